@@ -1,0 +1,8 @@
+"""Mechanism models: symbolic multibody descriptions plus closed-form kinematics (import nothing of ours)."""
+from .base import Field, Guard, InitialState, Mechanism, Mode, Transition
+from .geneva import Geneva
+
+#: scenario `mechanism.type` -> model class
+MECHANISMS: dict[str, type[Mechanism]] = {"geneva": Geneva}
+
+__all__ = ["Field", "Guard", "InitialState", "Mechanism", "Mode", "Transition", "Geneva", "MECHANISMS"]

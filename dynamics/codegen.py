@@ -1,0 +1,69 @@
+"""Generate plain-Python scalar functions from sympy expressions (for the IDA hot path).
+
+design.md measured one `jax.jit` call from Python at ~11 us against ~3 us for plain scalar Python, so the
+residual, Jacobian and event functions IDA calls thousands of times are emitted as straight-line Python with
+common subexpressions eliminated (sympy.cse) and `math` functions, then compiled once with `exec`.
+The generated source is kept on the function (`__source__`) for inspection.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+
+class _Printer(PythonCodePrinter):
+    """Python printer emitting bare `math` names (bound as globals of the generated module)."""
+
+    def _print_known_func(self, expr):
+        known = self.known_functions[expr.__class__.__name__]
+        return "{name}({args})".format(name=known.split(".")[-1],
+                                       args=", ".join(map(lambda arg: self._print(arg), expr.args)))
+
+    def _print_known_const(self, expr):
+        return self.known_constants[expr.__class__.__name__].split(".")[-1]
+
+    def _print_sign(self, expr):
+        a = self._print(expr.args[0])
+        return f"(({a} > 0) - ({a} < 0))"
+
+    def _print_Abs(self, expr):
+        return f"abs({self._print(expr.args[0])})"
+
+
+_GLOBALS = {name: getattr(math, name) for name in dir(math) if not name.startswith("_")}
+_GLOBALS["Infinity"] = math.inf
+
+
+def emit(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequence[sp.Symbol]]],
+         outputs: Sequence[tuple[str, sp.Expr]], prologue: Sequence[str] = (), result: str | None = None):
+    """Compile `def name(*signature)` that unpacks symbols from array arguments and assigns each output.
+
+    unpack: (argument name, symbols) pairs; the argument must hold exactly those values, in order.
+    outputs: (target, expression), the target being e.g. "out[3]" or "JJ[1, 2]".
+    prologue: extra source lines run first (e.g. "JJ.fill(0.0)"). result: the expression returned.
+    """
+    printer = _Printer({"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": False})
+    exprs = [sp.sympify(e) for _, e in outputs]
+    replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_x"), optimizations="basic")
+    lines = [f"def {name}({', '.join(signature)}):"]
+    lines += [f"    {line}" for line in prologue]
+    for array, symbols in unpack:
+        if symbols:
+            names = ", ".join(printer._print(s) for s in symbols)
+            trailing = "," if len(symbols) == 1 else ""
+            lines.append(f"    {names}{trailing} = {array}.tolist() if hasattr({array}, 'tolist') else {array}")
+    for sym, expr in replacements:
+        lines.append(f"    {printer._print(sym)} = {printer.doprint(expr)}")
+    for (target, _), expr in zip(outputs, reduced):
+        lines.append(f"    {target} = {printer.doprint(expr)}")
+    if result:
+        lines.append(f"    return {result}")
+    source = "\n".join(lines) + "\n"
+    namespace = dict(_GLOBALS)
+    exec(compile(source, f"<mechsim-generated {name}>", "exec"), namespace)
+    fn = namespace[name]
+    fn.__source__ = source
+    return fn

@@ -1,0 +1,68 @@
+"""Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .hybrid import Trajectory
+
+
+def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:
+    """Column names of a coordinate's position, speed and acceleration."""
+    if is_angle:
+        return f"{name}_angle_rad", f"{name}_speed_rad_s", f"{name}_accel_rad_s2"
+    return f"{name}_position_m", f"{name}_speed_m_s", f"{name}_accel_m_s2"
+
+
+def _kinetic_energy(mass, q: np.ndarray, v: np.ndarray, p: tuple) -> np.ndarray:
+    """1/2 v^T M(q) v row by row (M evaluated on the whole array where it broadcasts)."""
+    M = mass(q.T, p)
+    n = q.shape[1]
+    rows = len(q)
+    Mb = np.empty((rows, n, n))
+    for i in range(n):
+        for j in range(n):
+            Mb[:, i, j] = np.broadcast_to(np.asarray(M[i][j], dtype=float), (rows,))
+    return 0.5 * np.einsum("ri,rij,rj->r", v, Mb, v)
+
+
+def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:
+    """One row per output instant, read-outs evaluated with the mode and parameters of that instant."""
+    model = traj.model
+    frames = []
+    for piece in traj.pieces:
+        mf = model.modes[piece.mode]
+        ix = mf.index
+        t, y, yp = piece.t, piece.y, piece.yp
+        q, v, a = y[:, ix["q"]], y[:, ix["v"]], yp[:, ix["v"]]
+        lam, x = y[:, ix["lam"]], y[:, ix["ext"]]
+        cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
+        for i, name in enumerate(model.coordinates):
+            pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
+            cols[pos], cols[spd], cols[acc] = q[:, i], v[:, i], a[:, i]
+        values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.p if hasattr(piece, "p") else piece.params)
+        for name, val in zip(mf.readout_names, values):
+            cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
+        cols["kinetic_energy_J"] = _kinetic_energy(mf.mass, q, v, piece.params)
+        for j, name in enumerate(model.work_names):
+            cols[f"work_{name}_J"] = y[:, ix["work"]][:, j]
+        phi = np.asarray([np.ravel(mf.phi(ti, qi, piece.params)) for ti, qi in zip(t, q)]) if mf.m else \
+            np.zeros((len(t), 1))
+        n_mech = mf.m - (1 if model.prescribed else 0)
+        cols["constraint_residual_m"] = np.max(np.abs(phi[:, :max(n_mech, 1)]), axis=1) if n_mech else \
+            np.zeros(len(t))
+        for j, name in enumerate(model.extension_names):
+            cols[name] = x[:, j]
+        frames.append(pd.DataFrame(cols))
+    df = pd.concat(frames, ignore_index=True)
+    return df.drop_duplicates(subset="t_s", keep="last").reset_index(drop=True)
+
+
+def events_table(traj: Trajectory) -> pd.DataFrame:
+    cols = ["t_s", "from_mode", "to_mode", "kind", "guard", "kinetic_energy_before_J", "kinetic_energy_after_J",
+            "message"]
+    df = pd.DataFrame(traj.events)
+    if df.empty:
+        return pd.DataFrame(columns=cols)
+    df["energy_lost_J"] = df["kinetic_energy_before_J"] - df["kinetic_energy_after_J"]
+    return df

@@ -1,0 +1,206 @@
+"""The mechanism interface: a small symbolic description that `dynamics/` turns into DAEs.
+
+A mechanism is written once, in sympy: generalized coordinates q, mass matrix M(q), and per mode the
+holonomic constraints Phi(t, q) = 0, the applied generalized forces Q(t, q, v, lam) (linear in the
+multipliers lam, which is how Coulomb friction on a constraint force enters), guard functions that end
+the mode, and named read-outs (contact force, slip speed, ...). Everything the solvers need (constraint
+Jacobian, acceleration right-hand side, residual Jacobians) is derived from this in `dynamics/`.
+
+Physical and discrete (mode) parameters are sympy symbols too, so that one derivation serves every
+scenario of a mechanism; their values travel in a dict keyed by symbol name.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+import sympy as sp
+
+
+@dataclass(frozen=True)
+class Field:
+    """One scenario key a mechanism reads, declared as data so `scenarios/` can validate it generically.
+
+    kind: "quantity" (a string with a unit, converted to `unit`, the SI unit), "int", "float", "str",
+        "bool", "points" (a list of [x, y] pairs with a length unit).
+    required: no default; default: the value (SI) when absent. positive/nonnegative/minimum: checks.
+    """
+
+    kind: str
+    unit: str = ""
+    default: object = None
+    required: bool = False
+    positive: bool = False
+    nonnegative: bool = False
+    minimum: float | None = None
+    choices: tuple = ()
+    help: str = ""
+
+
+@dataclass(frozen=True)
+class Guard:
+    """A scalar function of (t, q, v, lam, p) whose zero crossing ends the current mode.
+
+    `direction` follows scipy's convention: +1 rising only, -1 falling only, 0 both.
+    """
+
+    name: str
+    expr: sp.Expr
+    direction: int = 0
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One smooth piece of the hybrid motion.
+
+    constraints: Phi_i(t, q, p), all zero in this mode (any length, may be empty).
+    force: the applied generalized force Q(t, q, v, lam, p), one entry per coordinate, linear in lam.
+    powers: named power flows (W) whose time integrals are reported as work columns, e.g.
+        {"load": -T_L*wheel_speed, "friction": -mu*|N|*|u|}. Positive = into the mechanism.
+    readouts: named output columns `<quantity>_<unit>` as expressions of (t, q, v, a, lam, p).
+    heat: the contact quantities the thermal model needs (see `CONTACT_KEYS`); empty if no sliding contact.
+    """
+
+    name: str
+    constraints: tuple[sp.Expr, ...]
+    force: tuple[sp.Expr, ...]
+    guards: tuple[Guard, ...] = ()
+    powers: Mapping[str, sp.Expr] = field(default_factory=dict)
+    readouts: Mapping[str, sp.Expr] = field(default_factory=dict)
+    heat: Mapping[str, sp.Expr] = field(default_factory=dict)
+
+
+#: Contact quantities a mode exposes for the thermal model (all SI): normal force (N, signed),
+#: sliding speed at the contact (m/s, signed), speed of the contact over each body's surface (m/s).
+CONTACT_KEYS = ("normal_force", "slip_speed", "source_speed_pin", "source_speed_wheel")
+
+
+@dataclass(frozen=True)
+class Symbols:
+    """The symbols a mechanism's expressions are written in."""
+
+    t: sp.Symbol
+    q: tuple[sp.Symbol, ...]
+    v: tuple[sp.Symbol, ...]
+    a: tuple[sp.Symbol, ...]
+    lam: tuple[sp.Symbol, ...]
+    params: tuple[sp.Symbol, ...]
+
+    @classmethod
+    def make(cls, coordinates: tuple[str, ...], max_constraints: int, params: tuple[str, ...]) -> "Symbols":
+        real = dict(real=True)
+        return cls(
+            t=sp.Symbol("t", **real),
+            q=tuple(sp.Symbol(f"q_{c}", **real) for c in coordinates),
+            v=tuple(sp.Symbol(f"v_{c}", **real) for c in coordinates),
+            a=tuple(sp.Symbol(f"a_{c}", **real) for c in coordinates),
+            lam=tuple(sp.Symbol(f"lam_{i}", **real) for i in range(max_constraints)),
+            params=tuple(sp.Symbol(p, **real) for p in params),
+        )
+
+    def p(self, name: str) -> sp.Symbol:
+        """The parameter symbol called `name`."""
+        for s in self.params:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class Transition:
+    """What happens when a guard fires.
+
+    mode/updates: the next mode and the parameter values that change (e.g. the slot index).
+    restitution: None = velocities stay (they must already satisfy the new constraints up to round-off;
+        they are projected onto them, which removes only round-off); a number e in [0, 1] = an impact:
+        the constraint-normal relative velocity is reversed and scaled by e (Newton's law), the energy loss
+        is reported in the events table.
+    stop: a reason to stop the run here (stall, reversal, ...), reported to the user; None to go on.
+    kind: a short label for the events table ("entry", "exit", "flank switch", "impact", ...).
+    """
+
+    mode: str
+    updates: Mapping[str, float] = field(default_factory=dict)
+    restitution: float | None = None
+    stop: str | None = None
+    kind: str = "mode change"
+    message: str | None = None
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Where a run starts: mode, parameter updates for that mode, and approximate q0, v0 (made consistent
+    by `dynamics/`: q projected onto Phi = 0 keeping the drive coordinate, v onto the velocity constraints)."""
+
+    mode: str
+    updates: Mapping[str, float]
+    q: np.ndarray
+    v: np.ndarray
+
+
+class Mechanism(ABC):
+    """A mechanism: the symbolic model (shared by all its scenarios) plus one scenario's numbers.
+
+    Subclasses set `name`, `coordinates` (names of q), `max_constraints`, `parameter_names` and implement
+    the abstract methods. `structure_key()` must change whenever the symbolic model changes (e.g. slot
+    count if it entered the expressions structurally); derivations are cached on it.
+    """
+
+    name: str = "mechanism"
+    coordinates: tuple[str, ...] = ()
+    max_constraints: int = 0
+    parameter_names: tuple[str, ...] = ()
+    #: index of the coordinate the drive acts on (crank, driving sprocket, ...)
+    drive_coordinate: int = 0
+    #: coordinates whose values are angles (column unit rad) vs lengths (m)
+    angle_coordinates: tuple[int, ...] = ()
+
+    #: scenario keys, per section (e.g. {"mechanism": {...}, "load": {...}, "contact": {...}})
+    schema: dict[str, dict[str, Field]] = {}
+    #: names of the [initial] keys giving the drive coordinate's angle and speed
+    initial_keys: tuple[str, str] = ("crank_angle", "crank_speed")
+    #: default thermal model and whether the mechanism has a sliding contact at all
+    has_sliding_contact: bool = False
+
+    def __init__(self) -> None:
+        self.symbols = Symbols.make(self.coordinates, self.max_constraints, self.parameter_names)
+
+    @classmethod
+    def from_config(cls, config: dict[str, dict]) -> "Mechanism":
+        """Build from validated scenario sections (SI values); raise ValueError naming a field on bad input."""
+        raise NotImplementedError
+
+    def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
+        """Time series at a prescribed constant drive speed without a DAE, or None if there is none."""
+        return None
+
+    @abstractmethod
+    def mass_matrix(self) -> sp.Matrix:
+        """M(q, p), symmetric positive definite."""
+
+    @abstractmethod
+    def modes(self) -> dict[str, Mode]:
+        """Every mode of the hybrid model, by name."""
+
+    @abstractmethod
+    def parameter_values(self) -> dict[str, float]:
+        """Numeric values of every parameter symbol for this scenario (SI)."""
+
+    @abstractmethod
+    def initial_state(self, angle: float, speed: float) -> InitialState:
+        """The mode and approximate state at the start, from the drive coordinate's angle and speed."""
+
+    @abstractmethod
+    def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
+                 q: np.ndarray, v: np.ndarray) -> Transition:
+        """The transition when `guard` of `mode` fires."""
+
+    def structure_key(self) -> tuple:
+        """Identifies the symbolic model; derivations are cached on (class, structure_key())."""
+        return (type(self).__name__,)
+
+    def describe(self) -> dict:
+        """Derived geometry worth reporting in the summary (SI)."""
+        return {}

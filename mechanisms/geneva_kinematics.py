@@ -1,0 +1,150 @@
+"""Closed-form kinematics of the external Geneva drive at constant crank speed (vectorised numpy).
+
+Frame and signs of physics.md §1: wheel centre O2 at the origin, crank centre O1 at (c, 0); crank angle
+alpha from the line of centres (0 = pin deepest in the slot), growing with time; wheel angle beta = angle
+of the engaged slot, positive in the driving direction. Sources: physics.md §1 (re-derived; agrees with
+Sclater & Chironis 2001 and with the seed's S(3a), S(3b), S(7) up to the sign S(3b) loses).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GenevaGeometry:
+    """External Geneva geometry from crank radius r, slot count n and pin radius R (SI).
+
+    Tangential (shock-free) entry fixes the centre distance c = r / sin(pi/n) (physics.md §1 table, row λ, c).
+    """
+
+    crank_radius: float
+    slots: int
+    pin_radius: float
+    thickness: float
+
+    def __post_init__(self) -> None:
+        if self.slots < 3:
+            raise ValueError(f"slots must be >= 3 for an external Geneva drive, got {self.slots}")
+        for name in ("crank_radius", "pin_radius", "thickness"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.pin_radius >= self.min_pin_distance:
+            raise ValueError(
+                f"pin_radius {self.pin_radius} m must be smaller than the closest pin-to-wheel-centre distance "
+                f"c - r = {self.min_pin_distance} m")
+
+    @property
+    def ratio(self) -> float:
+        """lambda = r/c = sin(pi/n)."""
+        return float(np.sin(np.pi / self.slots))
+
+    @property
+    def centre_distance(self) -> float:
+        return self.crank_radius / self.ratio
+
+    @property
+    def engagement_half_angle(self) -> float:
+        """alpha0 = pi/2 - pi/n: the crank turns 2*alpha0 while the wheel indexes 2*pi/n."""
+        return np.pi / 2 - np.pi / self.slots
+
+    @property
+    def pitch(self) -> float:
+        """Wheel rotation per index, 2*pi/n."""
+        return 2 * np.pi / self.slots
+
+    @property
+    def min_pin_distance(self) -> float:
+        """x_min = c - r (pin deepest in the slot)."""
+        return self.centre_distance - self.crank_radius
+
+    @property
+    def entry_pin_distance(self) -> float:
+        """x_entry = c cos(pi/n)."""
+        return self.centre_distance * np.cos(np.pi / self.slots)
+
+    @property
+    def dwell_fraction(self) -> float:
+        """(n + 2) / (2 n) of a crank turn (physics.md §1)."""
+        return (self.slots + 2) / (2 * self.slots)
+
+
+def _d(lam: float, alpha):
+    return 1.0 - 2.0 * lam * np.cos(alpha) + lam * lam
+
+
+def wheel_angle(lam: float, alpha):
+    """beta = atan2(lambda sin(alpha), 1 - lambda cos(alpha)) (physics.md §1; seed S(3b) with its sign)."""
+    return np.arctan2(lam * np.sin(alpha), 1.0 - lam * np.cos(alpha))
+
+
+def speed_ratio(lam: float, alpha):
+    """G = d(beta)/d(alpha) = lambda (cos(alpha) - lambda) / D (physics.md §1)."""
+    return lam * (np.cos(alpha) - lam) / _d(lam, alpha)
+
+
+def speed_ratio_derivative(lam: float, alpha):
+    """G' = d2(beta)/d(alpha)2 = -lambda (1 - lambda^2) sin(alpha) / D^2 (physics.md §1)."""
+    return -lam * (1 - lam * lam) * np.sin(alpha) / _d(lam, alpha) ** 2
+
+
+def speed_ratio_second_derivative(lam: float, alpha):
+    """G'' = -lambda (1-lambda^2) [(1+lambda^2) cos(alpha) - 2 lambda (1 + sin^2 alpha)] / D^3 (physics.md §1, jerk)."""
+    return (-lam * (1 - lam * lam) * ((1 + lam * lam) * np.cos(alpha) - 2 * lam * (1 + np.sin(alpha) ** 2))
+            / _d(lam, alpha) ** 3)
+
+
+def pin_distance(geom: GenevaGeometry, alpha):
+    """x = c sqrt(D) (physics.md §1; seed S(3a))."""
+    return geom.centre_distance * np.sqrt(_d(geom.ratio, alpha))
+
+
+def pin_sliding_speed(geom: GenevaGeometry, alpha, crank_speed):
+    """v_s = dx/dt = omega1 r sin(alpha) c / x, signed (< 0 inward) (physics.md §1)."""
+    return crank_speed * geom.crank_radius * np.sin(alpha) * geom.centre_distance / pin_distance(geom, alpha)
+
+
+def slip_speed(geom: GenevaGeometry, alpha, crank_speed, wheel_speed, flank: float = 1.0):
+    """Surface slip on the contact flank, u = v_s + flank * R (omega1 + omega2) (physics.md §1 'Pin spin')."""
+    return pin_sliding_speed(geom, alpha, crank_speed) + flank * geom.pin_radius * (crank_speed + wheel_speed)
+
+
+def engaged_slot(geom: GenevaGeometry, crank_angle):
+    """Index k of the slot nearest the pin and the local crank angle alpha = theta - 2 pi k in (-pi, pi]."""
+    k = np.floor((np.asarray(crank_angle) + np.pi) / (2 * np.pi))
+    return k, np.asarray(crank_angle) - 2 * np.pi * k
+
+
+def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float) -> dict[str, np.ndarray]:
+    """Wheel angle (unwrapped), speed, acceleration and jerk at constant crank speed.
+
+    crank_angle is the unwrapped crank angle theta (0 at the first mid-engagement). During a dwell the wheel
+    rests at the nearest half-pitch: it has indexed once per engagement passed (physics.md §1-2).
+    """
+    theta = np.asarray(crank_angle, dtype=float)
+    lam, a0 = geom.ratio, geom.engagement_half_angle
+    k, alpha = engaged_slot(geom, theta)
+    engaged = np.abs(alpha) < a0
+    beta = np.where(engaged, wheel_angle(lam, alpha), np.sign(alpha) * np.pi / geom.slots)
+    w = crank_speed
+    return {
+        "engaged": engaged,
+        "alpha": alpha,
+        "wheel_angle": k * geom.pitch + beta,
+        "wheel_speed": np.where(engaged, w * speed_ratio(lam, alpha), 0.0),
+        "wheel_accel": np.where(engaged, w * w * speed_ratio_derivative(lam, alpha), 0.0),
+        "wheel_jerk": np.where(engaged, w ** 3 * speed_ratio_second_derivative(lam, alpha), 0.0),
+    }
+
+
+def normal_force_from_wheel(geom: GenevaGeometry, alpha, wheel_accel, wheel_speed, wheel_inertia: float,
+                            load_torque: float, friction: float, slide_sign, wheel_damping: float = 0.0):
+    """N = (J2 beta'' + T_L + c2 beta') / (x - sigma mu R): the wheel's moment balance (physics.md §2).
+
+    The normal force acts perpendicular to the slot through the pin centre (arm x about O2); friction mu|N|
+    acts along the slot at lateral offset R (arm R); sigma = sign(u_slip) on the driving flank.
+    """
+    x = pin_distance(geom, alpha)
+    return (wheel_inertia * wheel_accel + load_torque + wheel_damping * wheel_speed) / (
+        x - slide_sign * friction * geom.pin_radius)

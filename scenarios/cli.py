@@ -1,0 +1,106 @@
+"""The `mechsim` command line: list, show and run scenarios.
+
+Exit codes: 0 success; 2 a user error (one line naming the field, no traceback); 3 a solver or physics
+failure (what ran is written, plus one line: when, where, why, hint).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from .units import ScenarioError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Simulate intermittent-motion mechanisms and their contact temperatures.")
+err = Console(stderr=True)
+out = Console()
+
+USER_ERROR, SOLVER_FAILURE = 2, 3
+
+
+def _fail(message: str, code: int = USER_ERROR) -> None:
+    err.print(f"error: {message}", markup=False, highlight=False, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+@app.command("list")
+def list_cmd() -> None:
+    """List the built-in scenarios."""
+    from .loader import builtin_names, read_raw
+    for name in builtin_names():
+        raw, _ = read_raw(name)
+        out.print(f"{name:<28} {raw.get('description', '')}", markup=False, highlight=False, soft_wrap=True)
+
+
+@app.command()
+def show(name: str) -> None:
+    """Print a built-in scenario file."""
+    from .loader import builtin_text
+    try:
+        print(builtin_text(name), end="")
+    except ScenarioError as exc:
+        _fail(str(exc))
+
+
+@app.command()
+def run(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/<name>)"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
+) -> None:
+    """Run a scenario and write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and plots."""
+    from .loader import build_mechanism, load
+    from .outputs import write_result
+    from .runner import run as run_scenario
+    try:
+        sc = load(scenario, set_)
+        target = out_dir or Path("results") / sc.name
+        if target.exists() and not force:
+            raise ScenarioError("--out", f"{target} exists; pass --force to replace it")
+    except ScenarioError as exc:
+        _fail(str(exc))
+    duration = sc.si["duration"]
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("t = {task.completed:.3f} s"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=err, disable=quiet, transient=True) as bar:
+        task = bar.add_task(sc.name, total=duration)
+        try:
+            result = run_scenario(sc, progress=lambda t: bar.update(task, completed=t))
+        except ScenarioError as exc:
+            _fail(str(exc))
+        except ValueError as exc:
+            _fail(f"scenario: {exc}")
+    try:
+        write_result(result, target, force=force, plots=sc.si["output"]["plots"], mechanism=build_mechanism(sc.si))
+    except ScenarioError as exc:
+        _fail(str(exc))
+    s = result.summary
+    if result.failure:
+        err.print(f"failed: {result.failure.message()}; results so far written to {target}",
+                  markup=False, highlight=False, soft_wrap=True)
+        raise typer.Exit(SOLVER_FAILURE)
+    solver = s["solver"]
+    out.print(f"{sc.name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
+              f"{len(result.events)} events, wall {solver['wall_time_s']:.3f} s -> {target}",
+              markup=False, highlight=False, soft_wrap=True)
+    for w in s["warnings"]:
+        err.print(f"warning: {w}", markup=False, highlight=False, soft_wrap=True)
+
+
+def main() -> None:
+    """Console entry point; any user error that escaped becomes one line and exit code 2."""
+    try:
+        app()
+    except ScenarioError as exc:
+        err.print(f"error: {exc}", markup=False, highlight=False)
+        sys.exit(USER_ERROR)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""Load a scenario (built-in name or TOML file), apply --set overrides, validate, convert to SI.
+
+Scenario files are data: parsed with tomllib, never executed.
+"""
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from mechanisms import MECHANISMS, Mechanism
+from mechanisms.base import Field
+
+from .schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_section
+from .units import ScenarioError
+
+BUILTIN_PACKAGE = "scenarios.builtin"
+
+
+@dataclass
+class Scenario:
+    """A validated scenario: `raw` as written (after overrides), `si` the resolved values in SI."""
+
+    name: str
+    raw: dict
+    si: dict
+    source: str
+
+    @property
+    def mechanism_type(self) -> str:
+        return self.si["mechanism"]["type"]
+
+
+def builtin_names() -> list[str]:
+    files = resources.files(BUILTIN_PACKAGE)
+    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def builtin_text(name: str) -> str:
+    path = resources.files(BUILTIN_PACKAGE) / f"{name}.toml"
+    if not path.is_file():
+        raise ScenarioError("scenario", f"no built-in scenario or file named {name!r} "
+                                        f"(built-in: {', '.join(builtin_names())})")
+    return path.read_text()
+
+
+def read_raw(name_or_path: str) -> tuple[dict, str]:
+    """Parse a scenario file or built-in by name."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ScenarioError("scenario", f"file not found: {name_or_path}")
+        text, source = path.read_text(), str(path)
+    else:
+        text, source = builtin_text(name_or_path), f"built-in:{name_or_path}"
+    try:
+        return tomllib.loads(text), source
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError("scenario", f"malformed TOML in {source}: {exc}") from None
+
+
+def parse_override(text: str) -> tuple[list[str], object]:
+    """'section.key=value' -> (path, value); the value is read as TOML when it can be, else as a string."""
+    if "=" not in text:
+        raise ScenarioError("--set", f"expected section.key=value, got {text!r}")
+    path, value = text.split("=", 1)
+    keys = [k.strip() for k in path.strip().split(".") if k.strip()]
+    if not keys:
+        raise ScenarioError("--set", f"missing key in {text!r}")
+    try:
+        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value.strip()
+    return keys, parsed
+
+
+def apply_overrides(raw: dict, overrides: list[str]) -> dict:
+    out = copy.deepcopy(raw)
+    for text in overrides:
+        keys, value = parse_override(text)
+        node = out
+        for k in keys[:-1]:
+            node = node.setdefault(k, {})
+            if not isinstance(node, dict):
+                raise ScenarioError(".".join(keys), "is not inside a table")
+        node[keys[-1]] = value
+    return out
+
+
+def extra_sections(mech_cls: type[Mechanism]) -> dict:
+    """Sections contributed by other packages (thermal), keyed by name, as schema dicts."""
+    from .thermal_schema import thermal_section  # local: keeps the import graph one-way and lazy
+    return {"thermal": thermal_section(mech_cls)}
+
+
+def validate(raw: dict) -> dict:
+    """Check every section and key; return the resolved scenario in SI."""
+    if not isinstance(raw, dict):
+        raise ScenarioError("scenario", "must be a TOML table")
+    top_raw = {k: v for k, v in raw.items() if not isinstance(v, dict)}
+    si = check_section("", TOP, top_raw)
+    mech_raw = raw.get("mechanism")
+    if not isinstance(mech_raw, dict):
+        raise ScenarioError("mechanism", "missing (required table with at least `type`)")
+    mtype = mech_raw.get("type")
+    if mtype not in MECHANISMS:
+        raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {mtype!r}")
+    mech_cls = MECHANISMS[mtype]
+    sections = dict(COMMON_SECTIONS)
+    sections.update(mech_cls.schema)
+    sections.update(extra_sections(mech_cls))
+    sections["initial"] = {
+        mech_cls.initial_keys[0]: Field("quantity", "rad", default=0.0, help="initial angle of the drive coordinate"),
+        mech_cls.initial_keys[1]: Field("quantity", "rad/s", default=0.0, help="initial speed of the drive coordinate"),
+    }
+    for name, value in raw.items():
+        if isinstance(value, dict) and name not in sections:
+            raise ScenarioError(name, f"unknown section (known: {', '.join(sorted(sections))})")
+    for name, fields in sections.items():
+        data = raw.get(name, {})
+        if name == "mechanism":
+            data = {k: v for k, v in data.items() if k != "type"}
+        si[name] = check_section(name, fields, data)
+    si["mechanism"]["type"] = mtype
+    drive = si["drive"]
+    for key in REQUIRED_FOR_DRIVE[drive["type"]]:
+        if drive.get(key) is None:
+            raise ScenarioError(f"drive.{key}", f"missing (required for drive type '{drive['type']}')")
+    if si["output_step"] > si["duration"]:
+        raise ScenarioError("output_step", "must not exceed duration")
+    return si
+
+
+def build_mechanism(si: dict) -> Mechanism:
+    """The mechanism model of a validated scenario (geometry errors become ScenarioError)."""
+    cls = MECHANISMS[si["mechanism"]["type"]]
+    try:
+        return cls.from_config(si)
+    except ValueError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError("mechanism", str(exc)) from None
+
+
+def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:
+    """Read, override, validate. Raises ScenarioError (one line) on any user error."""
+    raw, source = read_raw(name_or_path)
+    raw = apply_overrides(raw, overrides or [])
+    si = validate(raw)
+    build_mechanism(si)  # geometry checks now, before anything runs
+    return Scenario(si["name"], raw, si, source)

@@ -1,0 +1,162 @@
+"""Run a validated scenario: choose the cheapest model that answers it, integrate, tabulate, summarise."""
+from __future__ import annotations
+
+import platform
+import time
+from importlib import metadata
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from dynamics.drives import Drive
+from dynamics.hybrid import simulate
+from dynamics.result import Failure, Result
+from dynamics.settings import SolverSettings
+from dynamics.tables import coordinate_columns, events_table, timeseries
+from mechanisms.base import Mechanism
+
+from .loader import Scenario, build_mechanism
+
+PEAK_COLUMNS = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2",
+                "slip_speed_m_s", "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2",
+                "coupler_force_N", "heat_rate_W", "temp_flash_rise_K", "temp_contact_C",
+                "temp_bulk_pin_C", "temp_bulk_wheel_C")
+VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
+
+
+def solver_settings(si: dict) -> SolverSettings:
+    s = si["solver"]
+    return SolverSettings(backend=s["backend"], formulation=s["formulation"], method=s["method"],
+                          rtol=s["rtol"], atol=s["atol"], multiplier_atol=s["multiplier_atol"],
+                          baumgarte_alpha=s["baumgarte_alpha"], baumgarte_beta=s["baumgarte_beta"],
+                          max_steps=s["max_steps"], events=s["events"], diffrax_solver=s["diffrax_solver"])
+
+
+def make_drive(si: dict) -> Drive:
+    d = si["drive"]
+    return Drive(d["type"], speed=d["speed"] or 0.0, torque=d["torque"] or 0.0,
+                 stall_torque=d["stall_torque"] or 0.0, no_load_speed=d["no_load_speed"] or 0.0)
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in VERSION_PACKAGES:
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def _choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSettings) -> tuple[str, str]:
+    """('closed-form' | 'dae', why)."""
+    if settings.method == "dae":
+        return "dae", "solver.method = 'dae' asks for the DAE"
+    if drive.is_prescribed:
+        probe = mech.closed_form(np.array([0.0]), 0.0, 1.0) is not None
+        if probe and settings.method in ("auto", "closed-form"):
+            return "closed-form", "prescribed speed: the motion is known in closed form, no DAE needed"
+        if settings.method == "closed-form":
+            raise ValueError("solver.method = 'closed-form' but this mechanism has no closed form")
+        return "dae", "prescribed speed, but this mechanism has no closed form: the DAE with a speed constraint"
+    if settings.method == "closed-form":
+        raise ValueError("solver.method = 'closed-form' needs drive.type = 'speed'")
+    return "dae", f"drive.type = '{drive.kind}': the speed follows from the dynamics, so the DAE is integrated"
+
+
+def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
+    from scipy.integrate import cumulative_trapezoid
+    t = np.arange(0.0, si["duration"] + 0.5 * si["output_step"], si["output_step"])
+    angle0 = si["initial"][mech.initial_keys[0]]
+    cols = mech.closed_form(t, angle0, drive.speed)
+    powers = cols.pop("powers")
+    df = pd.DataFrame({"t_s": t, **cols})
+    for name, power in powers.items():
+        df[f"work_{name}_J"] = cumulative_trapezoid(np.broadcast_to(power, t.shape), t, initial=0.0)
+    return df
+
+
+def peaks(df: pd.DataFrame, angle_column: str) -> dict:
+    """Peak |value| of each key column, with its time and drive angle (wrapped to (-180, 180] deg too)."""
+    out = {}
+    for col in PEAK_COLUMNS:
+        if col in df and len(df):
+            values = df[col].to_numpy(dtype=float)
+            i = int(np.nanargmax(np.abs(values)))
+            angle = float(df[angle_column].iloc[i])
+            out[col] = {"value": float(values[i]), "t_s": float(df["t_s"].iloc[i]),
+                        "drive_angle_rad": angle,
+                        "drive_angle_wrapped_deg": float(np.degrees((angle + np.pi) % (2 * np.pi) - np.pi))}
+    return out
+
+
+def energy_balance(df: pd.DataFrame) -> dict:
+    """Drive work = d(kinetic energy) - (load + friction + damping work) (all works signed into the system)."""
+    if "work_drive_J" not in df or len(df) < 2:
+        return {}
+    works = {c[5:-2]: float(df[c].iloc[-1] - df[c].iloc[0]) for c in df.columns
+             if c.startswith("work_") and c.endswith("_J")}
+    dke = float(df["kinetic_energy_J"].iloc[-1] - df["kinetic_energy_J"].iloc[0])
+    closure = sum(works.values()) - dke
+    scale = max(abs(works.get("drive", 0.0)), 1e-300)
+    return {"work_J": works, "kinetic_energy_change_J": dke, "closure_error_J": closure,
+            "closure_error_relative": closure / scale}
+
+
+def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> Result:
+    """Run one scenario. Never raises for solver trouble: a failure comes back in Result.failure."""
+    si = scenario.si
+    wall0 = time.perf_counter()
+    mech = build_mechanism(si)
+    drive = make_drive(si)
+    settings = solver_settings(si)
+    method, why = _choose_method(si, mech, drive, settings)
+    angle_key, speed_key = mech.initial_keys
+    angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
+                                   mech.drive_coordinate in mech.angle_coordinates)[0]
+    failure = None
+    warnings: list[str] = []
+    stats: dict = {}
+    if method == "closed-form":
+        df = _closed_form_table(mech, si, drive)
+        events = pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
+        if progress:
+            progress(si["duration"])
+    else:
+        speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
+        traj = simulate(mech, drive, settings, si["duration"], si["output_step"], si["initial"][angle_key],
+                        speed0, progress=progress)
+        df = timeseries(traj, mech.angle_coordinates)
+        events = events_table(traj)
+        stats = traj.stats
+        warnings += traj.warnings
+        if traj.failure:
+            failure = Failure(**traj.failure) if "where" not in traj.failure else Failure(
+                time=traj.failure["time"], mode=traj.failure["mode"],
+                reason=traj.failure["reason"] + " at " + ", ".join(
+                    f"{k} = {v:.6g}" for k, v in traj.failure["where"].items()),
+                hint=traj.failure.get("hint", ""), kind=traj.failure.get("kind", "solver"))
+    wall = time.perf_counter() - wall0
+    summary = {
+        "scenario": scenario.name,
+        "mechanism": si["mechanism"]["type"],
+        "model": {
+            "drive": drive.kind, "method": method, "why": why,
+            "formulation": settings.formulation if method == "dae" else None,
+            "backend": settings.backend if method == "dae" else None,
+            "thermal": si.get("thermal", {}).get("model", "none"),
+            "rtol": settings.rtol, "atol": settings.atol,
+        },
+        "geometry": mech.describe(),
+        "peaks": peaks(df, angle_col),
+        "energy": energy_balance(df),
+        "events": {str(k): int(v) for k, v in events["kind"].value_counts().items()} if len(events) else {},
+        "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
+        "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
+        "warnings": warnings,
+        "success": failure is None,
+        "failure": failure.message() if failure else None,
+        "versions": _versions(),
+    }
+    return Result(df, events, summary, si, failure)

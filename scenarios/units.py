@@ -1,0 +1,57 @@
+"""Units at the edge: parse "75 mm", "7 N*m", "-180 deg", "300 rpm" with pint and return SI magnitudes."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import pint
+
+
+class ScenarioError(ValueError):
+    """A user error in a scenario: `field` names the key (section.key), `problem` says what is wrong."""
+
+    def __init__(self, field: str, problem: str):
+        super().__init__(f"{field}: {problem}")
+        self.field = field
+        self.problem = problem
+
+
+@lru_cache(maxsize=1)
+def registry() -> pint.UnitRegistry:
+    ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
+    return ureg
+
+
+def to_si(field: str, value, unit: str) -> float:
+    """Convert a quantity string (or a bare number where `unit` is dimensionless) to the SI `unit`."""
+    ureg = registry()
+    if isinstance(value, bool):
+        raise ScenarioError(field, f"expected a quantity in {unit}, got a boolean")
+    if isinstance(value, (int, float)):
+        target = ureg.Quantity(1.0, unit)
+        if target.dimensionless:
+            return float(value)
+        raise ScenarioError(field, f"needs a unit, e.g. \"{value} {unit}\"")
+    if not isinstance(value, str):
+        raise ScenarioError(field, f"expected a quantity such as \"1 {unit}\", got {type(value).__name__}")
+    try:
+        q = ureg.Quantity(value.strip())
+    except Exception:
+        raise ScenarioError(field, f"cannot read {value!r} as a quantity (number and unit, e.g. \"1 {unit}\")") \
+            from None
+    if not isinstance(q, pint.Quantity):
+        q = ureg.Quantity(float(q), "")
+    try:
+        if unit == "K" or unit == "degC":
+            return float(q.to("K").magnitude) if unit == "K" else float(q.to("degC").magnitude)
+        magnitude = q.to(unit).magnitude
+    except pint.DimensionalityError:
+        raise ScenarioError(field, f"wrong unit in {value!r}: expected a quantity convertible to {unit}") from None
+    try:
+        return float(magnitude)
+    except (TypeError, ValueError):
+        raise ScenarioError(field, f"cannot read {value!r} as a number") from None
+
+
+def format_si(value: float, unit: str) -> str:
+    """A quantity string in SI for the resolved scenario file."""
+    return f"{value:.12g} {unit}" if unit else f"{value:.12g}"
