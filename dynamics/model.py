@@ -65,6 +65,7 @@ class ModeFunctions:
     gamma: object             # (t, q, v, p) -> (m,)
     readouts: dict[str, object] = field(default_factory=dict)   # vectorised (t, q, v, a, lam, x, p)
     readout_names: list[str] = field(default_factory=list)
+    symbolic: dict = field(default_factory=dict)   # the sympy pieces, for other backends (diffrax)
 
 
 @dataclass
@@ -182,6 +183,10 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
         force_lam=lamb([t, q, v, x, params], force_lam),
         gamma=lamb([t, q, v, params], cd.gamma if m else zeros_m),
         readouts={"_all": ro_fn}, readout_names=ro_names,
+        symbolic=dict(t=t, q=q, v=v, lam=lam, x=x, xp=xp, params=params, mass=M, force=force,
+                      constraints=cd, powers=powers, work_names=work_names, guards=guards,
+                      guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
+                      readout_exprs=ro_exprs),
     )
 
 

@@ -125,18 +125,20 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
             progress(si["duration"])
     else:
         speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
-        traj = simulate(mech, drive, settings, si["duration"], si["output_step"], si["initial"][angle_key],
-                        speed0, progress=progress)
+        integrate = simulate
+        if settings.backend == "diffrax":
+            from dynamics.diffrax_backend import simulate as integrate
+        traj = integrate(mech, drive, settings, si["duration"], si["output_step"], si["initial"][angle_key],
+                         speed0, progress=progress)
         df = timeseries(traj, mech.angle_coordinates)
         events = events_table(traj)
         stats = traj.stats
         warnings += traj.warnings
         if traj.failure:
-            failure = Failure(**traj.failure) if "where" not in traj.failure else Failure(
-                time=traj.failure["time"], mode=traj.failure["mode"],
-                reason=traj.failure["reason"] + " at " + ", ".join(
-                    f"{k} = {v:.6g}" for k, v in traj.failure["where"].items()),
-                hint=traj.failure.get("hint", ""), kind=traj.failure.get("kind", "solver"))
+            f = traj.failure
+            where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
+            failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
+                              hint=f.get("hint", ""), kind=f.get("kind", "solver"))
     wall = time.perf_counter() - wall0
     summary = {
         "scenario": scenario.name,
