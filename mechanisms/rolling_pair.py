@@ -199,6 +199,16 @@ class RollingFourBar:
         """Absolute angle of B0->B: nu0 + psi + phi (d/dphi = 1)."""
         return self.pair.normal0 + self.psi + phi
 
+    def theta4_of_param(self, u):
+        """Arm angle theta4 as a function of the rolling parameter u (gamma or s):
+        nu0 + psi + phi(u); d theta4/du = 1/du_dphi (constant)."""
+        return self.theta4(self.pair.phi_of_u(u))
+
+    def param_of_theta4(self, theta4):
+        """Rolling parameter u (gamma or s) for an arm angle theta4: the rolling constraint
+        B0 = centre(u(theta4)) of a Cartesian (DAE) model, kinematics.md §3."""
+        return self.pair.u_of_phi(theta4 - self.pair.normal0 - self.psi)
+
     def point_B(self, phi, lib=np):
         """B(phi) = B0(u(phi)) + l4 e^{i theta4} as (x, y): an epi-/trochoid (kinematics.md §2.1)."""
         u = self.pair.u_of_phi(phi)

@@ -262,3 +262,16 @@ def test_rolling_primitives_are_symbolic():
     assert abs(val - m.trochoid(np.array(1.3))["B"]) <= 1e-12
     # θ4 as a function of the rolling parameter: φ(γ) = (γ − γ0)(R + r)/r
     assert m.pair.phi_of_u(m.pair.u_of_phi(2.7)) == pytest.approx(2.7, abs=1e-15)
+
+
+@pytest.mark.parametrize("name", ["A", "D"])
+def test_theta4_and_rolling_parameter_are_inverse(name):
+    """θ4(u) and u(θ4) (for a Cartesian rolling constraint B0 = centre(u(θ4))) are inverse and consistent
+    with the φ-parameterisation."""
+    m = make(name)
+    phi = np.linspace(-7, 7, 29)
+    u = m.pair.u_of_phi(phi)
+    np.testing.assert_allclose(m.theta4_of_param(u), m.theta4(phi), atol=1e-13, rtol=0)
+    np.testing.assert_allclose(m.param_of_theta4(m.theta4(phi)), u, atol=1e-13, rtol=0)
+    cx, cy = m.pair.centre(m.param_of_theta4(m.theta4(phi)))
+    np.testing.assert_allclose(cx + 1j * cy, m.trochoid(phi)["B0"], atol=1e-13, rtol=0)
