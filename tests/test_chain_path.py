@@ -146,7 +146,7 @@ def test_circle_circle_intersection_sides():
     ([[5, 0], [0, 5], [0, 4], [-5, 0]], [1, 1, 1, 1], "overlap"),
     ([[10, 0], [0, 10], [-10, 0], [0, 2]], [1, 1, 1, 1], r"sprocket\(s\) \[4\] would be wrapped from inside"),
     ([[0, 0], [10, 0], [5, 1]], [1, 1, 3], "sprocket 3 sticks out of the chain loop"),
-    ([[0, 0], [5, 0], [10, 0], [5, 8]], [1, 1, 1, 1], "sprocket 2 is not wrapped|wrapped from inside"),
+    ([[0, 0], [5, 0], [10, 0], [5, 8]], [1, 1, 1, 1], "sprocket 2 is not wrapped"),
     ([[0, 0]], [1], "at least 2 sprockets"),
     ([[0, 0], [5, 0]], [1, -1], "radius must be positive"),
     ([[0, 0], [5, 0]], [1, 1, 1], "one radius per sprocket"),
