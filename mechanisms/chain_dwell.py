@@ -500,6 +500,9 @@ def kinematics_table(mechanism, branch: str = "leading", drive_angle=None, cycle
     if events and th.size:
         ev = mech.event_angles((th.max() - th.min()) / mech.cycle_angle, th.min())
         before, after = ev[ev > th.min()], ev[ev < th.max()]
+        if after.size:   # grid points on an event are replaced by its before/after pair
+            snap = mech.path.SNAP * mech.cycle_angle
+            th = th[np.min(np.abs(th[:, None] - after[None, :]), axis=1) > snap]
         parts = [(before, np.zeros(before.shape, int), -1), (th, np.ones(th.shape, int), +1),
                  (after, np.full(after.shape, 2), +1)]
     frames = []
