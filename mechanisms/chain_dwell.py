@@ -168,12 +168,8 @@ class ChainDwellMechanism:
                         continue  # the double root of a touch, already listed
                     if any(abs(s - x[0]) <= snap for x in roots):
                         continue  # on a junction: found from both pieces
-                    # a fold unless |QB| - c keeps its sign across s (a tangency on a junction)
-                    k_m, sm_m = self.path.locate(np.array([s - 1e-7 * Lc]), -1)
-                    k_p, sm_p = self.path.locate(np.array([s + 1e-7 * Lc]), +1)
-                    fm = self.path.pieces[k_m[0]].sq_dist_minus(sm_m[0], self.Q, c)
-                    fp = self.path.pieces[k_p[0]].sq_dist_minus(sm_p[0], self.Q, c)
-                    if fm * fp < 0:
+                    # transversal crossing (rho rho' != 0): a fold, where the position-driven dyad jams
+                    if abs(float(p.radial_rate(s, self.Q))) > self.GEOM_TOL * self.c_out:
                         roots.append((s, f"{label} fold", p.index))
             out += [SingularPoint(float(s) % Lc, k, i) for s, k, i in crit + roots]
         return sorted(out, key=lambda p: p.s)
@@ -539,15 +535,20 @@ def kinematics_table(mechanism, branch: str = "leading", drive_angle=None, cycle
 
 
 def _unwrap_runs(x, ok):
-    """Unwrap an angle column run by run (NaN gaps where the dyad does not close restart the unwrap)."""
+    """Continuous angle column: unwrapped run by run across NaN gaps (where the dyad does not close), each
+    run shifted by whole turns to start nearest to where the previous one ended."""
     x = x.copy()
-    idx = np.flatnonzero(ok)
+    idx = np.flatnonzero(ok & np.isfinite(x))
     if idx.size == 0:
         return x
     runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    last = None
     for r in runs:
-        first = math.remainder(x[r[0]], 2 * math.pi)
-        x[r] = np.unwrap(x[r]) - x[r[0]] + first
+        u = np.unwrap(x[r])
+        ref = 0.0 if last is None else last
+        u += 2 * math.pi * round((ref - u[0]) / (2 * math.pi))
+        x[r] = u
+        last = u[-1]
     return x
 
 

@@ -50,11 +50,22 @@ def _shade(ax, dwells):
 
 def _panel(ax, tables, which, dwells, crank_only=False):
     qs = _QUANTITIES[which][:1] if crank_only else _QUANTITIES[which]
+    ys = []
     for name, df in _tables(tables).items():
         for col, label, scale, ylabel in qs:
             lab = f"{label} {name}".strip()
-            ax.plot(df["drive_angle_rad"] * DEG, df[col] * scale, lw=1.2, label=lab)
+            y = np.where(np.isfinite(df[col]), df[col] * scale, np.nan)   # rates diverge at a fold
+            ax.plot(df["drive_angle_rad"] * DEG, y, lw=1.2, label=lab)
+            ys.append(y[np.isfinite(y)])
         ax.set_ylabel(ylabel)
+    y = np.concatenate(ys) if ys else np.array([])
+    if y.size and which != "displacement":
+        lo, hi = np.percentile(y, [1, 99])
+        span = max(hi - lo, 1e-12)
+        if y.max() > hi + 2 * span or y.min() < lo - 2 * span:   # spikes next to a fold: clip the view
+            ax.set_ylim(lo - 0.5 * span, hi + 0.5 * span)
+            ax.annotate("clipped: rates diverge at fold points", (0.01, 0.02), xycoords="axes fraction",
+                        fontsize=7, color="0.4")
     _shade(ax, dwells)
     ax.set_xlabel("driving angle $\\theta_1$ (deg)")
     ax.grid(True, lw=0.3)

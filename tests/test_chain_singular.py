@@ -144,3 +144,19 @@ def test_detuned_negative_fold(m1):
 def test_exact_design_has_no_folds(m1, m2):
     assert len(m1.folds()) == 0 and len(m2.folds()) == 0
     assert len(m2.singular) == 4
+
+
+@pytest.mark.parametrize("delta", [-1e-11, -1e-9, 1e-11])
+def test_tiny_detuning_is_classified(delta, m1):
+    """Folds appear in symmetric pairs about each apex for any delta < 0 above round-off; none for delta > 0."""
+    m = ChainDwellMechanism(MECH1.detuned(delta))
+    folds = m.folds()
+    if delta > 0:
+        assert len(m.singular) == 0
+        return
+    assert len(folds) == 6 and len(m.touches) == 0
+    s = folds["chain_position_m"].to_numpy().reshape(3, 2).mean(axis=1)
+    assert s == pytest.approx(m1.touches, abs=1e-12)
+    # closed-form half-width: sin^2(dpsi/2) = ((L_i + r_i)^2 - (R + L)^2) / (4 L_i r_i)
+    half = 2 * math.asin(math.sqrt(((0.08) ** 2 - (0.08 + delta) ** 2) / (4 * 0.05 * 0.03))) * 0.03
+    assert np.diff(folds["chain_position_m"].to_numpy()[:2])[0] == pytest.approx(2 * half, rel=1e-6)
