@@ -245,8 +245,9 @@ class ChainDwellMechanism:
 
         Returns arrays: s, piece, sigma, closes, B, A (m), phi, theta (rad), dphi, dtheta (rad/m),
         d2phi, d2theta (rad/m^2), stretch (R + L - |QB|, m). At a junction or a stretched/folded touch,
-        side = -1 / +1 gives the limit from before / after. Where the dyad does not close: NaN.
-        Sources: kinematics.md §1.1 (roots), paper eqs. (28)-(29) corrected per §1.6 E9 (rates).
+        side = -1 / +1 gives the limit from before / after. Where the dyad does not close: NaN; at a fold the
+        rates are infinite. Sources: kinematics.md §1.1 (roots), paper eqs. (28)-(29) corrected per §1.6 E9
+        (rates), one-sided apex limits derived in docs/chain_dwell.md ("Apex limits", checked against §1.4).
         """
         s_in = np.atleast_1d(np.asarray(s, float))
         s, tk = self._snap_touch(s_in)
@@ -273,7 +274,7 @@ class ChainDwellMechanism:
             theta = ad - sig * gamma
             argp = cross(d, B1) / rho2                   # d arg(QB)/ds
             q = rr / (rho2 * h)                          # -(d beta/ds)/(L cos gamma), cancellation-free
-            # one-sided limit at a tangential touch (h -> 0 with rho rho' -> 0), see module docstring
+            # one-sided limit at a tangential touch (h -> 0 with rho rho' -> 0): docs/chain_dwell.md "Apex limits"
             m = np.einsum("...i,...i", B1, B1) + np.einsum("...i,...i", d, B2)   # (rho rho')'
             q_touch = side * np.sign(m) * np.sqrt(np.abs(m) / (R * L)) / rho
             q = np.where(tk != 0, q_touch, q)

@@ -463,6 +463,22 @@ class ChainPath:
         rr = self._by_piece(k, sm, lambda p, x: p.radial_rate(x, Q))
         return gp.reshape(s.shape), gm.reshape(s.shape), rr.reshape(s.shape)
 
+    def piece_table(self):
+        """One row per piece: name, kind, travel range (m), driving-angle range (rad) and the closed-form data."""
+        import pandas as pd
+
+        rows = []
+        for p in self.pieces:
+            row = dict(segment=p.index, segment_name=p.name, kind=p.kind, s0_m=p.s0, s1_m=p.s1,
+                       length_m=p.length, start_drive_angle_rad=p.s0 / self.r1, end_drive_angle_rad=p.s1 / self.r1)
+            if p.kind == "line":
+                row.update(start_x_m=p.start[0], start_y_m=p.start[1], dir_x=p.direction[0], dir_y=p.direction[1])
+            else:
+                row.update(centre_x_m=p.centre[0], centre_y_m=p.centre[1], radius_m=p.radius, psi0_rad=p.psi0,
+                           wrap_rad=p.wrap)
+            rows.append(row)
+        return pd.DataFrame(rows)
+
     def sample(self, n: int = 721) -> np.ndarray:
         """n points along the closed loop (first == last), for drawing."""
         s = np.linspace(0.0, self.length, n)

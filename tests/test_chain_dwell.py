@@ -208,3 +208,12 @@ MECH1_CM = [(5, 0), (0, 5), (-5, 0)]
 def test_branch_name_is_checked(m1):
     with pytest.raises(ValueError, match="branch must be one of"):
         m1.state(np.array([0.0]), "middle")
+
+
+def test_coupler_along_sprocket_radius_at_dwell_end(m2):
+    """At v_e the coupler lies along O_iB: theta_l = phi_i = pi/4, 3pi/4, 5pi/4, 7pi/4 for Mech 2 (paper Table 1
+    with E11 corrected), not phi_i + alpha_i (eqs. 9/37, E8)."""
+    d = m2.dwells("leading")
+    r = m2.rates(d["end_drive_angle_rad"].to_numpy(), "leading", side=-1)
+    got = np.degrees(r["theta"]) % 360
+    assert got == pytest.approx([135, 225, 315, 45], abs=1e-9)     # sprockets 2, 3, 4, 1

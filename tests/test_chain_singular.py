@@ -160,3 +160,13 @@ def test_tiny_detuning_is_classified(delta, m1):
     # closed-form half-width: sin^2(dpsi/2) = ((L_i + r_i)^2 - (R + L)^2) / (4 L_i r_i)
     half = 2 * math.asin(math.sqrt(((0.08) ** 2 - (0.08 + delta) ** 2) / (4 * 0.05 * 0.03))) * 0.03
     assert np.diff(folds["chain_position_m"].to_numpy()[:2])[0] == pytest.approx(2 * half, rel=1e-6)
+
+
+def test_dwell_curve_rates_stay_exact_next_to_the_apex(m2):
+    """On the dwell curve just after the apex omega = f = 0 exactly. The textbook 2x2 solve of the paper's
+    eqs. (28)-(29) is 0/0 there (kinematics.md §1.4, E10); the cancellation-free form keeps round-off level."""
+    s_star = m2.touches[0]
+    th = (s_star + np.array([1e-3, 1e-4, 1e-5, 1e-6]) * CM) / m2.r1
+    r = m2.rates(th, "leading")
+    assert np.abs(r["crank_speed"]).max() < 1e-14
+    assert np.abs(r["crank_accel"]).max() < 1e-9
