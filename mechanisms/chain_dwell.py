@@ -349,6 +349,8 @@ class ChainDwellMechanism:
                start_branch: str = "leading") -> pd.DataFrame:
         """Exact dwells (crank at rest, A = O_i) on [start_angle, start_angle + cycles*cycle] of theta1.
 
+        For branch='smooth' the branch is `start_branch` just after theta1 = 0 (as in `state`), whatever the window.
+
         Structural detection (kinematics.md §1.2): on the wrap of a tuned sprocket (R = L_i, L = r_i) the
         root that sits on A = O_i is the one with O_i on its side of ray QB; the branch dwells where its
         sign matches. Durations are in driving-sprocket angle, Delta s / r1 (paper eq. 10 corrected, §1.6 E7).
@@ -363,7 +365,7 @@ class ChainDwellMechanism:
                 run = None
                 for a, b, sD in self._dwell_pieces(arc):
                     mid = c * Lc + 0.5 * (a + b)
-                    sb = int(self.sigma(np.array(mid), branch, +1, start_branch, s_lo))
+                    sb = int(self.sigma(np.array(mid), branch, +1, start_branch, 0.0))
                     if sb == sD:
                         run = [a if run is None else run[0], b, sD]
                     elif run is not None:

@@ -44,6 +44,16 @@ def test_mech1_apexes(m1):
                                                                         abs=DEG_TOL)
     B = m1.path.B(sp["chain_position_m"].to_numpy())
     assert np.hypot(*B.T) / CM == pytest.approx([8.0] * 3, abs=1e-13)
+    # numerical root of d|QB|^2/ds (direct B and B', Brent) against the closed form
+    from scipy.optimize import brentq
+
+    def rate(x):
+        P, T = m1.path.derivatives(np.array([x]), 1)
+        return float(P[0] @ T[0])
+
+    for s_star in sp["chain_position_m"]:
+        root = brentq(rate, s_star - 0.01, s_star + 0.01, xtol=1e-16)
+        assert abs(root - s_star) / m1.r1 < 1e-12
 
 
 def test_mech1_leading_dwells_reproduce_paper(m1):

@@ -93,3 +93,15 @@ def test_plots_write_pngs(tmp_path, hist):
         assert p.exists() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="which must be one of"):
         chain_plots.plot_quantity(ts, tmp_path / "x.png", "jerk")
+
+
+def test_window_not_starting_at_zero_is_consistent():
+    m = ChainDwellMechanism(MECH1)
+    th = np.linspace(math.radians(900), math.radians(1700), 801)
+    ts = kinematics_table(m, "smooth", drive_angle=th)
+    dw = dwell_table(m, "smooth", cycles=(th[-1] - th[0]) / m.cycle_angle, start_angle=th[0])
+    # the second-cycle smooth dwells (kinematics.md §1.3): sprocket 2 [956.128274, 1046.128274], sprocket 1 from 1507.16
+    assert np.degrees(dw["start_drive_angle_rad"]).tolist() == pytest.approx([956.128274, 1507.161653], abs=1e-6)
+    for d in dw.itertuples():
+        core = ts[(ts.drive_angle_rad > d.start_drive_angle_rad + 1e-9) & (ts.drive_angle_rad < d.end_drive_angle_rad - 1e-9)]
+        assert core["dwell"].all() and core["crank_speed_rad_s"].abs().max() < 1e-12
