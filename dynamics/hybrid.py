@@ -112,10 +112,11 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         q, v = seg.y_end[ix["q"]], seg.y_end[ix["v"]]
         guard = mf.guard_names[seg.guard]
         if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
-            # the same crossing seen again from the restart point (the root is located only to within
-            # IDA's time tolerance, so the restart can lie a hair before it): not a new event
-            y, yp = seg.y_end.copy(), seg.yp_end.copy()
-            continue
+            # the same guard again at the same instant: the transition did not move the state off it
+            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' fires again immediately after its own "
+                           "transition (chattering)", where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="the mechanism's guard for this transition should be directional")
+            break
         last = (guard, t)
         tr = mech.on_guard(mode, guard, values, t, q, v)
         row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,

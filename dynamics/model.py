@@ -152,8 +152,9 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
     jac_out = [(f"JJ[{i}, {j}]", J[i, j]) for i in range(ny) for j in range(ny) if J[i, j] != 0]
     jacobian = emit(f"jacobian_{mode.name}", ["t", "y", "yp", "res", "cj", "JJ", "p"],
                     [("y", y_syms), ("yp", yp_syms), ("p", params)], jac_out, prologue=["JJ.fill(0.0)"])
-    guard_sub = {a[i]: vp[i] for i in range(nq)}
-    guards = [sp.sympify(g.expr).subs(lam_sub).subs(guard_sub) for g in mode.guards]
+    guards = [sp.sympify(g.expr).subs(lam_sub) for g in mode.guards]
+    if any(g.has(*lam, *a) for g in guards):
+        guards = _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m)
     events = emit(f"events_{mode.name}", ["t", "y", "yp", "out", "p"], unpack,
                   [(f"out[{i}]", g) for i, g in enumerate(guards)])
 
@@ -188,6 +189,25 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                       guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
                       readout_exprs=ro_exprs),
     )
+
+
+def _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m):
+    """Guards that read multipliers or accelerations use their exact KKT values as functions of (t, q, v).
+
+    In the index-2/3 forms the multipliers are kept out of IDA's error test (see SolverSettings), so the
+    state's lam is too noisy to root-find on; the KKT solution is exact for the current (q, v). Solved
+    symbolically for small systems; larger ones fall back to the state's lam and v'.
+    """
+    if nq + m > 6:
+        return [g.subs({a[i]: vp[i] for i in range(nq)}) for g in guards]
+    Ql = force.jacobian(lam) if m else sp.zeros(nq, 0)
+    Q0 = force.subs({li: 0 for li in lam})
+    K = sp.Matrix(sp.BlockMatrix([[M, cd.G.T - Ql], [cd.G, sp.zeros(m, m)]]))
+    rhs = sp.Matrix(list(Q0) + list(-cd.gamma))
+    sol = K.LUsolve(rhs)
+    sub = {a[i]: sol[i] for i in range(nq)}
+    sub.update({lam[j]: sol[nq + j] for j in range(m)})
+    return [g.subs(sub, simultaneous=True) for g in guards]
 
 
 @lru_cache(maxsize=64)

@@ -129,8 +129,10 @@ class Geneva(Mechanism):
             force=(damping[0] + fric_force[0], damping[1] + fric_force[1] - T_L),
             guards=(
                 Guard("exit", theta - (2 * sp.pi * k + P("alpha0")), +1),
-                Guard("flank_switch", lam, 0),
-                Guard("slip_reversal", u, 0),
+                # sign guards are written relative to the mode's own sign, falling only: the crossing that
+                # started the mode (value ~ 0, rising) can never fire again from the restart point
+                Guard("flank_switch", flank * lam, -1),
+                Guard("slip_reversal", slide * u, -1),
                 Guard("stall", w1, -1),
             ),
             powers={"load": -T_L * w2, "friction": -fric_mag * slide * u, "damping": -c1 * w1**2 - c2 * w2**2},
