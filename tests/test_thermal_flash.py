@@ -126,6 +126,19 @@ def test_blok_partition_properties():
     np.testing.assert_allclose(r, [1.0, 0.75, 1.0])
     share, r = blok_partition(np.inf, np.inf)
     assert share == 0.5 and r == np.inf
+    share, r = blok_partition(np.array([0.0, 0.0]), np.array([2.0, 0.0]))   # just switched on: no rise
+    np.testing.assert_allclose(share, [1.0, 0.5])
+    np.testing.assert_allclose(r, [0.0, 0.0])
+
+
+def test_source_just_switched_on_has_no_rise():
+    b = 40e-6
+    res = flash_temperature(100.0, 0.3, 0.3, 0.05, b, LENGTH, 0.15, STEEL, STEEL, t_on_pin=0.0, t_on_wall=1.0)
+    assert res["temp_flash_rise_K"] == 0.0 and res["heat_share_pin"] == 1.0
+    # and it grows with t_on toward the steady value
+    t = np.array([1e-6, 1e-4, 1e-2, 1.0, np.inf])
+    rises = flash_temperature(100.0, 0.3, 1e-3, 1e-3, b, LENGTH, 0.15, STEEL, STEEL, t_on_pin=t, t_on_wall=t)
+    assert np.all(np.diff(rises["temp_flash_rise_K"]) > 0)
 
 
 def test_high_peclet_limit_is_blok_formula():

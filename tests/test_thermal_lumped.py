@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from thermal import (biot_number, bulk_system, disc_volume_area, geneva_bulk_system, get_material,
+from thermal import (biot_number, bulk_system, cycle_means, disc_volume_area, geneva_bulk_system, get_material,
                      integrate_mean_heat, pin_volume_area, steady_bulk_temperatures, time_constant)
 
 STEEL = get_material("aisi1045")
@@ -89,3 +89,13 @@ def test_lumped_energy_balance():
     convected = sol.y[2, -1]
     assert stored == pytest.approx(q_in - convected, rel=1e-6)
     assert convected > 0.05 * q_in                               # the check is not trivial
+
+
+def test_cycle_means():
+    t = np.linspace(0.0, 1.177, 2001)
+    Q = 3.0 * np.sin(np.pi * t / 1.177) ** 2
+    share = np.where(t < 0.5 * 1.177, 0.3, 0.4)
+    Q_bar, g_bar = cycle_means(t, Q, share)
+    assert Q_bar == pytest.approx(1.5, rel=1e-6)
+    assert g_bar == pytest.approx(0.35, rel=1e-3)                   # heat-weighted, symmetric halves
+    assert cycle_means(t, 0.0, 0.3) == (0.0, 0.5)

@@ -20,7 +20,7 @@ from .flash import (TRANSIENT_FLOOR_COEFFICIENT, band_theta_eval, blok_flash_hig
                     single_body_rise, transient_peclet_floor)
 from .linear import LinearThermalSystem
 from .lumped import (CONVECTION_COEFFICIENTS, H_PIN_DEFAULT, H_WHEEL_DEFAULT, ambient_temperatures, biot_number,
-                     bulk_system, disc_volume_area, geneva_bulk_system, integrate_mean_heat, pin_volume_area,
+                     bulk_system, cycle_means, disc_volume_area, geneva_bulk_system, integrate_mean_heat, pin_volume_area,
                      steady_bulk_temperatures, time_constant)
 from .conduction1d import (Conduction1D, Mesh1D, conduction_system, duhamel_surface, flux_step_profile,
                            flux_step_surface, graded_mesh, graded_mesh_cells, ierfc, mesh_settings,

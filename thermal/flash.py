@@ -41,11 +41,12 @@ def band_theta_eval(L, distribution: str = "semi-elliptic", statistic: str = "ma
 
 
 def transient_peclet_floor(half_width_m, diffusivity, t_on):
-    """c b/sqrt(chi t_on) with c = TRANSIENT_FLOOR_COEFFICIENT; 0 for t_on = inf (physics.md §4.6)."""
+    """c b/sqrt(chi t_on) with c = TRANSIENT_FLOOR_COEFFICIENT; 0 for t_on = inf, inf for t_on = 0 (physics.md §4.6)."""
     t_on = np.asarray(t_on, dtype=float)
-    if np.any(t_on <= 0):
-        raise ValueError("transient_peclet_floor: t_on must be > 0 (use inf for no floor)")
-    return TRANSIENT_FLOOR_COEFFICIENT * np.asarray(half_width_m, dtype=float) / np.sqrt(diffusivity * t_on)
+    if np.any(t_on < 0) or np.any(np.isnan(t_on)):
+        raise ValueError("transient_peclet_floor: t_on must be >= 0 (inf for no floor)")
+    with np.errstate(divide="ignore"):
+        return TRANSIENT_FLOOR_COEFFICIENT * np.asarray(half_width_m, dtype=float) / np.sqrt(diffusivity * t_on)
 
 
 def effective_peclet(L, half_width_m, diffusivity, t_on):
@@ -61,15 +62,17 @@ def single_body_rise(heat_per_length, theta, conductivity):
 def blok_partition(resistance_1, resistance_2):
     """Blok's postulate for two bodies with rise-per-heat R_i = dT_i*/Q' (K m/W): (share of body 1, R_flash).
 
-    gamma_1 = R_2/(R_1 + R_2), R_flash = 1/(1/R_1 + 1/R_2) (physics.md §4.6). Infinite R (no steady limit)
-    takes no heat; if both are infinite the flash resistance is infinite and the share is 1/2.
+    gamma_1 = R_2/(R_1 + R_2), R_flash = 1/(1/R_1 + 1/R_2) (physics.md §4.6). R = inf (no steady limit)
+    takes no heat, R = 0 (source just switched on) takes it all; if R_1 = R_2 in {0, inf} the share is 1/2.
     """
-    g1 = 1.0 / np.asarray(resistance_1, dtype=float)
-    g2 = 1.0 / np.asarray(resistance_2, dtype=float)
-    total = g1 + g2
+    r1 = np.asarray(resistance_1, dtype=float)
+    r2 = np.asarray(resistance_2, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
-        share_1 = np.where(total > 0, g1 / total, 0.5)
-        r_flash = 1.0 / total
+        share_1 = r2 / (r1 + r2)
+        share_1 = np.where(np.isinf(r1) & np.isfinite(r2), 0.0, share_1)
+        share_1 = np.where(np.isinf(r2) & np.isfinite(r1), 1.0, share_1)
+        share_1 = np.where(np.isnan(share_1), 0.5, share_1)
+        r_flash = 1.0 / (1.0 / r1 + 1.0 / r2)
     return share_1, r_flash
 
 
@@ -83,15 +86,16 @@ def blok_flash_high_peclet(heat_per_length, half_width_m, speed_1, speed_2, effu
     return coefficient * np.asarray(heat_per_length, dtype=float) / denom
 
 
-def flash_temperature(normal_force, slip, U_wall, U_pin, half_width_m, length, mu,
+def flash_temperature(N, slip, U_wall, U_pin, b, length, mu,
                       material_pin: Material | str, material_wheel: Material | str,
                       t_on_pin=np.inf, t_on_wall=np.inf, distribution: str = "semi-elliptic",
                       method: str = "jaeger", statistic: str = "max", evaluator: str = "table") -> dict:
     """Flash temperature rise of the pin–slot line contact, vectorised over time series (SI in, SI out).
 
-    normal_force N (N), slip speed u (m/s), source speeds over the wall U_wall and over the pin U_pin (m/s),
-    Hertz half-width b (m), contact length l (m), friction coefficient mu, materials (or names), times the
-    source has been on over each body (s, inf = no transient floor).
+    N normal force (N, signed), slip speed (m/s, signed), source speeds over the wall U_wall and over the pin
+    U_pin (m/s), Hertz half-width b (m), contact length (m), friction coefficient mu, materials (or names),
+    times the source has been on over each body t_on_pin/t_on_wall (s; inf = no transient floor, 0 = just
+    switched on: zero rise).
 
     method='jaeger' (mechsim): per-body exact moving-band rises at L_eff, Blok partition (physics.md §4.3,
     §4.6). method='seed-blok': the seed's S(13) as printed with C = 2.5, using U_pin and the pin material
@@ -102,8 +106,8 @@ def flash_temperature(normal_force, slip, U_wall, U_pin, half_width_m, length, m
     heat_rate_wheel_W, temp_flash_rise_K.
     """
     pin, wheel = get_material(material_pin), get_material(material_wheel)
-    b = np.asarray(half_width_m, dtype=float)
-    heat = frictional_heat(mu, normal_force, slip)
+    b = np.asarray(b, dtype=float)
+    heat = frictional_heat(mu, N, slip)
     heat_l = heat / length
     L_pin = peclet(U_pin, b, pin.diffusivity)
     L_wheel = peclet(U_wall, b, wheel.diffusivity)

@@ -89,6 +89,20 @@ def _mean_inputs(heat_mean, share_pin) -> np.ndarray:
     return np.array([share_pin * heat_mean, (1.0 - share_pin) * heat_mean], dtype=float)
 
 
+def cycle_means(times, heat_rate, heat_share_pin) -> tuple[float, float]:
+    """Cycle-mean heat Q_bar = (1/T) int Q dt and heat-weighted pin share gamma_bar = int gamma Q dt / int Q dt
+    over one period sampled at `times` (trapezoid rule); the inputs of `integrate_mean_heat` (physics.md §5)."""
+    t = np.asarray(times, dtype=float)
+    Q = np.broadcast_to(np.asarray(heat_rate, dtype=float), t.shape)
+    g = np.broadcast_to(np.asarray(heat_share_pin, dtype=float), t.shape)
+    energy = np.trapezoid(Q, t)
+    span = t[-1] - t[0]
+    if span <= 0:
+        raise ValueError("cycle_means: times must span a positive interval")
+    share = np.trapezoid(g * Q, t) / energy if energy > 0 else 0.5
+    return float(energy / span), float(share)
+
+
 def steady_bulk_temperatures(system: LinearThermalSystem, heat_mean, share_pin) -> np.ndarray:
     """Steady [T_pin, T_wheel] under the mean heat Q_bar split gamma_pin : 1 - gamma_pin (physics.md §5)."""
     return system.steady_state(_mean_inputs(heat_mean, share_pin))
