@@ -95,6 +95,39 @@ def extra_sections(mech_cls: type[Mechanism]) -> dict:
     return {"thermal": thermal_section(mech_cls)}
 
 
+def sections_for(mtype: str) -> dict[str, dict[str, Field]]:
+    """Every section's fields for a mechanism type (common + mechanism + thermal + initial)."""
+    mech_cls = MECHANISMS[mtype]
+    sections = dict(COMMON_SECTIONS)
+    sections.update(mech_cls.schema)
+    sections.update(extra_sections(mech_cls))
+    sections["initial"] = {
+        mech_cls.initial_keys[0]: Field("quantity", "rad", default=0.0, help="initial angle of the drive coordinate"),
+        mech_cls.initial_keys[1]: Field("quantity", "rad/s", default=0.0, help="initial speed of the drive coordinate"),
+    }
+    return sections
+
+
+def _as_text(spec: Field, value):
+    if value is None or spec.kind not in ("quantity", "points", "list") or not spec.unit:
+        return value
+    if spec.kind == "quantity":
+        return f"{value!r} {spec.unit}"
+    if spec.kind == "points":
+        return [[f"{c!r} {spec.unit}" for c in p] for p in value]
+    return [f"{c!r} {spec.unit}" for c in value]
+
+
+def resolved_raw(si: dict) -> dict:
+    """The resolved scenario (SI) written back as scenario input: quantities as strings with SI units."""
+    sections = sections_for(si["mechanism"]["type"])
+    out = {k: _as_text(TOP[k], si[k]) for k in TOP}
+    for name, fields in sections.items():
+        out[name] = {k: _as_text(spec, si[name].get(k)) for k, spec in fields.items() if k in si.get(name, {})}
+    out["mechanism"] = {"type": si["mechanism"]["type"], **out["mechanism"]}
+    return out
+
+
 def validate(raw: dict) -> dict:
     """Check every section and key; return the resolved scenario in SI."""
     if not isinstance(raw, dict):
@@ -107,14 +140,7 @@ def validate(raw: dict) -> dict:
     mtype = mech_raw.get("type")
     if mtype not in MECHANISMS:
         raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {mtype!r}")
-    mech_cls = MECHANISMS[mtype]
-    sections = dict(COMMON_SECTIONS)
-    sections.update(mech_cls.schema)
-    sections.update(extra_sections(mech_cls))
-    sections["initial"] = {
-        mech_cls.initial_keys[0]: Field("quantity", "rad", default=0.0, help="initial angle of the drive coordinate"),
-        mech_cls.initial_keys[1]: Field("quantity", "rad/s", default=0.0, help="initial speed of the drive coordinate"),
-    }
+    sections = sections_for(mtype)
     for name, value in raw.items():
         if isinstance(value, dict) and name not in sections:
             raise ScenarioError(name, f"unknown section (known: {', '.join(sorted(sections))})")

@@ -35,8 +35,10 @@ def _toml_clean(d):
 
 
 def resolved_scenario_toml(si: dict) -> str:
-    header = "# Resolved scenario: every value in SI (m, s, rad, N, kg, K), defaults filled in.\n"
-    return header + tomli_w.dumps(_toml_clean(si))
+    """The scenario as run: every value in SI with its unit, defaults filled in; valid scenario input."""
+    from .loader import resolved_raw
+    header = "# Resolved scenario: every value in SI units, defaults filled in (valid input to `mechsim run`).\n"
+    return header + tomli_w.dumps(_toml_clean(resolved_raw(si)))
 
 
 def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
