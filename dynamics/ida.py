@@ -46,7 +46,7 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
     """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end."""
     opts = dict(
         userdata=p, rtol=settings.rtol, atol=atol_vector(mf, settings), algebraic_idx=mf.algebraic or None,
-        jacfn=mf.jacobian, max_num_steps=settings.max_steps, linsolver="dense",
+        jacfn=mf.jacobian if settings.jacobian == "exact" else None, max_num_steps=settings.max_steps, linsolver="dense",
     )
     n_ev = len(mf.guard_names) if settings.events else 0
     if n_ev:

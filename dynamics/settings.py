@@ -18,6 +18,8 @@ class SolverSettings:
     multiplier_atol: IDA's absolute tolerance on multipliers. scikit-sundae cannot call IDASetSuppressAlg,
         so a large value keeps the algebraic variables out of the error test (design.md, kinematics.md §4).
         None picks 1e6 for index2/index3 and 1e3 for index1.
+    jacobian: "exact" (generated from the symbolic model, the default) or "fd" (IDA's internal finite
+        differences, only when asked for).
     events: False disables root-finding of guards (only for the stability study: mode changes are then
         stepped over and detected afterwards as a failure).
     """
@@ -33,6 +35,7 @@ class SolverSettings:
     max_steps: int = 20000
     events: bool = True
     diffrax_solver: str = "Tsit5"
+    jacobian: str = "exact"
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
@@ -41,6 +44,8 @@ class SolverSettings:
             raise ValueError(f"solver.formulation must be one of {FORMULATIONS}, got {self.formulation!r}")
         if self.method not in METHODS:
             raise ValueError(f"solver.method must be one of {METHODS}, got {self.method!r}")
+        if self.jacobian not in ("exact", "fd"):
+            raise ValueError(f"solver.jacobian must be 'exact' or 'fd', got {self.jacobian!r}")
         if not (0 < self.rtol < 1):
             raise ValueError(f"solver.rtol must be in (0, 1), got {self.rtol}")
         if not self.atol > 0:

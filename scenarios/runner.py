@@ -30,7 +30,8 @@ def solver_settings(si: dict) -> SolverSettings:
     return SolverSettings(backend=s["backend"], formulation=s["formulation"], method=s["method"],
                           rtol=s["rtol"], atol=s["atol"], multiplier_atol=s["multiplier_atol"],
                           baumgarte_alpha=s["baumgarte_alpha"], baumgarte_beta=s["baumgarte_beta"],
-                          max_steps=s["max_steps"], events=s["events"], diffrax_solver=s["diffrax_solver"])
+                          max_steps=s["max_steps"], events=s["events"], diffrax_solver=s["diffrax_solver"],
+                          jacobian=s["jacobian"])
 
 
 def make_drive(si: dict) -> Drive:

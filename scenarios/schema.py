@@ -37,6 +37,8 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "max_steps": Field("int", default=20000, minimum=1),
         "events": Field("bool", default=True),
         "diffrax_solver": Field("str", default="Tsit5"),
+        "jacobian": Field("str", default="exact", choices=("exact", "fd"),
+                          help="IDA Jacobian: exact (generated) or fd (finite differences, only when asked)"),
     },
     "output": {
         "plots": Field("bool", default=True, help="write PNG plots"),
