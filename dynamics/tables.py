@@ -15,11 +15,17 @@ def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:
 
 
 def _kinetic_energy(mass, q: np.ndarray, v: np.ndarray, p: tuple) -> np.ndarray:
-    """1/2 v^T M(q) v row by row (M evaluated on the whole array where it broadcasts)."""
-    M = mass(q.T, p)
+    """1/2 v^T M(q) v row by row (M evaluated on the whole array where it broadcasts; a configuration-dependent
+    M with constant entries does not form one numpy array, so it is then evaluated row by row)."""
     n = q.shape[1]
     rows = len(q)
     Mb = np.empty((rows, n, n))
+    try:
+        M = mass(q.T, p)
+    except ValueError:
+        for r in range(rows):
+            Mb[r] = np.asarray(mass(q[r], p), dtype=float)
+        return 0.5 * np.einsum("ri,rij,rj->r", v, Mb, v)
     for i in range(n):
         for j in range(n):
             Mb[:, i, j] = np.broadcast_to(np.asarray(M[i][j], dtype=float), (rows,))

@@ -4,5 +4,6 @@ from .geneva import Geneva
 
 #: scenario `mechanism.type` -> model class
 MECHANISMS: dict[str, type[Mechanism]] = {"geneva": Geneva}
+from .rolling_model import RollingPairFourBar; MECHANISMS["rolling_pair"] = RollingPairFourBar  # noqa: E402,E702
 
 __all__ = ["Field", "Guard", "InitialState", "Mechanism", "Mode", "Transition", "Geneva", "MECHANISMS"]

@@ -137,11 +137,11 @@ class CircleOnLine:
 
     def centre(self, u, lib=np):
         """B0(s) = P0 + r n + s t, as (x, y)."""
-        c, s_ = math.cos(self.tangent), math.sin(self.tangent)
+        c, s_ = lib.cos(self.tangent), lib.sin(self.tangent)
         return self.P0[0] - self.r * s_ + u * c, self.P0[1] + self.r * c + u * s_
 
     def centre_du(self, u, lib=np):
-        c, s_ = math.cos(self.tangent), math.sin(self.tangent)
+        c, s_ = lib.cos(self.tangent), lib.sin(self.tangent)
         z = 0 * u
         return c + z, s_ + z
 
@@ -150,7 +150,7 @@ class CircleOnLine:
         return z + 0.0, z + 0.0
 
     def contact(self, u, lib=np):
-        c, s_ = math.cos(self.tangent), math.sin(self.tangent)
+        c, s_ = lib.cos(self.tangent), lib.sin(self.tangent)
         return self.P0[0] + u * c, self.P0[1] + u * s_
 
     def period(self, *args, **kwargs):
