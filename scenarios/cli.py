@@ -93,6 +93,32 @@ def run(
         err.print(f"warning: {w}", markup=False, highlight=False, soft_wrap=True)
 
 
+@app.command()
+def sweep(
+    target: str = typer.Argument(..., help="scenario name or file, or a sweep TOML file with a [sweep] table"),
+    vary: List[str] = typer.Option([], "--vary", help="section.key=SPEC: 5,7,14 N*m | 0.1:0.4:7 | log:1e-3:1e-1:5"),
+    set_: List[str] = typer.Option([], "--set", help="override shared by every case: section.key=value"),
+    zip_: bool = typer.Option(False, "--zip", help="zip the axes (equal lengths) instead of a full grid"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/sweep-<name>)"),
+    workers: Optional[int] = typer.Option(None, "--workers", help="local processes (default: all cores; 0: here)"),
+    dask_local: Optional[int] = typer.Option(None, "--dask-local", help="run on a Dask LocalCluster of N workers"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="run on the Dask scheduler at ADDRESS"),
+    batch: bool = typer.Option(False, "--batch", help="diffrax cases as batched compiled solves where they can"),
+    timeseries: bool = typer.Option(False, "--timeseries", help="also write each case's time series"),
+    plots: bool = typer.Option(True, "--plots/--no-plots", help="write PNG plots of the table"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder, finished cases too"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
+) -> None:
+    """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
+    from .sweep_run import cli_main
+    try:
+        code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, batch, timeseries, plots,
+                        force, quiet, out, err)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    raise typer.Exit(code)
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:

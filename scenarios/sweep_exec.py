@@ -1,0 +1,231 @@
+"""Run sweep cases: in this process, on a local process pool, or on a Dask cluster.
+
+Every runner takes the validated cases (`CaseTask`) and calls `on_result(outcome)` in the main process as each
+case finishes, so the caller can write it at once. A case's solver failure or exception is an outcome (recorded
+with its reason), never an interruption. Ctrl-C or a lost worker stops the runner: it first delivers every case
+that had already finished, then raises `SweepInterrupted` so the caller can say how many remain.
+
+Each worker process derives the symbolic model once (dynamics.model caches the derivation per process) and
+reuses it for every case of the same mechanism structure it is given.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import pandas as pd
+
+from .loader import Scenario
+
+
+class SweepInterrupted(Exception):
+    """The sweep stopped before every case ran (finished cases have been delivered)."""
+
+
+@dataclass(frozen=True)
+class CaseTask:
+    """One case to run: its key (hash of the resolved scenario) and the validated scenario."""
+
+    key: str
+    scenario: Scenario
+    timeseries: bool = False
+
+
+@dataclass
+class Outcome:
+    """What a worker sends back: the flat summary row, and the time series when asked for."""
+
+    key: str
+    row: dict
+    timeseries: pd.DataFrame | None = None
+
+
+def _drive_angle_column(si: dict) -> str | None:
+    from dynamics.tables import coordinate_columns
+    from .loader import build_mechanism
+    mech = build_mechanism(si)
+    k = mech.drive_coordinate
+    if k not in mech.angle_coordinates:
+        return None
+    return coordinate_columns(mech.coordinates[k], True)[0]
+
+
+def run_case(task: CaseTask) -> Outcome:
+    """Run one case; any failure (solver, physics, exception) becomes a row with success = False and its reason."""
+    from .runner import run
+    from .sweep_rows import cycle_figures, summary_row
+    wall0 = time.perf_counter()
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    ts = None
+    try:
+        result = run(task.scenario)
+        row = summary_row(result.summary)
+        if result.failure is not None:
+            row["failure_kind"] = result.failure.kind
+        df = result.timeseries
+        row.update(cycle_figures(df, _drive_angle_column(task.scenario.si)))
+        row["simulated_time_s"] = float(df["t_s"].iloc[-1]) if len(df) else 0.0
+        if task.timeseries:
+            ts = df
+    except Exception as exc:  # a case's own error must not stop the others
+        row = {"success": False, "failure": f"{type(exc).__name__}: {exc}".splitlines()[0], "failure_kind": "error"}
+    row["case_wall_time_s"] = time.perf_counter() - wall0
+    row["worker"] = worker
+    return Outcome(task.key, row, ts)
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the main process, which stops the pool and keeps what finished."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class SerialRunner:
+    """Every case in this process, one after another (debugging; tiny sweeps)."""
+
+    name = "serial"
+    workers = 1
+
+    def describe(self) -> str:
+        return "in this process"
+
+    def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
+        try:
+            for task in tasks:
+                on_result(run_case(task))
+        except KeyboardInterrupt:
+            raise SweepInterrupted("interrupted (Ctrl-C)") from None
+
+
+class PoolRunner:
+    """A local concurrent.futures.ProcessPoolExecutor (forkserver processes, so no fork of a threaded parent)."""
+
+    name = "pool"
+
+    def __init__(self, workers: int | None = None):
+        self.workers = workers or len(os.sched_getaffinity(0))
+
+    def describe(self) -> str:
+        return f"local process pool, {self.workers} workers"
+
+    def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
+        import multiprocessing as mp
+        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)),
+                                 mp_context=mp.get_context("forkserver"), initializer=_ignore_sigint)
+        futures = [ex.submit(run_case, t) for t in tasks]
+        delivered: set = set()
+        try:
+            for f in as_completed(futures):
+                on_result(f.result())
+                delivered.add(f)
+        except KeyboardInterrupt:
+            self._stop(ex)
+            self._deliver_finished(futures, delivered, on_result)
+            raise SweepInterrupted("interrupted (Ctrl-C)") from None
+        except BrokenProcessPool:
+            self._stop(ex)
+            self._deliver_finished(futures, delivered, on_result)
+            raise SweepInterrupted("a worker process died (killed or out of memory); the pool stopped") from None
+        except BaseException:
+            self._stop(ex)
+            raise
+        ex.shutdown(wait=True)
+
+    @staticmethod
+    def _deliver_finished(futures: Iterable, delivered: set, on_result) -> None:
+        for f in futures:
+            if f not in delivered and f.done() and not f.cancelled() and f.exception() is None:
+                on_result(f.result())
+                delivered.add(f)
+
+    @staticmethod
+    def _stop(ex: ProcessPoolExecutor) -> None:
+        """Cancel what has not started and end the pool's own worker processes (running cases are dropped)."""
+        processes = list(getattr(ex, "_processes", {}).values())   # the executor keeps no public handle
+        ex.shutdown(wait=False, cancel_futures=True)
+        for p in processes:
+            if p.is_alive():
+                p.terminate()
+        for p in processes:
+            p.join(timeout=5)
+
+
+class DaskRunner:
+    """A Dask distributed cluster: an existing scheduler (`address`) or a LocalCluster of `local_workers`.
+
+    Cases are Dask futures (client.submit, distributed.as_completed); Dask does the scheduling, retries a task
+    whose worker died on another worker (up to its `allowed-failures`), and reports a case that keeps killing
+    workers as KilledWorker: such a case is not recorded (it remains to run), the others go on.
+    """
+
+    name = "dask"
+
+    def __init__(self, address: str | None = None, local_workers: int | None = None):
+        self.address = address
+        self.workers = local_workers
+        self.dashboard: str | None = None
+
+    def describe(self) -> str:
+        return f"Dask scheduler {self.address}" if self.address else f"Dask LocalCluster, {self.workers} workers"
+
+    def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
+        try:
+            from distributed import Client, LocalCluster, as_completed as dask_completed
+        except ImportError:
+            from .units import ScenarioError
+            raise ScenarioError("--dask-local/--scheduler", "needs dask[distributed]: pip install "
+                                "\"mechsim[dask]\"") from None
+        cluster = None
+        if self.address:
+            client = Client(self.address, timeout="20s")
+        else:
+            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+            client = Client(cluster)
+        self.dashboard = getattr(client, "dashboard_link", None)
+        lost = 0
+        delivered: set = set()
+        try:
+            futures = [client.submit(run_case, t, key=f"mechsim-case-{t.key}-{os.urandom(4).hex()}", pure=False)
+                       for t in tasks]
+            try:
+                for f in dask_completed(futures):
+                    try:
+                        outcome = f.result()
+                    except Exception:   # KilledWorker and the like: the case did not finish
+                        delivered.add(f.key)
+                        lost += 1
+                        continue
+                    on_result(outcome)
+                    delivered.add(f.key)
+            except KeyboardInterrupt:
+                client.cancel([f for f in futures if f.status == "pending"])
+                for f in futures:
+                    if f.key not in delivered and f.status == "finished":
+                        on_result(f.result())
+                        delivered.add(f.key)
+                raise SweepInterrupted("interrupted (Ctrl-C)") from None
+            if lost:
+                raise SweepInterrupted(f"{lost} case(s) lost with their Dask workers (KilledWorker)")
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def make_runner(workers: int | None = None, dask_local: int | None = None,
+                scheduler: str | None = None):
+    """The runner the options ask for: Dask if a scheduler or a local Dask cluster is given, else a pool."""
+    if scheduler:
+        return DaskRunner(address=scheduler)
+    if dask_local:
+        return DaskRunner(local_workers=dask_local)
+    if workers == 0:
+        return SerialRunner()
+    return PoolRunner(workers)
