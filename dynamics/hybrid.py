@@ -13,7 +13,7 @@ import numpy as np
 
 from mechanisms.base import Mechanism
 
-from .consistent import consistent_state
+from .consistent import consistent_state, project_positions, project_velocities
 from .drives import Drive
 from .ida import integrate_segment
 from .model import DerivedModel, StateExtension, derive
@@ -138,16 +138,29 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         mf = model.modes[mode]
         p = parameter_tuple(model, values)
         try:
+            restitution, rebound = tr.restitution, None
+            if restitution:
+                # Newton's law with e > 0 leaves G v = -e G v-, which the new mode's constraints forbid: its own
+                # row, then the plastic projection of consistent_state removes the rebound (a second row)
+                q = project_positions(mf, t, q, p)
+                v, rebound = project_velocities(mf, t, q, v, p, restitution)
+                restitution = None
             y, yp, impact = consistent_state(mf, t, q, v, seg.y_end[ix["work"]], seg.y_end[ix["ext"]], p,
-                                             tr.restitution)
+                                             restitution)
+            if rebound is not None:
+                events.append(dict(row, kinetic_energy_before_J=rebound.energy_before,
+                                   kinetic_energy_after_J=rebound.energy_after, message=tr.message or ""))
+                row = dict(row, kind="rebound absorbed", message=(
+                    f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
+                    f"'{mode}': removed by a plastic projection onto its constraints"))
         except (ValueError, np.linalg.LinAlgError) as exc:
             failure = dict(time=t, mode=mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
                            where={c: float(val) for c, val in zip(model.coordinates, q)},
                            hint="the new mode may be singular here")
             events.append(row)
             break
-        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after,
-                   message=tr.message or "")
+        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
+        row.setdefault("message", tr.message or "")
         events.append(row)
     stats["solve_time_s"] = _time.perf_counter() - solve0
     return Trajectory(model, pieces, events, stats, failure, warnings)

@@ -116,7 +116,8 @@ class Transition:
     restitution: None = velocities stay (they must already satisfy the new constraints up to round-off;
         they are projected onto them, which removes only round-off); a number e in [0, 1] = an impact:
         the constraint-normal relative velocity is reversed and scaled by e (Newton's law), the energy loss
-        is reported in the events table.
+        is reported in the events table. The new mode keeps those constraints closed, so for e > 0 the rebound
+        is then removed by a plastic projection, reported as a second row ("rebound absorbed").
     stop: a reason to stop the run here (stall, reversal, ...), reported to the user; None to go on.
     kind: a short label for the events table ("entry", "exit", "flank switch", "impact", ...).
     """
@@ -204,3 +205,11 @@ class Mechanism(ABC):
     def describe(self) -> dict:
         """Derived geometry worth reporting in the summary (SI)."""
         return {}
+
+    def extra_outputs(self, timeseries, events) -> dict:
+        """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""
+        return {}
+
+    def extra_plots(self, folder, timeseries, tables: dict) -> list:
+        """Mechanism-specific PNG plots written into `folder` (tables: those of `extra_outputs`); the paths."""
+        return []

@@ -83,4 +83,6 @@ def write_plots(result: Result, folder: Path, mechanism=None) -> list[Path]:
             fig.savefig(path, dpi=110)
             plt.close(fig)
             written.append(path)
+    if mechanism is not None and len(df):
+        written += mechanism.extra_plots(folder, df, result.extra_tables)
     return written

@@ -92,16 +92,22 @@ def peaks(df: pd.DataFrame, angle_column: str) -> dict:
     return out
 
 
-def energy_balance(df: pd.DataFrame) -> dict:
-    """Drive work = d(kinetic energy) - (load + friction + damping work) (all works signed into the system)."""
+def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict:
+    """Drive work = d(kinetic energy) - (load + friction + damping work) + energy lost in impacts (events table;
+    all works signed into the system)."""
     if "work_drive_J" not in df or len(df) < 2:
         return {}
     works = {c[5:-2]: float(df[c].iloc[-1] - df[c].iloc[0]) for c in df.columns
              if c.startswith("work_") and c.endswith("_J")}
     dke = float(df["kinetic_energy_J"].iloc[-1] - df["kinetic_energy_J"].iloc[0])
-    closure = sum(works.values()) - dke
+    lost = 0.0
+    if events is not None and "energy_lost_J" in events and len(events):
+        t0, t1 = float(df["t_s"].iloc[0]), float(df["t_s"].iloc[-1])
+        inside = (events["t_s"] > t0) & (events["t_s"] <= t1)
+        lost = float(events.loc[inside, "energy_lost_J"].fillna(0.0).sum())
+    closure = sum(works.values()) - dke - lost
     scale = max(abs(works.get("drive", 0.0)), 1e-300)
-    return {"work_J": works, "kinetic_energy_change_J": dke, "closure_error_J": closure,
+    return {"work_J": works, "kinetic_energy_change_J": dke, "impact_losses_J": lost, "closure_error_J": closure,
             "closure_error_relative": closure / scale}
 
 
@@ -153,7 +159,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         },
         "geometry": mech.describe(),
         "peaks": peaks(df, angle_col),
-        "energy": energy_balance(df),
+        "energy": energy_balance(df, events),
         "events": {str(k): int(v) for k, v in events["kind"].value_counts().items()} if len(events) else {},
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
@@ -162,4 +168,4 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         "failure": failure.message() if failure else None,
         "versions": _versions(),
     }
-    return Result(df, events, summary, si, failure)
+    return Result(df, events, summary, si, failure, extra_tables=mech.extra_outputs(df, events))
