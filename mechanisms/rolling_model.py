@@ -494,15 +494,17 @@ class RollingPairFourBar(Mechanism):
             where = ("coupler line through the contact point, the rolling link's instantaneous centre "
                      "(w . B' = 0)")
         at = f"crank angle {th2:.6g} rad, rolling angle {phi:.6g} rad"
+        link = "rolling link" if self.driven_link == "rolling" else "crank"
         if self.prescribed:
             return Transition(mode, kind="dead point", stop=(
-                f"the prescribed {self.driven_link} speed cannot be kept past the dead point ahead: {where}, "
+                f"the prescribed {link} speed cannot be kept past the dead point ahead: {where}, "
                 f"|transmission| fell to {values['dead_margin']:g} at {at}; the drive torque grows without bound "
-                f"there (drive it with a torque to let the {self.driven_link} link reverse)"))
+                f"there (drive it with a torque to let the {link} reverse)"))
         new = -values["dead_sign"]
         speed = float(v[self.drive_coordinate])
+        link = "rolling link" if self.driven_link == "rolling" else "crank"
         return Transition(mode, {"dead_sign": new}, kind="dead point", message=(
-            f"dead point of the {self.driven_link} input ({where}) at {at}: the {self.driven_link} link reverses "
+            f"dead point of the {link} input ({where}) at {at}: the {link} reverses "
             f"(its speed {speed:.3g} rad/s) and the motion goes on"))
 
     # -- prescribed rolling-link speed: no DAE ----------------------------------------------------------
@@ -582,11 +584,12 @@ class RollingPairFourBar(Mechanism):
         if k.pair.kind == "circle":
             ax.add_patch(Circle(k.pair.O, k.pair.R, fill=False, color="k", lw=1.0, hatch="//", alpha=0.4))
             lim = abs(complex(*k.pair.O) - k.a0) + k.pair.R + 2 * r + k.l4
-        else:
+        else:   # the line, long enough to cross the view; the view is fixed by A0 and the line's distance
             tdir = np.exp(1j * k.pair.tangent)
-            ends = P + np.array([-3, 3]) * (r + k.l4) * tdir
+            P0 = complex(*k.pair.P0)
+            lim = abs(((k.a0 - P0) * np.conj(tdir)).imag) + 2 * r + k.l4
+            ends = P0 + ((k.a0 - P0) * np.conj(tdir)).real * tdir + np.array([-1, 1]) * 10 * (lim + k.l2 + k.l3) * tdir
             ax.plot(ends.real, ends.imag, "k-", lw=1.0)
-            lim = abs(P - k.a0) + 2 * r + k.l4
         ax.add_patch(Circle((B0.real, B0.imag), r, fill=False, color="tab:green", lw=1.5))
         ax.plot([B0.real, B.real], [B0.imag, B.imag], color="tab:green", lw=2)
         ax.plot([k.a0.real, A.real], [k.a0.imag, A.imag], color="tab:red", lw=2)

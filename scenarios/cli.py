@@ -119,6 +119,23 @@ def sweep(
     raise typer.Exit(code)
 
 
+@app.command()
+def curves(
+    name: str = typer.Argument(..., help="rolling-pair set (A, B, C, D, ...), built-in scenario or TOML file"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/curves-<name>)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+) -> None:
+    """Coupler-curve atlas of a rolling-pair 4-bar: components, closure, cusps, crunodes (CSV) and atlas.png."""
+    from .curves import write_curves
+    try:
+        target, s = write_curves(name, out_dir, force)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    out.print(f"{s['mechanism']}: {s['components']} components ({s['monochromatic']} monochromatic, "
+              f"{s['dichromatic']} dichromatic), {s['cusps']} cusp rows, {s['crunodes']} crunodes -> {target}",
+              markup=False, highlight=False, soft_wrap=True)
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:

@@ -14,9 +14,12 @@ from dynamics.result import Result  # noqa: E402
 # (column, label with unit at the edge, scale to display unit)
 PANELS = {
     "motion": [
-        [("crank_angle_rad", "crank angle (deg)", np.degrees(1.0)), ("wheel_angle_rad", "wheel angle (deg)", np.degrees(1.0))],
-        [("crank_speed_rad_s", "crank speed (rad/s)", 1.0), ("wheel_speed_rad_s", "wheel speed (rad/s)", 1.0)],
-        [("crank_accel_rad_s2", "crank accel. (rad/s²)", 1.0), ("wheel_accel_rad_s2", "wheel accel. (rad/s²)", 1.0)],
+        [("crank_angle_rad", "crank angle (deg)", np.degrees(1.0)), ("wheel_angle_rad", "wheel angle (deg)", np.degrees(1.0)),
+         ("rolling_angle_rad", "rolling link angle (deg)", np.degrees(1.0))],
+        [("crank_speed_rad_s", "crank speed (rad/s)", 1.0), ("wheel_speed_rad_s", "wheel speed (rad/s)", 1.0),
+         ("rolling_speed_rad_s", "rolling link speed (rad/s)", 1.0)],
+        [("crank_accel_rad_s2", "crank accel. (rad/s²)", 1.0), ("wheel_accel_rad_s2", "wheel accel. (rad/s²)", 1.0),
+         ("rolling_accel_rad_s2", "rolling link accel. (rad/s²)", 1.0)],
     ],
     "forces": [
         [("contact_force_N", "normal force (N)", 1.0), ("friction_force_N", "friction force (N)", 1.0)],
