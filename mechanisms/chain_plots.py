@@ -116,6 +116,27 @@ def plot_kinematics(tables, path, dwells=None, title=None) -> Path:
     return _save(fig, path)
 
 
+def draw_layout(ax, mechanism, scale: float = 100.0) -> np.ndarray:
+    """Sprockets (numbered), the chain loop and the crank pivot Q on matplotlib axes, lengths times `scale`
+    (100: cm). Returns Q scaled."""
+    p = mechanism.path
+    for i, (O, r) in enumerate(zip(p.centres, p.radii)):
+        ax.add_patch(Circle(O * scale, r * scale, fill=False, lw=0.8, color="0.5"))
+        ax.annotate(f"{i + 1}", O * scale, ha="center", va="center", fontsize=9, color="0.3")
+    loop = p.sample(721) * scale
+    ax.plot(loop[:, 0], loop[:, 1], color="k", lw=1.5, label="chain")
+    Q = mechanism.Q * scale
+    ax.plot(*Q, "ks", ms=6)
+    ax.annotate("Q", Q, xytext=(4, 4), textcoords="offset points")
+    ax.set_aspect("equal")
+    return Q
+
+
+def draw_dyad(ax, Q, A, B, color="C0", label=None) -> None:
+    """The dyad Q-A-B (crank and coupler) in the units of the points given."""
+    ax.plot([Q[0], A[0], B[0]], [Q[1], A[1], B[1]], "-o", color=color, ms=3, lw=1.5, label=label)
+
+
 def plot_mechanism(mechanism, table: pd.DataFrame, path, drive_angles=None, n_positions: int = 4,
                    title: str | None = None) -> Path:
     """Sprockets, chain loop, crank pivot and the dyad Q-A-B at a few rows of `table` (cm on the axes).
@@ -126,15 +147,7 @@ def plot_mechanism(mechanism, table: pd.DataFrame, path, drive_angles=None, n_po
     cm = 100.0
     fig = Figure(figsize=(6.5, 6.5))
     ax = fig.add_subplot()
-    p = mechanism.path
-    for i, (O, r) in enumerate(zip(p.centres, p.radii)):
-        ax.add_patch(Circle(O * cm, r * cm, fill=False, lw=0.8, color="0.5"))
-        ax.annotate(f"{i + 1}", O * cm, ha="center", va="center", fontsize=9, color="0.3")
-    loop = p.sample(721) * cm
-    ax.plot(loop[:, 0], loop[:, 1], color="k", lw=1.5, label="chain")
-    Q = mechanism.Q * cm
-    ax.plot(*Q, "ks", ms=6)
-    ax.annotate("Q", Q, xytext=(4, 4), textcoords="offset points")
+    Q = draw_layout(ax, mechanism, cm)
     ok = table[table["closes"]]
     if drive_angles is None:
         frac = (np.arange(n_positions) + 0.35) / n_positions
@@ -146,10 +159,7 @@ def plot_mechanism(mechanism, table: pd.DataFrame, path, drive_angles=None, n_po
     for k, (_, row) in enumerate(rows.iterrows()):
         A = np.array([row.crank_tip_x_m, row.crank_tip_y_m]) * cm
         B = np.array([row.joint_B_x_m, row.joint_B_y_m]) * cm
-        c = colors[k % len(colors)]
-        ax.plot([Q[0], A[0], B[0]], [Q[1], A[1], B[1]], "-o", color=c, ms=3, lw=1.5,
-                label=f"$\\theta_1$ = {row.drive_angle_rad * 180 / np.pi:.0f} deg")
-    ax.set_aspect("equal")
+        draw_dyad(ax, Q, A, B, colors[k % len(colors)], f"$\\theta_1$ = {row.drive_angle_rad * 180 / np.pi:.0f} deg")
     ax.set_xlabel("x (cm)")
     ax.set_ylabel("y (cm)")
     ax.grid(True, lw=0.3)
