@@ -51,8 +51,13 @@ def acceleration(m: Geneva, theta: float, omega: float, drive_T0: float, drive_s
 
 
 def integrate(m: Geneva, drive_T0: float, drive_slope: float, theta0: float, omega0: float,
-              t_eval: np.ndarray, rtol: float = 1e-12, atol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
-    """theta(t), omega(t) at t_eval (t_eval[0] is the start), piecewise between boundaries."""
+              t_eval: np.ndarray, rtol: float = 1e-12, atol: float = 1e-12, method="DOP853",
+              stats: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """theta(t), omega(t) at t_eval (t_eval[0] is the start), piecewise between boundaries.
+
+    method: any `solve_ivp` method (name or OdeSolver class); stats, if given, accumulates nfev, njev, nlu,
+    segments and events (for the work-precision benchmark).
+    """
     g = m.geometry
     a0 = g.engagement_half_angle
     t, y = float(t_eval[0]), np.array([theta0, omega0], dtype=float)
@@ -88,8 +93,13 @@ def integrate(m: Geneva, drive_T0: float, drive_slope: float, theta0: float, ome
 
         slip.terminal, slip.direction = True, 0
         mask = (t_eval > t) & (t_eval <= t_end)
-        sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval[mask],
+        sol = solve_ivp(rhs, (t, t_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval[mask],
                         events=[boundary, slip], dense_output=False)
+        if stats is not None:
+            for key in ("nfev", "njev", "nlu"):
+                stats[key] = stats.get(key, 0) + int(getattr(sol, key, 0))
+            stats["segments"] = stats.get("segments", 0) + 1
+            stats["events"] = stats.get("events", 0) + int(sol.status == 1)
         n = len(sol.t)
         if n:
             idx = np.flatnonzero(mask)[:n]

@@ -136,6 +136,30 @@ def curves(
               markup=False, highlight=False, soft_wrap=True)
 
 
+@app.command()
+def bench(
+    names: Optional[List[str]] = typer.Argument(None, help="methods or families (ida, diffrax, scipy, casadi); "
+                                                          "default: all of the chosen size"),
+    out_dir: Path = typer.Option(Path("results") / "bench", "--out", help="output folder"),
+    full: bool = typer.Option(False, "--full", help="every tolerance 1e-3..1e-10, the whole scenario, diffrax"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress lines"),
+) -> None:
+    """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS."""
+    from .bench import BenchConfig, report_lines, run_bench, write
+    try:
+        config = BenchConfig.full(names) if full else BenchConfig.small(names)
+        if out_dir.exists() and not force:
+            raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
+        say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
+        result = run_bench(config, say)
+        write(result, out_dir, force)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    for line in report_lines(result) + [f"-> {out_dir}"]:
+        out.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:

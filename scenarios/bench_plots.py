@@ -1,0 +1,57 @@
+"""The work-precision figure of `mechsim bench`: error against warm wall time, error against the requested
+tolerance, and the cold setup time (derivation, compilation, construction) shown apart."""
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+STYLE = {"mechsim IDA": ("-", "o"), "mechsim diffrax": (":", "D"), "scipy": ("--", "s"), "CasADi": ("-.", "^")}
+
+
+def work_precision_figure(rows: pd.DataFrame, summary: dict, path) -> None:
+    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(17, 5.6), gridspec_kw={"width_ratios": [1.25, 1.0, 0.8]})
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    methods = list(dict.fromkeys(rows.method))
+    for i, name in enumerate(methods):
+        d = rows[rows.method == name].sort_values("rtol", ascending=False)
+        family = d.family.iloc[0]
+        ls, marker = STYLE.get(family, ("-", "o"))
+        color = colors[i % len(colors)]
+        ok = d[(d.status == "ok") & (d.error_rad > 0)]
+        bad = d[(d.status != "ok") & np.isfinite(d.wall_time_s)]
+        ax1.plot(ok.wall_time_s, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
+        ax2.plot(ok.rtol, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
+        if len(bad):
+            ax1.plot(bad.wall_time_s, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
+            ax2.plot(bad.rtol, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
+    r = np.array([rows.rtol.min(), rows.rtol.max()])
+    ax2.plot(r, r, color="0.6", lw=1, label="error = rtol")
+    for ax in (ax1, ax2):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_ylabel("max crank-angle error (rad)")
+    ax1.set_xlabel("warm wall time per run (s)")
+    ax1.set_title(f"{summary['scenario']}: {summary['duration_s']:g} s, {summary['output_points']} output points\n"
+                  "x = run failed (error over what ran)", fontsize=10)
+    ax2.set_xlabel("requested rtol (atol = 1e-2 rtol)")
+    ax2.set_title("achieved error against requested tolerance", fontsize=10)
+    ax2.invert_xaxis()
+    ax1.legend(fontsize=7, ncol=2, loc="lower left")
+    setup = rows.groupby("method", sort=False).agg(setup=("setup_time_s", "max"), scope=("setup_scope", "first"))
+    setup = setup[np.isfinite(setup.setup) & (setup.setup > 0)]
+    y = np.arange(len(setup))
+    ax3.barh(y, setup.setup, color=[colors[methods.index(m) % len(colors)] for m in setup.index])
+    ax3.set_yticks(y, [f"{m}\n({s})" for m, s in zip(setup.index, setup.scope)], fontsize=7)
+    ax3.set_xscale("log")
+    ax3.set_xlabel("cold setup time (s)")
+    ax3.set_title("derivation / compilation / construction,\nnot in the wall times", fontsize=10)
+    ax3.invert_yaxis()
+    ax3.grid(True, axis="x", which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

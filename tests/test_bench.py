@@ -1,0 +1,83 @@
+"""`mechsim bench` (small CI version): every method reaches the reduced-coordinate reference with an error that
+follows the requested tolerance; the files, counters and ratios are there; user errors exit 2."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from scenarios.bench import SMALL_METHODS, SMALL_RTOLS, time_at_error, tracking
+from scenarios.cli import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def small_bench(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench") / "b"
+    r = runner.invoke(app, ["bench", "--out", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    return out, r
+
+
+def test_small_bench_writes_every_file(small_bench):
+    out, r = small_bench
+    for name in ("work_precision.csv", "output_cost.csv", "summary.json", "work_precision.png"):
+        assert (out / name).is_file(), name
+    assert "error ~ rtol^slope" in r.stdout
+
+
+def test_every_method_tracks_the_tolerance(small_bench):
+    """Against the reference (DOP853 at 1e-12 on physics.md §2's reduced equation): each method finishes, its
+    error falls when rtol falls by 1000, and stays within 100 rtol (atol = 1e-2 rtol; angles ~ 10 rad)."""
+    out, _ = small_bench
+    rows = pd.read_csv(out / "work_precision.csv")
+    assert set(rows.method) == set(SMALL_METHODS)
+    assert (rows.status == "ok").all(), rows[rows.status != "ok"][["method", "rtol", "failure"]]
+    for method, d in rows.groupby("method"):
+        d = d.set_index("rtol").error_rad
+        loose, tight = d[max(SMALL_RTOLS)], d[min(SMALL_RTOLS)]
+        assert tight < loose / 20, method
+        assert tight <= 100 * min(SMALL_RTOLS), method
+    summary = json.loads((out / "summary.json").read_text())
+    # the reference is itself accurate far below every error it judges
+    assert summary["reference"]["uncertainty_rad"] < 1e-10 < rows.error_rad.min()
+
+
+def test_rows_carry_the_solver_statistics(small_bench):
+    out, _ = small_bench
+    rows = pd.read_csv(out / "work_precision.csv")
+    ida = rows[rows.method.str.startswith("ida-")]
+    # IDA's own step counters (read past scikit-sundae) and the DAE evaluations are all there
+    assert (ida.steps > 0).all() and (ida.rejected_steps >= 0).all()
+    assert (ida.residual_evaluations >= ida.steps).all() and (ida.jacobian_evaluations > 0).all()
+    # the same mode sequence: entry, slip reversal, exit in the first second (the reduced ODE's slip event,
+    # two-sided, may restart once more at the reversal)
+    dae = ~rows.method.str.startswith("scipy")
+    assert (rows.events[dae] == 3).all() and rows.events[~dae].between(3, 4).all()
+    assert (rows.output_points == 1001).all()
+    assert (rows.setup_time_s[rows.method.str.startswith(("ida", "casadi"))] > 0).all()
+    cost = pd.read_csv(out / "output_cost.csv")
+    assert {"ida-index1", "ida-index2"} <= set(cost.method)
+    assert np.isfinite(cost.cost_per_output_point_us).all()
+
+
+def test_unknown_method_and_existing_folder_are_user_errors(tmp_path):
+    r = runner.invoke(app, ["bench", "no-such-solver", "--out", str(tmp_path / "x")])
+    assert r.exit_code == 2 and "unknown method 'no-such-solver'" in r.stderr
+    (tmp_path / "y").mkdir()
+    r = runner.invoke(app, ["bench", "--out", str(tmp_path / "y")])
+    assert r.exit_code == 2 and "--force" in r.stderr
+
+
+def test_time_at_equal_error_and_tracking_on_exact_lines():
+    """Work-precision lines wall = 1e-3 err^-1/4 and err = 0.5 rtol: interpolation and slope are exact."""
+    rtol = 10.0 ** -np.arange(3, 11)
+    err = 0.5 * rtol
+    rows = pd.DataFrame(dict(method="m", status="ok", rtol=rtol, error_rad=err, wall_time_s=1e-3 * err ** -0.25))
+    assert time_at_error(rows, "m", 1e-6) == pytest.approx(1e-3 * 1e-6 ** -0.25, rel=1e-12)
+    assert np.isnan(time_at_error(rows, "m", 1e-12))
+    t = tracking(rows, "m")
+    assert t["slope"] == pytest.approx(1.0) and t["max_deviation_decades"] < 1e-12
+    assert t["error_over_rtol_at_1"] == pytest.approx(0.5)
