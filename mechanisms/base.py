@@ -174,7 +174,10 @@ class Mechanism(ABC):
         raise NotImplementedError
 
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
-        """Time series at a prescribed constant drive speed without a DAE, or None if there is none."""
+        """Time series at a prescribed constant drive speed without a DAE, or None if there is none.
+
+        A dict of columns plus "powers" (name -> power array, integrated to work columns) and optionally "events"
+        (a list of events-table rows: t_s, from_mode, to_mode, kind, kinetic_energy_before_J/after_J, ...)."""
         return None
 
     @abstractmethod

@@ -211,15 +211,17 @@ class ChainDwell(Mechanism):
     def _crank_tip(self, q) -> np.ndarray:
         return self.kin.Q + self.kin.R * np.array([math.cos(q[1]), math.sin(q[1])])
 
-    def _mode_for(self, k: int, q) -> str:
-        """Mode of piece k with the dyad at q: line, arc, or on a tuned wrap dwell (A = O_i) / swing."""
+    def _mode_for(self, k: int, q, crank_rate: float | None = None) -> str:
+        """Mode of piece k with the dyad at q: line, arc, or on a tuned wrap dwell (A = O_i) / swing. At the apex
+        both curves have A = O_i; there the crank rate (dphi/ds, if given) tells them apart (0 on D)."""
         p = self.path.pieces[k]
         if p.kind == "line":
             return "line"
         if p.sprocket not in self.tuned:
             return "arc"
         gap = float(np.hypot(*(self._crank_tip(q) - np.asarray(p.centre))))
-        return "dwell" if gap <= 1e-6 * self.kin.R else "swing"
+        still = crank_rate is None or abs(crank_rate) * self.kin.R <= 1e-6
+        return "dwell" if gap <= 1e-6 * self.kin.R and still else "swing"
 
     @staticmethod
     def _root_sign(q) -> float:
@@ -500,7 +502,8 @@ class ChainDwell(Mechanism):
         # piece, cycle and mode of every instant
         pieces = np.asarray(st["piece"], int)
         cycles = np.floor((s - self.path.boundaries[pieces]) / self.path.length + 1e-12).astype(int)
-        modes = np.array([self._mode_for(int(k), q[:, i]) for i, k in enumerate(pieces)], dtype=object)
+        modes = np.array([self._mode_for(int(k), q[:, i], st["dphi"][i]) for i, k in enumerate(pieces)],
+                         dtype=object)
         sig = np.asarray(st["sigma"], float)
         lam = np.zeros((2, n))
         torque = np.zeros(n)
@@ -534,11 +537,53 @@ class ChainDwell(Mechanism):
                 "crank_angle_rad": q[1], "crank_speed_rad_s": v[1], "crank_accel_rad_s2": a[1],
                 "coupler_angle_rad": q[2], "coupler_speed_rad_s": v[2], "coupler_accel_rad_s2": a[2]}
         cols.update(ro)
+        cols["events"] = self._prescribed_events(th1, speed, t[0] if n else 0.0, num)
         cols.update({"drive_torque_N_m": torque, "kinetic_energy_J": ke,
                      "constraint_residual_m": np.max(np.abs(closure), axis=0),
                      "powers": {"drive": torque * speed, "load": -self.crank_torque * v[1],
                                 "damping": -self.drive_damping * speed**2 - self.crank_damping * v[1] ** 2}})
         return cols
+
+    def _prescribed_events(self, th1: np.ndarray, speed: float, t0: float, num: dict) -> list[dict]:
+        """Events-table rows of a closed-form run: every junction and apex passed, with the mode before/after
+        and the kinetic energy of the one-sided limits (a stop impact loses 1/2 w^2 (tF M tF - tD M tD))."""
+        if len(th1) < 2 or speed <= 0:
+            return []
+        r1, Lc = self.path.r1, self.path.length
+        s_lo, s_hi = r1 * th1[0], r1 * th1[-1]
+        base = list(self.path.boundaries[:-1]) + [float(a) for a, k in zip(self.kin.touches, self.kin.touch_kind)
+                                                    if k > 0]
+        marks = sorted(b + c * Lc for c in range(int(s_lo // Lc) - 1, int(s_hi // Lc) + 2) for b in base
+                       if s_lo < b + c * Lc <= s_hi)
+        names = list(self.parameter_names)
+        rows = []
+        for sm in marks:
+            sides = {}
+            for side in (-1, +1):
+                st = self.prescribed_branch(np.array([sm]), r1 * th1[0]) if side > 0 else None
+                if side < 0:   # the limit before: branch of the instant just before, rates from that side
+                    before = self.prescribed_branch(np.array([sm - 1e-9 * Lc]), r1 * th1[0])
+                    root = "leading" if before["sigma"][0] < 0 else "lagging"
+                    st = self.kin.state(np.array([sm]), root, -1)
+                q = np.array([sm / r1, st["phi"][0], st["theta"][0]])
+                v = speed * np.array([1.0, r1 * st["dphi"][0], r1 * st["dtheta"][0]])
+                k, _ = self._piece_at(sm, side)
+                P = [np.array([self.parameter_values()[nm]], float) for nm in names]
+                M = num["M"](q[:, None], P)[0]
+                sides[side] = (self._mode_for(k, q, st["dphi"][0]), 0.5 * float(v @ M @ v), q)
+            (m0, e0, q0), (m1, e1, _) = sides[-1], sides[+1]
+            if m0 == "swing" and m1 == "dwell":
+                kind = "stop impact"
+            elif m0 == m1:
+                kind = "apex"
+            else:
+                kind = {"dwell": "dwell start", "swing": "arc entry", "arc": "arc entry"}.get(m1, "arc exit")
+                kind = "dwell end" if m0 == "dwell" else kind
+            rows.append(dict(t_s=t0 + (sm / r1 - th1[0]) / speed, from_mode=m0, to_mode=m1, kind=kind,
+                             guard="prescribed", drive_q=q0[0], crank_q=q0[1], coupler_q=q0[2],
+                             kinetic_energy_before_J=e0, kinetic_energy_after_J=e1, message="",
+                             energy_lost_J=e0 - e1))
+        return rows
 
     # -- extra tables and plots -----------------------------------------------------------------------------
     def extra_outputs(self, timeseries: pd.DataFrame, events: pd.DataFrame) -> dict[str, pd.DataFrame]:

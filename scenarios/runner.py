@@ -72,7 +72,9 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
     powers = cols.pop("powers")
+    events = cols.pop("events", [])
     df = pd.DataFrame({"t_s": t, **cols})
+    df.attrs["events"] = events
     for name, power in powers.items():
         df[f"work_{name}_J"] = cumulative_trapezoid(np.broadcast_to(power, t.shape), t, initial=0.0)
     return df
@@ -127,7 +129,8 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
     stats: dict = {}
     if method == "closed-form":
         df = _closed_form_table(mech, si, drive)
-        events = pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
+        rows = df.attrs.pop("events", [])
+        events = pd.DataFrame(rows) if rows else pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
         if progress:
             progress(si["duration"])
     else:

@@ -44,8 +44,9 @@ def test_all_chain_builtins_run(outputs):
         s = json.loads((folder / "summary.json").read_text())
         assert s["model"]["thermal"] == "none" and s["success"]
         assert s["max_constraint_residual_m"] < 1e-8
-        if s["model"]["method"] == "dae":
-            assert abs(s["energy"]["closure_error_relative"]) < 1e-6, name
+        # impact losses (events.csv, closed-form runs too) close the balance; closed form: trapezoid quadrature
+        tol = 1e-6 if s["model"]["method"] == "dae" else 1e-4
+        assert abs(s["energy"]["closure_error_relative"]) < tol, name
     folder = outputs["chain-mech2-torque"][1]
     for f in ("chain_displacement.png", "chain_velocity.png", "chain_acceleration.png", "chain_crank.png",
               "mechanism.png"):
