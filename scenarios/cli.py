@@ -94,6 +94,48 @@ def run(
 
 
 @app.command()
+def compare(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+    rtol: float = typer.Option(1e-10, "--rtol", help="relative tolerance of both runs"),
+    atol: Optional[float] = typer.Option(None, "--atol", help="absolute tolerance (default rtol / 100)"),
+    solver: Optional[str] = typer.Option(None, "--solver", help="diffrax solver (default: the scenario's)"),
+) -> None:
+    """Run a scenario on IDA and on diffrax and compare the columns; exit 1 if they disagree beyond tolerance."""
+    from rich.table import Table
+
+    from .compare import compare as compare_backends
+    if not 0 < rtol < 1:
+        _fail(f"--rtol must be in (0, 1), got {rtol}")
+    try:
+        table = compare_backends(scenario, set_, rtol=rtol, atol=atol, diffrax_solver=solver)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"scenario: {exc}")
+    a = table.attrs
+    view = Table(title=f"{a['scenario']}: IDA vs diffrax {a['diffrax_solver']} (rtol {a['rtol']:g})")
+    for name in ("column", "max |diff|", "max rel", "t (s)", "drive angle (rad)", "tolerance", "ok"):
+        view.add_column(name, justify="left" if name in ("column", "tolerance") else "right",
+                        no_wrap=name == "column")
+    for r in table.itertuples():
+        ok = "" if r.passed is None else ("yes" if r.passed else "NO")
+        view.add_row(r.column, f"{r.max_abs_diff:.3g}", f"{r.max_rel_diff:.3g}", f"{r.t_s:.6g}",
+                     f"{r.drive_angle_rad:.6g}", r.tolerance, ok)
+    out.print(view)
+    sv = a["solver"]
+    out.print(f"rows {a['rows']}, events {a['events']}, max event-time difference {a['event_time_max_diff_s']:.3g} s; "
+              f"wall IDA {sv['ida'].get('wall_time_s', float('nan')):.3f} s, diffrax "
+              f"{sv['diffrax'].get('wall_time_s', float('nan')):.3f} s (compile "
+              f"{sv['diffrax'].get('compile_time_s', 0.0):.3f} s)", markup=False, highlight=False, soft_wrap=True)
+    for backend, message in a["failures"].items():
+        err.print(f"{backend} failed: {message}", markup=False, highlight=False, soft_wrap=True)
+    if not a["passed"]:
+        err.print("the backends disagree beyond tolerance", markup=False, highlight=False)
+        raise typer.Exit(1)
+
+
+@app.command()
 def sweep(
     target: str = typer.Argument(..., help="scenario name or file, or a sweep TOML file with a [sweep] table"),
     vary: List[str] = typer.Option([], "--vary", help="section.key=SPEC: 5,7,14 N*m | 0.1:0.4:7 | log:1e-3:1e-1:5"),

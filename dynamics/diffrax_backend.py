@@ -1,0 +1,449 @@
+"""The hybrid loop on diffrax: the same derived model, integrated as an ODE with the whole per-mode solve compiled.
+
+Each mode's vector field comes from `jax_model` (accelerations and multipliers from the Baumgarte-stabilised
+KKT system, work and thermal rates alongside), built from the same sympy description as the IDA residual.
+A segment is one `diffrax.diffeqsolve` with one `diffrax.Event` per guard (optimistix root finder for the
+crossing time); the first crossing ends it, and the transition logic is the IDA loop's (`mech.on_guard`,
+`consistent_state`), so the events table has the same rows. Parameters (slot, flank, drive, gains, ...) are
+traced arguments, so one compilation per (mode, model structure, solver options) serves every segment; output
+rows at the requested times come from `SaveAt(ts=...)` over a fixed-size padded array (segments with more
+outputs than that are continued in chunks, re-projected onto the constraints at each restart).
+
+Guards already at zero when a segment starts (the one that just fired) are referenced to the sign they are
+heading for, so a root located a hair before the crossing does not fire again: the IDA rule that roots at the
+initial point are not reported.
+
+Known limitation of diffrax 0.7.2 (docs/diffrax.md): its implicit solvers reject many steps; the defaults here
+are the measured best.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from mechanisms.base import Mechanism
+
+from .consistent import consistent_state
+from .drives import Drive
+from .hybrid import Piece, Trajectory, parameter_tuple
+from .jax_model import JaxModel, jax_model  # also enables float64
+from .model import ModeFunctions, StateExtension, derive
+from .settings import SolverSettings
+
+import diffrax  # noqa: E402  (after jax_model has switched on float64)
+import equinox as eqx  # noqa: E402
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import jax.tree_util as jtu  # noqa: E402
+import optimistix as optx  # noqa: E402
+
+EXPLICIT = ("Tsit5", "Dopri5", "Dopri8", "Bosh3", "Heun", "Midpoint", "Ralston", "Euler")
+IMPLICIT = ("Kvaerno3", "Kvaerno4", "Kvaerno5", "ImplicitEuler")
+SOLVERS = EXPLICIT + IMPLICIT
+
+
+@dataclass(frozen=True)
+class DiffraxOptions:
+    """Everything that shapes one compiled solve (hashable: part of the compilation cache key).
+
+    pcoeff/icoeff/dcoeff: PID step-size controller gains (diffrax.PIDController; I-only is 0/1/0).
+    newton: root finder of implicit stages: "verychord" (diffrax's default), "patient" (the same with its
+        termination test corrected, see PatientVeryChord), "chord" or "newton"
+        (optimistix, with their Cauchy termination on |f| < atol).
+    newton_tol: tolerance of that root finder as a multiple of the step controller's rtol/atol.
+    newton_kappa: the contraction criterion of the chord/Newton iterations.
+    event_rtol/event_atol: width (relative, absolute in s) to which the bisection brackets a guard crossing.
+    n_save: output rows per compiled call (padded); longer segments continue in chunks.
+    projection: project q and v onto the constraints at every restart (mode change or chunk boundary).
+    """
+
+    solver: str = "Tsit5"
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    max_steps: int = 20000
+    pcoeff: float = 0.0
+    icoeff: float = 1.0
+    dcoeff: float = 0.0
+    newton: str = "verychord"
+    newton_tol: float = 1.0
+    newton_kappa: float = 1e-2
+    newton_floor: float = 1e-3
+    event_rtol: float = 1e-14
+    event_atol: float = 1e-13
+    n_save: int = 512
+    projection: bool = True
+
+    @property
+    def implicit(self) -> bool:
+        return self.solver in IMPLICIT
+
+
+#: Defaults for implicit solvers, picked by measurement (docs/diffrax.md).
+IMPLICIT_DEFAULTS = dict(newton="patient")
+
+
+def default_options(settings: SolverSettings) -> DiffraxOptions:
+    """The options a scenario's solver settings imply (implicit solvers get the measured best defaults)."""
+    name = settings.diffrax_solver
+    if name not in SOLVERS:
+        raise ValueError(f"solver.diffrax_solver must be one of {', '.join(SOLVERS)}; got {name!r}")
+    opts = DiffraxOptions(solver=name, rtol=settings.rtol, atol=settings.atol, max_steps=settings.max_steps,
+                          projection=getattr(settings, "diffrax_projection", True))
+    if opts.implicit:
+        opts = replace(opts, **IMPLICIT_DEFAULTS)
+    return opts
+
+
+# -- one compiled segment solve ----------------------------------------------------------------------------
+class PatientVeryChord(diffrax.VeryChord):
+    """diffrax's VeryChord with a corrected termination test (the cause of diffrax 0.7.2's rejected steps).
+
+    In diffrax 0.7.2 `VeryChord.terminate` reports `nonlinear_divergence` whenever, from the second iteration on,
+    the iteration has not yet converged, even while it is contracting; optimistix stops at the first
+    non-successful result, so every stage that needs a third chord iteration fails, the step's error becomes
+    inf and the step is rejected (about half the steps, docs/diffrax.md). Here divergence means divergence:
+    the corrections grow (rate > 2) or are not finite. The iteration also stops when a correction is already
+    below `floor` tolerance units, where the rate of two round-off-sized corrections is noise.
+    """
+
+    floor: float = 1e-3
+
+    def terminate(self, fn, y, args, options, state, tags):
+        at_least_two = state.step >= 2
+        rate = state.diffsize / state.diffsize_prev
+        factor = state.diffsize * rate / (1 - rate)
+        tiny = (state.step >= 1) & (state.diffsize < self.floor)
+        converged = tiny | (at_least_two & (factor > 0) & (factor < self.kappa))
+        diverged = at_least_two & jnp.invert(tiny) & (jnp.invert(jnp.isfinite(rate)) | (rate > 2))
+        linsolve_fail = state.result != optx.RESULTS.successful
+        result = optx.RESULTS.where(diverged, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful)
+        result = optx.RESULTS.where(linsolve_fail, state.result, result)
+        return converged | diverged | linsolve_fail, result
+
+
+def _stage_root_finder(o: DiffraxOptions):
+    rtol, atol = o.newton_tol * o.rtol, o.newton_tol * o.atol
+    if o.newton == "verychord":
+        return diffrax.VeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa)
+    if o.newton == "patient":
+        return PatientVeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa, floor=o.newton_floor)
+    if o.newton == "chord":
+        return optx.Chord(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
+    if o.newton == "newton":
+        return optx.Newton(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
+    raise ValueError(f"unknown implicit root finder {o.newton!r}")
+
+
+def _solver(o: DiffraxOptions):
+    cls = getattr(diffrax, o.solver)
+    return cls(root_finder=_stage_root_finder(o)) if o.implicit else cls()
+
+
+def _evaluations_per_step(o: DiffraxOptions) -> int | None:
+    """Vector-field evaluations per attempted step of an explicit Runge-Kutta method (None if implicit)."""
+    if o.implicit:
+        return None
+    tab = getattr(_solver(o), "tableau", None)
+    if tab is None:
+        return {"Euler": 1}.get(o.solver)
+    stages = len(tab.c) + 1
+    return stages - 1 if tab.fsal else stages
+
+
+class _State(eqx.Module):
+    lower: jax.Array
+    upper: jax.Array
+
+
+class FirstCrossing(optx.AbstractRootFinder):
+    """Bisection on [lower, upper] for the time where the segment's guard function first reaches zero.
+
+    Terminates on the width of the bracket only (guards have mixed units, so no test on |f|), and returns the
+    bracket's upper end: the first instant located *past* the crossing, as IDA does.
+    """
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        dtype = jnp.result_type(y)
+        return _State(jnp.asarray(options["lower"], dtype), jnp.asarray(options["upper"], dtype))
+
+    def step(self, fn, y, args, options, state, tags):
+        mid = state.lower + 0.5 * (state.upper - state.lower)
+        f, aux = fn(mid, args)
+        before = sum(jtu.tree_leaves(f)) > 0          # the guard function is positive before its crossing
+        new = _State(jnp.where(before, mid, state.lower), jnp.where(before, state.upper, mid))
+        return new.upper, new, aux
+
+    def terminate(self, fn, y, args, options, state, tags):
+        width = state.upper - state.lower
+        return width <= self.atol + self.rtol * jnp.abs(state.upper), optx.RESULTS.successful
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, {}
+
+
+def _make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
+    """solve(k, t0, t1, z0, p, enabled, ts) -> dict of arrays, for mode number k; to be jitted.
+
+    The segment's single event function is min_i sign(ref_i) g_i over the enabled guards: positive at the
+    start (ref_i = g_i there, or the sign a guard at zero is heading for), and it first reaches zero exactly
+    where the first guard crosses, whatever the units of the others.
+    """
+    term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
+
+    def heading(t, y, args):
+        k, p, t_start, ref, enabled = args
+        h = jnp.where(t == t_start, jnp.abs(ref), jnp.sign(ref) * jmod.guards(k, t, y, p))
+        return jnp.where(enabled, h, jnp.inf)
+
+    def cond(t, y, args, **kwargs):
+        return jnp.minimum(jnp.min(heading(t, y, args)), 1.0)
+
+    event = diffrax.Event(cond, FirstCrossing(rtol=o.event_rtol, atol=o.event_atol), direction=False)
+    controller = diffrax.PIDController(rtol=o.rtol, atol=o.atol, pcoeff=o.pcoeff, icoeff=o.icoeff,
+                                       dcoeff=o.dcoeff)
+    solver = _solver(o)
+
+    def solve(k, t0, t1, z0, p, enabled, ts):
+        f0 = jmod.rates(k, t0, z0, p)
+        g0, gdot0 = jax.jvp(lambda tt, zz: jmod.guards(k, tt, zz, p), (t0, z0), (jnp.ones_like(t0), f0))
+        # a guard at zero (it would cross within 1e-10 relative time) is referenced to where it is heading
+        at_zero = jnp.abs(g0) <= 1e-10 * jnp.maximum(1.0, jnp.abs(t0)) * jnp.abs(gdot0)
+        ref = jnp.where(at_zero, jnp.where(gdot0 != 0, gdot0, 1.0), jnp.where(g0 != 0, g0, 1.0))
+        args = (k, p, t0, ref, enabled)
+        saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
+        sol = diffrax.diffeqsolve(term, solver, t0, t1, None, z0, args=args, saveat=saveat,
+                                  stepsize_controller=controller, max_steps=o.max_steps, throw=False,
+                                  event=event, adjoint=diffrax.ForwardMode())
+        ts_out, zs = sol.ts[0], sol.ys[0]
+        zp, acc, lam, _ = jax.vmap(jmod.evaluate, in_axes=(None, 0, 0, None))(k, ts_out, zs, p)
+        t_end, z_end = sol.ts[1][0], sol.ys[1][0]
+        zp_end, acc_end, lam_end, _ = jmod.evaluate(k, t_end, z_end, p)
+        return dict(ts=ts_out, z=zs, zp=zp, a=acc, lam=lam, t_end=t_end, z_end=z_end, zp_end=zp_end,
+                    a_end=acc_end, lam_end=lam_end, h_end=heading(t_end, z_end, args), ref=ref,
+                    result=sol.result._value, steps=sol.stats["num_steps"],
+                    accepted=sol.stats["num_accepted_steps"], rejected=sol.stats["num_rejected_steps"])
+
+    return solve
+
+
+@dataclass
+class _Compiled:
+    fn: Callable
+    compile_time: float
+    compile_cpu_time: float
+    model: object        # keeps the derived model (and so the id in the key) alive
+
+
+_CACHE: dict[tuple, _Compiled] = {}
+
+
+def _args(k, t0, t1, z0, p, enabled, ts):
+    f64 = jnp.float64
+    return (jnp.asarray(k, jnp.int32), jnp.asarray(t0, f64), jnp.asarray(t1, f64), jnp.asarray(z0, f64),
+            jnp.asarray(p, f64), jnp.asarray(enabled, bool), jnp.asarray(ts, f64))
+
+
+def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]:
+    """The compiled segment solve of a model (all its modes; AOT-compiled once per model structure and
+    options); True if it was compiled by this call."""
+    jmod = jax_model(model)
+    key = (id(model), o)
+    hit = _CACHE.get(key)
+    if hit is not None and hit.model is model:
+        return hit, jmod, False
+    wall, cpu = _time.perf_counter(), _time.process_time()
+    example = _args(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+                    np.ones(jmod.ng_max, bool), np.ones(o.n_save))
+    fn = jax.jit(_make_solve(jmod, o)).lower(*example).compile()
+    entry = _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
+    _CACHE[key] = entry
+    return entry, jmod, True
+
+
+def _z(mf: ModeFunctions, y: np.ndarray) -> np.ndarray:
+    ix = mf.index
+    return np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
+
+
+def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.ndarray, lam: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (y, y') in the IDA layout of the mode: y = [q, v, lam, mu = 0, work, ext], y' = [v, a, 0, 0, ...]."""
+    z, zp, a, lam = (np.atleast_2d(x) for x in (z, zp, a, lam))
+    n = len(z)
+    n_mu = mf.index["mu"].stop - mf.index["mu"].start
+    y = np.hstack([z[:, :2 * nq], lam[:, :mf.m], np.zeros((n, n_mu)), z[:, 2 * nq:]])
+    yp = np.hstack([z[:, nq:2 * nq], a, np.zeros((n, mf.m + n_mu)), zp[:, 2 * nq:]])
+    return y, yp
+
+
+# -- the hybrid loop ---------------------------------------------------------------------------------------
+def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
+             angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
+             progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
+    """Integrate the hybrid model from t0 to t_end with outputs every dt_out (same contract as hybrid.simulate)."""
+    return simulate_with(default_options(settings), mech, drive, settings, t_end, dt_out, angle0, speed0, ext,
+                         ext_initial, progress, t0)
+
+
+def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settings: SolverSettings,
+                  t_end: float, dt_out: float, angle0: float, speed0: float, ext: StateExtension | None = None,
+                  ext_initial=None, progress: Callable[[float], None] | None = None,
+                  t0: float = 0.0) -> Trajectory:
+    """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
+    o = options
+    wall0 = _time.perf_counter()
+    model = derive(mech, settings.formulation, drive.is_prescribed, ext)
+    derive_time = _time.perf_counter() - wall0
+    values = dict(mech.parameter_values())
+    values.update(drive.parameter_values(angle0, t0))
+    values.update(baumgarte_alpha=settings.baumgarte_alpha, baumgarte_beta=settings.baumgarte_beta)
+    if ext:
+        values.update(ext.parameter_values())
+    init = mech.initial_state(angle0, speed0)
+    values.update(init.updates)
+    mode = init.mode
+    n_out = int(np.floor((t_end - t0) / dt_out + 1e-9))
+    t_out = t0 + dt_out * np.arange(1, n_out + 1)
+    if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
+        t_out = np.append(t_out, t_end)
+
+    mf = model.modes[mode]
+    p = parameter_tuple(model, values)
+    work0 = np.zeros(len(model.work_names))
+    x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
+    try:
+        y, yp, _ = consistent_state(mf, t0, init.q, init.v, work0, x0, p)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise ValueError(f"initial state: {exc}") from None
+    pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy())]
+    events: list[dict] = []
+    per_step = _evaluations_per_step(o)
+    stats = {"backend": "diffrax", "solver": o.solver, "segments": 0, "steps": 0, "accepted_steps": 0,
+             "rejected_steps": 0, "residual_evaluations": 0 if per_step else None,
+             "residual_evaluations_note": ("estimated: attempted steps x new stages per step + 3 per segment"
+                                           if per_step else "not exposed by diffrax for implicit solvers"),
+             "jacobian_evaluations": None, "events": 0, "derive_time_s": derive_time, "compile_time_s": 0.0,
+             "compile_cpu_time_s": 0.0, "compilations": 0}
+    failure = None
+    warnings: list[str] = []
+    t = t0
+    z = _z(mf, y)
+    last = None
+    stuck = 0
+    solve0 = _time.perf_counter()
+    while t < t_end - 1e-12:
+        entry, jmod, fresh = compiled_solve(model, o)
+        k = jmod.index(mode)
+        ng = len(mf.guard_names)
+        if fresh:
+            stats["compile_time_s"] += entry.compile_time
+            stats["compile_cpu_time_s"] += entry.compile_cpu_time
+            stats["compilations"] += 1
+        remaining = t_out[t_out > t]
+        chunk = remaining[:o.n_save]
+        t1 = t_end if len(remaining) <= o.n_save else float(chunk[-1])
+        ts = np.full(o.n_save, t1)
+        ts[:len(chunk)] = chunk
+        enabled = np.zeros(jmod.ng_max, bool)
+        enabled[:ng] = bool(settings.events)
+        args = _args(k, t, t1, z, np.asarray(p), enabled, ts)
+        out = jax.device_get(entry.fn(*args))
+        stats["segments"] += 1
+        stats["steps"] += int(out["steps"])
+        stats["accepted_steps"] += int(out["accepted"])
+        stats["rejected_steps"] += int(out["rejected"])
+        if per_step:
+            stats["residual_evaluations"] += int(out["steps"]) * per_step + 3
+        t_seg = float(out["t_end"])
+        keep = np.arange(o.n_save) < len(chunk)
+        keep &= np.isfinite(out["ts"]) & (out["ts"] <= t_seg)
+        if keep.any():
+            y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep],
+                                        out["lam"][keep])
+            pieces.append(Piece(mode, p, out["ts"][keep].copy(), y_rows, yp_rows))
+        if progress:
+            progress(t_seg)
+        code = int(out["result"])
+        is_event = code == int(diffrax.RESULTS.event_occurred._value)
+        ok = code == int(diffrax.RESULTS.successful._value) or is_event
+        if not ok or not np.all(np.isfinite(out["z_end"])):
+            q = out["z_end"][:jmod.nq]
+            msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
+            failure = dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
+                           where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver "
+                                "(Kvaerno5 if the motion is stiff); check for a singular configuration here")
+            break
+        ix = mf.index
+        y_end = _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"], out["lam_end"])[0][0]
+        q, v = y_end[ix["q"]], y_end[ix["v"]]
+        if not is_event:
+            t = t_seg
+            if t >= t_end - 1e-12:
+                break
+            if o.projection:     # a chunk boundary: restart from the state projected onto the constraints
+                y, yp, _ = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p)
+                z = _z(mf, y)
+            else:
+                z = np.asarray(out["z_end"])
+            continue
+        # a guard crossed: the one whose heading value is at or past zero at the (just-past) crossing time
+        h = np.asarray(out["h_end"])[:ng]
+        i = int(np.argmin(np.where(h <= 0, h, np.inf))) if (h <= 0).any() else int(np.argmin(h))
+        guard = mf.guard_names[i]
+        stuck = stuck + 1 if t_seg - t <= 1e-12 * max(1.0, abs(t)) else 0
+        t = t_seg
+        if stuck > 50:
+            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
+                           where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="the mode sequence chatters here (Zeno behaviour?)")
+            break
+        direction = mf.guard_directions[i]
+        if direction and np.sign(out["ref"][i]) == direction:
+            z = np.asarray(out["z_end"])   # crossed against its direction: not an event, re-arm and go on
+            continue
+        if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
+            z = np.asarray(out["z_end"])   # the same crossing seen again from the restart point: not a new event
+            continue
+        last = (guard, t)
+        tr = mech.on_guard(mode, guard, values, t, q, v)
+        row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
+                   **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
+        stats["events"] += 1
+        if tr.message:
+            warnings.append(f"t = {t:.6g} s: {tr.message}")
+        if tr.stop:
+            M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
+            ke = 0.5 * float(v @ M @ v)
+            row.update(kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop)
+            events.append(row)
+            failure = dict(time=t, mode=mode, reason=tr.stop,
+                           where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="raise the drive torque or lower the load", kind="physics")
+            break
+        values.update(tr.updates)
+        mode = tr.mode
+        mf = model.modes[mode]
+        p = parameter_tuple(model, values)
+        try:
+            y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, tr.restitution)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            failure = dict(time=t, mode=mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
+                           where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="the new mode may be singular here")
+            events.append(row)
+            break
+        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after,
+                   message=tr.message or "")
+        events.append(row)
+        z = _z(mf, y)
+    stats["solve_time_s"] = _time.perf_counter() - solve0 - stats["compile_time_s"]
+    stats["wall_time_backend_s"] = _time.perf_counter() - wall0
+    return Trajectory(model, pieces, events, stats, failure, warnings)

@@ -1,0 +1,262 @@
+"""One mode of a derived model as jax.numpy functions: the ODE form the diffrax backend integrates.
+
+Built from the SAME sympy pieces the IDA residual is generated from (`ModeFunctions.symbolic`), lambdified to
+jax.numpy in float64. The state is z = [q, v, work, ext]; accelerations and multipliers come from the
+augmented KKT system of the mode (index-1 with Baumgarte's stabilisation, kinematics.md §4):
+
+    [[M, G^T - dQ/dlam], [G, 0]] [a; lam] = [Q(lam = 0); -gamma - 2 alpha Phi' - beta^2 Phi]
+
+(Q is linear in lam, which is how Coulomb friction on a constraint force enters). Work states integrate the
+mode's power flows; extension (thermal) rows are linear in their rates, F = A x' + b, so x' = -A^-1 b.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Callable
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import sympy as sp  # noqa: E402
+
+from .model import ModeFunctions  # noqa: E402
+
+
+def _lambdify(args, exprs: list) -> Callable:
+    """sympy -> jax.numpy, one function returning a flat list of scalars (cse across all of them)."""
+    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True)
+
+
+def _stack(values, shape) -> jnp.ndarray:
+    if not len(values):
+        return jnp.zeros(shape)
+    return jnp.reshape(jnp.stack([jnp.asarray(x, dtype=jnp.float64) for x in values]), shape)
+
+
+@dataclass(frozen=True, eq=False)
+class JaxMode:
+    """The jax functions of one mode. All take the parameter vector p (traced) last.
+
+    Layout: z = [q (nq), v (nq), work (nw), ext (ne)]; the IDA layout (`ida_rows`) is
+    y = [q, v, lam (m), mu (m, index2 only: zero), work, ext].
+    """
+
+    name: str
+    nq: int
+    m: int
+    nw: int
+    ne: int
+    n_mu: int
+    guard_names: tuple[str, ...]
+    guard_directions: tuple[int, ...]
+    alpha_index: int
+    beta_index: int
+    _kkt_parts: Callable
+    _post: Callable
+
+    @property
+    def nz(self) -> int:
+        return 2 * self.nq + self.nw + self.ne
+
+    @property
+    def ng(self) -> int:
+        return len(self.guard_names)
+
+    def split(self, z):
+        nq, nw = self.nq, self.nw
+        return z[:nq], z[nq:2 * nq], z[2 * nq:2 * nq + nw], z[2 * nq + nw:]
+
+    def kkt(self, t, q, v, x, p):
+        """Accelerations a and multipliers lam from the Baumgarte-stabilised KKT system."""
+        nq, m = self.nq, self.m
+        parts = self._kkt_parts(t, q, v, x, p)
+        i = 0
+
+        def take(n, shape):
+            nonlocal i
+            out = _stack(parts[i:i + n], shape)
+            i += n
+            return out
+
+        M = take(nq * nq, (nq, nq))
+        G = take(m * nq, (m, nq))
+        Q0 = take(nq, (nq,))
+        Ql = take(nq * m, (nq, m))
+        gamma, phi, phi_dot = take(m, (m,)), take(m, (m,)), take(m, (m,))
+        if m == 0:
+            return jnp.linalg.solve(M, Q0), jnp.zeros(0)
+        alpha, beta = p[self.alpha_index], p[self.beta_index]
+        K = jnp.block([[M, G.T - Ql], [G, jnp.zeros((m, m))]])
+        rhs = jnp.concatenate([Q0, -gamma - 2.0 * alpha * phi_dot - beta ** 2 * phi])
+        sol = jnp.linalg.solve(K, rhs)
+        return sol[:nq], sol[nq:]
+
+    def _post_parts(self, t, q, v, a, lam, x, p):
+        vals = self._post(t, q, v, a, lam, x, p)
+        nw, ng, ne = self.nw, self.ng, self.ne
+        powers = _stack(vals[:nw], (nw,))
+        guards = _stack(vals[nw:nw + ng], (ng,))
+        A = _stack(vals[nw + ng:nw + ng + ne * ne], (ne, ne))
+        b = _stack(vals[nw + ng + ne * ne:], (ne,))
+        return powers, guards, A, b
+
+    def evaluate(self, t, z, p):
+        """(z', a, lam, guard values) at one state."""
+        q, v, _, x = self.split(z)
+        a, lam = self.kkt(t, q, v, x, p)
+        powers, guards, A, b = self._post_parts(t, q, v, a, lam, x, p)
+        xp = jnp.linalg.solve(A, -b) if self.ne else jnp.zeros(0)
+        return jnp.concatenate([v, a, powers, xp]), a, lam, guards
+
+    def rates(self, t, z, p):
+        """The vector field z' = f(t, z)."""
+        return self.evaluate(t, z, p)[0]
+
+    def guards(self, t, z, p):
+        """Guard values; accelerations and multipliers enter through the KKT solve."""
+        return self.evaluate(t, z, p)[3]
+
+    def ida_rows(self, t, z, p):
+        """(y, y') in the IDA state layout: y' = [v, a, lam' = 0, mu' = 0, work', x']."""
+        zp, a, lam, _ = self.evaluate(t, z, p)
+        q, v, w, x = self.split(z)
+        zeros = jnp.zeros(self.m + self.n_mu)
+        y = jnp.concatenate([q, v, lam, jnp.zeros(self.n_mu), w, x])
+        yp = jnp.concatenate([v, a, zeros, zp[2 * self.nq:]])
+        return y, yp
+
+
+def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
+    """Lambdify one mode's symbolic pieces (see module docstring)."""
+    s = mf.symbolic
+    t, q, v, lam, x, xp, params = s["t"], s["q"], s["v"], s["lam"], s["x"], s["xp"], s["params"]
+    nq, m = len(q), len(lam)
+    cd = s["constraints"]
+    force = sp.Matrix(s["force"])
+    lam_zero = {li: 0 for li in lam}
+    Q0 = force.subs(lam_zero)
+    Ql = force.jacobian(lam) if m else sp.zeros(nq, 0)
+    M = sp.Matrix(s["mass"])
+    kkt_exprs = (list(M) + (list(cd.G) if m else []) + list(Q0) + (list(Ql) if m else [])
+                 + (list(cd.gamma) + list(cd.phi) + list(cd.phi_dot) if m else []))
+    a_syms = [sp.Symbol(f"_acc_{i}", real=True) for i in range(nq)]
+    acc_sub = dict(zip(s["guard_acc_symbols"], a_syms))
+    powers = [sp.sympify(s["powers"][n]).subs(acc_sub) for n in s["work_names"]]
+    guards = [sp.sympify(g).subs(acc_sub) for g in s["guards"]]
+    ext_rows = sp.Matrix([sp.sympify(r).subs(acc_sub) for r in s["ext_rows"]]) if x else sp.zeros(0, 1)
+    if x:
+        A = ext_rows.jacobian(xp)
+        if any(e.has(*xp) for e in A):
+            raise ValueError(f"mode {mf.name!r}: extension rows are not linear in their rates")
+        b = ext_rows.subs({xi: 0 for xi in xp})
+        ext_exprs = list(A) + list(b)
+    else:
+        ext_exprs = []
+    for e in kkt_exprs + powers + guards + ext_exprs:
+        stray = sp.sympify(e).free_symbols - set([t, *q, *v, *lam, *x, *a_syms, *params])
+        if stray:
+            raise ValueError(f"mode {mf.name!r}: unexpected symbols {sorted(map(str, stray))}")
+    names = list(parameter_names)
+    n_mu = mf.index["mu"].stop - mf.index["mu"].start
+    return JaxMode(
+        name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu,
+        guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
+        alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"),
+        _kkt_parts=_lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs),
+        _post=_lambdify([t, list(q), list(v), a_syms, list(lam), list(x), list(params)],
+                        powers + guards + ext_exprs),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class JaxModel:
+    """Every mode of a derived model behind one switch on a (traced) mode index.
+
+    All modes share the state layout z = [q, v, work, ext]; multipliers and guard values are padded to the
+    largest mode (guards with 1.0), so one compiled solve serves every mode of a model structure.
+    """
+
+    modes: tuple[JaxMode, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(jm.name for jm in self.modes)
+
+    @property
+    def nz(self) -> int:
+        return self.modes[0].nz
+
+    @property
+    def nq(self) -> int:
+        return self.modes[0].nq
+
+    @property
+    def m_max(self) -> int:
+        return max(jm.m for jm in self.modes)
+
+    @property
+    def ng_max(self) -> int:
+        return max(jm.ng for jm in self.modes)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def _branch(self, jm: JaxMode):
+        m_max, ng_max = self.m_max, self.ng_max
+
+        def f(t, z, p):
+            zp, a, lam, g = jm.evaluate(t, z, p)
+            return (zp, a, jnp.concatenate([lam, jnp.zeros(m_max - jm.m)]),
+                    jnp.concatenate([g, jnp.ones(ng_max - jm.ng)]))
+        return f
+
+    def evaluate(self, k, t, z, p):
+        """(z', a, lam padded to m_max, guards padded to ng_max) in mode number k."""
+        if len(self.modes) == 1:
+            return self._branch(self.modes[0])(t, z, p)
+        return jax.lax.switch(k, [self._branch(jm) for jm in self.modes], t, z, p)
+
+    def rates(self, k, t, z, p):
+        return self.evaluate(k, t, z, p)[0]
+
+    def guards(self, k, t, z, p):
+        return self.evaluate(k, t, z, p)[3]
+
+
+@lru_cache(maxsize=64)
+def _cached(key, mf_ref, parameter_names):
+    return build_mode(mf_ref.obj, parameter_names)
+
+
+class _ById:
+    def __init__(self, obj):
+        self.obj = obj
+
+    def __hash__(self):
+        return id(self.obj)
+
+    def __eq__(self, other):
+        return isinstance(other, _ById) and other.obj is self.obj
+
+
+def jax_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
+    """The JaxMode of a derived mode (cached on the ModeFunctions object, which `derive` caches)."""
+    return _cached(id(mf), _ById(mf), tuple(parameter_names))
+
+
+@lru_cache(maxsize=16)
+def _cached_model(key, model_ref):
+    model = model_ref.obj
+    modes = tuple(jax_mode(mf, model.parameter_names) for mf in model.modes.values())
+    layouts = {(jm.nz, jm.nw, jm.ne) for jm in modes}
+    if len(layouts) != 1:
+        raise ValueError(f"modes of one model must share the state layout, got {layouts}")
+    return JaxModel(modes)
+
+
+def jax_model(model) -> JaxModel:
+    """The JaxModel of a DerivedModel (cached on the object, which `derive` caches)."""
+    return _cached_model(id(model), _ById(model))
