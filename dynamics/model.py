@@ -143,9 +143,8 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
         pos += n
     algebraic = list(range(index["lam"].start, index["mu"].stop))
 
-    F = sp.Matrix(rows)
     cj = sp.Symbol("cj", real=True)
-    J = F.jacobian(y_syms) + cj * F.jacobian(yp_syms)
+    J = _residual_jacobian(rows, y_syms, yp_syms, cj)
     unpack = [("y", y_syms), ("yp", yp_syms), ("p", params)]
     residual = emit(f"residual_{mode.name}", ["t", "y", "yp", "out", "p"], unpack,
                     [(f"out[{i}]", r) for i, r in enumerate(rows)])
@@ -189,6 +188,22 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                       guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
                       readout_exprs=ro_exprs),
     )
+
+
+def _residual_jacobian(rows, y_syms, yp_syms, cj) -> sp.Matrix:
+    """dF/dy + cj dF/dy', differentiating each row only by the symbols it contains (same result as
+    Matrix.jacobian, but linear in the number of nonzeros instead of rows x states: matters for 1-D meshes)."""
+    J = sp.zeros(len(rows), len(y_syms))
+    col_y = {s: j for j, s in enumerate(y_syms)}
+    col_yp = {s: j for j, s in enumerate(yp_syms)}
+    for i, row in enumerate(rows):
+        row = sp.sympify(row)
+        for s in row.free_symbols:
+            if s in col_y:
+                J[i, col_y[s]] += sp.diff(row, s)
+            if s in col_yp:
+                J[i, col_yp[s]] += cj * sp.diff(row, s)
+    return J
 
 
 def _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m):

@@ -75,6 +75,9 @@ class Mode:
 #: Contact quantities a mode exposes for the thermal model (all SI): normal force (N, signed),
 #: sliding speed at the contact (m/s, signed), speed of the contact over each body's surface (m/s).
 CONTACT_KEYS = ("normal_force", "slip_speed", "source_speed_pin", "source_speed_wheel")
+#: Optional keys: the friction power mu |N| |u_slip| as a smooth in-mode expression (W; needed for thermal
+#: states) and an integer index of the surface track in contact (e.g. the Geneva's slot counter).
+CONTACT_OPTIONAL_KEYS = ("heat_rate", "track")
 
 
 @dataclass(frozen=True)

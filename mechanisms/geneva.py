@@ -138,7 +138,8 @@ class Geneva(Mechanism):
             powers={"load": -T_L * w2, "friction": -fric_mag * slide * u, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts=engaged_readouts,
             heat={"normal_force": normal, "slip_speed": u,
-                  "source_speed_pin": spin, "source_speed_wheel": v_s},
+                  "source_speed_pin": spin, "source_speed_wheel": v_s,
+                  "heat_rate": fric_mag * slide * u, "track": k},
         )
         zero = sp.Integer(0)
         dwell = Mode(
@@ -156,7 +157,8 @@ class Geneva(Mechanism):
                     (c - r * sp.cos(alpha)) ** 2 + (r * sp.sin(alpha)) ** 2),
                 "friction_power_W": zero, "flank": zero, "lock_force_N": lam,
             },
-            heat={"normal_force": zero, "slip_speed": zero, "source_speed_pin": zero, "source_speed_wheel": zero},
+            heat={"normal_force": zero, "slip_speed": zero, "source_speed_pin": zero, "source_speed_wheel": zero,
+                  "heat_rate": zero, "track": k},
         )
         return {"engaged": engaged, "dwell": dwell}
 

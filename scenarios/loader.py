@@ -150,6 +150,8 @@ def validate(raw: dict) -> dict:
             data = {k: v for k, v in data.items() if k != "type"}
         si[name] = check_section(name, fields, data)
     si["mechanism"]["type"] = mtype
+    from .thermal_schema import check_thermal  # local, like extra_sections
+    check_thermal(si)
     drive = si["drive"]
     for key in REQUIRED_FOR_DRIVE[drive["type"]]:
         if drive.get(key) is None:

@@ -84,7 +84,7 @@ def peaks(df: pd.DataFrame, angle_column: str) -> dict:
     """Peak |value| of each key column, with its time and drive angle (wrapped to (-180, 180] deg too)."""
     out = {}
     for col in PEAK_COLUMNS:
-        if col in df and len(df):
+        if col in df and len(df) and df[col].notna().any():
             values = df[col].to_numpy(dtype=float)
             i = int(np.nanargmax(np.abs(values)))
             angle = float(df[angle_column].iloc[i])
@@ -121,6 +121,9 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
     drive = make_drive(si)
     settings = solver_settings(si)
     method, why = _choose_method(si, mech, drive, settings)
+    from .thermal_post import plan as thermal_plan   # local: thermal is optional per scenario
+    thermal = thermal_plan(si, mech, drive, method)
+    run_si = si if thermal is None else {**si, "duration": thermal.mechanics_duration}
     angle_key, speed_key = mech.initial_keys
     angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
                                    mech.drive_coordinate in mech.angle_coordinates)[0]
@@ -128,7 +131,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
     warnings: list[str] = []
     stats: dict = {}
     if method == "closed-form":
-        df = _closed_form_table(mech, si, drive)
+        df = _closed_form_table(mech, run_si, drive)
         rows = df.attrs.pop("events", [])
         events = pd.DataFrame(rows) if rows else pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
         if progress:
@@ -138,8 +141,9 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         integrate = simulate
         if settings.backend == "diffrax":
             from dynamics.diffrax_backend import simulate as integrate
-        traj = integrate(mech, drive, settings, si["duration"], si["output_step"], si["initial"][angle_key],
-                         speed0, progress=progress)
+        traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
+                         speed0, progress=progress, ext=thermal and thermal.extension,
+                         ext_initial=thermal and thermal.ext_initial)
         df = timeseries(traj, mech.angle_coordinates)
         events = events_table(traj)
         stats = traj.stats
@@ -149,6 +153,10 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"))
+    thermal_summary, thermal_tables = None, {}
+    if thermal is not None:
+        df, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(df, events, failed=failure is not None)
+        warnings += thermal_warnings
     wall = time.perf_counter() - wall0
     summary = {
         "scenario": scenario.name,
@@ -171,4 +179,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         "failure": failure.message() if failure else None,
         "versions": _versions(),
     }
-    return Result(df, events, summary, si, failure, extra_tables=mech.extra_outputs(df, events))
+    if thermal_summary is not None:
+        summary["thermal"] = thermal_summary
+    return Result(df, events, summary, si, failure,
+                  extra_tables={**mech.extra_outputs(df, events), **thermal_tables})

@@ -1,14 +1,104 @@
-"""The [thermal] section: which thermal model runs alongside the mechanics."""
+"""The [thermal] section: which thermal model runs alongside the mechanics, with its material, surroundings,
+body geometry and 1-D mesh. Absent keys get sound defaults (derived from the mechanism where they depend on
+it, see scenarios/thermal_setup.py and docs/thermal.md "Coupling"); values are SI after validation."""
 from __future__ import annotations
 
 from mechanisms.base import Field, Mechanism
+from thermal import MATERIALS, Material
 
-THERMAL_MODELS = ("none",)
+from .units import ScenarioError
+
+THERMAL_MODELS = ("none", "flash", "lumped", "1d")
+FLASH_METHODS = ("jaeger", "seed-blok")
+DISTRIBUTIONS = ("semi-elliptic", "uniform")
+AVERAGING = ("resolved", "cycle", "auto")
+MESH_DIRECTIONS = ("depth",)
+#: material property keys that override the library material (Field unit, Material attribute)
+MATERIAL_KEYS = {"E": "E", "nu": "nu", "density": "density", "specific_heat": "specific_heat",
+                 "conductivity": "conductivity"}
 
 
 def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
     """Keys of [thermal] for this mechanism (a mechanism without sliding contact accepts only 'none')."""
-    choices = THERMAL_MODELS if mech_cls.has_sliding_contact else ("none",)
-    return {"model": Field("str", default="none", choices=choices,
-                           help="thermal model: none" + ("" if mech_cls.has_sliding_contact else
-                                                         " (this mechanism has no sliding contact)"))}
+    if not mech_cls.has_sliding_contact:
+        return {"model": Field("str", default="none", choices=("none",),
+                               help="thermal model: none (this mechanism has no sliding contact)")}
+    return {
+        "model": Field("str", default="none", choices=THERMAL_MODELS,
+                       help="none; flash (algebraic contact rise over ambient); lumped (+ bulk pin/crank/wheel "
+                            "states); 1d (+ 1-D conduction into each slot wall's track)"),
+        "flash": Field("str", default="jaeger", choices=FLASH_METHODS,
+                       help="flash rise: jaeger (exact moving band + Blok partition) or seed-blok (seed S(13))"),
+        "distribution": Field("str", default="semi-elliptic", choices=DISTRIBUTIONS,
+                              help="heat flux over the Hertz band"),
+        "material": Field("str", default="aisi1045", choices=tuple(sorted(MATERIALS)),
+                          help="library material of pin, crank and wheel"),
+        "E": Field("quantity", "Pa", default=None, positive=True, help="Young's modulus (overrides the library)"),
+        "nu": Field("float", default=None, help="Poisson's ratio (overrides the library)"),
+        "density": Field("quantity", "kg/m^3", default=None, positive=True, help="density (overrides the library)"),
+        "specific_heat": Field("quantity", "J/(kg*K)", default=None, positive=True,
+                               help="specific heat (overrides the library)"),
+        "conductivity": Field("quantity", "W/(m*K)", default=None, positive=True,
+                              help="thermal conductivity (overrides the library)"),
+        "ambient_temperature": Field("quantity", "K", default=293.15, positive=True,
+                                     help="surroundings and initial temperature"),
+        "convection_pin": Field("quantity", "W/(m^2*K)", default=15.0, nonnegative=True,
+                                help="heat-transfer coefficient of pin and crank (physics.md §5: 10-25)"),
+        "convection_wheel": Field("quantity", "W/(m^2*K)", default=7.0, nonnegative=True,
+                                  help="heat-transfer coefficient of the wheel (physics.md §5: 5-12)"),
+        "pin_crank_conductance": Field("quantity", "W/K", default=None, nonnegative=True,
+                                       help="pin-crank conductance (default: conduction along the pin's exposed "
+                                            "half-length, k pi R^2/(l_pin/2))"),
+        "pin_exposed_length": Field("quantity", "m", default=None, positive=True,
+                                    help="exposed pin length (default 2.5 x wheel thickness: 10 mm for the seed)"),
+        "crank_volume": Field("quantity", "m^3", default=None, nonnegative=True,
+                              help="crank arm volume lumped with the pin side (default: bar r x 4R x thickness)"),
+        "crank_area": Field("quantity", "m^2", default=None, nonnegative=True,
+                            help="crank arm surface area (default: that bar's)"),
+        "wheel_radius": Field("quantity", "m", default=None, positive=True,
+                              help="wheel disc radius (default: pin distance at entry, c cos(pi/n))"),
+        "wheel_thickness": Field("quantity", "m", default=None, positive=True,
+                                 help="wheel disc thickness (default: the mechanism's thickness)"),
+        "averaging": Field("str", default="auto", choices=AVERAGING,
+                           help="resolved; cycle (mechanics until periodic, cycle-mean heat drives the bulk); auto"),
+        "mesh_direction": Field("str", default="depth", choices=MESH_DIRECTIONS,
+                                help="1-D conduction direction (depth into the slot wall; docs/thermal.md)"),
+        "mesh_first_cell": Field("quantity", "m", default=None, positive=True,
+                                 help="first cell of the 1-D mesh (default sqrt(chi t_engagement)/20)"),
+        "mesh_growth": Field("float", default=1.2, minimum=1.0, help="cell growth ratio of the 1-D mesh"),
+        "mesh_depth": Field("quantity", "m", default=None, positive=True,
+                            help="1-D mesh depth (default 3 sqrt(chi n T_cycle / pi), the periodic penetration)"),
+    }
+
+
+def thermal_material(section: dict) -> Material:
+    """The library material with any explicit property overrides; ScenarioError naming the field if invalid."""
+    base = MATERIALS[section.get("material", "aisi1045")]
+    values = {attr: section[key] if section.get(key) is not None else getattr(base, attr)
+              for key, attr in MATERIAL_KEYS.items()}
+    overridden = [key for key in MATERIAL_KEYS if section.get(key) is not None]
+    name = base.name + (" (" + ", ".join(overridden) + " set)" if overridden else "")
+    try:
+        return Material(name=name, **values)
+    except ValueError as exc:
+        problem = str(exc).split(": ", 1)[-1]                 # "<attribute> must ..."
+        attribute = problem.split(" ", 1)[0]
+        field = next((k for k, a in MATERIAL_KEYS.items() if a == attribute), "material")
+        raise ScenarioError(f"thermal.{field}", problem) from None
+
+
+def check_thermal(si: dict) -> None:
+    """Cross-field checks of a validated [thermal] section (one ScenarioError naming the field)."""
+    th = si.get("thermal", {})
+    if th.get("model", "none") == "none" or "flash" not in th:
+        return
+    thermal_material(th)
+    if th["model"] == "1d" and th["averaging"] == "cycle":
+        raise ScenarioError("thermal.averaging", "'cycle' is available for model = 'flash' or 'lumped'; "
+                                                 "model = '1d' resolves every cycle (use 'resolved' or 'auto')")
+    first, depth = th.get("mesh_first_cell"), th.get("mesh_depth")
+    if first is not None and depth is not None and first > depth:
+        raise ScenarioError("thermal.mesh_first_cell", f"must not exceed mesh_depth ({depth!r} m), got {first!r} m")
+    if (th.get("crank_volume") is None) != (th.get("crank_area") is None):
+        missing = "crank_area" if th.get("crank_area") is None else "crank_volume"
+        raise ScenarioError(f"thermal.{missing}", "give crank_volume and crank_area together (or neither)")

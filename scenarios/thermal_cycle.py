@@ -1,0 +1,129 @@
+"""Cycle-averaged bulk temperatures for long runs (shared/physics.md §5: tau >> cycle, so the mean heat drives the bulk).
+
+The mechanics runs until it is periodic (a few crank turns); the last full turn gives the cycle-mean heat Q_bar
+and the heat-weighted pin share gamma_bar (exact, from the integrated bookkeeping energies). The network is
+linear and time-invariant, so with the input taken periodic from t = 0 its response splits exactly into
+- the response to the constant mean input, from ambient: exact, as `thermal.integrate_mean_heat` (tested
+  equal), evaluated in the network's modes so that an hour costs what a second does, and
+- the ripple, the response to the zero-mean remainder u(t) - u_bar from zero: T~(t) = T~_p(t) - e^{At} T~_p(0),
+  where T~_p is the periodic solution, found from one period's zero-state response Z by
+  (I - e^{AP}) T~_p(0) = Z(P).
+Fast nodes (the pin, tau ~ 5 s) keep their in-cycle swing this way; slow ones (crank, wheel) are the mean curve.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from thermal import LinearThermalSystem, ambient_temperatures
+
+from .thermal_integrate import ModalNetwork
+
+#: rows of the bulk history table over the whole duration
+HISTORY_ROWS = 1001
+
+
+def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarray:
+    """Times at which the drive angle passes angle0 + 2 pi m (m = 1, 2, ...), interpolated between rows."""
+    if len(t) < 2 or not np.all(np.diff(angle) > 0):
+        return np.array([])
+    m = np.arange(1, int(np.floor((angle[-1] - angle0) / (2 * np.pi) + 1e-12)) + 1)
+    return np.interp(angle0 + 2 * np.pi * m, angle, t)
+
+
+@dataclass
+class CycleMeans:
+    """Mean heat, heat-weighted pin share and the period of the last full turn; periodicity against the one before."""
+
+    t_start: float
+    period: float
+    heat_mean: float
+    share_mean: float
+    periodicity: float | None     # |Q_bar(last) - Q_bar(previous)| / Q_bar(last), None with one turn only
+
+
+def cycle_means_from_energies(t: np.ndarray, bounds: np.ndarray, e_gen: np.ndarray, e_pin: np.ndarray) -> CycleMeans:
+    """Q_bar = dE_gen/P, gamma_bar = dE_pin/dE_gen over the last full turn (E interpolated at its ends)."""
+    a, b = bounds[-2], bounds[-1]
+    G = np.interp([a, b], t, e_gen)
+    Pn = np.interp([a, b], t, e_pin)
+    energy = G[1] - G[0]
+    share = (Pn[1] - Pn[0]) / energy if energy > 0 else 0.5
+    periodicity = None
+    if len(bounds) >= 3:
+        prev = np.diff(np.interp(bounds[-3:-1], t, e_gen))[0] / (bounds[-2] - bounds[-3])
+        mean = energy / (b - a)
+        periodicity = abs(mean - prev) / mean if mean > 0 else 0.0
+    return CycleMeans(float(a), float(b - a), float(energy / (b - a)), float(share), periodicity)
+
+
+def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Callable[[np.ndarray], np.ndarray],
+                  phase_breaks: list[float], times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(mean response, mean + ripple) of the network states at `times` (s from the start, from ambient)."""
+    times = np.asarray(times, dtype=float)
+    n = system.size
+    u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
+    mean, _ = ModalNetwork(system).constant(ambient_temperatures(system), u_bar, times)
+    P = means.period
+    s0 = (-means.t_start) % P                      # phase of t = 0 within the periodic turn
+    tau = np.unique(np.concatenate([[0.0, P], times % P]))
+    breaks = sorted({(b - s0) % P for b in list(phase_breaks) + [0.0]} - {0.0})
+    # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
+    # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
+    u_own = _period_mean(u_of_phase, P, sorted(set(phase_breaks) | {0.0}))
+
+    def ripple_input(x):
+        return np.asarray(u_of_phase((s0 + np.asarray(x)) % P), dtype=float) - u_own[:, None]
+
+    homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
+    Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
+    start = homogeneous.resolvent_periodic(Z[-1], P)
+    periodic = homogeneous.exp(tau, start) + Z
+    ripple = periodic[np.searchsorted(tau, times % P)] - homogeneous.exp(times, start)
+    return mean, mean + ripple
+
+
+def _period_mean(u_of_phase, period: float, breaks: list[float], nodes: int = 8, pieces: int = 64) -> np.ndarray:
+    """(1/P) int_0^P u(s) ds by Gauss-Legendre on `pieces` sub-intervals of each smooth stretch between breaks."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    edges = np.unique(np.concatenate([[0.0, period], [b for b in breaks if 0.0 < b < period]]))
+    fine = np.unique(np.concatenate([np.linspace(a, b, pieces + 1) for a, b in zip(edges[:-1], edges[1:])]))
+    h = np.diff(fine)
+    s = (fine[:-1, None] + 0.5 * h[:, None] * (x[None, :] + 1.0)).ravel()
+    weights = (0.5 * h[:, None] * w[None, :]).ravel()
+    return np.asarray(u_of_phase(s), dtype=float) @ weights / period
+
+
+def history_table(system: LinearThermalSystem, means: CycleMeans, u_of_phase, phase_breaks, duration: float,
+                  kelvin: float) -> pd.DataFrame:
+    """Bulk temperatures over the whole run (mean + ripple and mean only), HISTORY_ROWS rows."""
+    times = np.linspace(0.0, duration, HISTORY_ROWS)
+    mean, full = bulk_response(system, means, u_of_phase, phase_breaks, times)
+    out = {"t_s": times, "heat_generated_J": means.heat_mean * times}
+    for j, name in enumerate(system.state_names):
+        if name.startswith("temp_bulk_"):
+            base = name[:-2]
+            out[f"{base}_C"] = full[:, j] - kelvin
+            out[f"{base}_mean_C"] = mean[:, j] - kelvin
+    return pd.DataFrame(out)
+
+
+def shift_window(df: pd.DataFrame, t_start: float, period: float, duration: float) -> tuple[pd.DataFrame, int]:
+    """The rows of the last full turn moved by m whole periods to end at or before `duration`; cumulative columns
+    (unwrapped angles, works, heat energies) advance by m times their increase over one turn."""
+    window = df[(df["t_s"] >= t_start - 1e-12) & (df["t_s"] < t_start + period - 1e-9)].copy()
+    m = int(np.floor((duration - (t_start + period)) / period + 1e-9))
+    if m <= 0 or window.empty:
+        return window, 0
+    t = df["t_s"].to_numpy(float)
+    for col in df.columns:
+        if col.endswith("_angle_rad") or (col.startswith("work_") and col.endswith("_J")):
+            v = df[col].to_numpy(float)
+            step = float(np.diff(np.interp([t_start, t_start + period], t, v))[0])
+            window[col] = window[col] + m * step
+    window["t_s"] = window["t_s"] + m * period
+    return window.reset_index(drop=True), m

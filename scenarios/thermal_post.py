@@ -1,0 +1,350 @@
+"""The thermal model alongside a run: plan it (states for the DAE, how long the mechanics must run), then finish
+the result (bulk temperatures where no DAE ran, cycle averaging, flash columns, heat balance, summary).
+
+Columns added (SI): heat_rate_W, heat_share_pin, hertz_half_width_m, hertz_pressure_max_Pa, peclet_pin,
+peclet_wheel, temp_flash_rise_K, temp_contact_C; with bulk states temp_bulk_{pin,crank,wheel}_C, heat_share_pin_bulk,
+heat_generated_J, heat_pin_J, heat_convected_J; with 1d also temp_wall_surface_C.
+
+Contact temperature (Blok's postulate with unequal base temperatures, physics.md §4.6): equal surface temperatures
+give T_c = gamma T_pin + (1 - gamma) T_wheel + dT_flash exactly, gamma = R_wheel/(R_pin + R_wheel) the pin's share
+at equal base temperatures; T_pin/T_wheel are the bulk temperatures (lumped), the wall track's surface (1d) or
+the ambient (flash). No contact (dwell): NaN.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from thermal import effective_modulus, flash_temperature, half_width, peak_pressure, validity
+
+from . import thermal_cycle as cyc
+from .thermal_integrate import ModalNetwork, integrate_closed_form
+from .thermal_setup import KELVIN, ThermalSetup, adapter, build
+
+#: averaging = 'auto' picks the cycle-averaged bulk from this many nominal cycles on
+AUTO_CYCLES = 50
+#: crank turns the mechanics runs in cycle mode: closed form (periodic at once), DAE (settling first)
+CYCLE_TURNS_CLOSED_FORM = 2
+CYCLE_TURNS_DAE = 6
+#: warn when the last two turns' mean heat differ by more than this (mechanics not yet periodic)
+PERIODICITY_TOLERANCE = 1e-3
+
+MODEL_WHY = {
+    "flash": "algebraic flash rise over the ambient at every output instant (moving-band solution per body, "
+             "Blok partition; physics.md §4.3-4.7); no thermal states",
+    "lumped": "bulk pin, crank and wheel temperatures (physics.md §5) as extra states, plus the algebraic flash "
+              "rise on top",
+    "1d": "bulk pin, crank and wheel temperatures plus 1-D conduction into the depth of each slot wall's track "
+          "(physics.md §6), plus the algebraic flash rise on top",
+}
+
+
+def _thermal_why(model: str, method: str, n_states: int) -> str:
+    text = f"thermal.model = '{model}' (scenario): {MODEL_WHY[model]}"
+    if model == "flash":
+        return text
+    if method == "dae":
+        return text + f"; {n_states} thermal states integrated in the same IDA run as the mechanics"
+    return text + ("; prescribed speed needs no DAE: closed-form kinematics + the thermal ODE "
+                   "(LinearThermalSystem.integrate, BDF with the exact Jacobian)")
+
+
+@dataclass
+class ThermalPlan:
+    """What the runner needs before and after the mechanics for one scenario's thermal model."""
+
+    setup: ThermalSetup
+    si: dict
+    mech: object
+    method: str
+    speed: float
+    averaging: str
+    averaging_why: str
+    mechanics_duration: float
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def extension(self):
+        """The StateExtension for the DAE (None when no DAE runs or the model has no states)."""
+        return self.setup.extension if self.method == "dae" else None
+
+    @property
+    def ext_initial(self):
+        return self.setup.initial if self.extension is not None else None
+
+    # ---------------------------------------------------------------------------------------------- finish
+    def finish(self, df: pd.DataFrame, events: pd.DataFrame, failed: bool = False
+               ) -> tuple[pd.DataFrame, dict[str, pd.DataFrame], dict, list[str]]:
+        """(timeseries with thermal columns, extra tables, summary['thermal'], warnings)."""
+        setup, mech = self.setup, self.mech
+        _, contact_fn, starts_fn = adapter(mech)
+        warnings = list(setup.warnings) + list(self.warnings)
+        summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method,
+                                                             setup.system.size + 3 if setup.system else 0),
+                   "flash": setup.section["flash"], "distribution": setup.section["distribution"],
+                   "averaging": self.averaging, "averaging_why": self.averaging_why}
+        extra: dict[str, pd.DataFrame] = {}
+        if df.empty:
+            return df, extra, summary, warnings
+        starts = starts_fn(df, events, mech)
+        t_on_pin = self._time_since(df["t_s"].to_numpy(float), starts)
+        states = None
+        inputs = breaks = None
+        ext = setup.extension
+        if ext is not None:
+            if self.method == "dae":
+                states = df[list(ext.names)].to_numpy(float)
+            else:
+                states, inputs, breaks = integrate_closed_form(
+                    ext, mech, contact_fn, self.si["initial"][mech.initial_keys[0]], self.speed,
+                    df["t_s"].to_numpy(float), setup.initial)
+        window = None
+        if self.averaging == "cycle" and not failed:
+            window = self._cycle(df, states, inputs, breaks, contact_fn, t_on_pin, summary, warnings, extra)
+        if window is not None:
+            df, states, t_on_pin = window
+        elif self.averaging == "cycle":
+            summary["averaging"] = "resolved"
+            summary["averaging_why"] += "; the run failed before a periodic cycle, so what ran is shown resolved"
+        df = df.copy()
+        contact = contact_fn(df, mech)
+        self._add_columns(df, contact, states, t_on_pin)
+        if states is not None and window is None:
+            summary["heat_balance"] = self._balance(states)
+        summary.update(setup.describe())
+        summary["heat_share"] = ("flash columns: Blok partition of the exact band rises (fast table) with the "
+                                 "transient floors of physics.md §4.7; bulk states: the same partition with the "
+                                 "band fit and smooth floors (heat_share_pin_bulk; docs/thermal.md)")
+        summary["notes"] = list(setup.notes)
+        warnings += self._validity(df, contact, summary)
+        return df, extra, summary, warnings
+
+    @staticmethod
+    def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """Time since the latest contact start (inf before the first)."""
+        if not len(starts):
+            return np.full(t.shape, np.inf)
+        i = np.searchsorted(starts, t + 1e-12, side="right") - 1
+        out = np.where(i >= 0, t - starts[np.clip(i, 0, None)], np.inf)
+        return np.clip(out, 0.0, None)
+
+    # ---------------------------------------------------------------------------------------------- columns
+    def _add_columns(self, df: pd.DataFrame, contact: dict, states, t_on_pin) -> None:
+        setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
+        th = setup.section
+        N = contact["normal_force"]
+        engaged = contact["engaged"] & (N != 0)
+        U_wall = np.abs(contact["source_speed_wheel"])
+        U_pin = np.abs(contact["source_speed_pin"])
+        E_star = effective_modulus(mat)
+        b = half_width(N, geo.contact_radius, geo.contact_length, E_star)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_cross = np.where(U_wall > 0, 2 * b / U_wall, np.inf)
+            a_s = np.abs(contact["sliding_accel"])
+            t_turn = np.where(a_s > 0, 2 * np.sqrt(2 * b / a_s), np.inf)
+        t_on_wall = np.where(engaged, np.minimum(t_cross, t_turn), np.inf)
+        t_on_pin = np.where(engaged, t_on_pin, np.inf)
+        mu = float(self.si.get("contact", {}).get("friction", 0.0))
+        res = flash_temperature(N, contact["slip_speed"], U_wall, U_pin, b, geo.contact_length, mu, mat, mat,
+                                t_on_pin=t_on_pin, t_on_wall=t_on_wall, distribution=th["distribution"])
+        rise = res["temp_flash_rise_K"]
+        if th["flash"] == "seed-blok":
+            seed_speed = geo.seed_source_speed_factor * df["crank_speed_rad_s"].to_numpy(float)
+            rise = flash_temperature(N, contact["slip_speed"], U_wall, seed_speed, b, geo.contact_length, mu, mat,
+                                     mat, distribution=th["distribution"], method="seed-blok")["temp_flash_rise_K"]
+        share = np.where(engaged, res["heat_share_pin"], np.nan)
+        base_pin = base_wheel = np.full(len(df), setup.temp_ambient)
+        if states is not None:
+            names = setup.system.state_names
+            base_pin = states[:, names.index("temp_bulk_pin_K")]
+            base_wheel = states[:, names.index("temp_bulk_wheel_K")]
+            for j, name in enumerate(setup.extension.names):
+                if name.startswith("temp_bulk_"):
+                    df[name[:-2] + "_C"] = states[:, j] - KELVIN
+                elif not name.startswith("temp_wall_") and not np.all(np.isnan(states[:, j])):
+                    df[name] = states[:, j]
+            u, _, gamma_bulk = setup.extension.inputs_numeric(contact)
+            df["heat_share_pin_bulk"] = np.where(engaged, gamma_bulk, np.nan)
+            if setup.mesh is not None:
+                surface = self._wall_surface(states, u, contact["track"])
+                df["temp_wall_surface_C"] = surface - KELVIN
+                base_wheel = surface
+            for c in [c for c in setup.extension.names if c in df and c.startswith("temp_")]:
+                del df[c]
+        base = np.where(engaged, share * base_pin + (1.0 - share) * base_wheel, np.nan)
+        df["heat_rate_W"] = res["heat_rate_W"]
+        df["heat_share_pin"] = share
+        df["hertz_half_width_m"] = b
+        df["hertz_pressure_max_Pa"] = peak_pressure(N, geo.contact_radius, geo.contact_length, E_star)
+        df["peclet_pin"] = res["peclet_pin"]
+        df["peclet_wheel"] = res["peclet_wheel"]
+        df["temp_flash_rise_K"] = rise
+        df["temp_contact_C"] = base + rise - KELVIN
+
+    def _wall_surface(self, states, u, track) -> np.ndarray:
+        """Surface temperature of the wall track under the contact: T_0 + q dz_0/(2k), q = heat into it / area."""
+        setup = self.setup
+        n = setup.geometry.tracks
+        j = np.mod(np.rint(track), n).astype(int)
+        dz0 = float(setup.mesh.widths[0])
+        out = np.empty(len(track))
+        for jj, idx in setup.mesh_states.items():
+            rows = j == jj
+            q = u[1 + jj][rows] / setup.track_area
+            out[rows] = states[rows, idx[0]] + q * dz0 / (2 * setup.material.conductivity)
+        return out
+
+    def _balance(self, states) -> dict:
+        sysm = self.setup.system
+        n = sysm.size
+        generated = float(states[-1, n] - states[0, n])
+        stored = float(sysm.capacity @ (states[-1, :n] - states[0, :n]))
+        convected = float(states[-1, n + 2] - states[0, n + 2])
+        closure = generated - stored - convected
+        return {"generated_J": generated, "stored_J": stored, "convected_J": convected,
+                "into_pin_J": float(states[-1, n + 1] - states[0, n + 1]), "closure_error_J": closure,
+                "closure_error_relative": closure / generated if generated > 0 else 0.0}
+
+    # ---------------------------------------------------------------------------------------------- cycle mode
+    def _cycle(self, df, states, inputs, breaks, contact_fn, t_on_pin, summary, warnings, extra):
+        setup, mech = self.setup, self.mech
+        t = df["t_s"].to_numpy(float)
+        angle_col = next(c for c in df.columns if c.endswith("_angle_rad"))
+        angle = df[angle_col].to_numpy(float)
+        bounds = cyc.turn_boundaries(t, angle, angle[0])
+        if len(bounds) < 2:
+            warnings.append("thermal: fewer than one full crank turn in the mechanics window; shown resolved")
+            return None
+        if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
+            n = None
+            contact = contact_fn(df, mech)
+            e_gen = np.concatenate([[0.0], np.cumsum(0.5 * (contact["heat_rate"][1:] + contact["heat_rate"][:-1])
+                                                      * np.diff(t))])
+            means = cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
+                                   float(np.diff(np.interp(bounds[-2:], t, e_gen))[0] / (bounds[-1] - bounds[-2])),
+                                   float("nan"), None)
+        else:
+            n = setup.system.size
+            means = cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
+        duration = float(self.si["duration"])
+        window, m = cyc.shift_window(df, means.t_start, means.period, duration)
+        keep = (t >= means.t_start - 1e-12) & (t < means.t_start + means.period - 1e-9)   # as in shift_window
+        t_on = t_on_pin[keep]
+        info = {"period_s": means.period, "mean_heat_rate_W": means.heat_mean,
+                "mean_heat_share_pin": means.share_mean, "turns_simulated": int(len(bounds)),
+                "window_shift_periods": m, "periodicity_of_mean_heat": means.periodicity}
+        if means.periodicity is not None and means.periodicity > PERIODICITY_TOLERANCE:
+            warnings.append(f"thermal: the mechanics is not yet periodic after {len(bounds)} crank turns (mean heat "
+                            f"changed by {means.periodicity:.2e} between the last two); the cycle means may be off")
+        summary["cycle"] = info
+        if states is None:
+            return window, None, t_on
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, contact_fn)
+        times = window["t_s"].to_numpy(float)
+        _, full = cyc.bulk_response(setup.system, means, u_of_phase, phase_breaks, times)
+        window_states = np.full((len(window), n + 3), np.nan)      # per-row energies: see the history table
+        window_states[:, :n] = full
+        extra["thermal_history"] = cyc.history_table(setup.system, means, u_of_phase, phase_breaks, duration,
+                                                     KELVIN)
+        summary["heat_balance"] = self._mean_balance(means, duration)
+        window = window.drop(columns=[c for c in setup.extension.names if c in window])
+        return window, window_states, t_on
+
+    def _period_input(self, df, states, inputs, breaks, means, contact_fn):
+        """u(phase) over the periodic turn (phase 0 = means.t_start) and the phases where it jumps."""
+        a, P = means.t_start, means.period
+        if inputs is not None:                                    # closed form: exact at any time
+            n_in = self.setup.system.input_matrix.shape[1]
+            return (lambda s: inputs(a + s)[:n_in]), [b - a for b in breaks if a < b < a + P]
+        t = df["t_s"].to_numpy(float)
+        u, _, _ = self.setup.extension.inputs_numeric(contact_fn(df, self.mech))
+        mode = df["mode"].to_numpy()
+        jumps = [0.5 * (t[i] + t[i + 1]) - a for i in np.flatnonzero(mode[1:] != mode[:-1]) if a < t[i] < a + P]
+        return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), jumps
+
+    def _mean_balance(self, means, duration) -> dict:
+        """Heat balance of the mean model at the end of the run (exact: modal solution, convected integral)."""
+        setup = self.setup
+        n = setup.system.size
+        u = np.array([means.share_mean * means.heat_mean, (1 - means.share_mean) * means.heat_mean])
+        T0 = setup.initial[:n]
+        T, convected = ModalNetwork(setup.system, setup.extension.loss).constant(T0, u, [duration])
+        generated = means.heat_mean * duration
+        stored = float(setup.system.capacity @ (T[0] - T0))
+        closure = generated - stored - float(convected[0])
+        return {"generated_J": float(generated), "stored_J": stored, "convected_J": float(convected[0]),
+                "into_pin_J": float(means.share_mean * generated), "closure_error_J": float(closure),
+                "closure_error_relative": float(closure / generated) if generated > 0 else 0.0,
+                "basis": "cycle-mean heat over the whole duration (exact modal solution)"}
+
+    # ---------------------------------------------------------------------------------------------- validity
+    def _validity(self, df, contact, summary) -> list[str]:
+        setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
+        out = []
+        b = df["hertz_half_width_m"].to_numpy(float)
+        if len(b) and np.nanmax(b) > 0.1 * geo.contact_radius:
+            out.append(f"thermal: the Hertz half-width reaches {np.nanmax(b) / geo.contact_radius:.2f} R; the line-"
+                       "contact formulas need b << R (physics.md §3)")
+        if setup.mesh is None:
+            return out
+        engaged = contact["engaged"]
+        U = np.abs(contact["source_speed_wheel"][engaged])
+        L_contact = df["peclet_wheel"].to_numpy(float)[engaged]
+        if len(L_contact):
+            ok, msg = validity(np.max(L_contact))
+            if not ok:
+                out.append(f"thermal (1d): {msg}. So the 1-D mesh is not the flash model here: it carries only the "
+                           "track-scale heating (the wall's heat spread over its swept track), and the flash rise "
+                           "on top comes from the moving-band solution")
+        if len(U):
+            L_track = float(np.mean(U)) * 0.5 * geo.track_length / (2 * mat.diffusivity)
+            ok, msg = validity(L_track)
+            summary["track_peclet"] = L_track
+            if not ok:
+                out.append(f"thermal (1d): the contact sweeps the slot-wall track slowly (track Peclet number "
+                           f"{L_track:.3g} < 5), so conduction along the track is not negligible and the 1-D depth "
+                           f"model of the track does not hold [{msg}]")
+        penetration = math.sqrt(mat.diffusivity * setup.engagement_time)
+        if setup.mesh.widths[0] > 0.25 * penetration:
+            out.append(f"thermal (1d): first cell {setup.mesh.widths[0]:.3g} m is coarse against the depth heated "
+                       f"during one engagement, {penetration:.3g} m; refine thermal.mesh_first_cell")
+        periodic = math.sqrt(mat.diffusivity * geo.tracks * setup.period / math.pi)
+        if setup.mesh.depth < periodic:
+            out.append(f"thermal (1d): mesh depth {setup.mesh.depth:.3g} m is shallower than the periodic penetration "
+                       f"depth {periodic:.3g} m; the far face ties the wall to the bulk too close to the surface")
+        return out
+
+
+def plan(si: dict, mech, drive, method: str) -> ThermalPlan | None:
+    """The thermal plan of a validated scenario (None for thermal.model = 'none')."""
+    setup = build(si, mech)
+    if setup is None:
+        return None
+    th = setup.section
+    duration = float(si["duration"])
+    cycles = duration / setup.period
+    turns = CYCLE_TURNS_CLOSED_FORM if method == "closed-form" else CYCLE_TURNS_DAE
+    window = turns * setup.period + 2 * si["output_step"]
+    if th["averaging"] == "cycle":
+        averaging, why = "cycle", "thermal.averaging = 'cycle' (scenario)"
+    elif th["averaging"] == "resolved":
+        averaging, why = "resolved", "thermal.averaging = 'resolved' (scenario)"
+    elif setup.model == "1d":
+        averaging, why = "resolved", "auto: model = '1d' resolves every cycle (the track meshes follow each engagement)"
+    elif cycles >= AUTO_CYCLES:
+        averaging, why = "cycle", (
+            f"auto: duration {duration:.6g} s = {cycles:.0f} cycles of {setup.period:.4g} s (>= {AUTO_CYCLES}); the "
+            "bulk time constants are >> one cycle (physics.md §5), so the mechanics runs "
+            f"{turns} turns until periodic and the cycle-mean heat drives the bulk exactly (plus its periodic ripple)")
+    else:
+        averaging, why = "resolved", f"auto: duration is {cycles:.3g} cycles (< {AUTO_CYCLES}), every cycle is resolved"
+    if averaging == "cycle" and window >= duration:
+        averaging, why = "resolved", why + f"; but the duration is within the {turns}-turn mechanics window, so resolved"
+    if averaging == "cycle" and setup.model != "flash" and setup.model != "lumped":
+        averaging = "resolved"
+    speed = float(drive.speed) if drive.is_prescribed else setup.nominal_speed
+    return ThermalPlan(setup=setup, si=si, mech=mech, method=method, speed=speed, averaging=averaging,
+                       averaging_why=why, mechanics_duration=window if averaging == "cycle" else duration)

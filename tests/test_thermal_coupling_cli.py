@@ -1,0 +1,85 @@
+"""The [thermal] section on the command line: bad input exits 2 with one line naming the field; a thermal run writes
+its columns, the heat balance and (cycle-averaged) the bulk history."""
+import json
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from scenarios.cli import app
+
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, list(map(str, args)))
+
+
+def one_line_error(result):
+    text = result.stderr.strip()
+    assert "Traceback" not in result.output + text
+    lines = [line for line in text.splitlines() if line.strip()]
+    assert len(lines) == 1, text
+    assert lines[0].startswith("error: ")
+    return lines[0]
+
+
+BAD = [
+    ("unknown model", "thermal.model=2d", "thermal.model"),
+    ("unknown flash", "thermal.flash=blok", "thermal.flash"),
+    ("unknown distribution", "thermal.distribution=triangular", "thermal.distribution"),
+    ("unknown material", "thermal.material=unobtanium", "thermal.material"),
+    ("unknown key", "thermal.emissivity=0.3", "thermal.emissivity"),
+    ("Poisson ratio", "thermal.nu=0.7", "thermal.nu"),
+    ("negative conductivity", 'thermal.conductivity="-40 W/(m*K)"', "thermal.conductivity"),
+    ("wrong unit", 'thermal.convection_pin="15 W/m^2"', "thermal.convection_pin"),
+    ("missing unit", "thermal.density=7800", "thermal.density"),
+    ("below absolute zero", 'thermal.ambient_temperature="-300 degC"', "thermal.ambient_temperature"),
+    ("bad averaging", "thermal.averaging=sometimes", "thermal.averaging"),
+    ("cycle with 1d", "thermal.model=1d --set thermal.averaging=cycle", "thermal.averaging"),
+    ("growth below 1", "thermal.mesh_growth=0.9", "thermal.mesh_growth"),
+    ("first cell over depth", 'thermal.mesh_first_cell="5 mm" --set thermal.mesh_depth="1 mm"',
+     "thermal.mesh_first_cell"),
+    ("crank volume alone", 'thermal.crank_volume="1 cm^3"', "thermal.crank_area"),
+    ("direction", "thermal.mesh_direction=track", "thermal.mesh_direction"),
+]
+
+
+@pytest.mark.parametrize("label,setting,field", BAD, ids=[b[0] for b in BAD])
+def test_bad_thermal_input_exits_2_with_one_line(tmp_path, label, setting, field):
+    sets = []
+    for part in setting.split(" --set "):
+        sets += ["--set", part]
+    r = invoke("run", "geneva-lc1", "--out", tmp_path / "out", "--quiet", *sets)
+    assert r.exit_code == 2, r.output
+    line = one_line_error(r)
+    assert field in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_mechanism_without_sliding_contact_accepts_only_none(tmp_path):
+    r = invoke("run", "rolling-a-speed", "--out", tmp_path / "out", "--quiet", "--set", "thermal.model=lumped")
+    assert r.exit_code == 2 and "thermal.model" in one_line_error(r)
+
+
+def test_thermal_run_writes_columns_balance_and_history(tmp_path):
+    out = tmp_path / "hour"
+    r = invoke("run", "geneva-seed-lc2-mu030", "--out", out, "--quiet", "--set", "duration=1 h",
+               "--set", "output.plots=false")
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())
+    th = summary["thermal"]
+    assert th["model"] == "lumped" and th["averaging"] == "cycle" and "auto" in th["averaging_why"]
+    assert abs(th["heat_balance"]["closure_error_relative"]) < 1e-9
+    for col in ("temp_contact_C", "temp_flash_rise_K", "heat_rate_W", "temp_bulk_pin_C", "temp_bulk_wheel_C"):
+        assert col in summary["peaks"]
+        assert -180 <= summary["peaks"][col]["drive_angle_wrapped_deg"] <= 180
+    df = pd.read_parquet(out / "timeseries.parquet")
+    assert df["t_s"].iloc[-1] <= 3600 and df["t_s"].iloc[-1] > 3600 - 2.4
+    history = pd.read_csv(out / "thermal_history.csv")
+    assert history["t_s"].iloc[-1] == pytest.approx(3600)
+    assert history["temp_bulk_wheel_C"].is_monotonic_increasing
+    # the resolved scenario (with its thermal section) is valid input again
+    r2 = invoke("run", out / "scenario.toml", "--out", tmp_path / "again", "--quiet", "--set", "duration=0.5 s",
+                "--set", "output.plots=false")
+    assert r2.exit_code == 0, r2.output
