@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
 
 from mechanisms.base import Mechanism
 
-from .consistent import consistent_state
+from .consistent import consistent_state, project_positions, project_velocities
 from .drives import Drive
 from .hybrid import Piece, Trajectory, parameter_tuple
 from .jax_model import JaxModel, jax_model  # also enables float64
@@ -283,6 +284,18 @@ def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.n
     return y, yp
 
 
+def _stepped_over(mf, p, t0, y0, yp0, t_rows, y_rows, yp_rows, out, nq) -> dict | None:
+    """With events disabled: the first guard that crossed in its direction between the segment's samples
+    (the IDA loop's check, `dynamics.hybrid.stepped_over`, where available)."""
+    from . import hybrid
+    check = getattr(hybrid, "stepped_over", None)
+    if check is None:
+        return None
+    y_end, yp_end = (r[0] for r in _ida_rows(mf, nq, out["z_end"], out["zp_end"], out["a_end"], out["lam_end"]))
+    seg = SimpleNamespace(t=t_rows, y=y_rows, yp=yp_rows, t_end=float(out["t_end"]), y_end=y_end, yp_end=yp_end)
+    return check(mf, p, t0, y0, yp0, seg)
+
+
 # -- the hybrid loop ---------------------------------------------------------------------------------------
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
              angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
@@ -364,12 +377,24 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
         t_seg = float(out["t_end"])
         keep = np.arange(o.n_save) < len(chunk)
         keep &= np.isfinite(out["ts"]) & (out["ts"] <= t_seg)
-        if keep.any():
-            y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep],
-                                        out["lam"][keep])
-            pieces.append(Piece(mode, p, out["ts"][keep].copy(), y_rows, yp_rows))
+        y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep], out["lam"][keep])
+        t_rows = out["ts"][keep].copy()
+        crossed = None if settings.events else _stepped_over(mf, p, t, y, yp, t_rows, y_rows, yp_rows, out, jmod.nq)
+        if crossed:
+            n_rows = crossed["rows"]
+            t_rows, y_rows, yp_rows = t_rows[:n_rows], y_rows[:n_rows], yp_rows[:n_rows]
+        if len(t_rows):
+            pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows))
         if progress:
             progress(t_seg)
+        if crossed:
+            failure = dict(time=crossed["after"], mode=mode, reason=(
+                f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
+                f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
+                "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
+                "dropped"), where={c: float(v) for c, v in zip(model.coordinates, crossed["q"])},
+                hint="set solver.events = true (guards root-found by the integrator)")
+            break
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
         ok = code == int(diffrax.RESULTS.successful._value) or is_event
@@ -382,7 +407,8 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
                                 "(Kvaerno5 if the motion is stiff); check for a singular configuration here")
             break
         ix = mf.index
-        y_end = _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"], out["lam_end"])[0][0]
+        y_end, yp_end = (r[0] for r in _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
+                                                   out["lam_end"]))
         q, v = y_end[ix["q"]], y_end[ix["v"]]
         if not is_event:
             t = t_seg
@@ -392,6 +418,7 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
                 y, yp, _ = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p)
                 z = _z(mf, y)
             else:
+                y, yp = y_end, yp_end
                 z = np.asarray(out["z_end"])
             continue
         # a guard crossed: the one whose heading value is at or past zero at the (just-past) crossing time
@@ -407,11 +434,15 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
             break
         direction = mf.guard_directions[i]
         if direction and np.sign(out["ref"][i]) == direction:
-            z = np.asarray(out["z_end"])   # crossed against its direction: not an event, re-arm and go on
+            y, yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
+            z = np.asarray(out["z_end"])
             continue
         if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
-            z = np.asarray(out["z_end"])   # the same crossing seen again from the restart point: not a new event
-            continue
+            # as in the IDA loop: the transition did not move the state off its own guard
+            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' fires again immediately after its own "
+                           "transition (chattering)", where={c: float(val) for c, val in zip(model.coordinates, q)},
+                           hint="the mechanism's guard for this transition should be directional")
+            break
         last = (guard, t)
         tr = mech.on_guard(mode, guard, values, t, q, v)
         row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
@@ -433,15 +464,27 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
         mf = model.modes[mode]
         p = parameter_tuple(model, values)
         try:
-            y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, tr.restitution)
+            # the IDA loop's re-initialisation, impact rows included (dynamics/hybrid.py)
+            restitution, rebound = tr.restitution, None
+            if restitution:
+                q = project_positions(mf, t, q, p)
+                v, rebound = project_velocities(mf, t, q, v, p, restitution)
+                restitution = None
+            y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution)
+            if rebound is not None:
+                events.append(dict(row, kinetic_energy_before_J=rebound.energy_before,
+                                   kinetic_energy_after_J=rebound.energy_after, message=tr.message or ""))
+                row = dict(row, kind="rebound absorbed", message=(
+                    f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
+                    f"'{mode}': removed by a plastic projection onto its constraints"))
         except (ValueError, np.linalg.LinAlgError) as exc:
             failure = dict(time=t, mode=mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
                            where={c: float(val) for c, val in zip(model.coordinates, q)},
                            hint="the new mode may be singular here")
             events.append(row)
             break
-        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after,
-                   message=tr.message or "")
+        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
+        row.setdefault("message", tr.message or "")
         events.append(row)
         z = _z(mf, y)
     stats["solve_time_s"] = _time.perf_counter() - solve0 - stats["compile_time_s"]

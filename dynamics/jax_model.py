@@ -21,13 +21,31 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import sympy as sp  # noqa: E402
+from sympy.printing.numpy import JaxPrinter  # noqa: E402
 
 from .model import ModeFunctions  # noqa: E402
 
 
+class _JaxPrinter(JaxPrinter):
+    """sympy's jax printer, plus functions that carry their own code printer (the opaque functions of
+    dynamics/thermal_coupling.py print their explicit expression through `_numpycode`/`_pythoncode`)."""
+
+    def _print_Function(self, expr):
+        for method in ("_jaxcode", "_numpycode", "_pythoncode"):
+            own = getattr(expr, method, None)
+            if own is not None:
+                return own(self)
+        return super()._print_Function(expr)
+
+
+_PRINTER_SETTINGS = {"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": True,
+                     "user_functions": {}}
+
+
 def _lambdify(args, exprs: list) -> Callable:
     """sympy -> jax.numpy, one function returning a flat list of scalars (cse across all of them)."""
-    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True)
+    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True,
+                       printer=_JaxPrinter(_PRINTER_SETTINGS))
 
 
 def _stack(values, shape) -> jnp.ndarray:
