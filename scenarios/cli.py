@@ -145,7 +145,6 @@ def sweep(
     workers: Optional[int] = typer.Option(None, "--workers", help="local processes (default: all cores; 0: here)"),
     dask_local: Optional[int] = typer.Option(None, "--dask-local", help="run on a Dask LocalCluster of N workers"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="run on the Dask scheduler at ADDRESS"),
-    batch: bool = typer.Option(False, "--batch", help="diffrax cases as batched compiled solves where they can"),
     timeseries: bool = typer.Option(False, "--timeseries", help="also write each case's time series"),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write PNG plots of the table"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder, finished cases too"),
@@ -154,8 +153,8 @@ def sweep(
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
     from .sweep_run import cli_main
     try:
-        code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, batch, timeseries, plots,
-                        force, quiet, out, err)
+        code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, timeseries, plots, force,
+                        quiet, out, err)
     except ScenarioError as exc:
         _fail(str(exc))
     raise typer.Exit(code)

@@ -57,11 +57,29 @@ def _drive_angle_column(si: dict) -> str | None:
     return coordinate_columns(mech.coordinates[k], True)[0]
 
 
+_PREPARED = False
+
+
+def _prepare_process() -> None:
+    """Once per worker process: the runner looks up package versions from their metadata on every run (~40 ms,
+    as much as a closed-form case). Versions cannot change inside a process, so a sweep worker caches the answer.
+    (Runtime wrapper only; better done in scenarios/runner.py itself.)"""
+    global _PREPARED
+    if _PREPARED:
+        return
+    from functools import lru_cache
+    from . import runner
+    if callable(getattr(runner, "_versions", None)) and not hasattr(runner._versions, "cache_info"):
+        runner._versions = lru_cache(maxsize=1)(runner._versions)
+    _PREPARED = True
+
+
 def run_case(task: CaseTask) -> Outcome:
     """Run one case; any failure (solver, physics, exception) becomes a row with success = False and its reason."""
     from .runner import run
     from .sweep_rows import cycle_figures, summary_row
-    wall0 = time.perf_counter()
+    _prepare_process()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     ts = None
     try:
@@ -77,6 +95,7 @@ def run_case(task: CaseTask) -> Outcome:
     except Exception as exc:  # a case's own error must not stop the others
         row = {"success": False, "failure": f"{type(exc).__name__}: {exc}".splitlines()[0], "failure_kind": "error"}
     row["case_wall_time_s"] = time.perf_counter() - wall0
+    row["case_cpu_time_s"] = time.process_time() - cpu0
     row["worker"] = worker
     return Outcome(task.key, row, ts)
 
@@ -116,6 +135,8 @@ class PoolRunner:
 
     def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
         import multiprocessing as mp
+        if not tasks:
+            return
         ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)),
                                  mp_context=mp.get_context("forkserver"), initializer=_ignore_sigint)
         futures = [ex.submit(run_case, t) for t in tasks]
@@ -175,21 +196,26 @@ class DaskRunner:
         return f"Dask scheduler {self.address}" if self.address else f"Dask LocalCluster, {self.workers} workers"
 
     def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
+        from .units import ScenarioError
+        if not tasks:
+            return
         try:
             from distributed import Client, LocalCluster, as_completed as dask_completed
         except ImportError:
-            from .units import ScenarioError
             raise ScenarioError("--dask-local/--scheduler", "needs dask[distributed]: pip install "
                                 "\"mechsim[dask]\"") from None
         cluster = None
         if self.address:
-            client = Client(self.address, timeout="20s")
+            try:
+                client = Client(self.address, timeout="20s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise ScenarioError("--scheduler", f"cannot connect to {self.address}: {exc}") from None
         else:
             cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
             client = Client(cluster)
         self.dashboard = getattr(client, "dashboard_link", None)
-        lost = 0
+        lost, first_error = 0, ""
         delivered: set = set()
         try:
             futures = [client.submit(run_case, t, key=f"mechsim-case-{t.key}-{os.urandom(4).hex()}", pure=False)
@@ -198,9 +224,10 @@ class DaskRunner:
                 for f in dask_completed(futures):
                     try:
                         outcome = f.result()
-                    except Exception:   # KilledWorker and the like: the case did not finish
+                    except Exception as exc:   # KilledWorker, or a worker that cannot run mechsim: not finished
                         delivered.add(f.key)
                         lost += 1
+                        first_error = first_error or f"{type(exc).__name__}: {exc}".splitlines()[0]
                         continue
                     on_result(outcome)
                     delivered.add(f.key)
@@ -212,7 +239,7 @@ class DaskRunner:
                         delivered.add(f.key)
                 raise SweepInterrupted("interrupted (Ctrl-C)") from None
             if lost:
-                raise SweepInterrupted(f"{lost} case(s) lost with their Dask workers (KilledWorker)")
+                raise SweepInterrupted(f"{lost} case(s) did not finish on Dask ({first_error})")
         finally:
             client.close()
             if cluster is not None:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import time
 import uuid
-from dataclasses import dataclass, field
+from contextlib import contextmanager
+from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Protocol
 
@@ -43,18 +45,49 @@ class Plan:
         return list(self.cases[0].params) if self.cases else []
 
 
-def plan(spec: SweepSpec) -> Plan:
-    """Validate every case (base scenario + its overrides) with the loader; nothing runs yet."""
+@contextmanager
+def _memoized_units():
+    """Validating every case re-parses the same quantity strings ("75 mm", ...) with pint, which is most of the
+    loader's time. scenarios.schema.to_si is a pure function of (field, value, unit): memoize it while planning
+    (a scoped wrapper, restored afterwards; errors are not cached and re-raise as before)."""
+    from . import schema
+    original = schema.to_si
+    cached = lru_cache(maxsize=None)(original)
+
+    def to_si(field, value, unit):
+        try:
+            hash(value)
+        except TypeError:
+            return original(field, value, unit)
+        return cached(field, value, unit)
+
+    schema.to_si = to_si
+    try:
+        yield
+    finally:
+        schema.to_si = original
+
+
+def plan(spec: SweepSpec, extra: list[list[str]] | None = None) -> Plan:
+    """Validate every case (base scenario + its overrides) with the loader; nothing runs yet.
+
+    extra: per case, further overrides derived from its values (Python API only, e.g. a duration of three
+    crank turns at each case's crank speed in benchmarks/sweep_bench.py).
+    """
     base_raw, _ = read_raw(spec.scenario)
     cases = []
-    for i, overrides in enumerate(spec.case_overrides()):
-        try:
-            sc = load(spec.scenario, overrides)
-        except ScenarioError as exc:
-            varied = ", ".join(overrides[len(spec.base):])
-            raise ScenarioError(exc.field, f"{exc.problem} (sweep case {i + 1}: {varied})") from None
-        cases.append(PlannedCase(i, case_key(sc, overrides, base_raw), overrides,
-                                 parameter_columns(sc, spec.keys), sc))
+    per_case = spec.case_overrides()
+    if extra is not None:
+        per_case = [o + list(e) for o, e in zip(per_case, extra, strict=True)]
+    with _memoized_units():
+        for i, overrides in enumerate(per_case):
+            try:
+                sc = load(spec.scenario, overrides)
+            except ScenarioError as exc:
+                varied = ", ".join(overrides[len(spec.base):])
+                raise ScenarioError(exc.field, f"{exc.problem} (sweep case {i + 1}: {varied})") from None
+            cases.append(PlannedCase(i, case_key(sc, overrides, base_raw), overrides,
+                                     parameter_columns(sc, spec.keys), sc))
     return Plan(spec, cases)
 
 
@@ -115,7 +148,6 @@ class Report:
     wall_time_s: float = 0.0
     runner: str = ""
     run_id: str = ""
-    notes: list[str] = field(default_factory=list)
 
     def line(self) -> str:
         head = (f"sweep: {self.total} cases ({self.computed} computed, {self.reused} reused, {self.failed} failed) "
@@ -127,12 +159,8 @@ class Report:
 
 
 def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: bool = False,
-              progress: Progress | None = None, plots: bool = True, batcher=None) -> Report:
-    """Validate, prepare the folder, run what is not finished, write the table, plots and sweep summary.
-
-    batcher: optional sweep_batch.Batcher; the cases it accepts run as batched compiled solves, the rest on
-    `runner`.
-    """
+              progress: Progress | None = None, plots: bool = True) -> Report:
+    """Validate, prepare the folder, run what is not finished, write the table, plots and sweep summary."""
     wall0 = time.perf_counter()
     pl = spec_or_plan if isinstance(spec_or_plan, Plan) else plan(spec_or_plan)
     progress = progress or NoProgress()
@@ -162,8 +190,6 @@ def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: 
         progress.advance(ok)
 
     try:
-        if batcher is not None:
-            tasks = batcher.run(tasks, on_result, report.notes)
         runner.run(tasks, on_result)
     except SweepInterrupted as exc:
         report.interrupted = str(exc)
@@ -171,11 +197,11 @@ def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: 
         finished = store.finished(pl.keys, timeseries)
         report.remaining = sum(1 for c in pl.cases if c.key not in finished)
         report.wall_time_s = time.perf_counter() - wall0
-        _finish(store, pl, report, plots, batcher)
+        _finish(store, pl, report, plots)
     return report
 
 
-def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool, batcher) -> None:
+def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool) -> None:
     df = store.table([(c.index, c.key, c.params) for c in pl.cases])
     if len(df):
         store.write_table(df)
@@ -189,22 +215,28 @@ def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool, batcher) -
         "computed_this_run": report.computed, "reused": report.reused, "failed": report.failed,
         "complete": report.remaining == 0, "interrupted": report.interrupted, "runner": report.runner,
         "run_id": report.run_id, "wall_time_s": report.wall_time_s,
-        "batching": report.notes or [batching_note(batcher)], "failed_cases": failed,
+        "batching": batching_note(pl), "failed_cases": failed,
     })
 
 
-def batching_note(batcher) -> str:
-    if batcher is None:
-        return ("not batched: each case ran its own hybrid integration (pass --batch to run cases on the "
-                "diffrax backend as batched compiled solves; see docs/sweeps.md)")
-    return "batched"
+def batching_note(pl: Plan) -> str:
+    """Why the cases ran one by one (docs/sweeps.md, 'Batching')."""
+    diffrax = sum(1 for c in pl.cases if c.scenario.si["solver"]["backend"] == "diffrax")
+    if not diffrax:
+        return ("not applicable: no case uses solver.backend = 'diffrax'; closed-form and IDA cases run one per "
+                "worker process")
+    return (f"not batched: {diffrax} of {len(pl.cases)} cases use the diffrax backend and each ran its own hybrid "
+            "integration. A lock-step jax.vmap over cases breaks at the mode changes, which fall at case-dependent "
+            "times; batching needs every case integrated to its own next event inside one vmapped while-loop, with "
+            "the transitions applied per case between rounds, which the diffrax backend does not offer yet "
+            "(docs/sweeps.md, 'Batching')")
 
 
 INTERRUPTED_EXIT, INCOMPLETE_EXIT = 130, 3
 
 
 def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir: Path | None,
-             workers: int | None, dask_local: int | None, scheduler: str | None, batch: bool, timeseries: bool,
+             workers: int | None, dask_local: int | None, scheduler: str | None, timeseries: bool,
              plots: bool, force: bool, quiet: bool, out, err) -> int:
     """`mechsim sweep`: returns the exit code (0 every case has a record; 130 Ctrl-C; 3 workers lost).
 
@@ -222,20 +254,10 @@ def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir:
     pl = plan(spec)
     target_dir = out_dir or Path("results") / f"sweep-{pl.cases[0].scenario.name}"
     runner = make_runner(workers, dask_local, scheduler)
-    batcher = None
-    if batch:
-        try:
-            from .sweep_batch import Batcher
-        except ImportError:
-            raise ScenarioError("--batch", "batched diffrax solves are not available in this build") from None
-        batcher = Batcher()
     with RichProgress(err, f"sweep {pl.cases[0].scenario.name}", disable=quiet) as bar:
-        report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots,
-                           batcher=batcher)
+        report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots)
     if report.interrupted:
         err.print(report.line(), markup=False, highlight=False, soft_wrap=True)
         return INTERRUPTED_EXIT if "Ctrl-C" in report.interrupted else INCOMPLETE_EXIT
     out.print(report.line(), markup=False, highlight=False, soft_wrap=True)
-    for note in report.notes:
-        out.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
     return 0

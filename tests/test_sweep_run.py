@@ -19,7 +19,7 @@ from scenarios.sweep_spec import build_spec
 
 # crank from -180 deg to the end of the first engagement (+45 deg) at 5.34 rad/s takes 0.735 s
 ONE_INDEX = ["duration=0.8 s", "output_step=5 ms", "solver.method=dae"]
-TIMING = ("case_wall_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s", "worker", "run_id")
+TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s", "worker", "run_id")
 cli = CliRunner()
 
 
@@ -62,7 +62,7 @@ def test_grid_table_a_row_per_case_with_physics(local):
     assert {"vs_contact.friction.png", "vs_load.wheel_torque_N_m.png", "heatmap_success.png",
             "heatmap_peak_contact_force_N.png"} <= plots
     summary = json.loads((out / "sweep_summary.json").read_text())
-    assert summary["complete"] and summary["cases"] == 4 and "not batched" in summary["batching"][0]
+    assert summary["complete"] and summary["cases"] == 4 and "not applicable" in summary["batching"]
 
 
 def test_dask_local_cluster_gives_identical_rows(local, tmp_path):
