@@ -28,7 +28,8 @@ PANELS = {
     ],
     "thermal": [
         [("temp_contact_C", "contact temperature (°C)", 1.0), ("temp_bulk_pin_C", "bulk pin (°C)", 1.0),
-         ("temp_bulk_wheel_C", "bulk wheel (°C)", 1.0)],
+         ("temp_bulk_wheel_C", "bulk wheel (°C)", 1.0), ("temp_bulk_crank_C", "bulk crank (°C)", 1.0),
+         ("temp_wall_surface_C", "wall track surface (°C)", 1.0)],
         [("heat_rate_W", "heat rate (W)", 1.0), ("temp_flash_rise_K", "flash rise (K)", 1.0)],
         [("peclet_pin", "Peclet pin", 1.0), ("peclet_wheel", "Peclet wheel", 1.0)],
     ],
