@@ -112,7 +112,7 @@ class SerialRunner:
     workers = 1
 
     def describe(self) -> str:
-        return "in this process"
+        return "serial (this process)"
 
     def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
         try:
