@@ -113,7 +113,7 @@ class RichProgress:
                                    TimeElapsedColumn, TimeRemainingColumn)
         self.bar = RProgress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                              TextColumn("cases, {task.fields[failed]} failed"), TimeElapsedColumn(),
-                             TextColumn("left"), TimeRemainingColumn(), console=console, disable=disable,
+                             TextColumn("ETA"), TimeRemainingColumn(), console=console, disable=disable,
                              transient=True)
         self.label = label
         self.task = None
