@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import platform
 import time
+from functools import lru_cache
 from importlib import metadata
 from typing import Callable
 
@@ -40,6 +41,7 @@ def make_drive(si: dict) -> Drive:
                  stall_torque=d["stall_torque"] or 0.0, no_load_speed=d["no_load_speed"] or 0.0)
 
 
+@lru_cache(maxsize=1)
 def _versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
     for pkg in VERSION_PACKAGES:
@@ -177,7 +179,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         "warnings": warnings,
         "success": failure is None,
         "failure": failure.message() if failure else None,
-        "versions": _versions(),
+        "versions": dict(_versions()),
     }
     if thermal_summary is not None:
         summary["thermal"] = thermal_summary

@@ -21,6 +21,12 @@ def registry() -> pint.UnitRegistry:
     return ureg
 
 
+@lru_cache(maxsize=4096)
+def _parse_quantity(text: str):
+    """pint parsing is the slow part of validation (sweeps validate thousands of cases): memoized."""
+    return registry().Quantity(text)
+
+
 def to_si(field: str, value, unit: str) -> float:
     """Convert a quantity string (or a bare number where `unit` is dimensionless) to the SI `unit`."""
     ureg = registry()
@@ -34,7 +40,7 @@ def to_si(field: str, value, unit: str) -> float:
     if not isinstance(value, str):
         raise ScenarioError(field, f"expected a quantity such as \"1 {unit}\", got {type(value).__name__}")
     try:
-        q = ureg.Quantity(value.strip())
+        q = _parse_quantity(value.strip())
     except Exception:
         raise ScenarioError(field, f"cannot read {value!r} as a quantity (number and unit, e.g. \"1 {unit}\")") \
             from None
