@@ -22,7 +22,7 @@ def measure() -> list[dict]:
     from mechanisms.geneva_kinematics import GenevaGeometry
 
     mech = Geneva(GenevaGeometry(0.075, 4, 0.004, 0.004), 0.02, 1.5626e-3, 7.0, 0.15)
-    rows = []
+    results = []
     for formulation in ("index1", "index2"):
         model = derive(mech, formulation, False)
         mf = model.modes["engaged"]
@@ -42,9 +42,9 @@ def measure() -> list[dict]:
         args = (0.1, *y, *yp, *p)
         f(*args)[0].block_until_ready()
         t_jax = min(timeit.repeat(lambda: np.asarray(f(*args)), number=2000, repeat=5)) / 2000
-        rows.append(dict(formulation=formulation, states=mf.ny, residual_us=t_res * 1e6, jacobian_us=t_jac * 1e6,
-                         jax_jit_residual_us=t_jax * 1e6, ratio_jax_over_generated=t_jax / t_res))
-    return rows
+        results.append(dict(formulation=formulation, states=mf.ny, residual_us=t_res * 1e6, jacobian_us=t_jac * 1e6,
+                            jax_jit_residual_us=t_jax * 1e6, ratio_jax_over_generated=t_jax / t_res))
+    return results
 
 
 def main() -> None:

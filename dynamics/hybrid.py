@@ -92,16 +92,32 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         stats["segments"] += 1
         stats["residual_evaluations"] += seg.nfev
         stats["jacobian_evaluations"] += seg.njev
+        crossed = None if settings.events else stepped_over(mf, p, t, y, yp, seg)
+        if crossed:
+            seg.t, seg.y, seg.yp = seg.t[:crossed["rows"]], seg.y[:crossed["rows"]], seg.yp[:crossed["rows"]]
         if len(seg.t):
             pieces.append(Piece(mode, p, seg.t, seg.y, seg.yp))
         if progress:
             progress(seg.t_end)
+        if crossed:
+            failure = dict(time=crossed["after"], mode=mode, reason=(
+                f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
+                f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
+                "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
+                "dropped"), where={c: float(v) for c, v in zip(model.coordinates, crossed["q"])},
+                hint="set solver.events = true (guards root-found by the integrator)")
+            break
         if seg.status == "failed":
             q = seg.y_end[mf.index["q"]]
-            failure = dict(time=seg.t_end, mode=mode, reason=f"IDA failed: {seg.message}",
-                           where={c: float(v) for c, v in zip(model.coordinates, q)},
-                           hint="tighten or loosen rtol, try formulation = 'index2', or check for a singular "
-                                "configuration at this point")
+            reason, hint = f"IDA failed: {seg.message}", ("tighten or loosen rtol, try formulation = 'index2', "
+                                                          "or check for a singular configuration at this point")
+            if settings.formulation == "index3":
+                reason = f"IDA failed on the index-3 formulation: {seg.message}"
+                hint = ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
+                        "error test breaks down at restarts and tight tolerances (kinematics.md §4); use "
+                        "formulation = 'index2'")
+            failure = dict(time=seg.t_end, mode=mode, reason=reason,
+                           where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=hint)
             break
         if seg.status == "end":
             t = seg.t_end
@@ -119,6 +135,12 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
             break
         last = (guard, t)
         tr = mech.on_guard(mode, guard, values, t, q, v)
+        for other in seg.fired[1:]:
+            # guards that fire at the same instant (a stall and the slip reversal it causes): a stop wins
+            if not tr.stop:
+                alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
+                if alt.stop:
+                    guard, tr = mf.guard_names[other], alt
         row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
                    **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
         stats["events"] += 1
@@ -164,3 +186,32 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         events.append(row)
     stats["solve_time_s"] = _time.perf_counter() - solve0
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+def stepped_over(mf, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray, seg) -> dict | None:
+    """The first guard that crossed zero in its direction between the segment's start, its output rows and its
+    end, or None (for runs with events disabled, where the integrator does not root-find the guards).
+
+    A guard exactly zero at the start is not counted (as IDA ignores roots at the initial point).
+    Returns the guard, the times around the crossing, the number of output rows before it and q just after.
+    """
+    n = len(mf.guard_names)
+    if not n:
+        return None
+    times = np.concatenate([[t0], seg.t, [seg.t_end]])
+    ys = np.vstack([y0[None, :], seg.y, seg.y_end[None, :]])
+    yps = np.vstack([yp0[None, :], seg.yp, seg.yp_end[None, :]])
+    g = np.empty((len(times), n))
+    for i, (ti, yi, ypi) in enumerate(zip(times, ys, yps)):
+        mf.events(ti, yi, ypi, g[i], p)
+    a, b = g[:-1], g[1:]
+    d = np.asarray(mf.guard_directions)
+    rising, falling = (a < 0) & (b >= 0), (a > 0) & (b <= 0)
+    cross = np.where(d > 0, rising, np.where(d < 0, falling, rising | falling))
+    cross[0] &= g[0] != 0
+    hits = np.argwhere(cross)
+    if not len(hits):
+        return None
+    k, j = hits[0]                       # the earliest sample (argwhere is in row order)
+    return dict(guard=mf.guard_names[j], before=float(times[k]), after=float(times[k + 1]), rows=int(k),
+                q=ys[k + 1][mf.index["q"]])

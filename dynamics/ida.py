@@ -29,6 +29,7 @@ class Segment:
     message: str = ""
     nfev: int = 0
     njev: int = 0
+    fired: tuple[int, ...] = ()   # every guard that found a root at t_end (guard is the first of them)
 
 
 def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray | None = None) -> np.ndarray:
@@ -68,11 +69,11 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
     requested = np.isin(t, t_out) & (t > t0)
     if sol.t_events is not None and len(sol.t_events) and sol.success:
         ie = np.asarray(sol.i_events)[-1]
-        guard = int(np.flatnonzero(ie)[0])
+        fired = tuple(int(i) for i in np.flatnonzero(ie))
         te = float(np.asarray(sol.t_events)[-1])
         requested &= t < te
         return Segment(t[requested], y[requested], yp[requested], "event", te, np.asarray(sol.y_events)[-1],
-                       np.asarray(sol.yp_events)[-1], guard, nfev=sol.nfev, njev=sol.njev)
+                       np.asarray(sol.yp_events)[-1], fired[0], nfev=sol.nfev, njev=sol.njev, fired=fired)
     if not sol.success:
         return Segment(t[requested], y[requested], yp[requested], "failed", float(t[-1]), y[-1], yp[-1],
                        message=str(sol.message), nfev=sol.nfev, njev=sol.njev)

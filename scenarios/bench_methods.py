@@ -268,22 +268,28 @@ METHODS: dict[str, Method] = {m.name: m for m in [
 
 @contextmanager
 def quiet_sundials():
-    """SUNDIALS prints failures on the C stderr; keep them out of the benchmark's console (they are in the rows)."""
+    """SUNDIALS prints its failures on the C stdout; keep them out of the benchmark's console (the rows have
+    them). The file descriptors are restored on exit; without real descriptors (captured streams) nothing is
+    redirected."""
     import os
     import sys
     try:
-        fd = sys.stderr.fileno()
+        fds = [sys.stdout.fileno(), sys.stderr.fileno()]
     except (AttributeError, OSError, ValueError):
         yield
         return
-    saved = os.dup(fd)
+    saved = [os.dup(fd) for fd in fds]
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        sys.stderr.flush()
-        os.dup2(devnull, fd)
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        for fd in fds:
+            os.dup2(devnull, fd)
         yield
     finally:
-        sys.stderr.flush()
-        os.dup2(saved, fd)
-        os.close(saved)
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        for fd, copy in zip(fds, saved):
+            os.dup2(copy, fd)
+            os.close(copy)
         os.close(devnull)

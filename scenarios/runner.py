@@ -151,7 +151,8 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
         stats = traj.stats
         warnings += traj.warnings
         if traj.failure:
-            f = traj.failure
+            from .diagnose import explain
+            f = explain(traj, settings, si["duration"])     # names the cause where the backend gives a symptom
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"))
