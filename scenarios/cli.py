@@ -201,6 +201,30 @@ def bench(
         out.print(line, markup=False, highlight=False, soft_wrap=True)
 
 
+@app.command()
+def report(
+    kind: str = typer.Argument(..., help="which report: seed (the seed paper's six load cases, three models)"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/report-seed)"),
+    small: bool = typer.Option(False, "--small", help="a short run: one index, coarse output step (CI)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+) -> None:
+    """Reports (CSV tables, PNG figures, report.md): `seed` compares the seed as printed, corrected, and mechsim."""
+    if kind != "seed":
+        _fail(f"report: unknown report {kind!r}; available: seed")
+    from .seed_report import cli_main as seed_report
+    try:
+        target, lines = seed_report(out_dir, small, force,
+                                    lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except RuntimeError as exc:
+        _fail(f"report: {exc}", SOLVER_FAILURE)
+    except ValueError as exc:
+        _fail(f"report: {exc}")
+    for line in lines:
+        out.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:
