@@ -94,7 +94,7 @@ class DiffraxOptions:
 
 
 #: Defaults for implicit solvers, picked by measurement (docs/diffrax.md).
-IMPLICIT_DEFAULTS = dict(newton="patient")
+IMPLICIT_DEFAULTS = dict(newton="patient", newton_kappa=0.1)
 
 
 def default_options(settings: SolverSettings) -> DiffraxOptions:

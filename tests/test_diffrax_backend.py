@@ -115,3 +115,21 @@ def test_implicit_solver_agrees_with_explicit(seed_geometry, prescribed):
     assert np.max(np.abs(df5["wheel_angle_rad"].to_numpy() - df["wheel_angle_rad"].to_numpy()[:n])) < 1e-7
     assert list(events_table(traj5)["kind"]) == list(events_table(traj)["kind"])[:len(traj5.events)]
     assert traj5.stats["rejected_steps"] < 0.25 * traj5.stats["steps"]
+
+
+@pytest.mark.parametrize("step, size, prev, done, ok", [
+    (2, 5e6, 4e7, False, True),     # contracting (rate 0.125) but not yet converged: go on (diffrax 0.7.2 fails here)
+    (3, 1e-4, 5e-2, True, True),    # converged by the rate test
+    (2, 8e7, 1e7, True, False),     # corrections growing: divergence
+    (1, 1e-6, np.inf, True, True),  # first correction already far below the tolerance
+    (2, 3e-5, 1e-5, True, True),    # rate 3 of round-off-sized corrections: converged, not diverged
+])
+def test_patient_verychord_terminates_only_on_convergence_or_divergence(step, size, prev, done, ok):
+    import optimistix as optx
+    from types import SimpleNamespace
+    finder = dbk.PatientVeryChord(rtol=1e-8, atol=1e-10, kappa=0.1)
+    state = SimpleNamespace(step=np.array(step), diffsize=np.array(size), diffsize_prev=np.array(prev),
+                            result=optx.RESULTS.successful)
+    terminate, result = finder.terminate(None, None, None, {}, state, frozenset())
+    assert bool(terminate) is done
+    assert bool(result == optx.RESULTS.successful) is ok
