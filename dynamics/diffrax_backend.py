@@ -266,12 +266,12 @@ def _args(k, t0, t1, z0, p, enabled, ts, dt0):
 def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]:
     """The compiled segment solve of a model (all its modes; AOT-compiled once per model structure and
     options); True if it was compiled by this call."""
-    jmod = jax_model(model)
     key = (id(model), o)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
-        return hit, jmod, False
+        return hit, jax_model(model), False
     wall, cpu = _time.perf_counter(), _time.process_time()
+    jmod = jax_model(model)          # sympy -> jax lambdification (once per model), counted with the compilation
     example = _args(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                     np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3)
     fn = jax.jit(_make_solve(jmod, o)).lower(*example).compile()
@@ -441,6 +441,9 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
         h = np.asarray(out["h_end"])[:ng]
         i = int(np.argmin(np.where(h <= 0, h, np.inf))) if (h <= 0).any() else int(np.argmin(h))
         guard = mf.guard_names[i]
+        # every guard past zero at the crossing instant, in the allowed direction (the IDA loop's `seg.fired`)
+        fired = [j for j in np.flatnonzero(h <= 0) if j != i and not (
+            mf.guard_directions[j] and np.sign(out["ref"][j]) == mf.guard_directions[j])]
         stuck = stuck + 1 if t_seg - t <= 1e-12 * max(1.0, abs(t)) else 0
         t = t_seg
         if stuck > 50:
@@ -461,6 +464,12 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
             break
         last = (guard, t)
         tr = mech.on_guard(mode, guard, values, t, q, v)
+        for other in fired:
+            # guards that fire at the same instant (a stall and the slip reversal it causes): a stop wins
+            if not tr.stop:
+                alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
+                if alt.stop:
+                    guard, tr = mf.guard_names[other], alt
         row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
                    **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
         stats["events"] += 1

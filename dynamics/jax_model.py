@@ -72,6 +72,7 @@ class JaxMode:
     guard_directions: tuple[int, ...]
     alpha_index: int
     beta_index: int
+    ext_diagonal: bool
     _kkt_parts: Callable
     _post: Callable
 
@@ -117,8 +118,9 @@ class JaxMode:
         nw, ng, ne = self.nw, self.ng, self.ne
         powers = _stack(vals[:nw], (nw,))
         guards = _stack(vals[nw:nw + ng], (ng,))
-        A = _stack(vals[nw + ng:nw + ng + ne * ne], (ne, ne))
-        b = _stack(vals[nw + ng + ne * ne:], (ne,))
+        na = ne if self.ext_diagonal else ne * ne
+        A = _stack(vals[nw + ng:nw + ng + na], (ne,) if self.ext_diagonal else (ne, ne))
+        b = _stack(vals[nw + ng + na:], (ne,))
         return powers, guards, A, b
 
     def evaluate(self, t, z, p):
@@ -126,7 +128,10 @@ class JaxMode:
         q, v, _, x = self.split(z)
         a, lam = self.kkt(t, q, v, x, p)
         powers, guards, A, b = self._post_parts(t, q, v, a, lam, x, p)
-        xp = jnp.linalg.solve(A, -b) if self.ne else jnp.zeros(0)
+        if not self.ne:
+            xp = jnp.zeros(0)
+        else:
+            xp = -b / A if self.ext_diagonal else jnp.linalg.solve(A, -b)
         return jnp.concatenate([v, a, powers, xp]), a, lam, guards
 
     def rates(self, t, z, p):
@@ -170,9 +175,12 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
         if any(e.has(*xp) for e in A):
             raise ValueError(f"mode {mf.name!r}: extension rows are not linear in their rates")
         b = ext_rows.subs({xi: 0 for xi in xp})
-        ext_exprs = list(A) + list(b)
+        diagonal = all(A[i, j] == 0 for i in range(A.rows) for j in range(A.cols) if i != j)
+        # a thermal network's rows are C x' + ...: only the diagonal is stored and divided by (82 states of a
+        # 1-D mesh would otherwise stack 82^2 entries and solve densely at every evaluation)
+        ext_exprs = ([A[i, i] for i in range(A.rows)] if diagonal else list(A)) + list(b)
     else:
-        ext_exprs = []
+        diagonal, ext_exprs = True, []
     for e in kkt_exprs + powers + guards + ext_exprs:
         stray = sp.sympify(e).free_symbols - set([t, *q, *v, *lam, *x, *a_syms, *params])
         if stray:
@@ -180,7 +188,7 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
     names = list(parameter_names)
     n_mu = mf.index["mu"].stop - mf.index["mu"].start
     return JaxMode(
-        name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu,
+        name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu, ext_diagonal=diagonal,
         guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
         alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"),
         _kkt_parts=_lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs),
