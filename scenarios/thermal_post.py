@@ -42,14 +42,15 @@ MODEL_WHY = {
 }
 
 
-def _thermal_why(model: str, method: str, n_states: int) -> str:
+def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
     text = f"thermal.model = '{model}' (scenario): {MODEL_WHY[model]}"
     if model == "flash":
         return text
     if method == "dae":
-        return text + f"; {n_states} thermal states integrated in the same IDA run as the mechanics"
-    return text + ("; prescribed speed needs no DAE: closed-form kinematics + the thermal ODE "
-                   "(LinearThermalSystem.integrate, BDF with the exact Jacobian)")
+        name = {"ida": "IDA"}.get(backend, backend)
+        return text + f"; {n_states} thermal states integrated in the same {name} run as the mechanics"
+    return text + ("; prescribed speed needs no DAE: closed-form kinematics + the thermal ODE (the network "
+                   "integrated exactly in its modes, scenarios/thermal_integrate.py)")
 
 
 @dataclass
@@ -82,8 +83,9 @@ class ThermalPlan:
         setup, mech = self.setup, self.mech
         _, contact_fn, starts_fn = adapter(mech)
         warnings = list(setup.warnings) + list(self.warnings)
-        summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method,
-                                                             setup.system.size + 3 if setup.system else 0),
+        n_states = setup.system.size + 3 if setup.system else 0
+        backend = self.si.get("solver", {}).get("backend", "ida")
+        summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method, n_states, backend),
                    "flash": setup.section["flash"], "distribution": setup.section["distribution"],
                    "averaging": self.averaging, "averaging_why": self.averaging_why}
         extra: dict[str, pd.DataFrame] = {}
@@ -108,7 +110,8 @@ class ThermalPlan:
             df, states, t_on_pin = window
         elif self.averaging == "cycle":
             summary["averaging"] = "resolved"
-            summary["averaging_why"] += "; the run failed before a periodic cycle, so what ran is shown resolved"
+            summary["averaging_why"] += ("; the run failed before a periodic cycle" if failed else
+                                         "; no full crank turn to average") + ", so what ran is shown resolved"
         df = df.copy()
         contact = contact_fn(df, mech)
         self._add_columns(df, contact, states, t_on_pin)
@@ -234,7 +237,8 @@ class ThermalPlan:
         keep = (t >= means.t_start - 1e-12) & (t < means.t_start + means.period - 1e-9)   # as in shift_window
         t_on = t_on_pin[keep]
         info = {"period_s": means.period, "mean_heat_rate_W": means.heat_mean,
-                "mean_heat_share_pin": means.share_mean, "turns_simulated": int(len(bounds)),
+                "mean_heat_share_pin": None if states is None else means.share_mean,
+                "turns_simulated": int(len(bounds)),
                 "window_shift_periods": m, "periodicity_of_mean_heat": means.periodicity}
         if means.periodicity is not None and means.periodicity > PERIODICITY_TOLERANCE:
             warnings.append(f"thermal: the mechanics is not yet periodic after {len(bounds)} crank turns (mean heat "
@@ -335,16 +339,19 @@ def plan(si: dict, mech, drive, method: str) -> ThermalPlan | None:
     elif setup.model == "1d":
         averaging, why = "resolved", "auto: model = '1d' resolves every cycle (the track meshes follow each engagement)"
     elif cycles >= AUTO_CYCLES:
-        averaging, why = "cycle", (
-            f"auto: duration {duration:.6g} s = {cycles:.0f} cycles of {setup.period:.4g} s (>= {AUTO_CYCLES}); the "
-            "bulk time constants are >> one cycle (physics.md §5), so the mechanics runs "
-            f"{turns} turns until periodic and the cycle-mean heat drives the bulk exactly (plus its periodic ripple)")
+        head = f"auto: duration {duration:.6g} s = {cycles:.0f} cycles of {setup.period:.4g} s (>= {AUTO_CYCLES})"
+        if setup.model == "flash":
+            tail = (f"; the flash model has no memory, so the mechanics runs {turns} turns until periodic and the last "
+                    "turn, moved to the end of the run, stands for every cycle")
+        else:
+            tail = ("; the bulk time constants are >> one cycle (physics.md §5), so the mechanics runs "
+                    f"{turns} turns until periodic and the cycle-mean heat drives the bulk exactly (plus its "
+                    "periodic ripple)")
+        averaging, why = "cycle", head + tail
     else:
         averaging, why = "resolved", f"auto: duration is {cycles:.3g} cycles (< {AUTO_CYCLES}), every cycle is resolved"
     if averaging == "cycle" and window >= duration:
         averaging, why = "resolved", why + f"; but the duration is within the {turns}-turn mechanics window, so resolved"
-    if averaging == "cycle" and setup.model != "flash" and setup.model != "lumped":
-        averaging = "resolved"
     speed = float(drive.speed) if drive.is_prescribed else setup.nominal_speed
     return ThermalPlan(setup=setup, si=si, mech=mech, method=method, speed=speed, averaging=averaging,
                        averaging_why=why, mechanics_duration=window if averaging == "cycle" else duration)
