@@ -27,9 +27,10 @@ import numpy as np
 
 from mechanisms.base import Mechanism
 
-from .consistent import consistent_state, project_positions, project_velocities
+from .consistent import consistent_state
 from .drives import Drive
 from .hybrid import Piece, Trajectory, parameter_tuple
+from .transitions import apply_transition, chattering
 from .jax_model import JaxModel, jax_model  # also enables float64
 from .model import ModeFunctions, StateExtension, derive
 from .settings import SolverSettings
@@ -456,61 +457,20 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
             y, yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
             z = np.asarray(out["z_end"])
             continue
-        if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
-            # as in the IDA loop: the transition did not move the state off its own guard
-            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' fires again immediately after its own "
-                           "transition (chattering)", where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="the mechanism's guard for this transition should be directional")
+        failure = chattering(model, mode, guard, t, q, last)
+        if failure:
             break
         last = (guard, t)
-        tr = mech.on_guard(mode, guard, values, t, q, v)
-        for other in fired:
-            # guards that fire at the same instant (a stall and the slip reversal it causes): a stop wins
-            if not tr.stop:
-                alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
-                if alt.stop:
-                    guard, tr = mf.guard_names[other], alt
-        row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
-                   **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
         stats["events"] += 1
-        if tr.message:
-            warnings.append(f"t = {t:.6g} s: {tr.message}")
-        if tr.stop:
-            M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
-            ke = 0.5 * float(v @ M @ v)
-            row.update(kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop)
-            events.append(row)
-            failure = dict(time=t, mode=mode, reason=tr.stop,
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="raise the drive torque or lower the load", kind="physics")
+        res = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, [i, *fired])
+        events += res.rows
+        warnings += res.warnings
+        if res.failure:
+            failure = res.failure
             break
-        values.update(tr.updates)
-        mode = tr.mode
+        mode, values, p, y, yp = res.mode, res.values, res.p, res.y, res.yp
         mf = model.modes[mode]
-        p = parameter_tuple(model, values)
-        try:
-            # the IDA loop's re-initialisation, impact rows included (dynamics/hybrid.py)
-            restitution, rebound = tr.restitution, None
-            if restitution:
-                q = project_positions(mf, t, q, p)
-                v, rebound = project_velocities(mf, t, q, v, p, restitution)
-                restitution = None
-            y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution)
-            if rebound is not None:
-                events.append(dict(row, kinetic_energy_before_J=rebound.energy_before,
-                                   kinetic_energy_after_J=rebound.energy_after, message=tr.message or ""))
-                row = dict(row, kind="rebound absorbed", message=(
-                    f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
-                    f"'{mode}': removed by a plastic projection onto its constraints"))
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            failure = dict(time=t, mode=mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="the new mode may be singular here")
-            events.append(row)
-            break
-        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
-        row.setdefault("message", tr.message or "")
-        events.append(row)
+        ix = mf.index
         z = _z(mf, y)
         dt0 *= 0.1
     stats["solve_time_s"] = _time.perf_counter() - solve0 - stats["compile_time_s"]

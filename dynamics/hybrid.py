@@ -13,10 +13,11 @@ import numpy as np
 
 from mechanisms.base import Mechanism
 
-from .consistent import consistent_state, project_positions, project_velocities
+from .consistent import consistent_state
 from .drives import Drive
 from .ida import integrate_segment
 from .model import DerivedModel, StateExtension, derive
+from .transitions import apply_transition, chattering
 from .settings import SolverSettings
 
 
@@ -125,65 +126,21 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         # a guard fired
         t = seg.t_end
         ix = mf.index
-        q, v = seg.y_end[ix["q"]], seg.y_end[ix["v"]]
+        q = seg.y_end[ix["q"]]
         guard = mf.guard_names[seg.guard]
-        if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
-            # the same guard again at the same instant: the transition did not move the state off it
-            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' fires again immediately after its own "
-                           "transition (chattering)", where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="the mechanism's guard for this transition should be directional")
+        failure = chattering(model, mode, guard, t, q, last)
+        if failure:
             break
         last = (guard, t)
-        tr = mech.on_guard(mode, guard, values, t, q, v)
-        for other in seg.fired[1:]:
-            # guards that fire at the same instant (a stall and the slip reversal it causes): a stop wins
-            if not tr.stop:
-                alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
-                if alt.stop:
-                    guard, tr = mf.guard_names[other], alt
-        row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
-                   **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
         stats["events"] += 1
-        if tr.message:
-            warnings.append(f"t = {t:.6g} s: {tr.message}")
-        if tr.stop:
-            M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
-            ke = 0.5 * float(v @ M @ v)
-            row.update(kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop)
-            events.append(row)
-            failure = dict(time=t, mode=mode, reason=tr.stop,
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="raise the drive torque or lower the load", kind="physics")
+        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, [seg.guard, *seg.fired[1:]])
+        events += out.rows
+        warnings += out.warnings
+        if out.failure:
+            failure = out.failure
             break
-        values.update(tr.updates)
-        mode = tr.mode
+        mode, values, p, y, yp = out.mode, out.values, out.p, out.y, out.yp
         mf = model.modes[mode]
-        p = parameter_tuple(model, values)
-        try:
-            restitution, rebound = tr.restitution, None
-            if restitution:
-                # Newton's law with e > 0 leaves G v = -e G v-, which the new mode's constraints forbid: its own
-                # row, then the plastic projection of consistent_state removes the rebound (a second row)
-                q = project_positions(mf, t, q, p)
-                v, rebound = project_velocities(mf, t, q, v, p, restitution)
-                restitution = None
-            y, yp, impact = consistent_state(mf, t, q, v, seg.y_end[ix["work"]], seg.y_end[ix["ext"]], p,
-                                             restitution)
-            if rebound is not None:
-                events.append(dict(row, kinetic_energy_before_J=rebound.energy_before,
-                                   kinetic_energy_after_J=rebound.energy_after, message=tr.message or ""))
-                row = dict(row, kind="rebound absorbed", message=(
-                    f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
-                    f"'{mode}': removed by a plastic projection onto its constraints"))
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            failure = dict(time=t, mode=mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="the new mode may be singular here")
-            events.append(row)
-            break
-        row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
-        row.setdefault("message", tr.message or "")
-        events.append(row)
     stats["solve_time_s"] = _time.perf_counter() - solve0
     return Trajectory(model, pieces, events, stats, failure, warnings)
 

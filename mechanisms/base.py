@@ -131,6 +131,8 @@ class Transition:
     stop: str | None = None
     kind: str = "mode change"
     message: str | None = None
+    #: with `stop`: what the user can do about it (shown after the reason)
+    hint: str | None = None
 
 
 @dataclass(frozen=True)

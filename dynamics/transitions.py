@@ -1,0 +1,105 @@
+"""What happens when a guard fires — shared by every backend's hybrid loop (IDA, diffrax).
+
+Given the guard(s) that fired at time t, ask the mechanism for its transition, write the events-table rows
+(kinetic energy before and after, impacts and absorbed rebounds as their own rows), and either stop (a
+physics stop or a failed re-initialisation, reported as a failure value) or re-initialise consistently in
+the next mode.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mechanisms.base import Mechanism
+
+from .consistent import consistent_state, project_positions, project_velocities
+from .model import DerivedModel
+
+DEFAULT_STOP_HINT = "raise the drive torque or lower the load"
+
+
+@dataclass
+class Outcome:
+    """The result of one transition: new mode and consistent state, or a failure; rows for the events table."""
+
+    mode: str
+    values: dict
+    p: tuple
+    y: np.ndarray | None = None
+    yp: np.ndarray | None = None
+    failure: dict | None = None
+    rows: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def _where(model: DerivedModel, q) -> dict:
+    return {c: float(val) for c, val in zip(model.coordinates, q)}
+
+
+def chattering(model: DerivedModel, mode: str, guard: str, t: float, q, last) -> dict | None:
+    """A failure if `guard` fires again at the instant of its own transition (the state did not leave it)."""
+    if last is not None and guard == last[0] and t - last[1] <= 1e-9 * max(1.0, abs(t)):
+        return dict(time=t, mode=mode, reason=f"guard '{guard}' fires again immediately after its own "
+                    "transition (chattering)", where=_where(model, q),
+                    hint="the mechanism's guard for this transition should be directional")
+    return None
+
+
+def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode: str, values: dict, t: float,
+                     y_end: np.ndarray, fired: list[int]) -> Outcome:
+    """Handle guards `fired` (indices into the mode's guards, the first one the primary) at time t."""
+    mf = model.modes[mode]
+    ix = mf.index
+    q, v = y_end[ix["q"]], y_end[ix["v"]]
+    p = parameter_tuple(model, values)
+    guard = mf.guard_names[fired[0]]
+    tr = mech.on_guard(mode, guard, values, t, q, v)
+    for other in fired[1:]:
+        # guards that fire at the same instant (a stall and the slip reversal it causes): a stop wins
+        if not tr.stop:
+            alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
+            if alt.stop:
+                guard, tr = mf.guard_names[other], alt
+    row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
+               **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
+    out = Outcome(mode, values, p)
+    if tr.message:
+        out.warnings.append(f"t = {t:.6g} s: {tr.message}")
+    if tr.stop:
+        M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
+        ke = 0.5 * float(v @ M @ v)
+        out.rows.append(dict(row, kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop))
+        out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q),
+                           hint=tr.hint or DEFAULT_STOP_HINT, kind="physics")
+        return out
+    values = {**values, **tr.updates}
+    new_mode = tr.mode
+    mf = model.modes[new_mode]
+    p = parameter_tuple(model, values)
+    out.mode, out.values, out.p = new_mode, values, p
+    try:
+        restitution, rebound = tr.restitution, None
+        if restitution:
+            # Newton's law with e > 0 leaves G v = -e G v-, which the new mode's constraints forbid: its own
+            # row, then the plastic projection of consistent_state removes the rebound (a second row)
+            q = project_positions(mf, t, q, p)
+            v, rebound = project_velocities(mf, t, q, v, p, restitution)
+            restitution = None
+        y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        out.failure = dict(time=t, mode=new_mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
+                           where=_where(model, q), hint="the new mode may be singular here")
+        out.rows.append(row)
+        return out
+    if rebound is not None:
+        out.rows.append(dict(row, kinetic_energy_before_J=rebound.energy_before,
+                             kinetic_energy_after_J=rebound.energy_after, message=tr.message or ""))
+        row = dict(row, kind="rebound absorbed", message=(
+            f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
+            f"'{new_mode}': removed by a plastic projection onto its constraints"))
+    row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
+    row.setdefault("message", tr.message or "")
+    out.rows.append(row)
+    out.y, out.yp = y, yp
+    return out
