@@ -363,14 +363,16 @@ class ChainDwell(Mechanism):
             return Transition(mode, stop=(
                 f"chain stalled and would reverse at drive angle {deg:.5f} deg{where} ({mode}, segment "
                 f"{self.path.pieces[int(values['seg'])].name}); the drive cannot carry the mechanism past this "
-                "point"), kind="reversal")
+                "point"), kind="reversal",
+                hint="raise the sprocket torque or lower the crank load; with a detuned design (detuning < 0) "
+                     "the fold cannot be passed at all")
         if guard == "dead_centre":
             folded = math.cos(q[2] - q[1]) < 0
             return Transition(mode, stop=(
                 f"dyad {'folded' if folded else 'stretched'} (dead centre) at drive angle {deg:.5f} deg on "
                 f"{self.path.pieces[int(values['seg'])].name}: a fold, where the chain must stall and reverse "
                 f"(chain speed {v[0] * self.path.r1:.3g} m/s); the run is not continued through it"),
-                kind="dead centre")
+                kind="dead centre", hint="set mechanism.detuning >= 0 or apex = 'stop' / 'smooth' for an exact design")
         if guard == "apex":
             far = values["s1"] + self.path.length
             if mode == "swing" and self.apex == "stop":

@@ -499,7 +499,9 @@ class RollingPairFourBar(Mechanism):
             return Transition(mode, kind="dead point", stop=(
                 f"the prescribed {link} speed cannot be kept past the dead point ahead: {where}, "
                 f"|transmission| fell to {values['dead_margin']:g} at {at}; the drive torque grows without bound "
-                f"there (drive it with a torque to let the {link} reverse)"))
+                f"there (drive it with a torque to let the {link} reverse)"),
+                hint=f"use drive.type = 'torque' or 'motor' so the {link} can reverse at the dead point, or "
+                     "keep the prescribed motion inside the closure interval")
         new = -values["dead_sign"]
         speed = float(v[self.drive_coordinate])
         link = "rolling link" if self.driven_link == "rolling" else "crank"
