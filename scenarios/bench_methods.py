@@ -140,11 +140,12 @@ class IdaMethod(Method):
 @dataclass
 class DiffraxMethod(Method):
     solver: str = "Tsit5"
+    max_steps: int = 200000
 
     def settings(self, problem, rtol, atol):
         a, b = problem.baumgarte
         return SolverSettings(backend="diffrax", formulation="index1", rtol=rtol, atol=atol, baumgarte_alpha=a,
-                              baumgarte_beta=b, method="dae", diffrax_solver=self.solver, max_steps=200000)
+                              baumgarte_beta=b, method="dae", diffrax_solver=self.solver, max_steps=self.max_steps)
 
     def _simulate(self, problem, rtol, atol):
         from dynamics.diffrax_backend import simulate

@@ -110,6 +110,21 @@ def test_baumgarte_gains_choke_the_explicit_solver(tmp_path):
     assert "Kvaerno5" in r.stderr and "index2" in r.stderr
 
 
+@pytest.mark.skipif(importlib.util.find_spec("diffrax") is None, reason="diffrax not installed")
+def test_explicit_solver_on_a_refined_thermal_mesh_exits_3_and_ida_runs(tmp_path):
+    """First cell 2.5 um: the wall's fastest time constant (~dz^2/chi) is about 1e-6 s; Tsit5 runs out of steps
+    and the message names the wall temperatures; IDA (BDF) runs the same scenario to the end."""
+    case = CASE["explicit solver on a refined 1-D thermal mesh"]
+    r = invoke_case(case, tmp_path / "o")
+    assert r.exit_code == 3, r.output
+    assert "stiff for the explicit Tsit5" in r.stderr and "temp_wall" in r.stderr and "'ida'" in r.stderr
+    args = ["run", case.scenario, "--out", str(tmp_path / "ida"), "--quiet"]
+    for o in case.overrides:
+        args += ["--set", o if not o.startswith("solver.backend") else "solver.backend=ida"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+
+
 def test_refined_thermal_mesh_stops_the_explicit_solver():
     """The fastest time constant of the 1-D mesh falls like dz^2 (here 2.5e-4 s -> 2.3e-7 s): RK45 exceeds its
     step budget and says so; BDF's cost stays flat, and on the coarse mesh both agree."""
