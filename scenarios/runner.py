@@ -184,5 +184,8 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
     }
     if thermal_summary is not None:
         summary["thermal"] = thermal_summary
+    elif not mech.has_sliding_contact:
+        summary["thermal"] = {"model": "none", "why": f"{mech.name} has no sliding contact in the model (pure "
+                              "rolling or pin joints): no frictional heat, so no thermal model was built"}
     return Result(df, events, summary, si, failure,
                   extra_tables={**mech.extra_outputs(df, events), **thermal_tables})

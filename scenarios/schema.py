@@ -80,7 +80,8 @@ def check_field(where: str, spec: Field, value):
     else:  # pragma: no cover - a schema bug, not a user error
         raise AssertionError(spec.kind)
     if spec.choices and out not in spec.choices:
-        raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {out!r}")
+        why = f" ({spec.help})" if len(spec.choices) == 1 and spec.help else ""
+        raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {out!r}{why}")
     if isinstance(out, (int, float)) and not isinstance(out, bool):
         if spec.positive and not out > 0:
             raise ScenarioError(where, f"must be positive, got {value!r}")
