@@ -50,7 +50,7 @@ class BenchConfig:
 
     @classmethod
     def small(cls, names=()) -> "BenchConfig":
-        return cls(methods=select(names, SMALL_METHODS))
+        return cls(methods=select(names, tuple(n for n in SMALL_METHODS if METHODS[n].available())))
 
     @classmethod
     def full(cls, names=()) -> "BenchConfig":
