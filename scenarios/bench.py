@@ -24,6 +24,7 @@ import pandas as pd
 
 from .bench_methods import METHODS, NAN, Problem, quiet_sundials
 from .units import ScenarioError
+from .atomic import atomic_folder
 
 FULL_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 SMALL_RTOLS = (1e-4, 1e-7)
@@ -320,34 +321,17 @@ def residual_call_cost():
 def write(result: BenchResult, out_dir, force: bool = False):
     """work_precision.csv, output_cost.csv, summary.json and work_precision.png into out_dir, atomically."""
     import json
-    import shutil
-    import tempfile
     from pathlib import Path
 
     from .bench_plots import work_precision_figure
-    from .outputs import _json_default
+    from .atomic import json_default as _json_default
 
     out_dir = Path(out_dir)
-    if out_dir.exists() and not force:
-        raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with atomic_folder(out_dir, force) as tmp:
         result.rows.to_csv(tmp / "work_precision.csv", index=False)
         result.output_cost.to_csv(tmp / "output_cost.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=_json_default))
         work_precision_figure(result.rows, result.summary, tmp / "work_precision.png")
-        if out_dir.exists():
-            trash = out_dir.with_name(f".{out_dir.name}.old")
-            shutil.rmtree(trash, ignore_errors=True)
-            out_dir.rename(trash)
-            tmp.rename(out_dir)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
 
 

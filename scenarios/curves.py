@@ -6,8 +6,6 @@ Written like a run: into a temporary sibling folder, then one rename; an existin
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 from mechanisms import rolling_sets
@@ -16,6 +14,7 @@ from mechanisms.rolling_model import RollingPairFourBar
 from mechanisms.rolling_pair import RollingFourBar
 
 from .units import ScenarioError
+from .atomic import atomic_folder
 
 #: atlas attribute -> CSV file name
 TABLES = {"component_table": "components", "closure": "closure", "nonclosure": "nonclosure", "curve": "curve",
@@ -68,25 +67,11 @@ def write_curves(name: str, out_dir: Path | None = None, force: bool = False,
         raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
     atlas = coupler_atlas(kin, samples_per_turn=samples_per_turn)
     summary = atlas_summary(atlas, label)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with atomic_folder(out_dir, force) as tmp:
         for attr, fname in TABLES.items():
             getattr(atlas, attr).to_csv(tmp / f"{fname}.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
         from mechanisms.rolling_plots import plot_coupler_atlas
         fig = plot_coupler_atlas(atlas, title=f"rolling-pair 4-bar: {label}")
         fig.savefig(tmp / "atlas.png", dpi=110)
-        if out_dir.exists():
-            trash = out_dir.with_name(f".{out_dir.name}.old")
-            if trash.exists():
-                shutil.rmtree(trash)
-            out_dir.rename(trash)
-            tmp.rename(out_dir)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir, summary

@@ -5,24 +5,13 @@ A reader never sees a half-written file; an existing folder is replaced only wit
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
-import numpy as np
 import tomli_w
 
 from dynamics.result import Result
 
-from .units import ScenarioError
-
-
-def _json_default(obj):
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
+from .atomic import atomic_folder, json_default
 
 
 def _toml_clean(d):
@@ -43,32 +32,15 @@ def resolved_scenario_toml(si: dict) -> str:
 
 def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
     """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and PNG plots into out_dir."""
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not force:
-        raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with atomic_folder(out_dir, force) as tmp:
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
         result.timeseries.to_csv(tmp / "timeseries.csv", index=False)
         result.events.to_csv(tmp / "events.csv", index=False)
         for name, table in result.extra_tables.items():
             table.to_csv(tmp / f"{name}.csv", index=False)
-        (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=_json_default))
+        (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
         (tmp / "scenario.toml").write_text(resolved_scenario_toml(result.scenario))
         if plots and len(result.timeseries):
             from .plots import write_plots
             write_plots(result, tmp, mechanism)
-        if out_dir.exists():
-            trash = out_dir.with_name(f".{out_dir.name}.old")
-            if trash.exists():
-                shutil.rmtree(trash)
-            out_dir.rename(trash)
-            tmp.rename(out_dir)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir

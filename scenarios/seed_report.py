@@ -21,8 +21,6 @@ one PNG per quantity (scenarios/seed_report_plots.py), report.md (scenarios/seed
 from __future__ import annotations
 
 import math
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -37,6 +35,7 @@ from thermal import (Material, effective_modulus, flash_temperature, frictional_
                      seed_reduced_modulus, seed_sliding_speed)
 
 from .units import ScenarioError
+from .atomic import atomic_folder
 
 KELVIN = 273.15
 #: the six built-in seed scenarios: (load case, mu code)
@@ -432,11 +431,7 @@ def write(report: SeedReport, out_dir: Path, force: bool = False) -> Path:
     from .seed_report_plots import write_figures
     from .seed_report_text import markdown
     out_dir = Path(out_dir)
-    if out_dir.exists() and not force:
-        raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with atomic_folder(out_dir, force) as tmp:
         for name, table in report.tables.items():
             table.to_csv(tmp / f"case_{name}.csv", index=False, float_format="%.12g")
         report.comparison.to_csv(tmp / "comparison.csv", index=False, float_format="%.12g")
@@ -444,17 +439,6 @@ def write(report: SeedReport, out_dir: Path, force: bool = False) -> Path:
         report.peaks.to_csv(tmp / "peak_location.csv", index=False, float_format="%.12g")
         figures = write_figures(report, tmp)
         (tmp / "report.md").write_text(markdown(report, figures))
-        if out_dir.exists():
-            trash = out_dir.with_name(f".{out_dir.name}.old")
-            shutil.rmtree(trash, ignore_errors=True)
-            out_dir.rename(trash)
-            tmp.rename(out_dir)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
 
 

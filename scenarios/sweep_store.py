@@ -18,17 +18,11 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import tomli_w
 
+from .atomic import json_default as _json_default
 from .units import ScenarioError
-
-
-def _json_default(obj):
-    if isinstance(obj, (np.floating, np.integer, np.bool_)):
-        return obj.item()
-    return str(obj)
 
 
 def atomic_write(path: Path, write) -> None:
