@@ -29,10 +29,10 @@ from mechanisms.base import Mechanism
 
 from .consistent import consistent_state
 from .drives import Drive
-from .hybrid import Piece, Trajectory, parameter_tuple
+from .hybrid import Piece, Trajectory, parameter_tuple, prepare
 from .transitions import apply_transition, chattering
 from .jax_model import JaxModel, jax_model  # also enables float64
-from .model import ModeFunctions, StateExtension, derive
+from .model import ModeFunctions, StateExtension
 from .settings import SolverSettings
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -325,29 +325,10 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
     """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
     o = options
     wall0 = _time.perf_counter()
-    model = derive(mech, settings.formulation, drive.is_prescribed, ext)
-    derive_time = _time.perf_counter() - wall0
-    values = dict(mech.parameter_values())
-    values.update(drive.parameter_values(angle0, t0))
-    values.update(baumgarte_alpha=settings.baumgarte_alpha, baumgarte_beta=settings.baumgarte_beta)
-    if ext:
-        values.update(ext.parameter_values())
-    init = mech.initial_state(angle0, speed0)
-    values.update(init.updates)
-    mode = init.mode
-    n_out = int(np.floor((t_end - t0) / dt_out + 1e-9))
-    t_out = t0 + dt_out * np.arange(1, n_out + 1)
-    if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
-        t_out = np.append(t_out, t_end)
-
-    mf = model.modes[mode]
-    p = parameter_tuple(model, values)
-    work0 = np.zeros(len(model.work_names))
-    x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
-    try:
-        y, yp, _ = consistent_state(mf, t0, init.q, init.v, work0, x0, p)
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise ValueError(f"initial state: {exc}") from None
+    start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+    model, values, mode, t_out, mf, p, y, yp = (start.model, start.values, start.mode, start.t_out, start.mf,
+                                                 start.p, start.y, start.yp)
+    derive_time = start.derive_time
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy())]
     events: list[dict] = []
     per_step = _evaluations_per_step(o)

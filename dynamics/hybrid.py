@@ -51,10 +51,24 @@ def parameter_tuple(model: DerivedModel, values: dict[str, float]) -> tuple:
     return tuple(float(values[n]) for n in model.parameter_names)
 
 
-def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
-             angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
-             progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
-    """Integrate the hybrid DAE from t0 to t_end with outputs every dt_out."""
+@dataclass
+class Start:
+    """A run's derived model, parameter values, output times and consistent initial state."""
+
+    model: DerivedModel
+    derive_time: float
+    values: dict
+    mode: str
+    t_out: np.ndarray
+    mf: object
+    p: tuple
+    y: np.ndarray
+    yp: np.ndarray
+
+
+def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float, angle0: float,
+            speed0: float, ext: StateExtension | None = None, ext_initial=None, t0: float = 0.0) -> Start:
+    """Everything a backend needs before its first segment (shared by the IDA and diffrax loops)."""
     wall0 = _time.perf_counter()
     model = derive(mech, settings.formulation, drive.is_prescribed, ext)
     derive_time = _time.perf_counter() - wall0
@@ -65,13 +79,11 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         values.update(ext.parameter_values())
     init = mech.initial_state(angle0, speed0)
     values.update(init.updates)
-    mode = init.mode
     n_out = int(np.floor((t_end - t0) / dt_out + 1e-9))
     t_out = t0 + dt_out * np.arange(1, n_out + 1)
     if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
         t_out = np.append(t_out, t_end)
-
-    mf = model.modes[mode]
+    mf = model.modes[init.mode]
     p = parameter_tuple(model, values)
     work0 = np.zeros(len(model.work_names))
     x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
@@ -79,6 +91,17 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         y, yp, _ = consistent_state(mf, t0, init.q, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
+    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp)
+
+
+def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
+             angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
+             progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
+    """Integrate the hybrid DAE from t0 to t_end with outputs every dt_out."""
+    start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+    model, values, mode, t_out, mf, p, y, yp = (start.model, start.values, start.mode, start.t_out, start.mf,
+                                                 start.p, start.y, start.yp)
+    derive_time = start.derive_time
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy())]
     events: list[dict] = []
     stats = {"segments": 0, "residual_evaluations": 0, "jacobian_evaluations": 0, "events": 0,
