@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Protocol, Sequence
 
-import numpy as np
 import sympy as sp
 
 from mechanisms.base import Mechanism, Mode
@@ -66,6 +65,8 @@ class ModeFunctions:
     readouts: dict[str, object] = field(default_factory=dict)   # vectorised (t, q, v, a, lam, x, p)
     readout_names: list[str] = field(default_factory=list)
     symbolic: dict = field(default_factory=dict)   # the sympy pieces, for other backends (diffrax)
+    #: the KKT pieces as flat lists of entries, vectorised over output rows (dynamics/tables.py)
+    kkt_flat: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -183,6 +184,13 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
         force_lam=lamb([t, q, v, x, params], force_lam),
         gamma=lamb([t, q, v, params], cd.gamma if m else zeros_m),
         readouts={"_all": ro_fn}, readout_names=ro_names,
+        kkt_flat=dict(
+            mass=lamb([q, params], list(M)),
+            force0=lamb([t, q, v, x, params], list(fmat.subs(lam_zero))),
+            G=lamb([t, q, params], list(cd.G)) if m else None,
+            force_lam=lamb([t, q, v, x, params], list(force_lam)) if m else None,
+            gamma=lamb([t, q, v, params], list(cd.gamma)) if m else None,
+        ),
         symbolic=dict(t=t, q=q, v=v, lam=lam, x=x, xp=xp, params=params, mass=M, force=force,
                       constraints=cd, powers=powers, work_names=work_names, guards=guards,
                       guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
@@ -239,7 +247,6 @@ def _derive_cached(key, mech_ref, formulation, prescribed, ext_ref):
 
     modes = {name: _build_mode(mech, mode, formulation, prescribed, ext, params, P)
              for name, mode in mech.modes().items()}
-    first = next(iter(modes.values()))
     work_names = tuple(n for n in _work_names(mech))
     return DerivedModel(coordinates=mech.coordinates, parameter_names=pnames, work_names=work_names,
                         extension_names=tuple(ext.names) if ext else (), modes=modes,

@@ -32,6 +32,33 @@ def _kinetic_energy(mass, q: np.ndarray, v: np.ndarray, p: tuple) -> np.ndarray:
     return 0.5 * np.einsum("ri,rij,rj->r", v, Mb, v)
 
 
+def _rows(entries, n: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Flat lambdified entries (arrays over the rows, or scalars) as an (n, *shape) array."""
+    return np.stack([np.broadcast_to(np.asarray(e, dtype=float), (n,)) for e in entries], axis=1).reshape(n, *shape)
+
+
+def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple):
+    """Accelerations and multipliers from the KKT system at every output row (exact for the row's q, v).
+
+    The index-2/3 forms keep multipliers out of IDA's error test (SolverSettings.multiplier_atol), so the
+    multiplier states are not accurate enough to report forces from; the KKT solution at the integrated
+    (q, v) is, in every formulation and backend.
+    """
+    f = mf.kkt_flat
+    n, nq, m = len(t), q.shape[1], mf.m
+    M = _rows(f["mass"](q.T, p), n, (nq, nq))
+    Q0 = _rows(f["force0"](t, q.T, v.T, x.T, p), n, (nq,))
+    if m == 0:
+        return np.linalg.solve(M, Q0[..., None])[..., 0], np.zeros((n, 0))
+    G = _rows(f["G"](t, q.T, p), n, (m, nq))
+    Ql = _rows(f["force_lam"](t, q.T, v.T, x.T, p), n, (nq, m))
+    gamma = _rows(f["gamma"](t, q.T, v.T, p), n, (m,))
+    K = np.zeros((n, nq + m, nq + m))
+    K[:, :nq, :nq], K[:, :nq, nq:], K[:, nq:, :nq] = M, np.swapaxes(G, 1, 2) - Ql, G
+    sol = np.linalg.solve(K, np.concatenate([Q0, -gamma], axis=1)[..., None])[..., 0]
+    return sol[:, :nq], sol[:, nq:]
+
+
 def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:
     """One row per output instant, read-outs evaluated with the mode and parameters of that instant."""
     model = traj.model
@@ -39,14 +66,14 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     for piece in traj.pieces:
         mf = model.modes[piece.mode]
         ix = mf.index
-        t, y, yp = piece.t, piece.y, piece.yp
-        q, v, a = y[:, ix["q"]], y[:, ix["v"]], yp[:, ix["v"]]
-        lam, x = y[:, ix["lam"]], y[:, ix["ext"]]
+        t, y = piece.t, piece.y
+        q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
+        a, lam = kkt_rows(mf, t, q, v, x, piece.params)
         cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
         for i, name in enumerate(model.coordinates):
             pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
             cols[pos], cols[spd], cols[acc] = q[:, i], v[:, i], a[:, i]
-        values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.p if hasattr(piece, "p") else piece.params)
+        values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.params)
         for name, val in zip(mf.readout_names, values):
             cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
         cols["kinetic_energy_J"] = _kinetic_energy(mf.mass, q, v, piece.params)
