@@ -80,7 +80,7 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
     init = mech.initial_state(angle0, speed0)
     values.update(init.updates)
     n_out = int(np.floor((t_end - t0) / dt_out + 1e-9))
-    t_out = t0 + dt_out * np.arange(1, n_out + 1)
+    t_out = np.minimum(t0 + dt_out * np.arange(1, n_out + 1), t_end)   # round-off must not pass t_end
     if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
         t_out = np.append(t_out, t_end)
     mf = model.modes[init.mode]

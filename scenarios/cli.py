@@ -76,6 +76,10 @@ def run(
             _fail(str(exc))
         except ValueError as exc:
             _fail(f"scenario: {exc}")
+        except Exception as exc:  # a backend fault we did not foresee: one line, exit 3, never a traceback
+            _fail(f"the integration stopped on an internal error ({type(exc).__name__}: "
+                  f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'}); "
+                  "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
     try:
         write_result(result, target, force=force, plots=sc.si["output"]["plots"], mechanism=build_mechanism(sc.si))
     except ScenarioError as exc:

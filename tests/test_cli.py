@@ -145,3 +145,16 @@ def test_console_script_user_error_has_no_traceback(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith("error: scenario:") and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_unforeseen_backend_error_is_one_line_exit_3(tmp_path, monkeypatch):
+    import scenarios.runner as runner_module
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("saveat.ts must be increasing\nmore lines of jax noise")
+
+    monkeypatch.setattr(runner_module, "simulate", broken)
+    r = invoke("run", "geneva-motor", "--out", tmp_path / "o", "--quiet")
+    assert r.exit_code == 3
+    line = one_line_error(r)
+    assert "internal error" in line and "RuntimeError" in line and "jax noise" not in line

@@ -173,3 +173,14 @@ def test_exact_jacobian_is_the_one_ida_calls(seed_geometry, monkeypatch):
     a = timeseries(exact, mech.angle_coordinates)["crank_angle_rad"].to_numpy()
     b = timeseries(fd, mech.angle_coordinates)["crank_angle_rad"].to_numpy()
     assert np.max(np.abs(a - b)) < 1e-6
+
+
+@pytest.mark.parametrize("t_end", [3.53, 0.353, 1.0, 2.9999999])
+def test_output_times_never_pass_the_end(seed_geometry, t_end):
+    """Output instants are increasing and end exactly at t_end (round-off in t0 + k dt must not pass it:
+    diffrax rejects a non-monotone SaveAt)."""
+    from dynamics.hybrid import prepare
+    mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0)
+    start = prepare(mech, Drive("torque", torque=5.0), SolverSettings(), t_end, 1e-3, -np.pi, W1)
+    assert np.all(np.diff(start.t_out) > 0)
+    assert start.t_out[-1] == t_end
