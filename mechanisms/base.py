@@ -185,6 +185,15 @@ class Mechanism(ABC):
         (a list of events-table rows: t_s, from_mode, to_mode, kind, kinetic_energy_before_J/after_J, ...)."""
         return None
 
+    def reference_solution(self, drive, t_eval: np.ndarray, angle0: float, speed0: float,
+                           rtol: float = 1e-12) -> np.ndarray | None:
+        """The drive coordinate's angle (rad) at `t_eval` (t_eval[0] is the start, angle0/speed0 the state there)
+        from an integration INDEPENDENT of `dynamics/` (e.g. a minimal-coordinate equation on scipy), at the
+        relative and absolute tolerance `rtol`; or None when the mechanism has none for this drive
+        (`dynamics.drives.Drive`). `mechsim bench` measures its methods against it; with None it falls back
+        to a self-reference (mechsim's own IDA at a tight tolerance), labelled as not independent."""
+        return None
+
     @abstractmethod
     def mass_matrix(self) -> sp.Matrix:
         """M(q, p), symmetric positive definite."""

@@ -219,6 +219,16 @@ class Geneva(Mechanism):
             return Transition("engaged", {"slide": -values["slide"]}, kind="slip reversal")
         raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
 
+    def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
+        """Crank angle from the reduced-coordinate equation (`geneva_reduced`, physics.md §2) on DOP853;
+        torque and motor drives only."""
+        if drive.is_prescribed:
+            return None
+        from . import geneva_reduced
+        dv = drive.parameter_values(angle0)
+        return geneva_reduced.integrate(self, dv["drive_T0"], dv["drive_slope"], angle0, speed0,
+                                        np.asarray(t_eval, float), rtol=rtol, atol=rtol)[0]
+
     def describe(self) -> dict:
         g = self.geometry
         return {

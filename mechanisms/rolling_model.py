@@ -556,6 +556,16 @@ class RollingPairFourBar(Mechanism):
                              zip(self._model()["powers"], pw)}}
         return cols
 
+    def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
+        """Rolling angle phi from the minimal-coordinate equation (`rolling_reduced`, kinematics.md §3) on
+        DOP853; torque and motor drives on the rolling link only."""
+        if drive.is_prescribed or self.driven_link != "rolling":
+            return None
+        from . import rolling_reduced
+        dv = drive.parameter_values(angle0)
+        return rolling_reduced.integrate(self, dv["drive_T0"], dv["drive_slope"], angle0, speed0,
+                                         np.asarray(t_eval, float), rtol=rtol, atol=rtol)[0]
+
     def describe(self) -> dict:
         k = self.kin
         out = {"profile": k.pair.kind, "driven_link": self.driven_link, "branch": self.branch,

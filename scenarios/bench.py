@@ -1,10 +1,14 @@
 """`mechsim bench`: work-precision of mechsim's integrators against the peers a user would pick instead.
 
-Every method integrates the same scenario (default `geneva-motor`: motor-driven Geneva, 5 s, 1 ms output) over
-a range of requested tolerances (atol = 1e-2 rtol). The error of a run is the largest crank-angle difference
-(rad) at the output times from an independent reference: the reduced-coordinate equation of
-`mechanisms.geneva_reduced` (physics.md §2) integrated with DOP853 at rtol = atol = 1e-12, restarted at every
-engagement boundary and slip reversal; its own uncertainty is estimated against rtol = atol = 1e-13.
+Every method integrates the same scenario (default `geneva-motor`: motor-driven Geneva, 5 s, 1 ms output; any
+scenario with a torque or motor drive, `--scenario`) over a range of requested tolerances (atol = 1e-2 rtol).
+The error of a run is the largest difference of the drive coordinate's angle (rad; the Geneva's crank) at the
+output times from a reference the mechanism supplies (`Mechanism.reference_solution`): an independent
+integration at rtol = atol = 1e-12, for the Geneva the reduced-coordinate equation of `mechanisms.geneva_reduced`
+(physics.md §2) on DOP853, restarted at every engagement boundary and slip reversal; its own uncertainty is
+estimated against rtol = atol = 1e-13. A mechanism without one (None) is measured against mechsim's own IDA
+index-2 at rtol 1e-12, labelled a self-reference (not independent). Methods written for other mechanisms'
+equations (the Geneva's scipy and CasADi peers, `Method.mechanisms`) are skipped with a note.
 The wall time of a run is the best of `repeats` warm runs; the cold work (derivation and code generation,
 compilation, integrator construction) is reported apart as the setup time.
 
@@ -35,7 +39,9 @@ TARGET_ERRORS = (1e-4, 1e-6, 1e-8, 1e-9, 1e-10)
 REFERENCE_RTOL = 1e-12
 COLUMNS = ["method", "family", "kind", "equations", "rtol", "atol", "status", "error_rad", "wall_time_s",
            "cpu_time_s", "setup_time_s", "setup_scope", "steps", "rejected_steps", "residual_evaluations",
-           "jacobian_evaluations", "events", "segments", "output_points", "t_reached_s", "failure"]
+           "jacobian_evaluations", "events", "segments", "output_points", "t_reached_s", "failure",
+           "error_column", "reference"]
+SELF_REFERENCE = "self-reference (IDA index2, rtol 1e-12; not independent)"
 
 
 @dataclass(frozen=True)
@@ -48,15 +54,18 @@ class BenchConfig:
     repeats: int = 1
     atol_factor: float = 1e-2
     output_cost: bool = True
+    overrides: tuple[str, ...] = ()       # --set section.key=value
 
     @classmethod
-    def small(cls, names=()) -> "BenchConfig":
-        return cls(methods=select(names, tuple(n for n in SMALL_METHODS if METHODS[n].available())))
+    def small(cls, names=(), scenario: str = "geneva-motor", overrides=()) -> "BenchConfig":
+        return cls(scenario=scenario, overrides=tuple(overrides),
+                   methods=select(names, tuple(n for n in SMALL_METHODS if METHODS[n].available())))
 
     @classmethod
-    def full(cls, names=()) -> "BenchConfig":
+    def full(cls, names=(), scenario: str = "geneva-motor", overrides=()) -> "BenchConfig":
         every = tuple(n for n, m in METHODS.items() if m.available())
-        return cls(methods=select(names, every), rtols=FULL_RTOLS, duration=None, repeats=3)
+        return cls(scenario=scenario, overrides=tuple(overrides), methods=select(names, every), rtols=FULL_RTOLS,
+                   duration=None, repeats=3)
 
 
 @dataclass
@@ -86,33 +95,59 @@ def select(names, default: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def make_problem(config: BenchConfig) -> Problem:
-    """The scenario as a benchmark problem (a Geneva with a torque or motor drive: the reference needs it)."""
+    """The scenario as a benchmark problem (any mechanism with a torque or motor drive: a prescribed speed
+    leaves nothing to integrate in the drive coordinate)."""
     from .loader import build_mechanism, load
     from .runner import make_drive
 
-    sc = load(config.scenario, [])
+    sc = load(config.scenario, list(config.overrides))
     si = sc.si
-    if si["mechanism"]["type"] != "geneva" or si["drive"]["type"] not in ("torque", "motor"):
-        raise ScenarioError("bench", "the benchmark needs a Geneva scenario with a torque or motor drive "
-                                     f"(its reference is the reduced-coordinate equation); got {config.scenario!r}")
+    if si["drive"]["type"] not in ("torque", "motor"):
+        raise ScenarioError("bench", "the benchmark needs a scenario with a torque or motor drive (a prescribed "
+                                     f"speed fixes the drive coordinate); got {config.scenario!r}")
     s = si["solver"]
-    return Problem(sc.name, build_mechanism(si), make_drive(si), si["initial"]["crank_angle"],
-                   si["initial"]["crank_speed"], config.duration or si["duration"],
+    mech = build_mechanism(si)
+    angle_key, speed_key = mech.initial_keys
+    return Problem(sc.name, mech, make_drive(si), si["initial"][angle_key],
+                   si["initial"][speed_key], config.duration or si["duration"],
                    config.output_step or si["output_step"], (s["baumgarte_alpha"], s["baumgarte_beta"]))
 
 
+def error_column(problem: Problem) -> str:
+    """The timeseries column the error is measured on (the drive coordinate's angle)."""
+    from dynamics.tables import coordinate_columns
+    mech = problem.mech
+    k = mech.drive_coordinate
+    return coordinate_columns(mech.coordinates[k], k in mech.angle_coordinates)[0]
+
+
 def reference(problem: Problem) -> dict:
-    """Crank angle of the reduced-coordinate reference on the output grid, and its own uncertainty."""
-    from mechanisms import geneva_reduced as red
-    dv = problem.drive.parameter_values(problem.angle0)
-    args = (problem.mech, dv["drive_T0"], dv["drive_slope"], problem.angle0, problem.speed0, problem.grid)
+    """The drive coordinate's angle on the output grid from the mechanism's independent reference
+    (`Mechanism.reference_solution`), and its own uncertainty (against 10x tighter); without one, mechsim's
+    IDA index-2 at rtol 1e-12, labelled a self-reference."""
+    mech, grid = problem.mech, problem.grid
+    args = (problem.drive, grid, problem.angle0, problem.speed0)
     wall = time.perf_counter()
-    theta, _ = red.integrate(*args, rtol=REFERENCE_RTOL, atol=REFERENCE_RTOL)
-    elapsed = time.perf_counter() - wall
-    finer, _ = red.integrate(*args, rtol=REFERENCE_RTOL / 10, atol=REFERENCE_RTOL / 10)
-    return {"t": problem.grid, "angle": theta, "rtol": REFERENCE_RTOL, "wall_time_s": elapsed,
-            "uncertainty_rad": float(np.max(np.abs(theta - finer))),
-            "method": "reduced-coordinate ODE (mechanisms.geneva_reduced), scipy DOP853"}
+    angle = mech.reference_solution(*args, rtol=REFERENCE_RTOL)
+    if angle is not None:
+        elapsed = time.perf_counter() - wall
+        finer = mech.reference_solution(*args, rtol=REFERENCE_RTOL / 10)
+        doc = " ".join((type(mech).reference_solution.__doc__ or "").split())
+        return {"t": grid, "angle": np.asarray(angle, float), "rtol": REFERENCE_RTOL, "wall_time_s": elapsed,
+                "uncertainty_rad": float(np.max(np.abs(np.asarray(angle) - np.asarray(finer)))),
+                "method": f"{type(mech).__name__}.reference_solution: {doc}", "independent": True,
+                "label": f"independent ({type(mech).__name__}.reference_solution, rtol {REFERENCE_RTOL:g})"}
+    ida = METHODS["ida-index2"]
+    with quiet_sundials():
+        run = ida.run(None, problem, REFERENCE_RTOL, REFERENCE_RTOL * 1e-2)
+        elapsed = time.perf_counter() - wall
+        finer = ida.run(None, problem, REFERENCE_RTOL / 10, REFERENCE_RTOL * 1e-3)
+    if run.failure or len(run.t) != len(grid):
+        raise ScenarioError("bench", f"the self-reference (IDA index2, rtol 1e-12) did not finish: {run.failure}")
+    n = min(len(finer.t), len(run.t))
+    return {"t": run.t, "angle": run.angle, "rtol": REFERENCE_RTOL, "wall_time_s": elapsed,
+            "uncertainty_rad": float(np.max(np.abs(run.angle[:n] - finer.angle[:n]))) if n else NAN,
+            "method": SELF_REFERENCE, "independent": False, "label": SELF_REFERENCE}
 
 
 def _error(run, ref: dict) -> float:
@@ -254,16 +289,27 @@ def ratios(rows: pd.DataFrame, column: str = "wall_time_s") -> dict:
 def run_bench(config: BenchConfig, progress: Callable[[str], None] | None = None) -> BenchResult:
     problem = make_problem(config)
     say = progress or (lambda _msg: None)
+    skipped = {n: f"written for {', '.join(METHODS[n].mechanisms)} only (not {problem.mech.name})"
+               for n in config.methods if not METHODS[n].supports(problem.mech)}
+    methods = tuple(n for n in config.methods if n not in skipped)
+    for n, why in skipped.items():
+        say(f"{n}: skipped, {why}")
+    if not methods:
+        raise ScenarioError("bench", f"none of the chosen methods applies to {problem.mech.name!r} "
+                                     f"({'; '.join(f'{n}: {w}' for n, w in skipped.items())})")
+    config = replace(config, methods=methods)
     wall0 = time.perf_counter()
     ref = reference(problem)
+    column = error_column(problem)
     say(f"reference: {ref['method']} at rtol {ref['rtol']:g}, {ref['wall_time_s']:.2f} s, "
-        f"uncertainty {ref['uncertainty_rad']:.1e} rad")
+        f"uncertainty {ref['uncertainty_rad']:.1e} rad; error on {column}")
     rows, cache = [], {}
     # tolerance outside, methods inside: a change of load on a shared machine hits every method alike
     for rtol in config.rtols:
         for name in config.methods:
             with quiet_sundials():
                 row = _bench_one(METHODS[name], problem, rtol, rtol * config.atol_factor, ref, config.repeats, cache)
+            row.update(error_column=column, reference=ref["label"])
             rows.append(row)
             say(f"{name:<18} rtol {rtol:7.0e}: {row['status']:<6} error {row['error_rad']:.2e} rad, "
                 f"wall {row['wall_time_s']:.3f} s, cpu {row['cpu_time_s']:.3f} s")
@@ -274,10 +320,13 @@ def run_bench(config: BenchConfig, progress: Callable[[str], None] | None = None
     df = pd.DataFrame(rows).reindex(columns=COLUMNS)
     summary = {
         "scenario": problem.scenario, "duration_s": problem.duration, "output_step_s": problem.dt_out,
-        "output_points": len(problem.grid), "error": "max |crank angle - reference| at the output times (rad)",
+        "output_points": len(problem.grid), "mechanism": problem.mech.name, "error_column": column,
+        "error": f"max |{column} - reference| at the output times (rad)",
         "wall_time": f"best of {config.repeats} warm runs (setup apart)",
-        "reference": {k: v for k, v in ref.items() if k not in ("t", "angle")},
+        "reference": {k: v for k, v in ref.items() if k not in ("t", "angle", "label")},
+        "reference_label": ref["label"],
         "rtols": list(config.rtols), "atol": f"{config.atol_factor:g} x rtol", "methods": list(config.methods),
+        "skipped_methods": skipped,
         "ratios_at_equal_error": ratios(df),
         "ratios_at_equal_error_cpu_time": ratios(df, "cpu_time_s"),
         "tolerance_tracking": {m: tracking(df, m) for m in config.methods},
@@ -347,6 +396,10 @@ def report_lines(result: BenchResult) -> list[str]:
     slopes = [f"{m} {v['slope']:.2f}" for m, v in s["tolerance_tracking"].items() if "slope" in v]
     if slopes:
         lines.append("error ~ rtol^slope: " + ", ".join(slopes))
+    if not s["reference"].get("independent", True):
+        lines.append(f"reference: {s['reference_label']}")
+    for name, why in s.get("skipped_methods", {}).items():
+        lines.append(f"{name} skipped: {why}")
     failed = result.rows[result.rows.status != "ok"]
     for r in failed.itertuples():
         lines.append(f"{r.method} rtol {r.rtol:.0e} {r.status}: {r.failure}")

@@ -3,7 +3,8 @@
 - mechsim's IDA backend in each formulation (`ida-index1`, `ida-index2`, `ida-index3`);
 - mechsim's diffrax backend, explicit and implicit (`diffrax-Tsit5`, `diffrax-Dopri8`, `diffrax-Kvaerno5`),
   when `dynamics.diffrax_backend` is importable;
-- the peers a user would pick instead, on the same equations in the same process: scipy `solve_ivp`
+- the peers a user would pick instead, on the same equations in the same process (for the Geneva only: they
+  are written for its equations, `Method.mechanisms`; other mechanisms bench mechsim's methods alone): scipy `solve_ivp`
   (`scipy-Radau`, `scipy-BDF`, `scipy-LSODA`, `scipy-DOP853`) on the reduced-coordinate ODE of
   `mechanisms.geneva_reduced`, and CasADi's IDAS on the index-1 DAE (`casadi-idas-dae`) and on the same with
   the algebraic rows solved by CasADi (`casadi-idas-ode`), see `bench_casadi`.
@@ -23,17 +24,17 @@ import numpy as np
 
 from dynamics.drives import Drive
 from dynamics.settings import SolverSettings
-from mechanisms.geneva import Geneva
+from mechanisms.base import Mechanism
 
 NAN = float("nan")
 
 
 @dataclass
 class Problem:
-    """The benchmark problem: a torque/motor-driven Geneva from a scenario, on a fixed output grid."""
+    """The benchmark problem: a torque/motor-driven mechanism from a scenario, on a fixed output grid."""
 
     scenario: str
-    mech: Geneva
+    mech: Mechanism
     drive: Drive
     angle0: float
     speed0: float
@@ -49,7 +50,8 @@ class Problem:
 
 @dataclass
 class Run:
-    """Crank angle at the output times a run reached, its statistics, and why it stopped early (or None)."""
+    """Drive-coordinate angle at the output times a run reached, its statistics, and why it stopped early
+    (or None)."""
 
     t: np.ndarray
     angle: np.ndarray
@@ -64,9 +66,14 @@ class Method:
     kind: str              # "explicit", "implicit", "DAE"
     equations: str         # what it integrates
     requires: str | None = None
+    #: names (`Mechanism.name`) of the mechanisms whose equations this method is written for; () = any
+    mechanisms: tuple[str, ...] = ()
 
     def available(self) -> bool:
         return self.requires is None or importlib.util.find_spec(self.requires) is not None
+
+    def supports(self, mech: Mechanism) -> bool:
+        return not self.mechanisms or mech.name in self.mechanisms
 
     def setup(self, problem: Problem, rtol: float, atol: float):
         """(handle, setup time in s, 'per process' | 'per tolerance')."""
@@ -80,10 +87,10 @@ class Method:
 
 
 # -- mechsim on IDA ------------------------------------------------------------------------------------------
-def _trajectory_angle(traj) -> tuple[np.ndarray, np.ndarray]:
-    """Crank angle at the output rows of a Trajectory (no table building: that is timed apart)."""
+def _trajectory_angle(traj, coordinate: int) -> tuple[np.ndarray, np.ndarray]:
+    """Drive-coordinate angle at the output rows of a Trajectory (no table building: that is timed apart)."""
     t = np.concatenate([p.t for p in traj.pieces])
-    qi = traj.model.modes[traj.pieces[0].mode].index["q"].start
+    qi = traj.model.modes[traj.pieces[0].mode].index["q"].start + coordinate
     a = np.concatenate([p.y[:, qi] for p in traj.pieces])
     _, last = np.unique(t[::-1], return_index=True)
     keep = len(t) - 1 - last
@@ -121,7 +128,7 @@ class IdaMethod(Method):
         from dynamics.hybrid import simulate
         traj = simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
                         problem.dt_out, problem.angle0, problem.speed0)
-        t, a = _trajectory_angle(traj)
+        t, a = _trajectory_angle(traj, problem.mech.drive_coordinate)
         s = traj.stats
         return Run(t, a, {"residual_evaluations": s["residual_evaluations"],
                           "jacobian_evaluations": s["jacobian_evaluations"], "events": s["events"],
@@ -160,7 +167,7 @@ class DiffraxMethod(Method):
 
     def run(self, handle, problem, rtol, atol):
         traj = self._simulate(problem, rtol, atol)
-        t, a = _trajectory_angle(traj)
+        t, a = _trajectory_angle(traj, problem.mech.drive_coordinate)
         s = traj.stats
         return Run(t, a, {"steps": s.get("steps", NAN), "rejected_steps": s.get("rejected_steps", NAN),
                           "residual_evaluations": _num(s.get("residual_evaluations")),
@@ -248,6 +255,7 @@ class CasadiMethod(Method):
         return Run(r.t, r.angle, stats, f"CasADi IDAS failed at {r.failure}" if r.failure else None)
 
 
+GENEVA = ("geneva",)    # the peers' equations (reduced ODE, the CasADi translation) are checked on the Geneva
 METHODS: dict[str, Method] = {m.name: m for m in [
     IdaMethod("ida-index1", "mechsim IDA", "DAE", "index-1 DAE + Baumgarte (9 states)", formulation="index1"),
     IdaMethod("ida-index2", "mechsim IDA", "DAE", "stabilized index-2 DAE, GGL (10 states)", formulation="index2"),
@@ -257,13 +265,13 @@ METHODS: dict[str, Method] = {m.name: m for m in [
                   solver="Dopri8"),
     DiffraxMethod("diffrax-Kvaerno5", "mechsim diffrax", "implicit", "KKT ODE + Baumgarte", "diffrax",
                   solver="Kvaerno5"),
-    ScipyMethod("scipy-Radau", "scipy", "implicit", "reduced ODE (2 states)", solver="Radau"),
-    ScipyMethod("scipy-BDF", "scipy", "implicit", "reduced ODE (2 states)", solver="BDF"),
-    ScipyMethod("scipy-LSODA", "scipy", "implicit", "reduced ODE (2 states)", solver="LSODA"),
-    ScipyMethod("scipy-DOP853", "scipy", "explicit", "reduced ODE (2 states)", solver="DOP853"),
-    CasadiMethod("casadi-idas-dae", "CasADi", "DAE", "index-1 DAE + Baumgarte (4 + 3 states)", "casadi", form="dae"),
+    ScipyMethod("scipy-Radau", "scipy", "implicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="Radau"),
+    ScipyMethod("scipy-BDF", "scipy", "implicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="BDF"),
+    ScipyMethod("scipy-LSODA", "scipy", "implicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="LSODA"),
+    ScipyMethod("scipy-DOP853", "scipy", "explicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="DOP853"),
+    CasadiMethod("casadi-idas-dae", "CasADi", "DAE", "index-1 DAE + Baumgarte (4 + 3 states)", "casadi", GENEVA, form="dae"),
     CasadiMethod("casadi-idas-ode", "CasADi", "implicit", "index-1 ODE + Baumgarte (4 states)", "casadi",
-                 form="ode"),
+                 GENEVA, form="ode"),
 ]}
 
 

@@ -34,10 +34,12 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path) -> None:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.grid(True, which="both", alpha=0.3)
-        ax.set_ylabel("max crank-angle error (rad)")
+        ax.set_ylabel(f"max error of {summary.get('error_column', 'crank_angle_rad')} (rad)")
     ax1.set_xlabel("warm wall time per run (s)")
+    independent = summary.get("reference", {}).get("independent", True)
+    ref_note = "" if independent else f"\nreference: {summary['reference_label']}"
     ax1.set_title(f"{summary['scenario']}: {summary['duration_s']:g} s, {summary['output_points']} output points\n"
-                  "x = run failed (error over what ran)", fontsize=10)
+                  f"x = run failed (error over what ran){ref_note}", fontsize=10)
     ax2.set_xlabel("requested rtol (atol = 1e-2 rtol)")
     ax2.set_title("achieved error against requested tolerance", fontsize=10)
     ax2.invert_xaxis()

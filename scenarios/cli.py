@@ -187,13 +187,17 @@ def bench(
                                                           "default: all of the chosen size"),
     out_dir: Path = typer.Option(Path("results") / "bench", "--out", help="output folder"),
     full: bool = typer.Option(False, "--full", help="every tolerance 1e-3..1e-10, the whole scenario, diffrax"),
+    scenario: str = typer.Option("geneva-motor", "--scenario",
+                                 help="built-in scenario name or TOML file (torque or motor drive)"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress lines"),
 ) -> None:
-    """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS."""
+    """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS (the Geneva's
+    peers) on any scenario, the error against the mechanism's reference solution."""
     from .bench import BenchConfig, report_lines, run_bench, write
     try:
-        config = BenchConfig.full(names) if full else BenchConfig.small(names)
+        config = (BenchConfig.full if full else BenchConfig.small)(names, scenario, set_)
         if out_dir.exists() and not force:
             raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
         say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))

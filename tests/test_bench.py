@@ -82,3 +82,37 @@ def test_time_at_equal_error_and_tracking_on_exact_lines():
     t = tracking(rows, "m")
     assert t["slope"] == pytest.approx(1.0) and t["max_deviation_decades"] < 1e-12
     assert t["error_over_rtol_at_1"] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("scenario, names, column, label", [
+    ("rolling-a-torque", ["ida-index1", "ida-index2"], "rolling_angle_rad", "independent (RollingPairFourBar.reference_solution"),
+    ("chain-mech2-smooth", ["ida-index2"], "drive_angle_rad", "self-reference (IDA index2, rtol 1e-12; not independent)"),
+])
+def test_any_scenario_against_its_mechanism_reference(tmp_path, scenario, names, column, label):
+    """`--scenario`: mechsim's own methods on another mechanism, the error on the drive coordinate against the
+    mechanism's reference (`Mechanism.reference_solution`: the rolling pair's minimal-coordinate equation) or,
+    without one (chain dwell), IDA index2 at rtol 1e-12, labelled as not independent; the Geneva's peers are
+    skipped with a note."""
+    out = tmp_path / "b"
+    r = runner.invoke(app, ["bench", *names, "--scenario", scenario, "--set", "output_step=20 ms",
+                            "--out", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    rows = pd.read_csv(out / "work_precision.csv")
+    assert (rows.status == "ok").all() and np.isfinite(rows.error_rad).all()
+    assert (rows.error_column == column).all() and rows.reference.str.startswith(label).all()
+    assert (rows.output_points == 51).all()
+    d = rows[rows.method == "ida-index2"].set_index("rtol").error_rad
+    assert d[min(SMALL_RTOLS)] < d[max(SMALL_RTOLS)] / 20
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["reference_label"].startswith(label) and summary["error_column"] == column
+    assert summary["reference"]["uncertainty_rad"] < 1e-10
+    if len(names) == 2:
+        assert set(rows.method) == {"ida-index1", "ida-index2"}
+        assert summary["reference"]["independent"] is True
+
+
+def test_geneva_peers_are_skipped_with_a_note_elsewhere(tmp_path):
+    r = runner.invoke(app, ["bench", "scipy", "--scenario", "rolling-a-torque", "--out", str(tmp_path / "x")])
+    assert r.exit_code == 2 and "none of the chosen methods applies to 'rolling_pair'" in r.stderr
+    r = runner.invoke(app, ["bench", "--scenario", "rolling-a-speed", "--out", str(tmp_path / "y")])
+    assert r.exit_code == 2 and "torque or motor drive" in r.stderr
