@@ -1,0 +1,36 @@
+"""The contact switch times of the closed-form thermal path: all brackets bisected together (one closed-form call
+per halving) give the times of bracket-by-bracket bisection."""
+import math
+
+import numpy as np
+
+from scenarios.loader import load
+from scenarios.runner import build_mechanism
+from scenarios.thermal_integrate import _contact_code, closed_form_columns, switch_times
+
+
+def _one_at_a_time(columns, t_grid, tol=1e-13):
+    code = _contact_code(columns(t_grid))
+    out = []
+    for i in np.flatnonzero(code[1:] != code[:-1]):
+        a, b, ca = float(t_grid[i]), float(t_grid[i + 1]), code[i]
+        while b - a > tol * max(1.0, abs(b)):
+            mid = 0.5 * (a + b)
+            if _contact_code(columns(mid))[0] == ca:
+                a = mid
+            else:
+                b = mid
+        out.append(0.5 * (a + b))
+    return sorted(out)
+
+
+def test_vectorised_switch_times_equal_scalar_bisection():
+    mech = build_mechanism(load("geneva-lc1", ["duration=3.6 s"]).si)
+    columns = closed_form_columns(mech, -math.pi, 5.34)
+    t = np.linspace(0.0, 3.6, 721)
+    fast, ref = switch_times(columns, t), _one_at_a_time(columns, t)
+    assert len(fast) == len(ref) >= 9                # entry, slip reversal, exit in each of three turns
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-14)
+    for s in fast:                                   # the contact code changes across each time
+        c = _contact_code(columns(np.array([s - 1e-9, s + 1e-9])))
+        assert c[0] != c[1]
