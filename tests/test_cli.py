@@ -6,30 +6,13 @@ import sys
 import pandas as pd
 import pytest
 import tomli_w
-from typer.testing import CliRunner
-
-from scenarios.cli import app
-
-runner = CliRunner()
+from cli_helpers import invoke, one_line_error
 
 
 def write(tmp_path, raw, name="case.toml"):
     path = tmp_path / name
     path.write_text(tomli_w.dumps(raw))
     return path
-
-
-def invoke(*args):
-    return runner.invoke(app, list(map(str, args)))
-
-
-def one_line_error(result):
-    text = result.stderr.strip()
-    assert "Traceback" not in result.output + text
-    lines = [line for line in text.splitlines() if line.strip()]
-    assert len(lines) == 1, text
-    assert lines[0].startswith("error: ")
-    return lines[0]
 
 
 def test_list_and_show():

@@ -13,9 +13,10 @@ import pytest
 from typer.testing import CliRunner
 
 from scenarios.cli import app
-from scenarios.sweep_exec import DaskRunner, PoolRunner, SerialRunner
+from scenarios.sweep_exec import DaskRunner, PoolRunner
 from scenarios.sweep_run import run_sweep
 from scenarios.sweep_spec import build_spec
+from cli_helpers import one_line_error
 
 # crank from -180 deg to the end of the first engagement (+45 deg) at 5.34 rad/s takes 0.735 s
 ONE_INDEX = ["duration=0.8 s", "output_step=5 ms", "solver.method=dae"]
@@ -134,15 +135,6 @@ def test_failing_cases_are_recorded_with_their_reason_and_the_rest_complete(tmp_
         assert not row["success"] and "closed-form" in row["failure"] and row["failure_kind"] == "error"
     series = pd.read_parquet(out / "timeseries" / f"{df.loc[(6.0, 'auto'), 'case_id']}.parquet")
     assert len(series) == 101 and series["t_s"].iloc[-1] == pytest.approx(0.5)
-
-
-def one_line_error(result):
-    text = result.stderr.strip()
-    assert "Traceback" not in result.output + text
-    lines = [line for line in text.splitlines() if line.strip()]
-    assert len(lines) == 1, text
-    assert lines[0].startswith("error: ")
-    return lines[0]
 
 
 @pytest.mark.parametrize("args, fragment", [

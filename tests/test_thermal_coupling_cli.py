@@ -4,24 +4,7 @@ import json
 
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
-
-from scenarios.cli import app
-
-runner = CliRunner()
-
-
-def invoke(*args):
-    return runner.invoke(app, list(map(str, args)))
-
-
-def one_line_error(result):
-    text = result.stderr.strip()
-    assert "Traceback" not in result.output + text
-    lines = [line for line in text.splitlines() if line.strip()]
-    assert len(lines) == 1, text
-    assert lines[0].startswith("error: ")
-    return lines[0]
+from cli_helpers import invoke, one_line_error
 
 
 BAD = [
