@@ -323,57 +323,100 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
                   ext_initial=None, progress: Callable[[float], None] | None = None,
                   t0: float = 0.0) -> Trajectory:
     """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
-    o = options
     wall0 = _time.perf_counter()
-    start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
-    model, values, mode, t_out, mf, p, y, yp = (start.model, start.values, start.mode, start.t_out, start.mf,
-                                                 start.p, start.y, start.yp)
-    derive_time = start.derive_time
-    pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy())]
-    events: list[dict] = []
-    per_step = _evaluations_per_step(o)
-    stats = {"backend": "diffrax", "solver": o.solver, "segments": 0, "steps": 0, "accepted_steps": 0,
-             "rejected_steps": 0, "residual_evaluations": 0 if per_step else None,
-             "residual_evaluations_note": ("estimated: attempted steps x new stages per step + 3 per segment"
-                                           if per_step else "not exposed by diffrax for implicit solvers"),
-             "jacobian_evaluations": None, "events": 0, "derive_time_s": derive_time, "compile_time_s": 0.0,
-             "compile_cpu_time_s": 0.0, "compilations": 0}
-    failure = None
-    warnings: list[str] = []
-    t = t0
-    z = _z(mf, y)
-    dt0 = DT0_FIRST
-    last = None
-    stuck = 0
+    lane = Lane.start(options, mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
     solve0 = _time.perf_counter()
-    while t < t_end - 1e-12:
-        entry, jmod, fresh = compiled_solve(model, o)
-        k = jmod.index(mode)
-        ng = len(mf.guard_names)
+    while not lane.done:
+        entry, jmod, fresh = compiled_solve(lane.model, options)
         if fresh:
-            stats["compile_time_s"] += entry.compile_time
-            stats["compile_cpu_time_s"] += entry.compile_cpu_time
-            stats["compilations"] += 1
-        n_save = o.rows(jmod.nz)
-        remaining = t_out[t_out > t]
+            lane.stats["compile_time_s"] += entry.compile_time
+            lane.stats["compile_cpu_time_s"] += entry.compile_cpu_time
+            lane.stats["compilations"] += 1
+        args, n_chunk = lane.segment_args(jmod)
+        out = jax.device_get(entry.fn(*args))
+        lane.after_segment(jmod, out, n_chunk)
+        if progress:
+            progress(lane.t_seg)
+    lane.stats["solve_time_s"] = _time.perf_counter() - solve0 - lane.stats["compile_time_s"]
+    lane.stats["wall_time_backend_s"] = _time.perf_counter() - wall0
+    return lane.trajectory()
+
+
+class Lane:
+    """The state of one run's hybrid loop between segments: shared by `simulate_with` (one lane) and
+    `dynamics.diffrax_batch` (many lanes advanced by one vmapped solve per round).
+
+    `segment_args` gives the compiled solve's arguments for the next segment; `after_segment` does everything
+    after it (output rows, failure checks, guard identification, the transition) and sets `done` at the end.
+    """
+
+    def __init__(self, o: DiffraxOptions, mech, settings, start, t0: float, t_end: float):
+        self.o, self.mech, self.settings, self.t_end = o, mech, settings, t_end
+        self.model, self.values, self.mode, self.t_out, self.mf, self.p, self.y, self.yp = (
+            start.model, start.values, start.mode, start.t_out, start.mf, start.p, start.y, start.yp)
+        self.pieces = [Piece(self.mode, self.p, np.array([t0]), self.y[None, :].copy(), self.yp[None, :].copy())]
+        self.events: list[dict] = []
+        self.per_step = _evaluations_per_step(o)
+        self.stats = {"backend": "diffrax", "solver": o.solver, "segments": 0, "steps": 0, "accepted_steps": 0,
+                      "rejected_steps": 0, "residual_evaluations": 0 if self.per_step else None,
+                      "residual_evaluations_note": ("estimated: attempted steps x new stages per step + 3 per "
+                                                    "segment" if self.per_step else
+                                                    "not exposed by diffrax for implicit solvers"),
+                      "jacobian_evaluations": None, "events": 0, "derive_time_s": start.derive_time,
+                      "compile_time_s": 0.0, "compile_cpu_time_s": 0.0, "compilations": 0}
+        self.failure = None
+        self.warnings: list[str] = []
+        self.t = t0
+        self.t_seg = t0
+        self.z = _z(self.mf, self.y)
+        self.dt0 = DT0_FIRST
+        self.last = None
+        self.stuck = 0
+        self.done = not self.t < t_end - 1e-12
+
+    @classmethod
+    def start(cls, o: DiffraxOptions, mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float,
+              dt_out: float, angle0: float, speed0: float, ext=None, ext_initial=None, t0: float = 0.0) -> "Lane":
+        start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+        return cls(o, mech, settings, start, t0, t_end)
+
+    def trajectory(self) -> Trajectory:
+        return Trajectory(self.model, self.pieces, self.events, self.stats, self.failure, self.warnings)
+
+    def segment_args(self, jmod: JaxModel) -> tuple[tuple, int]:
+        """Arguments of the compiled solve for the next segment, and the number of real output times in it."""
+        n_save = self.o.rows(jmod.nz)
+        remaining = self.t_out[self.t_out > self.t]
         chunk = remaining[:n_save]
-        t1 = t_end if len(remaining) <= n_save else float(chunk[-1])
+        t1 = self.t_end if len(remaining) <= n_save else float(chunk[-1])
         ts = np.full(n_save, t1)
         ts[:len(chunk)] = chunk
         enabled = np.zeros(jmod.ng_max, bool)
-        enabled[:ng] = bool(settings.events)
-        args = _args(k, t, t1, z, np.asarray(p), enabled, ts, dt0)
-        out = jax.device_get(entry.fn(*args))
+        enabled[:len(self.mf.guard_names)] = bool(self.settings.events)
+        return _args(jmod.index(self.mode), self.t, t1, self.z, np.asarray(self.p), enabled, ts, self.dt0), len(chunk)
+
+    def after_segment(self, jmod: JaxModel, out: dict, n_chunk: int) -> None:
+        """Process one segment's results (numpy values of the compiled solve's outputs)."""
+        self._after_segment(jmod, out, n_chunk)
+        if not self.t < self.t_end - 1e-12:
+            self.done = True
+
+    def _after_segment(self, jmod: JaxModel, out: dict, n_chunk: int) -> None:
+        o, settings, mf, model, mode, p = self.o, self.settings, self.mf, self.model, self.mode, self.p
+        t, y, yp = self.t, self.y, self.yp
+        stats = self.stats
+        n_save = o.rows(jmod.nz)
+        ng = len(mf.guard_names)
         stats["segments"] += 1
         # the next call starts with this one's mean accepted step (a tenth of it after a mode change)
-        dt0 = max((float(out["t_end"]) - t) / max(int(out["accepted"]), 1), DT0_FLOOR * max(1.0, abs(t)))
+        self.dt0 = max((float(out["t_end"]) - t) / max(int(out["accepted"]), 1), DT0_FLOOR * max(1.0, abs(t)))
         stats["steps"] += int(out["steps"])
         stats["accepted_steps"] += int(out["accepted"])
         stats["rejected_steps"] += int(out["rejected"])
-        if per_step:
-            stats["residual_evaluations"] += int(out["steps"]) * per_step + 3
-        t_seg = float(out["t_end"])
-        keep = np.arange(n_save) < len(chunk)
+        if self.per_step:
+            stats["residual_evaluations"] += int(out["steps"]) * self.per_step + 3
+        t_seg = self.t_seg = float(out["t_end"])
+        keep = np.arange(n_save) < n_chunk
         keep &= np.isfinite(out["ts"]) & (out["ts"] <= t_seg)
         y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep], out["lam"][keep])
         t_rows = out["ts"][keep].copy()
@@ -382,43 +425,42 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
             n_rows = crossed["rows"]
             t_rows, y_rows, yp_rows = t_rows[:n_rows], y_rows[:n_rows], yp_rows[:n_rows]
         if len(t_rows):
-            pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows))
-        if progress:
-            progress(t_seg)
+            self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows))
         if crossed:
-            failure = dict(time=crossed["after"], mode=mode, reason=(
+            self._fail(dict(time=crossed["after"], mode=mode, reason=(
                 f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
                 f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
                 "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
                 "dropped"), where={c: float(v) for c, v in zip(model.coordinates, crossed["q"])},
-                hint="set solver.events = true (guards root-found by the integrator)")
-            break
+                hint="set solver.events = true (guards root-found by the integrator)"))
+            return
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
         ok = code == int(diffrax.RESULTS.successful._value) or is_event
         if not ok or not np.all(np.isfinite(out["z_end"])):
             q = out["z_end"][:jmod.nq]
             msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
-            failure = dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver "
-                                "(Kvaerno5 if the motion is stiff); check for a singular configuration here")
-            break
+            self._fail(dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
+                            where={c: float(val) for c, val in zip(model.coordinates, q)},
+                            hint="raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver "
+                                 "(Kvaerno5 if the motion is stiff); check for a singular configuration here"))
+            return
         ix = mf.index
         y_end, yp_end = (r[0] for r in _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
                                                    out["lam_end"]))
         q, v = y_end[ix["q"]], y_end[ix["v"]]
         if not is_event:
-            t = t_seg
-            if t >= t_end - 1e-12:
-                break
+            self.t = t_seg
+            if self.t >= self.t_end - 1e-12:
+                self.done = True
+                return
             if o.projection:     # a chunk boundary: restart from the state projected onto the constraints
-                y, yp, _ = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p)
-                z = _z(mf, y)
+                self.y, self.yp, _ = consistent_state(mf, self.t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p)
+                self.z = _z(mf, self.y)
             else:
-                y, yp = y_end, yp_end
-                z = np.asarray(out["z_end"])
-            continue
+                self.y, self.yp = y_end, yp_end
+                self.z = np.asarray(out["z_end"])
+            return
         # a guard crossed: the one whose heading value is at or past zero at the (just-past) crossing time
         h = np.asarray(out["h_end"])[:ng]
         i = int(np.argmin(np.where(h <= 0, h, np.inf))) if (h <= 0).any() else int(np.argmin(h))
@@ -426,34 +468,35 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
         # every guard past zero at the crossing instant, in the allowed direction (the IDA loop's `seg.fired`)
         fired = [j for j in np.flatnonzero(h <= 0) if j != i and not (
             mf.guard_directions[j] and np.sign(out["ref"][j]) == mf.guard_directions[j])]
-        stuck = stuck + 1 if t_seg - t <= 1e-12 * max(1.0, abs(t)) else 0
-        t = t_seg
-        if stuck > 50:
-            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
-                           where={c: float(val) for c, val in zip(model.coordinates, q)},
-                           hint="the mode sequence chatters here (Zeno behaviour?)")
-            break
+        self.stuck = self.stuck + 1 if t_seg - t <= 1e-12 * max(1.0, abs(t)) else 0
+        self.t = t_seg
+        if self.stuck > 50:
+            self._fail(dict(time=t_seg, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
+                            where={c: float(val) for c, val in zip(model.coordinates, q)},
+                            hint="the mode sequence chatters here (Zeno behaviour?)"))
+            return
         direction = mf.guard_directions[i]
         if direction and np.sign(out["ref"][i]) == direction:
-            y, yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
-            z = np.asarray(out["z_end"])
-            continue
-        failure = chattering(model, mode, guard, t, q, last)
+            self.y, self.yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
+            self.z = np.asarray(out["z_end"])
+            return
+        failure = chattering(model, mode, guard, t_seg, q, self.last)
         if failure:
-            break
-        last = (guard, t)
+            self._fail(failure)
+            return
+        self.last = (guard, t_seg)
         stats["events"] += 1
-        res = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, [i, *fired])
-        events += res.rows
-        warnings += res.warnings
+        res = apply_transition(self.mech, model, parameter_tuple, mode, self.values, t_seg, y_end, [i, *fired])
+        self.events += res.rows
+        self.warnings += res.warnings
         if res.failure:
-            failure = res.failure
-            break
-        mode, values, p, y, yp = res.mode, res.values, res.p, res.y, res.yp
-        mf = model.modes[mode]
-        ix = mf.index
-        z = _z(mf, y)
-        dt0 *= 0.1
-    stats["solve_time_s"] = _time.perf_counter() - solve0 - stats["compile_time_s"]
-    stats["wall_time_backend_s"] = _time.perf_counter() - wall0
-    return Trajectory(model, pieces, events, stats, failure, warnings)
+            self._fail(res.failure)
+            return
+        self.mode, self.values, self.p, self.y, self.yp = res.mode, res.values, res.p, res.y, res.yp
+        self.mf = model.modes[self.mode]
+        self.z = _z(self.mf, self.y)
+        self.dt0 *= 0.1
+
+    def _fail(self, failure: dict) -> None:
+        self.failure = failure
+        self.done = True

@@ -153,12 +153,14 @@ def sweep(
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write PNG plots of the table"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder, finished cases too"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
+    batch: bool = typer.Option(False, "--batch", help="diffrax DAE cases of one model structure: one vmapped "
+                               "solve (the rest on the pool; docs/sweeps.md, 'Batching')"),
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
     from .sweep_run import cli_main
     try:
         code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, timeseries, plots, force,
-                        quiet, out, err)
+                        quiet, out, err, batch)
     except ScenarioError as exc:
         _fail(str(exc))
     raise typer.Exit(code)

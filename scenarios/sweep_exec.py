@@ -15,6 +15,7 @@ import os
 import signal
 import socket
 import time
+from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -247,8 +248,11 @@ class DaskRunner:
 
 
 def make_runner(workers: int | None = None, dask_local: int | None = None,
-                scheduler: str | None = None):
-    """The runner the options ask for: Dask if a scheduler or a local Dask cluster is given, else a pool."""
+                scheduler: str | None = None, batch: bool = False):
+    """The runner the options ask for: Dask if a scheduler or a local Dask cluster is given, else a pool;
+    with batch, diffrax DAE cases of one structure run batched first (BatchRunner) and the rest on that runner."""
+    if batch:
+        return BatchRunner(make_runner(workers, dask_local, scheduler))
     if scheduler:
         return DaskRunner(address=scheduler)
     if dask_local:
@@ -256,3 +260,155 @@ def make_runner(workers: int | None = None, dask_local: int | None = None,
     if workers == 0:
         return SerialRunner()
     return PoolRunner(workers)
+
+
+class _Captured(BaseException):
+    """Raised by the capturing stand-in for the diffrax backend's `simulate` (not an Exception: run_case lets it
+    through)."""
+
+    def __init__(self, args, kwargs):
+        self.args_, self.kwargs = args, kwargs
+
+
+@contextmanager
+def _diffrax_simulate(replacement):
+    """Swap `dynamics.diffrax_backend.simulate` (which scenarios.runner looks up at call time) in this process."""
+    from dynamics import diffrax_backend
+    original = diffrax_backend.simulate
+    diffrax_backend.simulate = replacement
+    try:
+        yield
+    finally:
+        diffrax_backend.simulate = original
+
+
+def _batch_reason(task: CaseTask) -> str | None:
+    """Why a case cannot join a batch (None if it can): closed-form cases and the IDA backend."""
+    from .loader import build_mechanism
+    from .runner import _choose_method, make_drive, solver_settings
+    si = task.scenario.si
+    if si["solver"]["backend"] != "diffrax":
+        return "IDA backend (solver.backend = 'ida')"
+    try:
+        mech, drive, settings = build_mechanism(si), make_drive(si), solver_settings(si)
+        if _choose_method(si, mech, drive, settings)[0] != "dae":
+            return "closed-form method (no integration to batch)"
+    except Exception as exc:  # the case's own error: it runs (and is recorded) on the fallback runner
+        return f"could not prepare ({type(exc).__name__})"
+    return None
+
+
+class BatchRunner:
+    """diffrax DAE cases grouped by derived model structure (the `derive` key), diffrax options and output step;
+    each group of two or more runs as one vmapped hybrid integration (dynamics.diffrax_batch) in this process,
+    then each case's tables and summary are built as `run_case` builds them. Everything else (closed-form cases,
+    the IDA backend, a structure with a single case, a group whose batch raised) goes to the fallback runner;
+    `batching_note` says what ran how and why.
+
+    The runner's call into the backend is captured once per case (the arguments it would pass: duration after
+    the thermal plan, initial state, state extension), then answered from the batch's trajectories.
+    """
+
+    name = "batch"
+
+    def __init__(self, fallback):
+        self.fallback = fallback
+        self.workers = getattr(fallback, "workers", 1)
+        self.batching_note: str | None = None
+
+    def describe(self) -> str:
+        return f"batched diffrax (vmap, this process), rest on {self.fallback.describe()}"
+
+    def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
+        from collections import Counter
+        rest: list[CaseTask] = []
+        reasons: Counter = Counter()
+        candidates = []
+        for task in tasks:
+            why = _batch_reason(task)
+            if why:
+                rest.append(task)
+                reasons[why] += 1
+            else:
+                candidates.append(task)
+        groups: dict = {}
+        for task in candidates:
+            call = self._capture(task)
+            if call is None:
+                rest.append(task)
+                reasons["could not prepare"] += 1
+                continue
+            groups.setdefault(call[0], []).append((task, call[1]))
+        batched, sizes = 0, []
+        try:
+            for key, members in groups.items():
+                if len(members) < 2:
+                    rest += [t for t, _ in members]
+                    reasons["a model structure with a single case"] += 1
+                    continue
+                try:
+                    self._run_group(members, on_result)
+                except (KeyboardInterrupt, SweepInterrupted):
+                    raise
+                except Exception as exc:
+                    rest += [t for t, _ in members]
+                    reasons[f"batch raised {type(exc).__name__}: {str(exc).splitlines()[0][:120]}"] += len(members)
+                    continue
+                batched += len(members)
+                sizes.append(len(members))
+        except KeyboardInterrupt:
+            raise SweepInterrupted("interrupted (Ctrl-C)") from None
+        finally:
+            self.batching_note = self._note(batched, sizes, len(rest), reasons)
+        if rest:
+            self.fallback.run(rest, on_result)
+
+    def _note(self, batched: int, sizes: list[int], rest: int, reasons) -> str:
+        head = (f"batched: {batched} case(s) in {len(sizes)} vmapped diffrax group(s) of {sizes}" if batched
+                else "batched: none")
+        if not rest:
+            return head
+        why = "; ".join(f"{r} ({n})" for r, n in reasons.items())
+        return f"{head}; {rest} case(s) ran one by one on {self.fallback.describe()}: {why}"
+
+    @staticmethod
+    def _capture(task: CaseTask):
+        """((group key), call) for a case: the arguments scenarios.runner passes to the diffrax backend."""
+        from dynamics.diffrax_backend import default_options
+        from dynamics.model import derive
+
+        def capture(*args, **kwargs):
+            raise _Captured(args, kwargs)
+
+        try:
+            with _diffrax_simulate(capture):
+                from .runner import run
+                run(task.scenario)
+        except _Captured as c:
+            mech, drive, settings, t_end, dt_out, angle0, speed0 = c.args_
+            ext = c.kwargs.get("ext")
+            model = derive(mech, settings.formulation, drive.is_prescribed, ext or None)
+            call = dict(mech=mech, drive=drive, settings=settings, t_end=t_end, dt_out=dt_out, angle0=angle0,
+                        speed0=speed0, ext=ext or None, ext_initial=c.kwargs.get("ext_initial"))
+            return (id(model), default_options(settings), float(dt_out), settings), call
+        except Exception:
+            return None
+        return None
+
+    @staticmethod
+    def _run_group(members, on_result) -> None:
+        from dynamics.diffrax_batch import simulate_batch
+        calls = [c for _, c in members]
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        trajs = simulate_batch([c["mech"] for c in calls], [c["drive"] for c in calls], calls[0]["settings"],
+                               [c["t_end"] for c in calls], calls[0]["dt_out"], [c["angle0"] for c in calls],
+                               [c["speed0"] for c in calls], [c["ext"] for c in calls],
+                               [c["ext_initial"] for c in calls])
+        share_wall = (time.perf_counter() - wall0) / len(members)
+        share_cpu = (time.process_time() - cpu0) / len(members)
+        for (task, _), traj in zip(members, trajs):
+            with _diffrax_simulate(lambda *a, _traj=traj, **k: _traj):
+                outcome = run_case(task)
+            outcome.row["case_wall_time_s"] += share_wall
+            outcome.row["case_cpu_time_s"] += share_cpu
+            on_result(outcome)

@@ -148,6 +148,7 @@ class Report:
     wall_time_s: float = 0.0
     runner: str = ""
     run_id: str = ""
+    batching: str | None = None
 
     def line(self) -> str:
         head = (f"sweep: {self.total} cases ({self.computed} computed, {self.reused} reused, {self.failed} failed) "
@@ -196,6 +197,7 @@ def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: 
     finally:
         finished = store.finished(pl.keys, timeseries)
         report.remaining = sum(1 for c in pl.cases if c.key not in finished)
+        report.batching = getattr(runner, "batching_note", None)
         report.wall_time_s = time.perf_counter() - wall0
         _finish(store, pl, report, plots)
     return report
@@ -215,7 +217,7 @@ def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool) -> None:
         "computed_this_run": report.computed, "reused": report.reused, "failed": report.failed,
         "complete": report.remaining == 0, "interrupted": report.interrupted, "runner": report.runner,
         "run_id": report.run_id, "wall_time_s": report.wall_time_s,
-        "batching": batching_note(pl), "failed_cases": failed,
+        "batching": report.batching or batching_note(pl), "failed_cases": failed,
     })
 
 
@@ -226,10 +228,8 @@ def batching_note(pl: Plan) -> str:
         return ("not applicable: no case uses solver.backend = 'diffrax'; closed-form and IDA cases run one per "
                 "worker process")
     return (f"not batched: {diffrax} of {len(pl.cases)} cases use the diffrax backend and each ran its own hybrid "
-            "integration. A lock-step jax.vmap over cases breaks at the mode changes, which fall at case-dependent "
-            "times; batching needs every case integrated to its own next event inside one vmapped while-loop, with "
-            "the transitions applied per case between rounds, which the diffrax backend does not offer yet "
-            "(docs/sweeps.md, 'Batching')")
+            "integration; run with --batch to integrate the diffrax DAE cases that share a model structure "
+            "as one vmapped solve (docs/sweeps.md, 'Batching')")
 
 
 INTERRUPTED_EXIT, INCOMPLETE_EXIT = 130, 3
@@ -237,7 +237,7 @@ INTERRUPTED_EXIT, INCOMPLETE_EXIT = 130, 3
 
 def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir: Path | None,
              workers: int | None, dask_local: int | None, scheduler: str | None, timeseries: bool,
-             plots: bool, force: bool, quiet: bool, out, err) -> int:
+             plots: bool, force: bool, quiet: bool, out, err, batch: bool = False) -> int:
     """`mechsim sweep`: returns the exit code (0 every case has a record; 130 Ctrl-C; 3 workers lost).
 
     User errors (spec, keys, units, options, output folder) raise ScenarioError before anything runs.
@@ -253,7 +253,7 @@ def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir:
     spec = build_spec(target, vary, base, zip_)
     pl = plan(spec)
     target_dir = out_dir or Path("results") / f"sweep-{pl.cases[0].scenario.name}"
-    runner = make_runner(workers, dask_local, scheduler)
+    runner = make_runner(workers, dask_local, scheduler, batch)
     with RichProgress(err, f"sweep {pl.cases[0].scenario.name}", disable=quiet) as bar:
         report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots)
     if report.interrupted:
