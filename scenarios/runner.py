@@ -115,7 +115,8 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict
             "closure_error_relative": closure / scale}
 
 
-def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> Result:
+def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
+        integrate: Callable | None = None) -> Result:
     """Run one scenario. Never raises for solver trouble: a failure comes back in Result.failure."""
     si = scenario.si
     wall0 = time.perf_counter()
@@ -140,9 +141,10 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None) -> 
             progress(si["duration"])
     else:
         speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
-        integrate = simulate
-        if settings.backend == "diffrax":
-            from dynamics.diffrax_backend import simulate as integrate
+        if integrate is None:   # a caller (the batched sweep) may supply the backend call itself
+            integrate = simulate
+            if settings.backend == "diffrax":
+                from dynamics.diffrax_backend import simulate as integrate
         traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)

@@ -15,7 +15,6 @@ import os
 import signal
 import socket
 import time
-from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -75,7 +74,7 @@ def _prepare_process() -> None:
     _PREPARED = True
 
 
-def run_case(task: CaseTask) -> Outcome:
+def run_case(task: CaseTask, integrate=None) -> Outcome:
     """Run one case; any failure (solver, physics, exception) becomes a row with success = False and its reason."""
     from .runner import run
     from .sweep_rows import cycle_figures, summary_row
@@ -84,7 +83,7 @@ def run_case(task: CaseTask) -> Outcome:
     worker = f"{socket.gethostname()}:{os.getpid()}"
     ts = None
     try:
-        result = run(task.scenario)
+        result = run(task.scenario, integrate=integrate)
         row = summary_row(result.summary)
         if result.failure is not None:
             row["failure_kind"] = result.failure.kind
@@ -263,23 +262,11 @@ def make_runner(workers: int | None = None, dask_local: int | None = None,
 
 
 class _Captured(BaseException):
-    """Raised by the capturing stand-in for the diffrax backend's `simulate` (not an Exception: run_case lets it
-    through)."""
+    """Raised by the capturing `integrate` passed to the runner: it carries the arguments the runner would give the
+    backend (not an Exception, so nothing on the way catches it)."""
 
     def __init__(self, args, kwargs):
         self.args_, self.kwargs = args, kwargs
-
-
-@contextmanager
-def _diffrax_simulate(replacement):
-    """Swap `dynamics.diffrax_backend.simulate` (which scenarios.runner looks up at call time) in this process."""
-    from dynamics import diffrax_backend
-    original = diffrax_backend.simulate
-    diffrax_backend.simulate = replacement
-    try:
-        yield
-    finally:
-        diffrax_backend.simulate = original
 
 
 def _batch_reason(task: CaseTask) -> str | None:
@@ -381,9 +368,8 @@ class BatchRunner:
             raise _Captured(args, kwargs)
 
         try:
-            with _diffrax_simulate(capture):
-                from .runner import run
-                run(task.scenario)
+            from .runner import run
+            run(task.scenario, integrate=capture)
         except _Captured as c:
             mech, drive, settings, t_end, dt_out, angle0, speed0 = c.args_
             ext = c.kwargs.get("ext")
@@ -407,8 +393,7 @@ class BatchRunner:
         share_wall = (time.perf_counter() - wall0) / len(members)
         share_cpu = (time.process_time() - cpu0) / len(members)
         for (task, _), traj in zip(members, trajs):
-            with _diffrax_simulate(lambda *a, _traj=traj, **k: _traj):
-                outcome = run_case(task)
+            outcome = run_case(task, integrate=lambda *a, _traj=traj, **k: _traj)
             outcome.row["case_wall_time_s"] += share_wall
             outcome.row["case_cpu_time_s"] += share_cpu
             on_result(outcome)
