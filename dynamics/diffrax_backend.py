@@ -30,7 +30,7 @@ from mechanisms.base import Mechanism
 from .consistent import consistent_state
 from .drives import Drive
 from .hybrid import Piece, Trajectory, parameter_tuple, prepare
-from .transitions import apply_transition, chattering
+from .transitions import apply_transition, chattering, stepped_over_failure
 from .jax_model import JaxModel, jax_model  # also enables float64
 from .model import ModeFunctions, StateExtension
 from .settings import SolverSettings
@@ -427,12 +427,7 @@ class Lane:
         if len(t_rows):
             self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows))
         if crossed:
-            self._fail(dict(time=crossed["after"], mode=mode, reason=(
-                f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
-                f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
-                "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
-                "dropped"), where={c: float(v) for c, v in zip(model.coordinates, crossed["q"])},
-                hint="set solver.events = true (guards root-found by the integrator)"))
+            self._fail(stepped_over_failure(model, mode, crossed))
             return
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)

@@ -17,7 +17,7 @@ from .consistent import consistent_state
 from .drives import Drive
 from .ida import integrate_segment
 from .model import DerivedModel, StateExtension, derive
-from .transitions import apply_transition, chattering
+from .transitions import apply_transition, chattering, stepped_over_failure
 from .settings import SolverSettings
 
 
@@ -124,12 +124,7 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         if progress:
             progress(seg.t_end)
         if crossed:
-            failure = dict(time=crossed["after"], mode=mode, reason=(
-                f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
-                f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
-                "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
-                "dropped"), where={c: float(v) for c, v in zip(model.coordinates, crossed["q"])},
-                hint="set solver.events = true (guards root-found by the integrator)")
+            failure = stepped_over_failure(model, mode, crossed)
             break
         if seg.status == "failed":
             q = seg.y_end[mf.index["q"]]

@@ -46,6 +46,16 @@ def chattering(model: DerivedModel, mode: str, guard: str, t: float, q, last) ->
     return None
 
 
+def stepped_over_failure(model: DerivedModel, mode: str, crossed: dict) -> dict:
+    """The failure for a guard that crossed zero while events were disabled (see hybrid.stepped_over)."""
+    return dict(time=crossed["after"], mode=mode, reason=(
+        f"mode change stepped over: guard '{crossed['guard']}' of mode '{mode}' crossed zero between "
+        f"t = {crossed['before']:.6g} s and {crossed['after']:.6g} s, but events are disabled "
+        "(solver.events = false), so the run went on in the wrong mode; rows after the crossing are "
+        "dropped"), where=_where(model, crossed["q"]),
+        hint="set solver.events = true (guards root-found by the integrator)")
+
+
 def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode: str, values: dict, t: float,
                      y_end: np.ndarray, fired: list[int]) -> Outcome:
     """Handle guards `fired` (indices into the mode's guards, the first one the primary) at time t."""
