@@ -23,3 +23,29 @@ def lc1_raw():
 
 def wrap(angle):
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
+def assert_wheel_matches_closed_form(geometry, df, crank_speed, rel=1e-6):
+    """Wheel angle, speed and acceleration of a run at constant crank speed against physics.md §1's closed
+    forms, each to `rel` of its peak; the crank keeps the prescribed speed."""
+    from mechanisms import geneva_kinematics as gk
+    cf = gk.constant_speed_motion(geometry, df["crank_angle_rad"].to_numpy(), crank_speed)
+    for key, col in [("wheel_angle", "wheel_angle_rad"), ("wheel_speed", "wheel_speed_rad_s"),
+                     ("wheel_accel", "wheel_accel_rad_s2")]:
+        scale = np.max(np.abs(cf[key]))
+        assert np.max(np.abs(df[col].to_numpy() - cf[key])) <= rel * scale, key
+    np.testing.assert_allclose(df["crank_speed_rad_s"], crank_speed, rtol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def m1():
+    """El-Shakery Mech 1 (3 sprockets), kinematics.md §1.3."""
+    from mechanisms.chain_dwell import MECH1, ChainDwellMechanism
+    return ChainDwellMechanism(MECH1)
+
+
+@pytest.fixture(scope="module")
+def m2():
+    """El-Shakery Mech 2 (4 sprockets), kinematics.md §1.3."""
+    from mechanisms.chain_dwell import MECH2, ChainDwellMechanism
+    return ChainDwellMechanism(MECH2)

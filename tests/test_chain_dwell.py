@@ -11,15 +11,6 @@ CM = 0.01
 DEG_TOL = 5e-7  # kinematics.md prints driving angles to 6 decimals
 
 
-@pytest.fixture(scope="module")
-def m1():
-    return ChainDwellMechanism(MECH1)
-
-
-@pytest.fixture(scope="module")
-def m2():
-    return ChainDwellMechanism(MECH2)
-
 
 def deg_rows(df):
     return [(round(math.degrees(r.start_drive_angle_rad), 6), round(math.degrees(r.end_drive_angle_rad), 6),

@@ -5,19 +5,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from mechanisms.chain_dwell import MECH1, MECH2, ChainDwellMechanism
+from mechanisms.chain_dwell import MECH1, ChainDwellMechanism
 
 CM = 0.01
 
-
-@pytest.fixture(scope="module")
-def m1():
-    return ChainDwellMechanism(MECH1)
-
-
-@pytest.fixture(scope="module")
-def m2():
-    return ChainDwellMechanism(MECH2)
 
 
 def ends(df, sprocket, event):

@@ -9,10 +9,10 @@ from dynamics import diffrax_backend as dbk
 from dynamics.drives import Drive
 from dynamics.settings import SolverSettings
 from dynamics.tables import events_table, timeseries
-from mechanisms import geneva_kinematics as gk
 from mechanisms.geneva import Geneva
 from scenarios.loader import load
 from scenarios.runner import run
+from conftest import assert_wheel_matches_closed_form
 
 J1, J2 = 0.02, 1.5626e-3
 W1 = 5.34
@@ -38,12 +38,7 @@ def test_prescribed_speed_matches_closed_form(seed_geometry, prescribed):
     """physics.md §7 rows 1-6 (as for IDA): wheel angle, speed and acceleration to 1e-6 relative."""
     _, traj, df = prescribed
     assert traj.failure is None, traj.failure
-    cf = gk.constant_speed_motion(seed_geometry, df["crank_angle_rad"].to_numpy(), W1)
-    for key, col in [("wheel_angle", "wheel_angle_rad"), ("wheel_speed", "wheel_speed_rad_s"),
-                     ("wheel_accel", "wheel_accel_rad_s2")]:
-        scale = np.max(np.abs(cf[key]))
-        assert np.max(np.abs(df[col].to_numpy() - cf[key])) <= 1e-6 * scale, key
-    np.testing.assert_allclose(df["crank_speed_rad_s"], W1, rtol=1e-9)
+    assert_wheel_matches_closed_form(seed_geometry, df, W1)
     # entry and exit alternate, one each per crank turn (2.5 s at 5.34 rad/s: two turns and a bit)
     kinds = [k for k in events_table(traj)["kind"] if k in ("entry", "exit")]
     assert kinds[:4] == ["entry", "exit", "entry", "exit"]

@@ -11,6 +11,7 @@ from dynamics.tables import events_table, timeseries
 from mechanisms import geneva_kinematics as gk
 from mechanisms import geneva_reduced as reduced
 from mechanisms.geneva import Geneva
+from conftest import assert_wheel_matches_closed_form
 
 J1, J2 = 0.02, 1.5626e-3
 W1 = 5.34
@@ -28,13 +29,7 @@ def test_prescribed_speed_matches_closed_form(seed_geometry, formulation):
     """physics.md §7 rows 1-6: wheel angle, speed, acceleration to 1e-6 relative; dwell fraction."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15)
     traj, df = run(mech, Drive("speed", speed=W1), 2.5, formulation)
-    cf = gk.constant_speed_motion(seed_geometry, df["crank_angle_rad"].to_numpy(), W1)
-    for key, col in [("wheel_angle", "wheel_angle_rad"), ("wheel_speed", "wheel_speed_rad_s"),
-                     ("wheel_accel", "wheel_accel_rad_s2")]:
-        scale = np.max(np.abs(cf[key]))
-        assert np.max(np.abs(df[col].to_numpy() - cf[key])) <= 1e-6 * scale, key
-    # the crank follows the prescribed speed exactly
-    np.testing.assert_allclose(df["crank_speed_rad_s"], W1, rtol=1e-9)
+    assert_wheel_matches_closed_form(seed_geometry, df, W1)
     # dwell fraction from the mode column = (n + 2) / (2 n); engagement time 0.29415 s per index
     ev = events_table(traj)
     entries, exits = ev[ev.kind == "entry"].t_s.to_numpy(), ev[ev.kind == "exit"].t_s.to_numpy()

@@ -13,7 +13,7 @@ from scenarios.runner import build_mechanism, make_drive, run
 from scenarios.thermal_cycle import CycleMeans, bulk_response
 from scenarios.thermal_integrate import ModalNetwork, closed_form_columns, input_function, switch_times
 from scenarios.thermal_post import plan
-from scenarios.thermal_setup import KELVIN, adapter
+from scenarios.thermal_setup import adapter
 from thermal import duhamel_surface, get_material, integrate_mean_heat
 
 STEEL = get_material("aisi1045")
