@@ -16,10 +16,10 @@ def measure() -> list[dict]:
     import sympy as sp
 
     jax.config.update("jax_enable_x64", True)
-    from dynamics.drives import Drive
-    from dynamics.model import derive
-    from mechanisms.geneva import Geneva
-    from mechanisms.geneva_kinematics import GenevaGeometry
+    from mechsim.dynamics.drives import Drive
+    from mechsim.dynamics.model import derive
+    from mechsim.mechanisms.geneva import Geneva
+    from mechsim.mechanisms.geneva_kinematics import GenevaGeometry
 
     mech = Geneva(GenevaGeometry(0.075, 4, 0.004, 0.004), 0.02, 1.5626e-3, 7.0, 0.15)
     results = []
@@ -58,7 +58,7 @@ def _rows_from_source(mf, model, mech, formulation):
     """Rebuild the residual rows symbolically (same derivation as dynamics/model.py)."""
     import sympy as sp
 
-    from dynamics.formulation import differentiate_constraints, mechanical_residual
+    from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
     s = mf.symbolic
     q, v, lam, params = s["q"], s["v"], s["lam"], s["params"]
     qp = [sp.Symbol(f"qp_{c}", real=True) for c in mech.coordinates]

@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from mechanisms.base import Mechanism
+from mechsim.mechanisms.base import Mechanism
 
 from .consistent import consistent_state
 from .drives import Drive

@@ -22,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mechanisms.base import Mechanism
+from mechsim.mechanisms.base import Mechanism
 
 from .diffrax_backend import DiffraxOptions, Lane, _args, _make_solve, default_options
 from .drives import Drive

@@ -18,7 +18,7 @@ from typing import Protocol, Sequence
 
 import sympy as sp
 
-from mechanisms.base import Mechanism, Mode
+from mechsim.mechanisms.base import Mechanism, Mode
 
 from .codegen import emit
 from .drives import DRIVE_PARAMETERS

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sps
 import sympy as sp
 
-from thermal import TRANSIENT_FLOOR_COEFFICIENT, LinearThermalSystem, band_fit
+from mechsim.thermal import TRANSIENT_FLOOR_COEFFICIENT, LinearThermalSystem, band_fit
 
 #: Regularising half-width b0 (m): of the order of the roughness of ground steel (Rq 0.2-1 µm), below which a
 #: smooth Hertz contact is not meaningful anyway; it changes b only for N below ~0.1 N (seed geometry).

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mechanisms.base import Mechanism
+from mechsim.mechanisms.base import Mechanism
 
 from .consistent import consistent_state, project_positions, project_velocities
 from .model import DerivedModel

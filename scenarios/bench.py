@@ -115,7 +115,7 @@ def make_problem(config: BenchConfig) -> Problem:
 
 def error_column(problem: Problem) -> str:
     """The timeseries column the error is measured on (the drive coordinate's angle)."""
-    from dynamics.tables import coordinate_columns
+    from mechsim.dynamics.tables import coordinate_columns
     mech = problem.mech
     k = mech.drive_coordinate
     return coordinate_columns(mech.coordinates[k], k in mech.angle_coordinates)[0]
@@ -221,8 +221,8 @@ def output_cost(problem: Problem, names: tuple[str, ...], rtol: float = 1e-8) ->
                    wall_time_coarse_s=w2, cost_per_output_point_us=1e6 * (w1 - w2) / max(n1 - n2, 1),
                    table_building_per_row_us=NAN)
         if name.startswith("ida"):
-            from dynamics.hybrid import simulate
-            from dynamics.tables import timeseries
+            from mechsim.dynamics.hybrid import simulate
+            from mechsim.dynamics.tables import timeseries
             traj = simulate(problem.mech, problem.drive, method.settings(problem, rtol, atol), problem.duration,
                             problem.dt_out, problem.angle0, problem.speed0)
             wall = time.perf_counter()

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
-from dynamics.drives import Drive
-from mechanisms.base import Mechanism
+from mechsim.dynamics.drives import Drive
+from mechsim.mechanisms.base import Mechanism
 
 FORMS = ("dae", "ode")
 _STAT_KEYS = {"nsteps": "steps", "netfails": "rejected_steps", "nfevals": "residual_evaluations",

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dynamics.drives import Drive
-from dynamics.settings import SolverSettings
-from mechanisms.base import Mechanism
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.mechanisms.base import Mechanism
 
 NAN = float("nan")
 
@@ -113,7 +113,7 @@ class IdaMethod(Method):
                               baumgarte_beta=b, method="dae")
 
     def setup(self, problem, rtol, atol):
-        from dynamics import model as model_module
+        from mechsim.dynamics import model as model_module
         wall = time.perf_counter()
         # a fresh derivation (bypassing the per-process cache) to show its cost; then the cached one
         mech = problem.mech
@@ -125,7 +125,7 @@ class IdaMethod(Method):
         return None, cold, "per process"
 
     def run(self, handle, problem, rtol, atol):
-        from dynamics.hybrid import simulate
+        from mechsim.dynamics.hybrid import simulate
         traj = simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
                         problem.dt_out, problem.angle0, problem.speed0)
         t, a = _trajectory_angle(traj, problem.mech.drive_coordinate)
@@ -155,7 +155,7 @@ class DiffraxMethod(Method):
                               baumgarte_beta=b, method="dae", diffrax_solver=self.solver, max_steps=self.max_steps)
 
     def _simulate(self, problem, rtol, atol):
-        from dynamics.diffrax_backend import simulate
+        from mechsim.dynamics.diffrax_backend import simulate
         return simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
                         problem.dt_out, problem.angle0, problem.speed0)
 
@@ -207,7 +207,7 @@ class ScipyMethod(Method):
     solver: str = "DOP853"
 
     def _integrate(self, problem, rtol, atol, method, stats):
-        from mechanisms import geneva_reduced as red
+        from mechsim.mechanisms import geneva_reduced as red
         dv = problem.drive.parameter_values(problem.angle0)
         grid = problem.grid
         try:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from dynamics.result import Result
-from dynamics.tables import coordinate_columns
+from mechsim.dynamics.result import Result
+from mechsim.dynamics.tables import coordinate_columns
 
 from .loader import Scenario, apply_overrides, build_mechanism, load, validate
 from .runner import run

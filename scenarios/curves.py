@@ -8,10 +8,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from mechanisms import rolling_sets
-from mechanisms.rolling_atlas import coupler_atlas
-from mechanisms.rolling_model import RollingPairFourBar
-from mechanisms.rolling_pair import RollingFourBar
+from mechsim.mechanisms import rolling_sets
+from mechsim.mechanisms.rolling_atlas import coupler_atlas
+from mechsim.mechanisms.rolling_model import RollingPairFourBar
+from mechsim.mechanisms.rolling_pair import RollingFourBar
 
 from .units import ScenarioError
 from .atomic import atomic_folder
@@ -71,7 +71,7 @@ def write_curves(name: str, out_dir: Path | None = None, force: bool = False,
         for attr, fname in TABLES.items():
             getattr(atlas, attr).to_csv(tmp / f"{fname}.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
-        from mechanisms.rolling_plots import plot_coupler_atlas
+        from mechsim.mechanisms.rolling_plots import plot_coupler_atlas
         fig = plot_coupler_atlas(atlas, title=f"rolling-pair 4-bar: {label}")
         fig.savefig(tmp / "atlas.png", dpi=110)
     return out_dir, summary

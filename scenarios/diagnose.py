@@ -57,7 +57,7 @@ def fastest_mode(traj) -> tuple[float, float, list[str], bool] | None:
     trajectory's last output row, or None if there is no row to look at."""
     import jax
 
-    from dynamics.jax_model import jax_mode
+    from mechsim.dynamics.jax_model import jax_mode
 
     piece = next((p for p in reversed(traj.pieces) if len(p.t)), None)
     if piece is None:

@@ -60,7 +60,7 @@ def read(solver, neq: int, nfev: int) -> dict | None:
 def counting():
     """Within the block, every IDA segment of `dynamics.ida` adds its counters to the yielded dict
     (values are NaN when they could not be read)."""
-    import dynamics.ida as ida_module
+    import mechsim.dynamics.ida as ida_module
     from sksundae.ida import IDA
 
     totals = {name: 0.0 for name in COUNTERS}

@@ -10,13 +10,13 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-from mechanisms import MECHANISMS, Mechanism
-from mechanisms.base import Field
+from mechsim.mechanisms import MECHANISMS, Mechanism
+from mechsim.mechanisms.base import Field
 
 from .schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_section
 from .units import ScenarioError
 
-BUILTIN_PACKAGE = "scenarios.builtin"
+BUILTIN_PACKAGE = "mechsim.scenarios.builtin"
 
 
 @dataclass

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import tomli_w
 
-from dynamics.result import Result
+from mechsim.dynamics.result import Result
 
 from .atomic import atomic_folder, json_default
 

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynamics.result import Result  # noqa: E402
+from mechsim.dynamics.result import Result  # noqa: E402
 
 # (column, label with unit at the edge, scale to display unit)
 PANELS = {

@@ -10,12 +10,12 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from dynamics.drives import Drive
-from dynamics.hybrid import simulate
-from dynamics.result import Failure, Result
-from dynamics.settings import SolverSettings
-from dynamics.tables import coordinate_columns, events_table, timeseries
-from mechanisms.base import Mechanism
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.result import Failure, Result
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
+from mechsim.mechanisms.base import Mechanism
 
 from .loader import Scenario, build_mechanism
 
@@ -144,7 +144,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
         if integrate is None:   # a caller (the batched sweep) may supply the backend call itself
             integrate = simulate
             if settings.backend == "diffrax":
-                from dynamics.diffrax_backend import simulate as integrate
+                from mechsim.dynamics.diffrax_backend import simulate as integrate
         traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)

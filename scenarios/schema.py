@@ -5,7 +5,7 @@ problem is reported as one `ScenarioError` naming `section.key`.
 """
 from __future__ import annotations
 
-from mechanisms.base import Field
+from mechsim.mechanisms.base import Field
 
 from .units import ScenarioError, to_si
 

@@ -29,8 +29,8 @@ import numpy as np
 import pandas as pd
 from scipy.integrate import trapezoid
 
-from mechanisms import geneva_kinematics as gk
-from thermal import (Material, effective_modulus, flash_temperature, frictional_heat, half_width, peak_pressure,
+from mechsim.mechanisms import geneva_kinematics as gk
+from mechsim.thermal import (Material, effective_modulus, flash_temperature, frictional_heat, half_width, peak_pressure,
                      peclet, seed_flash_rise, seed_half_width, seed_max_pressure, seed_normal_load,
                      seed_reduced_modulus, seed_sliding_speed)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq
 
-from mechanisms import geneva_kinematics as gk
+from mechsim.mechanisms import geneva_kinematics as gk
 
 #: physics.md §4.7 corrected-model table (phi, N, b um, |u|, dT_flash mu = 0.15) and the seed S(13) column
 #: (mu = 0.15): the reference values the report reproduces.

@@ -125,7 +125,7 @@ def thermal_mesh_sweep(first_cells=(8e-5, 5e-5, 3.5e-5, 2.5e-5, 8e-6, 2.5e-6, 8e
     stopped once it has used `budget` right-hand-side evaluations ("step budget exceeded: stiff"), and not run
     on finer meshes after that."""
     from scipy.integrate import solve_ivp
-    from thermal.conduction1d import conduction_system, graded_mesh
+    from mechsim.thermal.conduction1d import conduction_system, graded_mesh
 
     q = heat_pulses(duration)
     rows, exhausted = [], set()

@@ -48,7 +48,7 @@ class Outcome:
 
 
 def _drive_angle_column(si: dict) -> str | None:
-    from dynamics.tables import coordinate_columns
+    from mechsim.dynamics.tables import coordinate_columns
     from .loader import build_mechanism
     mech = build_mechanism(si)
     k = mech.drive_coordinate
@@ -361,8 +361,8 @@ class BatchRunner:
     @staticmethod
     def _capture(task: CaseTask):
         """((group key), call) for a case: the arguments scenarios.runner passes to the diffrax backend."""
-        from dynamics.diffrax_backend import default_options
-        from dynamics.model import derive
+        from mechsim.dynamics.diffrax_backend import default_options
+        from mechsim.dynamics.model import derive
 
         def capture(*args, **kwargs):
             raise _Captured(args, kwargs)
@@ -383,7 +383,7 @@ class BatchRunner:
 
     @staticmethod
     def _run_group(members, on_result) -> None:
-        from dynamics.diffrax_batch import simulate_batch
+        from mechsim.dynamics.diffrax_batch import simulate_batch
         calls = [c for _, c in members]
         wall0, cpu0 = time.perf_counter(), time.process_time()
         trajs = simulate_batch([c["mech"] for c in calls], [c["drive"] for c in calls], calls[0]["settings"],

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from thermal import LinearThermalSystem, ambient_temperatures
+from mechsim.thermal import LinearThermalSystem, ambient_temperatures
 
 from .thermal_integrate import ModalNetwork
 

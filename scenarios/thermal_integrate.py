@@ -20,8 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from dynamics.thermal_coupling import ThermalExtension
-from thermal import LinearThermalSystem
+from mechsim.dynamics.thermal_coupling import ThermalExtension
+from mechsim.thermal import LinearThermalSystem
 
 #: Gauss-Legendre nodes per (sub-)interval
 QUADRATURE_NODES = 6

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from thermal import effective_modulus, flash_temperature, half_width, peak_pressure, validity
+from mechsim.thermal import effective_modulus, flash_temperature, half_width, peak_pressure, validity
 
 from . import thermal_cycle as cyc
 from .thermal_integrate import ModalNetwork, integrate_closed_form

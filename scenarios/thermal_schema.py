@@ -3,8 +3,8 @@ body geometry and 1-D mesh. Absent keys get sound defaults (derived from the mec
 it, see scenarios/thermal_setup.py and docs/thermal.md "Coupling"); values are SI after validation."""
 from __future__ import annotations
 
-from mechanisms.base import Field, Mechanism
-from thermal import MATERIALS, Material
+from mechsim.mechanisms.base import Field, Mechanism
+from mechsim.thermal import MATERIALS, Material
 
 from .units import ScenarioError
 

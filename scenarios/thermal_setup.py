@@ -22,9 +22,9 @@ import numpy as np
 import pandas as pd
 import scipy.sparse as sps
 
-from dynamics.thermal_coupling import HeatInput, ShareModel, ThermalExtension
-from mechanisms.base import Mechanism
-from thermal import (LinearThermalSystem, Material, biot_number, conduction_system, disc_volume_area,
+from mechsim.dynamics.thermal_coupling import HeatInput, ShareModel, ThermalExtension
+from mechsim.mechanisms.base import Mechanism
+from mechsim.thermal import (LinearThermalSystem, Material, biot_number, conduction_system, disc_volume_area,
                      effective_modulus, graded_mesh, pin_volume_area)
 
 from .thermal_schema import thermal_material

@@ -1,7 +1,7 @@
 """In-process CLI helpers shared by the command-line tests."""
 from typer.testing import CliRunner
 
-from scenarios.cli import app
+from mechsim.scenarios.cli import app
 
 runner = CliRunner()
 

@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from scenarios.bench import SMALL_METHODS, SMALL_RTOLS, time_at_error, tracking
-from scenarios.bench_methods import METHODS
-from scenarios.cli import app
+from mechsim.scenarios.bench import SMALL_METHODS, SMALL_RTOLS, time_at_error, tracking
+from mechsim.scenarios.bench_methods import METHODS
+from mechsim.scenarios.cli import app
 
 runner = CliRunner()
 

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from mechanisms.chain_dwell import MECH1, MECH2, ChainDwellMechanism, ChainDwellParams
-from mechanisms.chain_path import circle_circle_intersection
+from mechsim.mechanisms.chain_dwell import MECH1, MECH2, ChainDwellMechanism, ChainDwellParams
+from mechsim.mechanisms.chain_path import circle_circle_intersection
 
 CM = 0.01
 DEG_TOL = 5e-7  # kinematics.md prints driving angles to 6 decimals

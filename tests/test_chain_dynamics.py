@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from dynamics.drives import Drive
-from dynamics.hybrid import simulate
-from dynamics.settings import SolverSettings
-from dynamics.tables import events_table, timeseries
-from mechanisms.chain_dwell import MECH2, ChainDwellMechanism
-from mechanisms.chain_model import ChainDwell
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.tables import events_table, timeseries
+from mechsim.mechanisms.chain_dwell import MECH2, ChainDwellMechanism
+from mechsim.mechanisms.chain_model import ChainDwell
 
 CM = 0.01
 R, L, r1 = 5 * CM, 3 * CM, 3 * CM

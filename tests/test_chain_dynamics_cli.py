@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from scenarios.cli import app
-from scenarios.loader import builtin_names
+from mechsim.scenarios.cli import app
+from mechsim.scenarios.loader import builtin_names
 
 CHAIN = [n for n in builtin_names() if n.startswith("chain-")]
 COLUMNS = ["t_s", "mode", "chain_travel_m", "chain_speed_m_s", "drive_angle_rad", "drive_speed_rad_s",

@@ -123,7 +123,7 @@ def test_solver_failure_exits_3(tmp_path):
 
 def test_console_script_user_error_has_no_traceback(tmp_path):
     """The real entry point in a fresh process: one line on stderr, exit 2."""
-    proc = subprocess.run([sys.executable, "-m", "scenarios.cli", "run", "no-such-scenario"], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "no-such-scenario"], capture_output=True,
                           text=True, cwd=tmp_path)
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith("error: scenario:") and "Traceback" not in proc.stderr
@@ -131,7 +131,7 @@ def test_console_script_user_error_has_no_traceback(tmp_path):
 
 
 def test_unforeseen_backend_error_is_one_line_exit_3(tmp_path, monkeypatch):
-    import scenarios.runner as runner_module
+    import mechsim.scenarios.runner as runner_module
 
     def broken(*args, **kwargs):
         raise RuntimeError("saveat.ts must be increasing\nmore lines of jax noise")

@@ -5,13 +5,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dynamics import diffrax_backend as dbk
-from dynamics.drives import Drive
-from dynamics.settings import SolverSettings
-from dynamics.tables import events_table, timeseries
-from mechanisms.geneva import Geneva
-from scenarios.loader import load
-from scenarios.runner import run
+from mechsim.dynamics import diffrax_backend as dbk
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.tables import events_table, timeseries
+from mechsim.mechanisms.geneva import Geneva
+from mechsim.scenarios.loader import load
+from mechsim.scenarios.runner import run
 from conftest import assert_wheel_matches_closed_form
 
 J1, J2 = 0.02, 1.5626e-3

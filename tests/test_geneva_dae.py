@@ -3,14 +3,14 @@ energy conservation and the constraint residual (issue: Geneva end to end)."""
 import numpy as np
 import pytest
 
-from dynamics.drives import Drive
-from dynamics.hybrid import simulate
-from dynamics.model import derive
-from dynamics.settings import SolverSettings
-from dynamics.tables import events_table, timeseries
-from mechanisms import geneva_kinematics as gk
-from mechanisms import geneva_reduced as reduced
-from mechanisms.geneva import Geneva
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.model import derive
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.tables import events_table, timeseries
+from mechsim.mechanisms import geneva_kinematics as gk
+from mechsim.mechanisms import geneva_reduced as reduced
+from mechsim.mechanisms.geneva import Geneva
 from conftest import assert_wheel_matches_closed_form
 
 J1, J2 = 0.02, 1.5626e-3
@@ -174,7 +174,7 @@ def test_exact_jacobian_is_the_one_ida_calls(seed_geometry, monkeypatch):
 def test_output_times_never_pass_the_end(seed_geometry, t_end):
     """Output instants are increasing and end exactly at t_end (round-off in t0 + k dt must not pass it:
     diffrax rejects a non-monotone SaveAt)."""
-    from dynamics.hybrid import prepare
+    from mechsim.dynamics.hybrid import prepare
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0)
     start = prepare(mech, Drive("torque", torque=5.0), SolverSettings(), t_end, 1e-3, -np.pi, W1)
     assert np.all(np.diff(start.t_out) > 0)

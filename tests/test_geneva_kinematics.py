@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mechanisms import geneva_kinematics as gk
+from mechsim.mechanisms import geneva_kinematics as gk
 
 W1 = 5.34
 

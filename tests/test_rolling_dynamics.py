@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from dynamics.drives import Drive
-from dynamics.hybrid import simulate
-from dynamics.settings import SolverSettings
-from dynamics.tables import events_table, timeseries
-from mechanisms import rolling_reduced as reduced
-from mechanisms.rolling_model import Bodies, RollingPairFourBar
-from mechanisms.rolling_sets import make
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.tables import events_table, timeseries
+from mechsim.mechanisms import rolling_reduced as reduced
+from mechsim.mechanisms.rolling_model import Bodies, RollingPairFourBar
+from mechsim.mechanisms.rolling_sets import make
 
 G = 9.81
 

@@ -152,7 +152,7 @@ def test_curves_from_scenarios(tmp_path):
     np.testing.assert_allclose(cl[["rolling_angle_start_rad", "rolling_angle_end_rad"]].to_numpy(),
                                [[-12.878132, -6.739964], [-6.245489, -0.082021]], atol=1e-6)
     assert len(pd.read_csv(tmp_path / "d" / "cusps.csv")) == 4   # phi = -10.124778, -3.841593 on both branches
-    from scenarios.loader import builtin_text
+    from mechsim.scenarios.loader import builtin_text
     path = tmp_path / "b.toml"
     path.write_text(builtin_text("rolling-b-components"))
     r = invoke("curves", path, "--out", tmp_path / "b")

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from scenarios.cli import app
+from mechsim.scenarios.cli import app
 
 # physics.md header / §1 / §2: seed geometry, wheel inertia, loads
 R_CRANK, N_SLOTS, R_PIN, LENGTH, J2 = 0.075, 4, 0.004, 0.004, 1.5626e-3

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import tomli_w
 
-from scenarios.sweep_spec import SweepSpec, build_spec, parse_vary, read_sweep_file
-from scenarios.units import ScenarioError
+from mechsim.scenarios.sweep_spec import SweepSpec, build_spec, parse_vary, read_sweep_file
+from mechsim.scenarios.units import ScenarioError
 
 
 def test_list_with_one_unit_applies_it_to_every_item():

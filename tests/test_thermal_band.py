@@ -9,7 +9,7 @@ import pytest
 import sympy as sp
 from scipy.special import k0e, k1e
 
-from thermal import band_source as bs
+from mechsim.thermal import band_source as bs
 
 
 def uniform_theta_closed_form(X, L):

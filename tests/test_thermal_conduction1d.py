@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sps
 from scipy.integrate import solve_ivp
 
-from thermal import (conduction_system, duhamel_surface, flux_step_profile, flux_step_surface, get_material,
+from mechsim.thermal import (conduction_system, duhamel_surface, flux_step_profile, flux_step_surface, get_material,
                      graded_mesh, graded_mesh_cells, mesh_settings, moving_band_high_peclet_max,
                      switched_flux_surface, validity)
 

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from thermal import (MATERIALS, Material, axis_shear_ratio, effective_modulus, effective_radius, frictional_heat,
+from mechsim.thermal import (MATERIALS, Material, axis_shear_ratio, effective_modulus, effective_radius, frictional_heat,
                      get_material, half_width, line_contact, max_shear_coefficients, mean_flux, mean_pressure,
                      peak_pressure, peclet, seed_half_width, seed_max_pressure, seed_reduced_modulus)
 

@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from dynamics.drives import Drive
-from dynamics.model import derive
-from scenarios.loader import load
-from scenarios.runner import build_mechanism, make_drive, run
-from scenarios.thermal_cycle import CycleMeans, bulk_response
-from scenarios.thermal_integrate import ModalNetwork, closed_form_columns, input_function, switch_times
-from scenarios.thermal_post import plan
-from scenarios.thermal_setup import adapter
-from thermal import duhamel_surface, get_material, integrate_mean_heat
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.model import derive
+from mechsim.scenarios.loader import load
+from mechsim.scenarios.runner import build_mechanism, make_drive, run
+from mechsim.scenarios.thermal_cycle import CycleMeans, bulk_response
+from mechsim.scenarios.thermal_integrate import ModalNetwork, closed_form_columns, input_function, switch_times
+from mechsim.scenarios.thermal_post import plan
+from mechsim.scenarios.thermal_setup import adapter
+from mechsim.thermal import duhamel_surface, get_material, integrate_mean_heat
 
 STEEL = get_material("aisi1045")
 E_STAR = 113.74e9              # physics.md §3: steel on steel, Johnson's convention

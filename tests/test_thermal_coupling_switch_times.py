@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 
-from scenarios.loader import load
-from scenarios.runner import build_mechanism
-from scenarios.thermal_integrate import _contact_code, closed_form_columns, switch_times
+from mechsim.scenarios.loader import load
+from mechsim.scenarios.runner import build_mechanism
+from mechsim.scenarios.thermal_integrate import _contact_code, closed_form_columns, switch_times
 
 
 def _one_at_a_time(columns, t_grid, tol=1e-13):

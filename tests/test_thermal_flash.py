@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from thermal import (TRANSIENT_FLOOR_COEFFICIENT, band_stationary_transient, band_theta_low, band_theta_table,
+from mechsim.thermal import (TRANSIENT_FLOOR_COEFFICIENT, band_stationary_transient, band_theta_low, band_theta_table,
                      blok_flash_high_peclet, blok_partition, circle_theta, circle_theta_avg_exact,
                      circle_theta_max_exact, effective_modulus, flash_temperature, frictional_heat, get_material,
                      half_width, high_peclet_coefficient, seed_flash_rise, seed_normal_load, seed_sliding_speed,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from thermal import (biot_number, bulk_system, cycle_means, disc_volume_area, geneva_bulk_system, get_material,
+from mechsim.thermal import (biot_number, bulk_system, cycle_means, disc_volume_area, geneva_bulk_system, get_material,
                      integrate_mean_heat, pin_volume_area, steady_bulk_temperatures, time_constant)
 
 STEEL = get_material("aisi1045")
