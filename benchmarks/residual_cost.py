@@ -1,6 +1,6 @@
 """Per-call cost of the IDA residual and Jacobian: generated plain Python vs a jax.jit of the same expressions.
 
-design.md measured ~3 us for plain scalar Python against ~11 us for one jitted JAX call from Python; this
+docs/architecture.md measured ~3 us for plain scalar Python against ~11 us for one jitted JAX call from Python; this
 measures ours side by side in one process and reports the ratio. Run: python benchmarks/residual_cost.py
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ def measure() -> list[dict]:
         n = 20000
         t_res = min(timeit.repeat(lambda: mf.residual(0.1, y, yp, out, p), number=n, repeat=5)) / n
         t_jac = min(timeit.repeat(lambda: mf.jacobian(0.1, y, yp, None, 10.0, J, p), number=n, repeat=5)) / n
-        # the same residual rows lambdified to jax and jitted (the peer design.md measured)
+        # the same residual rows lambdified to jax and jitted (the peer docs/architecture.md measured)
         rows = _rows_from_source(mf, model, mech, formulation)
         import jax.numpy as jnp
         raw = sp.lambdify(rows[0], rows[1], modules="jax")

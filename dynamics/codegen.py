@@ -1,6 +1,6 @@
 """Generate plain-Python scalar functions from sympy expressions (for the IDA hot path).
 
-design.md measured one `jax.jit` call from Python at ~11 us against ~3 us for plain scalar Python, so the
+docs/architecture.md measured one `jax.jit` call from Python at ~11 us against ~3 us for plain scalar Python, so the
 residual, Jacobian and event functions IDA calls thousands of times are emitted as straight-line Python with
 common subexpressions eliminated (sympy.cse) and `math` functions, then compiled once with `exec`.
 The generated source is kept on the function (`__source__`) for inspection.

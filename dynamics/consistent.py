@@ -1,7 +1,7 @@
 """Consistent (re)initialisation of a mode and the impact law at mode changes.
 
 IDA's own initial-condition calculation does not touch differential variables and is not applicable to the
-index-2/3 forms (kinematics.md §4), so every segment starts from a state made consistent here:
+index-2/3 forms (docs/theory.md §K4), so every segment starts from a state made consistent here:
 positions projected onto Phi = 0 (Gauss-Newton, minimum-norm corrections), velocities onto the velocity
 constraints with the kinetic-energy metric (which is also the impact law), then accelerations and multipliers
 from the KKT system  [[M, G^T - dQ/dlam], [G, 0]] [a; lam] = [Q(lam=0); -gamma].

@@ -2,7 +2,7 @@
 
 With q positions, v velocities, Phi(t, q) = 0 the m constraints, G = dPhi/dq, and M v' + G^T lam = Q:
 
-- index3: q' = v;  M v' + G^T lam = Q;  Phi = 0.                       (kinematics.md §4, 'Index 3')
+- index3: q' = v;  M v' + G^T lam = Q;  Phi = 0.                       (docs/theory.md §K4, 'Index 3')
 - index2: q' = v - G^T mu;  M v' + G^T lam = Q;  Phi = 0;  G v + Phi_t = 0.
           Stabilized index 2 of Gear, Gupta & Leimkuhler (1985); mu = 0 on the exact solution.
 - index1: q' = v;  M v' + G^T lam = Q;  Phi'' + 2 a Phi' + b^2 Phi = 0 (acceleration level with

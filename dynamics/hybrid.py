@@ -133,7 +133,7 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
             if settings.formulation == "index3":
                 reason = f"IDA failed on the index-3 formulation: {seg.message}"
                 hint = ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
-                        "error test breaks down at restarts and tight tolerances (kinematics.md §4); use "
+                        "error test breaks down at restarts and tight tolerances (docs/theory.md §K4); use "
                         "formulation = 'index2'")
             failure = dict(time=seg.t_end, mode=mode, reason=reason,
                            where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=hint)

@@ -2,7 +2,7 @@
 
 Built from the SAME sympy pieces the IDA residual is generated from (`ModeFunctions.symbolic`), lambdified to
 jax.numpy in float64. The state is z = [q, v, work, ext]; accelerations and multipliers come from the
-augmented KKT system of the mode (index-1 with Baumgarte's stabilisation, kinematics.md §4):
+augmented KKT system of the mode (index-1 with Baumgarte's stabilisation, docs/theory.md §K4):
 
     [[M, G^T - dQ/dlam], [G, 0]] [a; lam] = [Q(lam = 0); -gamma - 2 alpha Phi' - beta^2 Phi]
 

@@ -16,7 +16,7 @@ class SolverSettings:
     method: "auto" lets the runner skip the DAE where a closed form exists (prescribed speed);
         "dae" always integrates; "closed-form" insists on the closed form.
     multiplier_atol: IDA's absolute tolerance on multipliers. scikit-sundae cannot call IDASetSuppressAlg,
-        so a large value keeps the algebraic variables out of the error test (design.md, kinematics.md §4).
+        so a large value keeps the algebraic variables out of the error test (docs/architecture.md, docs/theory.md §K4).
         None picks 1e6 for index2/index3 and 1e3 for index1.
     jacobian: "exact" (generated from the symbolic model, the default) or "fd" (IDA's internal finite
         differences, only when asked for).

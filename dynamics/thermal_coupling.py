@@ -1,8 +1,8 @@
 """Thermal states in the same DAE as the mechanics: a `StateExtension` built from a linear thermal network.
 
 The network is a `thermal.LinearThermalSystem`, C T' = -K T + s + B u (lumped bulk bodies, optionally 1-D
-track meshes; shared/physics.md §5-6). Its inputs u are heat rates into the bodies, made from the contact
-expressions a mode exposes (`Mode.heat`): the friction power Q = mu |N| |u_slip| (`heat_rate`, physics.md §4.1),
+track meshes; docs/theory.md §G5-6). Its inputs u are heat rates into the bodies, made from the contact
+expressions a mode exposes (`Mode.heat`): the friction power Q = mu |N| |u_slip| (`heat_rate`, docs/theory.md §G4.1),
 the pin's share gamma (Blok's partition, §4.6, of the band-source fit, §4.3) and, for per-track meshes, the
 index of the track in contact (`track`). The same functions evaluate in sympy (IDA residual rows, exact
 Jacobian derived from them) and numpy (closed-form kinematics path), so both paths integrate one model.
@@ -118,7 +118,7 @@ def heat_share_pin(contact: dict, P: Callable[[str], object], distribution: str,
 
     `contact` holds normal_force, source_speed_pin, source_speed_wheel (sympy expressions or numpy arrays);
     P(name) gives the SHARE_PARAMETERS (symbols or numbers). With xp = sympy the result is one opaque call
-    (`opaque_function`) of the same expression. physics.md §4.3 (fit), §4.6 (partition, transient floor).
+    (`opaque_function`) of the same expression. docs/theory.md §G4.3 (fit), §4.6 (partition, transient floor).
     """
     if xp is not sp:
         return _share_expression(contact, P, distribution, xp)

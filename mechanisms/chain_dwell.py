@@ -6,14 +6,14 @@ closed form in s:
 
 * assembly roots, sigma = -1 'leading' (A clockwise of ray QB, paper case I, eq. 24) and sigma = +1
   'lagging' (paper case II, eq. 30): phi = arg(QB) + sigma*beta, theta = arg(QB) - sigma*gamma, with beta and
-  gamma the triangle angles at Q and B (kinematics.md §1.1);
+  gamma the triangle angles at Q and B (docs/theory.md §K1.1);
 * rates from the differentiated loop equation R e(phi) + L e(theta) = B - Q (the paper's eqs. 28-29 with
-  the sign of D_2 corrected, kinematics.md §1.6 E9), written so that they keep full accuracy next to a
+  the sign of D_2 corrected, docs/theory.md §K1.6 E9), written so that they keep full accuracy next to a
   stretched dyad;
-* one-sided limits at the singular apex (stretched dyad, kinematics.md §1.2), exact, from the second- and
+* one-sided limits at the singular apex (stretched dyad, docs/theory.md §K1.2), exact, from the second- and
   third-order loop equations;
 * the smooth branch: the analytic continuation of a root through every tangential stretched/folded point
-  (kinematics.md §1.1 "Smooth branch"; here the root sign simply flips there);
+  (docs/theory.md §K1.1 "Smooth branch"; here the root sign simply flips there);
 * exact dwells (§1.2-1.3), near-dwells and fold points of detuned designs (§1.5).
 
 Everything is SI (m, rad, s). Angles of the driving sprocket are theta1 = s/r1 (rad).
@@ -64,7 +64,7 @@ class ChainDwellParams:
                    (float(pivot_cm[0]) * c, float(pivot_cm[1]) * c), float(drive_speed))
 
     def detuned(self, delta: float) -> "ChainDwellParams":
-        """The same design with coupler L + delta (m): delta = (R + L) - (L_i + r_i), kinematics.md §1.5."""
+        """The same design with coupler L + delta (m): delta = (R + L) - (L_i + r_i), docs/theory.md §K1.5."""
         return replace(self, name=f"{self.name} (delta = {delta:+.3g} m)", coupler=self.coupler + delta)
 
 
@@ -95,7 +95,7 @@ class SingularPoint:
 
 
 class ChainDwellMechanism:
-    """Kinematics of the roller-chain dwell mechanism at prescribed driving speed (kinematics.md §1)."""
+    """Kinematics of the roller-chain dwell mechanism at prescribed driving speed (docs/theory.md §K1)."""
 
     #: relative tolerance on lengths deciding 'exactly tuned' (R = L_i, L = r_i) and 'exactly stretched'
     GEOM_TOL = 1e-12
@@ -193,7 +193,7 @@ class ChainDwellMechanism:
         """Root sign (-1 leading, +1 lagging) at chain travel s (cumulative, m).
 
         'smooth': equals `start_branch` just after travel `start` and flips at every tangential
-        stretched/folded point passed since (kinematics.md §1.1-1.2: there D continues into D).
+        stretched/folded point passed since (docs/theory.md §K1.1-1.2: there D continues into D).
         """
         s = np.asarray(s, float)
         if branch in _SIGMA:
@@ -246,7 +246,7 @@ class ChainDwellMechanism:
         Returns arrays: s, piece, sigma, closes, B, A (m), phi, theta (rad), dphi, dtheta (rad/m),
         d2phi, d2theta (rad/m^2), stretch (R + L - |QB|, m). At a junction or a stretched/folded touch,
         side = -1 / +1 gives the limit from before / after. Where the dyad does not close: NaN; at a fold the
-        rates are infinite. Sources: kinematics.md §1.1 (roots), paper eqs. (28)-(29) corrected per §1.6 E9
+        rates are infinite. Sources: docs/theory.md §K1.1 (roots), paper eqs. (28)-(29) corrected per §1.6 E9
         (rates), one-sided apex limits derived in docs/chain_dwell.md ("Apex limits", checked against §1.4).
         """
         s_in = np.atleast_1d(np.asarray(s, float))
@@ -306,7 +306,7 @@ class ChainDwellMechanism:
               start_branch: str = "leading") -> dict:
         """Crank/coupler angle, speed and acceleration at driving angles theta1 (rad), constant omega1.
 
-        phi_dot = phi' * r1*omega1, phi_ddot = phi'' * (r1*omega1)^2 (s = r1*theta1, kinematics.md §1.1).
+        phi_dot = phi' * r1*omega1, phi_ddot = phi'' * (r1*omega1)^2 (s = r1*theta1, docs/theory.md §K1.1).
         """
         w = self.omega1 if omega1 is None else float(omega1)
         st = self.state(np.asarray(drive_angle, float) * self.r1, branch, side, start_branch)
@@ -331,7 +331,7 @@ class ChainDwellMechanism:
         out = []
         for a, b in zip(cuts[:-1], cuts[1:]):
             mid = 0.5 * (a + b)
-            # A = O_i is clockwise of ray QB (leading, sigma = -1) iff (B-Q) x (O_i-Q) < 0 (kinematics.md §1.2)
+            # A = O_i is clockwise of ray QB (leading, sigma = -1) iff (B-Q) x (O_i-Q) < 0 (docs/theory.md §K1.2)
             Bm = arc.derivative(np.array(mid), 0)
             sD = -1 if float(cross(Bm - self.Q, np.asarray(arc.centre) - self.Q)) < 0 else +1
             out.append((a, b, sD))
@@ -351,7 +351,7 @@ class ChainDwellMechanism:
 
         For branch='smooth' the branch is `start_branch` just after theta1 = 0 (as in `state`), whatever the window.
 
-        Structural detection (kinematics.md §1.2): on the wrap of a tuned sprocket (R = L_i, L = r_i) the
+        Structural detection (docs/theory.md §K1.2): on the wrap of a tuned sprocket (R = L_i, L = r_i) the
         root that sits on A = O_i is the one with O_i on its side of ray QB; the branch dwells where its
         sign matches. Durations are in driving-sprocket angle, Delta s / r1 (paper eq. 10 corrected, §1.6 E7).
         """
@@ -396,7 +396,7 @@ class ChainDwellMechanism:
 
     def dwell_end_rates(self, branch: str = "leading", cycles: float = 1.0, omega1: float | None = None,
                         start_branch: str = "leading") -> pd.DataFrame:
-        """One-sided crank speed/acceleration at every dwell start and end (kinematics.md §1.4)."""
+        """One-sided crank speed/acceleration at every dwell start and end (docs/theory.md §K1.4)."""
         rows = []
         for _, d in self.dwells(branch, cycles, start_branch=start_branch).iterrows():
             for ev, ang, lab in (("start", d.start_drive_angle_rad, d.start_event),

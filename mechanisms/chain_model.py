@@ -2,15 +2,15 @@
 
 Coordinates q = (drive, crank, coupler): the driving-sprocket angle theta1 (rad; chain travel s = r1 theta1,
 so the drive torque is in N*m and the initial angle/speed in rad, rad/s), the crank angle phi about the pivot Q
-and the coupler angle theta (kinematics.md §1.1). Joint B rides on the chain path B(s), which is C1 but not C2,
-so every line/arc junction ends a mode (kinematics.md §1.5 point 5); each piece's geometry is a mode parameter.
+and the coupler angle theta (docs/theory.md §K1.1). Joint B rides on the chain path B(s), which is C1 but not C2,
+so every line/arc junction ends a mode (docs/theory.md §K1.5 point 5); each piece's geometry is a mode parameter.
 
-Constraints. On lines and on arcs without an exact dwell the loop closure (kinematics.md §1.5)
+Constraints. On lines and on arcs without an exact dwell the loop closure (docs/theory.md §K1.5)
 
     g = Q + R e(phi) + L e(theta) - B(s) = 0                    (2 rows, m; multipliers = force on the chain at B)
 
 is regular except where the dyad is stretched or folded. On the wrap of a tuned sprocket (|QO_i| = R, r_i = L,
-paper eq. 35) the solution set of g is two curves crossing at the apex, where rank G = 1 (kinematics.md §1.5
+paper eq. 35) the solution set of g is two curves crossing at the apex, where rank G = 1 (docs/theory.md §K1.5
 point 1): the dwell curve D (A = O_i) and the reflected curve F (A = O_i mirrored in QB). There each curve gets
 its own regular pair of rows, both equivalent to g on that curve (docs/chain_dwell.md §7):
 
@@ -19,7 +19,7 @@ its own regular pair of rows, both equivalent to g on that curve (docs/chain_dwe
 
 so no mode ever integrates through a rank-deficient Jacobian. The branch choice at the apex is explicit
 (`apex`): "stop" (a crank stop at alpha_i: Newton impact with restitution e, then the crank dwells against it),
-"smooth" (F continues through the apex: the exact inertial motion, kinematics.md §1.5 point 2) or "detuned"
+"smooth" (F continues through the apex: the exact inertial motion, docs/theory.md §K1.5 point 2) or "detuned"
 (coupler L + delta, delta != 0: no exact apex; delta < 0 gives folds where the chain stalls or reverses,
 detected by the `reversal`/`dead_centre` guards and reported, never integrated through).
 
@@ -52,7 +52,7 @@ def _e(angle):
 
 
 class ChainDwell(Mechanism):
-    """Roller-chain dwell mechanism driven at sprocket 1, loaded at the crank (kinematics.md §1)."""
+    """Roller-chain dwell mechanism driven at sprocket 1, loaded at the crank (docs/theory.md §K1)."""
 
     name = "chain_dwell"
     coordinates = ("drive", "crank", "coupler")
@@ -456,7 +456,7 @@ class ChainDwell(Mechanism):
 
         stop: the starting root up to the first apex, the leading root after it (a stop turns F into D, and D
         is never left at an apex); smooth: the analytic continuation (chain_dwell 'smooth') from the start;
-        detuned: the starting root (no apex exists). Sources: kinematics.md §1.2, §1.5; docs/chain_dwell.md §7.
+        detuned: the starting root (no apex exists). Sources: docs/theory.md §K1.2, §1.5; docs/chain_dwell.md §7.
         """
         k = self.kin
         if self.apex == "smooth":

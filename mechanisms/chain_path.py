@@ -1,9 +1,9 @@
 """Chain loop over n sprockets: pieces (tangent lines, wrapped arcs) and joint B located by chain travel s.
 
 Source: El-Shakery (1991) eqs. (12)-(22) and (31)-(32), restated with a quadrant-safe construction in
-`shared/kinematics.md §1.1` (the paper's eqs. (14)-(19), (32) are wrong, §1.6 E1-E6).
+`docs/theory.md §K1.1` (the paper's eqs. (14)-(19), (32) are wrong, §1.6 E1-E6).
 
-Conventions (kinematics.md §1.1): sprockets (O_i, r_i) are listed counter-clockwise; the chain wraps the
+Conventions (docs/theory.md §K1.1): sprockets (O_i, r_i) are listed counter-clockwise; the chain wraps the
 convex hull of their discs from outside and moves counter-clockwise. s = 0 is the tangent point where the
 chain leaves sprocket 1 towards sprocket 2; the pieces follow in the order
 line 1->2, arc 2, line 2->3, arc 3, ..., line n->1, arc 1. Piece names use the paper's 1-based sprocket
@@ -71,7 +71,7 @@ def circle_circle_intersection(c1, r1: float, c2, r2: float):
 class LinePiece:
     """Straight run from sprocket `sprocket` to `to_sprocket`: B(s) = P0 + (s - s0) t, B' = t, B'' = 0.
 
-    Source: external common tangent, kinematics.md §1.1 (the paper's eq. (21) with S = s - s0).
+    Source: external common tangent, docs/theory.md §K1.1 (the paper's eq. (21) with S = s - s0).
     """
 
     index: int
@@ -151,7 +151,7 @@ class ArcPiece:
     """Wrap of sprocket `sprocket`: B(s) = O + r e(psi), psi = psi0 + (s - s0)/r (counter-clockwise).
 
     B' = e(psi + pi/2), B'' = -e(psi)/r, B''' = -e(psi + pi/2)/r^2.
-    Source: the paper's eq. (22) with eps = psi, S = r_1 theta_1 (kinematics.md §1.1).
+    Source: the paper's eq. (22) with eps = psi, S = r_1 theta_1 (docs/theory.md §K1.1).
     """
 
     index: int
@@ -204,7 +204,7 @@ class ArcPiece:
         """|B - Q|^2 - c^2 = (D + r - c)(D + r + c) - 4 D r sin^2(dpsi/2), dpsi measured from the apex.
 
         Exact rewrite of |O - Q + r e(psi)|^2 - c^2; it keeps full relative accuracy near the apex
-        (dpsi = 0, |B - Q| = D + r), where the dwell design puts the stretched dyad (kinematics.md §1.2).
+        (dpsi = 0, |B - Q| = D + r), where the dwell design puts the stretched dyad (docs/theory.md §K1.2).
         """
         D, dpsi = self._dpsi(s, Q)
         r = self.radius
@@ -274,7 +274,7 @@ def _angle(v) -> float:
 
 
 class ChainPath:
-    """The closed chain loop over sprockets listed counter-clockwise (kinematics.md §1.1).
+    """The closed chain loop over sprockets listed counter-clockwise (docs/theory.md §K1.1).
 
     centres: (n, 2) sprocket centres O_i (m); radii: (n,) r_i (m). Raises ValueError naming the problem when
     the layout is not a convex counter-clockwise chain loop.
@@ -312,7 +312,7 @@ class ChainPath:
         self.radii = radii
         self.n = n
 
-        # external common tangents i -> i+1 (kinematics.md §1.1)
+        # external common tangents i -> i+1 (docs/theory.md §K1.1)
         t_dir, normals, starts, lengths = [], [], [], []
         for i in range(n):
             j = (i + 1) % n

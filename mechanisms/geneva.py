@@ -3,16 +3,16 @@
 Coordinates q = (crank, wheel): the crank angle theta (unwrapped, 0 at the first mid-engagement, growing
 with the drive) and the wheel angle psi (unwrapped, positive in the indexing direction, +2 pi/n per index).
 During engagement k the local angles are alpha = theta - 2 pi k and beta = psi - k 2 pi/n, the pin centre is
-P = (c - r cos alpha, r sin alpha) in the wheel-centre frame of physics.md §1, and the constraint is that P
+P = (c - r cos alpha, r sin alpha) in the wheel-centre frame of docs/theory.md §G1, and the constraint is that P
 lies on the slot centre line (signed lateral offset, metres):
 
     Phi = r sin(alpha) cos(beta) - (c - r cos(alpha)) sin(beta) = 0.
 
 Its multiplier is the normal force N on the driving flank (N > 0 pushes the wheel forward). Friction acts
 along the slot at the contact point, with the slip u = v_s + flank R (theta' + psi') including the pin's spin
-(physics.md §1 'Pin spin', §2); its generalized force -mu |N| sign(u) du/dv dissipates exactly mu |N| |u|.
+(docs/theory.md §G1 'Pin spin', §2); its generalized force -mu |N| sign(u) du/dv dissipates exactly mu |N| |u|.
 During the dwell the locking arcs hold the wheel: Phi = r (psi - psi_lock) (a length, so the residual has one
-unit); the load torque is then carried by the lock and locking friction is neglected (physics.md §2).
+unit); the load torque is then carried by the lock and locking friction is neglected (docs/theory.md §G2).
 """
 from __future__ import annotations
 
@@ -220,7 +220,7 @@ class Geneva(Mechanism):
         raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
-        """Crank angle from the reduced-coordinate equation (`geneva_reduced`, physics.md §2) on DOP853;
+        """Crank angle from the reduced-coordinate equation (`geneva_reduced`, docs/theory.md §G2) on DOP853;
         torque and motor drives only."""
         if drive.is_prescribed:
             return None
@@ -241,10 +241,10 @@ class Geneva(Mechanism):
 
     # -- prescribed constant crank speed: no DAE needed ------------------------------------------------
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
-        """Columns at constant crank speed from the closed forms of physics.md §1-2 (no integration).
+        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
 
         Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
-        (physics.md §2, with the flank chosen by the sign of N); drive torque from the crank's balance
+        (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
         T_in = c1 w1 + N r cos(alpha + beta) + mu |N| sigma (r sin(alpha + beta) + flank R).
         """
         g = self.geometry
@@ -304,7 +304,7 @@ class Geneva(Mechanism):
             inner = g.min_pin_distance * 1e3 * 0.9
             ax.plot([inner * np.cos(ang), wheel_r * np.cos(ang)], [inner * np.sin(ang), wheel_r * np.sin(ang)],
                     color="tab:blue", lw=2.5, solid_capstyle="butt")
-        # crank: O1 at (c, 0); pin at (c - r cos(theta), r sin(theta)) in the frame of physics.md §1
+        # crank: O1 at (c, 0); pin at (c - r cos(theta), r sin(theta)) in the frame of docs/theory.md §G1
         px, py = c - r * np.cos(theta), r * np.sin(theta)
         ax.plot([c, px], [0, py], color="tab:red", lw=2)
         ax.add_patch(Circle((px, py), g.pin_radius * 1e3, color="tab:red"))

@@ -1,8 +1,8 @@
 """Closed-form kinematics of the external Geneva drive at constant crank speed (vectorised numpy).
 
-Frame and signs of physics.md §1: wheel centre O2 at the origin, crank centre O1 at (c, 0); crank angle
+Frame and signs of docs/theory.md §G1: wheel centre O2 at the origin, crank centre O1 at (c, 0); crank angle
 alpha from the line of centres (0 = pin deepest in the slot), growing with time; wheel angle beta = angle
-of the engaged slot, positive in the driving direction. Sources: physics.md §1 (re-derived; agrees with
+of the engaged slot, positive in the driving direction. Sources: docs/theory.md §G1 (re-derived; agrees with
 Sclater & Chironis 2001 and with the seed's S(3a), S(3b), S(7) up to the sign S(3b) loses).
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 class GenevaGeometry:
     """External Geneva geometry from crank radius r, slot count n and pin radius R (SI).
 
-    Tangential (shock-free) entry fixes the centre distance c = r / sin(pi/n) (physics.md §1 table, row λ, c).
+    Tangential (shock-free) entry fixes the centre distance c = r / sin(pi/n) (docs/theory.md §G1 table, row λ, c).
     """
 
     crank_radius: float
@@ -66,7 +66,7 @@ class GenevaGeometry:
 
     @property
     def dwell_fraction(self) -> float:
-        """(n + 2) / (2 n) of a crank turn (physics.md §1)."""
+        """(n + 2) / (2 n) of a crank turn (docs/theory.md §G1)."""
         return (self.slots + 2) / (2 * self.slots)
 
 
@@ -75,38 +75,38 @@ def _d(lam: float, alpha):
 
 
 def wheel_angle(lam: float, alpha):
-    """beta = atan2(lambda sin(alpha), 1 - lambda cos(alpha)) (physics.md §1; seed S(3b) with its sign)."""
+    """beta = atan2(lambda sin(alpha), 1 - lambda cos(alpha)) (docs/theory.md §G1; seed S(3b) with its sign)."""
     return np.arctan2(lam * np.sin(alpha), 1.0 - lam * np.cos(alpha))
 
 
 def speed_ratio(lam: float, alpha):
-    """G = d(beta)/d(alpha) = lambda (cos(alpha) - lambda) / D (physics.md §1)."""
+    """G = d(beta)/d(alpha) = lambda (cos(alpha) - lambda) / D (docs/theory.md §G1)."""
     return lam * (np.cos(alpha) - lam) / _d(lam, alpha)
 
 
 def speed_ratio_derivative(lam: float, alpha):
-    """G' = d2(beta)/d(alpha)2 = -lambda (1 - lambda^2) sin(alpha) / D^2 (physics.md §1)."""
+    """G' = d2(beta)/d(alpha)2 = -lambda (1 - lambda^2) sin(alpha) / D^2 (docs/theory.md §G1)."""
     return -lam * (1 - lam * lam) * np.sin(alpha) / _d(lam, alpha) ** 2
 
 
 def speed_ratio_second_derivative(lam: float, alpha):
-    """G'' = -lambda (1-lambda^2) [(1+lambda^2) cos(alpha) - 2 lambda (1 + sin^2 alpha)] / D^3 (physics.md §1, jerk)."""
+    """G'' = -lambda (1-lambda^2) [(1+lambda^2) cos(alpha) - 2 lambda (1 + sin^2 alpha)] / D^3 (docs/theory.md §G1, jerk)."""
     return (-lam * (1 - lam * lam) * ((1 + lam * lam) * np.cos(alpha) - 2 * lam * (1 + np.sin(alpha) ** 2))
             / _d(lam, alpha) ** 3)
 
 
 def pin_distance(geom: GenevaGeometry, alpha):
-    """x = c sqrt(D) (physics.md §1; seed S(3a))."""
+    """x = c sqrt(D) (docs/theory.md §G1; seed S(3a))."""
     return geom.centre_distance * np.sqrt(_d(geom.ratio, alpha))
 
 
 def pin_sliding_speed(geom: GenevaGeometry, alpha, crank_speed):
-    """v_s = dx/dt = omega1 r sin(alpha) c / x, signed (< 0 inward) (physics.md §1)."""
+    """v_s = dx/dt = omega1 r sin(alpha) c / x, signed (< 0 inward) (docs/theory.md §G1)."""
     return crank_speed * geom.crank_radius * np.sin(alpha) * geom.centre_distance / pin_distance(geom, alpha)
 
 
 def slip_speed(geom: GenevaGeometry, alpha, crank_speed, wheel_speed, flank: float = 1.0):
-    """Surface slip on the contact flank, u = v_s + flank * R (omega1 + omega2) (physics.md §1 'Pin spin')."""
+    """Surface slip on the contact flank, u = v_s + flank * R (omega1 + omega2) (docs/theory.md §G1 'Pin spin')."""
     return pin_sliding_speed(geom, alpha, crank_speed) + flank * geom.pin_radius * (crank_speed + wheel_speed)
 
 
@@ -120,7 +120,7 @@ def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float)
     """Wheel angle (unwrapped), speed, acceleration and jerk at constant crank speed.
 
     crank_angle is the unwrapped crank angle theta (0 at the first mid-engagement). During a dwell the wheel
-    rests at the nearest half-pitch: it has indexed once per engagement passed (physics.md §1-2).
+    rests at the nearest half-pitch: it has indexed once per engagement passed (docs/theory.md §G1-2).
     """
     theta = np.asarray(crank_angle, dtype=float)
     lam, a0 = geom.ratio, geom.engagement_half_angle
@@ -140,7 +140,7 @@ def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float)
 
 def normal_force_from_wheel(geom: GenevaGeometry, alpha, wheel_accel, wheel_speed, wheel_inertia: float,
                             load_torque: float, friction: float, slide_sign, wheel_damping: float = 0.0):
-    """N = (J2 beta'' + T_L + c2 beta') / (x - sigma mu R): the wheel's moment balance (physics.md §2).
+    """N = (J2 beta'' + T_L + c2 beta') / (x - sigma mu R): the wheel's moment balance (docs/theory.md §G2).
 
     The normal force acts perpendicular to the slot through the pin centre (arm x about O2); friction mu|N|
     acts along the slot at lateral offset R (arm R); sigma = sign(u_slip) on the driving flank.

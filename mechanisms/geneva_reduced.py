@@ -1,11 +1,11 @@
 """Geneva dynamics in the single coordinate theta (crank angle): an independent reference for the DAE.
 
-Engaged (physics.md §2, friction included, driving flank): the wheel's moment balance gives
+Engaged (docs/theory.md §G2, friction included, driving flank): the wheel's moment balance gives
     N = (J2 (G theta'' + G' theta'^2) + c2 G theta' + T_L) / (x - sigma mu R)
 and the crank's, with the normal-force arm x G = r cos(alpha + beta) and the friction arm
 s = r sin(alpha + beta) + R (sliding plus pin spin),
     J1 theta'' = T_in - c1 theta' - N (x G + sigma mu s),
-which is physics.md's (J1 + J2 G (G + kappa_f)) theta'' + J2 G' (G + kappa_f) theta'^2 = T_in - T_L (G + kappa_f)
+which is docs/theory.md (Part G)'s (J1 + J2 G (G + kappa_f)) theta'' + J2 G' (G + kappa_f) theta'^2 = T_in - T_L (G + kappa_f)
 with damping added. Dwell: J1 theta'' = T_in - c1 theta'. T_in = T0 - slope theta'.
 Integrated with scipy's DOP853, restarting at every engagement boundary and slip reversal.
 """

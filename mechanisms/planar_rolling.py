@@ -48,7 +48,7 @@ def dyad_tip(A0, B, l2: float, l3: float, sigma: int, clip_tol: float = 1e-12):
 def dyad_derivatives(A0, A, B, dB, ddB):
     """First and second derivatives of the dyad tip A and of the crank/coupler angles with respect to
     the input parameter, by implicit differentiation of |A - A0|^2 = l2^2 and |B - A|^2 = l3^2
-    (kinematics.md §2.2).
+    (docs/theory.md §K2.2).
 
     With u = A - A0, w = B - A, A' = i th2' u and
         th2'  = (w.B') / (u x w),

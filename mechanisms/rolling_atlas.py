@@ -1,4 +1,4 @@
-"""Coupler-curve atlas of the rolling-pair 4-bar (Kar & Sen §3; kinematics.md §2.2-2.4): the curve
+"""Coupler-curve atlas of the rolling-pair 4-bar (Kar & Sen §3; docs/theory.md §K2.2-2.4): the curve
 tabulated over the trochoid's period (or a documented finite span), its components (monochromatic /
 dichromatic, coloured by branch), non-closure regions, cusps and crunodes, as pandas DataFrames.
 
@@ -54,7 +54,7 @@ def _grid(a: float, b: float, n: int, cluster_a: bool, cluster_b: bool) -> np.nd
 
 def components(mech: RollingFourBar, intervals: list[ClosureInterval] | None = None,
                span: tuple[float, float] | None = None, periodic: bool | None = None) -> list[Component]:
-    """Components of the coupler curve from the closure intervals (Kar & Sen §3.1, kinematics.md §2.2)."""
+    """Components of the coupler curve from the closure intervals (Kar & Sen §3.1, docs/theory.md §K2.2)."""
     if span is None:
         span, per = rolling_span(mech)
         periodic = per if periodic is None else periodic
@@ -170,7 +170,7 @@ def nonclosure_table(intervals: list[ClosureInterval], span: tuple[float, float]
 
 
 def cusps_table(mech: RollingFourBar, comps: list[Component] | None = None, rtol: float = 1e-12) -> pd.DataFrame:
-    """Cusps at B on the fixed profile when l4 = r (Kar & Sen §3.3; kinematics.md §2.3).
+    """Cusps at B on the fixed profile when l4 = r (Kar & Sen §3.3; docs/theory.md §K2.3).
 
     B touches the profile at phi_k = (pi - psi + 2 pi k)(R + r)/R (circle) or -pi - psi + 2 pi k (line);
     there B = contact = instantaneous centre of link 4, so B' = 0, A' = 0, theta3' = 0 and C' = 0 for every
@@ -244,7 +244,7 @@ def _crossings(f, df, verts_phi, verts_br, verts, closed, ends, period, other=No
 
 
 def trochoid_crunodes_table(mech: RollingFourBar, samples_per_turn: int = 720) -> pd.DataFrame:
-    """Self-intersections of the locus of B, refined by Newton on B(phi1) = B(phi2) (kinematics.md §2.4)."""
+    """Self-intersections of the locus of B, refined by Newton on B(phi1) = B(phi2) (docs/theory.md §K2.4)."""
     (a, b), periodic = rolling_span(mech)
     n = max(16, int(math.ceil(samples_per_turn * (b - a) / (2 * math.pi))))
     phi = np.linspace(a, b, n + 1)
@@ -260,7 +260,7 @@ def trochoid_crunodes_table(mech: RollingFourBar, samples_per_turn: int = 720) -
 def crunodes_table(mech: RollingFourBar, samples_per_turn: int = 720, comps: list[Component] | None = None,
                    between_components: bool = False, trochoid: pd.DataFrame | None = None) -> pd.DataFrame:
     """Crunodes (self-intersections) of each coupler-curve component, located on the sampled polyline and
-    refined by Newton on C(phi1, b1) = C(phi2, b2) (kinematics.md §2.4).
+    refined by Newton on C(phi1, b1) = C(phi2, b2) (docs/theory.md §K2.4).
 
     `induced` marks crunodes at the phi pair of a trochoid crunode (Kar & Sen §3.2: every trochoid
     crunode gives one on each branch). With `between_components`, crossings of different components are

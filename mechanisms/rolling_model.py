@@ -2,16 +2,16 @@
 bodies, gravity, a drive on the crank or on the rolling link, dead points as guards.
 
 Coordinates q = (theta2, theta3, phi): crank angle (A0 -> A), coupler angle (A -> B), and the absolute rotation
-phi of the rolling link (kinematics.md §2.1). Two loop-closure constraints (metres)
+phi of the rolling link (docs/theory.md §K2.1). Two loop-closure constraints (metres)
 
     Phi = A0 + l2 e^{i theta2} + l3 e^{i theta3} - B(phi) = 0,
     B(phi) = B0(u(phi)) + l4 e^{i theta4(phi)},  theta4 = nu0 + psi + phi,
 
-where B0(u) and u(phi) are the corrected no-slip rolling relations of `rolling_pair` (kinematics.md §2.1,
+where B0(u) and u(phi) are the corrected no-slip rolling relations of `rolling_pair` (docs/theory.md §K2.1,
 gamma = gamma0 + phi r/(R + r); a line: s = -r phi). The rolling constraint is holonomic and explicit in the
 rolling parameter, so it is embedded in the coordinates (the rolling link's pose is a function of phi alone)
 instead of being carried as two more constraint rows. Why these coordinates and not the 9 Cartesian ones of
-kinematics.md §3 (8 constraints): nq + m = 5 (6 with a prescribed speed) instead of 17, a residual of 10-13
+docs/theory.md §K3 (8 constraints): nq + m = 5 (6 with a prescribed speed) instead of 17, a residual of 10-13
 rows instead of 34-40, and the KKT guard substitution of dynamics/model.py stays within its symbolic limit.
 The price is a configuration-dependent mass matrix, whose velocity-product (Christoffel) terms are part of
 the applied force here.
@@ -21,7 +21,7 @@ between the coupler's end and link 4's point B, so the generalized force -G^T la
 -lam on the coupler. The rolling contact force then follows from link 4's Newton equation,
 F_P = m4 a_G4 - m4 g - lam, split into the normal (along B0 - P) and tangential parts.
 
-Dead points (kinematics.md §4, point 4). With the rolling link as input the singular configurations are the
+Dead points (docs/theory.md §K4, point 4). With the rolling link as input the singular configurations are the
 stretched/folded dyad, sin(theta3 - theta2) = 0; with the crank as input the coupler's line passes through the
 contact point P (the rolling link's instantaneous centre), w . B'(phi) = 0 (w = B - A; also at every cusp,
 where B' = 0). There the driven coordinate's speed must vanish: the configuration curve is smooth and the
@@ -66,7 +66,7 @@ class Bodies:
                 arm_mass: float = 0.0) -> "Bodies":
         """Slender rods for crank and coupler (m l^2/12 at mid-length); the rolling link a uniform disc
         (m r^2/2 about B0) welded to a slender arm B0B (m l4^2/3 about B0), moved to the joint centre of mass
-        (kinematics.md §3: 0.5 kg disc + 0.1 kg arm, l4 = 1.6 -> c4 = 0.13333, I = 0.324667)."""
+        (docs/theory.md §K3: 0.5 kg disc + 0.1 kg arm, l4 = 1.6 -> c4 = 0.13333, I = 0.324667)."""
         r, l4 = kin.pair.r, kin.l4
         m4 = disc_mass + arm_mass
         c4 = arm_mass * l4 / 2 / m4
@@ -465,7 +465,7 @@ class RollingPairFourBar(Mechanism):
         return InitialState("rolling", {"dead_sign": self._dead_sign}, q, v)
 
     def check_prescribed_motion(self, phi0: float, speed: float, duration: float) -> None:
-        """A prescribed rolling-link speed must keep the dyad closed over the whole run (kinematics.md §2.2):
+        """A prescribed rolling-link speed must keep the dyad closed over the whole run (docs/theory.md §K2.2):
         at a stretched/folded end phi would have to reverse. ValueError naming drive.speed otherwise."""
         phi1 = phi0 + speed * duration
         if phi1 <= phi0:
@@ -511,7 +511,7 @@ class RollingPairFourBar(Mechanism):
 
     # -- prescribed rolling-link speed: no DAE ----------------------------------------------------------
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
-        """Columns at constant rolling-link speed from `RollingFourBar.solve` (kinematics.md §2.2), forces from
+        """Columns at constant rolling-link speed from `RollingFourBar.solve` (docs/theory.md §K2.2), forces from
         the model's own balance: M a - Q + G^T lam = tau e_phi solved for (lam, tau) row by row.
         None for a crank drive (the crank input has no closed form). Rows where the dyad cannot close are nan."""
         if self.driven_link != "rolling":
@@ -557,7 +557,7 @@ class RollingPairFourBar(Mechanism):
         return cols
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
-        """Rolling angle phi from the minimal-coordinate equation (`rolling_reduced`, kinematics.md §3) on
+        """Rolling angle phi from the minimal-coordinate equation (`rolling_reduced`, docs/theory.md §K3) on
         DOP853; torque and motor drives on the rolling link only."""
         if drive.is_prescribed or self.driven_link != "rolling":
             return None

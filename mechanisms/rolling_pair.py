@@ -2,7 +2,7 @@
 geometry, corrected no-slip rolling kinematics and closed-form position/velocity/acceleration with the
 rolling link as input, both assembly branches, closure intervals.
 
-Model (kinematics.md §2.1-2.2). A disc of radius r (link 4, centre B0) rolls without slip outside a fixed
+Model (docs/theory.md §K2.1-2.2). A disc of radius r (link 4, centre B0) rolls without slip outside a fixed
 circle (centre O, radius R) or on a fixed line. The input phi is the absolute rotation of link 4 from
 its initial configuration. Rolling parameter u: the polar angle gamma of the line of centres (circle) or
 the arc position s of the contact along the line (line):
@@ -13,12 +13,12 @@ the arc position s of the contact along the line (line):
 
 nu0 is the outward normal angle at the initial contact (gamma0, or arg n for the line), so psi is measured
 from the outward normal (the paper's eq. (7) convention; its text says from B0->contact, which differs by
-pi, kinematics.md K6). Kar & Sen's eqs. (1), (10), (11), (14) move the centre by phi r/R instead: wrong,
-the contact slips (kinematics.md §2.1, K1; see `rolling_paper`). The dyad A0-A-B closes by Kar & Sen eq. (18)
-and the coupler point is C = A + lc e^{i(arg(B - A) + alpha)} (kinematics.md K3 corrects eq. 20).
+pi, docs/theory.md (Part K) K6). Kar & Sen's eqs. (1), (10), (11), (14) move the centre by phi r/R instead: wrong,
+the contact slips (docs/theory.md §K2.1, K1; see `rolling_paper`). The dyad A0-A-B closes by Kar & Sen eq. (18)
+and the coupler point is C = A + lc e^{i(arg(B - A) + alpha)} (docs/theory.md (Part K) K3 corrects eq. 20).
 
 Points are complex x + iy, lengths in m (the paper's lengths are unitless; we read one unit as 1 m, as the
-dynamics reference kinematics.md §3 does). The rolling-pair primitives take `lib=numpy` or `lib=sympy`
+dynamics reference docs/theory.md §K3 does). The rolling-pair primitives take `lib=numpy` or `lib=sympy`
 so the same formulas can be used symbolically; they return (x, y) pairs.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ from .planar_rolling import dyad_derivatives, dyad_tip
 class CircleOnCircle:
     """Disc radius r rolling outside the fixed circle (O, R); initial contact at polar angle gamma0.
 
-    Rolling parameter u = gamma (polar angle of O->B0). Source: kinematics.md §2.1 (corrected Kar & Sen
+    Rolling parameter u = gamma (polar angle of O->B0). Source: docs/theory.md §K2.1 (corrected Kar & Sen
     eqs. 1, 10, 11, 14).
     """
 
@@ -89,7 +89,7 @@ class CircleOnCircle:
         return self.O[0] + self.R * lib.cos(u), self.O[1] + self.R * lib.sin(u)
 
     def period(self, max_denominator: int = 100, rtol: float = 1e-12):
-        """phi-period of the trochoid, 2 pi (p + q) for R/r = p/q (kinematics.md §2.2), or None when R/r
+        """phi-period of the trochoid, 2 pi (p + q) for R/r = p/q (docs/theory.md §K2.2), or None when R/r
         is not a ratio of small integers (denominator > max_denominator or mismatch > rtol)."""
         ratio = self.R / self.r
         f = Fraction(ratio).limit_denominator(max_denominator)
@@ -103,7 +103,7 @@ class CircleOnCircle:
 
     def touch_phi(self, psi: float, kmin: int, kmax: int):
         """phi_k where a point at l4 = r of the arm psi touches the profile: nu0 + psi + phi = gamma + pi,
-        phi_k = (pi - psi + 2 pi k)(R + r)/R (kinematics.md §2.3)."""
+        phi_k = (pi - psi + 2 pi k)(R + r)/R (docs/theory.md §K2.3)."""
         k = np.arange(kmin, kmax + 1)
         return (math.pi - psi + 2.0 * math.pi * k) * (self.R + self.r) / self.R
 
@@ -112,7 +112,7 @@ class CircleOnCircle:
 class CircleOnLine:
     """Disc radius r rolling on the line through P0 with direction angle `tangent`; the disc is on the
     left of the tangent t (outward normal n = i t). Rolling parameter u = s, arc position of the contact
-    from P0. A counter-clockwise phi moves the centre by -r phi t (kinematics.md §2.1; Kar & Sen eq. 12
+    from P0. A counter-clockwise phi moves the centre by -r phi t (docs/theory.md §K2.1; Kar & Sen eq. 12
     gives no direction)."""
 
     r: float
@@ -158,7 +158,7 @@ class CircleOnLine:
         return None
 
     def touch_phi(self, psi: float, kmin: int, kmax: int):
-        """phi_k = -pi - psi + 2 pi k (kinematics.md §2.3)."""
+        """phi_k = -pi - psi + 2 pi k (docs/theory.md §K2.3)."""
         k = np.arange(kmin, kmax + 1)
         return -math.pi - psi + 2.0 * math.pi * k
 
@@ -206,11 +206,11 @@ class RollingFourBar:
 
     def param_of_theta4(self, theta4):
         """Rolling parameter u (gamma or s) for an arm angle theta4: the rolling constraint
-        B0 = centre(u(theta4)) of a Cartesian (DAE) model, kinematics.md §3."""
+        B0 = centre(u(theta4)) of a Cartesian (DAE) model, docs/theory.md §K3."""
         return self.pair.u_of_phi(theta4 - self.pair.normal0 - self.psi)
 
     def point_B(self, phi, lib=np):
-        """B(phi) = B0(u(phi)) + l4 e^{i theta4} as (x, y): an epi-/trochoid (kinematics.md §2.1)."""
+        """B(phi) = B0(u(phi)) + l4 e^{i theta4} as (x, y): an epi-/trochoid (docs/theory.md §K2.1)."""
         u = self.pair.u_of_phi(phi)
         x0, y0 = self.pair.centre(u, lib)
         th = self.theta4(phi)
@@ -367,7 +367,7 @@ def _monotone_breaks(mech: RollingFourBar, a: float, b: float, n: int):
 
 def closure_intervals(mech: RollingFourBar, span: tuple[float, float] | None = None,
                       periodic: bool | None = None, samples_per_turn: int = 720) -> list[ClosureInterval]:
-    """Closure intervals of the dyad over the span (kinematics.md §2.2; Kar & Sen §3.1 with the
+    """Closure intervals of the dyad over the span (docs/theory.md §K2.2; Kar & Sen §3.1 with the
     inequalities of K5 corrected: |l2 - l3| <= |A0B| <= l2 + l3).
 
     |A0B|(phi) is split into monotone pieces at the roots of its derivative; in each piece each of the

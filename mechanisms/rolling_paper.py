@@ -1,5 +1,5 @@
 """Kar & Sen's rolling-pair relations *as printed*, kept only to show (in tests and docs) why mechsim
-deviates from them (kinematics.md §2.1 and §2.5, errors K1 and K2). Do not use for simulation.
+deviates from them (docs/theory.md §K2.1 and §2.5, errors K1 and K2). Do not use for simulation.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ def paper_trochoid(pair: CircleOnCircle, l4: float, psi: float, phi):
     """Kar & Sen eqs. (1), (10), (11), (14): the centre turns by phi r/R about O and the body by phi.
 
     Returns complex B0, B, contact P and dB0/dphi. Inconsistent (K1): the contact slips at r^2/R per
-    unit phi (kinematics.md §2.1).
+    unit phi (docs/theory.md §K2.1).
     """
     phi = np.asarray(phi, dtype=float)
     g = pair.gamma0 + phi * pair.r / pair.R
@@ -41,7 +41,7 @@ def paper_rotation_matrix(alpha: float, P) -> np.ndarray:
 
 def rotation_matrix(alpha: float, P) -> np.ndarray:
     """Correct homogeneous rotation by alpha about P: translation (x - x cos a + y sin a,
-    y - x sin a - y cos a) (kinematics.md §2.5 K2)."""
+    y - x sin a - y cos a) (docs/theory.md §K2.5 K2)."""
     x, y = P
     c, s = np.cos(alpha), np.sin(alpha)
     return np.array([[c, -s, x - x * c + y * s], [s, c, y - x * s - y * c], [0.0, 0.0, 1.0]])

@@ -1,11 +1,11 @@
 """Rolling-pair 4-bar dynamics in the single coordinate phi (rolling link's absolute rotation): an independent
-reference for the DAE of `rolling_model` (kinematics.md §3, 'Minimal coordinate').
+reference for the DAE of `rolling_model` (docs/theory.md §K3, 'Minimal coordinate').
 
     M(phi) phi'' + 1/2 M'(phi) phi'^2 = tau(phi') - dV/dphi - (b2 theta2'^2 + b4) phi',
     M = sum m |G'|^2 + I theta'^2,  1/2 M' = sum m G' . G'' + I theta' theta'',
 
 with G the centres of mass and theta the body angles as closed-form functions of phi (`RollingFourBar.solve`,
-kinematics.md §2.2: implicit derivatives of the dyad, not the DAE's sympy model), tau = T0 - slope phi' the drive
+docs/theory.md §K2.2: implicit derivatives of the dyad, not the DAE's sympy model), tau = T0 - slope phi' the drive
 on the rolling link. Regular only while the dyad stays away from its stretched/folded configurations, where
 theta2' and theta3' become infinite; the integration stops with an error if it gets there.
 """

@@ -1,6 +1,6 @@
-"""Named parameter sets of the rolling-pair 4-bar (kinematics.md §2.2 table, §2.5 K7).
+"""Named parameter sets of the rolling-pair 4-bar (docs/theory.md §K2.2 table, §2.5 K7).
 
-Lengths in m (the paper's lengths are unitless; one unit = 1 m, as in kinematics.md §3), angles in rad.
+Lengths in m (the paper's lengths are unitless; one unit = 1 m, as in docs/theory.md §K3), angles in rad.
 A0 is the origin; the circle sets start with the contact at gamma0 = 0.
 Each entry is a plain dict: `make(name)` builds the `RollingFourBar`.
 """
@@ -10,7 +10,7 @@ import math
 
 from .rolling_pair import CircleOnCircle, CircleOnLine, RollingFourBar
 
-#: kinematics.md §2.2 set A: bicursal, two closed monochromatic curves; R/r = 2, period 6 pi.
+#: docs/theory.md §K2.2 set A: bicursal, two closed monochromatic curves; R/r = 2, period 6 pi.
 SET_A = dict(profile="circle", R=2.0, r=1.0, O=(0.5, 0.3), gamma0=0.0, psi=0.3,
              l2=3.0, l3=3.5, l4=1.6, lc=2.0, alpha=math.radians(40.0))
 
@@ -22,12 +22,12 @@ SET_B = dict(profile="circle", R=3.0, r=1.0, O=(1.5, 0.2), gamma0=0.0, psi=0.2,
 SET_C = dict(profile="circle", R=3.0, r=1.0, O=(1.0, 0.5), gamma0=0.0, psi=0.5,
              l2=3.0, l3=4.0, l4=1.0, lc=2.0, alpha=math.radians(-30.0))
 
-#: set D: circle on the line y = -2, phi in [-6 pi, 0]; l4 = r (cusps). kinematics.md does not state the
+#: set D: circle on the line y = -2, phi in [-6 pi, 0]; l4 = r (cusps). docs/theory.md (Part K) does not state the
 #: initial contact; (-6, -2) reproduces its closure intervals and cusps (the contact moves to +x).
 SET_D = dict(profile="line", r=1.0, P0=(-6.0, -2.0), tangent=0.0, psi=0.7,
              l2=3.0, l3=3.5, l4=1.0, lc=1.5, alpha=math.radians(20.0), span=(-6.0 * math.pi, 0.0))
 
-#: kinematics.md K7: bicursal although the trochoid's bounding annulus (seen from A0: [2, 6]) is not
+#: docs/theory.md §K1.3 (K7): bicursal although the trochoid's bounding annulus (seen from A0: [2, 6]) is not
 #: inside the dyad annulus [2.0079, 6.0023]; the trochoid itself stays in [2.0179, 5.9923].
 #: (lc, alpha not given there; chosen here.)
 SET_BICURSAL_K7 = dict(profile="circle", R=3.0, r=1.0, O=(1.0, 0.0), gamma0=0.0, psi=0.465,

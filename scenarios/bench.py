@@ -5,7 +5,7 @@ scenario with a torque or motor drive, `--scenario`) over a range of requested t
 The error of a run is the largest difference of the drive coordinate's angle (rad; the Geneva's crank) at the
 output times from a reference the mechanism supplies (`Mechanism.reference_solution`): an independent
 integration at rtol = atol = 1e-12, for the Geneva the reduced-coordinate equation of `mechanisms.geneva_reduced`
-(physics.md §2) on DOP853, restarted at every engagement boundary and slip reversal; its own uncertainty is
+(docs/theory.md §G2) on DOP853, restarted at every engagement boundary and slip reversal; its own uncertainty is
 estimated against rtol = atol = 1e-13. A mechanism without one (None) is measured against mechsim's own IDA
 index-2 at rtol 1e-12, labelled a self-reference (not independent). Methods written for other mechanisms'
 equations (the Geneva's scipy and CasADi peers, `Method.mechanisms`) are skipped with a note.

@@ -7,7 +7,7 @@ DAE (the form CasADi's `integrator` accepts):
 
     x = (q, v),  z = (a, lam):   q' = v,  v' = a,
     0 = M a + G^T lam - Q(q, v, lam),   0 = G a + gamma + 2 alpha Phi' + beta^2 Phi   (Baumgarte 1972,
-    the gains of mechsim's index-1 form; kinematics.md §4 'Index 1 + Baumgarte').
+    the gains of mechsim's index-1 form; docs/theory.md §K4 'Index 1 + Baumgarte').
 
 form "dae" integrates that DAE on IDAS with z kept out of the error test (`suppress_algebraic`, which
 scikit-sundae cannot set); form "ode" lets CasADi solve the algebraic rows (linear in z) symbolically and

@@ -1,6 +1,6 @@
 """Model no more than a scene needs: what each fidelity level of the Geneva scenarios costs and changes.
 
-- drive/method: at a prescribed crank speed the closed forms (physics.md §1-2) against the DAE with the speed
+- drive/method: at a prescribed crank speed the closed forms (docs/theory.md §G1-2) against the DAE with the speed
   as a rheonomic constraint (solver.method = dae): wall time against the largest column difference;
 - thermal: none / flash (algebraic) / lumped (+3 states) / 1d (+ a mesh per slot wall): wall time against the
   peak contact temperature, on geneva-lc1 (closed form) and geneva-motor (DAE).

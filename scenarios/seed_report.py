@@ -1,13 +1,13 @@
 """The seed reproduction report (`mechsim report seed`): the seed's six load cases, three models side by side.
 
 For each built-in `geneva-seed-lc{1,2,3}-mu{015,030}` scenario, on the seed's angular-position axis
-phi = alpha + alpha0 (0..90 deg for n = 4; physics.md §1):
+phi = alpha + alpha0 (0..90 deg for n = 4; docs/theory.md §G1):
 
 - **seed**: the seed's model as it evaluates it (Ambaye, Lemu & Tolcha 2022): S(8) load from the torque, S(9)
   with the half-width its Peclet numbers imply (E*, so p_max = W/(pi b l) = p0/2; S(9) as printed with
   E' = 2E* is kept in two extra columns), S(11) Peclet with U = omega1 r, S(12) heat with |V1 - V2| = |v_s|,
-  S(13) flash with C = 2.5, contact temperature = ambient + flash (physics.md §2-4, §4.7 "Reproduction");
-- **corrected**: the same quasi-static model with its errors corrected, physics.md §4.7 recipe: wheel balance
+  S(13) flash with C = 2.5, contact temperature = ambient + flash (docs/theory.md §G2-4, §4.7 "Reproduction");
+- **corrected**: the same quasi-static model with its errors corrected, docs/theory.md §G4.7 recipe: wheel balance
   N = (T_L + J2 alpha2)/x, Hertz b and p0 (Johnson), driving-flank slip with the pin spin, Peclet numbers with
   the source speed over each body, exact moving band (semi-elliptic max) per body + Blok partition, transient
   floors; contact temperature = ambient + flash;
@@ -126,9 +126,9 @@ def _alpha(case: Case, phi_deg):
 
 # ------------------------------------------------------------------------------------------------ (a) the seed
 def seed_model(case: Case, phi_deg) -> pd.DataFrame:
-    """The seed's model as it evaluates it (physics.md §2-4, §4.7 "Reproduction").
+    """The seed's model as it evaluates it (docs/theory.md §G2-4, §4.7 "Reproduction").
 
-    theta1 + theta2 = |alpha| + |beta| (physics.md §1 "Seed check"); S(8) W = (T/r) cos(theta1 + theta2);
+    theta1 + theta2 = |alpha| + |beta| (docs/theory.md §G1 "Seed check"); S(8) W = (T/r) cos(theta1 + theta2);
     S(7) |v_s| = omega1 r sin(theta1 + theta2); b = sqrt(4WR/(pi l E*)) (the seed's Peclet numbers 0.35...0.58
     need E*, not its printed E' = 2E*); S(9b) p_max = W/(pi b l); S(11) L = omega1 r b/(2 chi) for both bodies;
     S(12) Q = mu W |v_s|; S(13) with C = 2.5 and L = the contact length.
@@ -156,7 +156,7 @@ def seed_model(case: Case, phi_deg) -> pd.DataFrame:
 
 # ------------------------------------------------------------------------------------------------ (b) corrected
 def corrected_model(case: Case, phi_deg) -> pd.DataFrame:
-    """The seed's quasi-static model with its errors corrected: the physics.md §4.7 recipe.
+    """The seed's quasi-static model with its errors corrected: the docs/theory.md §G4.7 recipe.
 
     N = (T_L + J2 alpha2)/x (wheel balance, §2, no friction arm); Hertz b, p0 (§3); slip on the driving flank
     u = v_s + R(omega1 + omega2) (§1 pin spin); L_wall = |v_s| b/(2chi), L_pin = R(omega1 + omega2) b/(2chi)

@@ -1,5 +1,5 @@
 """report.md of the seed reproduction report: what was compared, the figures, the comparison table, why the
-models differ (physics.md §2-4) and the answers to the seed's conclusions, every number read from the tables."""
+models differ (docs/theory.md §G2-4) and the answers to the seed's conclusions, every number read from the tables."""
 from __future__ import annotations
 
 import math
@@ -10,12 +10,12 @@ from scipy.optimize import brentq
 
 from mechsim.mechanisms import geneva_kinematics as gk
 
-#: physics.md §4.7 corrected-model table (phi, N, b um, |u|, dT_flash mu = 0.15) and the seed S(13) column
+#: docs/theory.md §G4.7 corrected-model table (phi, N, b um, |u|, dT_flash mu = 0.15) and the seed S(13) column
 #: (mu = 0.15): the reference values the report reproduces.
 TABLE_47 = ((5, 103.1, 34.0, 0.375, 14.8, 3.4), (15, 127.7, 37.8, 0.352, 17.1, 5.9), (30, 186.2, 45.7, 0.233, 16.0, 6.7),
             (45, 225.3, 50.2, 0.073, 7.6, 0.0), (60, 174.5, 44.2, 0.334, 21.7, 6.7),
             (75, 123.9, 37.2, 0.412, 19.5, 5.9), (85, 101.4, 33.7, 0.422, 17.0, 3.4))
-#: the seed's reported minimum load (N), the end of its plotted range (physics.md §2)
+#: the seed's reported minimum load (N), the end of its plotted range (docs/theory.md §G2)
 SEED_MIN_LOAD = 35.0
 #: the verdicts of answer 2 (the test reads them back from report.md)
 TORQUE_MORE = "No: doubling the torque (LC2) heats more than doubling the speed (LC3)"
@@ -54,7 +54,7 @@ def _seed_window(case) -> tuple[float, float]:
 
 
 def _slip_zero_phi(case) -> float:
-    """phi where the driving-flank slip v_s + R(omega1 + omega2) vanishes (physics.md §1: 41.97 deg)."""
+    """phi where the driving-flank slip v_s + R(omega1 + omega2) vanishes (docs/theory.md §G1: 41.97 deg)."""
     g, w1 = case.geometry, case.speed
     a = brentq(lambda a: float(gk.slip_speed(g, a, w1, w1 * gk.speed_ratio(g.ratio, a))), -0.5, 0.0, xtol=1e-12)
     return math.degrees(a + g.engagement_half_angle)
@@ -67,7 +67,7 @@ def _models_legend() -> str:
   printed variant is drawn dotted in the width and pressure figures) and `p_max = W/(πbl)`, S(11) `L = U b/(2χ)`
   with U = ω1 r for both bodies, S(12) `Q = μ W |V1 − V2|`, S(13) `T_f = 0.159 C Q/(k l) · χ/(U b)` with
   C = 2.5; contact temperature = ambient + T_f.
-- **seed corrected** (solid): the same quasi-static model with every error of physics.md §2–4 fixed (the §4.7
+- **seed corrected** (solid): the same quasi-static model with every error of docs/theory.md §G2–4 fixed (the §4.7
   recipe): wheel balance `N = (T_L + J2 α2)/x`, Hertz `b = √(4NR/(πlE*))` and `p0 = 2N/(πbl)`, slip on the
   driving flank with the pin spin `u = v_s + R(ω1+ω2)`, Peclet numbers with the source speed over each body
   (wall |v_s|, pin R(ω1+ω2)), exact moving-band rise (semi-elliptic maximum) per body and Blok's partition, the
@@ -111,9 +111,9 @@ def _reproduction_section(report) -> str:
     i = int(np.argmax(q))
     lines = [
         "## Reproduction of the seed (load case 1)\n",
-        "Seed as printed, against the seed's own figures and physics.md §4.7 / §7:\n",
+        "Seed as printed, against the seed's own figures and docs/theory.md §G4.7 / §7:\n",
         f"- S(8) load: {_f(r30.seed_normal_load_N, 4)} N at φ = 30°, {_f(r45.seed_normal_load_N, 4)} N at 45° "
-        f"(physics.md §7 row 7: 66.00 / 93.33 N); 0 at entry and exit. The seed's reported minimum of 35 N is "
+        f"(docs/theory.md §G7 row 7: 66.00 / 93.33 N); 0 at entry and exit. The seed's reported minimum of 35 N is "
         f"reached at φ = {phi_min:.1f}° / {90 - phi_min:.1f}°, so its curves span only that range.",
         f"- Peclet number with U = ω1 r = {case.speed * case.geometry.crank_radius:.4f} m/s and the E* half-width: "
         f"{L_min:.3f} at 35 N, {r45.seed_peclet_pin:.3f} at 93.33 N (row 11: 0.357 / 0.583; the seed's Fig. 7a: "
@@ -129,12 +129,12 @@ def _reproduction_section(report) -> str:
                      f"{_f(r.corrected_normal_load_N, 4)} ({N})", f"{_f(r.corrected_half_width_m * 1e6)} ({b})",
                      f"{_f(abs(r.corrected_slip_speed_m_s))} ({u})", f"{_f(r.corrected_temp_flash_rise_K)} ({dT})",
                      f"{_f(r.mechsim_normal_load_N, 4)}", f"{_f(r.mechsim_temp_flash_rise_K)}"])
-    lines += ["", "Against physics.md §4.7 (LC1, μ = 0.15; reference values in brackets, ±15 % model-choice band):", "",
+    lines += ["", "Against docs/theory.md §G4.7 (LC1, μ = 0.15; reference values in brackets, ±15 % model-choice band):", "",
               _table(["φ (°)", "seed S(13) (K)", "corrected N (N)", "corrected b (µm)", "corrected slip speed (m/s)",
                       "corrected ΔT_flash (K)", "mechsim N (N)", "mechsim ΔT_flash (K)"], rows)]
     e = report.comparison.set_index(["case", "model"])
     lines += ["", f"Heat per index (μ = 0.15): seed {_f(e.loc[(case.name, 'seed'), 'energy_per_index_J'])} J "
-              f"(physics.md §4.7: 0.49 J), corrected {_f(e.loc[(case.name, 'corrected'), 'energy_per_index_J'], 4)} J "
+              f"(docs/theory.md §G4.7: 0.49 J), corrected {_f(e.loc[(case.name, 'corrected'), 'energy_per_index_J'], 4)} J "
               f"(row 18: 1.868 J), mechsim {_f(e.loc[(case.name, 'mechsim'), 'energy_per_index_J'], 4)} J."]
     return "\n".join(lines) + "\n"
 
@@ -161,19 +161,19 @@ def _differences_section(report) -> str:
     fr = (t["mechsim_normal_load_N"] / t["corrected_normal_load_N"] - 1).abs().max()
     return f"""## Why the three models differ
 
-1. **S(8) is a projection, not an equilibrium** (physics.md §2). It takes T as a crank torque delivered as the
+1. **S(8) is a projection, not an equilibrium** (docs/theory.md §G2). It takes T as a crank torque delivered as the
    force T/r tangent to the crank circle and keeps the component normal to the slot; the along-slot component
    cannot be carried by the slot. So the load is 0 at entry and exit and {_f(r45.seed_normal_load_N, 4)} N at
    mid-stroke. The wheel's moment balance with the seed's wheel torque T_Gw gives instead N = (T_L + J2α2)/x:
    {_f(first.corrected_normal_load_N, 4)} N just after entry, {_f(r45.corrected_normal_load_N, 4)} N at φ = 45°
    ({_f(r45.corrected_normal_load_N / r45.seed_normal_load_N)}× the seed). mechsim adds the friction arm
    σμR/x (x − σμR in the denominator) and differs from the corrected column by at most {100 * fr:.1f} % here.
-2. **S(9): √2 and a factor 2** (physics.md §3). As printed with the EHL modulus E' = 2E*, b is √2 too small; and
+2. **S(9): √2 and a factor 2** (docs/theory.md §G3). As printed with the EHL modulus E' = 2E*, b is √2 too small; and
    p_max = W/(πbl) is half the Hertz p0 = 2W/(πbl). The seed's Peclet numbers show that it evaluated b with E*, so
    its "p_max" is p0/2 of its own (too small) load: peak {_f(seed_p)} MPa against {_f(corr_p)} MPa for the
    corrected load and Hertz p0.
 3. **The seed's Peclet number uses the crank-pin speed** ω1 r = {_f(w1 * g.crank_radius, 4)} m/s for both bodies
-   (physics.md §4.2). The heat source moves over the slot wall at |v_s| (0…{_f(w1 * g.crank_radius, 4)} m/s,
+   (docs/theory.md §G4.2). The heat source moves over the slot wall at |v_s| (0…{_f(w1 * g.crank_radius, 4)} m/s,
    zero at 45°) and over the pin surface at R(ω1+ω2) ({_f(spin_min)}…{_f(spin_max)} m/s). So the pin's Peclet
    number is {_f(ratio_pin, 2)}× the seed's at mid-stroke and the wall's goes to zero there (figure `peclet.png`).
 4. **The seed omits the pin spin**, so its slip, heat and flash are exactly zero at φ = 45°. The pin is fixed to
@@ -183,7 +183,7 @@ def _differences_section(report) -> str:
    φ = {phi_zero:.2f}°. The spin subtracts from the inward sliding (first half) and adds to the outward sliding
    (second half), so every corrected quantity is asymmetric and the **outward half is hotter** (consistent with the
    seed's FE, which is also non-zero at 45°).
-5. **S(13) has a dimensional problem and a spurious 1/L** (physics.md §4.4). Read with L = the Peclet number (the
+5. **S(13) has a dimensional problem and a spurious 1/L** (docs/theory.md §G4.4). Read with L = the Peclet number (the
    seed's own symbol) `0.159 C μW|ΔV|/(K L) · χ/(U b)` has units K·m; it is consistent only with L = the contact
    length l, which is how it is evaluated here and how it reproduces the seed's numbers. Its factor χ/(U b) =
    1/(2L) makes the rise scale as 1/L on top of C(L): at the seed's L = 0.35…0.58 it under-predicts the exact
@@ -301,8 +301,8 @@ def markdown(report, figures: dict) -> str:
 
 Generated by `mechsim report seed{' --small' if report.config.small else ''}` ({report.config.describe()}).
 Seed: Ambaye, Lemu & Tolcha (2022), *Contact temperature analysis of the classical Geneva mechanism through
-numerical methods*, Mater. Today Proc. 57:545–552 (equations S(n)). Physics reference: `shared/physics.md` (§n);
-docs/thermal.md and docs/geneva.md describe mechsim's models. Angular position φ = α + α0 (physics.md §1): 0° at
+numerical methods*, Mater. Today Proc. 57:545–552 (equations S(n)). Physics reference: `docs/theory.md (Part G)` (§n);
+docs/thermal.md and docs/geneva.md describe mechsim's models. Angular position φ = α + α0 (docs/theory.md §G1): 0° at
 entry, 45° at mid-stroke (pin deepest in the slot), 90° at exit; the pin moves inward for φ < 45°.
 
 Files: `case_<scenario>.csv` (every model's columns on the φ grid, SI units), `comparison.csv` (peaks per case
@@ -332,10 +332,10 @@ l = {g.thickness * 1e3:g} mm, wheel inertia J2 = {c0.wheel_inertia:g} kg·m² (t
 ## Notes and limits
 
 - mechsim runs: {", ".join(methods)}. At a prescribed crank speed the runner needs no DAE: the closed-form
-  dynamics of physics.md §1–2 are exact (docs/geneva.md), and the bulk network is integrated exactly in its modes.
+  dynamics of docs/theory.md §G1–2 are exact (docs/geneva.md), and the bulk network is integrated exactly in its modes.
 - The seed's wheel Peclet curve (its Fig. 7a: rising to 35°, "0.15", "0.5" at exit) cannot be rebuilt from S(11)
   with any speed the paper states; the seed column uses U = ω1 r for both bodies, which reproduces its pin curve.
-- The flash values depend on model choices (flux distribution, transient floors, partition): physics.md §4.7
+- The flash values depend on model choices (flux distribution, transient floors, partition): docs/theory.md §G4.7
   treats them as ±15 % values. The exact band solution is a 2-D steady model; the seed's FE is not reproduced.
 - "After 1 h" runs {STEADY_DURATION_S:g} s with the scenario's lumped bulk model (default convection and pin–crank
   conductance, docs/thermal.md); the bulk is still rising slowly then (wheel time constant ≈ 1000 s).

@@ -1,4 +1,4 @@
-"""Cycle-averaged bulk temperatures for long runs (shared/physics.md §5: tau >> cycle, so the mean heat drives the bulk).
+"""Cycle-averaged bulk temperatures for long runs (docs/theory.md §G5: tau >> cycle, so the mean heat drives the bulk).
 
 The mechanics runs until it is periodic (a few crank turns); the last full turn gives the cycle-mean heat Q_bar
 and the heat-weighted pin share gamma_bar (exact, from the integrated bookkeeping energies). The network is

@@ -1,6 +1,6 @@
 """Integrate the thermal network where no DAE runs: prescribed speed, closed-form kinematics + the thermal ODE.
 
-design.md: "prescribed speed needs no DAE: closed-form kinematics + thermal ODE only". The heat inputs are the
+docs/architecture.md: "prescribed speed needs no DAE: closed-form kinematics + thermal ODE only". The heat inputs are the
 same functions the DAE rows use (dynamics.thermal_coupling, numpy flavour), evaluated on the closed form. The
 network is linear with constant coefficients, so each output interval is integrated exactly in the state
 (variation of constants) and by Gauss-Legendre quadrature in the input:

@@ -5,7 +5,7 @@ Columns added (SI): heat_rate_W, heat_share_pin, hertz_half_width_m, hertz_press
 peclet_wheel, temp_flash_rise_K, temp_contact_C; with bulk states temp_bulk_{pin,crank,wheel}_C, heat_share_pin_bulk,
 heat_generated_J, heat_pin_J, heat_convected_J; with 1d also temp_wall_surface_C.
 
-Contact temperature (Blok's postulate with unequal base temperatures, physics.md §4.6): equal surface temperatures
+Contact temperature (Blok's postulate with unequal base temperatures, docs/theory.md §G4.6): equal surface temperatures
 give T_c = gamma T_pin + (1 - gamma) T_wheel + dT_flash exactly, gamma = R_wheel/(R_pin + R_wheel) the pin's share
 at equal base temperatures; T_pin/T_wheel are the bulk temperatures (lumped), the wall track's surface (1d) or
 the ambient (flash). No contact (dwell): NaN.
@@ -34,11 +34,11 @@ PERIODICITY_TOLERANCE = 1e-3
 
 MODEL_WHY = {
     "flash": "algebraic flash rise over the ambient at every output instant (moving-band solution per body, "
-             "Blok partition; physics.md §4.3-4.7); no thermal states",
-    "lumped": "bulk pin, crank and wheel temperatures (physics.md §5) as extra states, plus the algebraic flash "
+             "Blok partition; docs/theory.md §G4.3-4.7); no thermal states",
+    "lumped": "bulk pin, crank and wheel temperatures (docs/theory.md §G5) as extra states, plus the algebraic flash "
               "rise on top",
     "1d": "bulk pin, crank and wheel temperatures plus 1-D conduction into the depth of each slot wall's track "
-          "(physics.md §6), plus the algebraic flash rise on top",
+          "(docs/theory.md §G6), plus the algebraic flash rise on top",
 }
 
 
@@ -119,7 +119,7 @@ class ThermalPlan:
             summary["heat_balance"] = self._balance(states)
         summary.update(setup.describe())
         summary["heat_share"] = ("flash columns: Blok partition of the exact band rises (fast table) with the "
-                                 "transient floors of physics.md §4.7; bulk states: the same partition with the "
+                                 "transient floors of docs/theory.md §G4.7; bulk states: the same partition with the "
                                  "band fit and smooth floors (heat_share_pin_bulk; docs/thermal.md)")
         summary["notes"] = list(setup.notes)
         warnings += self._validity(df, contact, summary)
@@ -291,7 +291,7 @@ class ThermalPlan:
         b = df["hertz_half_width_m"].to_numpy(float)
         if len(b) and np.nanmax(b) > 0.1 * geo.contact_radius:
             out.append(f"thermal: the Hertz half-width reaches {np.nanmax(b) / geo.contact_radius:.2f} R; the line-"
-                       "contact formulas need b << R (physics.md §3)")
+                       "contact formulas need b << R (docs/theory.md §G3)")
         if setup.mesh is None:
             return out
         engaged = contact["engaged"]
@@ -344,7 +344,7 @@ def plan(si: dict, mech, drive, method: str) -> ThermalPlan | None:
             tail = (f"; the flash model has no memory, so the mechanics runs {turns} turns until periodic and the last "
                     "turn, moved to the end of the run, stands for every cycle")
         else:
-            tail = ("; the bulk time constants are >> one cycle (physics.md §5), so the mechanics runs "
+            tail = ("; the bulk time constants are >> one cycle (docs/theory.md §G5), so the mechanics runs "
                     f"{turns} turns until periodic and the cycle-mean heat drives the bulk exactly (plus its "
                     "periodic ripple)")
         averaging, why = "cycle", head + tail

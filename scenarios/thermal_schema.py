@@ -43,9 +43,9 @@ def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
         "ambient_temperature": Field("quantity", "K", default=293.15, positive=True,
                                      help="surroundings and initial temperature"),
         "convection_pin": Field("quantity", "W/(m^2*K)", default=15.0, nonnegative=True,
-                                help="heat-transfer coefficient of pin and crank (physics.md §5: 10-25)"),
+                                help="heat-transfer coefficient of pin and crank (docs/theory.md §G5: 10-25)"),
         "convection_wheel": Field("quantity", "W/(m^2*K)", default=7.0, nonnegative=True,
-                                  help="heat-transfer coefficient of the wheel (physics.md §5: 5-12)"),
+                                  help="heat-transfer coefficient of the wheel (docs/theory.md §G5: 5-12)"),
         "pin_crank_conductance": Field("quantity", "W/K", default=None, nonnegative=True,
                                        help="pin-crank conductance (default: conduction along the pin's exposed "
                                             "half-length, k pi R^2/(l_pin/2))"),

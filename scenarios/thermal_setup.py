@@ -1,7 +1,7 @@
 """Build the thermal model a scenario asks for: material, contact geometry, the bulk network (lumped) and the
 slot-wall track meshes (1d), as one `LinearThermalSystem` wrapped in the DAE extension.
 
-Bodies (shared/physics.md §5, docs/thermal.md "Coupling"):
+Bodies (docs/theory.md §G5, docs/thermal.md "Coupling"):
 - pin: the exposed cylinder (radius R, length l_pin, one free end); takes the pin's share gamma Q;
 - crank: an arm lumped on the pin side, joined to the pin by the conductance G (rod conduction through the pin's
   exposed half-length, k pi R^2/(l_pin/2), by default); convects with the pin's h;
@@ -30,7 +30,7 @@ from mechsim.thermal import (LinearThermalSystem, Material, biot_number, conduct
 from .thermal_schema import thermal_material
 
 KELVIN = 273.15
-#: default exposed pin length over wheel thickness (physics.md §5: 10 mm pin for the seed's 4 mm wheel)
+#: default exposed pin length over wheel thickness (docs/theory.md §G5: 10 mm pin for the seed's 4 mm wheel)
 PIN_LENGTH_OVER_THICKNESS = 2.5
 #: default crank arm: length r, width CRANK_WIDTH_OVER_PIN_RADIUS * R, thickness = wheel thickness
 CRANK_WIDTH_OVER_PIN_RADIUS = 4.0
@@ -67,7 +67,7 @@ def geneva_contact(df: pd.DataFrame, mech) -> dict[str, np.ndarray]:
     """Contact quantities of each output row, equal to the engaged mode's `heat` expressions (geneva.py):
     normal force, slip, source speeds over pin R(w1 + w2) and wall v_s, heat rate (friction power), track (slot
     counter floor((theta + pi)/2 pi)), and the wall's sliding acceleration a_s = dv_s/dt =
-    (w1' v_s + w1 (w1 + w2) w2 x)/w1 (from r cos(alpha + beta) = w2 x/w1, physics.md §1)."""
+    (w1' v_s + w1 (w1 + w2) w2 x)/w1 (from r cos(alpha + beta) = w2 x/w1, docs/theory.md §G1)."""
     g = mech.geometry
 
     def col(name):
@@ -330,4 +330,4 @@ def _network(setup: ThermalSetup, th: dict) -> None:
         bi = biot_number(b.h, b.volume, b.area, k) if b.area > 0 else 0.0
         if bi >= 0.1:
             setup.warnings.append(f"thermal: the {b.name}'s Biot number h(V/A)/k = {bi:.3g} >= 0.1, so it is not "
-                                  "isothermal and the lumped model does not hold (Incropera §5.2; physics.md §5)")
+                                  "isothermal and the lumped model does not hold (Incropera §5.2; docs/theory.md §G5)")

@@ -1,4 +1,4 @@
-"""Shared fixtures: the seed geometry (physics.md header) and helpers to build scenarios in memory."""
+"""Shared fixtures: the seed geometry (docs/theory.md §G0) and helpers to build scenarios in memory."""
 import copy
 import tomllib
 
@@ -11,7 +11,7 @@ from mechsim.scenarios.loader import builtin_text
 
 @pytest.fixture(scope="session")
 def seed_geometry():
-    """Seed geometry: r = 75 mm, n = 4, R = 4 mm, l = 4 mm (physics.md header)."""
+    """Seed geometry: r = 75 mm, n = 4, R = 4 mm, l = 4 mm (docs/theory.md §G0)."""
     return GenevaGeometry(crank_radius=0.075, slots=4, pin_radius=0.004, thickness=0.004)
 
 
@@ -26,7 +26,7 @@ def wrap(angle):
 
 
 def assert_wheel_matches_closed_form(geometry, df, crank_speed, rel=1e-6):
-    """Wheel angle, speed and acceleration of a run at constant crank speed against physics.md §1's closed
+    """Wheel angle, speed and acceleration of a run at constant crank speed against docs/theory.md §G1's closed
     forms, each to `rel` of its peak; the crank keeps the prescribed speed."""
     from mechsim.mechanisms import geneva_kinematics as gk
     cf = gk.constant_speed_motion(geometry, df["crank_angle_rad"].to_numpy(), crank_speed)
@@ -39,13 +39,13 @@ def assert_wheel_matches_closed_form(geometry, df, crank_speed, rel=1e-6):
 
 @pytest.fixture(scope="module")
 def m1():
-    """El-Shakery Mech 1 (3 sprockets), kinematics.md §1.3."""
+    """El-Shakery Mech 1 (3 sprockets), docs/theory.md §K1.3."""
     from mechsim.mechanisms.chain_dwell import MECH1, ChainDwellMechanism
     return ChainDwellMechanism(MECH1)
 
 
 @pytest.fixture(scope="module")
 def m2():
-    """El-Shakery Mech 2 (4 sprockets), kinematics.md §1.3."""
+    """El-Shakery Mech 2 (4 sprockets), docs/theory.md §K1.3."""
     from mechsim.mechanisms.chain_dwell import MECH2, ChainDwellMechanism
     return ChainDwellMechanism(MECH2)

@@ -30,7 +30,7 @@ def test_small_bench_writes_every_file(small_bench):
 
 
 def test_every_method_tracks_the_tolerance(small_bench):
-    """Against the reference (DOP853 at 1e-12 on physics.md §2's reduced equation): each method finishes, its
+    """Against the reference (DOP853 at 1e-12 on docs/theory.md §G2's reduced equation): each method finishes, its
     error falls when rtol falls by 1000, and stays within 100 rtol (atol = 1e-2 rtol; angles ~ 10 rad)."""
     out, _ = small_bench
     rows = pd.read_csv(out / "work_precision.csv")

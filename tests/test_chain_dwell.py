@@ -1,4 +1,4 @@
-"""Dyad kinematics and exact dwells of El-Shakery's Mech 1 and Mech 2 (kinematics.md §1.1-1.3)."""
+"""Dyad kinematics and exact dwells of El-Shakery's Mech 1 and Mech 2 (docs/theory.md §K1.1-1.3)."""
 import math
 
 import numpy as np
@@ -8,7 +8,7 @@ from mechsim.mechanisms.chain_dwell import MECH1, MECH2, ChainDwellMechanism, Ch
 from mechsim.mechanisms.chain_path import circle_circle_intersection
 
 CM = 0.01
-DEG_TOL = 5e-7  # kinematics.md prints driving angles to 6 decimals
+DEG_TOL = 5e-7  # docs/theory.md (Part K) prints driving angles to 6 decimals
 
 
 

@@ -1,5 +1,5 @@
 """The roller-chain dwell mechanism as a hybrid DAE (issue 5): against the closed-form kinematics, energy
-conservation and balance, the stop-impact closed form, folds of detuned designs (kinematics.md §1.2-1.5)."""
+conservation and balance, the stop-impact closed form, folds of detuned designs (docs/theory.md §K1.2-1.5)."""
 import math
 
 import numpy as np
@@ -14,9 +14,9 @@ from mechsim.mechanisms.chain_model import ChainDwell
 
 CM = 0.01
 R, L, r1 = 5 * CM, 3 * CM, 3 * CM
-# kinematics.md §1.5 point 4: chain 0.5 kg, crank 0.05 kg, coupler 0.03 kg (slender rods), v = 3 cm/s
+# docs/theory.md §K1.5 point 4: chain 0.5 kg, crank 0.05 kg, coupler 0.03 kg (slender rods), v = 3 cm/s
 BODIES = dict(crank_mass=0.05, coupler_mass=0.03, chain_mass=0.5)
-# kinematics.md §1.3, Mech 2 leading branch: apexes (dwell starts) and arc exits (dwell ends), deg
+# docs/theory.md §K1.3, Mech 2 leading branch: apexes (dwell starts) and arc exits (dwell ends), deg
 APEX_DEG = [180.047447, 405.094895, 630.142342, 855.189790]
 EXIT_DEG = [225.047447, 450.094895, 675.142342, 900.189790]
 
@@ -30,7 +30,7 @@ def mass_matrix(phi, theta, J1, m3=0.03, mc=0.05):
 
 def apex_tangents():
     """Velocity directions per unit drive speed at the apex (stretched dyad, phi = theta = alpha_i): on F
-    phi' = 2/(R+L) per unit chain travel (kinematics.md §1.2); on D phi' = 0. The stretched loop equation's normal
+    phi' = 2/(R+L) per unit chain travel (docs/theory.md §K1.2); on D phi' = 0. The stretched loop equation's normal
     part R phi' + L theta' = 1 gives theta'."""
     tF = np.array([1.0, r1 * 2 / (R + L), r1 * (1 - 2 * R / (R + L)) / L])
     tD = np.array([1.0, 0.0, r1 / L])
@@ -75,7 +75,7 @@ def test_prescribed_speed_dae_matches_closed_form_kinematics(prescribed):
 
 
 def test_prescribed_speed_dwells_are_the_papers(prescribed):
-    """Stop impacts at the apexes, dwell ends at the arc exits: 4 x 45 deg (kinematics.md §1.3, Mech 2)."""
+    """Stop impacts at the apexes, dwell ends at the arc exits: 4 x 45 deg (docs/theory.md §K1.3, Mech 2)."""
     mech, _, ev = prescribed
     starts = np.degrees(ev[ev.kind == "stop impact"]["drive_q"].to_numpy())
     ends = np.degrees(ev[ev.kind == "dwell end"]["drive_q"].to_numpy())
@@ -139,7 +139,7 @@ def test_stop_impact_energy_loss_closed_form(torque_run):
 
 
 def test_exact_design_without_stops_follows_the_smooth_branch():
-    """kinematics.md §1.5 point 4, tau = 0: from F the crank passes the apex (where DOP853 jammed numerically in
+    """docs/theory.md §K1.5 point 4, tau = 0: from F the crank passes the apex (where DOP853 jammed numerically in
     the reference runs, the regular F rows do not), from D it dwells through it to the arc exit; energy is
     conserved."""
     mech = ChainDwell(MECH2, apex="smooth", **BODIES)
@@ -158,7 +158,7 @@ def test_exact_design_without_stops_follows_the_smooth_branch():
 
 
 def test_detuned_fold_stalls_and_is_reported():
-    """delta = -1e-3 cm: the chain reaches the fold at 178.176150 deg (kinematics.md §1.5) and must reverse; the
+    """delta = -1e-3 cm: the chain reaches the fold at 178.176150 deg (docs/theory.md §K1.5) and must reverse; the
     run stops there with a physics failure instead of integrating through."""
     mech = ChainDwell(MECH2, apex="detuned", detuning=-1e-5, **BODIES)
     fold = math.degrees(mech.kin.folds().drive_angle_rad.iloc[0])
@@ -174,8 +174,8 @@ def test_detuned_fold_stalls_and_is_reported():
 
 
 def test_detuned_near_dwell_moves_the_cranks_energy_into_the_chain():
-    """delta = +1e-3 cm: the crank stops smoothly and the chain speeds up from 3 cm/s to 3.148 cm/s (kinematics.md
-    §1.5 point 4); energy conservation with the crank at rest and the coupler swinging about A ~ O_2 at v/L gives
+    """delta = +1e-3 cm: the crank stops smoothly and the chain speeds up from 3 cm/s to 3.148 cm/s (docs/theory.md
+    §K1.5 point 4); energy conservation with the crank at rest and the coupler swinging about A ~ O_2 at v/L gives
     the same speed (closed form)."""
     mech = ChainDwell(MECH2, apex="detuned", detuning=1e-5, **BODIES)
     _, df, ev = run(mech, Drive("torque", torque=0.0), 1.3, math.radians(150), 1.0, rtol=1e-9, atol=1e-12)

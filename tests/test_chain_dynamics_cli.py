@@ -1,5 +1,5 @@
 """The chain-dwell built-in scenarios through the CLI (in process): files, columns, dwells.csv against
-kinematics.md §1.3, energy closure in the summary, and the one-line errors and physics failures."""
+docs/theory.md §K1.3, energy closure in the summary, and the one-line errors and physics failures."""
 import json
 
 import numpy as np
@@ -58,7 +58,7 @@ def dwells(outputs, name):
 
 
 def test_mech1_kinematic_dwells_are_table_1(outputs):
-    """Leading branch of Mech 1: 45, 90, 45 deg on sprockets 2, 3, 1 at phi = 90, 180, 0 deg (kinematics.md §1.3)."""
+    """Leading branch of Mech 1: 45, 90, 45 deg on sprockets 2, 3, 1 at phi = 90, 180, 0 deg (docs/theory.md §K1.3)."""
     d = dwells(outputs, "chain-mech1-kinematic")
     assert list(d.sprocket) == [2, 3, 1] and set(d.kind) == {"exact"}
     np.testing.assert_allclose(np.degrees(d.start_drive_angle_rad), [180.047447, 405.094895, 776.080827], atol=1e-6)
@@ -80,7 +80,7 @@ def test_torque_driven_dwells_start_with_an_impact(outputs):
 
 
 def test_smooth_and_detuned_scenarios(outputs):
-    """Smooth branch: 90 deg full-arc dwells on sprockets 3 and 1 only (kinematics.md §1.3); detuned delta > 0:
+    """Smooth branch: 90 deg full-arc dwells on sprockets 3 and 1 only (docs/theory.md §K1.3); detuned delta > 0:
     near-dwells with a small crank excursion, no impacts, no exact dwell."""
     d = dwells(outputs, "chain-mech2-smooth")
     assert set(d.sprocket) == {1, 3}

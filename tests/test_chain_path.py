@@ -1,4 +1,4 @@
-"""Chain loop geometry (kinematics.md §1.1, §1.3 path-piece table) and layout validation."""
+"""Chain loop geometry (docs/theory.md §K1.1, §1.3 path-piece table) and layout validation."""
 import math
 
 import numpy as np
@@ -9,7 +9,7 @@ from mechsim.mechanisms.chain_path import ChainPath, circle_circle_intersection,
 CM = 0.01
 MECH1 = (np.array([[5, 0], [0, 5], [-5, 0]]) * CM, [3 * CM] * 3)
 MECH2 = (np.array([[5, 0], [0, 5], [-5, 0], [0, -5]]) * CM, [3 * CM] * 4)
-DEG_TOL = 5e-7  # kinematics.md prints driving angles to 6 decimals
+DEG_TOL = 5e-7  # docs/theory.md (Part K) prints driving angles to 6 decimals
 
 
 def drive_deg(path, s):
@@ -58,7 +58,7 @@ UNEQUAL = (np.array([[0.0, 0.0], [0.30, -0.02], [0.38, 0.17], [0.12, 0.25]]), [0
 @pytest.mark.parametrize("layout", [MECH1, MECH2, UNEQUAL])
 def test_pieces_closed_form_and_c1(layout):
     p = ChainPath(*layout)
-    # total wrap is one turn and the length adds up (kinematics.md §1.1, not the paper's eq. 32, E6)
+    # total wrap is one turn and the length adds up (docs/theory.md §K1.1, not the paper's eq. 32, E6)
     assert p.wraps.sum() == pytest.approx(2 * math.pi, abs=1e-12)
     c, r = layout[0], np.asarray(layout[1])
     Z = np.hypot(*(np.roll(c, -1, 0) - c).T)
@@ -79,7 +79,7 @@ def test_pieces_closed_form_and_c1(layout):
                 assert abs(np.dot(P - c[i], B1[0])) < 1e-14
         else:
             assert np.allclose(np.hypot(*(B - c[q.sprocket]).T), r[q.sprocket], atol=1e-14)
-    # continuity of B and B' at every junction (the path is C1, kinematics.md §1.5 point 5)
+    # continuity of B and B' at every junction (the path is C1, docs/theory.md §K1.5 point 5)
     for b in p.boundaries:
         m, pl = p.derivatives(np.array(b), 1, side=-1), p.derivatives(np.array(b), 1, side=+1)
         assert np.abs(m[0] - pl[0]).max() < 1e-14

@@ -1,4 +1,4 @@
-"""The singular apex: one-sided rates (kinematics.md §1.4), smooth branch, detuned designs (§1.5)."""
+"""The singular apex: one-sided rates (docs/theory.md §K1.4), smooth branch, detuned designs (§1.5)."""
 import math
 
 import numpy as np
@@ -17,7 +17,7 @@ def ends(df, sprocket, event):
             row.crank_accel_before_rad_s2, row.crank_accel_after_rad_s2)
 
 
-F_EXIT = 0.848528  # v^2/(R L sin 45 deg), kinematics.md §1.4
+F_EXIT = 0.848528  # v^2/(R L sin 45 deg), docs/theory.md §K1.4
 
 
 def test_one_sided_rates_mech2(m2):
@@ -79,7 +79,7 @@ def test_smooth_branch_is_continuous_through_the_apex(m2):
 
 
 def test_constraint_jacobian_loses_rank_at_the_apex(m2):
-    """G = [-B', R n(phi), L n(theta)] has rank 1 at the apex (kinematics.md §1.5 point 1)."""
+    """G = [-B', R n(phi), L n(theta)] has rank 1 at the apex (docs/theory.md §K1.5 point 1)."""
     def sv(s):
         st = m2.state(np.array([s]), "leading")
         B1 = m2.path.derivatives(np.array([s]), 1)[1][0]
@@ -96,7 +96,7 @@ def test_constraint_jacobian_loses_rank_at_the_apex(m2):
 
 @pytest.mark.parametrize("delta_cm, f_peak", [(1e-2, 3.63), (1e-3, 11.48), (1e-4, 36.3), (1e-5, 114.8)])
 def test_detuned_positive_near_dwell(delta_cm, f_peak):
-    """delta > 0: roots never meet; omega = 0.375 at the apex, peak |f| ~ delta^-1/2 (kinematics.md §1.5)."""
+    """delta > 0: roots never meet; omega = 0.375 at the apex, peak |f| ~ delta^-1/2 (docs/theory.md §K1.5)."""
     m = ChainDwellMechanism(MECH1.detuned(delta_cm * CM))
     assert len(m.singular) == 0
     s_apex = m.path.arc_of(1).apex_travel(m.Q)
@@ -155,7 +155,7 @@ def test_tiny_detuning_is_classified(delta, m1):
 
 def test_dwell_curve_rates_stay_exact_next_to_the_apex(m2):
     """On the dwell curve just after the apex omega = f = 0 exactly. The textbook 2x2 solve of the paper's
-    eqs. (28)-(29) is 0/0 there (kinematics.md §1.4, E10); the cancellation-free form keeps round-off level."""
+    eqs. (28)-(29) is 0/0 there (docs/theory.md §K1.4, E10); the cancellation-free form keeps round-off level."""
     s_star = m2.touches[0]
     th = (s_star + np.array([1e-3, 1e-4, 1e-5, 1e-6]) * CM) / m2.r1
     r = m2.rates(th, "leading")

@@ -100,7 +100,7 @@ def test_window_not_starting_at_zero_is_consistent():
     th = np.linspace(math.radians(900), math.radians(1700), 801)
     ts = kinematics_table(m, "smooth", drive_angle=th)
     dw = dwell_table(m, "smooth", cycles=(th[-1] - th[0]) / m.cycle_angle, start_angle=th[0])
-    # the second-cycle smooth dwells (kinematics.md §1.3): sprocket 2 [956.128274, 1046.128274], sprocket 1 from 1507.16
+    # the second-cycle smooth dwells (docs/theory.md §K1.3): sprocket 2 [956.128274, 1046.128274], sprocket 1 from 1507.16
     assert np.degrees(dw["start_drive_angle_rad"]).tolist() == pytest.approx([956.128274, 1507.161653], abs=1e-6)
     for d in dw.itertuples():
         core = ts[(ts.drive_angle_rad > d.start_drive_angle_rad + 1e-9) & (ts.drive_angle_rad < d.end_drive_angle_rad - 1e-9)]

@@ -35,7 +35,7 @@ def motor():
 
 
 def test_prescribed_speed_matches_closed_form(seed_geometry, prescribed):
-    """physics.md §7 rows 1-6 (as for IDA): wheel angle, speed and acceleration to 1e-6 relative."""
+    """docs/theory.md §G7 rows 1-6 (as for IDA): wheel angle, speed and acceleration to 1e-6 relative."""
     _, traj, df = prescribed
     assert traj.failure is None, traj.failure
     assert_wheel_matches_closed_form(seed_geometry, df, W1)

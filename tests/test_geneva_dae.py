@@ -26,7 +26,7 @@ def run(mech, drive, t_end, formulation="index2", rtol=1e-10, atol=1e-12, angle0
 
 @pytest.mark.parametrize("formulation", ["index1", "index2"])
 def test_prescribed_speed_matches_closed_form(seed_geometry, formulation):
-    """physics.md §7 rows 1-6: wheel angle, speed, acceleration to 1e-6 relative; dwell fraction."""
+    """docs/theory.md §G7 rows 1-6: wheel angle, speed, acceleration to 1e-6 relative; dwell fraction."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15)
     traj, df = run(mech, Drive("speed", speed=W1), 2.5, formulation)
     assert_wheel_matches_closed_form(seed_geometry, df, W1)
@@ -39,7 +39,7 @@ def test_prescribed_speed_matches_closed_form(seed_geometry, formulation):
 
 
 def test_normal_force_matches_wheel_balance(seed_geometry):
-    """N = (J2 alpha2 + T_L) / (x - sigma mu R) (physics.md §2) to 1e-6 relative while indexing."""
+    """N = (J2 alpha2 + T_L) / (x - sigma mu R) (docs/theory.md §G2) to 1e-6 relative while indexing."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15)
     _, df = run(mech, Drive("speed", speed=W1), 1.3)
     eng = df[df["mode"] == "engaged"]
@@ -48,13 +48,13 @@ def test_normal_force_matches_wheel_balance(seed_geometry):
     sigma = np.sign(eng["slip_speed_m_s"].to_numpy())
     expected = gk.normal_force_from_wheel(seed_geometry, alpha, a2, 0.0, J2, 7.0, 0.15, sigma)
     np.testing.assert_allclose(eng["contact_force_N"], expected, rtol=1e-6)
-    # seed numbers (physics.md §7 row 9, mu = 0 version differs by < mu R / x): entry ~93.9 N, centre 225.3 N
+    # seed numbers (docs/theory.md §G7 row 9, mu = 0 version differs by < mu R / x): entry ~93.9 N, centre 225.3 N
     assert eng["contact_force_N"].max() == pytest.approx(7.0 / (seed_geometry.min_pin_distance - 0.15 * 0.004),
                                                          rel=0.05)
 
 
 def test_torque_driven_frictionless_matches_minimal_coordinates(seed_geometry):
-    """mu = 0, constant torque: theta(t) equals the reduced equation of physics.md §2 to 1e-7 rad, 5 turns."""
+    """mu = 0, constant torque: theta(t) equals the reduced equation of docs/theory.md §G2 to 1e-7 rad, 5 turns."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.0, crank_damping=0.05)
     t_end = 4.0
     _, df = run(mech, Drive("torque", torque=4.0), t_end, "index1", rtol=1e-11, atol=1e-13)
@@ -87,14 +87,14 @@ def test_motor_with_friction_energy_closes(seed_geometry, formulation):
 
 
 def test_friction_force_and_energy_per_index(seed_geometry):
-    """Friction energy per index at mu = 0.15, prescribed speed: 1.868 J (physics.md §7 row 18, +-0.5 %)."""
+    """Friction energy per index at mu = 0.15, prescribed speed: 1.868 J (docs/theory.md §G7 row 18, +-0.5 %)."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15)
     traj, df = run(mech, Drive("speed", speed=W1), 2 * np.pi / W1, angle0=-np.pi)
     assert -df["work_friction_J"].iloc[-1] == pytest.approx(1.868, rel=5e-3)
 
 
 def test_flank_switch_is_detected_and_reported(seed_geometry):
-    """No load, light wheel damping: the wheel's inertia drives the pin after mid-stroke (N < 0, physics.md §2)."""
+    """No load, light wheel damping: the wheel's inertia drives the pin after mid-stroke (N < 0, docs/theory.md §G2)."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=0.0, friction=0.1)
     traj, df = run(mech, Drive("speed", speed=W1), 1.2)
     ev = events_table(traj)

@@ -1,4 +1,4 @@
-"""Closed-form Geneva kinematics against physics.md §1 and §7 rows 1-6, 8-9 (independently derived numbers)."""
+"""Closed-form Geneva kinematics against docs/theory.md §G1 and §7 rows 1-6, 8-9 (independently derived numbers)."""
 import numpy as np
 import pytest
 
@@ -59,7 +59,7 @@ def test_row6_times(seed_geometry):
 
 
 def test_table_section1(seed_geometry):
-    """The numeric table of physics.md §1 (phi = 5 ... 45 deg)."""
+    """The numeric table of docs/theory.md §G1 (phi = 5 ... 45 deg)."""
     rows = [(5, -44.761, 0.5341, 37.330, -0.3988, 68.464), (15, -42.368, 2.1800, 66.533, -0.3817, 55.647),
             (30, -30.000, 7.2946, 145.375, -0.2832, 38.823), (40, -11.777, 11.9733, 105.718, -0.1156, 32.026)]
     g = seed_geometry

@@ -31,7 +31,7 @@ def test_column_names_carry_units(atlas_b):
 
 
 def test_multicursal_components(atlas_b):
-    """Set B: 4 closure intervals -> 4 closed dichromatic components (kinematics.md §2.2), each traced by
+    """Set B: 4 closure intervals -> 4 closed dichromatic components (docs/theory.md §K2.2), each traced by
     branch +1 one way and -1 back, the colours changing only at the stretched/folded ends."""
     ct = atlas_b.component_table
     assert list(ct.kind) == ["dichromatic"] * 4 and ct.closed.all()

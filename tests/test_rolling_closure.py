@@ -1,5 +1,5 @@
 """Closure intervals of the rolling-pair 4-bar: ends labelled stretched/folded to 1e-12, reference
-intervals of kinematics.md §2.2, bicursal cases (including the K7 counter-example)."""
+intervals of docs/theory.md §K2.2, bicursal cases (including the K7 counter-example)."""
 import math
 
 import numpy as np
@@ -56,7 +56,7 @@ def test_closure_matches_dense_sampling(name):
 
 @pytest.mark.parametrize("name", ["A", "C"])
 def test_bicursal_sets_close_everywhere(name):
-    """Sets A and C: bicursal, two closed monochromatic curves (kinematics.md §2.2)."""
+    """Sets A and C: bicursal, two closed monochromatic curves (docs/theory.md §K2.2)."""
     m = make(name)
     iv = closure_intervals(m)
     assert len(iv) == 1 and iv[0].start_kind == iv[0].end_kind == "period"
@@ -66,7 +66,7 @@ def test_bicursal_sets_close_everywhere(name):
 
 
 def test_bicursal_without_contained_annulus_K7():
-    """kinematics.md K7: the trochoid stays within |A0B| in [2.0179, 5.9923], inside the dyad annulus
+    """docs/theory.md §K1.3 (K7): the trochoid stays within |A0B| in [2.0179, 5.9923], inside the dyad annulus
     [2.0079, 6.0023], so the curve is bicursal, although the trochoid's bounding annulus seen from A0
     ([2.0, 6.0]) is not contained (the paper's condition is sufficient, not necessary)."""
     m = make("bicursal_K7")

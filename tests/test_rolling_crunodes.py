@@ -1,4 +1,4 @@
-"""Crunodes of the trochoid and of the coupler curve, set A (kinematics.md §2.4)."""
+"""Crunodes of the trochoid and of the coupler curve, set A (docs/theory.md §K2.4)."""
 import numpy as np
 import pytest
 

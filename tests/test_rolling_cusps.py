@@ -1,11 +1,11 @@
-"""Cusps of the rolling-pair coupler curve (l4 = r): kinematics.md §2.3, Kar & Sen §3.3."""
+"""Cusps of the rolling-pair coupler curve (l4 = r): docs/theory.md §K2.3, Kar & Sen §3.3."""
 import numpy as np
 import pytest
 
 from mechsim.mechanisms.rolling_atlas import cusps_table
 from mechsim.mechanisms.rolling_sets import make
 
-# kinematics.md §2.3, set C: phi_k, B (= contact), C on branch +1, C on branch -1
+# docs/theory.md §K2.3, set C: phi_k, B (= contact), C on branch +1, C on branch -1
 SET_C_CUSPS = [
     (3.522124, (2.910226, 2.813231), (3.822356, 0.508538), (0.646837, 1.802951)),
     (11.899704, (-1.958430, 0.997688), (-0.190889, 2.735328), (-0.395719, -0.926247)),

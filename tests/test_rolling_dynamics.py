@@ -1,6 +1,6 @@
-"""The rolling-pair 4-bar DAE (mechanisms/rolling_model.py) against kinematics.md §3 and independent physics:
+"""The rolling-pair 4-bar DAE (mechanisms/rolling_model.py) against docs/theory.md §K3 and independent physics:
 the minimal-coordinate equation, energy, link 4's Newton-Euler balance with the rolling contact force, the
-closed form at prescribed speed, and dead points (kinematics.md §2.2, §4 point 4)."""
+closed form at prescribed speed, and dead points (docs/theory.md §K2.2, §4 point 4)."""
 import math
 
 import numpy as np
@@ -18,7 +18,7 @@ G = 9.81
 
 
 def mechanism(set_name="A", **kw):
-    """kinematics.md §3 bodies: rods 0.2 / 0.3 kg, link 4 = 0.5 kg disc + 0.1 kg arm."""
+    """docs/theory.md §K3 bodies: rods 0.2 / 0.3 kg, link 4 = 0.5 kg disc + 0.1 kg arm."""
     kin = make(set_name)
     return RollingPairFourBar(kin, Bodies.uniform(kin, 0.2, 0.3, 0.5, 0.1), **kw)
 
@@ -37,7 +37,7 @@ def test_bodies_follow_kinematics_md_3():
 
 @pytest.mark.parametrize("branch,phi_end", [(1, 32.268), (-1, 35.237)])
 def test_torque_on_rolling_link_matches_minimal_coordinates(branch, phi_end):
-    """kinematics.md §3: set A, tau = 15 N m on link 4, gravity, from rest, 4 s. The DAE's phi(t) equals the
+    """docs/theory.md §K3: set A, tau = 15 N m on link 4, gravity, from rest, 4 s. The DAE's phi(t) equals the
     minimal-coordinate equation (closed-form kinematics, DOP853) to 1e-8 rad; phi(4 s) = 32.268 / 35.237;
     drive work = kinetic + potential energy change to 1e-8 of the drive work."""
     mech = mechanism(gravity=G, branch=branch)
@@ -104,7 +104,7 @@ def test_prescribed_rolling_speed_closed_form_matches_dae():
 
 
 def test_closed_form_cusps_of_set_c():
-    """kinematics.md §2.3, set C (l4 = r): at phi_k the coupler point is at the tabulated cusp and stops."""
+    """docs/theory.md §K2.3, set C (l4 = r): at phi_k the coupler point is at the tabulated cusp and stops."""
     mech = mechanism("C", prescribed=True)
     for phi_k, C in [(3.522124, (3.822356, 0.508538)), (11.899704, (-0.190889, 2.735328))]:
         h = 1e-4
@@ -116,7 +116,7 @@ def test_closed_form_cusps_of_set_c():
 
 def test_rolling_input_dead_point_is_the_closure_end():
     """Set B, torque on the rolling link from phi = 3: the dyad stretches at the end of the closure interval
-    [2.081243, 5.781935] (kinematics.md §2.2); the guard fires there with phi' = 0, the link reverses, the motion
+    [2.081243, 5.781935] (docs/theory.md §K2.2); the guard fires there with phi' = 0, the link reverses, the motion
     continues on the other branch (a dichromatic component), and energy still closes."""
     mech = mechanism("B")
     traj, df = run(mech, Drive("torque", torque=2.0), 3.0, 3.0)

@@ -1,6 +1,6 @@
 """The rolling-pair 4-bar through the command line, in-process: every built-in rolling scenario runs, user errors
 are one line with exit 2, a prescribed crank speed stopped by a dead point exits 3, and `mechsim curves` writes
-the coupler-curve atlas (numbers from kinematics.md §2.2-2.4 and §3)."""
+the coupler-curve atlas (numbers from docs/theory.md §K2.2-2.4 and §3)."""
 import json
 
 import numpy as np
@@ -25,7 +25,7 @@ def test_list_shows_the_rolling_scenarios():
 
 
 def test_torque_on_rolling_link_reference(tmp_path):
-    """kinematics.md §3, branch +1: phi(4 s) = 32.268 rad, W = 484.0 J; energy closes with the gravity work."""
+    """docs/theory.md §K3, branch +1: phi(4 s) = 32.268 rad, W = 484.0 J; energy closes with the gravity work."""
     s, df, ev, _ = run_ok(tmp_path, "rolling-a-torque", plots=True)
     assert s["mechanism"] == "rolling_pair" and s["model"]["method"] == "dae"
     assert df["rolling_angle_rad"].iloc[-1] == pytest.approx(32.268, abs=1e-3)
@@ -64,7 +64,7 @@ def test_multi_component_dead_points(tmp_path):
 
 def test_cusp_scenario_coupler_point_stops(tmp_path):
     """Set C (l4 = r): the coupler point's speed (finite differences of its path) drops to ~0 at each cusp
-    phi_k = 3.522124, 11.899704, 20.277284 (kinematics.md §2.3) and is O(1) elsewhere."""
+    phi_k = 3.522124, 11.899704, 20.277284 (docs/theory.md §K2.3) and is O(1) elsewhere."""
     s, df, _, _ = run_ok(tmp_path, "rolling-c-cusp")
     assert s["model"]["method"] == "closed-form"
     t = df["t_s"].to_numpy()
@@ -126,7 +126,7 @@ def test_user_errors_exit_2_with_one_line(tmp_path, label, name, sets, field):
 
 def test_curves_set_a(tmp_path):
     """Set A: bicursal (two closed monochromatic components), crunodes 4 on branch +1 and 2 on branch -1 with
-    4 of them induced by the trochoid's 2 (kinematics.md §2.4)."""
+    4 of them induced by the trochoid's 2 (docs/theory.md §K2.4)."""
     out = tmp_path / "A"
     r = invoke("curves", "A", "--out", out)
     assert r.exit_code == 0, r.output
@@ -145,7 +145,7 @@ def test_curves_set_a(tmp_path):
 
 def test_curves_from_scenarios(tmp_path):
     """A built-in scenario (set D on a line, with its atlas span) and a scenario file (set B): closure intervals of
-    kinematics.md §2.2."""
+    docs/theory.md §K2.2."""
     r = invoke("curves", "rolling-d-line", "--out", tmp_path / "d")
     assert r.exit_code == 0, r.output
     cl = pd.read_csv(tmp_path / "d" / "closure.csv")

@@ -1,4 +1,4 @@
-"""The closed-form rolling-pair kinematics reproduce the torque-driven reference of kinematics.md §3
+"""The closed-form rolling-pair kinematics reproduce the torque-driven reference of docs/theory.md §K3
 (set A, circle on circle, τ = 15 N·m on link 4, gravity, from rest at φ = 0) through the
 minimal-coordinate equation M(φ)φ̈ + ½M′(φ)φ̇² = τ − dV/dφ, M = Σ m|G′|² + I θ′².
 
@@ -13,7 +13,7 @@ from mechsim.mechanisms.rolling_sets import make
 
 G = 9.81
 TAU = 15.0
-# kinematics.md §3 bodies: crank and coupler slender rods; link 4 = disc (0.5 kg at B0) + arm (0.1 kg,
+# docs/theory.md §K3 bodies: crank and coupler slender rods; link 4 = disc (0.5 kg at B0) + arm (0.1 kg,
 # CoM at l4/2 = 0.8), so its CoM is 0.1 * 0.8 / 0.6 = 0.13333 from B0 along the arm
 M2, I2, M3, I3, M4, I4, C4 = 0.2, 0.15, 0.3, 0.30625, 0.6, 0.324667, 0.1 * 0.8 / 0.6
 
@@ -53,6 +53,6 @@ def test_torque_driven_reference(branch, phi_end, w_max):
     ts = np.linspace(0.0, 4.0, 401)
     phi, w = sol.sol(ts)
     assert w.max() == pytest.approx(w_max, abs=0.01)
-    # energy E = T + V − τφ is conserved (kinematics.md §3: drift ~1e-8)
+    # energy E = T + V − τφ is conserved (docs/theory.md §K3: drift ~1e-8)
     E = np.array([0.5 * terms(p)[0] * v * v + terms(p)[2] - TAU * p for p, v in zip(phi, w)])
     assert np.max(np.abs(E - E[0])) <= 1e-6

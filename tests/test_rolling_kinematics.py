@@ -1,6 +1,6 @@
 """Rolling-pair 4-bar: corrected no-slip kinematics, closed-form trochoids, dyad, derivatives.
 
-Expected values: kinematics.md §2.1-2.3 and textbook epi-/trochoid formulas; derivatives are checked
+Expected values: docs/theory.md §K2.1-2.3 and textbook epi-/trochoid formulas; derivatives are checked
 against finite differences and against the Kennedy (instantaneous-centre) relation.
 """
 import math
@@ -65,7 +65,7 @@ def test_arc_lengths_equal_on_both_profiles():
 
 @pytest.mark.parametrize("R,r", [(2.0, 1.0), (3.0, 1.0)])
 def test_paper_rolling_relation_slips(R, r):
-    """Kar & Sen eqs. (1), (10), (11), (14): the contact slips at exactly r²/R (kinematics.md §2.1, K1)."""
+    """Kar & Sen eqs. (1), (10), (11), (14): the contact slips at exactly r²/R (docs/theory.md §K2.1, K1)."""
     pair = CircleOnCircle(R=R, r=r, O=(0.5, 0.3))
     phi = np.linspace(0, 20, 501)
     slip = np.abs(paper_contact_slip(pair, phi))
@@ -137,7 +137,7 @@ def test_line_trochoid_closed_form():
 
 @pytest.mark.parametrize("name,T", [("A", 6 * math.pi), ("B", 8 * math.pi), ("C", 8 * math.pi)])
 def test_trochoid_period(name, T):
-    """φ-period 2π(p + q) for R/r = p/q (kinematics.md §2.2): 6π (set A), 8π (sets B, C)."""
+    """φ-period 2π(p + q) for R/r = p/q (docs/theory.md §K2.2): 6π (set A), 8π (sets B, C)."""
     m = make(name)
     (a, b), periodic = rolling_span(m)
     assert periodic and b - a == pytest.approx(T, rel=1e-15)
@@ -232,7 +232,7 @@ def test_time_derivatives_chain_rule():
 @pytest.mark.parametrize("name", ["A", "B", "C"])
 @pytest.mark.parametrize("branch", [1, -1])
 def test_kennedy_relation(name, branch):
-    """|ω3/ω4| = |BP|/|B I13| and V_C = ω3 k × (C − I13), I13 = A0A ∩ PB (kinematics.md §2.3)."""
+    """|ω3/ω4| = |BP|/|B I13| and V_C = ω3 k × (C − I13), I13 = A0A ∩ PB (docs/theory.md §K2.3)."""
     m = make(name)
     phi = _phi_grid(m, 300)
     st = m.solve(phi, branch)

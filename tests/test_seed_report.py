@@ -1,6 +1,6 @@
-"""`mechsim report seed --small`: the seed-as-printed columns reproduce physics.md §7 rows 7, 11, 12 and the §4.7
+"""`mechsim report seed --small`: the seed-as-printed columns reproduce docs/theory.md §G7 rows 7, 11, 12 and the §4.7
 S(13) column, the corrected model reproduces the §4.7 table, mechsim's normal force is the wheel balance of §2,
-and the conclusions written are those of the tables. Expected numbers: shared/physics.md."""
+and the conclusions written are those of the tables. Expected numbers: docs/theory.md (Part G)."""
 import math
 
 import numpy as np
@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from mechsim.scenarios.cli import app
 
-# physics.md header / §1 / §2: seed geometry, wheel inertia, loads
+# docs/theory.md §G0 / §1 / §2: seed geometry, wheel inertia, loads
 R_CRANK, N_SLOTS, R_PIN, LENGTH, J2 = 0.075, 4, 0.004, 0.004, 1.5626e-3
 LAM = math.sin(math.pi / N_SLOTS)
 C = R_CRANK / LAM
@@ -18,7 +18,7 @@ ALPHA0 = math.pi / 2 - math.pi / N_SLOTS
 CASES = {(lc, mu): f"geneva-seed-lc{lc}-mu{code}" for lc in (1, 2, 3) for mu, code in ((0.15, "015"), (0.3, "030"))}
 TORQUE = {1: 7.0, 2: 14.0, 3: 7.0}
 SPEED = {1: 5.34, 2: 5.34, 3: 10.68}
-# physics.md §4.7 corrected-model table: phi, N, b (um), |u|, dT_flash (mu = 0.15; x2 at mu = 0.3), seed S(13) mu = 0.15
+# docs/theory.md §G4.7 corrected-model table: phi, N, b (um), |u|, dT_flash (mu = 0.15; x2 at mu = 0.3), seed S(13) mu = 0.15
 TABLE_47 = [(5, 103.1, 34.0, 0.375, 14.8, 3.4), (15, 127.7, 37.8, 0.352, 17.1, 5.9), (30, 186.2, 45.7, 0.233, 16.0, 6.7),
             (45, 225.3, 50.2, 0.073, 7.6, 0.0), (60, 174.5, 44.2, 0.334, 21.7, 6.7),
             (75, 123.9, 37.2, 0.412, 19.5, 5.9), (85, 101.4, 33.7, 0.422, 17.0, 3.4)]
@@ -117,7 +117,7 @@ def test_mechsim_normal_force_is_the_wheel_balance(report):
         w1, T_L = SPEED[lc], TORQUE[lc]
         alpha = np.radians(t["phi_deg"].to_numpy()) - ALPHA0
         D = 1 - 2 * LAM * np.cos(alpha) + LAM**2
-        # physics.md §1 closed forms for the columns the balance uses
+        # docs/theory.md §G1 closed forms for the columns the balance uses
         np.testing.assert_allclose(t["mechsim_pin_distance_m"], C * np.sqrt(D), rtol=1e-9)
         np.testing.assert_allclose(t["mechsim_wheel_accel_rad_s2"], -w1**2 * LAM * (1 - LAM**2) * np.sin(alpha) / D**2,
                                    rtol=1e-9, atol=1e-9)

@@ -25,7 +25,7 @@ def test_index3_on_ida_exits_3_naming_the_formulation(tmp_path):
     r = invoke_case(CASE["index-3 on IDA"], tmp_path / "o")
     assert r.exit_code == 3, r.output
     assert "index-3" in r.stderr and "formulation = 'index2'" in r.stderr
-    # what ran is kept, and it stops at the first restart (entry at crank angle -pi/4, kinematics.md §4):
+    # what ran is kept, and it stops at the first restart (entry at crank angle -pi/4, docs/theory.md §K4):
     # the last row is the output step before it
     df = pd.read_csv(tmp_path / "o" / "timeseries.csv")
     gap = -np.pi / 4 - df["crank_angle_rad"].iloc[-1]
@@ -49,7 +49,7 @@ def test_events_off_mode_change_stepped_over(tmp_path):
 def test_stall_exits_3_where_the_crank_stops(tmp_path):
     """2 N*m cannot carry 7 N*m on the wheel through the engagement: the crank stops, and the slip reversal that
     comes with it (u is proportional to the crank speed) does not hide the stall; no row runs backwards.
-    The stall time is where the reduced-coordinate equation (physics.md §2) brings the crank speed to zero."""
+    The stall time is where the reduced-coordinate equation (docs/theory.md §G2) brings the crank speed to zero."""
     r = invoke_case(CASE["drive too weak (stall)"], tmp_path / "o")
     assert r.exit_code == 3, r.output
     assert "crank stalled" in r.stderr and "raise the drive torque" in r.stderr
@@ -82,7 +82,7 @@ def test_stall_exits_3_where_the_crank_stops(tmp_path):
 
 def test_flank_switch_is_a_warning_and_an_event_row(tmp_path):
     """At 40 rad/s the wheel's deceleration J2 beta'' exceeds the load: N changes sign where the closed form
-    (physics.md §2, flank from the sign of N) says it does; the run goes on (exit 0) on the other flank."""
+    (docs/theory.md §G2, flank from the sign of N) says it does; the run goes on (exit 0) on the other flank."""
     r = invoke_case(CASE["pin crosses to the other flank"], tmp_path / "o")
     assert r.exit_code == 0, r.output
     assert "warning:" in r.stderr and "flank" in r.stderr

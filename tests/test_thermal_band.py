@@ -1,4 +1,4 @@
-"""Moving band source (Jaeger 1942): exact integral, asymptotes, fast table, closed-form fit; physics.md §4.3,
+"""Moving band source (Jaeger 1942): exact integral, asymptotes, fast table, closed-form fit; docs/theory.md §G4.3,
 §4.6 and §7 rows 13, 14, 16."""
 import math
 
@@ -29,7 +29,7 @@ def test_exact_quad_matches_uniform_closed_form(X, L):
 
 
 def test_row13_uniform_max_and_avg():
-    # physics.md §7 row 13 (0.5 %) — and the §4.3 table (3-4 digits)
+    # docs/theory.md §G7 row 13 (0.5 %) — and the §4.3 table (3-4 digits)
     expected = {0.5: (1.3042, 1.1217), 1.0: (0.9919, 0.7999), 5.0: (0.4846, 0.3450)}
     for L, (tmax, tavg) in expected.items():
         assert bs.band_theta_max_exact(L, "uniform")[0] == pytest.approx(tmax, rel=1e-4)
@@ -58,7 +58,7 @@ def test_avg_rearrangement_equals_mean_of_profile():
 
 
 def test_row14_high_peclet_coefficients():
-    # physics.md §7 row 14: semi-elliptic A = 1.1115 (Blok 1.11) at X = 0.652; uniform 2/sqrt(pi)
+    # docs/theory.md §G7 row 14: semi-elliptic A = 1.1115 (Blok 1.11) at X = 0.652; uniform 2/sqrt(pi)
     assert bs.high_peclet_coefficient("semi-elliptic", "max") == pytest.approx(1.1115, rel=1e-4)
     assert bs.high_peclet_coefficient("uniform", "max") == pytest.approx(2 / math.sqrt(math.pi), rel=1e-14)
     assert bs.high_peclet_coefficient("uniform", "avg") == pytest.approx(0.7523, rel=1e-4)
@@ -73,7 +73,7 @@ def test_row14_high_peclet_coefficients():
 
 
 def test_low_peclet_log_law():
-    # physics.md §4.3: d_max/d_avg = 1.116/0.923 (uniform), 1.309/0.976 (semi-elliptic)
+    # docs/theory.md §G4.3: d_max/d_avg = 1.116/0.923 (uniform), 1.309/0.976 (semi-elliptic)
     expected = {("uniform", "max"): 1.116, ("uniform", "avg"): 0.923,
                 ("semi-elliptic", "max"): 1.309, ("semi-elliptic", "avg"): 0.976}
     for (kind, stat), d in expected.items():
@@ -128,7 +128,7 @@ def test_fit_evaluates_in_numpy_jax_and_sympy():
 
 
 def test_row16_stationary_band_switched_on():
-    # physics.md §7 row 16: chi t/b^2 = 100, centre theta = 2.3603, and the log law
+    # docs/theory.md §G7 row 16: chi t/b^2 = 100, centre theta = 2.3603, and the log law
     assert float(bs.band_stationary_transient(0.0, 100.0)) == pytest.approx(2.3603, rel=1e-3)
     assert float(bs.band_stationary_transient_centre_asymptote(100.0)) == pytest.approx(2.3603, rel=1e-3)
     # short times: 1-D penetration under the band centre, theta = 2 sqrt(Fo/pi)

@@ -1,4 +1,4 @@
-"""1-D conduction under the contact (physics.md §6, §7 row 17): MOL vs exact solutions, mesh convergence
+"""1-D conduction under the contact (docs/theory.md §G6, §7 row 17): MOL vs exact solutions, mesh convergence
 order, energy balance, exact-solution consistency."""
 import math
 
@@ -15,11 +15,11 @@ STEEL = get_material("aisi1045")
 
 
 def test_row17_switched_flux_bdf_with_sparse_jacobian():
-    # physics.md §7 row 17: q = 4.33e7 W/m^2 on for 161.6 us: 48.91 K at t_on, 20.26 K at 2 t_on (exact)
+    # docs/theory.md §G7 row 17: q = 4.33e7 W/m^2 on for 161.6 us: 48.91 K at t_on, 20.26 K at 2 t_on (exact)
     q, t_on = 4.33e7, 161.6e-6
     assert switched_flux_surface(t_on, q, t_on, STEEL) == pytest.approx(48.91, rel=1e-3)
     assert switched_flux_surface(2 * t_on, q, t_on, STEEL) == pytest.approx(20.26, rel=1e-3)
-    model = conduction_system(graded_mesh(0.5e-6, 1.15, 2.06e-3), STEEL)      # physics.md §6 example, 46 cells
+    model = conduction_system(graded_mesh(0.5e-6, 1.15, 2.06e-3), STEEL)      # docs/theory.md §G6 example, 46 cells
     assert model.mesh.n_cells == 46
     assert sps.issparse(model.system.jacobian())
     n = model.mesh.n_cells
@@ -31,7 +31,7 @@ def test_row17_switched_flux_bdf_with_sparse_jacobian():
 
 
 def test_stiffness_spectrum():
-    # physics.md §6 example mesh (0.5 um, 1.15, 2.06 mm): lambda_max ≈ 1.07e8 1/s <= 4 chi/dz_min^2 (Gershgorin);
+    # docs/theory.md §G6 example mesh (0.5 um, 1.15, 2.06 mm): lambda_max ≈ 1.07e8 1/s <= 4 chi/dz_min^2 (Gershgorin);
     # lambda_min = chi pi^2/(4 H^2) for a far face held fixed (0 if insulated)
     mesh = graded_mesh(0.5e-6, 1.15, 2.06e-3)
     lam = 1.0 / conduction_system(mesh, STEEL, far="fixed").system.time_constants()

@@ -1,4 +1,4 @@
-"""Materials, Hertz line contact, heat and Peclet numbers: physics.md header, §3, §4.1–4.2, §7 rows 10–11."""
+"""Materials, Hertz line contact, heat and Peclet numbers: docs/theory.md §G0, §3, §4.1–4.2, §7 rows 10–11."""
 import math
 import subprocess
 import sys
@@ -23,7 +23,7 @@ def test_thermal_imports_nothing_else_from_mechsim():
 
 
 def test_aisi1045_derived_properties():
-    # physics.md header: chi = 1.1096e-5 m^2/s, e = 12698 W s^0.5/(m^2 K)
+    # docs/theory.md §G0: chi = 1.1096e-5 m^2/s, e = 12698 W s^0.5/(m^2 K)
     assert STEEL.diffusivity == pytest.approx(1.1096e-5, rel=1e-4)
     assert STEEL.effusivity == pytest.approx(12698, rel=1e-4)
     assert STEEL.effusivity == pytest.approx(STEEL.conductivity / math.sqrt(STEEL.diffusivity), rel=1e-12)
@@ -38,7 +38,7 @@ def test_material_lookup_errors_name_the_material():
 
 
 def test_effective_modulus_conventions():
-    # physics.md §3: E* = 113.74 GPa (Johnson), seed E' = 2 E* = 227.47 GPa
+    # docs/theory.md §G3: E* = 113.74 GPa (Johnson), seed E' = 2 E* = 227.47 GPa
     assert effective_modulus(STEEL) == pytest.approx(113.74e9, rel=1e-4)
     assert seed_reduced_modulus(STEEL) == pytest.approx(227.47e9, rel=1e-4)
 
@@ -52,11 +52,11 @@ def test_effective_radius():
 
 
 def test_hertz_row10_half_width_and_peak_pressure():
-    # physics.md §7 row 10
+    # docs/theory.md §G7 row 10
     res = line_contact(LOADS, R_PIN, LENGTH, effective_modulus(STEEL))
     np.testing.assert_allclose(res["half_width_m"], [19.79e-6, 32.32e-6, 50.22e-6], rtol=1e-3)
     np.testing.assert_allclose(res["pressure_peak_Pa"], [281.4e6, 459.5e6, 714.0e6], rtol=1e-3)
-    # the consistent pair check of physics.md §3: p0 b = 2W/(pi l), mean = W/(2bl) = pi p0/4
+    # the consistent pair check of docs/theory.md §G3: p0 b = 2W/(pi l), mean = W/(2bl) = pi p0/4
     np.testing.assert_allclose(res["pressure_peak_Pa"] * res["half_width_m"], 2 * LOADS / (np.pi * LENGTH), rtol=1e-12)
     np.testing.assert_allclose(res["pressure_mean_Pa"], LOADS / (2 * res["half_width_m"] * LENGTH), rtol=1e-12)
     np.testing.assert_allclose(mean_pressure(LOADS, R_PIN, LENGTH, effective_modulus(STEEL)),
@@ -85,7 +85,7 @@ def test_max_subsurface_shear_from_stress_field():
 
 
 def test_seed_s9_as_quoted():
-    # physics.md §3 table: S&B-as-quoted b and p, and the seed's effective W/(pi b l) with Hertz b
+    # docs/theory.md §G3 table: S&B-as-quoted b and p, and the seed's effective W/(pi b l) with Hertz b
     b_q = seed_half_width(LOADS, R_PIN, LENGTH, seed_reduced_modulus(STEEL))
     np.testing.assert_allclose(b_q, [14.00e-6, 22.86e-6, 35.51e-6], rtol=1e-3)
     np.testing.assert_allclose(seed_max_pressure(LOADS, b_q, LENGTH), [199.0e6, 324.9e6, 504.9e6], rtol=1e-3)
@@ -96,7 +96,7 @@ def test_seed_s9_as_quoted():
 
 
 def test_row11_seed_peclet_numbers():
-    # physics.md §7 row 11: U = omega1 r = 0.4005 m/s, Hertz b of the S(8) loads 35 / 93.33 N
+    # docs/theory.md §G7 row 11: U = omega1 r = 0.4005 m/s, Hertz b of the S(8) loads 35 / 93.33 N
     b = half_width(np.array([35.0, 93.33]), R_PIN, LENGTH, effective_modulus(STEEL))
     np.testing.assert_allclose(peclet(0.4005, b, STEEL.diffusivity), [0.357, 0.583], rtol=5e-3)
     # with S(9) as printed (E' = 2E*) the seed's numbers are NOT reproduced (0.253...0.412)

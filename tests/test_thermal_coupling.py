@@ -1,5 +1,5 @@
 """The thermal model alongside the Geneva mechanics (issue 3 parts 2-6): heat balance of the states integrated with
-the mechanics, cycle-averaged vs resolved bulk, the flash columns against physics.md §4.7, DAE vs closed form,
+the mechanics, cycle-averaged vs resolved bulk, the flash columns against docs/theory.md §G4.7, DAE vs closed form,
 the exact Jacobian of the thermal rows, and the 1-D track mesh against the exact (Duhamel) surface solution."""
 import math
 
@@ -17,7 +17,7 @@ from mechsim.scenarios.thermal_setup import adapter
 from mechsim.thermal import duhamel_surface, get_material, integrate_mean_heat
 
 STEEL = get_material("aisi1045")
-E_STAR = 113.74e9              # physics.md §3: steel on steel, Johnson's convention
+E_STAR = 113.74e9              # docs/theory.md §G3: steel on steel, Johnson's convention
 R_PIN, LENGTH = 4e-3, 4e-3
 
 
@@ -63,7 +63,7 @@ def test_heat_balance_lumped_and_1d(lumped_pair, one_d_pair, path):
         assert result.success
         rel, hb = closure(result)
         assert abs(rel) <= 1e-6, hb
-        assert hb["generated_J"] > 3 * 1.8          # three engagements of ~1.87 J (physics.md §7 row 18)
+        assert hb["generated_J"] > 3 * 1.8          # three engagements of ~1.87 J (docs/theory.md §G7 row 18)
 
 
 # ------------------------------------------------------------------------------------------------ DAE vs closed form
@@ -165,7 +165,7 @@ def test_mean_response_is_integrate_mean_heat_and_auto_picks_cycle():
 
 
 # ------------------------------------------------------------------------------------------------ flash columns
-# physics.md §4.7 corrected-model table: phi (deg), L_wall, L_pin, Q at mu = 0.15 (W), dT_flash at mu = 0.15 (K)
+# docs/theory.md §G4.7 corrected-model table: phi (deg), L_wall, L_pin, Q at mu = 0.15 (W), dT_flash at mu = 0.15 (K)
 TABLE47 = [(5, 0.61, 0.06, 5.80, 14.8), (15, 0.65, 0.05, 6.73, 17.1), (30, 0.58, 0.10, 6.50, 16.0),
            (45, 0.13, 0.17, 2.46, 7.6), (60, 0.56, 0.10, 8.73, 21.7), (75, 0.64, 0.05, 7.65, 19.5),
            (85, 0.61, 0.04, 6.42, 17.0)]
@@ -194,7 +194,7 @@ def test_flash_columns_reproduce_table_47(flash_run, phi, L_wall, L_pin, Q, dT):
     assert _at_phi(df, "temp_flash_rise_K", phi) == pytest.approx(scale * dT, rel=0.15)
     # the table's N omits the friction arm: N = (T_L + J2 alpha2)/(x - sigma mu R) is up to mu R/x_min = 4 % larger
     assert _at_phi(df, "heat_rate_W", phi) == pytest.approx(scale * Q, rel=0.05)
-    # the table lists the effective pin Peclet number, floored by the time since entry (physics.md §4.6-4.7);
+    # the table lists the effective pin Peclet number, floored by the time since entry (docs/theory.md §G4.6-4.7);
     # b (so L) grows as sqrt(N): up to 2 % above the table at mu = 0.3
     floor = 0.749 * _at_phi(df, "hertz_half_width_m", phi) / math.sqrt(STEEL.diffusivity * math.radians(phi) / 5.34)
     assert max(_at_phi(df, "peclet_pin", phi), floor) == pytest.approx(L_pin, rel=0.03, abs=0.011)
@@ -212,7 +212,7 @@ def test_row20_flash_phi60(flash_run):
 
 
 def test_hertz_columns(flash_run):
-    """physics.md §3/§7 row 10: b = sqrt(4 N R/(pi l E*)), p0 b = 2 N/(pi l); 225.33 N -> 50.22 um, 714.0 MPa."""
+    """docs/theory.md §G3/§7 row 10: b = sqrt(4 N R/(pi l E*)), p0 b = 2 N/(pi l); 225.33 N -> 50.22 um, 714.0 MPa."""
     _, df = flash_run
     eng = df[df["mode"] == "engaged"]
     N = eng["contact_force_N"].to_numpy()
@@ -278,7 +278,7 @@ def test_thermal_rows_jacobian_matches_finite_differences(model):
 # ------------------------------------------------------------------------------------------------ 1-D track mesh
 def test_wall_track_surface_matches_duhamel(one_d_pair):
     """During the first engagement the wall track is a semi-infinite solid under the flux q(t) = (1-gamma) Q / A:
-    its surface rise is the exact Duhamel integral (physics.md §6) while the penetration is << the mesh depth."""
+    its surface rise is the exact Duhamel integral (docs/theory.md §G6) while the penetration is << the mesh depth."""
     cf, _ = one_d_pair
     df = cf.timeseries
     th = cf.summary["thermal"]

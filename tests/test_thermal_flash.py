@@ -1,5 +1,5 @@
 """Flash temperature: Blok partition of exact per-body rises, transient floor, seed S(7)/S(8)/S(13) reproduction,
-the 3-D circle source check. physics.md §4.4–4.7 and §7 rows 12, 15, 20."""
+the 3-D circle source check. docs/theory.md §G4.4–4.7 and §7 rows 12, 15, 20."""
 import math
 
 import numpy as np
@@ -18,7 +18,7 @@ ALPHA0 = math.pi / 2 - math.pi / N_SLOTS
 
 
 def kinematics(phi_deg):
-    """Closed-form Geneva kinematics of physics.md §1 (independent of mechanisms/): alpha, beta, omega2, v_s."""
+    """Closed-form Geneva kinematics of docs/theory.md §G1 (independent of mechanisms/): alpha, beta, omega2, v_s."""
     a = np.radians(phi_deg) - ALPHA0
     D = 1 - 2 * LAM * np.cos(a) + LAM**2
     beta = np.arctan2(LAM * np.sin(a), 1 - LAM * np.cos(a))
@@ -28,13 +28,13 @@ def kinematics(phi_deg):
 
 
 def seed_theta_sum(phi_deg):
-    """theta1 + theta2 of the seed (theta1 = |alpha|, theta2 = |beta|; physics.md §1 'Seed check')."""
+    """theta1 + theta2 of the seed (theta1 = |alpha|, theta2 = |beta|; docs/theory.md §G1 'Seed check')."""
     a, beta, _, _ = kinematics(phi_deg)
     return np.abs(a) + np.abs(beta)
 
 
 def test_seed_load_and_speed_s7_s8():
-    # physics.md §2 / §7 row 7: S(8) 66.00 N at phi = 30 deg, 93.33 N at 45 deg, 0 at entry
+    # docs/theory.md §G2 / §7 row 7: S(8) 66.00 N at phi = 30 deg, 93.33 N at 45 deg, 0 at entry
     np.testing.assert_allclose(seed_normal_load(TORQUE, seed_theta_sum(np.array([30.0, 45.0])), CRANK_R),
                                [66.00, 93.33], atol=0.01)
     assert seed_normal_load(TORQUE, seed_theta_sum(0.0), CRANK_R) == pytest.approx(0.0, abs=1e-12)
@@ -45,7 +45,7 @@ def test_seed_load_and_speed_s7_s8():
 
 
 def test_row12_seed_heat_maximum():
-    # physics.md §7 row 12: S(8) x S(7) x mu = 1/2 mu T omega1 sin 2(theta1+theta2); max 5.607 W (mu = 0.3) at phi = 30 deg
+    # docs/theory.md §G7 row 12: S(8) x S(7) x mu = 1/2 mu T omega1 sin 2(theta1+theta2); max 5.607 W (mu = 0.3) at phi = 30 deg
     phi = np.linspace(0.0, 45.0, 45001)
     s = seed_theta_sum(phi)
     Q = frictional_heat(0.3, seed_normal_load(TORQUE, s, CRANK_R), seed_sliding_speed(OMEGA1, CRANK_R, s))
@@ -55,7 +55,7 @@ def test_row12_seed_heat_maximum():
 
 
 def test_seed_s13_reproduces_seed_values():
-    # physics.md §4.7, column "seed S(13) mu=.15/.3": U = omega1 r, Hertz b of the S(8) load, C = 2.5
+    # docs/theory.md §G4.7, column "seed S(13) mu=.15/.3": U = omega1 r, Hertz b of the S(8) load, C = 2.5
     phi = np.array([5.0, 15.0, 30.0, 45.0])
     expected_015 = np.array([3.4, 5.9, 6.7, 0.0])
     s = seed_theta_sum(phi)
@@ -71,7 +71,7 @@ def test_seed_s13_reproduces_seed_values():
 
 
 def test_seed_s13_is_c_over_2L_times_line_source():
-    # physics.md §4.4: S(13) = 0.159 C Q/(k l) / (2 L); the exact solution has C(L) = pi theta(L) and no 1/(2L)
+    # docs/theory.md §G4.4: S(13) = 0.159 C Q/(k l) / (2 L); the exact solution has C(L) = pi theta(L) and no 1/(2L)
     b, U, Q = 40e-6, 0.4, 5.0
     L = U * b / (2 * STEEL.diffusivity)
     T = seed_flash_rise(Q, b, U, LENGTH, STEEL)
@@ -81,7 +81,7 @@ def test_seed_s13_is_c_over_2L_times_line_source():
                                [4.67, 4.10, 3.87], atol=0.006)
 
 
-# corrected model, physics.md §4.7 table (phi, N, dT_flash at mu = 0.15)
+# corrected model, docs/theory.md §G4.7 table (phi, N, dT_flash at mu = 0.15)
 TABLE47 = [(5, 103.1, 14.8), (15, 127.7, 17.1), (30, 186.2, 16.0), (45, 225.3, 7.6), (60, 174.5, 21.7),
            (75, 123.9, 19.5), (85, 101.4, 17.0)]
 
@@ -100,7 +100,7 @@ def corrected_case(phi, N, mu):
 
 
 def test_row20_corrected_flash_phi60():
-    # physics.md §7 row 20: 21.7 K (15 %); the recipe is followed exactly, so it agrees much closer
+    # docs/theory.md §G7 row 20: 21.7 K (15 %); the recipe is followed exactly, so it agrees much closer
     res = corrected_case(60, 174.5, 0.15)
     assert res["temp_flash_rise_K"] == pytest.approx(21.7, rel=0.15)
     assert res["temp_flash_rise_K"] == pytest.approx(21.7, rel=0.01)
@@ -142,7 +142,7 @@ def test_source_just_switched_on_has_no_rise():
 
 
 def test_high_peclet_limit_is_blok_formula():
-    # physics.md §4.6: both L >> 1 -> Blok's 1.11 Q'/(sqrt(2b)(e1 sqrt U1 + e2 sqrt U2)), share e1 sqrt U1/(...)
+    # docs/theory.md §G4.6: both L >> 1 -> Blok's 1.11 Q'/(sqrt(2b)(e1 sqrt U1 + e2 sqrt U2)), share e1 sqrt U1/(...)
     b, U1, U2, N, mu = 40e-6, 30.0, 120.0, 100.0, 0.2
     slip = U2 - U1
     res = flash_temperature(N, slip, U2, U1, b, LENGTH, mu, STEEL, STEEL)
@@ -169,7 +169,7 @@ def test_flash_vectorised_and_zero_load():
 
 
 def test_transient_floor_coefficient_matches_switched_on_band():
-    # physics.md §4.6: L_eff = 0.749 b/sqrt(chi t_on) makes the steady low-L centre rise (uniform) equal the
+    # docs/theory.md §G4.6: L_eff = 0.749 b/sqrt(chi t_on) makes the steady low-L centre rise (uniform) equal the
     # stationary band switched on for t_on
     assert TRANSIENT_FLOOR_COEFFICIENT == pytest.approx(0.749, abs=5e-4)
     fourier = 400.0                                      # chi t_on / b^2
@@ -179,7 +179,7 @@ def test_transient_floor_coefficient_matches_switched_on_band():
 
 
 def test_row15_circle_source_and_tian_kennedy():
-    # physics.md §7 row 15: Pe = 1 exact max/avg 0.7324/0.5554; T&K form 0.7484/0.5347
+    # docs/theory.md §G7 row 15: Pe = 1 exact max/avg 0.7324/0.5554; T&K form 0.7484/0.5347
     tmax, _ = circle_theta_max_exact(1.0)
     assert tmax == pytest.approx(0.7324, rel=5e-4)
     assert circle_theta_avg_exact(1.0) == pytest.approx(0.5554, rel=5e-4)

@@ -1,4 +1,4 @@
-"""Lumped bulk model (physics.md §5, §7 row 19): geometry, time constants, steady state, exact integrator,
+"""Lumped bulk model (docs/theory.md §G5, §7 row 19): geometry, time constants, steady state, exact integrator,
 energy balance."""
 import math
 
@@ -14,7 +14,7 @@ STEEL = get_material("aisi1045")
 
 def test_geometry_helpers():
     v, a = disc_volume_area(0.075, 0.004)
-    assert a == pytest.approx(0.0372, rel=2e-3)                 # physics.md §5: A = 0.0372 m^2
+    assert a == pytest.approx(0.0372, rel=2e-3)                 # docs/theory.md §G5: A = 0.0372 m^2
     assert v / a == pytest.approx(1.90e-3, rel=2e-3)            # V/A = 1.90 mm
     v, a = pin_volume_area(0.004, 0.010)
     assert v / a == pytest.approx(1.67e-3, rel=2e-3)            # V/A = 1.67 mm
@@ -22,7 +22,7 @@ def test_geometry_helpers():
 
 
 def test_row19_time_constants():
-    # physics.md §7 row 19 and §5: wheel 1034 s (h=7), 603 s (h=12); pin 635 s (h=10), 254 s (h=25)
+    # docs/theory.md §G7 row 19 and §5: wheel 1034 s (h=7), 603 s (h=12); pin 635 s (h=10), 254 s (h=25)
     vw, aw = disc_volume_area(0.075, 0.004)
     vp, ap = pin_volume_area(0.004, 0.010)
     assert time_constant(STEEL, vw, aw, 7.0) == pytest.approx(1034, rel=1e-2)
@@ -36,7 +36,7 @@ def test_row19_time_constants():
 
 
 def test_row19_steady_wheel_rise():
-    # physics.md §7 row 19: gamma_wheel = 0.65, Q_bar = 1.588 W (mu = 0.15), h = 7, A = 0.0372 -> 3.96 K
+    # docs/theory.md §G7 row 19: gamma_wheel = 0.65, Q_bar = 1.588 W (mu = 0.15), h = 7, A = 0.0372 -> 3.96 K
     sysm = geneva_bulk_system(h_wheel=7.0, temp_ambient=300.0)
     T = steady_bulk_temperatures(sysm, 1.588, share_pin=0.35)
     assert T[1] - 300.0 == pytest.approx(3.96, rel=1e-2)

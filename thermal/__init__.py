@@ -3,7 +3,7 @@
 materials (Material, library), hertz (line contact), heat (Q, Peclet), band_source (exact/fast/fit moving
 band), circle_source (3-D check, Tian–Kennedy), flash (per-body rises, Blok partition, seed formulas),
 linear (C T' = -K T + s + B u networks), lumped (bulk pin/wheel), conduction1d (1-D MOL + exact solutions).
-Formulas and sources: shared/physics.md §3–7 and docs/thermal.md.
+Formulas and sources: docs/theory.md §G3–7 and docs/thermal.md.
 """
 from .materials import MATERIALS, Material, get_material
 from .hertz import (axis_shear_ratio, effective_modulus, effective_radius, half_width, line_contact,

@@ -4,7 +4,7 @@ A body moves at speed U in +x under a stationary band |x| <= b that delivers the
 q_bar = Q'/(2b). The dimensionless surface rise theta = dT k/(q_bar b) depends only on X = x/b, the Peclet
 number L = U b/(2 chi) and the flux shape f: 'uniform' (f = 1) or 'semi-elliptic' (Hertzian,
 f = (4/pi) sqrt(1 - S^2)). Jaeger (1942) Proc. R. Soc. NSW 76:203; Carslaw & Jaeger (1959) ch. 10
-(moving sources); shared/physics.md §4.3:
+(moving sources); docs/theory.md §G4.3:
 
     theta(X; L) = (1/pi) int_{-1}^{1} f(S) e^{L(X-S)} K0(L|X-S|) dS.
 
@@ -88,7 +88,7 @@ def _band_theta_point(x: float, L: float, kind: str) -> float:
 def band_theta(X, L, kind: str = "uniform"):
     """Exact dimensionless surface rise theta(X; L) (quad split at S = X, scipy.special.k0e).
 
-    Jaeger (1942); physics.md §4.3. The semi-elliptic integral is taken in S = sin(phi) (smooth at the
+    Jaeger (1942); docs/theory.md §G4.3. The semi-elliptic integral is taken in S = sin(phi) (smooth at the
     band ends). X may be an array (evaluated point by point; for checks, not for time series).
     """
     _check(kind)
@@ -119,7 +119,7 @@ def _band_overlap(u, kind):
 def band_theta_avg_exact(L: float, kind: str = "uniform") -> float:
     """Exact band mean of theta, (1/2) int_{-1}^{1} theta dX, as one quad over the separation u = X - S.
 
-    theta_avg = (1/(2 pi)) int_{-2}^{2} w(u) e^{Lu} K0(L|u|) du (physics.md §4.3, rearranged).
+    theta_avg = (1/(2 pi)) int_{-2}^{2} w(u) e^{Lu} K0(L|u|) du (docs/theory.md §G4.3, rearranged).
     """
     _check(kind)
     breaks = _scale_breaks(0.0, 2.0, L, +1)
@@ -148,7 +148,7 @@ def _semi_elliptic_high_profile(x):
 
 @functools.lru_cache(maxsize=None)
 def high_peclet_coefficient(kind: str = "uniform", statistic: str = "max") -> float:
-    """A in theta -> A/sqrt(L) as L -> inf (1-D penetration limit; physics.md §4.3).
+    """A in theta -> A/sqrt(L) as L -> inf (1-D penetration limit; docs/theory.md §G4.3).
 
     uniform: max 2/sqrt(pi) = 1.1284 (trailing edge), avg 4/(3 sqrt(pi)) = 0.7523;
     semi-elliptic: max 1.1115 (at X = 0.652; Blok's 1.11), avg 64/(15 pi^1.5) = 0.7662.
@@ -164,7 +164,7 @@ def high_peclet_coefficient(kind: str = "uniform", statistic: str = "max") -> fl
 
 
 def low_peclet_constant(kind: str = "uniform", statistic: str = "max") -> float:
-    """d in theta -> (2/pi)[ln(1/L) + d] as L -> 0 (2-D log growth; physics.md §4.3), in closed form.
+    """d in theta -> (2/pi)[ln(1/L) + d] as L -> 0 (2-D log growth; docs/theory.md §G4.3), in closed form.
 
     From K0(z) ~ -ln(z/2) - gamma_E: uniform d_max = 1 + ln 2 - gamma_E = 1.116 (centre),
     d_avg = 3/2 - gamma_E = 0.923; semi-elliptic d_max = 2 ln 2 + 1/2 - gamma_E = 1.309,
@@ -178,12 +178,12 @@ def low_peclet_constant(kind: str = "uniform", statistic: str = "max") -> float:
 
 
 def band_theta_high(L, kind: str = "uniform", statistic: str = "max"):
-    """High-L asymptote A/sqrt(L); physics.md §4.3."""
+    """High-L asymptote A/sqrt(L); docs/theory.md §G4.3."""
     return high_peclet_coefficient(kind, statistic) / np.sqrt(np.asarray(L, dtype=float))
 
 
 def band_theta_low(L, kind: str = "uniform", statistic: str = "max"):
-    """Low-L asymptote (2/pi)[ln(1/L) + d]; physics.md §4.3."""
+    """Low-L asymptote (2/pi)[ln(1/L) + d]; docs/theory.md §G4.3."""
     return (2.0 / np.pi) * (np.log(1.0 / np.asarray(L, dtype=float)) + low_peclet_constant(kind, statistic))
 
 
@@ -222,20 +222,20 @@ def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
 
 # ---------------------------------------------------------------------------------------------- closed-form fit
 #: (A', B, m) of the all-L fit theta = (2/pi) ln(1 + g), g = [(A'/sqrt L)^m + (B/L)^m]^(1/m),
-#: A' = pi A/2, B = e^d; physics.md §4.3 (max error 3.0/5.0/2.9/5.1 % over 1e-3 < L < 1e3).
+#: A' = pi A/2, B = e^d; docs/theory.md §G4.3 (max error 3.0/5.0/2.9/5.1 % over 1e-3 < L < 1e3).
 FIT_PARAMETERS = {
     ("uniform", "max"): (1.7725, 3.0526, 1.435),
     ("uniform", "avg"): (1.1816, 2.5163, 2.131),
     ("semi-elliptic", "max"): (1.7460, 3.7028, 1.541),
     ("semi-elliptic", "avg"): (1.2036, 2.6530, 2.170),
 }
-#: Stated max relative error of `band_fit` over 1e-3 < L < 1e3 (physics.md §4.3).
+#: Stated max relative error of `band_fit` over 1e-3 < L < 1e3 (docs/theory.md §G4.3).
 FIT_MAX_REL_ERROR = {("uniform", "max"): 0.030, ("uniform", "avg"): 0.050,
                      ("semi-elliptic", "max"): 0.029, ("semi-elliptic", "avg"): 0.051}
 
 
 def band_fit(L, kind: str = "semi-elliptic", statistic: str = "max", xp=np):
-    """Closed-form all-L fit theta ≈ (2/pi) ln(1 + [(A'/sqrt L)^m + (B/L)^m]^(1/m)); physics.md §4.3.
+    """Closed-form all-L fit theta ≈ (2/pi) ln(1 + [(A'/sqrt L)^m + (B/L)^m]^(1/m)); docs/theory.md §G4.3.
 
     Asymptote-matched blend (Muzychka & Yovanovich 2001 style). `xp` is the array namespace: numpy,
     jax.numpy or sympy (then L may be a Symbol and the result is an expression).
@@ -252,7 +252,7 @@ def band_stationary_transient(X, fourier, kind: str = "uniform"):
 
     From the instantaneous 2-D line source on an insulated half-space (Carslaw & Jaeger 1959 §10.3):
     theta = (1/(2 sqrt pi)) int_0^Fo s^-1/2 [erf((1-X)/(2 sqrt s)) + erf((1+X)/(2 sqrt s))] ds.
-    At the centre and large Fo: (1/pi)[ln(4 Fo) + 2 - gamma_E] (physics.md §4.6).
+    At the centre and large Fo: (1/pi)[ln(4 Fo) + 2 - gamma_E] (docs/theory.md §G4.6).
     """
     if kind != "uniform":
         raise ValueError("band_stationary_transient is implemented for the uniform band only")
@@ -272,5 +272,5 @@ def band_stationary_transient(X, fourier, kind: str = "uniform"):
 
 
 def band_stationary_transient_centre_asymptote(fourier):
-    """(1/pi)[ln(4 Fo) + 2 - gamma_E]: large-Fo centre rise of the switched-on stationary band (physics.md §4.6)."""
+    """(1/pi)[ln(4 Fo) + 2 - gamma_E]: large-Fo centre rise of the switched-on stationary band (docs/theory.md §G4.6)."""
     return (np.log(4.0 * np.asarray(fourier, dtype=float)) + 2.0 - EULER_GAMMA) / np.pi

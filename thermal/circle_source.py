@@ -3,7 +3,7 @@
 Used as a cross-check of the Peclet conventions and of the Tian & Kennedy (1994) all-Pe form; the Geneva's
 line contact uses `band_source`. Pe = U a/(2 chi), a = source radius, theta = dT k/(q_bar a).
 Sources: Carslaw & Jaeger (1959) (moving point source dT = Q/(2 pi k R) exp(-U(R + xi)/(2 chi))),
-Tian & Kennedy (1994) J. Tribol. 116:167; shared/physics.md §4.5.
+Tian & Kennedy (1994) J. Tribol. 116:167; docs/theory.md §G4.5.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 from scipy.special import i0e
 
-#: (A, B) of theta = A/sqrt(pi (B + Pe)) (physics.md §4.5 table; A from the high-Pe limit, B from Pe = 0).
+#: (A, B) of theta = A/sqrt(pi (B + Pe)) (docs/theory.md §G4.5 table; A from the high-Pe limit, B from Pe = 0).
 TIAN_KENNEDY = {
     ("circle", "max"): (2.0, 4.0 / math.pi),
     ("circle", "avg"): (1.2204, 0.6580),
@@ -24,7 +24,7 @@ TIAN_KENNEDY = {
 
 
 def tian_kennedy(peclet, shape: str = "circle", statistic: str = "max"):
-    """Tian & Kennedy (1994) all-Pe form theta = A/sqrt(pi (B + Pe)); physics.md §4.5 (circle max +2.2 %, avg -3.7 % worst)."""
+    """Tian & Kennedy (1994) all-Pe form theta = A/sqrt(pi (B + Pe)); docs/theory.md §G4.5 (circle max +2.2 %, avg -3.7 % worst)."""
     try:
         a, b = TIAN_KENNEDY[(shape, statistic)]
     except KeyError:
@@ -37,7 +37,7 @@ def circle_theta(x: float, y: float, peclet: float) -> float:
 
     Superposing the moving point source in polar coordinates (rho, phi) about the field point, the radial
     integral is closed: theta = (1/(2 pi)) int_0^{2 pi} (1 - exp(-s rho_m))/s dphi, s = Pe (1 + cos phi),
-    rho_m = distance to the disc edge in direction phi (Carslaw & Jaeger 1959; physics.md §4.5).
+    rho_m = distance to the disc edge in direction phi (Carslaw & Jaeger 1959; docs/theory.md §G4.5).
     """
     r2 = x * x + y * y
     if r2 >= 1.0:
@@ -65,7 +65,7 @@ def circle_theta_avg_exact(peclet: float) -> float:
 
     theta_avg = (1/pi) int_0^2 A(rho) e^{-Pe rho} I0(Pe rho) drho, A(rho) = 2 acos(rho/2) - (rho/2) sqrt(4 - rho^2)
     (overlap area of two unit discs; the angular integral of exp(-Pe rho (1 + cos phi)) is 2 pi e^{-Pe rho} I0).
-    Pe = 0 gives 8/(3 pi) (physics.md §4.5).
+    Pe = 0 gives 8/(3 pi) (docs/theory.md §G4.5).
     """
     area = lambda r: 2.0 * math.acos(0.5 * r) - 0.5 * r * math.sqrt(max(0.0, 4.0 - r * r))
     return quad(lambda r: area(r) * i0e(peclet * r), 0.0, 2.0, limit=200, epsabs=1e-13, epsrel=1e-11)[0] / math.pi

@@ -1,7 +1,7 @@
 """1-D transient conduction into the depth z beneath the contact: finite-volume method of lines + exact solutions.
 
 rho c_p dT/dt = k d2T/dz2, -k dT/dz|_0 = q(t) - h (T_s - T_inf), far face insulated or held at T_far
-(shared/physics.md §6). Cell-centred finite volumes on a geometrically graded mesh; the surface temperature
+(docs/theory.md §G6). Cell-centred finite volumes on a geometrically graded mesh; the surface temperature
 T_s is eliminated through the half-cell conductance, so the model is the linear network
 C T' = -K T + s + B u, u = [q] or [q, T_far], per unit area (W/m^2, J/(m^2 K)). The Laplacian is stiff
 (eigenvalues up to ~4 chi/dz_min^2): integrate with BDF/Radau and the sparse Jacobian, or exactly (expm).
@@ -21,12 +21,12 @@ from scipy.special import erfc
 from .linear import LinearThermalSystem
 from .materials import Material, get_material
 
-#: Mesh defaults (physics.md §6): first cell <= delta/10 with delta = sqrt(chi 2b/U), growth 1.1–1.2,
+#: Mesh defaults (docs/theory.md §G6): first cell <= delta/10 with delta = sqrt(chi 2b/U), growth 1.1–1.2,
 #: depth >= 3 sqrt(chi t_end).
 GROWTH_DEFAULT = 1.15
 FIRST_CELL_FRACTION = 0.1
 DEPTH_DIFFUSION_LENGTHS = 3.0
-#: 1-D model valid as a flash model only for L >~ 5 (lateral conduction neglected; physics.md §6).
+#: 1-D model valid as a flash model only for L >~ 5 (lateral conduction neglected; docs/theory.md §G6).
 VALID_PECLET_MIN = 5.0
 
 
@@ -78,7 +78,7 @@ def graded_mesh(first_cell: float, growth: float = GROWTH_DEFAULT, depth: float 
 
 def mesh_settings(half_width_m: float, source_speed: float, diffusivity: float, t_end: float,
                   growth: float = GROWTH_DEFAULT) -> dict:
-    """Sound defaults from physics.md §6: first cell delta/10 (delta = sqrt(chi 2b/U), the penetration depth
+    """Sound defaults from docs/theory.md §G6: first cell delta/10 (delta = sqrt(chi 2b/U), the penetration depth
     during one pass), depth 3 sqrt(chi t_end) (at least 10 delta), growth 1.15."""
     delta = math.sqrt(diffusivity * 2.0 * half_width_m / source_speed)
     depth = max(DEPTH_DIFFUSION_LENGTHS * math.sqrt(diffusivity * t_end), 10.0 * delta)
@@ -163,27 +163,27 @@ def ierfc(u):
 
 
 def flux_step_profile(z, t, flux, material: Material | str):
-    """Constant flux q from t = 0: dT(z, t) = (2q/k) sqrt(chi t) ierfc(z/(2 sqrt(chi t))) (C&J 1959 §2.9; physics.md §6)."""
+    """Constant flux q from t = 0: dT(z, t) = (2q/k) sqrt(chi t) ierfc(z/(2 sqrt(chi t))) (C&J 1959 §2.9; docs/theory.md §G6)."""
     m = get_material(material)
     root = np.sqrt(m.diffusivity * np.asarray(t, dtype=float))
     return 2.0 * flux / m.conductivity * root * ierfc(np.asarray(z, dtype=float) / (2.0 * root))
 
 
 def flux_step_surface(t, flux, material: Material | str):
-    """Surface rise under constant flux: 2 q sqrt(t)/(sqrt(pi) e) = 2q sqrt(chi t/pi)/k (physics.md §6)."""
+    """Surface rise under constant flux: 2 q sqrt(t)/(sqrt(pi) e) = 2q sqrt(chi t/pi)/k (docs/theory.md §G6)."""
     m = get_material(material)
     return 2.0 * flux * np.sqrt(np.clip(np.asarray(t, dtype=float), 0.0, None)) / (math.sqrt(math.pi) * m.effusivity)
 
 
 def switched_flux_surface(t, flux, t_on, material: Material | str):
-    """Flux q on for 0 < t < t_on, then off: (2q/(sqrt(pi) e))(sqrt t - sqrt(t - t_on)) after t_on (physics.md §6)."""
+    """Flux q on for 0 < t < t_on, then off: (2q/(sqrt(pi) e))(sqrt t - sqrt(t - t_on)) after t_on (docs/theory.md §G6)."""
     t = np.asarray(t, dtype=float)
     return flux_step_surface(t, flux, material) - flux_step_surface(t - t_on, flux, material)
 
 
 def duhamel_surface(t: float, flux: Callable[[float], float], material: Material | str, breakpoints=()) -> float:
     """Surface rise for a general flux history q(tau), (1/(sqrt(pi) e)) int_0^t q(tau)/sqrt(t - tau) dtau
-    (Duhamel; physics.md §6). quad with the algebraic weight; pass the jumps of q as breakpoints."""
+    (Duhamel; docs/theory.md §G6). quad with the algebraic weight; pass the jumps of q as breakpoints."""
     m = get_material(material)
     edges = [0.0] + sorted(b for b in breakpoints if 0.0 < b < t) + [t]
     total = 0.0
@@ -201,7 +201,7 @@ def moving_band_high_peclet_max(mean_flux, half_width_m, source_speed, material:
 
 
 def validity(peclet_number) -> tuple[bool, str]:
-    """Is the 1-D model a valid flash model at this Peclet number (L >~ 5)? Returns (ok, message); physics.md §6."""
+    """Is the 1-D model a valid flash model at this Peclet number (L >~ 5)? Returns (ok, message); docs/theory.md §G6."""
     L = float(np.min(peclet_number))
     if L >= VALID_PECLET_MIN:
         return True, f"1-D conduction valid as a flash model (L = {L:.3g} >= {VALID_PECLET_MIN:g})"

@@ -1,6 +1,6 @@
 """Flash (contact) temperature rise of a sliding line contact: per-body rises, Blok's partition, seed variants.
 
-mechsim's model (physics.md §4.3, §4.6): each body i alone would rise dT_i* = theta_i(L_i) Q'/(2 k_i)
+mechsim's model (docs/theory.md §G4.3, §4.6): each body i alone would rise dT_i* = theta_i(L_i) Q'/(2 k_i)
 (steady moving band, Jaeger 1942); Blok's postulate (equal surface temperatures) splits the heat as
 gamma_1 = dT_2*/(dT_1* + dT_2*) and gives dT_flash = 1/(1/dT_1* + 1/dT_2*). Slow sources are capped by
 the time the source has been on: L_eff = max(L, c b/sqrt(chi t_on)), c = exp(-gamma_E/2) = 0.749.
@@ -20,7 +20,7 @@ from .materials import Material, get_material
 
 #: c in L_eff = max(L, c b/sqrt(chi t_on)) = exp(-gamma_E/2) = 0.7493: the Peclet number at which the
 #: steady low-L centre rise of the uniform band, (2/pi)[ln(1/L) + 1 + ln 2 - gamma_E], equals the rise of
-#: the stationary band switched on for t_on, (1/pi)[ln(4 chi t_on/b^2) + 2 - gamma_E] (physics.md §4.6: 0.749).
+#: the stationary band switched on for t_on, (1/pi)[ln(4 chi t_on/b^2) + 2 - gamma_E] (docs/theory.md §G4.6: 0.749).
 TRANSIENT_FLOOR_COEFFICIENT = math.exp(-0.5 * EULER_GAMMA)
 
 #: The seed's S(13) constants: 0.159 (≈ 1/(2 pi), as printed) and C = 2.5 read from S&B's chart.
@@ -41,7 +41,7 @@ def band_theta_eval(L, distribution: str = "semi-elliptic", statistic: str = "ma
 
 
 def transient_peclet_floor(half_width_m, diffusivity, t_on):
-    """c b/sqrt(chi t_on) with c = TRANSIENT_FLOOR_COEFFICIENT; 0 for t_on = inf, inf for t_on = 0 (physics.md §4.6)."""
+    """c b/sqrt(chi t_on) with c = TRANSIENT_FLOOR_COEFFICIENT; 0 for t_on = inf, inf for t_on = 0 (docs/theory.md §G4.6)."""
     t_on = np.asarray(t_on, dtype=float)
     if np.any(t_on < 0) or np.any(np.isnan(t_on)):
         raise ValueError("transient_peclet_floor: t_on must be >= 0 (inf for no floor)")
@@ -55,14 +55,14 @@ def effective_peclet(L, half_width_m, diffusivity, t_on):
 
 
 def single_body_rise(heat_per_length, theta, conductivity):
-    """dT* = theta Q'/(2 k): rise of one body taking all the heat (Jaeger 1942; physics.md §4.3)."""
+    """dT* = theta Q'/(2 k): rise of one body taking all the heat (Jaeger 1942; docs/theory.md §G4.3)."""
     return np.asarray(theta, dtype=float) * np.asarray(heat_per_length, dtype=float) / (2.0 * conductivity)
 
 
 def blok_partition(resistance_1, resistance_2):
     """Blok's postulate for two bodies with rise-per-heat R_i = dT_i*/Q' (K m/W): (share of body 1, R_flash).
 
-    gamma_1 = R_2/(R_1 + R_2), R_flash = 1/(1/R_1 + 1/R_2) (physics.md §4.6). R = inf (no steady limit)
+    gamma_1 = R_2/(R_1 + R_2), R_flash = 1/(1/R_1 + 1/R_2) (docs/theory.md §G4.6). R = inf (no steady limit)
     takes no heat, R = 0 (source just switched on) takes it all; if R_1 = R_2 in {0, inf} the share is 1/2.
     """
     r1 = np.asarray(resistance_1, dtype=float)
@@ -77,7 +77,7 @@ def blok_partition(resistance_1, resistance_2):
 
 
 def blok_flash_high_peclet(heat_per_length, half_width_m, speed_1, speed_2, effusivity_1, effusivity_2, coefficient=1.11):
-    """Blok (1937) high-Pe flash rise 1.11 Q'/(sqrt(2b)(e_1 sqrt U_1 + e_2 sqrt U_2)) (physics.md §4.6).
+    """Blok (1937) high-Pe flash rise 1.11 Q'/(sqrt(2b)(e_1 sqrt U_1 + e_2 sqrt U_2)) (docs/theory.md §G4.6).
 
     Equal to the Jaeger/Blok partition when both L_i >> 1 with coefficient = semi-elliptic A = 1.1115.
     """
@@ -97,9 +97,9 @@ def flash_temperature(N, slip, U_wall, U_pin, b, length, mu,
     times the source has been on over each body t_on_pin/t_on_wall (s; inf = no transient floor, 0 = just
     switched on: zero rise).
 
-    method='jaeger' (mechsim): per-body exact moving-band rises at L_eff, Blok partition (physics.md §4.3,
+    method='jaeger' (mechsim): per-body exact moving-band rises at L_eff, Blok partition (docs/theory.md §G4.3,
     §4.6). method='seed-blok': the seed's S(13) as printed with C = 2.5, using U_pin and the pin material
-    (the seed used U = omega1 r1), no partition: seed formula, for comparison only (physics.md §4.4).
+    (the seed used U = omega1 r1), no partition: seed formula, for comparison only (docs/theory.md §G4.4).
 
     Returns arrays: heat_rate_W, heat_per_length_W_m, peclet_pin, peclet_wheel, peclet_eff_pin,
     peclet_eff_wheel, temp_rise_pin_alone_K, temp_rise_wheel_alone_K, heat_share_pin, heat_rate_pin_W,
@@ -144,7 +144,7 @@ def flash_temperature(N, slip, U_wall, U_pin, b, length, mu,
 def seed_normal_load(torque, theta_sum, crank_radius):
     """Seed S(8): W_N = (T/r1) cos(theta1 + theta2) (N). Seed formula, for comparison only.
 
-    A projection of the crank force T/r1, not an equilibrium (physics.md §2: 0 N at entry, 93.33 N at
+    A projection of the crank force T/r1, not an equilibrium (docs/theory.md §G2: 0 N at entry, 93.33 N at
     the centre for T = 7 N m); mechsim uses N = (T_L + J2 alpha2)/x from the dynamics.
     """
     return np.asarray(torque, dtype=float) / crank_radius * np.cos(theta_sum)
@@ -153,7 +153,7 @@ def seed_normal_load(torque, theta_sum, crank_radius):
 def seed_sliding_speed(omega1, crank_radius, theta_sum):
     """Seed S(7): V_P/W = omega1 r1 sin(theta1 + theta2) (m/s), the pin-centre sliding speed (no pin spin).
 
-    Equal to |v_s| of physics.md §1; the contact slip adds R (omega1 + omega2) (pin spin).
+    Equal to |v_s| of docs/theory.md §G1; the contact slip adds R (omega1 + omega2) (pin spin).
     """
     return np.asarray(omega1, dtype=float) * crank_radius * np.sin(theta_sum)
 
@@ -164,7 +164,7 @@ def seed_flash_rise(heat_rate, half_width_m, speed, length, material: Material |
 
     Seed formula, for comparison only. Read literally (L = Peclet number) it has units K m; it is evaluated
     here the only dimensionally consistent way, with L = the contact length l, which reproduces the seed's
-    numbers (physics.md §4.4, §4.7: 6.7 K at phi = 30 deg, mu = 0.15). It under-predicts the exact
+    numbers (docs/theory.md §G4.4, §4.7: 6.7 K at phi = 30 deg, mu = 0.15). It under-predicts the exact
     maximum by 1.3-1.9x at the seed's Peclet numbers because chi/(U b) = 1/(2L) puts a spurious 1/L in.
     Zero where b = 0 (the rise scales as sqrt(W)).
     """

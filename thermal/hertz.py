@@ -2,7 +2,7 @@
 
 All functions are vectorised over numpy arrays (whole time series); loads W are total loads (N) over
 the contact length l (m). Sources: Johnson (1985) *Contact Mechanics* ch. 4 (2-D Hertz, subsurface
-stresses, eq. 4.49 family); shared/physics.md §3 (checked numbers and the seed's errors).
+stresses, eq. 4.49 family); docs/theory.md §G3 (checked numbers and the seed's errors).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from .materials import Material
 def effective_modulus(material_1: Material, material_2: Material | None = None) -> float:
     """Contact modulus E* with 1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2 (Pa).
 
-    Johnson (1985) ch. 4 convention; physics.md §3 (steel/steel: 113.74 GPa). `material_2` defaults to
+    Johnson (1985) ch. 4 convention; docs/theory.md §G3 (steel/steel: 113.74 GPa). `material_2` defaults to
     `material_1`.
     """
     material_2 = material_1 if material_2 is None else material_2
@@ -27,7 +27,7 @@ def effective_modulus(material_1: Material, material_2: Material | None = None) 
 def seed_reduced_modulus(material_1: Material, material_2: Material | None = None) -> float:
     """The seed's S(10b) "reduced modulus" E' with 1/E' = 1/2[...] = 2 E* (Pa).
 
-    Seed formula (S&B / EHL convention), for comparison only; physics.md §3.
+    Seed formula (S&B / EHL convention), for comparison only; docs/theory.md §G3.
     """
     return 2.0 * effective_modulus(material_1, material_2)
 
@@ -36,7 +36,7 @@ def effective_radius(radius_1, radius_2=np.inf):
     """Effective radius R' of two parallel cylinders, 1/R' = 1/R1 + 1/R2 (m).
 
     A flat is R2 = inf (so R' = R1, seed S(10a) ✓); a concave surface has a negative radius
-    (conformal contact, needs |R2| > R1). Johnson (1985) ch. 4; physics.md §3.
+    (conformal contact, needs |R2| > R1). Johnson (1985) ch. 4; docs/theory.md §G3.
     """
     r1 = np.asarray(radius_1, dtype=float)
     r2 = np.asarray(radius_2, dtype=float)
@@ -47,19 +47,19 @@ def effective_radius(radius_1, radius_2=np.inf):
 
 
 def half_width(load, radius, length, modulus):
-    """Hertz half-width b = sqrt(4 |W| R' / (pi l E*)) (m); Johnson (1985) ch. 4, physics.md §3."""
+    """Hertz half-width b = sqrt(4 |W| R' / (pi l E*)) (m); Johnson (1985) ch. 4, docs/theory.md §G3."""
     load = np.abs(np.asarray(load, dtype=float))
     return np.sqrt(4.0 * load * radius / (np.pi * length * modulus))
 
 
 def peak_pressure(load, radius, length, modulus):
-    """Hertz peak pressure p0 = sqrt(|W| E* / (pi l R')) = 2|W|/(pi b l) (Pa); Johnson (1985) ch. 4, physics.md §3."""
+    """Hertz peak pressure p0 = sqrt(|W| E* / (pi l R')) = 2|W|/(pi b l) (Pa); Johnson (1985) ch. 4, docs/theory.md §G3."""
     load = np.abs(np.asarray(load, dtype=float))
     return np.sqrt(load * modulus / (np.pi * length * radius))
 
 
 def mean_pressure(load, radius, length, modulus):
-    """Mean pressure W/(2 b l) = pi p0 / 4 (Pa); physics.md §3."""
+    """Mean pressure W/(2 b l) = pi p0 / 4 (Pa); docs/theory.md §G3."""
     return 0.25 * np.pi * peak_pressure(load, radius, length, modulus)
 
 
@@ -77,7 +77,7 @@ def axis_shear_ratio(depth_ratio):
 def max_shear_coefficients() -> tuple[float, float]:
     """(tau_max/p0, z_max/b) of the line contact computed from `axis_shear_ratio` (≈ 0.300, 0.786).
 
-    Johnson (1985) ch. 4 quotes 0.30 p0 at 0.78 b; physics.md §3.
+    Johnson (1985) ch. 4 quotes 0.30 p0 at 0.78 b; docs/theory.md §G3.
     """
     # d(tau)/d(zeta) = 1 - zeta (2 + zeta^2) / (1 + zeta^2)^1.5
     zeta = brentq(lambda s: 1.0 - s * (2.0 + s * s) / (1.0 + s * s) ** 1.5, 0.1, 2.0, xtol=1e-14)
@@ -87,7 +87,7 @@ def max_shear_coefficients() -> tuple[float, float]:
 def line_contact(load, radius, length, modulus) -> dict[str, np.ndarray]:
     """All Hertz line-contact results at once (arrays): half-width, peak/mean pressure, max subsurface shear and depth.
 
-    Valid for b << R', l >> b, elastic (p0 < ~1.6 yield), frictionless normal load; physics.md §3.
+    Valid for b << R', l >> b, elastic (p0 < ~1.6 yield), frictionless normal load; docs/theory.md §G3.
     """
     b = half_width(load, radius, length, modulus)
     p0 = peak_pressure(load, radius, length, modulus)
@@ -104,7 +104,7 @@ def line_contact(load, radius, length, modulus) -> dict[str, np.ndarray]:
 def seed_half_width(load, radius, length, reduced_modulus):
     """Seed S(9a) as quoted: b = sqrt(4 W R'/(pi l E')) (m).
 
-    Seed formula, for comparison only: with the seed's E' = 2E* it is sqrt(2) too small (physics.md §3);
+    Seed formula, for comparison only: with the seed's E' = 2E* it is sqrt(2) too small (docs/theory.md §G3);
     the seed's own Peclet numbers are reproduced only with E' replaced by E* (then it equals `half_width`).
     """
     load = np.abs(np.asarray(load, dtype=float))
@@ -114,7 +114,7 @@ def seed_half_width(load, radius, length, reduced_modulus):
 def seed_max_pressure(load, half_width_m, length):
     """Seed S(9b) as quoted: p_max = W/(pi b l) (Pa); zero where b = 0.
 
-    Seed formula, for comparison only: half of Hertz p0 = 2W/(pi b l) for the same b (physics.md §3).
+    Seed formula, for comparison only: half of Hertz p0 = 2W/(pi b l) for the same b (docs/theory.md §G3).
     """
     load = np.abs(np.asarray(load, dtype=float))
     b = np.asarray(half_width_m, dtype=float)

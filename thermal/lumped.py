@@ -1,4 +1,4 @@
-"""Lumped (bulk) temperatures of the pin (with its crank) and the wheel; shared/physics.md §5.
+"""Lumped (bulk) temperatures of the pin (with its crank) and the wheel; docs/theory.md §G5.
 
 C_i dT_i/dt = gamma_i Q - h_i A_i (T_i - T_inf) - G (T_i - T_j), C_i = rho c_p V_i (Incropera et al. 2007,
 §5.2; valid for Bi = h (V/A)/k < 0.1, here ~4e-4). Because the time constants (~10^3 s) dwarf the cycle
@@ -16,7 +16,7 @@ from .materials import Material, get_material
 STATE_NAMES = ("temp_bulk_pin", "temp_bulk_wheel")
 INPUT_NAMES = ("heat_rate_pin_W", "heat_rate_wheel_W")
 
-#: Still-air / radiation heat-transfer coefficients, W/(m^2 K), from physics.md §5 (air 300 K, dT = 20 K;
+#: Still-air / radiation heat-transfer coefficients, W/(m^2 K), from docs/theory.md §G5 (air 300 K, dT = 20 K;
 #: Incropera et al. 2007: Churchill–Chu eq. 9.34 cylinder and vertical plate, Hilpert Table 7.2, h_r = 4 eps sigma T^3).
 CONVECTION_COEFFICIENTS = {
     "pin_still_air": 8.5,             # 8 mm horizontal cylinder, free convection
@@ -26,19 +26,19 @@ CONVECTION_COEFFICIENTS = {
     "radiation_eps_0.3": 1.8,
     "radiation_eps_0.8": 4.9,
 }
-#: Defaults inside the ranges physics.md §5 recommends (wheel 5–12, pin 10–25 W/(m^2 K)).
+#: Defaults inside the ranges docs/theory.md §G5 recommends (wheel 5–12, pin 10–25 W/(m^2 K)).
 H_WHEEL_DEFAULT = 7.0
 H_PIN_DEFAULT = 15.0
 TEMP_AMBIENT_DEFAULT = 293.15
 
 
 def disc_volume_area(radius, thickness) -> tuple[float, float]:
-    """Solid disc: V = pi R^2 t, A = 2 pi R^2 + 2 pi R t (both faces and rim) (m^3, m^2); physics.md §5."""
+    """Solid disc: V = pi R^2 t, A = 2 pi R^2 + 2 pi R t (both faces and rim) (m^3, m^2); docs/theory.md §G5."""
     return math.pi * radius**2 * thickness, 2.0 * math.pi * radius**2 + 2.0 * math.pi * radius * thickness
 
 
 def pin_volume_area(radius, exposed_length, free_end: bool = True) -> tuple[float, float]:
-    """Pin: exposed cylinder V = pi R^2 l, A = 2 pi R l (+ pi R^2 for the free end) (m^3, m^2); physics.md §5."""
+    """Pin: exposed cylinder V = pi R^2 l, A = 2 pi R l (+ pi R^2 for the free end) (m^3, m^2); docs/theory.md §G5."""
     area = 2.0 * math.pi * radius * exposed_length + (math.pi * radius**2 if free_end else 0.0)
     return math.pi * radius**2 * exposed_length, area
 
@@ -49,13 +49,13 @@ def biot_number(h, volume, area, conductivity) -> float:
 
 
 def time_constant(material: Material | str, volume, area, h) -> float:
-    """tau = rho c_p (V/A)/h (s); physics.md §5 (wheel 75x4 mm, h=7: 1034 s)."""
+    """tau = rho c_p (V/A)/h (s); docs/theory.md §G5 (wheel 75x4 mm, h=7: 1034 s)."""
     return get_material(material).volumetric_heat_capacity * volume / area / h
 
 
 def bulk_system(capacity_pin, capacity_wheel, hA_pin, hA_wheel, conductance_pin_wheel: float = 0.0,
                 temp_ambient: float = TEMP_AMBIENT_DEFAULT) -> LinearThermalSystem:
-    """The two-body bulk network C T' = -K T + s_amb + B [Q_pin, Q_wheel] (physics.md §5).
+    """The two-body bulk network C T' = -K T + s_amb + B [Q_pin, Q_wheel] (docs/theory.md §G5).
 
     K = [[hA_p + G, -G], [-G, hA_w + G]], s_amb = [hA_p, hA_w] T_inf, B = I (inputs are the heat rates into
     each body, gamma Q and (1 - gamma) Q).
@@ -76,7 +76,7 @@ def geneva_bulk_system(material_pin: Material | str = "aisi1045", material_wheel
                        conductance_pin_wheel: float = 0.0,
                        temp_ambient: float = TEMP_AMBIENT_DEFAULT) -> LinearThermalSystem:
     """Bulk network from geometry: pin (plus an optional crank volume/area lumped with it, same material and h)
-    and the wheel as a solid disc. Defaults: the seed's geometry (physics.md header) and §5's h."""
+    and the wheel as a solid disc. Defaults: the seed's geometry (docs/theory.md §G0) and §5's h."""
     pin, wheel = get_material(material_pin), get_material(material_wheel)
     v_p, a_p = pin_volume_area(pin_radius, pin_exposed_length)
     v_p, a_p = v_p + crank_volume, a_p + crank_area
@@ -91,7 +91,7 @@ def _mean_inputs(heat_mean, share_pin) -> np.ndarray:
 
 def cycle_means(times, heat_rate, heat_share_pin) -> tuple[float, float]:
     """Cycle-mean heat Q_bar = (1/T) int Q dt and heat-weighted pin share gamma_bar = int gamma Q dt / int Q dt
-    over one period sampled at `times` (trapezoid rule); the inputs of `integrate_mean_heat` (physics.md §5)."""
+    over one period sampled at `times` (trapezoid rule); the inputs of `integrate_mean_heat` (docs/theory.md §G5)."""
     t = np.asarray(times, dtype=float)
     Q = np.broadcast_to(np.asarray(heat_rate, dtype=float), t.shape)
     g = np.broadcast_to(np.asarray(heat_share_pin, dtype=float), t.shape)
@@ -104,14 +104,14 @@ def cycle_means(times, heat_rate, heat_share_pin) -> tuple[float, float]:
 
 
 def steady_bulk_temperatures(system: LinearThermalSystem, heat_mean, share_pin) -> np.ndarray:
-    """Steady [T_pin, T_wheel] under the mean heat Q_bar split gamma_pin : 1 - gamma_pin (physics.md §5)."""
+    """Steady [T_pin, T_wheel] under the mean heat Q_bar split gamma_pin : 1 - gamma_pin (docs/theory.md §G5)."""
     return system.steady_state(_mean_inputs(heat_mean, share_pin))
 
 
 def integrate_mean_heat(system: LinearThermalSystem, heat_mean, share_pin, times, temp_initial=None) -> np.ndarray:
     """Bulk temperatures at `times` (s, from 0) under a constant cycle-mean heat, exact (matrix exponential).
 
-    Valid because tau >> cycle period (physics.md §5); returns (len(times), 2). Starts at ambient by default.
+    Valid because tau >> cycle period (docs/theory.md §G5); returns (len(times), 2). Starts at ambient by default.
     """
     if temp_initial is None:
         temp_initial = ambient_temperatures(system)

@@ -1,7 +1,7 @@
 """Thermo-elastic material properties (SI) and a small named library.
 
 Source of the library values: seed paper Table 2 (SAE-AISI 1045 at 20 °C), restated in
-shared/physics.md (header "Materials").
+docs/theory.md (Part G) (header "Materials").
 """
 from __future__ import annotations
 
@@ -38,12 +38,12 @@ class Material:
 
     @property
     def diffusivity(self) -> float:
-        """Thermal diffusivity chi = k/(rho c_p) (m^2/s); physics.md header."""
+        """Thermal diffusivity chi = k/(rho c_p) (m^2/s); docs/theory.md §G0."""
         return self.conductivity / self.volumetric_heat_capacity
 
     @property
     def effusivity(self) -> float:
-        """Thermal effusivity e = sqrt(k rho c_p) (W s^0.5/(m^2 K)); physics.md header, §4.6."""
+        """Thermal effusivity e = sqrt(k rho c_p) (W s^0.5/(m^2 K)); docs/theory.md §G0, §4.6."""
         return math.sqrt(self.conductivity * self.volumetric_heat_capacity)
 
     @property
@@ -52,7 +52,7 @@ class Material:
         return (1.0 - self.nu**2) / self.E
 
 
-#: Named materials. AISI 1045: seed Table 2 / physics.md header (rho=7860, E=207 GPa, nu=0.3,
+#: Named materials. AISI 1045: seed Table 2 / docs/theory.md §G0 (rho=7860, E=207 GPa, nu=0.3,
 #: c_p=485, k=42.3  ->  chi=1.1096e-5 m^2/s, e=12698 W s^0.5/(m^2 K)).
 MATERIALS: dict[str, Material] = {
     "aisi1045": Material(name="aisi1045", E=207e9, nu=0.3, density=7860.0, specific_heat=485.0, conductivity=42.3),
