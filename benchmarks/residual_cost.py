@@ -18,8 +18,8 @@ def measure() -> list[dict]:
     jax.config.update("jax_enable_x64", True)
     from mechsim.dynamics.drives import Drive
     from mechsim.dynamics.model import derive
-    from mechsim.mechanisms.geneva import Geneva
-    from mechsim.mechanisms.geneva_kinematics import GenevaGeometry
+    from mechsim.mechanisms.geneva.model import Geneva
+    from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 
     mech = Geneva(GenevaGeometry(0.075, 4, 0.004, 0.004), 0.02, 1.5626e-3, 7.0, 0.15)
     results = []

@@ -14,7 +14,7 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
 def main() -> None:
-    from mechsim.scenarios.bench import BenchConfig, report_lines, run_bench, write
+    from mechsim.benchmarks.bench import BenchConfig, report_lines, run_bench, write
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("results") / "bench")

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import ModeFunctions
+from mechsim.dynamics.model import ModeFunctions
 
 
 @dataclass(frozen=True)

@@ -27,13 +27,13 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from .consistent import consistent_state
-from .drives import Drive
-from .hybrid import Piece, Trajectory, parameter_tuple, prepare
-from .transitions import apply_transition, chattering, stepped_over_failure
-from .jax_model import JaxModel, jax_model  # also enables float64
-from .model import ModeFunctions, StateExtension
-from .settings import SolverSettings
+from mechsim.dynamics.consistent import consistent_state
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, prepare
+from mechsim.dynamics.transitions import apply_transition, chattering, stepped_over_failure
+from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics.model import ModeFunctions, StateExtension
+from mechsim.dynamics.settings import SolverSettings
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
 import equinox as eqx  # noqa: E402
@@ -300,7 +300,7 @@ def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.n
 def _stepped_over(mf, p, t0, y0, yp0, t_rows, y_rows, yp_rows, out, nq) -> dict | None:
     """With events disabled: the first guard that crossed in its direction between the segment's samples
     (the IDA loop's check, `dynamics.hybrid.stepped_over`, where available)."""
-    from . import hybrid
+    import mechsim.dynamics.hybrid as hybrid
     check = getattr(hybrid, "stepped_over", None)
     if check is None:
         return None

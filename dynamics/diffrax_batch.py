@@ -24,12 +24,12 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from .diffrax_backend import DiffraxOptions, Lane, _args, _make_solve, default_options
-from .drives import Drive
-from .hybrid import Trajectory, prepare
-from .jax_model import JaxModel, jax_model
-from .model import StateExtension
-from .settings import SolverSettings
+from mechsim.dynamics.diffrax_backend import DiffraxOptions, Lane, _args, _make_solve, default_options
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.hybrid import Trajectory, prepare
+from mechsim.dynamics.jax_model import JaxModel, jax_model
+from mechsim.dynamics.model import StateExtension
+from mechsim.dynamics.settings import SolverSettings
 
 import jax  # noqa: E402
 

@@ -13,12 +13,12 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from .consistent import consistent_state
-from .drives import Drive
-from .ida import integrate_segment
-from .model import DerivedModel, StateExtension, derive
-from .transitions import apply_transition, chattering, stepped_over_failure
-from .settings import SolverSettings
+from mechsim.dynamics.consistent import consistent_state
+from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.ida import integrate_segment
+from mechsim.dynamics.model import DerivedModel, StateExtension, derive
+from mechsim.dynamics.transitions import apply_transition, chattering, stepped_over_failure
+from mechsim.dynamics.settings import SolverSettings
 
 
 @dataclass

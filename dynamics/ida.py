@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from sksundae.ida import IDA
 
-from .model import ModeFunctions
-from .settings import SolverSettings
+from mechsim.dynamics.model import ModeFunctions
+from mechsim.dynamics.settings import SolverSettings
 
 
 @dataclass

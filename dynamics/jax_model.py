@@ -23,7 +23,7 @@ import jax.numpy as jnp  # noqa: E402
 import sympy as sp  # noqa: E402
 from sympy.printing.numpy import JaxPrinter  # noqa: E402
 
-from .model import ModeFunctions  # noqa: E402
+from mechsim.dynamics.model import ModeFunctions  # noqa: E402
 
 
 class _JaxPrinter(JaxPrinter):

@@ -20,9 +20,9 @@ import sympy as sp
 
 from mechsim.mechanisms.base import Mechanism, Mode
 
-from .codegen import emit
-from .drives import DRIVE_PARAMETERS
-from .formulation import differentiate_constraints, mechanical_residual
+from mechsim.dynamics.codegen import emit
+from mechsim.dynamics.drives import DRIVE_PARAMETERS
+from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
 
 SOLVER_PARAMETERS = ("baumgarte_alpha", "baumgarte_beta")
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .formulation import FORMULATIONS
+from mechsim.dynamics.formulation import FORMULATIONS
 
 BACKENDS = ("ida", "diffrax")
 METHODS = ("auto", "dae", "closed-form")

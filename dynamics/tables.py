@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .hybrid import Trajectory
+from mechsim.dynamics.hybrid import Trajectory
 
 
 def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:

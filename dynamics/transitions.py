@@ -13,8 +13,8 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from .consistent import consistent_state, project_positions, project_velocities
-from .model import DerivedModel
+from mechsim.dynamics.consistent import consistent_state, project_positions, project_velocities
+from mechsim.dynamics.model import DerivedModel
 
 DEFAULT_STOP_HINT = "raise the drive torque or lower the load"
 

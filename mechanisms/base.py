@@ -226,7 +226,3 @@ class Mechanism(ABC):
     def extra_outputs(self, timeseries, events) -> dict:
         """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""
         return {}
-
-    def extra_plots(self, folder, timeseries, tables: dict) -> list:
-        """Mechanism-specific PNG plots written into `folder` (tables: those of `extra_outputs`); the paths."""
-        return []

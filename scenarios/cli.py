@@ -13,7 +13,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from .units import ScenarioError
+from mechsim.scenarios.units import ScenarioError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Simulate intermittent-motion mechanisms and their contact temperatures.")
@@ -31,7 +31,7 @@ def _fail(message: str, code: int = USER_ERROR) -> None:
 @app.command("list")
 def list_cmd() -> None:
     """List the built-in scenarios."""
-    from .loader import builtin_names, read_raw
+    from mechsim.scenarios.loader import builtin_names, read_raw
     for name in builtin_names():
         raw, _ = read_raw(name)
         out.print(f"{name:<28} {raw.get('description', '')}", markup=False, highlight=False, soft_wrap=True)
@@ -40,7 +40,7 @@ def list_cmd() -> None:
 @app.command()
 def show(name: str) -> None:
     """Print a built-in scenario file."""
-    from .loader import builtin_text
+    from mechsim.scenarios.loader import builtin_text
     try:
         print(builtin_text(name), end="")
     except ScenarioError as exc:
@@ -56,9 +56,9 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
 ) -> None:
     """Run a scenario and write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and plots."""
-    from .loader import build_mechanism, load
-    from .outputs import write_result
-    from .runner import run as run_scenario
+    from mechsim.scenarios.loader import build_mechanism, load
+    from mechsim.scenarios.output.writer import write_result
+    from mechsim.scenarios.runner import run as run_scenario
     try:
         sc = load(scenario, set_)
         target = out_dir or Path("results") / sc.name
@@ -108,7 +108,7 @@ def compare(
     """Run a scenario on IDA and on diffrax and compare the columns; exit 1 if they disagree beyond tolerance."""
     from rich.table import Table
 
-    from .compare import compare as compare_backends
+    from mechsim.scenarios.compare import compare as compare_backends
     if not 0 < rtol < 1:
         _fail(f"--rtol must be in (0, 1), got {rtol}")
     try:
@@ -157,7 +157,7 @@ def sweep(
                                "solve (the rest on the pool; docs/sweeps.md, 'Batching')"),
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
-    from .sweep_run import cli_main
+    from mechsim.scenarios.sweep.run import cli_main
     try:
         code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, timeseries, plots, force,
                         quiet, out, err, batch)
@@ -173,7 +173,7 @@ def curves(
     force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
 ) -> None:
     """Coupler-curve atlas of a rolling-pair 4-bar: components, closure, cusps, crunodes (CSV) and atlas.png."""
-    from .curves import write_curves
+    from mechsim.scenarios.curves import write_curves
     try:
         target, s = write_curves(name, out_dir, force)
     except ScenarioError as exc:
@@ -197,7 +197,7 @@ def bench(
 ) -> None:
     """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS (the Geneva's
     peers) on any scenario, the error against the mechanism's reference solution."""
-    from .bench import BenchConfig, report_lines, run_bench, write
+    from mechsim.benchmarks.bench import BenchConfig, report_lines, run_bench, write
     try:
         config = (BenchConfig.full if full else BenchConfig.small)(names, scenario, set_)
         if out_dir.exists() and not force:
@@ -221,7 +221,7 @@ def report(
     """Reports (CSV tables, PNG figures, report.md): `seed` compares the seed as printed, corrected, and mechsim."""
     if kind != "seed":
         _fail(f"report: unknown report {kind!r}; available: seed")
-    from .seed_report import cli_main as seed_report
+    from mechsim.benchmarks.seed_report import cli_main as seed_report
     try:
         target, lines = seed_report(out_dir, small, force,
                                     lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))

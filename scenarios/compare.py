@@ -17,8 +17,8 @@ import pandas as pd
 from mechsim.dynamics.result import Result
 from mechsim.dynamics.tables import coordinate_columns
 
-from .loader import Scenario, apply_overrides, build_mechanism, load, validate
-from .runner import run
+from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, load, validate
+from mechsim.scenarios.runner import run
 
 
 @dataclass(frozen=True)

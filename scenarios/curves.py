@@ -1,5 +1,5 @@
-"""`mechsim curves`: the coupler-curve atlas of a rolling-pair 4-bar (mechanisms/rolling_atlas.py) as CSV tables
-and a plot, for a named set (mechanisms/rolling_sets.py), a built-in scenario or a scenario file.
+"""`mechsim curves`: the coupler-curve atlas of a rolling-pair 4-bar (mechanisms/rolling/atlas.py) as CSV tables
+and a plot, for a named set (mechanisms/rolling/sets.py), a built-in scenario or a scenario file.
 
 Written like a run: into a temporary sibling folder, then one rename; an existing folder only with `force`.
 """
@@ -8,13 +8,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from mechsim.mechanisms import rolling_sets
-from mechsim.mechanisms.rolling_atlas import coupler_atlas
-from mechsim.mechanisms.rolling_model import RollingPairFourBar
-from mechsim.mechanisms.rolling_pair import RollingFourBar
+import mechsim.mechanisms.rolling.sets as rolling_sets
+from mechsim.mechanisms.rolling.atlas import coupler_atlas
+from mechsim.mechanisms.rolling.model import RollingPairFourBar
+from mechsim.mechanisms.rolling.pair import RollingFourBar
 
-from .units import ScenarioError
-from .atomic import atomic_folder
+from mechsim.scenarios.units import ScenarioError
+from mechsim.scenarios.output.atomic import atomic_folder
 
 #: atlas attribute -> CSV file name
 TABLES = {"component_table": "components", "closure": "closure", "nonclosure": "nonclosure", "curve": "curve",
@@ -23,7 +23,7 @@ TABLES = {"component_table": "components", "closure": "closure", "nonclosure": "
 
 def resolve(name: str) -> tuple[RollingFourBar, str]:
     """(mechanism, label) for a scenario file, a named rolling set, or a built-in rolling-pair scenario."""
-    from .loader import builtin_names, load
+    from mechsim.scenarios.loader import builtin_names, load
     path = Path(name)
     is_file = path.suffix == ".toml" or path.exists()
     if not is_file and name in rolling_sets.SETS:
@@ -71,7 +71,7 @@ def write_curves(name: str, out_dir: Path | None = None, force: bool = False,
         for attr, fname in TABLES.items():
             getattr(atlas, attr).to_csv(tmp / f"{fname}.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
-        from mechsim.mechanisms.rolling_plots import plot_coupler_atlas
+        from mechsim.scenarios.output.rolling_plots import plot_coupler_atlas
         fig = plot_coupler_atlas(atlas, title=f"rolling-pair 4-bar: {label}")
         fig.savefig(tmp / "atlas.png", dpi=110)
     return out_dir, summary

@@ -13,8 +13,8 @@ from pathlib import Path
 from mechsim.mechanisms import MECHANISMS, Mechanism
 from mechsim.mechanisms.base import Field
 
-from .schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_section
-from .units import ScenarioError
+from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_section
+from mechsim.scenarios.units import ScenarioError
 
 BUILTIN_PACKAGE = "mechsim.scenarios.builtin"
 
@@ -91,7 +91,7 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
 
 def extra_sections(mech_cls: type[Mechanism]) -> dict:
     """Sections contributed by other packages (thermal), keyed by name, as schema dicts."""
-    from .thermal_schema import thermal_section  # local: keeps the import graph one-way and lazy
+    from mechsim.scenarios.thermal_schema import thermal_section  # local: keeps the import graph one-way and lazy
     return {"thermal": thermal_section(mech_cls)}
 
 
@@ -150,7 +150,7 @@ def validate(raw: dict) -> dict:
             data = {k: v for k, v in data.items() if k != "type"}
         si[name] = check_section(name, fields, data)
     si["mechanism"]["type"] = mtype
-    from .thermal_schema import check_thermal  # local, like extra_sections
+    from mechsim.scenarios.thermal_schema import check_thermal  # local, like extra_sections
     check_thermal(si)
     drive = si["drive"]
     for key in REQUIRED_FOR_DRIVE[drive["type"]]:

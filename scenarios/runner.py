@@ -17,7 +17,7 @@ from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
 
-from .loader import Scenario, build_mechanism
+from mechsim.scenarios.loader import Scenario, build_mechanism
 
 PEAK_COLUMNS = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2",
                 "slip_speed_m_s", "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2",
@@ -124,7 +124,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
     drive = make_drive(si)
     settings = solver_settings(si)
     method, why = _choose_method(si, mech, drive, settings)
-    from .thermal_post import plan as thermal_plan   # local: thermal is optional per scenario
+    from mechsim.scenarios.thermal_post import plan as thermal_plan   # local: thermal is optional per scenario
     thermal = thermal_plan(si, mech, drive, method)
     run_si = si if thermal is None else {**si, "duration": thermal.mechanics_duration}
     angle_key, speed_key = mech.initial_keys
@@ -153,7 +153,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
         stats = traj.stats
         warnings += traj.warnings
         if traj.failure:
-            from .diagnose import explain
+            from mechsim.scenarios.diagnose import explain
             f = explain(traj, settings, si["duration"])     # names the cause where the backend gives a symptom
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),

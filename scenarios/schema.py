@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from mechsim.mechanisms.base import Field
 
-from .units import ScenarioError, to_si
+from mechsim.scenarios.units import ScenarioError, to_si
 
 TOP = {
     "name": Field("str", required=True, help="scenario name (also the default output folder)"),

@@ -21,7 +21,7 @@ import pandas as pd
 
 from mechsim.thermal import LinearThermalSystem, ambient_temperatures
 
-from .thermal_integrate import ModalNetwork
+from mechsim.scenarios.thermal_integrate import ModalNetwork
 
 #: rows of the bulk history table over the whole duration
 HISTORY_ROWS = 1001

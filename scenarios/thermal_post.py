@@ -20,9 +20,9 @@ import pandas as pd
 
 from mechsim.thermal import effective_modulus, flash_temperature, half_width, peak_pressure, validity
 
-from . import thermal_cycle as cyc
-from .thermal_integrate import ModalNetwork, integrate_closed_form
-from .thermal_setup import KELVIN, ThermalSetup, adapter, build
+import mechsim.scenarios.thermal_cycle as cyc
+from mechsim.scenarios.thermal_integrate import ModalNetwork, integrate_closed_form
+from mechsim.scenarios.thermal_setup import KELVIN, ThermalSetup, adapter, build
 
 #: averaging = 'auto' picks the cycle-averaged bulk from this many nominal cycles on
 AUTO_CYCLES = 50

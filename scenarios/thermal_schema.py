@@ -6,7 +6,7 @@ from __future__ import annotations
 from mechsim.mechanisms.base import Field, Mechanism
 from mechsim.thermal import MATERIALS, Material
 
-from .units import ScenarioError
+from mechsim.scenarios.units import ScenarioError
 
 THERMAL_MODELS = ("none", "flash", "lumped", "1d")
 FLASH_METHODS = ("jaeger", "seed-blok")

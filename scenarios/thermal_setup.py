@@ -27,7 +27,7 @@ from mechsim.mechanisms.base import Mechanism
 from mechsim.thermal import (LinearThermalSystem, Material, biot_number, conduction_system, disc_volume_area,
                      effective_modulus, graded_mesh, pin_volume_area)
 
-from .thermal_schema import thermal_material
+from mechsim.scenarios.thermal_schema import thermal_material
 
 KELVIN = 273.15
 #: default exposed pin length over wheel thickness (docs/theory.md §G5: 10 mm pin for the seed's 4 mm wheel)
@@ -264,14 +264,14 @@ def _network(setup: ThermalSetup, th: dict) -> None:
         depth = th.get("mesh_depth") or MESH_DEPTH_PENETRATIONS * math.sqrt(chi * geo.tracks * setup.period / math.pi)
         th["mesh_first_cell"], th["mesh_depth"] = first, depth
         if first > depth:
-            from .units import ScenarioError
+            from mechsim.scenarios.units import ScenarioError
             raise ScenarioError("thermal.mesh_first_cell", f"{first!r} m exceeds the mesh depth {depth!r} m")
         setup.mesh = graded_mesh(first, th["mesh_growth"], depth)
         mesh_sys = conduction_system(setup.mesh, mat, h=0.0, far="fixed").system
         setup.track_area = geo.contact_length * geo.track_length
         wheel.volume -= geo.tracks * setup.track_area * depth
         if wheel.volume <= 0:
-            from .units import ScenarioError
+            from mechsim.scenarios.units import ScenarioError
             raise ScenarioError("thermal.mesh_depth", f"{depth!r} m: the slot-wall meshes would exceed the wheel")
     for b in bodies:
         b.capacity = rho_c * b.volume

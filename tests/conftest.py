@@ -5,7 +5,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.geneva_kinematics import GenevaGeometry
+from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 from mechsim.scenarios.loader import builtin_text
 
 
@@ -28,7 +28,7 @@ def wrap(angle):
 def assert_wheel_matches_closed_form(geometry, df, crank_speed, rel=1e-6):
     """Wheel angle, speed and acceleration of a run at constant crank speed against docs/theory.md §G1's closed
     forms, each to `rel` of its peak; the crank keeps the prescribed speed."""
-    from mechsim.mechanisms import geneva_kinematics as gk
+    import mechsim.mechanisms.geneva.kinematics as gk
     cf = gk.constant_speed_motion(geometry, df["crank_angle_rad"].to_numpy(), crank_speed)
     for key, col in [("wheel_angle", "wheel_angle_rad"), ("wheel_speed", "wheel_speed_rad_s"),
                      ("wheel_accel", "wheel_accel_rad_s2")]:
@@ -40,12 +40,12 @@ def assert_wheel_matches_closed_form(geometry, df, crank_speed, rel=1e-6):
 @pytest.fixture(scope="module")
 def m1():
     """El-Shakery Mech 1 (3 sprockets), docs/theory.md §K1.3."""
-    from mechsim.mechanisms.chain_dwell import MECH1, ChainDwellMechanism
+    from mechsim.mechanisms.chain.dwell import MECH1, ChainDwellMechanism
     return ChainDwellMechanism(MECH1)
 
 
 @pytest.fixture(scope="module")
 def m2():
     """El-Shakery Mech 2 (4 sprockets), docs/theory.md §K1.3."""
-    from mechsim.mechanisms.chain_dwell import MECH2, ChainDwellMechanism
+    from mechsim.mechanisms.chain.dwell import MECH2, ChainDwellMechanism
     return ChainDwellMechanism(MECH2)

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from mechsim.scenarios.bench import SMALL_METHODS, SMALL_RTOLS, time_at_error, tracking
-from mechsim.scenarios.bench_methods import METHODS
+from mechsim.benchmarks.bench import SMALL_METHODS, SMALL_RTOLS, time_at_error, tracking
+from mechsim.benchmarks.bench_methods import METHODS
 from mechsim.scenarios.cli import app
 
 runner = CliRunner()

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.chain_dwell import MECH1, MECH2, ChainDwellMechanism, ChainDwellParams
-from mechsim.mechanisms.chain_path import circle_circle_intersection
+from mechsim.mechanisms.chain.dwell import MECH1, MECH2, ChainDwellMechanism, ChainDwellParams
+from mechsim.mechanisms.chain.path import circle_circle_intersection
 
 CM = 0.01
 DEG_TOL = 5e-7  # docs/theory.md (Part K) prints driving angles to 6 decimals

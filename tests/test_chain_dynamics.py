@@ -9,8 +9,8 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
-from mechsim.mechanisms.chain_dwell import MECH2, ChainDwellMechanism
-from mechsim.mechanisms.chain_model import ChainDwell
+from mechsim.mechanisms.chain.dwell import MECH2, ChainDwellMechanism
+from mechsim.mechanisms.chain.model import ChainDwell
 
 CM = 0.01
 R, L, r1 = 5 * CM, 3 * CM, 3 * CM

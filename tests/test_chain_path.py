@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.chain_path import ChainPath, circle_circle_intersection, cross
+from mechsim.mechanisms.chain.path import ChainPath, circle_circle_intersection, cross
 
 CM = 0.01
 MECH1 = (np.array([[5, 0], [0, 5], [-5, 0]]) * CM, [3 * CM] * 3)

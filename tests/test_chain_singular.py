@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from mechsim.mechanisms.chain_dwell import MECH1, ChainDwellMechanism
+from mechsim.mechanisms.chain.dwell import MECH1, ChainDwellMechanism
 
 CM = 0.01
 

@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mechsim.dynamics import diffrax_backend as dbk
+import mechsim.dynamics.diffrax_backend as dbk
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
-from mechsim.mechanisms.geneva import Geneva
+from mechsim.mechanisms.geneva.model import Geneva
 from mechsim.scenarios.loader import load
 from mechsim.scenarios.runner import run
 from conftest import assert_wheel_matches_closed_form

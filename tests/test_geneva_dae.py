@@ -8,9 +8,9 @@ from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
-from mechsim.mechanisms import geneva_kinematics as gk
-from mechsim.mechanisms import geneva_reduced as reduced
-from mechsim.mechanisms.geneva import Geneva
+import mechsim.mechanisms.geneva.kinematics as gk
+import mechsim.mechanisms.geneva.reduced as reduced
+from mechsim.mechanisms.geneva.model import Geneva
 from conftest import assert_wheel_matches_closed_form
 
 J1, J2 = 0.02, 1.5626e-3

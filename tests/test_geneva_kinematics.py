@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from mechsim.mechanisms import geneva_kinematics as gk
-
+import mechsim.mechanisms.geneva.kinematics as gk
 W1 = 5.34
 
 

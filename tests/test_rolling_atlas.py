@@ -8,10 +8,10 @@ import re
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.rolling_atlas import coupler_atlas
-from mechsim.mechanisms.rolling_pair import rolling_span
-from mechsim.mechanisms.rolling_plots import BRANCH_COLOURS, plot_coupler_atlas
-from mechsim.mechanisms.rolling_sets import SETS, make
+from mechsim.mechanisms.rolling.atlas import coupler_atlas
+from mechsim.mechanisms.rolling.pair import rolling_span
+from mechsim.scenarios.output.rolling_plots import BRANCH_COLOURS, plot_coupler_atlas
+from mechsim.mechanisms.rolling.sets import SETS, make
 
 UNIT_COLUMN = re.compile(r"^[A-Za-z0-9_]+_(m|rad|m_per_rad)$")
 CATEGORICAL = {"component", "branch", "kind", "closed", "branches", "start_kind", "end_kind", "component_1",

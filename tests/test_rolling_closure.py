@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.rolling_atlas import components, nonclosure_table
-from mechsim.mechanisms.rolling_pair import closure_intervals, rolling_span
-from mechsim.mechanisms.rolling_sets import make
+from mechsim.mechanisms.rolling.atlas import components, nonclosure_table
+from mechsim.mechanisms.rolling.pair import closure_intervals, rolling_span
+from mechsim.mechanisms.rolling.sets import make
 
 REF = {
     "B": [(2.081243, 5.781935, "stretched", "stretched"), (8.475975, 11.498952, "stretched", "folded"),

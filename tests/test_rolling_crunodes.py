@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.rolling_atlas import crunodes_table, trochoid_crunodes_table
-from mechsim.mechanisms.rolling_sets import make
+from mechsim.mechanisms.rolling.atlas import crunodes_table, trochoid_crunodes_table
+from mechsim.mechanisms.rolling.sets import make
 
 TROCHOID = [((2.585419, 5.939359), (0.905415, 2.982469)), ((12.010197, 15.364137), (0.094585, -2.382469))]
 BRANCH_P = [((2.585419, 5.939359), (1.048915, 0.636241), True),

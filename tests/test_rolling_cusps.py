@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mechsim.mechanisms.rolling_atlas import cusps_table
-from mechsim.mechanisms.rolling_sets import make
+from mechsim.mechanisms.rolling.atlas import cusps_table
+from mechsim.mechanisms.rolling.sets import make
 
 # docs/theory.md §K2.3, set C: phi_k, B (= contact), C on branch +1, C on branch -1
 SET_C_CUSPS = [

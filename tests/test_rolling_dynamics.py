@@ -1,4 +1,4 @@
-"""The rolling-pair 4-bar DAE (mechanisms/rolling_model.py) against docs/theory.md §K3 and independent physics:
+"""The rolling-pair 4-bar DAE (mechanisms/rolling/model.py) against docs/theory.md §K3 and independent physics:
 the minimal-coordinate equation, energy, link 4's Newton-Euler balance with the rolling contact force, the
 closed form at prescribed speed, and dead points (docs/theory.md §K2.2, §4 point 4)."""
 import math
@@ -10,9 +10,9 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
-from mechsim.mechanisms import rolling_reduced as reduced
-from mechsim.mechanisms.rolling_model import Bodies, RollingPairFourBar
-from mechsim.mechanisms.rolling_sets import make
+import mechsim.mechanisms.rolling.reduced as reduced
+from mechsim.mechanisms.rolling.model import Bodies, RollingPairFourBar
+from mechsim.mechanisms.rolling.sets import make
 
 G = 9.81
 

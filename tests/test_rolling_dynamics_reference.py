@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from mechsim.mechanisms.rolling_sets import make
+from mechsim.mechanisms.rolling.sets import make
 
 G = 9.81
 TAU = 15.0

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from mechsim.mechanisms.rolling_pair import CircleOnCircle, RollingFourBar, rolling_span
-from mechsim.mechanisms.rolling_paper import paper_contact_slip, paper_rotation_matrix, paper_trochoid, rotation_matrix
-from mechsim.mechanisms.rolling_sets import make
+from mechsim.mechanisms.rolling.pair import CircleOnCircle, RollingFourBar, rolling_span
+from mechsim.mechanisms.rolling.paper import paper_contact_slip, paper_rotation_matrix, paper_trochoid, rotation_matrix
+from mechsim.mechanisms.rolling.sets import make
 
 CIRCLE_SETS = ["A", "B", "C", "bicursal_K7", "irrational"]
 

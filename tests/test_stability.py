@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mechsim.scenarios.cli import app
-from mechsim.scenarios.stability import CASES, thermal_mesh_sweep
+from mechsim.benchmarks.stability import CASES, thermal_mesh_sweep
 
 runner = CliRunner()
 CASE = {c.name: c for c in CASES}
@@ -59,7 +59,7 @@ def test_stall_exits_3_where_the_crank_stops(tmp_path):
     assert list(ev["kind"]) == ["entry", "stall"]
     from scipy.integrate import solve_ivp
 
-    from mechsim.mechanisms import geneva_reduced as reduced
+    import mechsim.mechanisms.geneva.reduced as reduced
     from mechsim.scenarios.loader import build_mechanism, load
     mech = build_mechanism(load("geneva-torque", ["drive.torque=2 N*m"]).si)   # frictionless: no slip sign
 
@@ -89,7 +89,7 @@ def test_flank_switch_is_a_warning_and_an_event_row(tmp_path):
     ev = pd.read_csv(tmp_path / "o" / "events.csv")
     switches = ev[ev["kind"] == "flank switch"]
     assert len(switches) >= 2
-    from mechsim.mechanisms.geneva import Geneva  # noqa: F401  (the closed form below is the mechanism's own, independent)
+    from mechsim.mechanisms.geneva.model import Geneva  # noqa: F401  (the closed form below is the mechanism's own, independent)
     from mechsim.scenarios.loader import build_mechanism, load
     sc = load("geneva-lc1", ["drive.speed=40 rad/s"])
     mech = build_mechanism(sc.si)

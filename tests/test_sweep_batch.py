@@ -11,13 +11,13 @@ import pandas as pd
 import pytest
 
 from cli_helpers import invoke
-from mechsim.dynamics import diffrax_backend
+import mechsim.dynamics.diffrax_backend as diffrax_backend
 from mechsim.dynamics.diffrax_batch import last_batch, simulate_batch
 from mechsim.scenarios.loader import build_mechanism, load
 from mechsim.scenarios.runner import make_drive, solver_settings
-from mechsim.scenarios.sweep_exec import CaseTask, SerialRunner, _batch_reason
-from mechsim.scenarios.sweep_run import run_sweep
-from mechsim.scenarios.sweep_spec import build_spec
+from mechsim.scenarios.sweep.execute import CaseTask, SerialRunner, _batch_reason
+from mechsim.scenarios.sweep.run import run_sweep
+from mechsim.scenarios.sweep.spec import build_spec
 
 CASES = [(0.15, 7.0), (0.05, 2.0), (0.3, 12.0)]
 BASE = ["solver.backend=diffrax", "duration=1.5 s"]

@@ -9,9 +9,7 @@ import pytest
 import sympy as sp
 from scipy.special import k0e, k1e
 
-from mechsim.thermal import band_source as bs
-
-
+import mechsim.thermal.band_source as bs
 def uniform_theta_closed_form(X, L):
     """Independent closed form of the uniform band (from int e^t K0 dt = t e^t (K0 + K1) and
     int e^-t K0 dt = t e^-t (K0 - K1)): theta = [z (k0e+k1e)(z) + w e^-2w (k0e-k1e)(w)]/(pi L),

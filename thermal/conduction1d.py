@@ -18,8 +18,8 @@ import scipy.sparse as sps
 from scipy.integrate import quad
 from scipy.special import erfc
 
-from .linear import LinearThermalSystem
-from .materials import Material, get_material
+from mechsim.thermal.linear import LinearThermalSystem
+from mechsim.thermal.materials import Material, get_material
 
 #: Mesh defaults (docs/theory.md §G6): first cell <= delta/10 with delta = sqrt(chi 2b/U), growth 1.1–1.2,
 #: depth >= 3 sqrt(chi t_end).

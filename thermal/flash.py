@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from .band_source import EULER_GAMMA, band_fit, band_theta_exact, band_theta_table
-from .heat import frictional_heat, peclet
-from .materials import Material, get_material
+from mechsim.thermal.band_source import EULER_GAMMA, band_fit, band_theta_exact, band_theta_table
+from mechsim.thermal.heat import frictional_heat, peclet
+from mechsim.thermal.materials import Material, get_material
 
 #: c in L_eff = max(L, c b/sqrt(chi t_on)) = exp(-gamma_E/2) = 0.7493: the Peclet number at which the
 #: steady low-L centre rise of the uniform band, (2/pi)[ln(1/L) + 1 + ln 2 - gamma_E], equals the rise of

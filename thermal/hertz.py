@@ -11,7 +11,7 @@ import functools
 import numpy as np
 from scipy.optimize import brentq
 
-from .materials import Material
+from mechsim.thermal.materials import Material
 
 
 def effective_modulus(material_1: Material, material_2: Material | None = None) -> float:

@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from .linear import LinearThermalSystem
-from .materials import Material, get_material
+from mechsim.thermal.linear import LinearThermalSystem
+from mechsim.thermal.materials import Material, get_material
 
 STATE_NAMES = ("temp_bulk_pin", "temp_bulk_wheel")
 INPUT_NAMES = ("heat_rate_pin_W", "heat_rate_wheel_W")

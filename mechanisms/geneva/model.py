@@ -1,0 +1,315 @@
+"""External Geneva drive as a two-mode multibody model (engaged: pin in slot; dwell: wheel locked).
+
+Coordinates q = (crank, wheel): the crank angle theta (unwrapped, 0 at the first mid-engagement, growing
+with the drive) and the wheel angle psi (unwrapped, positive in the indexing direction, +2 pi/n per index).
+During engagement k the local angles are alpha = theta - 2 pi k and beta = psi - k 2 pi/n, the pin centre is
+P = (c - r cos alpha, r sin alpha) in the wheel-centre frame of docs/theory.md §G1, and the constraint is that P
+lies on the slot centre line (signed lateral offset, metres):
+
+    Phi = r sin(alpha) cos(beta) - (c - r cos(alpha)) sin(beta) = 0.
+
+Its multiplier is the normal force N on the driving flank (N > 0 pushes the wheel forward). Friction acts
+along the slot at the contact point, with the slip u = v_s + flank R (theta' + psi') including the pin's spin
+(docs/theory.md §G1 'Pin spin', §2); its generalized force -mu |N| sign(u) du/dv dissipates exactly mu |N| |u|.
+During the dwell the locking arcs hold the wheel: Phi = r (psi - psi_lock) (a length, so the residual has one
+unit); the load torque is then carried by the lock and locking friction is neglected (docs/theory.md §G2).
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+import sympy as sp
+
+from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+import mechsim.mechanisms.geneva.kinematics as gk
+from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
+
+
+class Geneva(Mechanism):
+    """External Geneva drive with n >= 3 slots, driven at the crank, loaded at the wheel."""
+
+    name = "geneva"
+    coordinates = ("crank", "wheel")
+    max_constraints = 1
+    drive_coordinate = 0
+    angle_coordinates = (0, 1)
+    parameter_names = (
+        "r", "c", "R", "J1", "J2", "T_L", "mu", "c1", "c2", "pitch", "alpha0",
+        # discrete (mode) parameters
+        "slot", "lock_angle", "flank", "slide",
+    )
+
+    has_sliding_contact = True
+    schema = {
+        "mechanism": {
+            "slots": Field("int", required=True, minimum=3, help="number of slots n (>= 3)"),
+            "crank_radius": Field("quantity", "m", required=True, positive=True, help="crank radius r"),
+            "pin_radius": Field("quantity", "m", required=True, positive=True, help="pin radius R"),
+            "thickness": Field("quantity", "m", required=True, positive=True,
+                               help="wheel thickness = pin-slot contact length"),
+            "crank_inertia": Field("quantity", "kg*m^2", required=True, positive=True,
+                                   help="crank + pin (+ drive side) moment of inertia J1"),
+            "wheel_inertia": Field("quantity", "kg*m^2", required=True, positive=True,
+                                   help="wheel (+ driven side) moment of inertia J2"),
+            "crank_damping": Field("quantity", "N*m*s/rad", default=0.0, nonnegative=True,
+                                   help="viscous damping on the crank shaft"),
+            "wheel_damping": Field("quantity", "N*m*s/rad", default=0.0, nonnegative=True,
+                                   help="viscous damping on the wheel shaft"),
+        },
+        "load": {
+            "wheel_torque": Field("quantity", "N*m", default=0.0, nonnegative=True,
+                                  help="resisting torque on the wheel while it indexes"),
+        },
+        "contact": {
+            "friction": Field("float", default=0.0, nonnegative=True, help="Coulomb friction coefficient, pin-slot"),
+        },
+    }
+
+    @classmethod
+    def from_config(cls, config: dict[str, dict]) -> "Geneva":
+        m, load, contact = config["mechanism"], config.get("load", {}), config.get("contact", {})
+        geometry = GenevaGeometry(m["crank_radius"], int(m["slots"]), m["pin_radius"], m["thickness"])
+        return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
+                   contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0))
+
+    def __init__(self, geometry: GenevaGeometry, crank_inertia: float, wheel_inertia: float,
+                 wheel_torque: float = 0.0, friction: float = 0.0, crank_damping: float = 0.0,
+                 wheel_damping: float = 0.0) -> None:
+        super().__init__()
+        self.geometry = geometry
+        self.crank_inertia = crank_inertia
+        self.wheel_inertia = wheel_inertia
+        self.wheel_torque = wheel_torque
+        self.friction = friction
+        self.crank_damping = crank_damping
+        self.wheel_damping = wheel_damping
+
+    # -- symbolic model -------------------------------------------------------------------------------
+    def mass_matrix(self) -> sp.Matrix:
+        P = self.symbols.p
+        return sp.diag(P("J1"), P("J2"))
+
+    def modes(self) -> dict[str, Mode]:
+        s, P = self.symbols, self.symbols.p
+        t = s.t
+        theta, psi = s.q
+        w1, w2 = s.v
+        a1, a2 = s.a
+        lam = s.lam[0]
+        r, c, R, mu = P("r"), P("c"), P("R"), P("mu")
+        c1, c2, T_L = P("c1"), P("c2"), P("T_L")
+        k, flank, slide = P("slot"), P("flank"), P("slide")
+
+        alpha = theta - 2 * sp.pi * k
+        beta = psi - k * P("pitch")
+        phi_engaged = r * sp.sin(alpha) * sp.cos(beta) - (c - r * sp.cos(alpha)) * sp.sin(beta)
+        x = r * sp.sin(alpha) * sp.sin(beta) + (c - r * sp.cos(alpha)) * sp.cos(beta)  # along-slot pin distance
+        v_s = r * w1 * sp.sin(alpha + beta)                     # pin-centre sliding speed along the slot
+        spin = R * (w1 + w2)                                    # pin surface speed relative to the wheel
+        u = v_s + flank * spin                                  # slip on the contact flank
+        normal = lam                                            # N, signed (> 0: driving flank)
+        fric_mag = mu * flank * lam                             # mu |N| with |N| = flank * N in this mode
+        fric_force = [-fric_mag * slide * sp.diff(u, vi) for vi in (w1, w2)]
+        damping = [-c1 * w1, -c2 * w2]
+
+        engaged_readouts = {
+            "contact_force_N": normal,
+            "friction_force_N": fric_mag * slide,
+            "slip_speed_m_s": u,
+            "pin_sliding_speed_m_s": v_s,
+            "pin_distance_m": x,
+            "friction_power_W": fric_mag * slide * u,
+            "flank": flank,
+            "lock_force_N": sp.Integer(0),
+        }
+        engaged = Mode(
+            name="engaged",
+            constraints=(phi_engaged,),
+            force=(damping[0] + fric_force[0], damping[1] + fric_force[1] - T_L),
+            guards=(
+                Guard("exit", theta - (2 * sp.pi * k + P("alpha0")), +1),
+                # sign guards are written relative to the mode's own sign, falling only: the crossing that
+                # started the mode (value ~ 0, rising) can never fire again from the restart point
+                Guard("flank_switch", flank * lam, -1),
+                Guard("slip_reversal", slide * u, -1),
+                Guard("stall", w1, -1),
+            ),
+            powers={"load": -T_L * w2, "friction": -fric_mag * slide * u, "damping": -c1 * w1**2 - c2 * w2**2},
+            readouts=engaged_readouts,
+            heat={"normal_force": normal, "slip_speed": u,
+                  "source_speed_pin": spin, "source_speed_wheel": v_s,
+                  "heat_rate": fric_mag * slide * u, "track": k},
+        )
+        zero = sp.Integer(0)
+        dwell = Mode(
+            name="dwell",
+            constraints=(r * (psi - P("lock_angle")),),
+            force=tuple(damping),
+            guards=(
+                Guard("entry", theta - (2 * sp.pi * k - P("alpha0")), +1),
+                Guard("stall", w1, -1),
+            ),
+            powers={"load": zero, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
+            readouts={
+                "contact_force_N": zero, "friction_force_N": zero, "slip_speed_m_s": zero,
+                "pin_sliding_speed_m_s": zero, "pin_distance_m": sp.sqrt(
+                    (c - r * sp.cos(alpha)) ** 2 + (r * sp.sin(alpha)) ** 2),
+                "friction_power_W": zero, "flank": zero, "lock_force_N": lam,
+            },
+            heat={"normal_force": zero, "slip_speed": zero, "source_speed_pin": zero, "source_speed_wheel": zero,
+                  "heat_rate": zero, "track": k},
+        )
+        return {"engaged": engaged, "dwell": dwell}
+
+    # -- numbers ----------------------------------------------------------------------------------------
+    def parameter_values(self) -> dict[str, float]:
+        g = self.geometry
+        return {
+            "r": g.crank_radius, "c": g.centre_distance, "R": g.pin_radius,
+            "J1": self.crank_inertia, "J2": self.wheel_inertia, "T_L": self.wheel_torque,
+            "mu": self.friction, "c1": self.crank_damping, "c2": self.wheel_damping,
+            "pitch": g.pitch, "alpha0": g.engagement_half_angle,
+            "slot": 0.0, "lock_angle": 0.0, "flank": 1.0, "slide": 1.0,
+        }
+
+    def initial_state(self, angle: float, speed: float) -> InitialState:
+        g = self.geometry
+        k = float(np.floor((angle + np.pi) / (2 * np.pi)))
+        alpha = angle - 2 * np.pi * k
+        a0 = g.engagement_half_angle
+        if -a0 <= alpha < a0:
+            lam = g.ratio
+            beta = float(wheel_angle(lam, alpha))
+            w2 = float(speed_ratio(lam, alpha)) * speed
+            u = (speed * g.crank_radius * np.sin(alpha + beta) + g.pin_radius * (speed + w2))
+            slide = 1.0 if u >= 0 else -1.0
+            return InitialState("engaged", {"slot": k, "flank": 1.0, "slide": slide},
+                                np.array([angle, k * g.pitch + beta]), np.array([speed, w2]))
+        if alpha >= a0:   # past this slot's exit: wheel locked after index k, next slot k + 1
+            lock = (k + 0.5) * g.pitch
+            return InitialState("dwell", {"slot": k + 1, "lock_angle": lock},
+                                np.array([angle, lock]), np.array([speed, 0.0]))
+        lock = (k - 0.5) * g.pitch
+        return InitialState("dwell", {"slot": k, "lock_angle": lock}, np.array([angle, lock]), np.array([speed, 0.0]))
+
+    def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
+                 q: np.ndarray, v: np.ndarray) -> Transition:
+        g = self.geometry
+        k = values["slot"]
+        if guard == "stall":
+            return Transition(mode, stop=(
+                f"crank stalled: its speed fell to zero at crank angle {np.degrees(q[0]):.2f} deg "
+                f"({mode}); the drive cannot carry the load past this point"), kind="stall")
+        if guard == "entry":
+            lam = g.ratio
+            alpha = q[0] - 2 * np.pi * k
+            beta = float(wheel_angle(lam, alpha))
+            u = v[0] * g.crank_radius * np.sin(alpha + beta) + g.pin_radius * v[0]
+            return Transition("engaged", {"flank": 1.0, "slide": 1.0 if u >= 0 else -1.0}, kind="entry")
+        if guard == "exit":
+            return Transition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * g.pitch}, kind="exit")
+        if guard == "flank_switch":
+            new = -values["flank"]
+            return Transition("engaged", {"flank": new}, kind="flank switch", message=(
+                f"normal force changed sign at crank angle {np.degrees(q[0] - 2 * np.pi * k):.2f} deg "
+                f"(local): the pin crossed to the {'driving' if new > 0 else 'trailing'} flank "
+                "(with slot clearance this is a backlash impact)"))
+        if guard == "slip_reversal":
+            return Transition("engaged", {"slide": -values["slide"]}, kind="slip reversal")
+        raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
+
+    def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
+        """Crank angle from the reduced-coordinate equation (`geneva_reduced`, docs/theory.md §G2) on DOP853;
+        torque and motor drives only."""
+        if drive.is_prescribed:
+            return None
+        import mechsim.mechanisms.geneva.reduced as geneva_reduced
+        dv = drive.parameter_values(angle0)
+        return geneva_reduced.integrate(self, dv["drive_T0"], dv["drive_slope"], angle0, speed0,
+                                        np.asarray(t_eval, float), rtol=rtol, atol=rtol)[0]
+
+    def describe(self) -> dict:
+        g = self.geometry
+        return {
+            "centre_distance_m": g.centre_distance,
+            "min_pin_distance_m": g.min_pin_distance,
+            "entry_pin_distance_m": g.entry_pin_distance,
+            "engagement_half_angle_rad": g.engagement_half_angle,
+            "dwell_fraction": g.dwell_fraction,
+        }
+
+    # -- prescribed constant crank speed: no DAE needed ------------------------------------------------
+    def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
+        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
+
+        Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
+        (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
+        T_in = c1 w1 + N r cos(alpha + beta) + mu |N| sigma (r sin(alpha + beta) + flank R).
+        """
+        g = self.geometry
+        theta = angle0 + speed * (t - t[0])
+        kin = gk.constant_speed_motion(g, theta, speed)
+        alpha, eng = kin["alpha"], kin["engaged"]
+        beta = kin["wheel_angle"] - np.floor((theta + np.pi) / (2 * np.pi)) * g.pitch
+        w2, a2 = kin["wheel_speed"], kin["wheel_accel"]
+        mu, R, r = self.friction, g.pin_radius, g.crank_radius
+        x = gk.pin_distance(g, alpha)
+        v_s = np.where(eng, r * speed * np.sin(alpha + beta), 0.0)
+        wheel_moment = self.wheel_inertia * a2 + self.wheel_damping * w2 + self.wheel_torque
+
+        def balance(flank):
+            u = v_s + flank * R * (speed + w2)
+            sigma = np.where(u >= 0, 1.0, -1.0)
+            return u, sigma, wheel_moment / (x - mu * sigma * R)
+
+        flank = np.ones_like(theta)
+        u, sigma, N = balance(1.0)
+        u2, sigma2, N2 = balance(-1.0)
+        swap = eng & (N < 0)
+        flank[swap], u[swap], sigma[swap], N[swap] = -1.0, u2[swap], sigma2[swap], N2[swap]
+        N, u = np.where(eng, N, 0.0), np.where(eng, u, 0.0)
+        flank = np.where(eng, flank, 0.0)
+        fric = mu * np.abs(N) * sigma
+        torque = (self.crank_damping * speed + N * r * np.cos(alpha + beta)
+                  + fric * (r * np.sin(alpha + beta) + flank * R))
+        torque = np.where(eng, torque, self.crank_damping * speed)
+        return {
+            "mode": np.where(eng, "engaged", "dwell").astype(object),
+            "crank_angle_rad": theta, "crank_speed_rad_s": np.full_like(theta, speed),
+            "crank_accel_rad_s2": np.zeros_like(theta),
+            "wheel_angle_rad": kin["wheel_angle"], "wheel_speed_rad_s": w2, "wheel_accel_rad_s2": a2,
+            "contact_force_N": N, "friction_force_N": fric, "slip_speed_m_s": u,
+            "pin_sliding_speed_m_s": v_s, "pin_distance_m": x, "friction_power_W": fric * u,
+            "flank": flank, "lock_force_N": np.zeros_like(theta), "drive_torque_N_m": torque,
+            "kinetic_energy_J": 0.5 * (self.crank_inertia * speed**2 + self.wheel_inertia * w2**2),
+            "constraint_residual_m": np.zeros_like(theta),
+            "powers": {"drive": torque * speed, "load": -self.wheel_torque * w2 * eng,
+                       "friction": -fric * u, "damping": -self.crank_damping * speed**2 - self.wheel_damping * w2**2},
+        }
+
+    # -- drawing ---------------------------------------------------------------------------------------
+    def draw(self, ax, row) -> None:
+        """Draw wheel (with slots), crank and pin at one output row (matplotlib axes, mm)."""
+        from matplotlib.patches import Circle
+
+        g = self.geometry
+        c, r, n = g.centre_distance * 1e3, g.crank_radius * 1e3, g.slots
+        theta, psi = float(row["crank_angle_rad"]), float(row["wheel_angle_rad"])
+        wheel_r = g.entry_pin_distance * 1e3 * 1.05
+        phi = np.linspace(0, 2 * np.pi, 200)
+        ax.plot(wheel_r * np.cos(phi), wheel_r * np.sin(phi), color="0.3", lw=1)
+        for j in range(n):
+            ang = psi + j * g.pitch
+            inner = g.min_pin_distance * 1e3 * 0.9
+            ax.plot([inner * np.cos(ang), wheel_r * np.cos(ang)], [inner * np.sin(ang), wheel_r * np.sin(ang)],
+                    color="tab:blue", lw=2.5, solid_capstyle="butt")
+        # crank: O1 at (c, 0); pin at (c - r cos(theta), r sin(theta)) in the frame of docs/theory.md §G1
+        px, py = c - r * np.cos(theta), r * np.sin(theta)
+        ax.plot([c, px], [0, py], color="tab:red", lw=2)
+        ax.add_patch(Circle((px, py), g.pin_radius * 1e3, color="tab:red"))
+        ax.plot([0, c], [0, 0], "k+", ms=8)
+        ax.set_aspect("equal")
+        ax.set_xlim(-wheel_r * 1.1, c + r * 1.1)
+        ax.set_ylim(-wheel_r * 1.1, wheel_r * 1.1)
+        ax.set_xlabel("x (mm)")

@@ -1,0 +1,1 @@
+"""Output writers: the atomic result folder, tables, summary and figures."""

@@ -1,0 +1,46 @@
+"""Write a Result to a folder atomically: everything goes to a temporary sibling folder, then one rename.
+
+A reader never sees a half-written file; an existing folder is replaced only with `force`.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import tomli_w
+
+from mechsim.dynamics.result import Result
+
+from mechsim.scenarios.output.atomic import atomic_folder, json_default
+
+
+def _toml_clean(d):
+    """TOML has no null: drop None values (they mean 'default/not used')."""
+    if isinstance(d, dict):
+        return {k: _toml_clean(v) for k, v in d.items() if v is not None}
+    if isinstance(d, list):
+        return [_toml_clean(v) for v in d]
+    return d
+
+
+def resolved_scenario_toml(si: dict) -> str:
+    """The scenario as run: every value in SI with its unit, defaults filled in; valid scenario input."""
+    from mechsim.scenarios.loader import resolved_raw
+    header = "# Resolved scenario: every value in SI units, defaults filled in (valid input to `mechsim run`).\n"
+    return header + tomli_w.dumps(_toml_clean(resolved_raw(si)))
+
+
+def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
+    """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and PNG plots into out_dir."""
+    with atomic_folder(out_dir, force) as tmp:
+        result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
+        result.timeseries.to_csv(tmp / "timeseries.csv", index=False)
+        result.events.to_csv(tmp / "events.csv", index=False)
+        for name, table in result.extra_tables.items():
+            table.to_csv(tmp / f"{name}.csv", index=False)
+        (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
+        (tmp / "scenario.toml").write_text(resolved_scenario_toml(result.scenario))
+        if plots and len(result.timeseries):
+            from mechsim.scenarios.output.plots import write_plots
+            write_plots(result, tmp, mechanism)
+    return out_dir

@@ -1,0 +1,1 @@
+"""Parameter sweeps: specification, execution (pool, Dask, batched), storage, rows and plots."""

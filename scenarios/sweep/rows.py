@@ -1,0 +1,139 @@
+"""One sweep-table row from one run: varied parameters (SI), summary figures, cycle figures, solver statistics.
+
+Column names follow the house rule `<quantity>_<unit>`; a varied key keeps its scenario path and gets its SI
+unit appended (`load.wheel_torque_N_m`, `contact.friction`).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+
+import numpy as np
+import pandas as pd
+
+from mechsim.scenarios.loader import Scenario, sections_for
+from mechsim.scenarios.schema import TOP
+
+#: figures plotted against each varied parameter (those present in the table)
+KEY_FIGURES = ("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_slip_speed_m_s",
+               "peak_friction_power_W", "peak_temp_contact_C", "cycle_time_s", "work_drive_per_cycle_J",
+               "work_friction_per_cycle_J", "case_wall_time_s")
+
+
+def unit_suffix(unit: str) -> str:
+    """'N*m' -> 'N_m', 'rad/s' -> 'rad_s', 'kg*m^2' -> 'kg_m2' (column-name form of an SI unit)."""
+    return unit.replace("*", "_").replace("/", "_").replace("^", "").replace(" ", "")
+
+
+def field_unit(si: dict, key: str) -> str:
+    """The SI unit of a scenario key ('' for dimensionless, words, booleans)."""
+    parts = key.split(".")
+    if len(parts) == 1:
+        spec = TOP.get(parts[0])
+    else:
+        spec = sections_for(si["mechanism"]["type"]).get(parts[0], {}).get(parts[1])
+    return (spec.unit or "") if spec is not None and spec.kind == "quantity" else ""
+
+
+def lookup(si: dict, key: str):
+    node = si
+    for part in key.split("."):
+        node = node[part]
+    return node
+
+
+def parameter_columns(sc: Scenario, keys: list[str]) -> dict:
+    """The varied keys' resolved (SI) values, keyed by column name."""
+    out = {}
+    for key in keys:
+        unit = field_unit(sc.si, key)
+        out[f"{key}_{unit_suffix(unit)}" if unit else key] = lookup(sc.si, key)
+    return out
+
+
+def case_key(sc: Scenario, overrides: list[str], base_raw: dict) -> str:
+    """The case's identity: a hash of the base scenario as written and the case's overrides resolved to SI.
+
+    Resolving makes '5 N*m' and '5000 N*mm' one case; leaving out the defaults the loader fills in keeps finished
+    cases valid when the schema gains a defaulted key. A changed scenario file changes every key.
+    """
+    from mechsim.scenarios.loader import parse_override
+    resolved = {}
+    for text in overrides:
+        path, value = parse_override(text)
+        key = ".".join(path)
+        try:
+            resolved[key] = lookup(sc.si, key)
+        except (KeyError, TypeError):
+            resolved[key] = value
+    text = json.dumps({"scenario": base_raw, "overrides": resolved}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def cycle_figures(df: pd.DataFrame, angle_col: str | None) -> dict:
+    """Figures of the last complete drive revolution: its duration and the work of each power flow over it.
+
+    The revolution boundaries are the first instants the drive angle has advanced 2 pi k from its start
+    (linear interpolation between output rows). The last one is used because the first may hold a start-up
+    transient (a motor running up). Not defined (NaN, cycles = 0) when the drive is not an angle or has not
+    completed a turn.
+    """
+    out = {"cycles": 0, "cycle_time_s": math.nan}
+    work_cols = [c for c in df.columns if c.startswith("work_") and c.endswith("_J")]
+    for c in work_cols:
+        out[f"{c[:-2]}_per_cycle_J"] = math.nan
+    if angle_col is None or angle_col not in df or len(df) < 2:
+        return out
+    t = df["t_s"].to_numpy(float)
+    theta = df[angle_col].to_numpy(float)
+    advance = theta - theta[0]
+    sign = 1.0 if advance[-1] >= 0 else -1.0
+    advance = sign * advance
+    turns = int(np.floor(np.nanmax(advance) / (2 * np.pi) + 1e-12))
+    if turns < 1:
+        return out
+
+    def crossing(level: float) -> float:
+        if level == 0.0:
+            return t[0]
+        j = int(np.argmax(advance >= level))
+        a0, a1 = advance[j - 1], advance[j]
+        return float(t[j - 1] + (level - a0) / (a1 - a0) * (t[j] - t[j - 1])) if a1 != a0 else float(t[j])
+
+    t0, t1 = crossing(2 * np.pi * (turns - 1)), crossing(2 * np.pi * turns)
+    out["cycles"] = turns
+    out["cycle_time_s"] = t1 - t0
+    for c in work_cols:
+        w = df[c].to_numpy(float)
+        out[f"{c[:-2]}_per_cycle_J"] = float(np.interp(t1, t, w) - np.interp(t0, t, w))
+    return out
+
+
+def _scalar(v) -> bool:
+    return v is None or isinstance(v, (bool, int, float, str, np.floating, np.integer))
+
+
+def summary_row(summary: dict) -> dict:
+    """The summary flattened: peaks with time and drive angle, energy, events, solver statistics, model."""
+    row: dict = {"success": bool(summary.get("success")), "failure": summary.get("failure") or ""}
+    model = summary.get("model", {})
+    for k in ("drive", "method", "backend", "formulation", "thermal"):
+        row[f"model_{k}"] = model.get(k)
+    for col, pk in summary.get("peaks", {}).items():
+        row[f"peak_{col}"] = pk["value"]
+        row[f"peak_{col}_at_t_s"] = pk["t_s"]
+        row[f"peak_{col}_at_drive_angle_deg"] = pk["drive_angle_wrapped_deg"]
+    energy = summary.get("energy") or {}
+    for name, w in (energy.get("work_J") or {}).items():
+        row[f"work_{name}_J"] = w
+    if "closure_error_relative" in energy:
+        row["energy_closure_error_relative"] = energy["closure_error_relative"]
+    for kind, n in (summary.get("events") or {}).items():
+        row[f"events_{kind.replace(' ', '_')}"] = n
+    for k, v in (summary.get("solver") or {}).items():
+        if _scalar(v) and not k.endswith("_note"):
+            row[f"solver_{k}"] = v
+    row["max_constraint_residual_m"] = summary.get("max_constraint_residual_m")
+    row["warnings"] = len(summary.get("warnings") or [])
+    return row
