@@ -74,7 +74,10 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
     powers = cols.pop("powers")
-    events = cols.pop("events", [])
+    events = cols.pop("events", None)
+    if events is None:   # a mechanism may list the closed form's transitions apart from its columns
+        listing = getattr(mech, "closed_form_events", None)
+        events = listing(t, angle0, drive.speed) if listing else []
     df = pd.DataFrame({"t_s": t, **cols})
     df.attrs["events"] = events
     for name, power in powers.items():

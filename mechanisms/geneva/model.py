@@ -288,6 +288,29 @@ class Geneva(Mechanism):
                        "friction": -fric * u, "damping": -self.crank_damping * speed**2 - self.wheel_damping * w2**2},
         }
 
+    def closed_form_events(self, t: np.ndarray, angle0: float, speed: float) -> list[dict]:
+        """Events-table rows of a constant-speed run at their exact times: the pin enters slot k at crank angle
+        2 pi k - alpha0 (the dwell ends) and leaves it at 2 pi k + alpha0 (the next dwell starts), alpha0 =
+        pi/2 - pi/n (docs/theory.md §G1). Entry and exit are tangential, so no kinetic energy is lost.
+        Only crossings after the first instant and up to the last are listed (as the DAE reports them)."""
+        t = np.asarray(t, float)
+        if len(t) < 2 or speed <= 0:
+            return []
+        g = self.geometry
+        t0 = float(t[0])
+        a0, lo, hi = g.engagement_half_angle, angle0, angle0 + speed * (float(t[-1]) - t0)
+        ke = 0.5 * self.crank_inertia * speed**2
+        rows = []
+        for k in range(int(np.floor((lo - a0) / (2 * np.pi))), int(np.ceil((hi + a0) / (2 * np.pi))) + 1):
+            for kind, angle, before, after, lock in (("entry", 2 * np.pi * k - a0, "dwell", "engaged", k - 0.5),
+                                                      ("exit", 2 * np.pi * k + a0, "engaged", "dwell", k + 0.5)):
+                if lo < angle <= hi:
+                    rows.append(dict(t_s=t0 + (angle - lo) / speed, from_mode=before, to_mode=after, kind=kind,
+                                     guard="closed form", crank_q=angle, wheel_q=lock * g.pitch,
+                                     kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message="",
+                                     energy_lost_J=0.0))
+        return sorted(rows, key=lambda row: row["t_s"])
+
     # -- drawing ---------------------------------------------------------------------------------------
     def draw(self, ax, row) -> None:
         """Draw wheel (with slots), crank and pin at one output row (matplotlib axes, mm)."""
