@@ -310,29 +310,3 @@ class Geneva(Mechanism):
                                      kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message="",
                                      energy_lost_J=0.0))
         return sorted(rows, key=lambda row: row["t_s"])
-
-    # -- drawing ---------------------------------------------------------------------------------------
-    def draw(self, ax, row) -> None:
-        """Draw wheel (with slots), crank and pin at one output row (matplotlib axes, mm)."""
-        from matplotlib.patches import Circle
-
-        g = self.geometry
-        c, r, n = g.centre_distance * 1e3, g.crank_radius * 1e3, g.slots
-        theta, psi = float(row["crank_angle_rad"]), float(row["wheel_angle_rad"])
-        wheel_r = g.entry_pin_distance * 1e3 * 1.05
-        phi = np.linspace(0, 2 * np.pi, 200)
-        ax.plot(wheel_r * np.cos(phi), wheel_r * np.sin(phi), color="0.3", lw=1)
-        for j in range(n):
-            ang = psi + j * g.pitch
-            inner = g.min_pin_distance * 1e3 * 0.9
-            ax.plot([inner * np.cos(ang), wheel_r * np.cos(ang)], [inner * np.sin(ang), wheel_r * np.sin(ang)],
-                    color="tab:blue", lw=2.5, solid_capstyle="butt")
-        # crank: O1 at (c, 0); pin at (c - r cos(theta), r sin(theta)) in the frame of docs/theory.md §G1
-        px, py = c - r * np.cos(theta), r * np.sin(theta)
-        ax.plot([c, px], [0, py], color="tab:red", lw=2)
-        ax.add_patch(Circle((px, py), g.pin_radius * 1e3, color="tab:red"))
-        ax.plot([0, c], [0, 0], "k+", ms=8)
-        ax.set_aspect("equal")
-        ax.set_xlim(-wheel_r * 1.1, c + r * 1.1)
-        ax.set_ylim(-wheel_r * 1.1, wheel_r * 1.1)
-        ax.set_xlabel("x (mm)")

@@ -582,35 +582,9 @@ class RollingPairFourBar(Mechanism):
             pass
         return out
 
-    # -- drawing ----------------------------------------------------------------------------------------
-    def draw(self, ax, row) -> None:
-        """Fixed profile, disc with its arm, coupler and crank at one output row (matplotlib axes, m)."""
-        from matplotlib.patches import Circle
-
-        k = self.kin
-        q = np.array([row["crank_angle_rad"], row["coupler_angle_rad"], row["rolling_angle_rad"]], float)
-        pts = self._numeric()["points"](q, self._p_tuple())
-        A, B, B0, P, C = (complex(*np.asarray(pts[i], float).ravel())
-                          for i in (list(self._model()["points"]).index(n) for n in ("A", "B", "B0", "P", "C")))
-        r = k.pair.r
-        if k.pair.kind == "circle":
-            ax.add_patch(Circle(k.pair.O, k.pair.R, fill=False, color="k", lw=1.0, hatch="//", alpha=0.4))
-            lim = abs(complex(*k.pair.O) - k.a0) + k.pair.R + 2 * r + k.l4
-        else:   # the line, long enough to cross the view; the view is fixed by A0 and the line's distance
-            tdir = np.exp(1j * k.pair.tangent)
-            P0 = complex(*k.pair.P0)
-            lim = abs(((k.a0 - P0) * np.conj(tdir)).imag) + 2 * r + k.l4
-            ends = P0 + ((k.a0 - P0) * np.conj(tdir)).real * tdir + np.array([-1, 1]) * 10 * (lim + k.l2 + k.l3) * tdir
-            ax.plot(ends.real, ends.imag, "k-", lw=1.0)
-        ax.add_patch(Circle((B0.real, B0.imag), r, fill=False, color="tab:green", lw=1.5))
-        ax.plot([B0.real, B.real], [B0.imag, B.imag], color="tab:green", lw=2)
-        ax.plot([k.a0.real, A.real], [k.a0.imag, A.imag], color="tab:red", lw=2)
-        ax.plot([A.real, B.real, C.real, A.real], [A.imag, B.imag, C.imag, A.imag], color="tab:blue", lw=1.5)
-        ax.plot([k.a0.real], [k.a0.imag], "k^", ms=7)
-        ax.plot([P.real], [P.imag], "ko", ms=3)
-        ax.plot([C.real], [C.imag], "o", color="tab:blue", ms=4)
-        lim = max(lim, k.l2 + k.l3 + k.lc)
-        ax.set_aspect("equal")
-        ax.set_xlim(k.a0.real - lim, k.a0.real + lim)
-        ax.set_ylim(k.a0.imag - lim, k.a0.imag + lim)
-        ax.set_xlabel("x (m)")
+    # -- geometry for drawings and checks --------------------------------------------------------------------
+    def points(self, q) -> dict[str, np.ndarray]:
+        """Named points (x, y in m) at coordinates q = (crank, coupler, rolling): A (crank tip), B (coupler-arm
+        joint), B0 (disc centre), P (contact point), C (coupler point), G4 (rolling link's centre of mass)."""
+        pts = self._numeric()["points"](np.asarray(q, float), self._p_tuple())
+        return {name: np.asarray(pt, float).ravel() for name, pt in zip(self._model()["points"], pts)}

@@ -6,7 +6,6 @@ written to `path`; each function returns the path.
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Mapping
 
@@ -70,24 +69,29 @@ def _panel(ax, tables, which, dwells, crank_only=False):
     _shade(ax, dwells)
     ax.set_xlabel("driving angle $\\theta_1$ (deg)")
     ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
 
 
-def plot_quantity(tables, path, which: str = "displacement", dwells: pd.DataFrame | None = None,
-                  title: str | None = None) -> Path:
+def quantity_figure(tables, which: str = "displacement", dwells: pd.DataFrame | None = None,
+                    title: str | None = None) -> Figure:
     """One of 'displacement', 'velocity', 'acceleration' (crank and coupler) versus driving angle.
 
     tables: a kinematics DataFrame or {label: DataFrame} (e.g. one per branch); dwells shaded if given.
     """
     if which not in _QUANTITIES:
         raise ValueError(f"which must be one of {sorted(_QUANTITIES)}, got {which!r}")
-    fig = Figure(figsize=(8, 4.5))
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
     ax = fig.add_subplot()
     _panel(ax, tables, which, dwells)
     if title:
         ax.set_title(title)
-    fig.tight_layout()
-    return _save(fig, path)
+    return fig
+
+
+def plot_quantity(tables, path, which: str = "displacement", dwells: pd.DataFrame | None = None,
+                  title: str | None = None) -> Path:
+    """`quantity_figure` written to `path`."""
+    return _save(quantity_figure(tables, which, dwells, title), path)
 
 
 def plot_displacement(tables, path, dwells=None, title=None) -> Path:
@@ -105,16 +109,20 @@ def plot_acceleration(tables, path, dwells=None, title=None) -> Path:
     return plot_quantity(tables, path, "acceleration", dwells, title)
 
 
-def plot_kinematics(tables, path, dwells=None, title=None) -> Path:
+def kinematics_figure(tables, dwells=None, title=None) -> Figure:
     """Crank angle, speed and acceleration in three stacked panels."""
-    fig = Figure(figsize=(8, 9))
+    fig = Figure(figsize=(9, 9), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     for ax, which in zip(axes, ("displacement", "velocity", "acceleration")):
         _panel(ax, tables, which, dwells, crank_only=True)
     if title:
         axes[0].set_title(title)
-    fig.tight_layout()
-    return _save(fig, path)
+    return fig
+
+
+def plot_kinematics(tables, path, dwells=None, title=None) -> Path:
+    """`kinematics_figure` written to `path`."""
+    return _save(kinematics_figure(tables, dwells, title), path)
 
 
 def draw_layout(ax, mechanism, scale: float = 100.0) -> np.ndarray:
@@ -170,29 +178,14 @@ def plot_mechanism(mechanism, table: pd.DataFrame, path, drive_angles=None, n_po
     return _save(fig, path)
 
 
-# -- the mechanism's drawing and its extra figures (dispatched from scenarios.output.plots) ------------------
-def extra_plots(mech, folder, timeseries, tables: dict) -> list:
+# -- the mechanism's own figures (collected by scenarios.output.plots.figures) ---------------------------------
+def extra_figures(mech, timeseries, tables: dict) -> dict[str, Figure]:
     """El-Shakery Figs. 3-8 style: crank and coupler displacement, velocity, acceleration versus the
-    driving angle (dwells shaded), and the crank's three in one figure (chain_plots)."""
-    folder = Path(folder)
+    driving angle (dwells shaded), and the crank's three in one figure."""
     dw = tables.get("dwells")
     dw = dw[dw["kind"] == "exact"] if dw is not None and len(dw) else None
     title = f"chain dwell ({mech.apex})"
-    out = [plot_quantity(timeseries, folder / f"chain_{w}.png", w, dw, f"{title}: {w}")
-           for w in ("displacement", "velocity", "acceleration")]
-    out.append(plot_kinematics(timeseries, folder / "chain_crank.png", dw, title))
+    out = {f"chain_{w}": quantity_figure(timeseries, w, dw, f"{title}: {w}")
+           for w in ("displacement", "velocity", "acceleration")}
+    out["chain_crank"] = kinematics_figure(timeseries, dw, title)
     return out
-
-def draw(mech, ax, row) -> None:
-    """Sprockets, chain loop, pivot, crank and coupler at one output row (cm), with the crank stops."""
-    cm = 100.0
-    Q = draw_layout(ax, mech.kin, cm)
-    A = np.array([row["crank_tip_x_m"], row["crank_tip_y_m"]], float) * cm
-    B = np.array([row["joint_B_x_m"], row["joint_B_y_m"]], float) * cm
-    draw_dyad(ax, Q, A, B, "tab:red")
-    if mech.apex == "stop":
-        for i in mech.tuned:
-            a = mech.stop_angle(i)
-            tip = Q + 1.1 * mech.kin.R * cm * np.array([math.cos(a), math.sin(a)])
-            ax.plot(*tip, marker=(3, 0, math.degrees(a) - 90), color="tab:blue", ms=6)
-    ax.set_xlabel("x (cm)")

@@ -1,109 +1,254 @@
-"""PNG plots of a result: time histories, the same versus the drive angle, and drawings of the mechanism."""
+"""Figures of a result: time histories, the same over one cycle of the driven member's angle (a line per
+cycle), and drawings of the mechanism.
+
+`figures(result, mechanism)` builds `matplotlib.figure.Figure` objects without pyplot's global state (a
+caller may show, save or embed them); `write_plots` saves them as PNG. Every panel holds one unit (its y label
+names the quantity and the unit), legends sit outside the data to the right.
+"""
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from mechsim.dynamics.result import Result
 
-from mechsim.dynamics.result import Result  # noqa: E402
-import mechsim.scenarios.output.chain_plots as chain_plots  # noqa: E402
+DEG = 180.0 / math.pi
+DPI = 110
 
-# (column, label with unit at the edge, scale to display unit)
-PANELS = {
-    "motion": [
-        [("crank_angle_rad", "crank angle (deg)", np.degrees(1.0)), ("wheel_angle_rad", "wheel angle (deg)", np.degrees(1.0)),
-         ("rolling_angle_rad", "rolling link angle (deg)", np.degrees(1.0))],
-        [("crank_speed_rad_s", "crank speed (rad/s)", 1.0), ("wheel_speed_rad_s", "wheel speed (rad/s)", 1.0),
-         ("rolling_speed_rad_s", "rolling link speed (rad/s)", 1.0)],
-        [("crank_accel_rad_s2", "crank accel. (rad/s²)", 1.0), ("wheel_accel_rad_s2", "wheel accel. (rad/s²)", 1.0),
-         ("rolling_accel_rad_s2", "rolling link accel. (rad/s²)", 1.0)],
-    ],
-    "forces": [
-        [("contact_force_N", "normal force (N)", 1.0), ("friction_force_N", "friction force (N)", 1.0)],
-        [("slip_speed_m_s", "slip speed (m/s)", 1.0), ("pin_sliding_speed_m_s", "pin sliding speed (m/s)", 1.0)],
-        [("drive_torque_N_m", "drive torque (N·m)", 1.0)],
-    ],
-    "thermal": [
-        [("temp_contact_C", "contact temperature (°C)", 1.0), ("temp_bulk_pin_C", "bulk pin (°C)", 1.0),
-         ("temp_bulk_wheel_C", "bulk wheel (°C)", 1.0), ("temp_bulk_crank_C", "bulk crank (°C)", 1.0),
-         ("temp_wall_surface_C", "wall track surface (°C)", 1.0)],
-        [("heat_rate_W", "heat rate (W)", 1.0), ("temp_flash_rise_K", "flash rise (K)", 1.0)],
-        [("peclet_pin", "Peclet pin", 1.0), ("peclet_wheel", "Peclet wheel", 1.0)],
-    ],
+#: panels per figure: (suffix of the columns, quantity, unit label, scale from SI); a column joins the first
+#: panel whose suffix it ends with, unless it is named in SKIP or claimed by an earlier figure
+FIGURES = {
+    "motion": [("_angle_rad", "angle", "deg", DEG), ("_speed_rad_s", "angular speed", "rad/s", 1.0),
+               ("_accel_rad_s2", "angular acceleration", "rad/s²", 1.0)],
+    "forces": [("_force_N", "force", "N", 1.0), ("_shear_N", "force", "N", 1.0), ("_N_m", "torque", "N·m", 1.0),
+               ("_speed_m_s", "speed", "m/s", 1.0), ("_power_W", "power", "W", 1.0)],
+    "thermal": [("_C", "temperature", "°C", 1.0), ("_K", "temperature rise", "K", 1.0),
+                ("heat_rate_W", "heat rate", "W", 1.0), ("peclet_", "Péclet number", "–", 1.0),
+                ("_pressure_max_Pa", "peak contact pressure", "MPa", 1e-6)],
+    "energy": [("_energy_J", "energy", "J", 1.0), ("work_", "work done on the system", "J", 1.0),
+               ("heat_generated_J", "heat", "J", 1.0), ("heat_pin_J", "heat", "J", 1.0),
+               ("heat_convected_J", "heat", "J", 1.0)],
 }
+#: figures that make sense against the drive angle (energy and work accumulate over the run)
+PER_CYCLE = ("motion", "forces", "thermal")
+NAMES = {"rolling": "rolling link"}
+WORDS = {"accel": "acceleration"}
 
 
-def _figure(df, rows, x, xlabel, path, title):
-    rows = [[c for c in row if c[0] in df] for row in rows]
-    rows = [row for row in rows if row]
+@dataclass(frozen=True)
+class DriveCycle:
+    """The driven member's angle column, the angle of one cycle of the mechanism, where a cycle starts, and the
+    x label of the versus-angle figures."""
+
+    column: str
+    period: float
+    start: float
+    label: str
+
+
+def drive_cycle(mech) -> DriveCycle | None:
+    """One cycle of the driven member: a crank turn from mid-dwell for the Geneva (0 = mid-engagement,
+    docs/theory.md §G1), a chain circuit for the chain dwell mechanism (El-Shakery eq. 31), the trochoid's
+    period for the rolling pair (docs/theory.md §K2) when it closes (a turn of the crank if the crank is
+    driven); None when the motion has no period to wrap on."""
+    kind = type(mech).__name__
+    if kind == "Geneva":
+        return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi,
+                          "crank angle within its turn (deg; 0 = mid-engagement)")
+    if kind == "ChainDwell":
+        return DriveCycle("drive_angle_rad", mech.kin.cycle_angle, 0.0,
+                          "drive sprocket angle within the chain circuit (deg)")
+    if kind == "RollingPairFourBar":
+        if mech.driven_link != "rolling":
+            return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi, "crank angle within its turn (deg)")
+        from mechsim.mechanisms.rolling.pair import rolling_span
+        try:
+            (a, b), periodic = rolling_span(mech.kin)
+        except ValueError:
+            return None
+        return DriveCycle("rolling_angle_rad", b - a, a, "rolling link angle within the trochoid period (deg)") \
+            if periodic else None
+    return None
+
+
+UNITS = ("_rad_s2", "_rad_s", "_rad", "_N_m", "_N", "_m_s", "_W", "_C", "_K", "_J", "_Pa")
+
+
+def _label(column: str) -> str:
+    """A column's quantity in words: its name less the unit suffix, members named in full."""
+    stem = next((column[:-len(u)] for u in UNITS if column.endswith(u)), column)
+    words = stem.removeprefix("temp_").split("_")
+    words[0] = NAMES.get(words[0], words[0])
+    return " ".join(WORDS.get(w, w) for w in words)
+
+
+def _hit(column: str, suffix: str) -> bool:
+    return column.endswith(suffix) if suffix.startswith("_") else suffix in column
+
+
+def panels(df: pd.DataFrame, figure: str, exclude: tuple[str, ...] = ()) -> list[dict]:
+    """The panels of one figure present in `df`: dicts of quantity, unit, scale and (column, label) lines."""
+    claimed = set(exclude)
+    for name, specs in FIGURES.items():
+        if name == figure:
+            break
+        claimed |= {c for c in df.columns for s, *_ in specs if _hit(c, s)}
+    out: dict[tuple[str, str], dict] = {}
+    for col in df.columns:
+        if col in claimed or not pd.api.types.is_numeric_dtype(df[col]) or not df[col].notna().any():
+            continue
+        for suffix, quantity, unit, scale in FIGURES[figure]:
+            if _hit(col, suffix):
+                panel = out.setdefault((quantity, unit), dict(quantity=quantity, unit=unit, scale=scale, lines=[]))
+                panel["lines"].append((col, _label(col)))
+                claimed.add(col)
+                break
+    order = {(q, u): i for i, (_, q, u, _) in enumerate(FIGURES[figure])}
+    return sorted(out.values(), key=lambda panel: order[(panel["quantity"], panel["unit"])])
+
+
+def _legend(ax) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False,
+                  borderaxespad=0.0)
+
+
+def time_figure(df: pd.DataFrame, figure: str, title: str) -> Figure | None:
+    """One panel per unit against time."""
+    rows = panels(df, figure)
     if not rows:
-        return
-    fig, axes = plt.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)), sharex=True, squeeze=False)
-    for ax, row in zip(axes[:, 0], rows):
-        for col, label, scale in row:
-            ax.plot(x, df[col].to_numpy(dtype=float) * scale, lw=1.0, label=label)
-        ax.set_ylabel(row[0][1] if len(row) == 1 else "")
+        return None
+    fig = Figure(figsize=(10, 2.4 * len(rows) + 0.8), layout="constrained")
+    axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    t = df["t_s"].to_numpy(float)
+    for ax, panel in zip(axes, rows):
+        for col, label in panel["lines"]:
+            ax.plot(t, df[col].to_numpy(float) * panel["scale"], lw=1.0, label=label, gid=col)
+        ax.set_ylabel(f"{panel['quantity']} ({panel['unit']})")
         ax.grid(alpha=0.3)
-        if len(row) > 1:
-            ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel(xlabel)
+        _legend(ax)
+    axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def cycle_index(angle: np.ndarray, cycle: DriveCycle) -> tuple[np.ndarray, np.ndarray]:
+    """(cycle number, angle within the cycle in rad measured from the cycle's start) of every row."""
+    k = np.floor((angle - cycle.start) / cycle.period + 1e-12).astype(int)
+    if len(k) > 1 and k[-1] != k[-2]:   # a run that ends where a cycle starts closes the previous one
+        k[-1] = k[-2]
+    return k, angle - cycle.start - k * cycle.period
+
+
+def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle) -> Figure | None:
+    """One panel per unit against the driven member's angle within its cycle, a line per cycle (later cycles
+    darker). Angles of the other members are shown as their change since the cycle started."""
+    rows = panels(df, figure, exclude=(cycle.column,))
+    if not rows or cycle.column not in df:
+        return None
+    k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)
+    x, x0 = (within + cycle.start) * DEG, cycle.start * DEG
+    cycles = np.unique(k)
+    bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+    fig = Figure(figsize=(10, 2.4 * len(rows) + 0.9), layout="constrained")
+    axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, panel in zip(axes, rows):
+        for j, (col, label) in enumerate(panel["lines"]):
+            y = df[col].to_numpy(float) * panel["scale"]
+            colour = f"C{j % 10}"
+            for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+                yy = y[a:b]
+                if panel["unit"] == "deg" and col.endswith("_angle_rad"):
+                    yy = yy - _cycle_start_value(df[cycle.column].to_numpy(float), y, a, b, cycle)
+                shade = 0.35 + 0.65 * (n + 1) / len(cycles)
+                ax.plot(x[a:b], yy, lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
+                        label=label if n == len(cycles) - 1 else "_nolegend_")
+        quantity = "angle turned since the cycle start" if panel["unit"] == "deg" else panel["quantity"]
+        ax.set_ylabel(f"{quantity} ({panel['unit']})")
+        ax.grid(alpha=0.3)
+        _legend(ax)
+    axes[-1].set_xlim(x0, x0 + cycle.period * DEG)
+    axes[-1].set_xlabel(cycle.label)
+    fig.suptitle(f"{title} ({len(cycles)} cycle{'s' if len(cycles) != 1 else ''}, a line each, later darker)")
+    return fig
+
+
+def _cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: DriveCycle) -> float:
+    """The value of y where this cycle started (interpolated in the drive angle; the first rows if the run
+    began inside the cycle)."""
+    start = cycle.start + math.floor((drive[a] - cycle.start) / cycle.period + 1e-12) * cycle.period
+    if a > 0:
+        return float(np.interp(start, drive[a - 1:a + 1], y[a - 1:a + 1]))
+    return float(y[a])
+
+
+def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | None) -> Figure | None:
+    """The mechanism at `instants` evenly spread over the last cycle of the run (over the run if no cycle)."""
+    from mechsim.scenarios.output.drawings import DRAWINGS, drawing_for
+    if mech is None or type(mech).__name__ not in DRAWINGS or not instants or not len(df):
+        return None
+    if cycle is not None and cycle.column in df:
+        angle = df[cycle.column].to_numpy(float)
+        targets = angle[-1] - cycle.period + (np.arange(instants) + 0.5) * cycle.period / instants
+        idx = [int(np.argmin(np.abs(angle - a))) for a in targets]
+    else:
+        idx = list(np.linspace(0, len(df) - 1, instants).astype(int))
+    fig = Figure(figsize=(3.6 * instants, 3.9), layout="constrained")
+    axes = fig.subplots(1, instants, squeeze=False)[0]
+    for ax, i in zip(axes, idx):
+        row = df.iloc[i]
+        drawing = drawing_for(ax, mech, df)
+        drawing.update(row)
+        where = f", {cycle.column.split('_')[0]} {math.degrees(float(row[cycle.column])):.0f}°" if cycle else ""
+        ax.set_title(f"t = {row['t_s']:.3f} s{where}", fontsize=9)
+    fig.suptitle("mechanism (mm); arrow: " + ("coupler force" if type(mech).__name__ == "ChainDwell"
+                                               else "normal contact force") + ", scaled to the run's peak")
+    return fig
+
+
+def figures(result: Result, mechanism=None) -> dict[str, Figure]:
+    """Every figure of a run by file stem: <group>_vs_time, <group>_vs_angle, mechanism, and the mechanism's
+    own figures (chain: El-Shakery's kinematics figures). `mechanism` defaults to the scenario's."""
+    df = result.timeseries
+    if mechanism is None and result.scenario:
+        from mechsim.scenarios.loader import build_mechanism
+        mechanism = build_mechanism(result.scenario)
+    name = result.summary.get("scenario", "")
+    cycle = drive_cycle(mechanism) if mechanism is not None else None
+    out: dict[str, Figure] = {}
+    if not len(df):
+        return out
+    for group in FIGURES:
+        fig = time_figure(df, group, f"{name}: {group}")
+        if fig is not None:
+            out[f"{group}_vs_time"] = fig
+        if cycle is not None and group in PER_CYCLE:
+            fig = angle_figure(df, group, f"{name}: {group}", cycle)
+            if fig is not None:
+                out[f"{group}_vs_angle"] = fig
+    fig = drawing_figure(df, mechanism, result.scenario.get("output", {}).get("drawing_instants", 4), cycle)
+    if fig is not None:
+        out["mechanism"] = fig
+    if type(mechanism).__name__ == "ChainDwell":
+        from mechsim.scenarios.output.chain_plots import extra_figures
+        out.update(extra_figures(mechanism, df, result.extra_tables))
+    return out
+
+
+def save(fig: Figure, path: Path) -> Path:
+    """Write one figure as PNG (Agg canvas, no pyplot state)."""
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=DPI)
+    return Path(path)
 
 
 def write_plots(result: Result, folder: Path, mechanism=None) -> list[Path]:
-    df = result.timeseries
-    name = result.summary.get("scenario", "")
-    written = []
-    angle_col = next((c for c in df.columns if c.endswith("_angle_rad")), None)
-    for group, rows in PANELS.items():
-        path = folder / f"{group}_vs_time.png"
-        _figure(df, rows, df["t_s"].to_numpy(), "time (s)", path, f"{name}: {group}")
-        if path.exists():
-            written.append(path)
-        if angle_col:
-            wrapped = np.degrees((df[angle_col].to_numpy() + np.pi) % (2 * np.pi) - np.pi)
-            order = np.argsort(wrapped, kind="stable")
-            path = folder / f"{group}_vs_angle.png"
-            _figure(df.iloc[order], rows, wrapped[order], f"{angle_col[:-4].replace('_', ' ')} (deg, 0 = mid-engagement)",
-                    path, f"{name}: {group} versus drive angle")
-            if path.exists():
-                written.append(path)
-    drawer = _drawer(mechanism)
-    if drawer is not None and len(df):
-        n = result.scenario.get("output", {}).get("drawing_instants", 4)
-        if n:
-            idx = np.linspace(0, len(df) - 1, n).astype(int)
-            fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.4), squeeze=False)
-            for ax, i in zip(axes[0], idx):
-                drawer(ax, df.iloc[i])
-                ax.set_title(f"t = {df['t_s'].iloc[i]:.3f} s", fontsize=9)
-            fig.tight_layout()
-            path = folder / "mechanism.png"
-            fig.savefig(path, dpi=110)
-            plt.close(fig)
-            written.append(path)
-    if mechanism is not None and len(df):
-        extra = EXTRA_PLOTS.get(type(mechanism).__name__)
-        written += extra(mechanism, folder, df, result.extra_tables) if extra else []
-    return written
-
-
-#: mechanism class -> drawing of the mechanism at one output row, and its mechanism-specific figures: plotting
-#: lives here, not in mechanisms/ (the layer contract, docs/CONTRIBUTING.md)
-DRAWERS = {"ChainDwell": chain_plots.draw}
-EXTRA_PLOTS = {"ChainDwell": chain_plots.extra_plots}
-
-
-def _drawer(mechanism):
-    if mechanism is None:
-        return None
-    if type(mechanism).__name__ in DRAWERS:
-        return lambda ax, row: DRAWERS[type(mechanism).__name__](mechanism, ax, row)
-    return getattr(mechanism, "draw", None)
+    """Save every figure of `figures` as <stem>.png in `folder`."""
+    return [save(fig, Path(folder) / f"{stem}.png") for stem, fig in figures(result, mechanism).items()]

@@ -1,0 +1,119 @@
+"""The figures of a run, read back from the Figure objects: labelled axes, one unit per axis, legends outside
+the data, versus-angle figures over one cycle of the driven member with a line per cycle, and drawings."""
+import math
+import re
+
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+from mechsim.scenarios.loader import build_mechanism, load
+from mechsim.scenarios.output.drawings import geneva_wheel_outline, locking_disc_outline, locking_radius
+from mechsim.scenarios.output.plots import figures
+from mechsim.scenarios.runner import run
+
+#: SI suffix of a column -> the unit its axis must show
+UNITS = {"_rad_s2": "rad/s²", "_rad_s": "rad/s", "_rad": "deg", "_N_m": "N·m", "_N": "N", "_m_s": "m/s",
+         "_W": "W", "_C": "°C", "_K": "K", "_J": "J", "_Pa": "MPa"}
+
+CASES = {   # scenario, overrides, driven angle column, cycle (rad), cycle start (rad)
+    "geneva": ("geneva-lc1", ["duration='2.5 s'", "output_step='2 ms'"], "crank_angle_rad", 2 * math.pi, -math.pi),
+    "chain": ("chain-mech1-kinematic", ["duration='20 s'", "output_step='20 ms'"], "drive_angle_rad", None, 0.0),
+    "rolling": ("rolling-a-speed", ["duration='12 s'", "output_step='20 ms'"], "rolling_angle_rad", 6 * math.pi, 0.0),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(CASES))
+def case(request):
+    name, overrides, column, period, start = CASES[request.param]
+    sc = load(name, overrides)
+    result = run(sc)
+    mech = build_mechanism(sc.si)
+    if period is None:
+        period = mech.kin.cycle_angle     # El-Shakery eq. (31): one chain circuit
+    return request.param, result, figures(result, mech), column, period, start
+
+
+def _unit(column):
+    return "–" if column.startswith("peclet_") else next(u for s, u in UNITS.items() if column.endswith(s))
+
+
+def _axes(figs):
+    for stem, fig in figs.items():
+        for ax in fig.axes:
+            yield stem, fig, ax
+
+
+def test_every_axis_names_quantity_and_one_unit(case):
+    kind, result, figs, *_ = case
+    assert {"motion_vs_time", "motion_vs_angle", "forces_vs_time", "forces_vs_angle", "mechanism"} <= set(figs)
+    for stem, fig, ax in _axes(figs):
+        m = re.fullmatch(r".+ \((.+)\)", ax.get_ylabel())
+        assert m, f"{stem}: y label {ax.get_ylabel()!r} names no unit"
+        if stem.endswith(("_vs_time", "_vs_angle")):
+            units = {_unit(line.get_gid().split("#")[0]) for line in ax.get_lines()}
+            assert units == {m.group(1)}, f"{stem}: axis {ax.get_ylabel()!r} holds {units}"
+    for stem, fig in figs.items():
+        assert re.fullmatch(r".+ \((.+)\)", fig.axes[-1].get_xlabel()) if stem != "mechanism" else True
+
+
+def test_legends_sit_outside_the_data(case):
+    _, _, figs, *_ = case
+    for stem, fig in figs.items():
+        if not stem.endswith(("_vs_time", "_vs_angle")):
+            continue
+        FigureCanvasAgg(fig).draw()
+        for ax in fig.axes:
+            legend = ax.get_legend()
+            if legend is not None:
+                assert legend.get_window_extent().x0 >= ax.get_window_extent().x1 - 1.0, stem
+
+
+def test_versus_angle_spans_one_cycle_of_the_driven_member_a_line_per_cycle(case):
+    kind, result, figs, column, period, start = case
+    theta = result.timeseries[column].to_numpy(float)
+    cycles = np.floor((theta - start) / period + 1e-12)
+    if cycles[-1] != cycles[-2]:
+        cycles[-1] = cycles[-2]      # the last row closes the cycle it ends
+    n_cycles = len(np.unique(cycles))
+    assert n_cycles >= 2
+    for stem in ("motion_vs_angle", "forces_vs_angle"):
+        fig = figs[stem]
+        assert ("mid-engagement" in fig.axes[-1].get_xlabel()) == (kind == "geneva")
+        for ax in fig.axes:
+            lo, hi = ax.get_xlim()
+            assert lo == pytest.approx(math.degrees(start)) and hi == pytest.approx(math.degrees(start + period))
+            per_column = {}
+            for line in ax.get_lines():
+                col, cyc = line.get_gid().split("#cycle")
+                x = line.get_xdata()
+                assert x.min() >= math.degrees(start) - 1e-9 and x.max() <= math.degrees(start + period) + 1e-9
+                assert np.all(np.diff(x) > 0), f"{stem} {col}: a cycle's line runs backwards"
+                per_column.setdefault(col, set()).add(int(cyc))
+            assert column not in per_column
+            assert all(len(c) == n_cycles for c in per_column.values()), per_column
+
+
+def test_geneva_wheel_outline_has_slots_2R_wide_and_locking_arcs():
+    """The wheel's slot flanks lie R off the slot line, the slot bottom at c - r - R, the rim at c cos(pi/n),
+    and between slots the locking arc is the crank's locking disc (radius r - 2R about the dwell position)."""
+    sc = load("geneva-lc1", [])
+    g = build_mechanism(sc.si).geometry
+    c, r, R, n = g.centre_distance, g.crank_radius, g.pin_radius, g.slots
+    pts = geneva_wheel_outline(g)
+    rho = np.hypot(*pts.T)
+    assert rho.max() == pytest.approx(g.entry_pin_distance, rel=1e-12)
+    assert rho.min() == pytest.approx(c - r - R, rel=1e-9)         # the slot bottom, reached by the pin
+    for j in range(n):
+        a = j * g.pitch
+        along = pts @ [math.cos(a), math.sin(a)]
+        across = pts @ [-math.sin(a), math.cos(a)]
+        strip = (along > c - r) & (np.abs(across) <= R * (1 + 1e-9))   # the open slot: nothing inside 2R
+        np.testing.assert_allclose(np.abs(across[strip]), R, rtol=1e-9)
+        assert (across[strip] > 0).sum() >= 2 and (across[strip] < 0).sum() >= 2     # both flanks present
+        L = c * np.array([math.cos(a + g.pitch / 2), math.sin(a + g.pitch / 2)])
+        on_arc = np.abs(np.hypot(*(pts - L).T) - locking_radius(g)) < 1e-12
+        assert on_arc.sum() >= 10
+    disc = locking_disc_outline(g)
+    assert np.hypot(*disc.T).max() == pytest.approx(locking_radius(g), rel=1e-12)
+    assert locking_radius(g) < r - R             # the arc clears the slot flanks (r - R from the arc centre)
