@@ -98,6 +98,25 @@ def run(
 
 
 @app.command()
+def animate(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/<name>)"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+    fmt: str = typer.Option("gif", "--format", help="gif (Pillow) or mp4 (needs ffmpeg)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
+) -> None:
+    """Run a scenario and write everything `run` writes plus animation.gif (or .mp4): the mechanism moving, the
+    contact force as an arrow, the contact temperature as colour, a time cursor on the force trace."""
+    from mechsim.scenarios.output.animation import check_format
+    try:
+        check_format(fmt)
+    except ScenarioError as exc:
+        _fail(str(exc).replace("output.animation_format", "--format"))
+    run(scenario, out_dir, list(set_) + ["output.animation=true", f"output.animation_format='{fmt}'"], force, quiet)
+
+
+@app.command()
 def compare(
     scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),

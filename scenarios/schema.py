@@ -43,6 +43,9 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
     "output": {
         "plots": Field("bool", default=True, help="write PNG plots"),
         "drawing_instants": Field("int", default=4, minimum=0, help="mechanism drawings at this many instants"),
+        "animation": Field("bool", default=False, help="write an animation of the mechanism beside its force trace"),
+        "animation_format": Field("str", default="gif", choices=("gif", "mp4"),
+                                  help="gif (Pillow) or mp4 (needs ffmpeg)"),
     },
 }
 

@@ -125,8 +125,9 @@ class GenevaDrawing:
         slot = math.atan2(py, px)   # the pin lies on the engaged slot's centre line; N > 0 turns the wheel forward
         self.arrow.set_offsets([[px, py]])
         self.arrow.set_UVC([-math.sin(slot) * force * self.force_scale], [math.cos(slot) * force * self.force_scale])
-        if self.temperature is not None and "temp_contact_C" in row:
-            self.pin.set_facecolor(_colour(self.temperature, row["temp_contact_C"]))
+        if self.temperature is not None and "temp_contact_C" in row:   # no contact (dwell): the pin's own colour
+            temp = float(row["temp_contact_C"])
+            self.pin.set_facecolor(_colour(self.temperature, temp) if math.isfinite(temp) else CRANK)
         return [self.wheel, self.disc, self.arm, self.pin, self.arrow]
 
 

@@ -43,4 +43,8 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         if plots and len(result.timeseries):
             from mechsim.scenarios.output.plots import write_plots
             write_plots(result, tmp, mechanism)
+        output = result.scenario.get("output", {})
+        if output.get("animation") and len(result.timeseries):
+            from mechsim.scenarios.output.animation import write_animation
+            write_animation(result, tmp, mechanism, output.get("animation_format", "gif"))
     return out_dir
