@@ -6,8 +6,8 @@
 - the peers a user would pick instead, on the same equations in the same process (for the Geneva only: they
   are written for its equations, `Method.mechanisms`; other mechanisms bench mechsim's methods alone): scipy `solve_ivp`
   (`scipy-Radau`, `scipy-BDF`, `scipy-LSODA`, `scipy-DOP853`) on the reduced-coordinate ODE of
-  `mechanisms.geneva_reduced`, and CasADi's IDAS on the index-1 DAE (`casadi-idas-dae`) and on the same with
-  the algebraic rows solved by CasADi (`casadi-idas-ode`), see `bench_casadi`.
+  `mechanisms.geneva.reduced`, and CasADi's IDAS on the index-1 equations with the algebraic rows solved by
+  CasADi, driven the way a careful CasADi user writes it (`casadi-idas`, see `bench_casadi`).
 
 `setup` does the cold work once (derivation and code generation, compilation, integrator construction) and
 says how often it is paid (`per process` or `per tolerance`); `run` is what is timed; `count` repeats a run
@@ -41,6 +41,8 @@ class Problem:
     duration: float
     dt_out: float
     baumgarte: tuple[float, float] = (10.0, 10.0)
+    ext: object = None            # thermal states in the same DAE (`dynamics.thermal_coupling.ThermalExtension`)
+    ext_initial: object = None
 
     @property
     def grid(self) -> np.ndarray:
@@ -74,6 +76,13 @@ class Method:
 
     def supports(self, mech: Mechanism) -> bool:
         return not self.mechanisms or mech.name in self.mechanisms
+
+    def supports_problem(self, problem: "Problem") -> bool:
+        """Whether this method integrates the whole problem (the mechanism, and its thermal states if any)."""
+        return self.supports(problem.mech) and (problem.ext is None or self.thermal)
+
+    #: integrates thermal states alongside (False: mechanics only)
+    thermal = True
 
     def setup(self, problem: Problem, rtol: float, atol: float):
         """(handle, setup time in s, 'per process' | 'per tolerance')."""
@@ -113,21 +122,16 @@ class IdaMethod(Method):
                               baumgarte_beta=b, method="dae")
 
     def setup(self, problem, rtol, atol):
-        import mechsim.dynamics.model as model_module
+        from mechsim.dynamics.model import derive
         wall = time.perf_counter()
-        # a fresh derivation (bypassing the per-process cache) to show its cost; then the cached one
-        mech = problem.mech
-        key = (mech.structure_key(), self.formulation, False, None)
-        model_module._derive_cached.__wrapped__(key, model_module._Ref(mech, mech.structure_key()),
-                                                self.formulation, False, None)
-        cold = time.perf_counter() - wall
-        model_module.derive(mech, self.formulation, False)
-        return None, cold, "per process"
+        derive(problem.mech, self.formulation, False, problem.ext)     # the first call in a process derives
+        return None, time.perf_counter() - wall, "per process (first call)"
 
     def run(self, handle, problem, rtol, atol):
         from mechsim.dynamics.hybrid import simulate
         traj = simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
-                        problem.dt_out, problem.angle0, problem.speed0)
+                        problem.dt_out, problem.angle0, problem.speed0, ext=problem.ext,
+                        ext_initial=problem.ext_initial)
         t, a = _trajectory_angle(traj, problem.mech.drive_coordinate)
         s = traj.stats
         return Run(t, a, {"residual_evaluations": s["residual_evaluations"],
@@ -157,7 +161,8 @@ class DiffraxMethod(Method):
     def _simulate(self, problem, rtol, atol):
         from mechsim.dynamics.diffrax_backend import simulate
         return simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
-                        problem.dt_out, problem.angle0, problem.speed0)
+                        problem.dt_out, problem.angle0, problem.speed0, ext=problem.ext,
+                        ext_initial=problem.ext_initial)
 
     def setup(self, problem, rtol, atol):
         wall = time.perf_counter()
@@ -205,6 +210,7 @@ def _counting_class(name: str, totals: dict):
 @dataclass
 class ScipyMethod(Method):
     solver: str = "DOP853"
+    thermal = False        # the reduced ODE has no thermal states
 
     def _integrate(self, problem, rtol, atol, method, stats):
         import mechsim.mechanisms.geneva.reduced as red
@@ -236,23 +242,35 @@ class ScipyMethod(Method):
 # -- CasADi IDAS ---------------------------------------------------------------------------------------------
 @dataclass
 class CasadiMethod(Method):
-    form: str = "dae"
-    chunk_outputs: int = 100
+    """The CasADi peer (`bench_casadi`): `loop` = Python event loop on per-mode integrators, `events` = CasADi's
+    own event support."""
+
+    variant: str = "loop"
 
     def setup(self, problem, rtol, atol):
-        from mechsim.benchmarks.bench_casadi import build
-        model = build(problem.mech, rtol, atol, self.chunk_outputs, form=self.form)
+        from mechsim.benchmarks import bench_casadi as bc
+        n_out = len(problem.grid) - 1
+        build = bc.build if self.variant == "loop" else bc.build_events
+        model = build(problem.mech, rtol, atol, n_out, problem.dt_out, problem.ext)
         return model, model.build_time_s, "per tolerance"
 
-    def run(self, handle, problem, rtol, atol):
-        from mechsim.benchmarks.bench_casadi import simulate
+    def _simulate(self, handle, problem, count):
+        from mechsim.benchmarks import bench_casadi as bc
         a, b = problem.baumgarte
-        r = simulate(handle, problem.mech, problem.drive, problem.duration, problem.dt_out, problem.angle0,
-                     problem.speed0, alpha=a, beta=b)
-        s = r.stats
-        stats = {k: s[k] for k in ("steps", "rejected_steps", "residual_evaluations", "jacobian_evaluations",
-                                   "events", "segments", "convergence_failures")}
-        return Run(r.t, r.angle, stats, f"CasADi IDAS failed at {r.failure}" if r.failure else None)
+        simulate = bc.simulate if self.variant == "loop" else bc.simulate_events
+        return simulate(handle, problem.mech, problem.drive, problem.duration, problem.dt_out, problem.angle0,
+                        problem.speed0, alpha=a, beta=b, ext=problem.ext, ext_initial=problem.ext_initial,
+                        count=count)
+
+    def run(self, handle, problem, rtol, atol):
+        r = self._simulate(handle, problem, False)
+        return Run(r.t, r.angle, {"events": r.stats["events"], "segments": r.stats["segments"]},
+                   f"CasADi IDAS failed at {r.failure}" if r.failure else None)
+
+    def count(self, handle, problem, rtol, atol):
+        s = self._simulate(handle, problem, True).stats
+        return {k: s[k] for k in ("steps", "rejected_steps", "residual_evaluations", "jacobian_evaluations")
+                if k in s}
 
 
 GENEVA = ("geneva",)    # the peers' equations (reduced ODE, the CasADi translation) are checked on the Geneva
@@ -269,9 +287,8 @@ METHODS: dict[str, Method] = {m.name: m for m in [
     ScipyMethod("scipy-BDF", "scipy", "implicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="BDF"),
     ScipyMethod("scipy-LSODA", "scipy", "implicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="LSODA"),
     ScipyMethod("scipy-DOP853", "scipy", "explicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="DOP853"),
-    CasadiMethod("casadi-idas-dae", "CasADi", "DAE", "index-1 DAE + Baumgarte (4 + 3 states)", "casadi", GENEVA, form="dae"),
-    CasadiMethod("casadi-idas-ode", "CasADi", "implicit", "index-1 ODE + Baumgarte (4 states)", "casadi",
-                 GENEVA, form="ode"),
+    CasadiMethod("casadi-idas", "CasADi", "implicit", "index-1 + Baumgarte, KKT solved by CasADi (4 states)",
+                 "casadi", GENEVA, variant="loop"),
 ]}
 
 

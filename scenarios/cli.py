@@ -213,9 +213,15 @@ def bench(
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress lines"),
+    peer: bool = typer.Option(False, "--peer", help="mechsim against the CasADi IDAS peer side by side on case A "
+                                                    "and its friction and thermal variants: CPU-time ratios at "
+                                                    "equal error (small: case A, IDA and the peer; --full: all)"),
 ) -> None:
     """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS (the Geneva's
     peers) on any scenario, the error against the mechanism's reference solution."""
+    if peer:
+        _bench_peer(out_dir, full, force, quiet)
+        return
     from mechsim.benchmarks.bench import BenchConfig, report_lines, run_bench, write
     try:
         config = (BenchConfig.full if full else BenchConfig.small)(names, scenario, set_)
@@ -226,6 +232,17 @@ def bench(
         write(result, out_dir, force)
     except ScenarioError as exc:
         _fail(str(exc))
+    for line in report_lines(result) + [f"-> {out_dir}"]:
+        out.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
+def _bench_peer(out_dir: Path, full: bool, force: bool, quiet: bool) -> None:
+    from mechsim.benchmarks.peer_bench import PeerConfig, report_lines, run_peer_bench, write
+    if out_dir.exists() and not force:
+        _fail(f"--out: {out_dir} exists; pass --force to replace it")
+    say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
+    result = run_peer_bench(PeerConfig() if full else PeerConfig.small(), say)
+    write(result, out_dir, force)
     for line in report_lines(result) + [f"-> {out_dir}"]:
         out.print(line, markup=False, highlight=False, soft_wrap=True)
 

@@ -116,3 +116,32 @@ def test_geneva_peers_are_skipped_with_a_note_elsewhere(tmp_path):
     assert r.exit_code == 2 and "none of the chosen methods applies to 'rolling_pair'" in r.stderr
     r = runner.invoke(app, ["bench", "--scenario", "rolling-a-speed", "--out", str(tmp_path / "y")])
     assert r.exit_code == 2 and "torque or motor drive" in r.stderr
+
+
+def test_peer_bench_reaches_its_target_and_ratios_come_from_the_curves(tmp_path):
+    """`mechsim bench --peer` (small): on case A the CasADi IDAS peer reaches 1e-6 rad against the independent
+    reduced reference, with the same 9 mode changes (entry/exit, no slip guard at mu = 0) as the reference's
+    boundaries; each reported ratio is the quotient of the two methods' times interpolated on the measured
+    (error, median CPU) curves. No timing is asserted."""
+    from mechsim.benchmarks.peer_bench import PEER, PEER_TARGET_ERROR
+    out = tmp_path / "p"
+    r = runner.invoke(app, ["bench", "--peer", "--out", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    rows = pd.read_csv(out / "peer.csv")
+    summary = json.loads((out / "peer_summary.json").read_text())
+    assert (rows.status == "ok").all(), rows[["method", "rtol", "failure"]]
+    peer = rows[rows.method == PEER].set_index("rtol")
+    assert peer.error_rad.min() <= PEER_TARGET_ERROR
+    assert summary["peer_target"]["reached"] and summary["peer_target"]["error_rad"] <= PEER_TARGET_ERROR
+    assert (peer.events == 9).all() and (rows.output_points == 5001).all()
+    # the peer's error falls with rtol (a tolerance 100x tighter: at least 20x smaller error)
+    assert peer.error_rad[min(peer.index)] < peer.error_rad[max(peer.index)] / 20
+    for target, entry in summary["ratios_at_equal_error_cpu"]["A"].items():
+        t_peer = time_at_error(rows, PEER, float(target), "cpu_time_s")
+        for method, ratio in entry["ratio_to_peer"].items():
+            t = time_at_error(rows, method, float(target), "cpu_time_s")
+            if np.isfinite(t) and np.isfinite(t_peer):
+                assert ratio == pytest.approx(t / t_peer, rel=1e-12)
+            else:
+                assert ratio is None or np.isnan(ratio)
+    assert "CPU time / casadi-idas" in r.stdout
