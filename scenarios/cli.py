@@ -1,7 +1,8 @@
 """The `mechsim` command line: list, show and run scenarios.
 
 Exit codes: 0 success; 2 a user error (one line naming the field, no traceback); 3 a solver or physics
-failure (what ran is written, plus one line: when, where, why, hint).
+failure (what ran is written, plus one line: when, where, why, hint); 4 the operating system refused a read or
+write (permission, read-only folder, full disk): one line, nothing half-written left (docs/limits.md).
 """
 from __future__ import annotations
 
@@ -20,12 +21,29 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 err = Console(stderr=True)
 out = Console()
 
-USER_ERROR, SOLVER_FAILURE = 2, 3
+USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
 
 
 def _fail(message: str, code: int = USER_ERROR) -> None:
     err.print(f"error: {message}", markup=False, highlight=False, soft_wrap=True)
     raise typer.Exit(code)
+
+
+def _os_refused(exc: OSError, doing: str) -> None:
+    """One line for an OSError (permission, read-only, full disk, ...), exit 4."""
+    where = exc.filename if exc.filename is not None else "?"
+    _fail(f"{doing}: the operating system refused {where}: {exc.strerror or exc} (nothing half-written is left)",
+          OS_REFUSED)
+
+
+def _output_folder(out_dir: Optional[Path], label: str, force: bool, prefix: str = "") -> Path:
+    """--out if given, else results/<prefix><slug of the label>; refuses an existing folder without --force and
+    any folder mechsim did not write (ScenarioError naming --out)."""
+    from mechsim.scenarios.output.atomic import check_replaceable
+    from mechsim.scenarios.output.paths import default_folder
+    target = out_dir if out_dir is not None else default_folder(label, prefix)
+    check_replaceable(target, force)
+    return target
 
 
 @app.command("list")
@@ -61,9 +79,7 @@ def run(
     from mechsim.scenarios.runner import run as run_scenario
     try:
         sc = load(scenario, set_)
-        target = out_dir or Path("results") / sc.name
-        if target.exists() and not force:
-            raise ScenarioError("--out", f"{target} exists; pass --force to replace it")
+        target = _output_folder(out_dir, sc.name, force)
     except ScenarioError as exc:
         _fail(str(exc))
     duration = sc.si["duration"]
@@ -84,6 +100,8 @@ def run(
         write_result(result, target, force=force, plots=sc.si["output"]["plots"], mechanism=build_mechanism(sc.si))
     except ScenarioError as exc:
         _fail(str(exc))
+    except OSError as exc:
+        _os_refused(exc, f"{sc.name}: the results")
     s = result.summary
     if result.failure:
         err.print(f"failed: {result.failure.message()}; results so far written to {target}",
@@ -182,6 +200,8 @@ def sweep(
                         quiet, out, err, batch)
     except ScenarioError as exc:
         _fail(str(exc))
+    except OSError as exc:
+        _os_refused(exc, "sweep")
     raise typer.Exit(code)
 
 
@@ -278,6 +298,10 @@ def main() -> None:
     except ScenarioError as exc:
         err.print(f"error: {exc}", markup=False, highlight=False)
         sys.exit(USER_ERROR)
+    except OSError as exc:
+        err.print(f"error: the operating system refused {exc.filename}: {exc.strerror or exc}", markup=False,
+                  highlight=False)
+        sys.exit(OS_REFUSED)
 
 
 if __name__ == "__main__":

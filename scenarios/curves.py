@@ -14,7 +14,8 @@ from mechsim.mechanisms.rolling.model import RollingPairFourBar
 from mechsim.mechanisms.rolling.pair import RollingFourBar
 
 from mechsim.scenarios.units import ScenarioError
-from mechsim.scenarios.output.atomic import atomic_folder
+from mechsim.scenarios.output.atomic import atomic_folder, check_replaceable
+from mechsim.scenarios.output.paths import default_folder
 
 #: atlas attribute -> CSV file name
 TABLES = {"component_table": "components", "closure": "closure", "nonclosure": "nonclosure", "curve": "curve",
@@ -62,9 +63,8 @@ def write_curves(name: str, out_dir: Path | None = None, force: bool = False,
                  samples_per_turn: int = 720) -> tuple[Path, dict]:
     """Compute the atlas of `name` and write <table>.csv, atlas.png and summary.json into out_dir."""
     kin, label = resolve(name)
-    out_dir = Path(out_dir) if out_dir is not None else Path("results") / f"curves-{label}"
-    if out_dir.exists() and not force:
-        raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
+    out_dir = Path(out_dir) if out_dir is not None else default_folder(label, "curves-")
+    check_replaceable(out_dir, force)
     atlas = coupler_atlas(kin, samples_per_turn=samples_per_turn)
     summary = atlas_summary(atlas, label)
     with atomic_folder(out_dir, force) as tmp:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Protocol
 
 from mechsim.scenarios.loader import Scenario, load, read_raw
+from mechsim.scenarios.output.paths import default_folder
 from mechsim.scenarios.sweep.execute import CaseTask, Outcome, SweepInterrupted
 from mechsim.scenarios.sweep.rows import case_key, parameter_columns
 from mechsim.scenarios.sweep.spec import SweepSpec
@@ -252,7 +253,7 @@ def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir:
         raise ScenarioError("--workers" if dask_local is None else "--dask-local", "must be a positive number")
     spec = build_spec(target, vary, base, zip_)
     pl = plan(spec)
-    target_dir = out_dir or Path("results") / f"sweep-{pl.cases[0].scenario.name}"
+    target_dir = out_dir if out_dir is not None else default_folder(pl.cases[0].scenario.name, "sweep-")
     runner = make_runner(workers, dask_local, scheduler, batch)
     with RichProgress(err, f"sweep {pl.cases[0].scenario.name}", disable=quiet) as bar:
         report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots)

@@ -21,6 +21,7 @@ from pathlib import Path
 import pandas as pd
 import tomli_w
 
+from mechsim.scenarios.output.atomic import MARKER, MARKER_TEXT, check_replaceable
 from mechsim.scenarios.output.atomic import json_default as _json_default
 from mechsim.scenarios.units import ScenarioError
 
@@ -63,7 +64,10 @@ class SweepStore:
         """
         manifest = self.root / "sweep.json"
         runs: list[str] = []
+        ours = (self.root / MARKER).is_file() or manifest.is_file()
         if self.root.exists() and force:
+            if self.root.is_symlink() or not ours:
+                check_replaceable(self.root, force)          # refuses a folder mechsim did not write
             shutil.rmtree(self.root)
         elif self.root.exists() and any(self.root.iterdir()):
             if not manifest.is_file():
@@ -77,6 +81,7 @@ class SweepStore:
                                              "it or choose another --out")
             runs = old.get("runs", [])
         self.cases.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.root / MARKER, MARKER_TEXT)
         runs.append(run_id)
         atomic_write_text(manifest, json.dumps({"case_ids": keys, "runs": runs}, indent=1))
         atomic_write_text(self.root / "sweep.toml",
