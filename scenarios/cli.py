@@ -71,7 +71,7 @@ def run(
     out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/<name>)"),
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
-    quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
+    quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
 ) -> None:
     """Run a scenario and write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and plots."""
     from mechsim.scenarios.loader import build_mechanism, load
@@ -82,12 +82,14 @@ def run(
         target = _output_folder(out_dir, sc.name, force)
     except ScenarioError as exc:
         _fail(str(exc))
+    from mechsim.scenarios.console import native_output
     duration = sc.si["duration"]
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("t = {task.completed:.3f} s"),
                   TimeElapsedColumn(), TimeRemainingColumn(), console=err, disable=quiet, transient=True) as bar:
         task = bar.add_task(sc.name, total=duration)
         try:
-            result = run_scenario(sc, progress=lambda t: bar.update(task, completed=t))
+            with native_output() as native:
+                result = run_scenario(sc, progress=lambda t: bar.update(task, completed=t))
         except ScenarioError as exc:
             _fail(str(exc))
         except ValueError as exc:
@@ -96,23 +98,38 @@ def run(
             _fail(f"the integration stopped on an internal error ({type(exc).__name__}: "
                   f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'}); "
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
-    try:
-        write_result(result, target, force=force, plots=sc.si["output"]["plots"], mechanism=build_mechanism(sc.si))
-    except ScenarioError as exc:
-        _fail(str(exc))
-    except OSError as exc:
-        _os_refused(exc, f"{sc.name}: the results")
+        result.summary["solver_messages"] = native
+        bar.update(task, description=f"{sc.name}: writing files")
+        try:
+            write_result(result, target, force=force, plots=sc.si["output"]["plots"],
+                         mechanism=build_mechanism(sc.si))
+        except ScenarioError as exc:
+            _fail(str(exc))
+        except OSError as exc:
+            _os_refused(exc, f"{sc.name}: the results")
+    _report_run(result, sc.name, target, quiet)
+
+
+def _report_run(result, name: str, target: Path, quiet: bool) -> None:
+    """The run's console report: a summary line and one line per kind of warning (none with --quiet), the
+    failure as an error line (exit 3)."""
+    from mechsim.scenarios.console import group_line
     s = result.summary
+    if not quiet:
+        for group in s.get("warning_groups", []):
+            err.print(group_line(group), markup=False, highlight=False, soft_wrap=True)
+        if s.get("solver_messages"):
+            err.print(f"note: {len(s['solver_messages'])} message(s) of the solver library captured, in "
+                      "summary.json (solver_messages)", markup=False, highlight=False, soft_wrap=True)
     if result.failure:
         err.print(f"failed: {result.failure.message()}; results so far written to {target}",
                   markup=False, highlight=False, soft_wrap=True)
         raise typer.Exit(SOLVER_FAILURE)
-    solver = s["solver"]
-    out.print(f"{sc.name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
-              f"{len(result.events)} events, wall {solver['wall_time_s']:.3f} s -> {target}",
-              markup=False, highlight=False, soft_wrap=True)
-    for w in s["warnings"]:
-        err.print(f"warning: {w}", markup=False, highlight=False, soft_wrap=True)
+    if not quiet:
+        solver = s["solver"]
+        out.print(f"{name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
+                  f"{len(result.events)} events, wall {solver['wall_time_s']:.3f} s -> {target}",
+                  markup=False, highlight=False, soft_wrap=True)
 
 
 @app.command()

@@ -17,6 +17,7 @@ from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
 
+from mechsim.scenarios.console import group_warnings
 from mechsim.scenarios.loader import Scenario, build_mechanism
 
 PEAK_COLUMNS = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2",
@@ -183,6 +184,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
         "warnings": warnings,
+        "warning_groups": group_warnings(warnings),
         "success": failure is None,
         "failure": failure.message() if failure else None,
         "versions": dict(_versions()),

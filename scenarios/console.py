@@ -1,0 +1,113 @@
+"""A calm console for the CLI: warnings grouped by kind, and what C libraries print captured instead of shown.
+
+A run's warnings are strings "t = <time> s: <message>" (or a plain message); their kind is the message up to
+its first colon with the numbers taken out, so 52 flank switches make one line with the count and the first
+and last time. SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
+points those at a temporary file for the length of a run while Python's own streams keep the terminal.
+"""
+from __future__ import annotations
+
+import io
+import os
+import re
+import sys
+import tempfile
+import warnings as py_warnings
+from contextlib import contextmanager
+from typing import Iterator
+
+_TIME = re.compile(r"^t = ([-+0-9.eE]+) s: ")
+_NUMBER = re.compile(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
+
+
+def warning_kind(message: str) -> str:
+    """The kind of a warning: its text without the time prefix, up to the first ': ' that ends at least four
+    words, numbers as '#'."""
+    parts = _TIME.sub("", message).split(": ")
+    head = parts[0]
+    for part in parts[1:]:          # a short tag ("thermal: ...") is no kind of its own: take the next clause
+        if len(head.split()) >= 4:
+            break
+        head += ": " + part
+    return _NUMBER.sub("#", head).strip()
+
+
+def group_warnings(messages: list[str]) -> list[dict]:
+    """One dict per kind, in order of first appearance: kind, count, first and last time (s, None if the
+    warnings carry none) and the first message in full."""
+    groups: dict[str, dict] = {}
+    for message in messages:
+        kind = warning_kind(message)
+        m = _TIME.match(message)
+        t = float(m.group(1)) if m else None
+        g = groups.setdefault(kind, dict(kind=kind, count=0, first_t_s=t, last_t_s=t, first=message))
+        g["count"] += 1
+        if t is not None:
+            g["first_t_s"] = t if g["first_t_s"] is None else min(g["first_t_s"], t)
+            g["last_t_s"] = t if g["last_t_s"] is None else max(g["last_t_s"], t)
+    return list(groups.values())
+
+
+def group_line(group: dict) -> str:
+    """One console line for a group of warnings."""
+    if group["count"] == 1:
+        return f"warning: {group['first']}"
+    when = ""
+    if group["first_t_s"] is not None:
+        when = f" between t = {group['first_t_s']:.4g} s and {group['last_t_s']:.4g} s"
+    first = _TIME.sub("", group["first"])
+    return f"warning: {group['count']} x {group['kind']}{when} (first: {first}); all in summary.json"
+
+
+@contextmanager
+def native_output() -> Iterator[list[str]]:
+    """Capture what the solver libraries print while the block runs: native code writing to file descriptors 1
+    and 2 (SUNDIALS, XLA), Python-level prints to sys.stdout (scikit-sundae's error handler) and Python warnings
+    ('python: <category>: <text>'). The yielded list receives the captured lines (blank ones dropped) when the
+    block ends. sys.stderr, where it is descriptor 2, stays on the terminal (the progress bar draws there)."""
+    lines: list[str] = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, ValueError):
+            pass
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    printed, stdout, stderr = io.StringIO(), sys.stdout, sys.stderr
+    with tempfile.TemporaryFile(mode="w+b") as sink, py_warnings.catch_warnings(record=True) as caught:
+        py_warnings.simplefilter("default")
+        sys.stdout = printed
+        if _fileno(stderr) == 2:
+            sys.stderr = os.fdopen(os.dup(saved[2]), "w", buffering=1, encoding=getattr(stderr, "encoding", None),
+                                   errors="replace")
+        for fd in (1, 2):
+            os.dup2(sink.fileno(), fd)
+        try:
+            yield lines
+        finally:
+            _flush_c_stdio()                  # C's stdout is block-buffered into a file: empty it into the sink
+            sys.stdout = stdout
+            if sys.stderr is not stderr:
+                sys.stderr.close()
+                sys.stderr = stderr
+            for fd, copy in saved.items():
+                os.dup2(copy, fd)
+                os.close(copy)
+            sink.seek(0)
+            text = sink.read().decode(errors="replace") + "\n" + printed.getvalue()
+            lines += [line.strip() for line in text.splitlines() if line.strip()]
+            lines += [f"python: {w.category.__name__}: {w.message}" for w in caught]
+
+
+def _flush_c_stdio() -> None:
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass
+
+
+def _fileno(stream) -> int | None:
+    try:
+        return stream.fileno()
+    except (AttributeError, ValueError, OSError):
+        return None

@@ -1,0 +1,53 @@
+"""A calm console: warnings grouped by kind, native solver output captured, --quiet prints only errors."""
+import ctypes
+import json
+import os
+import warnings
+
+from cli_helpers import invoke
+
+from mechsim.scenarios.console import group_line, group_warnings, native_output
+
+
+def test_warnings_group_by_kind_with_count_and_time_span():
+    msgs = [f"t = {t} s: normal force changed sign at crank angle {a} deg (local): the pin crossed to the "
+            f"{side} flank" for t, a, side in ((0.5, 6.75, "trailing"), (0.54, 20.6, "driving"), (4.2, 5.9, "trailing"))]
+    msgs.append("thermal: the pin's Biot number h(V/A)/k = 0.2 >= 0.1, so it is not lumped")
+    groups = group_warnings(msgs)
+    assert [g["count"] for g in groups] == [3, 1]
+    assert groups[0]["first_t_s"] == 0.5 and groups[0]["last_t_s"] == 4.2 and groups[0]["first"] == msgs[0]
+    assert groups[1]["first_t_s"] is None
+    line = group_line(groups[0])
+    assert "\n" not in line and line.startswith("warning: 3 x normal force changed sign") and "4.2 s" in line
+    assert group_line(groups[1]) == f"warning: {msgs[3]}"
+    assert groups[1]["kind"] == "thermal: the pin's Biot number h(V/A)/k = # >= #, so it is not lumped"
+
+
+def test_native_output_is_captured_not_printed(capfd):
+    libc = ctypes.CDLL(None)
+    with native_output() as lines:
+        os.write(1, b"[IDAHandleFailure, Error: -3] raw fd 1\n")
+        os.write(2, b"raw fd 2\n")
+        libc.printf(b"buffered C stdio\n")
+        print("\n[IDASolve, Error: -4] printed by python\n")
+        warnings.warn("a library warning", RuntimeWarning)
+    captured = capfd.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert set(lines) == {"[IDAHandleFailure, Error: -3] raw fd 1", "raw fd 2", "buffered C stdio",
+                          "[IDASolve, Error: -4] printed by python", "python: RuntimeWarning: a library warning"}
+    os.write(1, b"after\n")                      # the descriptors are back
+    assert capfd.readouterr().out == "after\n"
+
+
+def test_quiet_run_prints_nothing_and_loud_run_one_line_per_kind(tmp_path):
+    args = ("run", "geneva-torque", "--set", "duration=2 s", "--set", "output.plots=false")
+    r = invoke(*args, "--out", tmp_path / "quiet", "--quiet")
+    assert r.exit_code == 0, r.output
+    assert r.stdout == "" and r.stderr == ""
+    s = json.loads((tmp_path / "quiet" / "summary.json").read_text())
+    assert len(s["warnings"]) >= 5 and sum(g["count"] for g in s["warning_groups"]) == len(s["warnings"])
+    r = invoke(*args, "--out", tmp_path / "loud")
+    assert r.exit_code == 0, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == len(s["warning_groups"]) and all(line.startswith("warning: ") for line in lines)
+    assert len(r.stdout.strip().splitlines()) == 1 and "rows" in r.stdout
