@@ -158,39 +158,61 @@ def compare(
     rtol: float = typer.Option(1e-10, "--rtol", help="relative tolerance of both runs"),
     atol: Optional[float] = typer.Option(None, "--atol", help="absolute tolerance (default rtol / 100)"),
     solver: Optional[str] = typer.Option(None, "--solver", help="diffrax solver (default: the scenario's)"),
+    fmt: str = typer.Option("table", "--format", help="table (plain full-precision text when piped), csv or json"),
 ) -> None:
     """Run a scenario on IDA and on diffrax and compare the columns; exit 1 if they disagree beyond tolerance."""
-    from rich.table import Table
-
     from mechsim.scenarios.compare import compare as compare_backends
     if not 0 < rtol < 1:
         _fail(f"--rtol must be in (0, 1), got {rtol}")
+    if fmt not in ("table", "csv", "json"):
+        _fail(f"--format must be table, csv or json, got {fmt!r}")
+    from mechsim.scenarios.console import native_output
     try:
-        table = compare_backends(scenario, set_, rtol=rtol, atol=atol, diffrax_solver=solver)
+        with native_output():       # the solver libraries' own prints stay off the table
+            table = compare_backends(scenario, set_, rtol=rtol, atol=atol, diffrax_solver=solver)
     except ScenarioError as exc:
         _fail(str(exc))
     except ValueError as exc:
         _fail(f"scenario: {exc}")
-    a = table.attrs
-    view = Table(title=f"{a['scenario']}: IDA vs diffrax {a['diffrax_solver']} (rtol {a['rtol']:g})")
-    for name in ("column", "max |diff|", "max rel", "t (s)", "drive angle (rad)", "tolerance", "ok"):
-        view.add_column(name, justify="left" if name in ("column", "tolerance") else "right",
-                        no_wrap=name == "column")
-    for r in table.itertuples():
-        ok = "" if r.passed is None else ("yes" if r.passed else "NO")
-        view.add_row(r.column, f"{r.max_abs_diff:.3g}", f"{r.max_rel_diff:.3g}", f"{r.t_s:.6g}",
-                     f"{r.drive_angle_rad:.6g}", r.tolerance, ok)
-    out.print(view)
-    sv = a["solver"]
-    out.print(f"rows {a['rows']}, events {a['events']}, max event-time difference {a['event_time_max_diff_s']:.3g} s; "
-              f"wall IDA {sv['ida'].get('wall_time_s', float('nan')):.3f} s, diffrax "
-              f"{sv['diffrax'].get('wall_time_s', float('nan')):.3f} s (compile "
-              f"{sv['diffrax'].get('compile_time_s', 0.0):.3f} s)", markup=False, highlight=False, soft_wrap=True)
-    for backend, message in a["failures"].items():
-        err.print(f"{backend} failed: {message}", markup=False, highlight=False, soft_wrap=True)
-    if not a["passed"]:
-        err.print("the backends disagree beyond tolerance", markup=False, highlight=False)
+    _print_compare(table, fmt)
+    if not table.attrs["passed"]:
         raise typer.Exit(1)
+
+
+def _print_compare(table, fmt: str) -> None:
+    """The comparison on stdout: a rich table on a terminal, full-precision plain text when piped, or csv/json
+    (data only on stdout; notes and failures on stderr)."""
+    from rich.table import Table
+
+    from mechsim.scenarios.compare import render
+    a = table.attrs
+    sv = a["solver"]
+    notes = [f"rows {a['rows']}, events {a['events']}, max event-time difference {a['event_time_max_diff_s']:.3g} s; "
+             f"wall IDA {sv['ida'].get('wall_time_s', float('nan')):.3f} s, diffrax "
+             f"{sv['diffrax'].get('wall_time_s', float('nan')):.3f} s (compile "
+             f"{sv['diffrax'].get('compile_time_s', 0.0):.3f} s)"]
+    notes += [f"{backend} failed: {message}" for backend, message in a["failures"].items()]
+    notes += [] if a["passed"] else ["the backends disagree beyond tolerance"]
+    title = f"{a['scenario']}: IDA vs diffrax {a['diffrax_solver']} (rtol {a['rtol']:g})"
+    if fmt == "table" and out.is_terminal:
+        view = Table(title=title)
+        for name in ("column", "max |diff|", "max rel", "t (s)", "drive angle (rad)", "tolerance", "ok"):
+            view.add_column(name, justify="left" if name in ("column", "tolerance") else "right",
+                            no_wrap=name == "column")
+        for r in table.itertuples():
+            ok = "" if r.passed is None else ("yes" if r.passed else "NO")
+            view.add_row(r.column, f"{r.max_abs_diff:.3g}", f"{r.max_rel_diff:.3g}", f"{r.t_s:.6g}",
+                         f"{r.drive_angle_rad:.6g}", r.tolerance, ok)
+        out.print(view)
+        out.print(notes[0], markup=False, highlight=False, soft_wrap=True)
+        notes = notes[1:]
+    elif fmt == "table":
+        sys.stdout.write(f"{title}\n{render(table, 'text')}{notes[0]}\n")
+        notes = notes[1:]
+    else:
+        sys.stdout.write(render(table, fmt))
+    for note in notes:
+        err.print(note, markup=False, highlight=False, soft_wrap=True)
 
 
 @app.command()

@@ -23,9 +23,10 @@ def _row(table, column):
 
 
 def test_tolerances_as_stated():
-    assert tolerance_for("wheel_angle_rad").value == 1e-7 and tolerance_for("wheel_angle_rad").kind == "abs"
-    assert tolerance_for("crank_speed_rad_s").kind == "rel" and tolerance_for("crank_speed_rad_s").value == 1e-6
-    assert tolerance_for("contact_force_N").value == 1e-5
+    assert tolerance_for("wheel_angle_rad").value == pytest.approx(1e-7) and tolerance_for("wheel_angle_rad").kind == "rel"
+    assert tolerance_for("wheel_angle_rad", 1e-8).value == pytest.approx(1e-5)      # scales with the rtol
+    assert tolerance_for("crank_speed_rad_s").kind == "rel" and tolerance_for("crank_speed_rad_s").value == pytest.approx(1e-6)
+    assert tolerance_for("contact_force_N").value == pytest.approx(1e-5)
     assert tolerance_for("drive_torque_N_m") is None
 
 
