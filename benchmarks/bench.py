@@ -338,8 +338,8 @@ def run_bench(config: BenchConfig, progress: Callable[[str], None] | None = None
         "run with --full (or python benchmarks/residual_cost.py)",
         "bench_wall_time_s": time.perf_counter() - wall0,
     }
-    from mechsim.scenarios.runner import _versions
-    summary["versions"] = {**_versions(), "casadi": _version("casadi")}
+    from mechsim.scenarios.runner import versions
+    summary["versions"] = {**versions(), "casadi": _version("casadi")}
     return BenchResult(df, cost, summary, ref)
 
 

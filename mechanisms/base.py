@@ -73,11 +73,32 @@ class Mode:
 
 
 #: Contact quantities a mode exposes for the thermal model (all SI): normal force (N, signed),
-#: sliding speed at the contact (m/s, signed), speed of the contact over each body's surface (m/s).
-CONTACT_KEYS = ("normal_force", "slip_speed", "source_speed_pin", "source_speed_wheel")
+#: sliding speed at the contact (m/s, signed), speed of the contact over the driver body's and over the driven
+#: body's surface (m/s; the heat source's speed over each body, docs/theory.md §G4.2).
+CONTACT_KEYS = ("normal_force", "slip_speed", "source_speed_driver", "source_speed_driven")
 #: Optional keys: the friction power mu |N| |u_slip| as a smooth in-mode expression (W; needed for thermal
 #: states) and an integer index of the surface track in contact (e.g. the Geneva's slot counter).
 CONTACT_OPTIONAL_KEYS = ("heat_rate", "track")
+#: Keys of `Mechanism.contact_state`: CONTACT_KEYS and CONTACT_OPTIONAL_KEYS per output row, plus
+#: `sliding_accel` (m/s^2, the rate of change of source_speed_driven, for the time a band needs to pass a
+#: point) and `engaged` (bool, the bodies touch).
+CONTACT_STATE_KEYS = CONTACT_KEYS + CONTACT_OPTIONAL_KEYS + ("sliding_accel", "engaged")
+
+
+@dataclass(frozen=True)
+class ContactGeometry:
+    """A sliding line contact as the thermal model sees it (SI), in body-neutral terms: a cylinder carried by the
+    driver body (radius `contact_radius`, touching along `contact_length`, at `driver_arm` from the driver's
+    axis) slides along one of `tracks` flat tracks of the driven body (each swept over `track_length`); the
+    driven body is about a disc of radius `driven_radius`; one contact lasts `contact_angle` of drive angle."""
+
+    contact_radius: float
+    contact_length: float
+    driver_arm: float
+    tracks: int
+    track_length: float
+    driven_radius: float
+    contact_angle: float
 
 
 @dataclass(frozen=True)
@@ -222,6 +243,21 @@ class Mechanism(ABC):
     def describe(self) -> dict:
         """Derived geometry worth reporting in the summary (SI)."""
         return {}
+
+    # -- the sliding contact (implemented by mechanisms with has_sliding_contact = True) ---------------------
+    def contact_geometry(self) -> ContactGeometry:
+        """The sliding contact's geometry (see ContactGeometry)."""
+        raise NotImplementedError(f"{self.name} has no sliding contact")
+
+    def contact_state(self, table) -> dict[str, np.ndarray]:
+        """The contact quantities (CONTACT_STATE_KEYS) of each row of a result table (a DataFrame or a dict of
+        columns, as `closed_form` returns), equal to the modes' `heat` expressions."""
+        raise NotImplementedError(f"{self.name} has no sliding contact")
+
+    def contact_starts(self, table, events) -> np.ndarray:
+        """Sorted times at which a contact began (the heat source switched on at a new place), including one
+        before the table's first row when the run starts in contact."""
+        raise NotImplementedError(f"{self.name} has no sliding contact")
 
     def extra_outputs(self, timeseries, events) -> dict:
         """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""

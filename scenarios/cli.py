@@ -74,11 +74,9 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
 ) -> None:
     """Run a scenario and write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and plots."""
-    from mechsim.scenarios.loader import build_mechanism, load
-    from mechsim.scenarios.output.writer import write_result
-    from mechsim.scenarios.runner import run as run_scenario
+    from mechsim.scenarios import api
     try:
-        sc = load(scenario, set_)
+        sc = api.load(scenario, set_)
         target = _output_folder(out_dir, sc.name, force)
     except ScenarioError as exc:
         _fail(str(exc))
@@ -89,7 +87,7 @@ def run(
         task = bar.add_task(sc.name, total=duration)
         try:
             with native_output() as native:
-                result = run_scenario(sc, progress=lambda t: bar.update(task, completed=t))
+                result = api.run(sc, progress=lambda t: bar.update(task, completed=t))
         except ScenarioError as exc:
             _fail(str(exc))
         except ValueError as exc:
@@ -101,8 +99,7 @@ def run(
         result.summary["solver_messages"] = native
         bar.update(task, description=f"{sc.name}: writing files")
         try:
-            write_result(result, target, force=force, plots=sc.si["output"]["plots"],
-                         mechanism=build_mechanism(sc.si))
+            result.save(target, force=force)
         except ScenarioError as exc:
             _fail(str(exc))
         except OSError as exc:
@@ -161,7 +158,7 @@ def compare(
     fmt: str = typer.Option("table", "--format", help="table (plain full-precision text when piped), csv or json"),
 ) -> None:
     """Run a scenario on IDA and on diffrax and compare the columns; exit 1 if they disagree beyond tolerance."""
-    from mechsim.scenarios.compare import compare as compare_backends
+    from mechsim.scenarios import api
     if not 0 < rtol < 1:
         _fail(f"--rtol must be in (0, 1), got {rtol}")
     if fmt not in ("table", "csv", "json"):
@@ -169,7 +166,7 @@ def compare(
     from mechsim.scenarios.console import native_output
     try:
         with native_output():       # the solver libraries' own prints stay off the table
-            table = compare_backends(scenario, set_, rtol=rtol, atol=atol, diffrax_solver=solver)
+            table = api.compare(scenario, set_, rtol=rtol, atol=atol, solver=solver)
     except ScenarioError as exc:
         _fail(str(exc))
     except ValueError as exc:

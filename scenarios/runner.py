@@ -1,8 +1,11 @@
-"""Run a validated scenario: choose the cheapest model that answers it, integrate, tabulate, summarise."""
+"""Run a validated scenario in two steps: `plan` (build the mechanism, the drive, the solver settings and the
+thermal model once, and choose the cheapest method that answers the scenario), then `execute` (integrate,
+tabulate, summarise). `run` is both."""
 from __future__ import annotations
 
 import platform
 import time
+from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
 from typing import Callable
@@ -19,6 +22,7 @@ from mechsim.mechanisms.base import Mechanism
 
 from mechsim.scenarios.console import group_warnings
 from mechsim.scenarios.loader import Scenario, build_mechanism
+from mechsim.scenarios.units import ScenarioError
 
 PEAK_COLUMNS = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2",
                 "slip_speed_m_s", "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2",
@@ -43,7 +47,8 @@ def make_drive(si: dict) -> Drive:
 
 
 @lru_cache(maxsize=1)
-def _versions() -> dict[str, str]:
+def versions() -> dict[str, str]:
+    """Versions of Python and the packages a result depends on (read once per process: ~40 ms of metadata)."""
     out = {"python": platform.python_version()}
     for pkg in VERSION_PACKAGES:
         try:
@@ -53,8 +58,8 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def _choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSettings) -> tuple[str, str]:
-    """('closed-form' | 'dae', why)."""
+def choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSettings) -> tuple[str, str]:
+    """('closed-form' | 'dae', why): the closed form where the drive is prescribed and the mechanism has one."""
     if settings.method == "dae":
         return "dae", "solver.method = 'dae' asks for the DAE"
     if drive.is_prescribed:
@@ -119,17 +124,54 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict
             "closure_error_relative": closure / scale}
 
 
-def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
-        integrate: Callable | None = None) -> Result:
-    """Run one scenario. Never raises for solver trouble: a failure comes back in Result.failure."""
+@dataclass
+class Plan:
+    """Everything decided before anything is integrated; the mechanism is built once, here."""
+
+    scenario: Scenario
+    mechanism: Mechanism
+    drive: Drive
+    settings: SolverSettings
+    method: str              # "closed-form" | "dae"
+    why: str
+    thermal: object = None   # mechsim.thermal.ThermalPlan, or None without a thermal model
+
+    @property
+    def mechanics_duration(self) -> float:
+        """How long the mechanics runs: the scenario's duration, or the cycle-averaging window."""
+        return self.scenario.si["duration"] if self.thermal is None else self.thermal.mechanics_duration
+
+
+def plan(scenario: Scenario) -> Plan:
+    """Build the mechanism, drive, settings and thermal model and choose the method (ValueError on bad input)."""
     si = scenario.si
-    wall0 = time.perf_counter()
     mech = build_mechanism(si)
     drive = make_drive(si)
     settings = solver_settings(si)
-    method, why = _choose_method(si, mech, drive, settings)
-    from mechsim.scenarios.thermal_post import plan as thermal_plan   # local: thermal is optional per scenario
-    thermal = thermal_plan(si, mech, drive, method)
+    method, why = choose_method(si, mech, drive, settings)
+    thermal = None
+    if si.get("thermal", {}).get("model", "none") != "none":
+        from mechsim.thermal.plan import ThermalSetupError, plan as thermal_plan   # local: optional per scenario
+        try:
+            thermal = thermal_plan(si, mech, drive, method)
+        except ThermalSetupError as exc:
+            raise ScenarioError(exc.field, exc.problem) from None
+    return Plan(scenario, mech, drive, settings, method, why, thermal)
+
+
+def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
+        integrate: Callable | None = None) -> Result:
+    """Plan and execute one scenario. Never raises for solver trouble: a failure comes back in Result.failure."""
+    return execute(plan(scenario), progress, integrate)
+
+
+def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
+            integrate: Callable | None = None) -> Result:
+    """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
+    scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
+    method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
+    si = scenario.si
+    wall0 = time.perf_counter()
     run_si = si if thermal is None else {**si, "duration": thermal.mechanics_duration}
     angle_key, speed_key = mech.initial_keys
     angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
@@ -164,7 +206,8 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"))
     thermal_summary, thermal_tables = None, {}
     if thermal is not None:
-        df, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(df, events, failed=failure is not None)
+        df, events, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(df, events,
+                                                                                     failed=failure is not None)
         warnings += thermal_warnings
     wall = time.perf_counter() - wall0
     summary = {
@@ -187,7 +230,7 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
         "warning_groups": group_warnings(warnings),
         "success": failure is None,
         "failure": failure.message() if failure else None,
-        "versions": dict(_versions()),
+        "versions": dict(versions()),
     }
     if thermal_summary is not None:
         summary["thermal"] = thermal_summary

@@ -1,21 +1,19 @@
 """The [thermal] section: which thermal model runs alongside the mechanics, with its material, surroundings,
 body geometry and 1-D mesh. Absent keys get sound defaults (derived from the mechanism where they depend on
-it, see scenarios/thermal_setup.py and docs/thermal.md "Coupling"); values are SI after validation."""
+it, see thermal/network.py and docs/thermal.md "Coupling"); values are SI after validation."""
 from __future__ import annotations
 
 from mechsim.mechanisms.base import Field, Mechanism
 from mechsim.thermal import MATERIALS, Material
+from mechsim.thermal.materials import MATERIAL_KEYS, material_with_overrides
+from mechsim.thermal.models import MODELS
 
 from mechsim.scenarios.units import ScenarioError
 
-THERMAL_MODELS = ("none", "flash", "lumped", "1d")
 FLASH_METHODS = ("jaeger", "seed-blok")
 DISTRIBUTIONS = ("semi-elliptic", "uniform")
 AVERAGING = ("resolved", "cycle", "auto")
 MESH_DIRECTIONS = ("depth",)
-#: material property keys that override the library material (Field unit, Material attribute)
-MATERIAL_KEYS = {"E": "E", "nu": "nu", "density": "density", "specific_heat": "specific_heat",
-                 "conductivity": "conductivity"}
 
 
 def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
@@ -24,9 +22,8 @@ def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
         return {"model": Field("str", default="none", choices=("none",),
                                help="thermal model: none (this mechanism has no sliding contact)")}
     return {
-        "model": Field("str", default="none", choices=THERMAL_MODELS,
-                       help="none; flash (algebraic contact rise over ambient); lumped (+ bulk pin/crank/wheel "
-                            "states); 1d (+ 1-D conduction into each slot wall's track)"),
+        "model": Field("str", default="none", choices=("none", *MODELS),
+                       help="none; " + "; ".join(f"{name} ({m.short})" for name, m in MODELS.items())),
         "flash": Field("str", default="jaeger", choices=FLASH_METHODS,
                        help="flash rise: jaeger (exact moving band + Blok partition) or seed-blok (seed S(13))"),
         "distribution": Field("str", default="semi-elliptic", choices=DISTRIBUTIONS,
@@ -73,13 +70,8 @@ def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
 
 def thermal_material(section: dict) -> Material:
     """The library material with any explicit property overrides; ScenarioError naming the field if invalid."""
-    base = MATERIALS[section.get("material", "aisi1045")]
-    values = {attr: section[key] if section.get(key) is not None else getattr(base, attr)
-              for key, attr in MATERIAL_KEYS.items()}
-    overridden = [key for key in MATERIAL_KEYS if section.get(key) is not None]
-    name = base.name + (" (" + ", ".join(overridden) + " set)" if overridden else "")
     try:
-        return Material(name=name, **values)
+        return material_with_overrides(section)
     except ValueError as exc:
         problem = str(exc).split(": ", 1)[-1]                 # "<attribute> must ..."
         attribute = problem.split(" ", 1)[0]
@@ -93,9 +85,10 @@ def check_thermal(si: dict) -> None:
     if th.get("model", "none") == "none" or "flash" not in th:
         return
     thermal_material(th)
-    if th["model"] == "1d" and th["averaging"] == "cycle":
-        raise ScenarioError("thermal.averaging", "'cycle' is available for model = 'flash' or 'lumped'; "
-                                                 "model = '1d' resolves every cycle (use 'resolved' or 'auto')")
+    if MODELS[th["model"]].every_cycle and th["averaging"] == "cycle":
+        averaged = " or ".join(f"'{name}'" for name, m in MODELS.items() if not m.every_cycle)
+        raise ScenarioError("thermal.averaging", f"'cycle' is available for model = {averaged}; model = "
+                                                 f"'{th['model']}' resolves every cycle (use 'resolved' or 'auto')")
     first, depth = th.get("mesh_first_cell"), th.get("mesh_depth")
     if first is not None and depth is not None and first > depth:
         raise ScenarioError("thermal.mesh_first_cell", f"must not exceed mesh_depth ({depth!r} m), got {first!r} m")

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import pint
 
 
 class ScenarioError(ValueError):
@@ -16,7 +15,10 @@ class ScenarioError(ValueError):
 
 
 @lru_cache(maxsize=1)
-def registry() -> pint.UnitRegistry:
+def registry():
+    """The unit registry (pint is imported here, on first use: it costs ~0.3 s, which `mechsim --help` and the
+    error paths should not pay)."""
+    import pint
     ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
     return ureg
 
@@ -28,7 +30,25 @@ def _parse_quantity(text: str):
 
 
 def to_si(field: str, value, unit: str) -> float:
-    """Convert a quantity string (or a bare number where `unit` is dimensionless) to the SI `unit`."""
+    """Convert a quantity string (or a bare number where `unit` is dimensionless) to the SI `unit`.
+
+    A pure function of its arguments, so it is memoized (sweeps validate thousands of cases with the same
+    strings); errors are not cached and raise again."""
+    try:
+        return _to_si_cached(field, value, unit)
+    except TypeError as exc:            # unhashable value (a list, a table): convert uncached, same messages
+        if "unhashable" not in str(exc):
+            raise
+        return _to_si(field, value, unit)
+
+
+@lru_cache(maxsize=65536)
+def _to_si_cached(field: str, value, unit: str) -> float:
+    return _to_si(field, value, unit)
+
+
+def _to_si(field: str, value, unit: str) -> float:
+    import pint
     ureg = registry()
     if isinstance(value, bool):
         raise ScenarioError(field, f"expected a quantity in {unit}, got a boolean")

@@ -10,10 +10,9 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.model import derive
 from mechsim.scenarios.loader import load
 from mechsim.scenarios.runner import build_mechanism, make_drive, run
-from mechsim.scenarios.thermal_cycle import CycleMeans, bulk_response
-from mechsim.scenarios.thermal_integrate import ModalNetwork, closed_form_columns, input_function, switch_times
-from mechsim.scenarios.thermal_post import plan
-from mechsim.scenarios.thermal_setup import adapter
+from mechsim.thermal.cycle import CycleMeans, bulk_response
+from mechsim.thermal.exact import ModalNetwork, closed_form_columns, input_function, switch_times
+from mechsim.thermal.plan import plan
 from mechsim.thermal import duhamel_surface, get_material, integrate_mean_heat
 
 STEEL = get_material("aisi1045")
@@ -87,9 +86,8 @@ def test_closed_form_path_equals_the_thermal_package_integrator():
     mech = build_mechanism(sc.si)
     pl = plan(sc.si, mech, make_drive(sc.si), "closed-form")
     ext = pl.setup.extension
-    _, contact_fn, _ = adapter(mech)
     columns = closed_form_columns(mech, -math.pi, 5.34)
-    inputs = input_function(ext, contact_fn, columns, mech)
+    inputs = input_function(ext, mech, columns)
     t = np.linspace(0.0, 1.2, 1201)
     breaks = switch_times(columns, t)
     assert len(breaks) == 3                       # entry, slip reversal, exit

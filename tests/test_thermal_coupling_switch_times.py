@@ -6,17 +6,17 @@ import numpy as np
 
 from mechsim.scenarios.loader import load
 from mechsim.scenarios.runner import build_mechanism
-from mechsim.scenarios.thermal_integrate import _contact_code, closed_form_columns, switch_times
+from mechsim.thermal.exact import closed_form_columns, contact_code, switch_times
 
 
 def _one_at_a_time(columns, t_grid, tol=1e-13):
-    code = _contact_code(columns(t_grid))
+    code = contact_code(columns(t_grid))
     out = []
     for i in np.flatnonzero(code[1:] != code[:-1]):
         a, b, ca = float(t_grid[i]), float(t_grid[i + 1]), code[i]
         while b - a > tol * max(1.0, abs(b)):
             mid = 0.5 * (a + b)
-            if _contact_code(columns(mid))[0] == ca:
+            if contact_code(columns(mid))[0] == ca:
                 a = mid
             else:
                 b = mid
@@ -32,5 +32,5 @@ def test_vectorised_switch_times_equal_scalar_bisection():
     assert len(fast) == len(ref) >= 9                # entry, slip reversal, exit in each of three turns
     np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-14)
     for s in fast:                                   # the contact code changes across each time
-        c = _contact_code(columns(np.array([s - 1e-9, s + 1e-9])))
+        c = contact_code(columns(np.array([s - 1e-9, s + 1e-9])))
         assert c[0] != c[1]

@@ -40,7 +40,7 @@ class LinearThermalSystem:
     def size(self) -> int:
         return len(self.state_names)
 
-    def _dense_K(self) -> np.ndarray:
+    def dense_conductance(self) -> np.ndarray:
         K = self.conductance
         return K.toarray() if sps.issparse(K) else np.asarray(K)
 
@@ -63,12 +63,12 @@ class LinearThermalSystem:
         rhs = self.source + self.input_matrix @ np.atleast_1d(u)
         if sps.issparse(self.conductance):
             return sps.linalg.spsolve(sps.csc_matrix(self.conductance), rhs)
-        return np.linalg.solve(self._dense_K(), rhs)
+        return np.linalg.solve(self.dense_conductance(), rhs)
 
     def time_constants(self) -> np.ndarray:
         """Time constants 1/lambda of the modes, lambda = eigenvalues of C^-1 K, sorted longest first (inf for lambda = 0)."""
         c = np.sqrt(self.capacity)
-        sym = self._dense_K() / c[:, None] / c[None, :]   # similar to C^-1 K, symmetric for a reciprocal network
+        sym = self.dense_conductance() / c[:, None] / c[None, :]   # similar to C^-1 K, symmetric for a reciprocal network
         lam = np.linalg.eigvalsh(0.5 * (sym + sym.T))
         with np.errstate(divide="ignore"):
             return np.sort(np.where(lam > 0, 1.0 / np.where(lam > 0, lam, 1.0), np.inf))[::-1]
@@ -78,7 +78,7 @@ class LinearThermalSystem:
         augmented system [[-C^-1 K, C^-1(s + B u)], [0, 0]] (scipy.linalg.expm). Returns (len(times), n)."""
         n = self.size
         M = np.zeros((n + 1, n + 1))
-        M[:n, :n] = -self._dense_K() / self.capacity[:, None]
+        M[:n, :n] = -self.dense_conductance() / self.capacity[:, None]
         M[:n, n] = (self.source + self.input_matrix @ np.atleast_1d(u)) / self.capacity
         z0 = np.append(np.asarray(T0, dtype=float), 1.0)
         return np.array([(scipy.linalg.expm(M * t) @ z0)[:n] for t in np.atleast_1d(times)])

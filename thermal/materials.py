@@ -72,3 +72,19 @@ def get_material(name: str | Material) -> Material:
     except KeyError:
         known = ", ".join(sorted(MATERIALS))
         raise ValueError(f"unknown material {name!r}; known materials: {known}") from None
+
+
+#: keys of a scenario's [thermal] section that override a library material's properties (key -> attribute)
+MATERIAL_KEYS = {"E": "E", "nu": "nu", "density": "density", "specific_heat": "specific_heat",
+                 "conductivity": "conductivity"}
+
+
+def material_with_overrides(section: dict) -> Material:
+    """The library material `section["material"]` with any property in MATERIAL_KEYS set in `section` (SI) in
+    place of the library's; ValueError (from Material) on an invalid value."""
+    base = get_material(section.get("material") or "aisi1045")
+    values = {attr: section[key] if section.get(key) is not None else getattr(base, attr)
+              for key, attr in MATERIAL_KEYS.items()}
+    overridden = [key for key in MATERIAL_KEYS if section.get(key) is not None]
+    name = base.name + (" (" + ", ".join(overridden) + " set)" if overridden else "")
+    return Material(name=name, **values)

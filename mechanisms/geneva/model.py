@@ -22,6 +22,7 @@ import numpy as np
 import sympy as sp
 
 from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
 
@@ -138,7 +139,7 @@ class Geneva(Mechanism):
             powers={"load": -T_L * w2, "friction": -fric_mag * slide * u, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts=engaged_readouts,
             heat={"normal_force": normal, "slip_speed": u,
-                  "source_speed_pin": spin, "source_speed_wheel": v_s,
+                  "source_speed_driver": spin, "source_speed_driven": v_s,
                   "heat_rate": fric_mag * slide * u, "track": k},
         )
         zero = sp.Integer(0)
@@ -157,7 +158,7 @@ class Geneva(Mechanism):
                     (c - r * sp.cos(alpha)) ** 2 + (r * sp.sin(alpha)) ** 2),
                 "friction_power_W": zero, "flank": zero, "lock_force_N": lam,
             },
-            heat={"normal_force": zero, "slip_speed": zero, "source_speed_pin": zero, "source_speed_wheel": zero,
+            heat={"normal_force": zero, "slip_speed": zero, "source_speed_driver": zero, "source_speed_driven": zero,
                   "heat_rate": zero, "track": k},
         )
         return {"engaged": engaged, "dwell": dwell}
@@ -228,6 +229,16 @@ class Geneva(Mechanism):
         dv = drive.parameter_values(angle0)
         return geneva_reduced.integrate(self, dv["drive_T0"], dv["drive_slope"], angle0, speed0,
                                         np.asarray(t_eval, float), rtol=rtol, atol=rtol)[0]
+
+    # -- the pin-slot contact, for the thermal model (mechanisms/geneva/contact.py) ----------------------------
+    def contact_geometry(self):
+        return geneva_contact.geometry(self.geometry)
+
+    def contact_state(self, table) -> dict[str, np.ndarray]:
+        return geneva_contact.state(self.geometry, table)
+
+    def contact_starts(self, table, events) -> np.ndarray:
+        return geneva_contact.starts(self.geometry, table, events)
 
     def describe(self) -> dict:
         g = self.geometry

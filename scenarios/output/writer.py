@@ -31,7 +31,8 @@ def resolved_scenario_toml(si: dict) -> str:
 
 
 def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
-    """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and PNG plots into out_dir."""
+    """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv) and
+    the PNG figures (scenarios/output/figures.py) into out_dir, atomically."""
     with atomic_folder(out_dir, force) as tmp:
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
         result.timeseries.to_csv(tmp / "timeseries.csv", index=False)
@@ -41,8 +42,12 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
         (tmp / "scenario.toml").write_text(resolved_scenario_toml(result.scenario))
         if plots and len(result.timeseries):
+            from mechsim.scenarios.output.figures import THERMAL_CYCLES, thermal_cycle_figure
             from mechsim.scenarios.output.plots import write_plots
             write_plots(result, tmp, mechanism)
+            cycle = thermal_cycle_figure(result)
+            if cycle is not None:
+                cycle.savefig(tmp / f"{THERMAL_CYCLES}.png", dpi=110)
         output = result.scenario.get("output", {})
         if output.get("animation") and len(result.timeseries):
             from mechsim.scenarios.output.animation import write_animation

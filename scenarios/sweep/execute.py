@@ -57,28 +57,10 @@ def _drive_angle_column(si: dict) -> str | None:
     return coordinate_columns(mech.coordinates[k], True)[0]
 
 
-_PREPARED = False
-
-
-def _prepare_process() -> None:
-    """Once per worker process: the runner looks up package versions from their metadata on every run (~40 ms,
-    as much as a closed-form case). Versions cannot change inside a process, so a sweep worker caches the answer.
-    (Runtime wrapper only; better done in scenarios/runner.py itself.)"""
-    global _PREPARED
-    if _PREPARED:
-        return
-    from functools import lru_cache
-    import mechsim.scenarios.runner as runner
-    if callable(getattr(runner, "_versions", None)) and not hasattr(runner._versions, "cache_info"):
-        runner._versions = lru_cache(maxsize=1)(runner._versions)
-    _PREPARED = True
-
-
 def run_case(task: CaseTask, integrate=None) -> Outcome:
     """Run one case; any failure (solver, physics, exception) becomes a row with success = False and its reason."""
     from mechsim.scenarios.runner import run
     from mechsim.scenarios.sweep.rows import cycle_figures, summary_row
-    _prepare_process()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     ts = None
@@ -272,13 +254,13 @@ class _Captured(BaseException):
 def _batch_reason(task: CaseTask) -> str | None:
     """Why a case cannot join a batch (None if it can): closed-form cases and the IDA backend."""
     from mechsim.scenarios.loader import build_mechanism
-    from mechsim.scenarios.runner import _choose_method, make_drive, solver_settings
+    from mechsim.scenarios.runner import choose_method, make_drive, solver_settings
     si = task.scenario.si
     if si["solver"]["backend"] != "diffrax":
         return "IDA backend (solver.backend = 'ida')"
     try:
         mech, drive, settings = build_mechanism(si), make_drive(si), solver_settings(si)
-        if _choose_method(si, mech, drive, settings)[0] != "dae":
+        if choose_method(si, mech, drive, settings)[0] != "dae":
             return "closed-form method (no integration to batch)"
     except Exception as exc:  # the case's own error: it runs (and is recorded) on the fallback runner
         return f"could not prepare ({type(exc).__name__})"

@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import time
 import uuid
-from contextlib import contextmanager
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 from typing import Protocol
 
@@ -46,29 +44,6 @@ class Plan:
         return list(self.cases[0].params) if self.cases else []
 
 
-@contextmanager
-def _memoized_units():
-    """Validating every case re-parses the same quantity strings ("75 mm", ...) with pint, which is most of the
-    loader's time. scenarios.schema.to_si is a pure function of (field, value, unit): memoize it while planning
-    (a scoped wrapper, restored afterwards; errors are not cached and re-raise as before)."""
-    import mechsim.scenarios.schema as schema
-    original = schema.to_si
-    cached = lru_cache(maxsize=None)(original)
-
-    def to_si(field, value, unit):
-        try:
-            hash(value)
-        except TypeError:
-            return original(field, value, unit)
-        return cached(field, value, unit)
-
-    schema.to_si = to_si
-    try:
-        yield
-    finally:
-        schema.to_si = original
-
-
 def plan(spec: SweepSpec, extra: list[list[str]] | None = None) -> Plan:
     """Validate every case (base scenario + its overrides) with the loader; nothing runs yet.
 
@@ -80,15 +55,14 @@ def plan(spec: SweepSpec, extra: list[list[str]] | None = None) -> Plan:
     per_case = spec.case_overrides()
     if extra is not None:
         per_case = [o + list(e) for o, e in zip(per_case, extra, strict=True)]
-    with _memoized_units():
-        for i, overrides in enumerate(per_case):
-            try:
-                sc = load(spec.scenario, overrides)
-            except ScenarioError as exc:
-                varied = ", ".join(overrides[len(spec.base):])
-                raise ScenarioError(exc.field, f"{exc.problem} (sweep case {i + 1}: {varied})") from None
-            cases.append(PlannedCase(i, case_key(sc, overrides, base_raw), overrides,
-                                     parameter_columns(sc, spec.keys), sc))
+    for i, overrides in enumerate(per_case):
+        try:
+            sc = load(spec.scenario, overrides)
+        except ScenarioError as exc:
+            varied = ", ".join(overrides[len(spec.base):])
+            raise ScenarioError(exc.field, f"{exc.problem} (sweep case {i + 1}: {varied})") from None
+        cases.append(PlannedCase(i, case_key(sc, overrides, base_raw), overrides,
+                                 parameter_columns(sc, spec.keys), sc))
     return Plan(spec, cases)
 
 

@@ -19,9 +19,9 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from mechsim.thermal import LinearThermalSystem, ambient_temperatures
-
-from mechsim.scenarios.thermal_integrate import ModalNetwork
+from mechsim.thermal.exact import ModalNetwork
+from mechsim.thermal.linear import LinearThermalSystem
+from mechsim.thermal.lumped import ambient_temperatures
 
 #: rows of the bulk history table over the whole duration
 HISTORY_ROWS = 1001
@@ -112,18 +112,82 @@ def history_table(system: LinearThermalSystem, means: CycleMeans, u_of_phase, ph
     return pd.DataFrame(out)
 
 
-def shift_window(df: pd.DataFrame, t_start: float, period: float, duration: float) -> tuple[pd.DataFrame, int]:
-    """The rows of the last full turn moved by m whole periods to end at or before `duration`; cumulative columns
-    (unwrapped angles, works, heat energies) advance by m times their increase over one turn."""
-    window = df[(df["t_s"] >= t_start - 1e-12) & (df["t_s"] < t_start + period - 1e-9)].copy()
-    m = int(np.floor((duration - (t_start + period)) / period + 1e-9))
-    if m <= 0 or window.empty:
-        return window, 0
+def output_times(duration: float, step: float) -> np.ndarray:
+    """The run's output grid: 0, step, 2 step, ... and the end itself when it is not a multiple (as the runner's)."""
+    n = int(np.floor(duration / step + 1e-9))
+    t = np.minimum(step * np.arange(n + 1), duration)
+    return t if t[-1] >= duration - 1e-12 else np.append(t, duration)
+
+
+def cumulative(column: str) -> bool:
+    """Columns that grow by a fixed amount per periodic turn (unwrapped angles, works) rather than repeat."""
+    return column.endswith("_angle_rad") or (column.startswith("work_") and column.endswith("_J"))
+
+
+def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
+                          step: float) -> tuple[pd.DataFrame, pd.DataFrame, float]:
+    """The whole run at the output step: the simulated rows on the output grid, then the periodic turn
+    [t_start, t_start + period) repeated up to `duration` (the mechanics is periodic there: cycle averaging
+    checks it). A repeated row at time t takes the turn's row at phase t_start + ((t - t_start) mod period),
+    linearly interpolated between the two simulated rows around it, or the nearer one where the mode changes
+    between them (no value the motion never takes); cumulative columns advance by their increase over one turn
+    per period. Events of the turn repeat the same way (`message` says so). Returns (table, events, the last
+    simulated time)."""
     t = df["t_s"].to_numpy(float)
+    grid = output_times(duration, step)
+    on_grid = np.isin(np.round(t / step, 6), np.round(grid / step, 6))
+    simulated = df[on_grid]
+    t_sim = float(simulated["t_s"].iloc[-1])
+    new_t = grid[grid > t_sim + 1e-9 * step]
+    if not len(new_t):
+        return df, events, float(t[-1])
+    m = np.floor((new_t - t_start) / period + 1e-12)
+    phase = np.clip(new_t - m * period, t[0], t[-1])
+    i = np.clip(np.searchsorted(t, phase, side="right") - 1, 0, len(t) - 2)
+    j = i + 1
+    w = (phase - t[i]) / (t[j] - t[i])
+    mode = df["mode"].to_numpy() if "mode" in df else np.zeros(len(t))
+    same = mode[i] == mode[j]
+    nearest = np.where(w < 0.5, i, j)
+    new = {}
     for col in df.columns:
-        if col.endswith("_angle_rad") or (col.startswith("work_") and col.endswith("_J")):
-            v = df[col].to_numpy(float)
-            step = float(np.diff(np.interp([t_start, t_start + period], t, v))[0])
-            window[col] = window[col] + m * step
-    window["t_s"] = window["t_s"] + m * period
-    return window.reset_index(drop=True), m
+        values = df[col].to_numpy()
+        if col == "t_s":
+            new[col] = new_t
+        elif np.issubdtype(values.dtype, np.number) and not np.issubdtype(values.dtype, np.bool_):
+            v = values.astype(float)
+            out = np.where(same, v[i] + w * (v[j] - v[i]), v[nearest])
+            if cumulative(col):
+                out = out + m * float(np.diff(np.interp([t_start, t_start + period], t, v))[0])
+            new[col] = out.astype(values.dtype) if np.issubdtype(values.dtype, np.integer) else out
+        else:
+            new[col] = values[nearest]
+    table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
+    return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim
+
+
+def _repeat_events(df, events, t_start, period, t_sim, duration) -> pd.DataFrame:
+    """The turn's events repeated every period after t_sim up to duration; `<coordinate>_q` advances like the
+    coordinate's angle column."""
+    if events is None or not len(events):
+        return events
+    te = events["t_s"].to_numpy(float)
+    turn = events[(te >= t_start) & (te < t_start + period)]
+    t = df["t_s"].to_numpy(float)
+    copies = []
+    for m in range(1, int(np.ceil((duration - t_start) / period)) + 1):
+        shifted = turn.copy()
+        shifted["t_s"] = shifted["t_s"] + m * period
+        shifted = shifted[(shifted["t_s"] > t_sim) & (shifted["t_s"] <= duration + 1e-12)]
+        if shifted.empty:
+            continue
+        for col in shifted.columns:
+            angle = f"{col[:-2]}_angle_rad"
+            if col.endswith("_q") and angle in df:
+                v = df[angle].to_numpy(float)
+                shifted[col] = shifted[col].astype(float) + m * float(
+                    np.diff(np.interp([t_start, t_start + period], t, v))[0])
+        if "message" in shifted:
+            shifted["message"] = "periodic continuation of the last simulated turn"
+        copies.append(shifted)
+    return pd.concat([events, *copies], ignore_index=True) if copies else events

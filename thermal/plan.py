@@ -18,11 +18,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from mechsim.thermal import effective_modulus, flash_temperature, half_width, peak_pressure, validity
+import mechsim.thermal.cycle as cyc
+from mechsim.thermal.conduction1d import validity
+from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form
+from mechsim.thermal.flash import flash_temperature
+from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
+from mechsim.thermal.models import MODELS
+from mechsim.thermal.network import KELVIN, ContactSource, ThermalSetup, ThermalSetupError, prepare
 
-import mechsim.scenarios.thermal_cycle as cyc
-from mechsim.scenarios.thermal_integrate import ModalNetwork, integrate_closed_form
-from mechsim.scenarios.thermal_setup import KELVIN, ThermalSetup, adapter, build
+__all__ = ["ThermalPlan", "ThermalSetupError", "plan"]
 
 #: averaging = 'auto' picks the cycle-averaged bulk from this many nominal cycles on
 AUTO_CYCLES = 50
@@ -32,25 +36,15 @@ CYCLE_TURNS_DAE = 6
 #: warn when the last two turns' mean heat differ by more than this (mechanics not yet periodic)
 PERIODICITY_TOLERANCE = 1e-3
 
-MODEL_WHY = {
-    "flash": "algebraic flash rise over the ambient at every output instant (moving-band solution per body, "
-             "Blok partition; docs/theory.md §G4.3-4.7); no thermal states",
-    "lumped": "bulk pin, crank and wheel temperatures (docs/theory.md §G5) as extra states, plus the algebraic flash "
-              "rise on top",
-    "1d": "bulk pin, crank and wheel temperatures plus 1-D conduction into the depth of each slot wall's track "
-          "(docs/theory.md §G6), plus the algebraic flash rise on top",
-}
-
-
 def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
-    text = f"thermal.model = '{model}' (scenario): {MODEL_WHY[model]}"
-    if model == "flash":
+    text = f"thermal.model = '{model}' (scenario): {MODELS[model].description}"
+    if MODELS[model].build is None:
         return text
     if method == "dae":
         name = {"ida": "IDA"}.get(backend, backend)
         return text + f"; {n_states} thermal states integrated in the same {name} run as the mechanics"
     return text + ("; prescribed speed needs no DAE: closed-form kinematics + the thermal ODE (the network "
-                   "integrated exactly in its modes, scenarios/thermal_integrate.py)")
+                   "integrated exactly in its modes, thermal/exact.py)")
 
 
 @dataclass
@@ -59,7 +53,7 @@ class ThermalPlan:
 
     setup: ThermalSetup
     si: dict
-    mech: object
+    mech: ContactSource
     method: str
     speed: float
     averaging: str
@@ -78,10 +72,11 @@ class ThermalPlan:
 
     # ---------------------------------------------------------------------------------------------- finish
     def finish(self, df: pd.DataFrame, events: pd.DataFrame, failed: bool = False
-               ) -> tuple[pd.DataFrame, dict[str, pd.DataFrame], dict, list[str]]:
-        """(timeseries with thermal columns, extra tables, summary['thermal'], warnings)."""
+               ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, pd.DataFrame], dict, list[str]]:
+        """(timeseries with thermal columns, events, extra tables, summary['thermal'], warnings). With cycle
+        averaging the timeseries and events cover the whole duration (thermal/cycle.py: the periodic turn
+        continued after the simulated window)."""
         setup, mech = self.setup, self.mech
-        _, contact_fn, starts_fn = adapter(mech)
         warnings = list(setup.warnings) + list(self.warnings)
         n_states = setup.system.size + 3 if setup.system else 0
         backend = self.si.get("solver", {}).get("backend", "ida")
@@ -90,9 +85,7 @@ class ThermalPlan:
                    "averaging": self.averaging, "averaging_why": self.averaging_why}
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
-            return df, extra, summary, warnings
-        starts = starts_fn(df, events, mech)
-        t_on_pin = self._time_since(df["t_s"].to_numpy(float), starts)
+            return df, events, extra, summary, warnings
         states = None
         inputs = breaks = None
         ext = setup.extension
@@ -101,19 +94,20 @@ class ThermalPlan:
                 states = df[list(ext.names)].to_numpy(float)
             else:
                 states, inputs, breaks = integrate_closed_form(
-                    ext, mech, contact_fn, self.si["initial"][mech.initial_keys[0]], self.speed,
+                    ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
                     df["t_s"].to_numpy(float), setup.initial)
         window = None
         if self.averaging == "cycle" and not failed:
-            window = self._cycle(df, states, inputs, breaks, contact_fn, t_on_pin, summary, warnings, extra)
+            window = self._cycle(df, events, states, inputs, breaks, summary, warnings, extra)
         if window is not None:
-            df, states, t_on_pin = window
+            df, events, states = window
         elif self.averaging == "cycle":
             summary["averaging"] = "resolved"
             summary["averaging_why"] += ("; the run failed before a periodic cycle" if failed else
                                          "; no full crank turn to average") + ", so what ran is shown resolved"
         df = df.copy()
-        contact = contact_fn(df, mech)
+        t_on_pin = self._time_since(df["t_s"].to_numpy(float), mech.contact_starts(df, events))
+        contact = mech.contact_state(df)
         self._add_columns(df, contact, states, t_on_pin)
         if states is not None and window is None:
             summary["heat_balance"] = self._balance(states)
@@ -123,7 +117,7 @@ class ThermalPlan:
                                  "band fit and smooth floors (heat_share_pin_bulk; docs/thermal.md)")
         summary["notes"] = list(setup.notes)
         warnings += self._validity(df, contact, summary)
-        return df, extra, summary, warnings
+        return df, events, extra, summary, warnings
 
     @staticmethod
     def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -140,8 +134,8 @@ class ThermalPlan:
         th = setup.section
         N = contact["normal_force"]
         engaged = contact["engaged"] & (N != 0)
-        U_wall = np.abs(contact["source_speed_wheel"])
-        U_pin = np.abs(contact["source_speed_pin"])
+        U_wall = np.abs(contact["source_speed_driven"])
+        U_pin = np.abs(contact["source_speed_driver"])
         E_star = effective_modulus(mat)
         b = half_width(N, geo.contact_radius, geo.contact_length, E_star)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -155,7 +149,7 @@ class ThermalPlan:
                                 t_on_pin=t_on_pin, t_on_wall=t_on_wall, distribution=th["distribution"])
         rise = res["temp_flash_rise_K"]
         if th["flash"] == "seed-blok":
-            seed_speed = geo.seed_source_speed_factor * df["crank_speed_rad_s"].to_numpy(float)
+            seed_speed = geo.driver_arm * df["crank_speed_rad_s"].to_numpy(float)
             rise = flash_temperature(N, contact["slip_speed"], U_wall, seed_speed, b, geo.contact_length, mu, mat,
                                      mat, distribution=th["distribution"], method="seed-blok")["temp_flash_rise_K"]
         share = np.where(engaged, res["heat_share_pin"], np.nan)
@@ -212,7 +206,10 @@ class ThermalPlan:
                 "closure_error_relative": closure / generated if generated > 0 else 0.0}
 
     # ---------------------------------------------------------------------------------------------- cycle mode
-    def _cycle(self, df, states, inputs, breaks, contact_fn, t_on_pin, summary, warnings, extra):
+    def _cycle(self, df, events, states, inputs, breaks, summary, warnings, extra):
+        """Cycle averaging: the cycle means of the last full turn, the mechanics continued periodically over the
+        whole duration, and the bulk states of the averaged solution (mean + periodic ripple) on every row.
+        (table, events, states) or None when there is no full turn to average."""
         setup, mech = self.setup, self.mech
         t = df["t_s"].to_numpy(float)
         angle_col = next(c for c in df.columns if c.endswith("_angle_rad"))
@@ -223,7 +220,7 @@ class ThermalPlan:
             return None
         if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
             n = None
-            contact = contact_fn(df, mech)
+            contact = mech.contact_state(df)
             e_gen = np.concatenate([[0.0], np.cumsum(0.5 * (contact["heat_rate"][1:] + contact["heat_rate"][:-1])
                                                       * np.diff(t))])
             means = cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
@@ -233,38 +230,49 @@ class ThermalPlan:
             n = setup.system.size
             means = cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
         duration = float(self.si["duration"])
-        window, m = cyc.shift_window(df, means.t_start, means.period, duration)
-        keep = (t >= means.t_start - 1e-12) & (t < means.t_start + means.period - 1e-9)   # as in shift_window
-        t_on = t_on_pin[keep]
+        full, full_events, t_sim = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
+                                                             float(self.si["output_step"]))
+        if self.method == "closed-form":     # the closed form is exact at any time: no interpolation in phase
+            columns = closed_form_columns(mech, self.si["initial"][mech.initial_keys[0]], self.speed)
+            later = full["t_s"].to_numpy(float) > t_sim
+            exact = columns(full["t_s"].to_numpy(float)[later])
+            for col, values in exact.items():
+                if col in full and col != "t_s":
+                    full.loc[later, col] = values
         info = {"period_s": means.period, "mean_heat_rate_W": means.heat_mean,
                 "mean_heat_share_pin": None if states is None else means.share_mean,
-                "turns_simulated": int(len(bounds)),
-                "window_shift_periods": m, "periodicity_of_mean_heat": means.periodicity}
+                "turns_simulated": int(len(bounds)), "mechanics_simulated_until_s": t_sim,
+                "rows_continued_periodically": int((full["t_s"] > t_sim).sum()),
+                "continuation": ("rows after mechanics_simulated_until_s repeat the last simulated turn "
+                                 + ("(closed form: exact at every row)" if self.method == "closed-form" else
+                                    "(interpolated in phase between its output rows)")
+                                 + "; bulk temperatures on every row come from the cycle-averaged solution"),
+                "periodicity_of_mean_heat": means.periodicity}
         if means.periodicity is not None and means.periodicity > PERIODICITY_TOLERANCE:
             warnings.append(f"thermal: the mechanics is not yet periodic after {len(bounds)} crank turns (mean heat "
                             f"changed by {means.periodicity:.2e} between the last two); the cycle means may be off")
         summary["cycle"] = info
         if states is None:
-            return window, None, t_on
-        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, contact_fn)
-        times = window["t_s"].to_numpy(float)
-        _, full = cyc.bulk_response(setup.system, means, u_of_phase, phase_breaks, times)
-        window_states = np.full((len(window), n + 3), np.nan)      # per-row energies: see the history table
-        window_states[:, :n] = full
+            return full, full_events, None
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        times = full["t_s"].to_numpy(float)
+        _, bulk = cyc.bulk_response(setup.system, means, u_of_phase, phase_breaks, times)
+        full_states = np.full((len(full), n + 3), np.nan)      # per-row energies: see the history table
+        full_states[:, :n] = bulk
         extra["thermal_history"] = cyc.history_table(setup.system, means, u_of_phase, phase_breaks, duration,
                                                      KELVIN)
         summary["heat_balance"] = self._mean_balance(means, duration)
-        window = window.drop(columns=[c for c in setup.extension.names if c in window])
-        return window, window_states, t_on
+        full = full.drop(columns=[c for c in setup.extension.names if c in full])
+        return full, full_events, full_states
 
-    def _period_input(self, df, states, inputs, breaks, means, contact_fn):
+    def _period_input(self, df, states, inputs, breaks, means):
         """u(phase) over the periodic turn (phase 0 = means.t_start) and the phases where it jumps."""
         a, P = means.t_start, means.period
         if inputs is not None:                                    # closed form: exact at any time
             n_in = self.setup.system.input_matrix.shape[1]
             return (lambda s: inputs(a + s)[:n_in]), [b - a for b in breaks if a < b < a + P]
         t = df["t_s"].to_numpy(float)
-        u, _, _ = self.setup.extension.inputs_numeric(contact_fn(df, self.mech))
+        u, _, _ = self.setup.extension.inputs_numeric(self.mech.contact_state(df))
         mode = df["mode"].to_numpy()
         jumps = [0.5 * (t[i] + t[i + 1]) - a for i in np.flatnonzero(mode[1:] != mode[:-1]) if a < t[i] < a + P]
         return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), jumps
@@ -295,7 +303,7 @@ class ThermalPlan:
         if setup.mesh is None:
             return out
         engaged = contact["engaged"]
-        U = np.abs(contact["source_speed_wheel"][engaged])
+        U = np.abs(contact["source_speed_driven"][engaged])
         L_contact = df["peclet_wheel"].to_numpy(float)[engaged]
         if len(L_contact):
             ok, msg = validity(np.max(L_contact))
@@ -322,11 +330,13 @@ class ThermalPlan:
         return out
 
 
-def plan(si: dict, mech, drive, method: str) -> ThermalPlan | None:
-    """The thermal plan of a validated scenario (None for thermal.model = 'none')."""
-    setup = build(si, mech)
-    if setup is None:
+def plan(si: dict, mech: ContactSource, drive, method: str) -> ThermalPlan | None:
+    """The thermal plan of a validated scenario (None for thermal.model = 'none'); ThermalSetupError names a
+    [thermal] value that cannot work with this mechanism."""
+    model = si.get("thermal", {}).get("model", "none")
+    if model == "none":
         return None
+    setup = prepare(si, mech, MODELS[model])
     th = setup.section
     duration = float(si["duration"])
     cycles = duration / setup.period
@@ -336,11 +346,11 @@ def plan(si: dict, mech, drive, method: str) -> ThermalPlan | None:
         averaging, why = "cycle", "thermal.averaging = 'cycle' (scenario)"
     elif th["averaging"] == "resolved":
         averaging, why = "resolved", "thermal.averaging = 'resolved' (scenario)"
-    elif setup.model == "1d":
-        averaging, why = "resolved", "auto: model = '1d' resolves every cycle (the track meshes follow each engagement)"
+    elif MODELS[model].every_cycle:
+        averaging, why = "resolved", f"auto: model = '{model}' resolves every cycle (it follows each engagement)"
     elif cycles >= AUTO_CYCLES:
         head = f"auto: duration {duration:.6g} s = {cycles:.0f} cycles of {setup.period:.4g} s (>= {AUTO_CYCLES})"
-        if setup.model == "flash":
+        if setup.system is None:
             tail = (f"; the flash model has no memory, so the mechanics runs {turns} turns until periodic and the last "
                     "turn, moved to the end of the run, stands for every cycle")
         else:

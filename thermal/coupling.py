@@ -1,6 +1,7 @@
-"""Thermal states in the same DAE as the mechanics: a `StateExtension` built from a linear thermal network.
+"""Thermal states in the same DAE as the mechanics: a state extension (the rows `dynamics/` appends to the
+mechanics' residual) built from a linear thermal network.
 
-The network is a `thermal.LinearThermalSystem`, C T' = -K T + s + B u (lumped bulk bodies, optionally 1-D
+The network is a `LinearThermalSystem` (thermal/linear.py), C T' = -K T + s + B u (lumped bulk bodies, optionally 1-D
 track meshes; docs/theory.md §G5-6). Its inputs u are heat rates into the bodies, made from the contact
 expressions a mode exposes (`Mode.heat`): the friction power Q = mu |N| |u_slip| (`heat_rate`, docs/theory.md §G4.1),
 the pin's share gamma (Blok's partition, §4.6, of the band-source fit, §4.3) and, for per-track meshes, the
@@ -28,7 +29,9 @@ import numpy as np
 import scipy.sparse as sps
 import sympy as sp
 
-from mechsim.thermal import TRANSIENT_FLOOR_COEFFICIENT, LinearThermalSystem, band_fit
+from mechsim.thermal.band_source import band_fit
+from mechsim.thermal.flash import TRANSIENT_FLOOR_COEFFICIENT
+from mechsim.thermal.linear import LinearThermalSystem
 
 #: Regularising half-width b0 (m): of the order of the roughness of ground steel (Rq 0.2-1 µm), below which a
 #: smooth Hertz contact is not meaningful anyway; it changes b only for N below ~0.1 N (seed geometry).
@@ -94,7 +97,7 @@ def _share_function(distribution: str) -> tuple[type[sp.Function], tuple[sp.Symb
     N, u_pin, u_wheel = sp.symbols("N U_pin U_wheel", real=True)
     params = sp.symbols(SHARE_PARAMETERS, positive=True)
     by_name = dict(zip(SHARE_PARAMETERS, params))
-    contact = {"normal_force": N, "source_speed_pin": u_pin, "source_speed_wheel": u_wheel}
+    contact = {"normal_force": N, "source_speed_driver": u_pin, "source_speed_driven": u_wheel}
     expr = _share_expression(contact, by_name.__getitem__, distribution, sp)
     args = (N, u_pin, u_wheel) + params
     return opaque_function(f"heat_share_pin_{distribution.replace('-', '_')}", expr, args), args
@@ -103,7 +106,7 @@ def _share_function(distribution: str) -> tuple[type[sp.Function], tuple[sp.Symb
 def _share_expression(contact: dict, P: Callable[[str], object], distribution: str, xp=np):
     """The explicit share expression (sympy or numpy)."""
     N = contact["normal_force"]
-    U_pin, U_wheel = contact["source_speed_pin"], contact["source_speed_wheel"]
+    U_pin, U_wheel = contact["source_speed_driver"], contact["source_speed_driven"]
     b2 = 4 * P("th_R") * _abs(N, xp) / (xp.pi * P("th_l") * P("th_Estar")) + P("th_b0") ** 2
     c2 = TRANSIENT_FLOOR_COEFFICIENT ** 2
     L2_pin = b2 * (U_pin ** 2 / (4 * P("th_chi_pin") ** 2) + c2 / (P("th_chi_pin") * P("th_t_ref")))
@@ -116,14 +119,14 @@ def _share_expression(contact: dict, P: Callable[[str], object], distribution: s
 def heat_share_pin(contact: dict, P: Callable[[str], object], distribution: str, xp=np):
     """gamma_pin of the DAE (module docstring): Blok partition of the band fit at smooth, floored Peclet numbers.
 
-    `contact` holds normal_force, source_speed_pin, source_speed_wheel (sympy expressions or numpy arrays);
+    `contact` holds normal_force, source_speed_driver (over the pin), source_speed_driven (over the wheel) (sympy expressions or numpy arrays);
     P(name) gives the SHARE_PARAMETERS (symbols or numbers). With xp = sympy the result is one opaque call
     (`opaque_function`) of the same expression. docs/theory.md §G4.3 (fit), §4.6 (partition, transient floor).
     """
     if xp is not sp:
         return _share_expression(contact, P, distribution, xp)
     fn, _ = _share_function(distribution)
-    return fn(contact["normal_force"], contact["source_speed_pin"], contact["source_speed_wheel"],
+    return fn(contact["normal_force"], contact["source_speed_driver"], contact["source_speed_driven"],
               *(P(name) for name in SHARE_PARAMETERS))
 
 

@@ -1,7 +1,7 @@
 """Integrate the thermal network where no DAE runs: prescribed speed, closed-form kinematics + the thermal ODE.
 
 docs/architecture.md: "prescribed speed needs no DAE: closed-form kinematics + thermal ODE only". The heat inputs are the
-same functions the DAE rows use (dynamics.thermal_coupling, numpy flavour), evaluated on the closed form. The
+same functions the DAE rows use (thermal/coupling.py, numpy flavour), evaluated on the closed form. The
 network is linear with constant coefficients, so each output interval is integrated exactly in the state
 (variation of constants) and by Gauss-Legendre quadrature in the input:
 
@@ -20,8 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from mechsim.dynamics.thermal_coupling import ThermalExtension
-from mechsim.thermal import LinearThermalSystem
+from mechsim.thermal.coupling import ThermalExtension
+from mechsim.thermal.linear import LinearThermalSystem
 
 #: Gauss-Legendre nodes per (sub-)interval
 QUADRATURE_NODES = 6
@@ -39,16 +39,17 @@ def closed_form_columns(mech, angle0: float, speed: float) -> Callable[[np.ndarr
     return columns
 
 
-def input_function(ext: ThermalExtension, contact_fn, columns_fn, mech) -> Callable[[np.ndarray], np.ndarray]:
-    """u(t) = [network inputs, Q, gamma Q] at an array of times, shape (n_inputs + 2, len(t))."""
+def input_function(ext: ThermalExtension, mech, columns_fn) -> Callable[[np.ndarray], np.ndarray]:
+    """u(t) = [network inputs, Q, gamma Q] at an array of times, shape (n_inputs + 2, len(t)); the contact from
+    the mechanism's `contact_state` of the closed-form columns."""
     def inputs(t) -> np.ndarray:
-        contact = contact_fn(columns_fn(t), mech)
+        contact = mech.contact_state(columns_fn(t))
         u, Q, gamma = ext.inputs_numeric(contact)
         return np.vstack([u, Q[None, :], (gamma * Q)[None, :]])
     return inputs
 
 
-def _contact_code(cols: dict) -> np.ndarray:
+def contact_code(cols: dict) -> np.ndarray:
     """One integer per row that changes wherever the heat input is not smooth: mode changes (jumps), and sign
     changes of the slip (|u| kinks: slip reversal) and of the normal force (flank switch)."""
     mode = np.asarray(cols["mode"]) == "engaged"
@@ -60,13 +61,13 @@ def _contact_code(cols: dict) -> np.ndarray:
 
 
 def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13) -> list[float]:
-    """Times where the closed form's contact changes (see _contact_code), by bisection between output rows, so
+    """Times where the closed form's contact changes (see contact_code), by bisection between output rows, so
     that every quadrature interval sees a smooth input.
 
     All brackets are bisected together (one vectorised closed-form call per halving: a few dozen calls per
     case instead of that many per bracket); each bracket stops on its own tolerance, so the times are those of
     one-at-a-time bisection."""
-    code = _contact_code(columns_fn(t_grid))
+    code = contact_code(columns_fn(t_grid))
     idx = np.flatnonzero(code[1:] != code[:-1])
     if not len(idx):
         return []
@@ -75,7 +76,7 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13) -> list[flo
     active = b - a > tol * np.maximum(1.0, np.abs(b))
     while np.any(active):
         mid = 0.5 * (a[active] + b[active])
-        same = _contact_code(columns_fn(mid)) == ca[active]
+        same = contact_code(columns_fn(mid)) == ca[active]
         j = np.flatnonzero(active)
         a[j[same]] = mid[same]
         b[j[~same]] = mid[~same]
@@ -101,7 +102,7 @@ class ModalNetwork:
     """
 
     def __init__(self, system: LinearThermalSystem, loss: np.ndarray | None = None, source: bool = True):
-        K = np.asarray(system._dense_K(), dtype=float)
+        K = np.asarray(system.dense_conductance(), dtype=float)
         if not np.allclose(K, K.T, rtol=1e-12, atol=1e-14 * np.abs(K).max()):
             raise ValueError("ModalNetwork needs a symmetric (reciprocal) conductance matrix")
         d = 1.0 / np.sqrt(system.capacity)
@@ -182,11 +183,11 @@ class ModalNetwork:
         return out[np.searchsorted(cuts, t_out)]
 
 
-def integrate_closed_form(ext: ThermalExtension, mech, contact_fn, angle0: float, speed: float, t_out: np.ndarray,
+def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: float, t_out: np.ndarray,
                           y0: np.ndarray) -> tuple[np.ndarray, Callable, list[float]]:
     """Thermal states [T..., E_gen, E_pin, E_conv] at t_out for the closed-form motion; also the input function
     and the contact switch times (for reuse by the cycle-averaged model)."""
     columns = closed_form_columns(mech, angle0, speed)
-    inputs = input_function(ext, contact_fn, columns, mech)
+    inputs = input_function(ext, mech, columns)
     breaks = switch_times(columns, t_out)
     return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks), inputs, breaks

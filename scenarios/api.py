@@ -1,0 +1,152 @@
+"""mechsim's Python API (docs/api.md): load a scenario, run it, look at the result, save what the CLI saves.
+
+    import mechsim
+    sc = mechsim.load("geneva-motor", set=["duration=2 s"])
+    r = mechsim.run(sc)
+    r.timeseries, r.events, r.summary["peaks"]
+    figs = r.plot()                 # {name: matplotlib Figure}, the CLI's figures
+    r.save("results/motor")         # the CLI's output folder, written atomically
+
+`mechsim sweep` and `mechsim compare` are `sweep(...)` and `compare(...)`. The command line is a thin layer over
+these functions (scenarios/cli.py), so both give the same numbers and files.
+"""
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from pathlib import Path
+from typing import Callable, Iterable, Mapping
+
+from mechsim.dynamics.result import Result as RunResult
+from mechsim.scenarios.loader import Scenario, builtin_names
+from mechsim.scenarios.loader import load as _load_scenario
+from mechsim.scenarios.units import ScenarioError
+
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sweep"]
+
+Overrides = Iterable[str] | Mapping[str, object] | None
+
+
+def _override_list(overrides: Overrides) -> list[str]:
+    """`set=` as the CLI's --set strings: a list of "section.key=value", or a dict {"section.key": value}
+    whose values are written as TOML ("75 mm" stays a quantity string, 3 a number, True a boolean)."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, str):
+        return [overrides]
+    if isinstance(overrides, Mapping):
+        from mechsim.scenarios.sweep.spec import toml_literal
+        return [f"{key}={toml_literal(value)}" for key, value in overrides.items()]
+    return [str(o) for o in overrides]
+
+
+def builtins() -> list[str]:
+    """Names of the built-in scenarios (`mechsim list`)."""
+    return builtin_names()
+
+
+def load(name_or_path: str | Path, set: Overrides = None) -> Scenario:  # noqa: A002 (the CLI's --set)
+    """A validated scenario from a built-in name or a TOML file, with overrides applied.
+
+    set: ["section.key=value", ...] like `mechsim run --set`, or {"section.key": value}.
+    Raises ScenarioError (a ValueError whose message names the field) on any user error.
+    """
+    return _load_scenario(str(name_or_path), _override_list(set))
+
+
+@dataclasses.dataclass(repr=False)
+class Result(RunResult):
+    """A finished run: `timeseries` (one row per output instant, SI columns `<quantity>_<unit>`), `events` (one
+    row per transition), `summary` (peaks, energy balance, solver statistics, model choices, warnings),
+    `scenario` (the resolved scenario in SI), `failure` (None, or when/where/why the run stopped; what ran is
+    kept), `extra_tables` (mechanism- and thermal-specific tables, written as <name>.csv)."""
+
+    mechanism: object = None
+
+    def __repr__(self) -> str:
+        state = "ok" if self.failure is None else f"failed: {self.failure.message()}"
+        return (f"<mechsim.Result {self.summary.get('scenario', '?')}: {self.timeseries.shape[0]} rows x "
+                f"{self.timeseries.shape[1]} columns, {len(self.events)} events, {state}>")
+
+    def plot(self, which: str | Iterable[str] | None = None) -> dict:
+        """The figures the CLI writes, as matplotlib Figures keyed by name (the PNG's name without .png).
+
+        which: one name or several (e.g. "motion_vs_time"); None for all. Display one in a notebook by
+        leaving it as a cell's value; save with fig.savefig(path)."""
+        from mechsim.scenarios.output.figures import result_figures
+        figs = result_figures(self, self.mechanism)
+        if which is None:
+            return figs
+        wanted = [which] if isinstance(which, str) else list(which)
+        unknown = [w for w in wanted if w not in figs]
+        if unknown:
+            raise KeyError(f"no figure named {', '.join(unknown)}; this result has: {', '.join(figs)}")
+        return {w: figs[w] for w in wanted}
+
+    def save(self, folder: str | Path, force: bool = False, plots: bool | None = None) -> Path:
+        """Write the CLI's output folder (timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, extra
+        tables and PNG figures) atomically: all or nothing, an existing folder replaced only with force=True.
+        plots: None follows the scenario's output.plots."""
+        from mechsim.scenarios.output.writer import write_result
+        if plots is None:
+            plots = bool(self.scenario.get("output", {}).get("plots", True))
+        return write_result(self, Path(folder), force=force, plots=plots, mechanism=self.mechanism)
+
+
+def run(scenario: Scenario | str | Path, set: Overrides = None,  # noqa: A002
+        progress: Callable[[float], None] | None = None) -> Result:
+    """Run a scenario (a loaded Scenario, or a name/path loaded with `set` overrides).
+
+    The mechanism and the thermal model are built once (runner.plan), then integrated (runner.execute). A solver
+    or physics failure does not raise: it comes back in `Result.failure` with what ran. progress(t) is called
+    with the simulated time as the run advances."""
+    from mechsim.scenarios import runner
+    if not isinstance(scenario, Scenario):
+        scenario = load(scenario, set)
+    elif set:
+        raise ValueError("run(scenario, set=...): pass the overrides to load(); this scenario is already loaded")
+    plan = runner.plan(scenario)
+    base = runner.execute(plan, progress)
+    fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+    return Result(**fields, mechanism=plan.mechanism)
+
+
+def compare(scenario: Scenario | str | Path, set: Overrides = None, rtol: float = 1e-10,  # noqa: A002
+            atol: float | None = None, solver: str | None = None):
+    """Run on IDA and on diffrax at rtol (atol = rtol/100 by default) and compare every column (`mechsim
+    compare`): a DataFrame, one row per column (max |diff|, max relative, where, tolerance, passed);
+    `.attrs["passed"]` says whether the backends agree, `.attrs` also holds row and event counts, the event-time
+    difference, failures and each run's solver statistics."""
+    from mechsim.scenarios.compare import compare as compare_backends
+    if not 0 < rtol < 1:
+        raise ValueError(f"rtol must be in (0, 1), got {rtol}")
+    target = scenario if isinstance(scenario, Scenario) else str(scenario)
+    return compare_backends(target, _override_list(set), rtol=rtol, atol=atol, diffrax_solver=solver)
+
+
+def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: bool = False,  # noqa: A002
+          out: str | Path | None = None, workers: int | None = 0, timeseries: bool = False, plots: bool = False,
+          force: bool = False, batch: bool = False):
+    """A parameter sweep (`mechsim sweep`): the table with one row per case (parameters, peaks, cycle figures,
+    success and failure reason), as a DataFrame.
+
+    vary: ["section.key=SPEC", ...] or {"section.key": "SPEC"}, SPEC as on the command line ("5,7,14 N*m",
+    "0.1:0.4:7", "log:1e-3:1e-1:5"); zip=True pairs the axes instead of a full grid. out: the sweep folder
+    (resumable, as the CLI writes it); None runs in a temporary folder and keeps only the table. workers: local
+    processes (0 runs here, None all cores). batch: one vmapped diffrax solve per model structure."""
+    import pandas as pd
+
+    from mechsim.scenarios.sweep.execute import make_runner
+    from mechsim.scenarios.sweep.run import plan, run_sweep
+    from mechsim.scenarios.sweep.spec import build_spec
+    if isinstance(vary, Mapping):
+        vary = [f"{key}={spec}" for key, spec in vary.items()]
+    spec = build_spec(str(scenario), [str(v) for v in (vary or [])], _override_list(set), zip)
+    pl = plan(spec)
+    runner = make_runner(workers, None, None, batch)
+    with tempfile.TemporaryDirectory(prefix="mechsim-sweep-") as scratch:
+        folder = Path(out) if out is not None else Path(scratch) / "sweep"
+        report = run_sweep(pl, folder, runner, timeseries=timeseries, force=force, plots=plots)
+        table = pd.read_parquet(folder / "sweep.parquet")
+    table.attrs["report"] = report.line()
+    return table

@@ -1,0 +1,88 @@
+"""A result's figures as matplotlib Figure objects, keyed by the name of the PNG the CLI writes (without .png).
+
+`Result.plot()` returns these, and `write_result` saves them, so the Python API and the CLI show the same
+pictures. The per-mechanism figures come from the plot writer (scenarios/output/plots.py: its `figures(result,
+mechanism)` where it offers one); the figures of long thermal runs are made here (`thermal_cycle_figure`).
+"""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+#: the cycle-temperature figure's name (thermal_cycles.png)
+THERMAL_CYCLES = "thermal_cycles"
+
+
+def result_figures(result, mechanism=None) -> dict[str, Figure]:
+    """Every figure of a result: the plot writer's, then the whole-run thermal figure where there is one."""
+    from mechsim.scenarios.output import plots
+    maker = getattr(plots, "figures", None)
+    figs = dict(maker(result, mechanism)) if maker is not None else _rendered(result, mechanism)
+    cycle = thermal_cycle_figure(result)
+    if cycle is not None:
+        figs[THERMAL_CYCLES] = cycle
+    return figs
+
+
+def _rendered(result, mechanism) -> dict[str, Figure]:
+    """The plot writer's PNGs, each shown on a Figure (for a plot writer that only writes files)."""
+    import matplotlib.image as mpimg
+    from mechsim.scenarios.output.plots import write_plots
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="mechsim-figures-") as tmp:
+        for path in write_plots(result, Path(tmp), mechanism):
+            image = mpimg.imread(path)
+            dpi = 110
+            fig = Figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi), dpi=dpi)
+            ax = fig.add_axes((0, 0, 1, 1))
+            ax.imshow(image)
+            ax.set_axis_off()
+            out[Path(path).stem] = fig
+    return out
+
+
+def cycle_table(timeseries, angle_column: str | None = None):
+    """Per drive cycle (one turn of the drive angle from its first value; the rows grouped by
+    floor((angle - angle0)/2 pi)): its middle time, the cycle mean of each bulk temperature and the peak
+    contact temperature (°C; NaN in a cycle without contact). A pandas DataFrame, one row per cycle."""
+    angle_column = angle_column or next(c for c in timeseries.columns if c.endswith("_angle_rad"))
+    angle = timeseries[angle_column].to_numpy(float)
+    cycle = np.floor((angle - angle[0]) / (2 * np.pi) + 1e-12).astype(int)
+    columns = [c for c in timeseries.columns if c.startswith("temp_bulk_") or c == "temp_contact_C"]
+    grouped = timeseries[["t_s", *columns]].assign(cycle=cycle).groupby("cycle")
+    t = grouped["t_s"]
+    table = {"cycle": t.min().index.to_numpy(), "t_mid_s": (0.5 * (t.min() + t.max())).to_numpy()}
+    for c in columns:
+        if c == "temp_contact_C":
+            table["temp_contact_peak_C"] = grouped[c].max().to_numpy()
+        else:
+            table[c[:-2] + "_mean_C"] = grouped[c].mean().to_numpy()
+    import pandas as pd
+    return pd.DataFrame(table)
+
+
+def thermal_cycle_figure(result) -> Figure | None:
+    """Bulk temperatures (cycle means) and the peak contact temperature of each drive cycle over the whole run,
+    for runs with bulk thermal states long enough to have been cycle-averaged (summary['thermal']['cycle'])."""
+    th = result.summary.get("thermal", {}) if isinstance(result.summary, dict) else {}
+    cycle = th.get("cycle") or {}
+    df = result.timeseries
+    if not cycle.get("period_s") or "temp_contact_C" not in df or not any(c.startswith("temp_bulk_") for c in df):
+        return None
+    table = cycle_table(df)
+    fig = Figure(figsize=(9, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot(table["t_mid_s"], table["temp_contact_peak_C"], lw=1.2, color="C3", label="contact, peak of the cycle")
+    for i, c in enumerate(c for c in table.columns if c.startswith("temp_bulk_")):
+        body = c[len("temp_bulk_"):-len("_mean_C")]
+        ax.plot(table["t_mid_s"], table[c], lw=1.2, color=f"C{i}", label=f"bulk {body}, cycle mean")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("temperature (°C)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax.set_title(f"{result.summary.get('scenario', '')}: temperatures per drive cycle ({len(table)} cycles; "
+                 f"periodic from {float(cycle['period_s']):.4g} s per cycle)")
+    return fig
