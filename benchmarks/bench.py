@@ -97,9 +97,8 @@ def select(names, default: tuple[str, ...]) -> tuple[str, ...]:
 def make_problem(config: BenchConfig) -> Problem:
     """The scenario as a benchmark problem (any mechanism with a torque or motor drive: a prescribed speed
     leaves nothing to integrate in the drive coordinate)."""
-    from mechsim.scenarios import thermal_setup
-    from mechsim.scenarios.loader import build_mechanism, load
-    from mechsim.scenarios.runner import make_drive
+    from mechsim.scenarios.loader import load
+    from mechsim.scenarios.runner import plan
 
     sc = load(config.scenario, list(config.overrides))
     si = sc.si
@@ -107,13 +106,14 @@ def make_problem(config: BenchConfig) -> Problem:
         raise ScenarioError("bench", "the benchmark needs a scenario with a torque or motor drive (a prescribed "
                                      f"speed fixes the drive coordinate); got {config.scenario!r}")
     s = si["solver"]
-    mech = build_mechanism(si)
+    planned = plan(sc)
+    mech = planned.mechanism
     angle_key, speed_key = mech.initial_keys
-    thermal = thermal_setup.build(si, mech)
+    thermal = planned.thermal and planned.thermal.setup
     if thermal is not None and thermal.extension is None:
         raise ScenarioError("bench", f"thermal.model = {thermal.model!r} adds no states; the benchmark integrates "
                                      "'none', 'lumped' or '1d'")
-    return Problem(sc.name, mech, make_drive(si), si["initial"][angle_key],
+    return Problem(sc.name, mech, planned.drive, si["initial"][angle_key],
                    si["initial"][speed_key], config.duration or si["duration"],
                    config.output_step or si["output_step"], (s["baumgarte_alpha"], s["baumgarte_beta"]),
                    thermal and thermal.extension, thermal and thermal.initial)

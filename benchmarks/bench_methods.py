@@ -41,7 +41,7 @@ class Problem:
     duration: float
     dt_out: float
     baumgarte: tuple[float, float] = (10.0, 10.0)
-    ext: object = None            # thermal states in the same DAE (`dynamics.thermal_coupling.ThermalExtension`)
+    ext: object = None            # thermal states in the same DAE (`thermal.coupling.ThermalExtension`)
     ext_initial: object = None
 
     @property

@@ -1,13 +1,10 @@
 """A result's figures as matplotlib Figure objects, keyed by the name of the PNG the CLI writes (without .png).
 
 `Result.plot()` returns these, and `write_result` saves them, so the Python API and the CLI show the same
-pictures. The per-mechanism figures come from the plot writer (scenarios/output/plots.py: its `figures(result,
-mechanism)` where it offers one); the figures of long thermal runs are made here (`thermal_cycle_figure`).
+pictures. The per-mechanism figures come from scenarios/output/plots.py (`figures`); the figure of long
+thermal runs is made here (`thermal_cycle_figure`).
 """
 from __future__ import annotations
-
-import tempfile
-from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -18,30 +15,12 @@ THERMAL_CYCLES = "thermal_cycles"
 
 def result_figures(result, mechanism=None) -> dict[str, Figure]:
     """Every figure of a result: the plot writer's, then the whole-run thermal figure where there is one."""
-    from mechsim.scenarios.output import plots
-    maker = getattr(plots, "figures", None)
-    figs = dict(maker(result, mechanism)) if maker is not None else _rendered(result, mechanism)
+    from mechsim.scenarios.output.plots import figures
+    figs = dict(figures(result, mechanism))
     cycle = thermal_cycle_figure(result)
     if cycle is not None:
         figs[THERMAL_CYCLES] = cycle
     return figs
-
-
-def _rendered(result, mechanism) -> dict[str, Figure]:
-    """The plot writer's PNGs, each shown on a Figure (for a plot writer that only writes files)."""
-    import matplotlib.image as mpimg
-    from mechsim.scenarios.output.plots import write_plots
-    out = {}
-    with tempfile.TemporaryDirectory(prefix="mechsim-figures-") as tmp:
-        for path in write_plots(result, Path(tmp), mechanism):
-            image = mpimg.imread(path)
-            dpi = 110
-            fig = Figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi), dpi=dpi)
-            ax = fig.add_axes((0, 0, 1, 1))
-            ax.imshow(image)
-            ax.set_axis_off()
-            out[Path(path).stem] = fig
-    return out
 
 
 def cycle_table(timeseries, angle_column: str | None = None):

@@ -42,12 +42,10 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
         (tmp / "scenario.toml").write_text(resolved_scenario_toml(result.scenario))
         if plots and len(result.timeseries):
-            from mechsim.scenarios.output.figures import THERMAL_CYCLES, thermal_cycle_figure
-            from mechsim.scenarios.output.plots import write_plots
-            write_plots(result, tmp, mechanism)
-            cycle = thermal_cycle_figure(result)
-            if cycle is not None:
-                cycle.savefig(tmp / f"{THERMAL_CYCLES}.png", dpi=110)
+            from mechsim.scenarios.output.figures import result_figures
+            from mechsim.scenarios.output.plots import save
+            for stem, fig in result_figures(result, mechanism).items():
+                save(fig, tmp / f"{stem}.png")
         output = result.scenario.get("output", {})
         if output.get("animation") and len(result.timeseries):
             from mechsim.scenarios.output.animation import write_animation
