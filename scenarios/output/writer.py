@@ -31,8 +31,8 @@ def resolved_scenario_toml(si: dict) -> str:
 
 
 def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
-    """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv) and
-    the PNG figures (scenarios/output/figures.py) into out_dir, atomically."""
+    """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv),
+    the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically."""
     with atomic_folder(out_dir, force) as tmp:
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
         result.timeseries.to_csv(tmp / "timeseries.csv", index=False)
@@ -40,7 +40,8 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         for name, table in result.extra_tables.items():
             table.to_csv(tmp / f"{name}.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
-        (tmp / "scenario.toml").write_text(resolved_scenario_toml(result.scenario))
+        scenario_toml = resolved_scenario_toml(result.scenario)
+        (tmp / "scenario.toml").write_text(scenario_toml)
         if plots and len(result.timeseries):
             from mechsim.scenarios.output.figures import result_figures
             from mechsim.scenarios.output.plots import save
@@ -50,4 +51,6 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         if output.get("animation") and len(result.timeseries):
             from mechsim.scenarios.output.animation import write_animation
             write_animation(result, tmp, mechanism, output.get("animation_format", "gif"))
+        from mechsim.scenarios.output.report_html import write_report
+        write_report(result, tmp, scenario_toml)
     return out_dir
