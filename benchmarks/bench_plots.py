@@ -1,21 +1,25 @@
 """The work-precision figure of `mechsim bench`: error against warm wall time, error against the requested
-tolerance, and the cold setup time (derivation, compilation, construction) shown apart."""
+tolerance, and the cold setup time (derivation, compilation, construction) shown apart.
+
+Built on a Figure of its own (no pyplot state); the legend sits below the panels, off the data; the setup
+panel's labels get room for every method."""
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+import numpy as np
+import pandas as pd
+from matplotlib import rcParams
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 STYLE = {"mechsim IDA": ("-", "o"), "mechsim diffrax": (":", "D"), "scipy": ("--", "s"), "CasADi": ("-.", "^")}
 
 
-def work_precision_figure(rows: pd.DataFrame, summary: dict, path) -> None:
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(17, 5.6), gridspec_kw={"width_ratios": [1.25, 1.0, 0.8]})
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figure:
+    """The figure; written as PNG to `path` when given."""
     methods = list(dict.fromkeys(rows.method))
+    fig = Figure(figsize=(17, max(6.4, 2.2 + 0.42 * len(methods))), layout="constrained")
+    ax1, ax2, ax3 = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.25, 1.0, 0.8]})
+    colors = rcParams["axes.prop_cycle"].by_key()["color"]
     for i, name in enumerate(methods):
         d = rows[rows.method == name].sort_values("rtol", ascending=False)
         family = d.family.iloc[0]
@@ -43,17 +47,19 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path) -> None:
     ax2.set_xlabel("requested rtol (atol = 1e-2 rtol)")
     ax2.set_title("achieved error against requested tolerance", fontsize=10)
     ax2.invert_xaxis()
-    ax1.legend(fontsize=7, ncol=2, loc="lower left")
+    handles, labels = ax2.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(7, len(labels)), fontsize=8, frameon=False)
     setup = rows.groupby("method", sort=False).agg(setup=("setup_time_s", "max"), scope=("setup_scope", "first"))
     setup = setup[np.isfinite(setup.setup) & (setup.setup > 0)]
     y = np.arange(len(setup))
     ax3.barh(y, setup.setup, color=[colors[methods.index(m) % len(colors)] for m in setup.index])
-    ax3.set_yticks(y, [f"{m}\n({s})" for m, s in zip(setup.index, setup.scope)], fontsize=7)
+    ax3.set_yticks(y, [f"{m} ({s})" for m, s in zip(setup.index, setup.scope)], fontsize=8)
     ax3.set_xscale("log")
     ax3.set_xlabel("cold setup time (s)")
     ax3.set_title("derivation / compilation / construction,\nnot in the wall times", fontsize=10)
     ax3.invert_yaxis()
     ax3.grid(True, axis="x", which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    FigureCanvasAgg(fig)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
