@@ -190,14 +190,16 @@ def _cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: 
 
 
 def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | None) -> Figure | None:
-    """The mechanism at `instants` evenly spread over the last cycle of the run (over the run if no cycle)."""
-    from mechsim.scenarios.output.drawings import DRAWINGS, drawing_for
+    """The mechanism at `instants` over the last complete cycle of the run (over the run if no cycle): evenly over
+    the contact and once in the contact-free part (`_instants`)."""
+    from mechsim.scenarios.output.drawings import DRAWINGS, FORCE_COLUMNS, drawing_for
     if mech is None or type(mech).__name__ not in DRAWINGS or not instants or not len(df):
         return None
     if cycle is not None and cycle.column in df:
-        angle = df[cycle.column].to_numpy(float)
-        targets = angle[-1] - cycle.period + (np.arange(instants) + 0.5) * cycle.period / instants
-        idx = [int(np.argmin(np.abs(angle - a))) for a in targets]
+        k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)
+        complete = [c for c in np.unique(k) if np.ptp(within[k == c]) >= 0.98 * cycle.period]
+        last = np.flatnonzero(k == (complete[-1] if complete else k[-1]))
+        idx = _instants(df.iloc[last], instants, FORCE_COLUMNS.get(type(mech).__name__)) + last[0]
     else:
         idx = list(np.linspace(0, len(df) - 1, instants).astype(int))
     fig = Figure(figsize=(3.6 * instants, 3.9), layout="constrained")
@@ -211,6 +213,20 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
     fig.suptitle("mechanism (mm); arrow: " + ("coupler force" if type(mech).__name__ == "ChainDwell"
                                                else "normal contact force") + ", scaled to the run's peak")
     return fig
+
+
+def _instants(rows: pd.DataFrame, n: int, force_column: str | None) -> np.ndarray:
+    """Row positions of `n` drawings in one cycle: evenly over the rows in contact (force != 0) and one farthest
+    from contact where the cycle has a contact-free part (mid-dwell of a Geneva), else evenly over the cycle."""
+    force = rows[force_column].to_numpy(float) if force_column in rows else np.ones(len(rows))
+    contact = np.flatnonzero(force != 0)
+    free = np.flatnonzero(force == 0)
+    if n < 2 or not len(contact) or not len(free):
+        return ((np.arange(n) + 0.5) * len(rows) / n).astype(int)
+    picks = contact[((np.arange(n - 1) + 0.5) * len(contact) / (n - 1)).astype(int)]
+    gap = np.abs(free[:, None] - contact[None, :])
+    farthest = free[np.argmax(np.minimum(gap, len(rows) - gap).min(axis=1))]   # the cycle wraps around
+    return np.sort(np.r_[picks, farthest])
 
 
 def figures(result: Result, mechanism=None) -> dict[str, Figure]:
