@@ -47,7 +47,7 @@ class DriveCycle:
     x label of the versus-angle figures."""
 
     column: str
-    period: float
+    period: float | None
     start: float
     label: str
 
@@ -56,7 +56,7 @@ def drive_cycle(mech) -> DriveCycle | None:
     """One cycle of the driven member: a crank turn from mid-dwell for the Geneva (0 = mid-engagement,
     docs/theory.md §G1), a chain circuit for the chain dwell mechanism (El-Shakery eq. 31), the trochoid's
     period for the rolling pair (docs/theory.md §K2) when it closes (a turn of the crank if the crank is
-    driven); None when the motion has no period to wrap on."""
+    driven), else no period (period None: the angle over the run, one line); None for other mechanisms."""
     kind = type(mech).__name__
     if kind == "Geneva":
         return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi,
@@ -71,9 +71,10 @@ def drive_cycle(mech) -> DriveCycle | None:
         try:
             (a, b), periodic = rolling_span(mech.kin)
         except ValueError:
-            return None
-        return DriveCycle("rolling_angle_rad", b - a, a, "rolling link angle within the trochoid period (deg)") \
-            if periodic else None
+            periodic = False
+        if periodic:
+            return DriveCycle("rolling_angle_rad", b - a, a, "rolling link angle within the trochoid period (deg)")
+        return DriveCycle("rolling_angle_rad", None, 0.0, "rolling link angle (deg; the motion has no period)")
     return None
 
 
@@ -141,6 +142,8 @@ def time_figure(df: pd.DataFrame, figure: str, title: str) -> Figure | None:
 
 def cycle_index(angle: np.ndarray, cycle: DriveCycle) -> tuple[np.ndarray, np.ndarray]:
     """(cycle number, angle within the cycle in rad measured from the cycle's start) of every row."""
+    if cycle.period is None:
+        return np.zeros(len(angle), int), angle - cycle.start
     k = np.floor((angle - cycle.start) / cycle.period + 1e-12).astype(int)
     if len(k) > 1 and k[-1] != k[-2]:   # a run that ends where a cycle starts closes the previous one
         k[-1] = k[-2]
@@ -170,19 +173,23 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle) -
                 shade = 0.35 + 0.65 * (n + 1) / len(cycles)
                 ax.plot(x[a:b], yy, lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
                         label=label if n == len(cycles) - 1 else "_nolegend_")
-        quantity = "angle turned since the cycle start" if panel["unit"] == "deg" else panel["quantity"]
+        since = "the cycle start" if cycle.period else "the start"
+        quantity = f"angle turned since {since}" if panel["unit"] == "deg" else panel["quantity"]
         ax.set_ylabel(f"{quantity} ({panel['unit']})")
         ax.grid(alpha=0.3)
         _legend(ax)
-    axes[-1].set_xlim(x0, x0 + cycle.period * DEG)
+    axes[-1].set_xlim(*((x0, x0 + cycle.period * DEG) if cycle.period else (np.nanmin(x), np.nanmax(x))))
     axes[-1].set_xlabel(cycle.label)
-    fig.suptitle(f"{title} ({len(cycles)} cycle{'s' if len(cycles) != 1 else ''}, a line each, later darker)")
+    fig.suptitle(f"{title} ({len(cycles)} cycle{'s' if len(cycles) != 1 else ''}, a line each, later darker)"
+                 if cycle.period else f"{title} (no period: the whole run)")
     return fig
 
 
 def _cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: DriveCycle) -> float:
     """The value of y where this cycle started (interpolated in the drive angle; the first rows if the run
     began inside the cycle)."""
+    if a == 0 or cycle.period is None:
+        return float(y[a])
     start = cycle.start + math.floor((drive[a] - cycle.start) / cycle.period + 1e-12) * cycle.period
     if a > 0:
         return float(np.interp(start, drive[a - 1:a + 1], y[a - 1:a + 1]))
@@ -195,7 +202,7 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
     from mechsim.scenarios.output.drawings import DRAWINGS, FORCE_COLUMNS, drawing_for
     if mech is None or type(mech).__name__ not in DRAWINGS or not instants or not len(df):
         return None
-    if cycle is not None and cycle.column in df:
+    if cycle is not None and cycle.period and cycle.column in df:
         k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)
         complete = [c for c in np.unique(k) if np.ptp(within[k == c]) >= 0.98 * cycle.period]
         last = np.flatnonzero(k == (complete[-1] if complete else k[-1]))
