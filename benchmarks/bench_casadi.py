@@ -28,6 +28,10 @@ below, `geneva_transition`):
   state, projected onto its constraints (position by Gauss-Newton, velocity in the kinetic-energy metric).
   Every CasADi function is called through its buffer interface (`Fast`): a plain call from Python converts
   each argument (20-50 µs a call here), which would make the peer measure CasADi's Python wrapper.
+- `simulate_events` (`casadi-idas-events`): CasADi's own event support (CasADi >= 3.7, which marks it
+  experimental): one integrator over the whole grid whose state carries the discrete mode variables, the
+  dynamics switched by `if_else`, the guards as zero-crossing outputs and the transition rules as a CasADi
+  `transition` function (`build_events`).
 
 Needs the `bench` extra (casadi).
 """
@@ -509,3 +513,149 @@ def _consistent(cm: LoopMode, q, v, p) -> np.ndarray:
         MiGt = np.linalg.solve(M, G.T)
         v = v - MiGt @ np.linalg.solve(G @ MiGt, G @ v)
     return np.concatenate([q, v])
+
+
+# -- variant 2: CasADi's own event support -------------------------------------------------------------------
+#: the Geneva's discrete (mode) parameters, carried as states (zero rate) by the event-support variant
+DISCRETE = ("slot", "lock_angle", "flank", "slide")
+
+
+@dataclass
+class EventsModel:
+    integrator: Fast
+    peer: PeerModel
+    indicators: list       # (mode, guard) of each zero-crossing output
+    n_out: int
+    dt_out: float
+    build_time_s: float
+
+
+def build_events(mech: Mechanism, rtol: float, atol: float, n_out: int, dt_out: float, ext=None,
+                 max_steps: int = 100000, max_events: int = 1000) -> EventsModel:
+    """One IDAS integrator for the whole run with CasADi's event support (CasADi >= 3.7, 'experimental').
+
+    The state is x = (q, v, thermal states, engaged flag, slot, lock angle, flank, slide); the rate is the
+    engaged or dwell right-hand side by `if_else` on the flag (zero for the discrete states). Each guard of each
+    mode is one zero-crossing output, positive while it cannot fire (CasADi fires on a fall through zero:
+    -g for a rising guard, g for a falling one, 1 in the other mode). The `transition` function applies the
+    Geneva's rules (`geneva_transition`) and projects q and v onto the new mode's constraints (two Gauss-Newton
+    steps on Phi, velocity in the kinetic-energy metric), all symbolic. Not covered: the stall guard (a
+    transition cannot stop the integration); without friction the slip guard is left out as in `build`.
+    """
+    import casadi as ca
+
+    wall = time.perf_counter()
+    peer = translate(mech, ext)
+    g = mech.geometry
+    nq = peer.nq
+    e0 = next(iter(peer.modes.values()))
+    x, P = e0["x"], e0["p"]
+    D = ca.SX.sym("d", 1 + len(DISCRETE))           # engaged flag, then DISCRETE
+    dv = {n: D[1 + i] for i, n in enumerate(DISCRETE)}
+    idx = {n: peer.parameter_names.index(n) for n in DISCRETE}
+    old = ca.vertcat(*[P[idx[n]] for n in DISCRETE])
+    new = ca.vertcat(*[dv[n] for n in DISCRETE])
+
+    def sub(expr):
+        return ca.substitute(expr, old, new)
+
+    eng, dw = peer.modes["engaged"], peer.modes["dwell"]
+    engaged = D[0] > 0.5
+    rhs = ca.vertcat(ca.if_else(engaged, sub(eng["rhs"]), sub(dw["rhs"])), ca.DM.zeros(D.shape))
+    X = ca.vertcat(x, D)
+    zero, indicators = [], []
+    for name, e, active in (("engaged", eng, engaged), ("dwell", dw, ca.logic_not(engaged))):
+        for i, (gname, direction) in enumerate(zip(peer.guard_names[name], peer.directions[name])):
+            if gname == "stall" or (gname == "slip_reversal" and mech.friction == 0):
+                continue
+            value = -sub(e["guards"][i]) if direction > 0 else sub(e["guards"][i])
+            zero.append(ca.if_else(active, value, 1.0))
+            indicators.append((name, gname))
+
+    def project(e, q, v, d):
+        """q, v of mode e made consistent with its constraints (symbolic, discrete values d)."""
+        def at(expr, qq, vv=v):
+            return ca.substitute(ca.substitute(sub_d(expr, d), e["q"], qq), e["v"], vv)
+        for _ in range(2):
+            Gq = at(e["G"], q)
+            q = q - ca.mtimes(ca.pinv(Gq), at(e["phi"], q))
+        Gq, Mq = at(e["G"], q), at(e["M"], q)
+        MiGt = ca.solve(Mq, Gq.T)
+        v = v - ca.mtimes(MiGt, ca.solve(ca.mtimes(Gq, MiGt), ca.mtimes(Gq, v)))
+        return q, v
+
+    def sub_d(expr, d):
+        return ca.substitute(expr, old, ca.vertcat(*[d[n] for n in DISCRETE]))
+
+    q, v = x[:nq], x[nq:2 * nq]
+    rest = x[2 * nq:]
+    index = ca.SX.sym("index")
+    post = X
+    for i, (mode, gname) in enumerate(indicators):
+        d = dict(dv)
+        k = dv["slot"]
+        if gname == "exit":
+            d.update(slot=k + 1, lock_angle=(k + 0.5) * g.pitch)
+            flag, target = 0.0, dw
+        elif gname == "entry":
+            d.update(flank=1.0)
+            flag, target = 1.0, eng
+        elif gname == "flank_switch":
+            d.update(flank=-dv["flank"])
+            flag, target = 1.0, eng
+        else:                                       # slip_reversal
+            d.update(slide=-dv["slide"])
+            flag, target = 1.0, eng
+        qn, vn = project(target, q, v, d)
+        if gname == "entry":                        # the slip sign from the projected state
+            alpha = qn[0] - 2 * math.pi * d["slot"]
+            beta = qn[1] - d["slot"] * g.pitch
+            u = g.crank_radius * vn[0] * ca.sin(alpha + beta) + g.pin_radius * (vn[0] + vn[1])
+            d.update(slide=ca.if_else(u >= 0, 1.0, -1.0))
+        after = ca.vertcat(qn, vn, rest, flag, *[d[n] for n in DISCRETE])
+        post = ca.if_else(index == i, after, post)
+    transition = ca.Function("transition", {"index": index, "t": ca.SX.sym("t"), "x": X, "p": P, "post_x": post},
+                             ca.event_in(), ca.event_out())
+    opts = {"reltol": rtol, "abstol": atol, "max_num_steps": max_steps, "disable_internal_warnings": True,
+            "transition": transition, "max_events": max_events, "event_tol": 1e-12}
+    dae = {"x": X, "p": P, "ode": rhs, "zero": ca.vertcat(*zero)}
+    F = ca.integrator("events", "idas", dae, 0.0, [dt_out * i for i in range(1, n_out + 1)], opts)
+    return EventsModel(Fast(F), peer, indicators, n_out, dt_out, time.perf_counter() - wall)
+
+
+def simulate_events(model: EventsModel, mech: Mechanism, drive: Drive, t_end: float, dt_out: float, angle0: float,
+                    speed0: float, alpha: float = 10.0, beta: float = 10.0, ext=None, ext_initial=None,
+                    count: bool = False) -> PeerRun:
+    """One call of the event-support integrator; events are counted from the engaged flag and the discrete
+    states at the outputs (two mode changes between two outputs would count as none)."""
+    if drive.is_prescribed:
+        raise ValueError("the CasADi peer integrates torque and motor drives only")
+    n_out = int(np.floor(t_end / dt_out + 1e-9))
+    if n_out != model.n_out or abs(dt_out - model.dt_out) > 1e-15:
+        raise ValueError("the peer was built for another output grid")
+    peer, nq = model.peer, model.peer.nq
+    values = _values(peer, mech, drive, angle0, alpha, beta, ext)
+    init = mech.initial_state(angle0, speed0)
+    values.update(init.updates)
+    pv = np.array([values[n] for n in peer.parameter_names], float)
+    extra = np.asarray(ext_initial, float) if ext_initial is not None else np.zeros(peer.nx - 2 * nq)
+    d0 = [1.0 if init.mode == "engaged" else 0.0] + [values[n] for n in DISCRETE]
+    x0 = np.concatenate([init.q, init.v, extra, d0])
+    F = model.integrator
+    failure = None
+    try:
+        xs = F(x0, None, pv)[0]
+    except RuntimeError as exc:
+        xs, failure = np.full((n_out, len(x0)), np.nan), str(exc)
+    disc = xs[:, peer.nx:]
+    changes = int(np.count_nonzero(np.any(np.diff(np.vstack([d0, disc]), axis=0) != 0, axis=1)))
+    stats = {"events": changes, "segments": changes + 1}
+    if count:
+        st = F.stats()
+        stats.update(steps=int(st.get("nsteps", 0)), rejected_steps=int(st.get("netfails", 0)),
+                     residual_evaluations=int(st.get("nfevals", 0)),
+                     jacobian_evaluations=int(st.get("nlinsetups", 0)))
+    t = dt_out * np.arange(n_out + 1)
+    angle = np.concatenate([[x0[0]], xs[:, 0]])
+    ok = np.isfinite(angle)
+    return PeerRun(t[ok], angle[ok], stats, [], failure)

@@ -289,6 +289,8 @@ METHODS: dict[str, Method] = {m.name: m for m in [
     ScipyMethod("scipy-DOP853", "scipy", "explicit", "reduced ODE (2 states)", mechanisms=GENEVA, solver="DOP853"),
     CasadiMethod("casadi-idas", "CasADi", "implicit", "index-1 + Baumgarte, KKT solved by CasADi (4 states)",
                  "casadi", GENEVA, variant="loop"),
+    CasadiMethod("casadi-idas-events", "CasADi", "implicit", "the same, CasADi's event support (4 + 5 states)",
+                 "casadi", GENEVA, variant="events"),
 ]}
 
 

@@ -1,4 +1,4 @@
-"""The work-precision figure of `mechsim bench`: error against warm wall time, error against the requested
+"""The work-precision figure of `mechsim bench`: error against warm CPU time, error against the requested
 tolerance, and the cold setup time (derivation, compilation, construction) shown apart.
 
 Built on a Figure of its own (no pyplot state); the legend sits below the panels, off the data; the setup
@@ -26,11 +26,11 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
         ls, marker = STYLE.get(family, ("-", "o"))
         color = colors[i % len(colors)]
         ok = d[(d.status == "ok") & (d.error_rad > 0)]
-        bad = d[(d.status != "ok") & np.isfinite(d.wall_time_s)]
-        ax1.plot(ok.wall_time_s, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
+        bad = d[(d.status != "ok") & np.isfinite(d.cpu_time_s)]
+        ax1.plot(ok.cpu_time_s, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
         ax2.plot(ok.rtol, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
         if len(bad):
-            ax1.plot(bad.wall_time_s, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
+            ax1.plot(bad.cpu_time_s, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
             ax2.plot(bad.rtol, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
     r = np.array([rows.rtol.min(), rows.rtol.max()])
     ax2.plot(r, r, color="0.6", lw=1, label="error = rtol")
@@ -39,7 +39,7 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
         ax.set_yscale("log")
         ax.grid(True, which="both", alpha=0.3)
         ax.set_ylabel(f"max error of {summary.get('error_column', 'crank_angle_rad')} (rad)")
-    ax1.set_xlabel("warm wall time per run (s)")
+    ax1.set_xlabel("warm CPU time per run (s)")
     independent = summary.get("reference", {}).get("independent", True)
     ref_note = "" if independent else f"\nreference: {summary['reference_label']}"
     ax1.set_title(f"{summary['scenario']}: {summary['duration_s']:g} s, {summary['output_points']} output points\n"
@@ -56,7 +56,7 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
     ax3.set_yticks(y, [f"{m} ({s})" for m, s in zip(setup.index, setup.scope)], fontsize=8)
     ax3.set_xscale("log")
     ax3.set_xlabel("cold setup time (s)")
-    ax3.set_title("derivation / compilation / construction,\nnot in the wall times", fontsize=10)
+    ax3.set_title("derivation / compilation / construction,\nnot in the run times", fontsize=10)
     ax3.invert_yaxis()
     ax3.grid(True, axis="x", which="both", alpha=0.3)
     FigureCanvasAgg(fig)

@@ -8,7 +8,7 @@ Cases (the seed Geneva, n = 4, r = 75 mm, driven by a linear motor, stall 40 N·
 - `A-mu0.15-lumped`: friction 0.15 and the lumped thermal model (bulk pin/crank/wheel temperatures and the
   heat balance as 6 more states; without friction no heat flows, so the thermal case has friction).
 
-Methods: mechsim's IDA (index-2, the scenario's formulation), mechsim's diffrax Tsit5 (warm; its compile time
+Methods: mechsim's IDA (index-1 and index-2; the scenario's formulation is index-2), mechsim's diffrax Tsit5 (warm; its compile time
 per tolerance is reported apart), the CasADi IDAS peer of `bench_casadi` (a Python event loop as a careful
 CasADi user writes it, and CasADi's own event support), and scipy's LSODA and DOP853 on the reduced
 2-state ODE, a scipy user's first choice (mechanics only: not in the thermal case).
@@ -40,7 +40,7 @@ CASES: dict[str, tuple[str, ...]] = {
     "A-mu0.15-lumped": ("drive.no_load_speed=6 rad/s", "contact.friction=0.15", 'thermal.model="lumped"'),
 }
 PEER = "casadi-idas"
-METHODS_FULL = ("ida-index2", "diffrax-Tsit5", "casadi-idas", "casadi-idas-events", "scipy-LSODA", "scipy-DOP853")
+METHODS_FULL = ("ida-index1", "ida-index2", "diffrax-Tsit5", "casadi-idas", "casadi-idas-events", "scipy-LSODA", "scipy-DOP853")
 METHODS_SMALL = ("ida-index2", "casadi-idas")
 RTOLS_FULL = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 RTOLS_SMALL = (1e-5, 1e-6, 1e-7)
