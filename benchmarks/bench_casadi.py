@@ -406,7 +406,7 @@ def simulate(model: LoopModel, mech: Mechanism, drive: Drive, t_end: float, dt_o
 def _predict(cm: LoopMode, x, pv, gap: float, dt: float, remaining: int, nq: int) -> int:
     """Outputs to integrate: up to the first one past the predicted crossing of the mode's boundary angle
     (g = theta - theta_b, g' = omega, g'' = the crank's acceleration: the later of the crossings at constant
-    speed and at constant acceleration), with the margin MARGIN and two outputs; all that remain when the mode has
+    speed and at constant acceleration, capped at twice the first), with the margin MARGIN and two outputs; all that remain when the mode has
     no boundary or the crank is not predicted to reach it."""
     if cm.boundary is None:
         return remaining
@@ -417,7 +417,9 @@ def _predict(cm: LoopMode, x, pv, gap: float, dt: float, remaining: int, nq: int
         return min(remaining, 2)
     disc = w * w - 2 * acc * g
     T_quad = -2 * g / (w + math.sqrt(disc)) if disc > 0 and w + math.sqrt(disc) > 0 else math.inf
-    T = max(T_quad, -g / w) if w > 0 else T_quad     # the later of constant speed and constant acceleration
+    # the later of constant speed and constant acceleration, at most twice the constant-speed time (a strong
+    # deceleration at the start of a mode does not last: the quadratic alone may never reach the boundary)
+    T = min(max(T_quad, -g / w), -2 * g / w) if w > 0 else T_quad
     if not math.isfinite(T):
         return remaining
     steps = 1 + math.ceil(max(T * MARGIN - gap, 0.0) / dt) + 2
