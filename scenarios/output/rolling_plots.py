@@ -26,7 +26,7 @@ def plot_coupler_atlas(atlas: Atlas | RollingFourBar, ax=None, show_trochoid: bo
         atlas = coupler_atlas(atlas)
     mech = atlas.mechanism
     if ax is None:
-        fig = Figure(figsize=(7, 7))
+        fig = Figure(figsize=(9.5, 7), layout="constrained")
         FigureCanvasAgg(fig)
         ax = fig.add_subplot(111)
     else:
@@ -69,5 +69,5 @@ def plot_coupler_atlas(atlas: Atlas | RollingFourBar, ax=None, show_trochoid: bo
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(title if title is not None else (mech.name and f"rolling-pair 4-bar, set {mech.name}"))
-    ax.legend(loc="upper right", fontsize=7)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)   # off the curves
     return fig
