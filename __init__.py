@@ -12,19 +12,20 @@ The Python API (docs/api.md), loaded on first use so that `import mechsim` stays
 ``mechanisms/``, ``dynamics/``, ``thermal/``, ``scenarios/`` and ``benchmarks/`` to ``mechsim.mechanisms`` and
 so on (``pyproject.toml``, ``[tool.setuptools.package-dir]``).
 """
-from importlib import metadata as _metadata
-
-try:
-    __version__ = _metadata.version("mechsim")
-except _metadata.PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0+unknown"
-
 #: the API's names, imported from mechsim.scenarios.api on first access (PEP 562)
 _API = ("load", "run", "sweep", "compare", "builtins", "Result", "Scenario", "ScenarioError")
 __all__ = [*_API, "__version__"]
 
 
 def __getattr__(name: str):
+    if name == "__version__":            # from the package metadata, read on first use (~20-50 ms)
+        from importlib import metadata
+        try:
+            value = metadata.version("mechsim")
+        except metadata.PackageNotFoundError:  # a source tree that was never installed
+            value = "0+unknown"
+        globals()[name] = value
+        return value
     if name in _API:
         from mechsim.scenarios import api
         value = getattr(api, name)

@@ -11,15 +11,37 @@ from pathlib import Path
 from typing import List, Optional
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from mechsim.scenarios.units import ScenarioError
 
+# Cold start (docs/benchmarks.md, "Cold start"): this module imports only typer; rich, the scientific stack and
+# the solvers load inside the commands that use them, and help is click's plain text (typer's rich help alone
+# costs ~0.3 s of imports), so `mechsim --help` answers in a fraction of a second.
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  rich_markup_mode=None,
                   help="Simulate intermittent-motion mechanisms and their contact temperatures.")
-err = Console(stderr=True)
-out = Console()
+
+
+class LazyConsole:
+    """A rich Console made on first use (importing rich costs ~0.1 s that `--help` need not pay)."""
+
+    def __init__(self, stderr: bool = False):
+        self._stderr = stderr
+        self._console = None
+
+    @property
+    def console(self):
+        if self._console is None:
+            from rich.console import Console
+            self._console = Console(stderr=self._stderr)
+        return self._console
+
+    def __getattr__(self, name):
+        return getattr(self.console, name)
+
+
+err = LazyConsole(stderr=True)
+out = LazyConsole()
 
 USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
 
@@ -80,10 +102,13 @@ def run(
         target = _output_folder(out_dir, sc.name, force)
     except ScenarioError as exc:
         _fail(str(exc))
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
     from mechsim.scenarios.console import native_output
     duration = sc.si["duration"]
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("t = {task.completed:.3f} s"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=err, disable=quiet, transient=True) as bar:
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=err.console, disable=quiet,
+                  transient=True) as bar:
         task = bar.add_task(sc.name, total=duration)
         try:
             with native_output() as native:
@@ -233,7 +258,7 @@ def sweep(
     from mechsim.scenarios.sweep.run import cli_main
     try:
         code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, timeseries, plots, force,
-                        quiet, out, err, batch)
+                        quiet, out.console, err.console, batch)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:

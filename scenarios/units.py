@@ -44,7 +44,30 @@ def to_si(field: str, value, unit: str) -> float:
 
 @lru_cache(maxsize=65536)
 def _to_si_cached(field: str, value, unit: str) -> float:
-    return _to_si(field, value, unit)
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        return _to_si(field, value, unit)
+    key = f"{type(value).__name__}:{value!r}->{unit}"
+    cache = _disk_cache()
+    hit = cache.get(key) if cache is not None else None
+    if isinstance(hit, float):
+        return hit
+    result = _to_si(field, value, unit)          # raises on a bad value: errors are never stored
+    if cache is not None:
+        cache.put(key, result)
+    return result
+
+
+@lru_cache(maxsize=1)
+def _disk_cache():
+    """Successful conversions on disk (scenarios/diskcache.py), keyed by pint's version: a fresh `mechsim run`
+    of a scenario it has seen converts every quantity without importing pint."""
+    from importlib import metadata
+
+    from mechsim.scenarios.diskcache import JsonCache
+    try:
+        return JsonCache(f"units-pint-{metadata.version('pint')}")
+    except metadata.PackageNotFoundError:
+        return None
 
 
 def _to_si(field: str, value, unit: str) -> float:

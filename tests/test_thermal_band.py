@@ -132,3 +132,13 @@ def test_row16_stationary_band_switched_on():
     # short times: 1-D penetration under the band centre, theta = 2 sqrt(Fo/pi)
     fo = 1e-3
     assert float(bs.band_stationary_transient(0.0, fo)) == pytest.approx(2 * math.sqrt(fo / math.pi), rel=1e-9)
+
+
+def test_shipped_table_nodes_are_the_exact_integral():
+    """band_table_data.py holds band_theta_exact at the table's nodes (shipped for a fast cold start): recomputed
+    here by quadrature, they agree far inside the table's own interpolation error (2e-5)."""
+    from mechsim.thermal import band_table_data as data
+    assert data.LOG10_RANGE == bs.TABLE_LOG10_RANGE and data.NODES_PER_DECADE == bs.TABLE_NODES_PER_DECADE
+    for kind in bs.KINDS:
+        for stat in bs.STATISTICS:
+            np.testing.assert_allclose(data.VALUES[(kind, stat)], bs.table_nodes_exact(kind, stat), rtol=1e-10)

@@ -188,20 +188,35 @@ def band_theta_low(L, kind: str = "uniform", statistic: str = "max"):
 
 
 # ---------------------------------------------------------------------------------------------- fast table
-@functools.lru_cache(maxsize=None)
-def _table(kind: str, statistic: str) -> CubicSpline:
+def table_log_nodes() -> np.ndarray:
+    """ln(L) at the fast table's nodes (TABLE_NODES_PER_DECADE per decade over TABLE_LOG10_RANGE)."""
     lo, hi = TABLE_LOG10_RANGE
     n = int(round((hi - lo) * TABLE_NODES_PER_DECADE)) + 1
-    log_l = np.linspace(lo, hi, n) * math.log(10.0)
-    values = band_theta_exact(np.exp(log_l), kind, statistic)
-    return CubicSpline(log_l, np.log(values))
+    return np.linspace(lo, hi, n) * math.log(10.0)
+
+
+def table_nodes_exact(kind: str, statistic: str) -> np.ndarray:
+    """The exact theta at the table's nodes (quadrature, ~0.1 s per kind and statistic)."""
+    return band_theta_exact(np.exp(table_log_nodes()), kind, statistic)
+
+
+@functools.lru_cache(maxsize=None)
+def _table(kind: str, statistic: str) -> CubicSpline:
+    """The spline through the node values shipped in band_table_data.py (the same numbers as
+    `table_nodes_exact`, checked by the tests), or computed here when the table's grid has changed."""
+    from mechsim.thermal import band_table_data as data
+    values = data.VALUES.get((kind, statistic))
+    if (data.LOG10_RANGE != tuple(TABLE_LOG10_RANGE) or data.NODES_PER_DECADE != TABLE_NODES_PER_DECADE
+            or values is None):
+        values = table_nodes_exact(kind, statistic)
+    return CubicSpline(table_log_nodes(), np.log(np.asarray(values, dtype=float)))
 
 
 def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
     """Fast theta_max/theta_avg for arrays of L (the evaluator to use at every output instant).
 
-    A cubic spline of ln(theta) in ln(L) through the exact values at 5 nodes per decade on 1e-4..1e4, built
-    once per (kind, statistic) on first use (~0.2 s, cached); outside that range the exact asymptotes
+    A cubic spline of ln(theta) in ln(L) through the exact values at 5 nodes per decade on 1e-4..1e4 (shipped
+    in band_table_data.py, built into a spline once per (kind, statistic) on first use); outside that range the exact asymptotes
     `band_theta_high`/`band_theta_low` (relative mismatch at the table ends < 1e-4). Measured max relative
     error against the exact integral over 1e-3 < L < 1e3 (600 log-spaced points): max 2.1e-6 / 3.9e-6
     (uniform / semi-elliptic), avg 1.4e-5 / 1.4e-5; bound asserted: TABLE_MAX_REL_ERROR = 2e-5.
@@ -274,3 +289,24 @@ def band_stationary_transient(X, fourier, kind: str = "uniform"):
 def band_stationary_transient_centre_asymptote(fourier):
     """(1/pi)[ln(4 Fo) + 2 - gamma_E]: large-Fo centre rise of the switched-on stationary band (docs/theory.md §G4.6)."""
     return (np.log(4.0 * np.asarray(fourier, dtype=float)) + 2.0 - EULER_GAMMA) / np.pi
+
+
+def write_table_data(path) -> None:
+    """Regenerate band_table_data.py (the exact node values of every kind and statistic)."""
+    from pathlib import Path
+    from mechsim.thermal import band_table_data as data
+    head = data.__doc__.strip()
+    lines = [f'"""{head}"""', "", f"LOG10_RANGE = {tuple(TABLE_LOG10_RANGE)!r}",
+             f"NODES_PER_DECADE = {TABLE_NODES_PER_DECADE!r}", "", "VALUES = {"]
+    for kind in ("uniform", "semi-elliptic"):
+        for statistic in ("max", "avg"):
+            values = [repr(float(x)) for x in table_nodes_exact(kind, statistic)]
+            lines.append(f"    ({kind!r}, {statistic!r}): (")
+            lines += ["        " + ", ".join(values[i:i + 4]) + "," for i in range(0, len(values), 4)]
+            lines.append("    ),")
+    Path(path).write_text("\n".join(lines + ["}"]) + "\n")
+
+
+if __name__ == "__main__":
+    from pathlib import Path
+    write_table_data(Path(__file__).with_name("band_table_data.py"))

@@ -1,0 +1,55 @@
+"""Cold start (docs/benchmarks.md, "Cold start"): what a fresh `mechsim` process must not import, and the on-disk
+cache of unit conversions that lets a repeated run skip pint. Behaviour only: the timings live in the docs."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("numpy", "pandas", "sympy", "scipy", "jax", "matplotlib", "pint", "rich", "sksundae")
+
+
+def fresh(code, cache_dir, tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), "MECHSIM_CACHE_DIR": str(cache_dir)}
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=240)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def test_the_cli_module_and_its_help_import_only_typer(tmp_path):
+    code = ("import sys, io, contextlib\nfrom mechsim.scenarios import cli\n"
+            "buf = io.StringIO()\n"
+            "with contextlib.redirect_stdout(buf):\n"
+            "    try:\n        cli.app(['--help'])\n    except SystemExit:\n        pass\n"
+            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules)); print('run' in buf.getvalue())")
+    lines = fresh(code, tmp_path / "cache", tmp_path).split("\n")
+    assert lines[0] == "[]" and lines[1] == "True"
+
+
+def test_a_second_process_converts_units_from_the_disk_cache(tmp_path):
+    cache = tmp_path / "cache"
+    code = ("import sys\nfrom mechsim.scenarios.units import to_si\n"
+            "print(repr(to_si('a', '75 mm', 'm')), repr(to_si('b', '300 rpm', 'rad/s')), repr(to_si('c', '20 degC', 'K')),"
+            " 'pint' in sys.modules)")
+    first = fresh(code, cache, tmp_path).split()
+    second = fresh(code, cache, tmp_path).split()
+    assert first[:3] == second[:3]
+    assert float(first[0]) == 0.075 and float(first[1]) == pytest.approx(10 * 3.141592653589793, rel=1e-15)
+    assert float(first[2]) == pytest.approx(293.15, rel=1e-15)
+    assert first[3] == "True" and second[3] == "False"          # the second process never imported pint
+    # a damaged cache file is ignored (and replaced), never an error
+    for f in cache.glob("*.json"):
+        f.write_text("{not json")
+    third = fresh(code, cache, tmp_path).split()
+    assert third[:3] == first[:3] and third[3] == "True"
+    assert all(isinstance(json.loads(f.read_text()), dict) for f in cache.glob("*.json"))
+
+
+def test_errors_are_never_cached(tmp_path):
+    code = ("from mechsim.scenarios.units import to_si, ScenarioError\n"
+            "try:\n    to_si('mechanism.crank_radius', '75 kg', 'm')\nexcept ScenarioError as e:\n    print(e.field)")
+    cache = tmp_path / "cache"
+    assert fresh(code, cache, tmp_path).strip() == "mechanism.crank_radius"
+    assert fresh(code, cache, tmp_path).strip() == "mechanism.crank_radius"
