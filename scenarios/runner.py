@@ -75,7 +75,6 @@ def choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSetti
 
 
 def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
-    from scipy.integrate import cumulative_trapezoid
     t = np.arange(0.0, si["duration"] + 0.5 * si["output_step"], si["output_step"])
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
@@ -87,7 +86,8 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     df = pd.DataFrame({"t_s": t, **cols})
     df.attrs["events"] = events
     for name, power in powers.items():
-        df[f"work_{name}_J"] = cumulative_trapezoid(np.broadcast_to(power, t.shape), t, initial=0.0)
+        p = np.broadcast_to(np.asarray(power, dtype=float), t.shape)      # the trapezoidal rule, cumulative
+        df[f"work_{name}_J"] = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(t))])
     return df
 
 

@@ -18,10 +18,20 @@ import functools
 import math
 
 import numpy as np
-from scipy.integrate import quad
 from scipy.interpolate import CubicSpline
-from scipy.optimize import minimize_scalar
 from scipy.special import k0e
+
+
+def quad(*args, **kwargs):
+    """scipy.integrate.quad, imported on first call (a fresh `mechsim run` need not load scipy.integrate)."""
+    from scipy.integrate import quad as impl
+    return impl(*args, **kwargs)
+
+
+def minimize_scalar(*args, **kwargs):
+    """scipy.optimize.minimize_scalar, imported on first call (a fresh `mechsim run` need not load scipy.optimize)."""
+    from scipy.optimize import minimize_scalar as impl
+    return impl(*args, **kwargs)
 
 KINDS = ("uniform", "semi-elliptic")
 STATISTICS = ("max", "avg")

@@ -10,9 +10,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import quad
-from scipy.optimize import minimize_scalar
 from scipy.special import i0e
+
+
+def quad(*args, **kwargs):
+    """scipy.integrate.quad, imported on first call (a fresh `mechsim run` need not load scipy.integrate)."""
+    from scipy.integrate import quad as impl
+    return impl(*args, **kwargs)
+
+
+def minimize_scalar(*args, **kwargs):
+    """scipy.optimize.minimize_scalar, imported on first call (a fresh `mechsim run` need not load scipy.optimize)."""
+    from scipy.optimize import minimize_scalar as impl
+    return impl(*args, **kwargs)
 
 #: (A, B) of theta = A/sqrt(pi (B + Pe)) (docs/theory.md §G4.5 table; A from the high-Pe limit, B from Pe = 0).
 TIAN_KENNEDY = {

@@ -15,11 +15,16 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sps
-from scipy.integrate import quad
 from scipy.special import erfc
 
 from mechsim.thermal.linear import LinearThermalSystem
 from mechsim.thermal.materials import Material, get_material
+
+
+def quad(*args, **kwargs):
+    """scipy.integrate.quad, imported on first call (a fresh `mechsim run` need not load scipy.integrate)."""
+    from scipy.integrate import quad as impl
+    return impl(*args, **kwargs)
 
 #: Mesh defaults (docs/theory.md §G6): first cell <= delta/10 with delta = sqrt(chi 2b/U), growth 1.1–1.2,
 #: depth >= 3 sqrt(chi t_end).

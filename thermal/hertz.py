@@ -9,9 +9,14 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.optimize import brentq
 
 from mechsim.thermal.materials import Material
+
+
+def brentq(*args, **kwargs):
+    """scipy.optimize.brentq, imported on first call (a fresh `mechsim run` need not load scipy.optimize)."""
+    from scipy.optimize import brentq as impl
+    return impl(*args, **kwargs)
 
 
 def effective_modulus(material_1: Material, material_2: Material | None = None) -> float:

@@ -11,9 +11,13 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sps
-from scipy.integrate import solve_ivp
+
+
+def solve_ivp(*args, **kwargs):
+    """scipy.integrate.solve_ivp, imported on first call (a fresh `mechsim run` need not load scipy.integrate)."""
+    from scipy.integrate import solve_ivp as impl
+    return impl(*args, **kwargs)
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,8 @@ class LinearThermalSystem:
         M[:n, :n] = -self.dense_conductance() / self.capacity[:, None]
         M[:n, n] = (self.source + self.input_matrix @ np.atleast_1d(u)) / self.capacity
         z0 = np.append(np.asarray(T0, dtype=float), 1.0)
-        return np.array([(scipy.linalg.expm(M * t) @ z0)[:n] for t in np.atleast_1d(times)])
+        from scipy.linalg import expm
+        return np.array([(expm(M * t) @ z0)[:n] for t in np.atleast_1d(times)])
 
     def integrate(self, t_span, T0, inputs: Callable[[float], np.ndarray], *, t_eval=None, method: str = "BDF",
                   rtol: float = 1e-8, atol: float = 1e-10, max_step: float = np.inf):
