@@ -41,9 +41,10 @@ CASES: dict[str, tuple[str, ...]] = {
 }
 PEER = "casadi-idas"
 METHODS_FULL = ("ida-index1", "ida-index2", "diffrax-Tsit5", "casadi-idas", "casadi-idas-events", "scipy-LSODA", "scipy-DOP853")
-METHODS_SMALL = ("ida-index2", "casadi-idas")
+#: CI: index-1, whose error reaches 1e-8 on case A within the small tolerance range (index-2 stalls at ~2e-8)
+METHODS_SMALL = ("ida-index1", "casadi-idas")
 RTOLS_FULL = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
-RTOLS_SMALL = (1e-5, 1e-6, 1e-7)
+RTOLS_SMALL = (1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 TARGETS = (1e-6, 1e-8)
 #: the peer's error target on case A (issue: <= 1e-6 rad within 25 ms CPU on the 2-core machine)
 PEER_TARGET_ERROR = 1e-6
@@ -62,7 +63,8 @@ class PeerConfig:
 
     @classmethod
     def small(cls) -> "PeerConfig":
-        """The CI size: case A, mechsim IDA and the peer, three tolerances, two rounds."""
+        """The CI size: case A, mechsim IDA and the peer, five tolerances (both target errors inside), two
+        rounds."""
         return cls(cases=("A",), methods=METHODS_SMALL, rtols=RTOLS_SMALL, rounds=2)
 
 
