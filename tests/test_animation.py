@@ -44,7 +44,10 @@ def test_geneva_arrow_is_the_normal_force_and_the_pin_colours_with_temperature(g
     theta = row["crank_angle_rad"]
     pin = 1e3 * np.array([g.centre_distance - g.crank_radius * math.cos(theta), g.crank_radius * math.sin(theta)])
     np.testing.assert_allclose(at, pin, rtol=1e-12)
-    np.testing.assert_allclose(np.hypot(*vec), 0.45 * g.crank_radius * 1e3, rtol=1e-12)   # the peak's length
+    f = np.abs(df["contact_force_N"].to_numpy())
+    typical = np.percentile(f[f > 0], 99)                              # the arrow's nominal force
+    nominal = 0.45 * g.crank_radius * 1e3
+    np.testing.assert_allclose(np.hypot(*vec), min(abs(row["contact_force_N"]) / typical, 1.6) * nominal, rtol=1e-12)
     assert abs(vec @ pin) < 1e-9 * np.hypot(*vec) * np.hypot(*pin)     # across the slot (the pin is on its line)
     assert _cross(pin, vec) * row["contact_force_N"] > 0             # N > 0 turns the wheel forward
     colour = colormaps[TEMPERATURE_MAP](d.temperature(row["temp_contact_C"]))

@@ -2,7 +2,9 @@
 
 Each drawing is built once on an axes (the parts that never move drawn there for good) and `update(row)` moves
 the parts to one output row and returns the artists it changed, so an animation redraws only those. The
-contact force is an arrow, scaled to `arrow_length_mm` at the run's peak |force|; with a thermal model the
+contact force is an arrow, `arrow_length_mm` long at the run's typical peak (99th percentile of |force| while in
+contact, so that a few impact spikes do not shrink it to nothing; longer arrows are cut at ARROW_CLIP times
+that length); with a thermal model the
 contact colours with the contact temperature. Geometry comes from the mechanisms' public attributes; no
 plotting lives in mechanisms/ (docs/architecture.md, the layer contract).
 """
@@ -18,6 +20,12 @@ from matplotlib.patches import Circle, Polygon
 MM = 1e3
 TEMPERATURE_MAP = "inferno"
 STEEL, STEEL_EDGE, CRANK = "#c9d3dc", "#3b4b5a", "tab:red"
+ARROW_CLIP = 1.6
+
+
+def arrow_length(force: float, scale: float, nominal: float) -> float:
+    """Signed arrow length (mm) of a force: force x scale, cut at +-ARROW_CLIP x nominal."""
+    return float(np.clip(force * scale, -ARROW_CLIP * nominal, ARROW_CLIP * nominal))
 
 
 def _rotate(points: np.ndarray, angle: float) -> np.ndarray:
@@ -105,7 +113,8 @@ class GenevaDrawing:
         self.arm, = ax.plot([], [], color=CRANK, lw=3.0, solid_capstyle="round")
         self.pin = ax.add_patch(Circle((0, 0), self.R, fc=CRANK, ec="k", lw=0.6, zorder=4))
         ax.plot([0, self.c], [0, 0], "k+", ms=9, mew=1.2)
-        self.force_scale = (arrow_length_mm or 0.45 * self.r) / force_peak if force_peak else 0.0
+        self.arrow_nominal = arrow_length_mm or 0.45 * self.r
+        self.force_scale = self.arrow_nominal / force_peak if force_peak else 0.0
         self.arrow = ax.quiver([0], [0], [0], [0], angles="xy", scale_units="xy", scale=1, color="tab:blue",
                                width=0.012, zorder=5)
         self.temperature = temperature
@@ -124,7 +133,8 @@ class GenevaDrawing:
         force = float(row.get("contact_force_N", 0.0) or 0.0)
         slot = math.atan2(py, px)   # the pin lies on the engaged slot's centre line; N > 0 turns the wheel forward
         self.arrow.set_offsets([[px, py]])
-        self.arrow.set_UVC([-math.sin(slot) * force * self.force_scale], [math.cos(slot) * force * self.force_scale])
+        f = arrow_length(force, self.force_scale, self.arrow_nominal)
+        self.arrow.set_UVC([-math.sin(slot) * f], [math.cos(slot) * f])
         if self.temperature is not None and "temp_contact_C" in row:   # no contact (dwell): the pin's own colour
             temp = float(row["temp_contact_C"])
             self.pin.set_facecolor(_colour(self.temperature, temp) if math.isfinite(temp) else CRANK)
@@ -155,7 +165,8 @@ class ChainDrawing:
                 ax.plot(*tip, marker=(3, 0, math.degrees(a) - 90), color="0.2", ms=7)
         self.crank, = ax.plot([], [], color=CRANK, lw=3.0, solid_capstyle="round")
         self.coupler, = ax.plot([], [], "-o", color="tab:green", lw=2.2, ms=4)
-        self.force_scale = (arrow_length_mm or 0.6 * kin.L * MM) / force_peak if force_peak else 0.0
+        self.arrow_nominal = arrow_length_mm or 0.6 * kin.L * MM
+        self.force_scale = self.arrow_nominal / force_peak if force_peak else 0.0
         self.arrow = ax.quiver([0], [0], [0], [0], angles="xy", scale_units="xy", scale=1, color="tab:blue",
                                width=0.012, zorder=5)
         span = np.vstack([loop, self.Q + 1.2 * kin.R * MM * np.array([[1, 1], [-1, -1]])])
@@ -171,7 +182,7 @@ class ChainDrawing:
         self.crank.set_data([self.Q[0], A[0]], [self.Q[1], A[1]])
         self.coupler.set_data([A[0], B[0]], [A[1], B[1]])
         d = (B - A) / max(float(np.hypot(*(B - A))), 1e-12)
-        f = float(row.get("coupler_force_N", 0.0) or 0.0) * self.force_scale
+        f = arrow_length(float(row.get("coupler_force_N", 0.0) or 0.0), self.force_scale, self.arrow_nominal)
         self.arrow.set_offsets([B])
         self.arrow.set_UVC([d[0] * f], [d[1] * f])
         return [self.crank, self.coupler, self.arrow]
@@ -209,7 +220,8 @@ class RollingDrawing:
         self.point, = ax.plot([], [], "o", color="tab:purple", ms=5, zorder=5)
         self.contact, = ax.plot([], [], "ko", ms=3, zorder=5)
         ax.plot(*self.a0, "k^", ms=8)
-        self.force_scale = (arrow_length_mm or 0.25 * reach) / force_peak if force_peak else 0.0
+        self.arrow_nominal = arrow_length_mm or 0.25 * reach
+        self.force_scale = self.arrow_nominal / force_peak if force_peak else 0.0
         self.arrow = ax.quiver([0], [0], [0], [0], angles="xy", scale_units="xy", scale=1, color="tab:blue",
                                width=0.012, zorder=6)
         box = [self.a0 - k.l2 * MM, self.a0 + k.l2 * MM]
@@ -239,7 +251,7 @@ class RollingDrawing:
         self.point.set_data([C[0]], [C[1]])
         self.contact.set_data([P[0]], [P[1]])
         n = (B0 - P) / max(float(np.hypot(*(B0 - P))), 1e-12)       # profile -> disc: the force on the disc
-        f = float(row.get("contact_force_N", 0.0) or 0.0) * self.force_scale
+        f = arrow_length(float(row.get("contact_force_N", 0.0) or 0.0), self.force_scale, self.arrow_nominal)
         self.arrow.set_offsets([P])
         self.arrow.set_UVC([n[0] * f], [n[1] * f])
         return [self.disc, self.arm, self.crank, self.coupler, self.point, self.contact, self.arrow]
@@ -266,13 +278,15 @@ FORCE_COLUMNS = {"Geneva": "contact_force_N", "ChainDwell": "coupler_force_N",
 
 
 def drawing_for(ax, mech, df: pd.DataFrame, with_temperature: bool = True):
-    """The drawing of `mech` on `ax`, its arrow scaled to the peak force of `df`, coloured by the contact
+    """The drawing of `mech` on `ax`, its arrow scaled to the typical peak force of `df`, coloured by the contact
     temperature range of `df` where it has one; None if the mechanism has no drawing."""
     kind = type(mech).__name__
     if kind not in DRAWINGS:
         return None
     col = FORCE_COLUMNS[kind]
-    peak = float(np.nanmax(np.abs(df[col]))) if col in df and len(df) and df[col].notna().any() else 0.0
+    force = np.abs(df[col].to_numpy(float)) if col in df else np.zeros(0)
+    force = force[np.isfinite(force) & (force > 0)]
+    peak = float(np.percentile(force, 99)) if force.size else 0.0
     norm = None
     if with_temperature and "temp_contact_C" in df and df["temp_contact_C"].notna().any():
         lo, hi = float(np.nanmin(df["temp_contact_C"])), float(np.nanmax(df["temp_contact_C"]))
