@@ -34,8 +34,7 @@ from mechsim.thermal import (Material, effective_modulus, flash_temperature, fri
                      peclet, seed_flash_rise, seed_half_width, seed_max_pressure, seed_normal_load,
                      seed_reduced_modulus, seed_sliding_speed)
 
-from mechsim.scenarios.units import ScenarioError
-from mechsim.scenarios.output.atomic import atomic_folder
+from mechsim.scenarios.output.atomic import atomic_folder, check_replaceable
 
 KELVIN = 273.15
 #: the six built-in seed scenarios: (load case, mu code)
@@ -458,8 +457,7 @@ def cli_main(out_dir: Path | None, small: bool, force: bool, say: Callable[[str]
              ) -> tuple[Path, list[str]]:
     """`mechsim report seed`: check the target, build, write; (folder, console lines)."""
     target = Path(out_dir) if out_dir is not None else Path("results") / ("report-seed-small" if small else "report-seed")
-    if target.exists() and not force:
-        raise ScenarioError("--out", f"{target} exists; pass --force to replace it")
+    check_replaceable(target, force)
     config = ReportConfig.make(small)
     if say:
         say(f"seed report: {config.describe()}")

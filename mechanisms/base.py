@@ -25,7 +25,9 @@ class Field:
 
     kind: "quantity" (a string with a unit, converted to `unit`, the SI unit), "int", "float", "str",
         "bool", "points" (a list of [x, y] pairs with a length unit).
-    required: no default; default: the value (SI) when absent. positive/nonnegative/minimum: checks.
+    required: no default; default: the value (SI) when absent. positive/nonnegative/minimum/maximum: checks;
+    why: the reason for the range, shown with a refusal (quantities also get their unit's physical range,
+    scenarios/schema.py UNIT_RANGES; docs/limits.md).
     """
 
     kind: str
@@ -37,6 +39,8 @@ class Field:
     minimum: float | None = None
     choices: tuple = ()
     help: str = ""
+    maximum: float | None = None
+    why: str = ""
 
 
 @dataclass(frozen=True)

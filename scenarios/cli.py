@@ -306,8 +306,7 @@ def bench(
     from mechsim.benchmarks.bench import BenchConfig, report_lines, run_bench, write
     try:
         config = (BenchConfig.full if full else BenchConfig.small)(names, scenario, set_)
-        if out_dir.exists() and not force:
-            raise ScenarioError("--out", f"{out_dir} exists; pass --force to replace it")
+        _output_folder(out_dir, "bench", force)
         say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
         result = run_bench(config, say)
         write(result, out_dir, force)
@@ -319,8 +318,10 @@ def bench(
 
 def _bench_peer(out_dir: Path, full: bool, force: bool, quiet: bool) -> None:
     from mechsim.benchmarks.peer_bench import PeerConfig, report_lines, run_peer_bench, write
-    if out_dir.exists() and not force:
-        _fail(f"--out: {out_dir} exists; pass --force to replace it")
+    try:
+        _output_folder(out_dir, "bench", force)
+    except ScenarioError as exc:
+        _fail(str(exc))
     say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
     result = run_peer_bench(PeerConfig() if full else PeerConfig.small(), say)
     write(result, out_dir, force)

@@ -1,10 +1,12 @@
 """Load a scenario (built-in name or TOML file), apply --set overrides, validate, convert to SI.
 
-Scenario files are data: parsed with tomllib, never executed.
+Scenario files are data: parsed with tomllib, never executed; they are untrusted input, so a file must be
+UTF-8 text of at most MAX_FILE_BYTES with tables nested at most MAX_DEPTH deep (docs/limits.md).
 """
 from __future__ import annotations
 
 import copy
+import re
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
@@ -13,10 +15,14 @@ from pathlib import Path
 from mechsim.mechanisms import MECHANISMS, Mechanism
 from mechsim.mechanisms.base import Field
 
-from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_section
+from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_derived, check_section
 from mechsim.scenarios.units import ScenarioError
 
 BUILTIN_PACKAGE = "mechsim.scenarios.builtin"
+#: a scenario file is a page of settings (the built-ins are under 2 kB)
+MAX_FILE_BYTES = 1_000_000
+#: tables and arrays nest at most this deep (a scenario needs 3: [section] key = [[x, y], ...])
+MAX_DEPTH = 8
 
 
 @dataclass
@@ -46,19 +52,68 @@ def builtin_text(name: str) -> str:
     return path.read_text()
 
 
+def read_text(path: Path) -> str:
+    """A scenario file's text: a regular file, at most MAX_FILE_BYTES, UTF-8 (ScenarioError naming it if not)."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ScenarioError("scenario", f"{path} is {size:,} bytes; a scenario file is at most "
+                                            f"{MAX_FILE_BYTES:,} bytes (docs/limits.md)")
+        with path.open("rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror or exc}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ScenarioError("scenario", f"{path} is over {MAX_FILE_BYTES:,} bytes; a scenario file is at most that")
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ScenarioError("scenario", f"{path} is UTF-16 text; save it as UTF-8")
+    if b"\x00" in data:
+        raise ScenarioError("scenario", f"{path} is a binary file (it holds NUL bytes), not a TOML scenario")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError("scenario", f"{path} is not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                                        f"{exc.start}); save it as UTF-8") from None
+
+
+def _depth(node) -> int:
+    """Nesting depth of parsed TOML (iterative: a deep file cannot exhaust the stack here)."""
+    deepest, stack = 0, [(node, 1)]
+    while stack:
+        item, level = stack.pop()
+        if isinstance(item, (dict, list)):
+            deepest = max(deepest, level)
+            if deepest > MAX_DEPTH:
+                return deepest
+            stack.extend((child, level + 1) for child in (item.values() if isinstance(item, dict) else item))
+    return deepest
+
+
+def parse_toml(text: str, source: str) -> dict:
+    """tomllib, with every failure (syntax, nesting that exhausts the parser, huge integers) one ScenarioError."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError("scenario", f"malformed TOML in {source}: {exc}") from None
+    except RecursionError:
+        raise ScenarioError("scenario", f"{source} nests tables or arrays too deeply (at most {MAX_DEPTH})") from None
+    except ValueError as exc:
+        raise ScenarioError("scenario", f"unreadable value in {source}: {str(exc).splitlines()[0][:120]}") from None
+    if _depth(raw) > MAX_DEPTH:
+        raise ScenarioError("scenario", f"{source} nests tables or arrays more than {MAX_DEPTH} deep")
+    return raw
+
+
 def read_raw(name_or_path: str) -> tuple[dict, str]:
     """Parse a scenario file or built-in by name."""
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise ScenarioError("scenario", f"file not found: {name_or_path}")
-        text, source = path.read_text(), str(path)
+        text, source = read_text(path), str(path)
     else:
         text, source = builtin_text(name_or_path), f"built-in:{name_or_path}"
-    try:
-        return tomllib.loads(text), source
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError("scenario", f"malformed TOML in {source}: {exc}") from None
+    return parse_toml(text, source), source
 
 
 def parse_override(text: str) -> tuple[list[str], object]:
@@ -132,18 +187,21 @@ def validate(raw: dict) -> dict:
     """Check every section and key; return the resolved scenario in SI."""
     if not isinstance(raw, dict):
         raise ScenarioError("scenario", "must be a TOML table")
-    top_raw = {k: v for k, v in raw.items() if not isinstance(v, dict)}
-    si = check_section("", TOP, top_raw)
     mech_raw = raw.get("mechanism")
     if not isinstance(mech_raw, dict):
         raise ScenarioError("mechanism", "missing (required table with at least `type`)")
     mtype = mech_raw.get("type")
-    if mtype not in MECHANISMS:
-        raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {mtype!r}")
+    if not isinstance(mtype, str) or mtype not in MECHANISMS:
+        shown = repr(mtype) if isinstance(mtype, (str, int, float, bool, type(None))) else type(mtype).__name__
+        raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {shown[:80]}")
     sections = sections_for(mtype)
     for name, value in raw.items():
+        if name in sections and not isinstance(value, dict):
+            raise ScenarioError(name, f"must be a table ([{name}]), got {type(value).__name__}")
         if isinstance(value, dict) and name not in sections:
             raise ScenarioError(name, f"unknown section (known: {', '.join(sorted(sections))})")
+    top_raw = {k: v for k, v in raw.items() if not isinstance(v, dict)}
+    si = check_section("", TOP, top_raw)
     for name, fields in sections.items():
         data = raw.get(name, {})
         if name == "mechanism":
@@ -158,6 +216,7 @@ def validate(raw: dict) -> dict:
             raise ScenarioError(f"drive.{key}", f"missing (required for drive type '{drive['type']}')")
     if si["output_step"] > si["duration"]:
         raise ScenarioError("output_step", "must not exceed duration")
+    check_derived(si)
     return si
 
 
@@ -169,7 +228,12 @@ def build_mechanism(si: dict) -> Mechanism:
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise
+        named = re.match(r"^([a-z_]+\.[a-z_]+(?:\[\d+\])?): (.+)$", str(exc), re.S)  # 'section.key: problem'
+        if named:
+            raise ScenarioError(named.group(1), named.group(2)) from None
         raise ScenarioError("mechanism", str(exc)) from None
+    except ArithmeticError as exc:                        # overflow/zero division in a degenerate geometry
+        raise ScenarioError("mechanism", f"the geometry cannot be built ({type(exc).__name__}: {exc})") from None
 
 
 def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:

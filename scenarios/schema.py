@@ -1,16 +1,20 @@
 """The scenario schema: the common sections, plus each mechanism's own fields (declared in mechanisms/).
 
 Validation is generic: every key is declared as a `Field`; unknown sections and keys are rejected; each
-problem is reported as one `ScenarioError` naming `section.key`.
+problem is reported as one `ScenarioError` naming `section.key`. Every number must be finite and inside a
+physical range: the field's own (Field.minimum/maximum with its reason) and its unit's (UNIT_RANGES); derived
+sizes (output rows) are bounded before anything runs. The limits and their reasons: docs/limits.md.
 """
 from __future__ import annotations
+
+import math
 
 from mechsim.mechanisms.base import Field
 
 from mechsim.scenarios.units import ScenarioError, to_si
 
 TOP = {
-    "name": Field("str", required=True, help="scenario name (also the default output folder)"),
+    "name": Field("str", required=True, help="scenario label (the default output folder is results/<its slug>)"),
     "description": Field("str", default="", help="free text"),
     "duration": Field("quantity", "s", required=True, positive=True, help="simulated time"),
     "output_step": Field("quantity", "s", default=1e-3, positive=True, help="spacing of output rows"),
@@ -29,12 +33,18 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "formulation": Field("str", default="index2", choices=("index1", "index2", "index3")),
         "method": Field("str", default="auto", choices=("auto", "dae", "closed-form"),
                         help="auto: closed form where the drive is prescribed and the model allows it"),
-        "rtol": Field("float", default=1e-8, positive=True),
-        "atol": Field("float", default=1e-10, positive=True),
-        "multiplier_atol": Field("float", default=None, positive=True),
-        "baumgarte_alpha": Field("float", default=10.0, nonnegative=True),
-        "baumgarte_beta": Field("float", default=10.0, nonnegative=True),
-        "max_steps": Field("int", default=20000, minimum=1),
+        "rtol": Field("float", default=1e-8, positive=True, minimum=1e-15, maximum=0.1,
+                      why="float64 carries about 16 digits; above 0.1 there is no accuracy left"),
+        "atol": Field("float", default=1e-10, positive=True, minimum=1e-30, maximum=1.0,
+                      why="an absolute error in SI units (m, rad): 1e-30 is far below round-off, 1 is no accuracy"),
+        "multiplier_atol": Field("float", default=None, positive=True, minimum=1e-30, maximum=1e6,
+                                 why="an absolute error on constraint forces (N)"),
+        "baumgarte_alpha": Field("float", default=10.0, nonnegative=True, maximum=1e8,
+                                 why="stabilisation rates (1/s) beyond 1e8 are stiffer than any mechanism's dynamics"),
+        "baumgarte_beta": Field("float", default=10.0, nonnegative=True, maximum=1e8,
+                                why="stabilisation rates (1/s) beyond 1e8 are stiffer than any mechanism's dynamics"),
+        "max_steps": Field("int", default=20000, minimum=1, maximum=10_000_000,
+                           why="ten million steps is hours of solver time and gigabytes of history"),
         "events": Field("bool", default=True),
         "diffrax_solver": Field("str", default="Tsit5"),
         "jacobian": Field("str", default="exact", choices=("exact", "fd"),
@@ -42,7 +52,8 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
     },
     "output": {
         "plots": Field("bool", default=True, help="write PNG plots"),
-        "drawing_instants": Field("int", default=4, minimum=0, help="mechanism drawings at this many instants"),
+        "drawing_instants": Field("int", default=4, minimum=0, maximum=24, help="mechanism drawings at this many "
+                                  "instants", why="each drawing is one more figure panel; 24 still fit one page"),
         "animation": Field("bool", default=False, help="write an animation of the mechanism beside its force trace"),
         "animation_format": Field("str", default="gif", choices=("gif", "mp4"),
                                   help="gif (Pillow) or mp4 (needs ffmpeg)"),
@@ -51,6 +62,73 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
 
 REQUIRED_FOR_DRIVE = {"speed": ("speed",), "torque": ("torque",), "motor": ("stall_torque", "no_load_speed")}
 
+#: physical range of every quantity by its SI unit: (smallest magnitude of a positive field, largest magnitude,
+#: why). A typo of a few orders of magnitude, or an overflow, is refused before any work (docs/limits.md).
+UNIT_RANGES: dict[str, tuple[float, float, str]] = {
+    "m": (1e-9, 1e3, "machine parts lie between 1 nm and 1 km"),
+    "m^2": (1e-18, 1e6, "areas of parts between 1 nm^2 and 1 km^2"),
+    "m^3": (1e-27, 1e9, "volumes of parts between 1 nm^3 and 1 km^3"),
+    "rad": (1e-12, 1e6, "angles beyond 1e6 rad (160,000 turns) lose float64 resolution"),
+    "rad/s": (1e-9, 1e5, "1e5 rad/s (about a million rpm) is beyond any machine shaft"),
+    "s": (1e-9, 1e6, "simulated times between 1 ns and 1e6 s (11.6 days)"),
+    "N*m": (1e-12, 1e7, "1e7 N*m is the torque of the largest ship propeller shafts"),
+    "kg": (1e-9, 1e6, "masses between 1 microgram and 1000 t"),
+    "kg*m^2": (1e-15, 1e6, "inertias between a 1 mm steel pin's (about 1e-14 kg*m^2) and a large flywheel's"),
+    "N*m*s/rad": (1e-15, 1e6, "viscous damping up to 1e6 N*m*s/rad (a locked shaft)"),
+    "m/s^2": (1e-9, 1e4, "accelerations of gravity up to 1000 g"),
+    "K": (1.0, 3000.0, "temperatures between 1 K and 3000 K (above the melting point of steel)"),
+    "Pa": (1e5, 2e12, "Young's moduli between soft foams and diamond (1.2e12 Pa)"),
+    "kg/m^3": (1.0, 1e5, "densities between light foams and osmium (22,600 kg/m^3)"),
+    "J/(kg*K)": (10.0, 1e5, "specific heats of solids lie between 10 and 1e5 J/(kg*K)"),
+    "W/(m*K)": (1e-3, 1e4, "conductivities between aerogels and diamond (2,200 W/(m*K))"),
+    "W/(m^2*K)": (1e-6, 1e6, "heat-transfer coefficients up to 1e6 W/(m^2*K) (boiling water)"),
+    "W/K": (1e-12, 1e6, "thermal conductances up to 1e6 W/K"),
+}
+#: at most this many output steps on the requested grid (duration / output_step): a fully resolved table of
+#: about 40 float64 columns is then about 3 GB (a cycle-averaged thermal run keeps only its mechanics window)
+MAX_OUTPUT_ROWS = 10_000_000
+#: at most this many entries in a list field (sprockets, points): no mechanism here has more than a few
+MAX_LIST = 64
+#: longest string value (names, descriptions, choices)
+MAX_STRING = 10_000
+
+
+def _shown(value) -> str:
+    """repr of a value, short (a 5000-digit integer or a long string stays one readable line)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 64:
+        return f"an integer of about {int(value.bit_length() * 0.30103)} digits"
+    text = repr(value)
+    return text if len(text) <= 80 else text[:60] + "...'"
+
+
+def _as_float(where: str, value) -> float:
+    try:
+        return float(value)
+    except OverflowError:
+        raise ScenarioError(where, f"{_shown(value)} is too large for a float (at most about 1.8e308)") from None
+
+
+def check_range(where: str, spec: Field, out: float, value) -> None:
+    """Finite, signs, the field's own range and its unit's range (ScenarioError with the reason)."""
+    if not math.isfinite(out):
+        raise ScenarioError(where, f"must be a finite number, got {_shown(value)}")
+    unit = f" {spec.unit}" if spec.unit else ""
+    if spec.positive and not out > 0:
+        raise ScenarioError(where, f"must be positive, got {_shown(value)}")
+    if spec.nonnegative and out < 0:
+        raise ScenarioError(where, f"must not be negative, got {_shown(value)}")
+    why = f" ({spec.why})" if spec.why else ""
+    if spec.minimum is not None and out < spec.minimum:
+        raise ScenarioError(where, f"must be at least {spec.minimum:g}{unit}{why}, got {_shown(value)}")
+    if spec.maximum is not None and out > spec.maximum:
+        raise ScenarioError(where, f"must be at most {spec.maximum:g}{unit}{why}, got {_shown(value)}")
+    if spec.unit in UNIT_RANGES:
+        tiny, huge, reason = UNIT_RANGES[spec.unit]
+        if abs(out) > huge:
+            raise ScenarioError(where, f"must be at most {huge:g}{unit} in magnitude ({reason}), got {_shown(value)}")
+        if spec.positive and out < tiny:
+            raise ScenarioError(where, f"must be at least {tiny:g}{unit} ({reason}), got {_shown(value)}")
+
 
 def check_field(where: str, spec: Field, value):
     """Validate and convert one value to SI."""
@@ -58,41 +136,77 @@ def check_field(where: str, spec: Field, value):
         out = to_si(where, value, spec.unit)
     elif spec.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(where, f"expected an integer, got {value!r}")
+            raise ScenarioError(where, f"expected an integer, got {_shown(value)}")
         out = value
     elif spec.kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(where, f"expected a number, got {value!r}")
-        out = float(value)
+            raise ScenarioError(where, f"expected a number, got {_shown(value)}")
+        out = _as_float(where, value)
     elif spec.kind == "bool":
         if not isinstance(value, bool):
-            raise ScenarioError(where, f"expected true or false, got {value!r}")
+            raise ScenarioError(where, f"expected true or false, got {_shown(value)}")
         out = value
     elif spec.kind == "str":
         if not isinstance(value, str):
-            raise ScenarioError(where, f"expected a string, got {value!r}")
+            raise ScenarioError(where, f"expected a string, got {_shown(value)}")
+        if len(value) > MAX_STRING:
+            raise ScenarioError(where, f"a string of {len(value)} characters; at most {MAX_STRING}")
         out = value
     elif spec.kind == "points":
         if not isinstance(value, list) or not all(isinstance(p, list) and len(p) == 2 for p in value):
             raise ScenarioError(where, "expected a list of [x, y] pairs")
-        out = [[to_si(f"{where}[{i}]", c, spec.unit) for c in p] for i, p in enumerate(value)]
+        _check_length(where, value)
+        out = [[_element(f"{where}[{i}]", spec, c) for c in p] for i, p in enumerate(value)]
     elif spec.kind == "list":
         if not isinstance(value, list):
             raise ScenarioError(where, "expected a list")
-        out = [to_si(f"{where}[{i}]", c, spec.unit) if spec.unit else c for i, c in enumerate(value)]
+        _check_length(where, value)
+        out = [_element(f"{where}[{i}]", spec, c) if spec.unit else c for i, c in enumerate(value)]
     else:  # pragma: no cover - a schema bug, not a user error
         raise AssertionError(spec.kind)
-    if spec.choices and out not in spec.choices:
-        why = f" ({spec.help})" if len(spec.choices) == 1 and spec.help else ""
-        raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {out!r}{why}")
+    if spec.choices:
+        try:
+            known = out in spec.choices
+        except TypeError:
+            known = False
+        if not known:
+            why = f" ({spec.help})" if len(spec.choices) == 1 and spec.help else ""
+            raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {_shown(out)}{why}")
     if isinstance(out, (int, float)) and not isinstance(out, bool):
-        if spec.positive and not out > 0:
-            raise ScenarioError(where, f"must be positive, got {value!r}")
-        if spec.nonnegative and out < 0:
-            raise ScenarioError(where, f"must not be negative, got {value!r}")
-        if spec.minimum is not None and out < spec.minimum:
-            raise ScenarioError(where, f"must be at least {spec.minimum}, got {value!r}")
+        check_range(where, spec, out, value)
     return out
+
+
+def _check_length(where: str, value: list) -> None:
+    if len(value) > MAX_LIST:
+        raise ScenarioError(where, f"a list of {len(value)} entries; at most {MAX_LIST} (no mechanism here has more)")
+
+
+def _element(where: str, spec: Field, value) -> float:
+    """One entry of a list/points field: a quantity in the field's unit, finite and inside the unit's range."""
+    out = to_si(where, value, spec.unit)
+    check_range(where, Field("quantity", spec.unit), out, value)
+    return out
+
+
+#: the drive turns at most this far in one run (prescribed speed x duration)
+MAX_DRIVE_ANGLE = 1e6
+
+
+def check_derived(si: dict) -> None:
+    """Derived sizes before any work: output rows (memory and disk) and the prescribed drive angle are bounded."""
+    drive = si["drive"]
+    speed = drive.get("speed") if drive["type"] == "speed" else drive.get("no_load_speed")
+    if speed is not None and speed * si["duration"] > MAX_DRIVE_ANGLE:
+        field = "drive.speed" if drive["type"] == "speed" else "drive.no_load_speed"
+        raise ScenarioError(field, f"{speed:g} rad/s for {si['duration']:g} s turns the drive {speed * si['duration']:.3g}"
+                                   f" rad; at most {MAX_DRIVE_ANGLE:g} rad (160,000 turns) in one run: shorten "
+                                   "duration")
+    rows = si["duration"] / si["output_step"]
+    if rows > MAX_OUTPUT_ROWS:
+        raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "
+                                           f"{rows:.3g} output steps; at most {MAX_OUTPUT_ROWS:,} (a table of about 3 "
+                                           "GB): raise output_step or shorten duration")
 
 
 def check_section(name: str, fields: dict[str, Field], data) -> dict:

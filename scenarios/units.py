@@ -1,8 +1,15 @@
 """Units at the edge: parse "75 mm", "7 N*m", "-180 deg", "300 rpm" with pint and return SI magnitudes."""
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 
+
+#: a quantity string: a number (or nan/inf, refused later with a clear message) and a unit expression; checked
+#: before pint sees it, so that pint never evaluates an arbitrary arithmetic expression ("9**9**9 s")
+QUANTITY_TEXT = re.compile(r"^[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|nan|inf|infinity)"
+                           r"(?:\s*(?:[^\W\d]|[\u00b0\u00b5])[\w\s*/^().\u00b7\u00b0\u00b5-]*)?$", re.IGNORECASE)
+MAX_QUANTITY_TEXT = 64
 
 
 class ScenarioError(ValueError):
@@ -30,7 +37,8 @@ def _parse_quantity(text: str):
 
 
 def to_si(field: str, value, unit: str) -> float:
-    """Convert a quantity string (or a bare number where `unit` is dimensionless) to the SI `unit`.
+    """Convert a quantity string to the SI `unit`. Every quantity needs its unit written out, angles included
+    ("-180 deg", "0 rad"); only a field without a unit (`unit` = "") takes a bare number.
 
     A pure function of its arguments, so it is memoized (sweeps validate thousands of cases with the same
     strings); errors are not cached and raise again."""
@@ -76,18 +84,28 @@ def _to_si(field: str, value, unit: str) -> float:
     if isinstance(value, bool):
         raise ScenarioError(field, f"expected a quantity in {unit}, got a boolean")
     if isinstance(value, (int, float)):
-        target = ureg.Quantity(1.0, unit)
-        if target.dimensionless:
-            return float(value)
-        raise ScenarioError(field, f"needs a unit, e.g. \"{value} {unit}\"")
+        if not unit:
+            try:
+                return float(value)
+            except OverflowError:
+                raise ScenarioError(field, "number too large for a float (at most about 1.8e308)") from None
+        shown = f"{value:.6g}" if isinstance(value, float) or abs(value) < 10**15 else "1"
+        example = f"\"{shown} deg\" or \"{shown} rad\"" if unit == "rad" else f"\"{shown} {unit}\""
+        raise ScenarioError(field, f"needs a unit, e.g. {example}")
     if not isinstance(value, str):
         raise ScenarioError(field, f"expected a quantity such as \"1 {unit}\", got {type(value).__name__}")
+    text = value.strip()
+    if len(text) > MAX_QUANTITY_TEXT or not QUANTITY_TEXT.match(text):
+        shown = repr(text if len(text) <= 40 else text[:40] + "...")
+        raise ScenarioError(field, f"cannot read {shown} as a quantity (a number and a unit, e.g. \"1 {unit}\")")
     try:
-        q = _parse_quantity(value.strip())
+        q = _parse_quantity(text)
     except Exception:
         raise ScenarioError(field, f"cannot read {value!r} as a quantity (number and unit, e.g. \"1 {unit}\")") \
             from None
     if not isinstance(q, pint.Quantity):
+        if unit:
+            raise ScenarioError(field, f"needs a unit, e.g. \"{text} {unit}\"")
         q = ureg.Quantity(float(q), "")
     try:
         if unit == "K" or unit == "degC":
@@ -95,6 +113,8 @@ def _to_si(field: str, value, unit: str) -> float:
         magnitude = q.to(unit).magnitude
     except pint.DimensionalityError:
         raise ScenarioError(field, f"wrong unit in {value!r}: expected a quantity convertible to {unit}") from None
+    except (ArithmeticError, ValueError, TypeError):
+        raise ScenarioError(field, f"cannot convert {value!r} to {unit}") from None
     try:
         return float(magnitude)
     except (TypeError, ValueError):

@@ -79,7 +79,8 @@ class ChainDwell(Mechanism):
                               help="delta = (R + L) - (L_i + r_i): the coupler is made L + delta (apex = detuned)"),
             "apex": Field("str", default="stop", choices=APEX_LAWS,
                           help="branch law at a dwell apex: stop (crank stop, impact), smooth, detuned"),
-            "restitution": Field("float", default=0.0, nonnegative=True,
+            "restitution": Field("float", default=0.0, nonnegative=True, maximum=1.0,
+                                 why="e > 1 would create energy at every impact",
                                  help="coefficient of restitution e of the crank stop (apex = stop), 0..1"),
             "branch": Field("str", default="leading", choices=tuple(_ROOT),
                             help="assembly root at the start: leading (paper case I) or lagging (case II)"),
@@ -119,13 +120,40 @@ class ChainDwell(Mechanism):
             raise ValueError(f"mechanism.sprocket_inertias: {len(inertias)} values for {len(centres)} sprockets")
         params = ChainDwellParams("scenario", tuple(centres), tuple(radii), m["crank_radius"], m["coupler_length"],
                                   tuple(pivot))
-        return cls(params, crank_mass=m["crank_mass"], coupler_mass=m["coupler_mass"],
+        mech = cls(params, crank_mass=m["crank_mass"], coupler_mass=m["coupler_mass"],
                    chain_mass=m.get("chain_mass", 0.0), sprocket_inertias=inertias,
                    crank_inertia=m.get("crank_inertia"), coupler_inertia=m.get("coupler_inertia"),
                    crank_torque=load.get("crank_torque", 0.0), drive_damping=m.get("drive_damping", 0.0),
                    crank_damping=m.get("crank_damping", 0.0), apex=m.get("apex", "stop"),
                    restitution=m.get("restitution", 0.0), branch=m.get("branch", "leading"),
                    detuning=m.get("detuning", 0.0))
+        mech.check_run(config)
+        return mech
+
+    def check_run(self, config: dict[str, dict]) -> None:
+        """Before any work (closed form, cheap): the dyad assembles at the initial drive angle, and a prescribed
+        speed never carries the chain to a fold, where |QB| leaves [|R - L|, R + L] and it jams (ValueError)."""
+        initial, drive = config.get("initial", {}), config.get("drive", {})
+        angle0 = initial.get(self.initial_keys[0]) or 0.0
+        st = self.kin.state(np.array([self.path.r1 * angle0]), self.branch, +1)
+        if not bool(np.asarray(st["closes"])[0]):
+            raise ValueError(f"initial.drive_angle: the dyad cannot assemble at drive angle {math.degrees(angle0):.6g} "
+                             f"deg: |QB| lies outside [|R - L|, R + L] = [{self.kin.c_in:.6g}, {self.kin.c_out:.6g}] m "
+                             "(mechanism.crank_radius and coupler_length cannot reach the chain there)")
+        speed, duration = drive.get("speed"), config.get("duration")
+        if drive.get("type") != "speed" or not speed or not duration:
+            return
+        folds = self.kin.folds().drive_angle_rad.to_numpy()
+        cycle = self.kin.cycle_angle
+        a0, a1 = sorted((angle0, angle0 + speed * duration))
+        hits = [f + math.ceil((a0 - f) / cycle) * cycle for f in folds]
+        hits = [x for x in hits if x <= a1]
+        if hits:
+            raise ValueError(
+                f"mechanism.coupler_length: the prescribed chain motion reaches a fold (dead centre) at drive angle "
+                f"{math.degrees(min(hits)):.6g} deg, where |QB| leaves [|R - L|, R + L] = [{self.kin.c_in:.6g}, "
+                f"{self.kin.c_out:.6g}] m and a position-driven chain jams; change crank_radius/coupler_length, "
+                "shorten the run, or use a torque drive to see it stall")
 
     def __init__(self, params: ChainDwellParams, crank_mass: float, coupler_mass: float, chain_mass: float = 0.0,
                  sprocket_inertias=None, crank_inertia: float | None = None, coupler_inertia: float | None = None,

@@ -34,6 +34,11 @@ class GenevaGeometry:
             raise ValueError(
                 f"pin_radius {self.pin_radius} m must be smaller than the closest pin-to-wheel-centre distance "
                 f"c - r = {self.min_pin_distance} m")
+        if self.pin_radius >= self.max_pin_radius:
+            raise ValueError(
+                f"pin_radius {self.pin_radius:g} m is too large for crank_radius {self.crank_radius:g} m and "
+                f"{self.slots} slots: neighbouring slots of width 2R would merge at the wheel rim (R < r cos^2(pi/n) "
+                f"= {self.max_pin_radius:.6g} m)")
 
     @property
     def ratio(self) -> float:
@@ -53,6 +58,12 @@ class GenevaGeometry:
     def pitch(self) -> float:
         """Wheel rotation per index, 2*pi/n."""
         return 2 * np.pi / self.slots
+
+    @property
+    def max_pin_radius(self) -> float:
+        """Largest pin (= slot half-width) that fits: at entry the pin centre is at a = c cos(pi/n) from the wheel
+        centre and the next slot's centre line lies a sin(2 pi/n) away, so 2R < a sin(2 pi/n) = 2 r cos^2(pi/n)."""
+        return self.crank_radius * float(np.cos(np.pi / self.slots)) ** 2
 
     @property
     def min_pin_distance(self) -> float:

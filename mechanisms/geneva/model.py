@@ -44,7 +44,8 @@ class Geneva(Mechanism):
     has_sliding_contact = True
     schema = {
         "mechanism": {
-            "slots": Field("int", required=True, minimum=3, help="number of slots n (>= 3)"),
+            "slots": Field("int", required=True, minimum=3, maximum=72, help="number of slots n (>= 3)",
+                           why="built Geneva wheels have 3 to about 24 slots; at 72 each index is 5 degrees"),
             "crank_radius": Field("quantity", "m", required=True, positive=True, help="crank radius r"),
             "pin_radius": Field("quantity", "m", required=True, positive=True, help="pin radius R"),
             "thickness": Field("quantity", "m", required=True, positive=True,
@@ -63,7 +64,9 @@ class Geneva(Mechanism):
                                   help="resisting torque on the wheel while it indexes"),
         },
         "contact": {
-            "friction": Field("float", default=0.0, nonnegative=True, help="Coulomb friction coefficient, pin-slot"),
+            "friction": Field("float", default=0.0, nonnegative=True, maximum=2.0,
+                              help="Coulomb friction coefficient, pin-slot",
+                              why="Coulomb coefficients of engineering material pairs lie below about 1.5"),
         },
     }
 

@@ -124,6 +124,8 @@ class Report:
     runner: str = ""
     run_id: str = ""
     batching: str | None = None
+    #: (case key, why) of stored cases that failed verification on resume and were computed again
+    discarded: list = None
 
     def line(self) -> str:
         head = (f"sweep: {self.total} cases ({self.computed} computed, {self.reused} reused, {self.failed} failed) "
@@ -148,7 +150,8 @@ def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: 
     for c in pl.cases:
         by_key.setdefault(c.key, c)
     todo = [c for k, c in by_key.items() if k not in done]
-    report = Report(out=Path(out), total=len(pl.cases), run_id=run_id, runner=runner.describe())
+    report = Report(out=Path(out), total=len(pl.cases), run_id=run_id, runner=runner.describe(),
+                    discarded=list(store.discarded))
     report.reused = sum(1 for c in pl.cases if c.key in done)
     failed_before = sum(1 for k in done if not store.read_case(k)["row"].get("success", False))
     report.failed = failed_before
@@ -231,6 +234,9 @@ def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir:
     runner = make_runner(workers, dask_local, scheduler, batch)
     with RichProgress(err, f"sweep {pl.cases[0].scenario.name}", disable=quiet) as bar:
         report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots)
+    for key, why in report.discarded or []:
+        err.print(f"sweep: stored case {key} did not verify ({why}); it was computed again", markup=False,
+                  highlight=False, soft_wrap=True)
     if report.interrupted:
         err.print(report.line(), markup=False, highlight=False, soft_wrap=True)
         return INTERRUPTED_EXIT if "Ctrl-C" in report.interrupted else INCOMPLETE_EXIT

@@ -23,7 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
+from mechsim.scenarios.loader import parse_toml, read_text
 from mechsim.scenarios.units import ScenarioError
+
+#: cases in one sweep (each is validated before anything runs and stored as its own file)
+MAX_CASES = 100_000
 
 NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _ITEM = re.compile(rf"^\s*({NUMBER})\s*(.*?)\s*$")
@@ -104,6 +108,8 @@ def parse_values(key: str, spec: str) -> tuple[tuple, str]:
                 from None
         if n < 1:
             raise ScenarioError(where, f"the number of points in {spec!r} must be at least 1, got {n}")
+        if n > MAX_CASES:
+            raise ScenarioError(where, f"{n} points; a sweep has at most {MAX_CASES:,} cases (docs/limits.md)")
         start, stop = float(start_t), float(stop_t)
         if is_log:
             if not (start > 0 and stop > 0):
@@ -229,9 +235,9 @@ def is_sweep_file(target: str) -> bool:
     if path.suffix != ".toml" or not path.is_file():
         return False
     try:
-        return isinstance(tomllib.loads(path.read_text()).get("sweep"), dict)
-    except tomllib.TOMLDecodeError:
-        return False
+        return isinstance(parse_toml(read_text(path), str(path)).get("sweep"), dict)
+    except ScenarioError:
+        return False          # the scenario loader reports it
 
 
 def read_sweep_file(path: str | Path) -> tuple[str, str, list[str], list[Axis]]:
@@ -248,10 +254,7 @@ def read_sweep_file(path: str | Path) -> tuple[str, str, list[str], list[Axis]]:
         load.wheel_torque = ["5 N*m", "7 N*m"]      # or an explicit list
     """
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError("sweep", f"malformed TOML in {path}: {exc}") from None
+    doc = parse_toml(read_text(path), str(path))
     sweep = doc.get("sweep")
     if not isinstance(sweep, dict):
         raise ScenarioError("sweep", f"{path} has no [sweep] table")
@@ -281,5 +284,11 @@ def build_spec(target: str, vary: list[str], base: list[str], zip_: bool) -> Swe
     axes = [parse_vary(v) for v in vary]
     if is_sweep_file(target):
         scenario, mode, file_base, file_axes = read_sweep_file(target)
-        return SweepSpec(scenario, tuple(file_axes + axes), "zip" if zip_ else mode, tuple(file_base + list(base)))
-    return SweepSpec(target, tuple(axes), "zip" if zip_ else "grid", tuple(base))
+        spec = SweepSpec(scenario, tuple(file_axes + axes), "zip" if zip_ else mode, tuple(file_base + list(base)))
+    else:
+        spec = SweepSpec(target, tuple(axes), "zip" if zip_ else "grid", tuple(base))
+    if spec.axes and (spec.mode == "grid" or all(len(a) == len(spec.axes[0]) for a in spec.axes)) \
+            and len(spec) > MAX_CASES:
+        raise ScenarioError("--vary", f"{len(spec):,} cases; a sweep has at most {MAX_CASES:,} (each is validated "
+                                      "before anything runs and stored as its own file; docs/limits.md)")
+    return spec

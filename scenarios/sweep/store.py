@@ -8,12 +8,17 @@
     DIR/sweep_summary.json    counts, runner, timing, batching note, failed cases
 
 Every file is written to a temporary name in the same folder and renamed, so a reader (or a resumed sweep)
-never sees half a file; a case counts as finished when its cases/<key>.json exists.
+never sees half a file; a case counts as finished when its cases/<key>.json exists and verifies: it parses,
+its SHA-256 checksum matches its content, and its time series (when asked for) matches the checksum recorded
+for it. A case that does not verify (a truncated or edited file, a disk fault) is removed and computed again.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
+import socket
 import shutil
 import tempfile
 from pathlib import Path
@@ -26,10 +31,39 @@ from mechsim.scenarios.output.atomic import json_default as _json_default
 from mechsim.scenarios.units import ScenarioError
 
 
+def _host_tag() -> str:
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+
+
+#: .<name>.tmp-<pid>-<host tag>-<random>: a file being written by process pid on this host
+_TEMP_FILE = re.compile(r"^\..+\.tmp-(\d+)-([0-9a-f]{8})-[A-Za-z0-9_]+$")
+
+
+def remove_stale_files(folder: Path) -> int:
+    """Remove temporary files left in `folder` by killed sweeps on this host (owning process gone)."""
+    removed = 0
+    try:
+        entries = list(Path(folder).iterdir())
+    except OSError:
+        return 0
+    for path in entries:
+        m = _TEMP_FILE.match(path.name)
+        if not m or m.group(2) != _host_tag() or not path.is_file() or path.is_symlink():
+            continue
+        try:
+            os.kill(int(m.group(1)), 0)
+        except ProcessLookupError:
+            path.unlink(missing_ok=True)
+            removed += 1
+        except (OSError, OverflowError):
+            pass
+    return removed
+
+
 def atomic_write(path: Path, write) -> None:
     """Call write(tmp_path), then rename tmp_path to path."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-{os.getpid()}-{_host_tag()}-", dir=path.parent)
     os.close(fd)
     try:
         write(Path(tmp))
@@ -43,6 +77,15 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write(path, lambda p: p.write_text(text))
 
 
+def _checksum(record: dict) -> str:
+    """SHA-256 of a case record's canonical JSON (sorted keys), the `checksum` field itself left out."""
+    return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()
+
+
+def _file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 class SweepStore:
     """Per-case files of one sweep folder."""
 
@@ -50,6 +93,8 @@ class SweepStore:
         self.root = Path(root)
         self.cases = self.root / "cases"
         self.series = self.root / "timeseries"
+        #: (key, why) of stored cases that failed verification and were removed, to be computed again
+        self.discarded: list[tuple[str, str]] = []
 
     def case_path(self, key: str) -> Path:
         return self.cases / f"{key}.json"
@@ -81,6 +126,8 @@ class SweepStore:
                                              "it or choose another --out")
             runs = old.get("runs", [])
         self.cases.mkdir(parents=True, exist_ok=True)
+        for folder in (self.root, self.cases, self.series):
+            remove_stale_files(folder)
         atomic_write_text(self.root / MARKER, MARKER_TEXT)
         runs.append(run_id)
         atomic_write_text(manifest, json.dumps({"case_ids": keys, "runs": runs}, indent=1))
@@ -88,16 +135,49 @@ class SweepStore:
                           "# The sweep definition (valid input to `mechsim sweep`).\n" + tomli_w.dumps(definition))
 
     def finished(self, keys: list[str], need_timeseries: bool) -> set[str]:
-        """Keys whose case file exists (and time series, when asked for)."""
-        return {k for k in set(keys) if self.case_path(k).is_file()
-                and (not need_timeseries or self.series_path(k).is_file())}
+        """Keys whose case file exists and verifies (and time series, when asked for); a stored case that does
+        not verify is removed and listed in `discarded` (it counts as not finished, so it is computed again)."""
+        done = set()
+        for k in sorted(set(keys)):
+            if not self.case_path(k).is_file():
+                continue
+            why = self.verify(k, need_timeseries)
+            if why is None:
+                done.add(k)
+            elif why != "no time series":
+                self.discarded.append((k, why))
+                self.case_path(k).unlink(missing_ok=True)
+                self.series_path(k).unlink(missing_ok=True)
+        return done
+
+    def verify(self, key: str, need_timeseries: bool) -> str | None:
+        """None if the stored case is sound, else why not (parse, checksum, time-series checksum)."""
+        try:
+            record = json.loads(self.case_path(key).read_bytes().decode("utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            return f"unreadable: {type(exc).__name__}"
+        if not isinstance(record, dict) or "checksum" not in record:
+            return "no checksum (written by an older mechsim, or edited)"
+        stored = record.pop("checksum")
+        if stored != _checksum(record) or record.get("case_id") != key or not isinstance(record.get("row"), dict):
+            return "checksum mismatch"
+        if need_timeseries or "timeseries_sha256" in record:
+            path = self.series_path(key)
+            if not path.is_file():
+                return "no time series" if "timeseries_sha256" not in record else "time series missing"
+            if _file_sha256(path) != record.get("timeseries_sha256"):
+                return "time series checksum mismatch"
+        return None
 
     def write_case(self, record: dict, timeseries: pd.DataFrame | None = None) -> None:
-        """The time series first, then the case file that marks the case finished."""
+        """The time series first, then the case file (with checksums of both) that marks the case finished."""
         key = record["case_id"]
+        record = json.loads(json.dumps(record, default=_json_default))      # exactly what will be read back
         if timeseries is not None:
             atomic_write(self.series_path(key), lambda p: timeseries.to_parquet(p, index=False))
-        atomic_write_text(self.case_path(key), json.dumps(record, default=_json_default))
+            record["timeseries_sha256"] = _file_sha256(self.series_path(key))
+        record["checksum"] = _checksum(record)
+        atomic_write_text(self.case_path(key), json.dumps(record))
 
     def read_case(self, key: str) -> dict:
         return json.loads(self.case_path(key).read_text())
