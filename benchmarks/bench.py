@@ -162,7 +162,7 @@ def _error(run, ref: dict) -> float:
     return float(np.max(np.abs(run.angle - np.interp(run.t, ref["t"], ref["angle"]))))
 
 
-def _bench_one(method, problem: Problem, rtol: float, atol: float, ref: dict, repeats: int, setup_cache: dict):
+def bench_one(method, problem: Problem, rtol: float, atol: float, ref: dict, repeats: int, setup_cache: dict):
     """One row: set up (cold), run warm `repeats` times (best wall time), count, compare with the reference."""
     row = dict(method=method.name, family=method.family, kind=method.kind, equations=method.equations,
                rtol=rtol, atol=atol)
@@ -315,7 +315,7 @@ def run_bench(config: BenchConfig, progress: Callable[[str], None] | None = None
     for rtol in config.rtols:
         for name in config.methods:
             with quiet_sundials():
-                row = _bench_one(METHODS[name], problem, rtol, rtol * config.atol_factor, ref, config.repeats, cache)
+                row = bench_one(METHODS[name], problem, rtol, rtol * config.atol_factor, ref, config.repeats, cache)
             row.update(error_column=column, reference=ref["label"])
             rows.append(row)
             say(f"{name:<18} rtol {rtol:7.0e}: {row['status']:<6} error {row['error_rad']:.2e} rad, "

@@ -84,7 +84,7 @@ def baumgarte_sweep(gains=(1e1, 1e2, 1e3, 1e4, 1e5, 1e6), methods=("ida-index1",
                     duration: float = 1.0, rtol: float = 1e-6, max_steps: int = 20000) -> pd.DataFrame:
     """Steps and outcome of geneva-motor (index-1 + Baumgarte, alpha = beta = gain) per method and gain, with
     the scenario default step limit per segment (so an explicit solver fails where a user's run would)."""
-    from mechsim.benchmarks.bench import BenchConfig, make_problem, reference, _bench_one
+    from mechsim.benchmarks.bench import BenchConfig, make_problem, reference, bench_one
     from mechsim.benchmarks.bench_methods import METHODS, quiet_sundials
 
     problem = make_problem(BenchConfig(duration=duration))
@@ -101,7 +101,7 @@ def baumgarte_sweep(gains=(1e1, 1e2, 1e3, 1e4, 1e5, 1e6), methods=("ida-index1",
                 continue
             prob = replace(problem, baumgarte=(g, g))
             with quiet_sundials():
-                row = _bench_one(method, prob, rtol, rtol * 1e-2, ref, 1, cache)
+                row = bench_one(method, prob, rtol, rtol * 1e-2, ref, 1, cache)
             rows.append({**row, "gain": g})
     return pd.DataFrame(rows)
 
