@@ -99,8 +99,8 @@ class Method:
 def _trajectory_angle(traj, coordinate: int) -> tuple[np.ndarray, np.ndarray]:
     """Drive-coordinate angle at the output rows of a Trajectory (no table building: that is timed apart)."""
     t = np.concatenate([p.t for p in traj.pieces])
-    qi = traj.model.modes[traj.pieces[0].mode].index["q"].start + coordinate
-    a = np.concatenate([p.y[:, qi] for p in traj.pieces])
+    ix = traj.model.modes[traj.pieces[0].mode].index["q"]
+    a = np.concatenate([p.coordinates(ix)[:, coordinate] for p in traj.pieces])
     _, last = np.unique(t[::-1], return_index=True)
     keep = len(t) - 1 - last
     return t[keep], a[keep]

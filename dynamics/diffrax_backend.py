@@ -354,7 +354,9 @@ class Lane:
         self.o, self.mech, self.settings, self.t_end = o, mech, settings, t_end
         self.model, self.values, self.mode, self.t_out, self.mf, self.p, self.y, self.yp = (
             start.model, start.values, start.mode, start.t_out, start.mf, start.p, start.y, start.yp)
-        self.pieces = [Piece(self.mode, self.p, np.array([t0]), self.y[None, :].copy(), self.yp[None, :].copy())]
+        self.offset = start.offset         # the coordinates' re-based offset (transitions.rebased)
+        self.pieces = [Piece(self.mode, self.p, np.array([t0]), self.y[None, :].copy(), self.yp[None, :].copy(),
+                             self.offset)]
         self.events: list[dict] = []
         self.per_step = _evaluations_per_step(o)
         self.stats = {"backend": "diffrax", "solver": o.solver, "segments": 0, "steps": 0, "accepted_steps": 0,
@@ -425,15 +427,15 @@ class Lane:
             n_rows = crossed["rows"]
             t_rows, y_rows, yp_rows = t_rows[:n_rows], y_rows[:n_rows], yp_rows[:n_rows]
         if len(t_rows):
-            self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows))
+            self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows, self.offset))
         if crossed:
-            self._fail(stepped_over_failure(model, mode, crossed))
+            self._fail(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + self.offset)))
             return
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
         ok = code == int(diffrax.RESULTS.successful._value) or is_event
         if not ok or not np.all(np.isfinite(out["z_end"])):
-            q = out["z_end"][:jmod.nq]
+            q = out["z_end"][:jmod.nq] + self.offset
             msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
             self._fail(dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
                             where={c: float(val) for c, val in zip(model.coordinates, q)},
@@ -467,7 +469,7 @@ class Lane:
         self.t = t_seg
         if self.stuck > 50:
             self._fail(dict(time=t_seg, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
-                            where={c: float(val) for c, val in zip(model.coordinates, q)},
+                            where={c: float(val) for c, val in zip(model.coordinates, q + self.offset)},
                             hint="the mode sequence chatters here (Zeno behaviour?)"))
             return
         direction = mf.guard_directions[i]
@@ -475,19 +477,21 @@ class Lane:
             self.y, self.yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
             self.z = np.asarray(out["z_end"])
             return
-        failure = chattering(model, mode, guard, t_seg, q, self.last)
+        failure = chattering(model, mode, guard, t_seg, q + self.offset, self.last)
         if failure:
             self._fail(failure)
             return
         self.last = (guard, t_seg)
         stats["events"] += 1
-        res = apply_transition(self.mech, model, parameter_tuple, mode, self.values, t_seg, y_end, [i, *fired])
+        res = apply_transition(self.mech, model, parameter_tuple, mode, self.values, t_seg, y_end, [i, *fired],
+                               self.offset)
         self.events += res.rows
         self.warnings += res.warnings
         if res.failure:
             self._fail(res.failure)
             return
         self.mode, self.values, self.p, self.y, self.yp = res.mode, res.values, res.p, res.y, res.yp
+        self.offset = res.offset
         self.mf = model.modes[self.mode]
         self.z = _z(self.mf, self.y)
         self.dt0 *= 0.1

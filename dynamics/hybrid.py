@@ -17,7 +17,7 @@ from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.ida import integrate_segment
 from mechsim.dynamics.model import DerivedModel, StateExtension, derive
-from mechsim.dynamics.transitions import apply_transition, chattering, stepped_over_failure
+from mechsim.dynamics.transitions import apply_transition, chattering, rebased, stepped_over_failure
 from mechsim.dynamics.settings import SolverSettings
 
 
@@ -30,6 +30,12 @@ class Piece:
     t: np.ndarray
     y: np.ndarray
     yp: np.ndarray
+    offset: np.ndarray | None = None   # added to y's coordinates for output (re-based frame, see transitions.rebased)
+
+    def coordinates(self, ix: slice) -> np.ndarray:
+        """The unwrapped coordinates of the rows (y's q plus the re-based offset)."""
+        q = self.y[:, ix]
+        return q if self.offset is None else q + self.offset
 
 
 @dataclass
@@ -64,6 +70,7 @@ class Start:
     p: tuple
     y: np.ndarray
     yp: np.ndarray
+    offset: np.ndarray
 
 
 def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float, angle0: float,
@@ -84,14 +91,16 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
     if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
         t_out = np.append(t_out, t_end)
     mf = model.modes[init.mode]
+    values, q_init, offset = rebased(mech, model, values, t0, np.asarray(init.q, dtype=float),
+                                     np.zeros(len(model.coordinates)))
     p = parameter_tuple(model, values)
     work0 = np.zeros(len(model.work_names))
     x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
     try:
-        y, yp, _ = consistent_state(mf, t0, init.q, init.v, work0, x0, p)
+        y, yp, _ = consistent_state(mf, t0, q_init, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
-    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp)
+    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset)
 
 
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
@@ -99,20 +108,22 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
              progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
     """Integrate the hybrid DAE from t0 to t_end with outputs every dt_out."""
     start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
-    model, values, mode, t_out, mf, p, y, yp = (start.model, start.values, start.mode, start.t_out, start.mf,
-                                                 start.p, start.y, start.yp)
+    model, values, mode, t_out, mf, p, y, yp, offset = (start.model, start.values, start.mode, start.t_out,
+                                                         start.mf, start.p, start.y, start.yp, start.offset)
     derive_time = start.derive_time
-    pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy())]
+    pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
     events: list[dict] = []
-    stats = {"segments": 0, "residual_evaluations": 0, "jacobian_evaluations": 0, "events": 0,
-             "derive_time_s": derive_time}
+    stats = {"segments": 0, "residual_evaluations": 0, "jacobian_evaluations": 0, "events": 0, "restarts": 0,
+             "recoveries": 0, "derive_time_s": derive_time}
     failure = None
     warnings: list[str] = []
     t = t0
     last = None
+    first_step = 0.0
+    in_row = 0
     solve0 = _time.perf_counter()
     while t < t_end - 1e-12:
-        seg = integrate_segment(mf, p, t, y, yp, t_out[t_out > t], t_end, settings)
+        seg = integrate_segment(mf, p, t, y, yp, t_out[t_out > t], t_end, settings, first_step)
         stats["segments"] += 1
         stats["residual_evaluations"] += seg.nfev
         stats["jacobian_evaluations"] += seg.njev
@@ -120,16 +131,28 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         if crossed:
             seg.t, seg.y, seg.yp = seg.t[:crossed["rows"]], seg.y[:crossed["rows"]], seg.yp[:crossed["rows"]]
         if len(seg.t):
-            pieces.append(Piece(mode, p, seg.t, seg.y, seg.yp))
+            pieces.append(Piece(mode, p, seg.t, seg.y, seg.yp, offset))
         if progress:
             progress(seg.t_end)
         if crossed:
-            failure = stepped_over_failure(model, mode, crossed)
+            failure = stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + offset))
             break
         if seg.status == "failed":
-            q = seg.y_end[mf.index["q"]]
-            reason, hint = f"IDA failed: {seg.message}", ("tighten or loosen rtol, try formulation = 'index2', "
-                                                          "or check for a singular configuration at this point")
+            recovered = recover(mf, p, seg, in_row, t_end)
+            if recovered is not None:
+                # IDA gave up (error or convergence test): restart from its last state, re-initialised
+                # consistently (a fresh order-1 history) with a small first step; at most twice per instant
+                t, y, yp, first_step = recovered
+                in_row += 1
+                stats["recoveries"] += 1
+                continue
+            q = seg.y_end[mf.index["q"]] + offset
+            reason, hint = f"IDA failed: {seg.message}", (
+                "tighten or loosen rtol; formulation = 'index1' (or solver.backend = 'diffrax') where index2 fails; "
+                "check for a singular configuration at this point")
+            if settings.formulation == "index1":
+                hint = ("tighten or loosen rtol; formulation = 'index2' (or solver.backend = 'diffrax'); check for "
+                        "a singular configuration at this point")
             if settings.formulation == "index3":
                 reason = f"IDA failed on the index-3 formulation: {seg.message}"
                 hint = ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
@@ -138,6 +161,7 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
             failure = dict(time=seg.t_end, mode=mode, reason=reason,
                            where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=hint)
             break
+        first_step, in_row = 0.0, 0
         if seg.status == "end":
             t = seg.t_end
             break
@@ -146,21 +170,49 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         ix = mf.index
         q = seg.y_end[ix["q"]]
         guard = mf.guard_names[seg.guard]
-        failure = chattering(model, mode, guard, t, q, last)
+        failure = chattering(model, mode, guard, t, q + offset, last)
         if failure:
             break
         last = (guard, t)
         stats["events"] += 1
-        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, [seg.guard, *seg.fired[1:]])
+        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, [seg.guard, *seg.fired[1:]],
+                               offset)
         events += out.rows
         warnings += out.warnings
         if out.failure:
             failure = out.failure
             break
-        mode, values, p, y, yp = out.mode, out.values, out.p, out.y, out.yp
+        mode, values, p, y, yp, offset = out.mode, out.values, out.p, out.y, out.yp, out.offset
         mf = model.modes[mode]
+        stats["restarts"] += 1
     stats["solve_time_s"] = _time.perf_counter() - solve0
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+#: restarts of failed segments allowed in a row (without a segment that ends normally) before giving up
+MAX_RECOVERIES = 2
+
+
+def recover(mf, p: tuple, seg, in_row: int, t_end: float):
+    """(t, y, yp, first_step) to restart a failed IDA segment from, or None when not possible.
+
+    IDA's last reached state is re-initialised consistently (positions to round-off, velocities, accelerations
+    and multipliers from the KKT system: `consistent_state`) and restarted with a fresh order-1 history and a
+    first step of 1e-6 of the remaining time (IDA's own estimate is what failed). More than MAX_RECOVERIES
+    failures in a row, a non-finite state or a state that cannot be made consistent gives up.
+    """
+    t = float(seg.t_end)
+    if in_row >= MAX_RECOVERIES:
+        return None
+    if not (np.all(np.isfinite(seg.y_end)) and t < t_end):
+        return None
+    ix = mf.index
+    try:
+        y, yp, _ = consistent_state(mf, t, seg.y_end[ix["q"]], seg.y_end[ix["v"]], seg.y_end[ix["work"]],
+                                    seg.y_end[ix["ext"]], p)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return t, y, yp, 1e-6 * (t_end - t)
 
 
 def stepped_over(mf, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray, seg) -> dict | None:

@@ -43,9 +43,11 @@ def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray 
 
 
 def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray,
-                      t_out: np.ndarray, t_end: float, settings: SolverSettings) -> Segment:
-    """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end."""
-    opts = dict(
+                      t_out: np.ndarray, t_end: float, settings: SolverSettings, first_step: float = 0.0) -> Segment:
+    """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end.
+
+    first_step: IDA's initial step (0: its own estimate)."""
+    opts = dict(first_step=first_step,
         userdata=p, rtol=settings.rtol, atol=atol_vector(mf, settings), algebraic_idx=mf.algebraic or None,
         jacfn=mf.jacobian if settings.jacobian == "exact" else None, max_num_steps=settings.max_steps, linsolver="dense",
     )

@@ -68,11 +68,12 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
         ix = mf.index
         t, y = piece.t, piece.y
         q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
+        q_out = piece.coordinates(ix["q"])       # unwrapped: q is in the mode's re-based frame
         a, lam = kkt_rows(mf, t, q, v, x, piece.params)
         cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
         for i, name in enumerate(model.coordinates):
             pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
-            cols[pos], cols[spd], cols[acc] = q[:, i], v[:, i], a[:, i]
+            cols[pos], cols[spd], cols[acc] = q_out[:, i], v[:, i], a[:, i]
         values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.params)
         for name, val in zip(mf.readout_names, values):
             cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()

@@ -31,10 +31,33 @@ class Outcome:
     failure: dict | None = None
     rows: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    offset: np.ndarray | None = None    # the coordinates' re-based offset after the transition (see `rebased`)
 
 
 def _where(model: DerivedModel, q) -> dict:
     return {c: float(val) for c, val in zip(model.coordinates, q)}
+
+
+def rebased(mech: Mechanism, model: DerivedModel, values: dict, t: float, q: np.ndarray, offset: np.ndarray
+            ) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(values, q, offset) moved by the mechanism's symmetry (`Mechanism.rebase`) so that q stays small.
+
+    The solvers integrate q while q + offset is the unwrapped coordinate reported: ulp(q), the round-off of
+    every constraint and guard evaluated from q, then does not grow with the number of turns. A prescribed
+    drive's reference (angle0 + speed (t - time0)) is moved to the shifted frame and to the current time.
+    """
+    r = mech.rebase(values)
+    if r is None:
+        return values, q, offset
+    shift, updates = r
+    shift = np.asarray(shift, dtype=float)
+    values = {**values, **updates}
+    if model.prescribed:
+        k = mech.drive_coordinate
+        values["drive_angle0"] = (values["drive_angle0"] - shift[k]
+                                  + values["drive_speed"] * (t - values["drive_time0"]))
+        values["drive_time0"] = t
+    return values, np.asarray(q, dtype=float) - shift, offset + shift
 
 
 def chattering(model: DerivedModel, mode: str, guard: str, t: float, q, last) -> dict | None:
@@ -57,11 +80,15 @@ def stepped_over_failure(model: DerivedModel, mode: str, crossed: dict) -> dict:
 
 
 def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode: str, values: dict, t: float,
-                     y_end: np.ndarray, fired: list[int]) -> Outcome:
-    """Handle guards `fired` (indices into the mode's guards, the first one the primary) at time t."""
+                     y_end: np.ndarray, fired: list[int], offset: np.ndarray | None = None) -> Outcome:
+    """Handle guards `fired` (indices into the mode's guards, the first one the primary) at time t.
+
+    y_end is in the re-based frame: the unwrapped coordinates are y_end's q + offset (zero when None); the
+    outcome's state is re-based again for the new mode (`Outcome.offset`)."""
     mf = model.modes[mode]
     ix = mf.index
     q, v = y_end[ix["q"]], y_end[ix["v"]]
+    offset = np.zeros(len(q)) if offset is None else np.asarray(offset, dtype=float)
     p = parameter_tuple(model, values)
     guard = mf.guard_names[fired[0]]
     tr = mech.on_guard(mode, guard, values, t, q, v)
@@ -72,22 +99,23 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
             if alt.stop:
                 guard, tr = mf.guard_names[other], alt
     row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
-               **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q)})
-    out = Outcome(mode, values, p)
+               **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q + offset)})
+    out = Outcome(mode, values, p, offset=offset)
     if tr.message:
         out.warnings.append(f"t = {t:.6g} s: {tr.message}")
     if tr.stop:
         M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
         ke = 0.5 * float(v @ M @ v)
         out.rows.append(dict(row, kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop))
-        out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q),
+        out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q + offset),
                            hint=tr.hint or DEFAULT_STOP_HINT, kind="physics")
         return out
     values = {**values, **tr.updates}
+    values, q, offset = rebased(mech, model, values, t, q, offset)
     new_mode = tr.mode
     mf = model.modes[new_mode]
     p = parameter_tuple(model, values)
-    out.mode, out.values, out.p = new_mode, values, p
+    out.mode, out.values, out.p, out.offset = new_mode, values, p, offset
     try:
         restitution, rebound = tr.restitution, None
         if restitution:
@@ -99,7 +127,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution)
     except (ValueError, np.linalg.LinAlgError) as exc:
         out.failure = dict(time=t, mode=new_mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
-                           where=_where(model, q), hint="the new mode may be singular here")
+                           where=_where(model, q + offset), hint="the new mode may be singular here")
         out.rows.append(row)
         return out
     if rebound is not None:

@@ -240,6 +240,15 @@ class Mechanism(ABC):
                  q: np.ndarray, v: np.ndarray) -> Transition:
         """The transition when `guard` of `mode` fires."""
 
+    def rebase(self, values: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]] | None:
+        """A symmetry that keeps the integrated coordinates small, or None (the default: there is none).
+
+        (shift, updates): the state q with parameters `values` is the same physical state as q - shift with
+        `values` updated by `updates` (e.g. slot k of a Geneva wheel is slot 0 one crank turn per slot back).
+        Unwrapped angles grow with every turn, and so does their round-off, ulp(q); the solvers integrate
+        q - shift and add the shift back to the output columns (docs/stability.md, 'Restarts')."""
+        return None
+
     def structure_key(self) -> tuple:
         """Identifies the symbolic model; derivations are cached on (class, structure_key())."""
         return (type(self).__name__,)

@@ -38,7 +38,7 @@ class Geneva(Mechanism):
     parameter_names = (
         "r", "c", "R", "J1", "J2", "T_L", "mu", "c1", "c2", "pitch", "alpha0",
         # discrete (mode) parameters
-        "slot", "lock_angle", "flank", "slide",
+        "slot", "lock_angle", "flank", "slide", "slot_base",
     )
 
     has_sliding_contact = True
@@ -143,7 +143,7 @@ class Geneva(Mechanism):
             readouts=engaged_readouts,
             heat={"normal_force": normal, "slip_speed": u,
                   "source_speed_driver": spin, "source_speed_driven": v_s,
-                  "heat_rate": fric_mag * slide * u, "track": k},
+                  "heat_rate": fric_mag * slide * u, "track": k + P("slot_base")},
         )
         zero = sp.Integer(0)
         dwell = Mode(
@@ -162,7 +162,7 @@ class Geneva(Mechanism):
                 "friction_power_W": zero, "flank": zero, "lock_force_N": lam,
             },
             heat={"normal_force": zero, "slip_speed": zero, "source_speed_driver": zero, "source_speed_driven": zero,
-                  "heat_rate": zero, "track": k},
+                  "heat_rate": zero, "track": k + P("slot_base")},
         )
         return {"engaged": engaged, "dwell": dwell}
 
@@ -174,7 +174,7 @@ class Geneva(Mechanism):
             "J1": self.crank_inertia, "J2": self.wheel_inertia, "T_L": self.wheel_torque,
             "mu": self.friction, "c1": self.crank_damping, "c2": self.wheel_damping,
             "pitch": g.pitch, "alpha0": g.engagement_half_angle,
-            "slot": 0.0, "lock_angle": 0.0, "flank": 1.0, "slide": 1.0,
+            "slot": 0.0, "lock_angle": 0.0, "flank": 1.0, "slide": 1.0, "slot_base": 0.0,
         }
 
     def initial_state(self, angle: float, speed: float) -> InitialState:
@@ -196,6 +196,16 @@ class Geneva(Mechanism):
                                 np.array([angle, lock]), np.array([speed, 0.0]))
         lock = (k - 0.5) * g.pitch
         return InitialState("dwell", {"slot": k, "lock_angle": lock}, np.array([angle, lock]), np.array([speed, 0.0]))
+
+    def rebase(self, values: Mapping[str, float]):
+        """Slot k in the angles (theta, psi) is slot 0 in (theta - 2 pi k, psi - k pitch) with the lock angle moved
+        by k pitch; `slot_base` counts the slots re-based away (the contact's track is slot + slot_base)."""
+        k = values["slot"]
+        if k == 0:
+            return None
+        pitch = self.geometry.pitch
+        return np.array([2 * np.pi * k, k * pitch]), {
+            "slot": 0.0, "lock_angle": values["lock_angle"] - k * pitch, "slot_base": values["slot_base"] + k}
 
     def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
                  q: np.ndarray, v: np.ndarray) -> Transition:
