@@ -137,6 +137,9 @@ def check_field(where: str, spec: Field, value):
     elif spec.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             raise ScenarioError(where, f"expected an integer, got {_shown(value)}")
+        if value.bit_length() > 64:  # compared as an integer: a huge one cannot even become a float
+            raise ScenarioError(where, f"{_shown(value)} is out of range"
+                                + (f"; at most {spec.maximum:g}" if spec.maximum is not None else ""))
         out = value
     elif spec.kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
