@@ -234,9 +234,8 @@ def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: fl
     k = np.floor((theta + np.pi) / (2 * np.pi))
     phi_row = np.degrees(theta - 2 * np.pi * k + a0)
     engaged = (df["mode"] == "engaged").to_numpy()
-    slots = [kk for kk in np.unique(k[engaged])
-             if np.any((k == kk) & (phi_row < 0)) and np.any((k == kk) & (phi_row > 90))]
-    if not slots:
+    slots = np.intersect1d(np.intersect1d(k[engaged], k[phi_row < 0]), k[phi_row > 90])
+    if not len(slots):
         raise RuntimeError(f"{case.name}: the run has no complete engagement to report")
     kk = slots[-1]
     key = np.rint(phi_row / step_deg)

@@ -168,26 +168,24 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
 
 def _repeat_events(df, events, t_start, period, t_sim, duration) -> pd.DataFrame:
     """The turn's events repeated every period after t_sim up to duration; `<coordinate>_q` advances like the
-    coordinate's angle column."""
+    coordinate's angle column (all copies built at once: a long run repeats the turn thousands of times)."""
     if events is None or not len(events):
         return events
     te = events["t_s"].to_numpy(float)
     turn = events[(te >= t_start) & (te < t_start + period)]
+    if turn.empty:
+        return events
     t = df["t_s"].to_numpy(float)
-    copies = []
-    for m in range(1, int(np.ceil((duration - t_start) / period)) + 1):
-        shifted = turn.copy()
-        shifted["t_s"] = shifted["t_s"] + m * period
-        shifted = shifted[(shifted["t_s"] > t_sim) & (shifted["t_s"] <= duration + 1e-12)]
-        if shifted.empty:
-            continue
-        for col in shifted.columns:
-            angle = f"{col[:-2]}_angle_rad"
-            if col.endswith("_q") and angle in df:
-                v = df[angle].to_numpy(float)
-                shifted[col] = shifted[col].astype(float) + m * float(
-                    np.diff(np.interp([t_start, t_start + period], t, v))[0])
-        if "message" in shifted:
-            shifted["message"] = "periodic continuation of the last simulated turn"
-        copies.append(shifted)
-    return pd.concat([events, *copies], ignore_index=True) if copies else events
+    turns = int(np.ceil((duration - t_start) / period))
+    m = np.repeat(np.arange(1, turns + 1), len(turn))
+    copies = turn.iloc[np.tile(np.arange(len(turn)), turns)].reset_index(drop=True)
+    copies["t_s"] = copies["t_s"] + m * period
+    for col in turn.columns:
+        angle = f"{col[:-2]}_angle_rad"
+        if col.endswith("_q") and angle in df:
+            per_turn = float(np.diff(np.interp([t_start, t_start + period], t, df[angle].to_numpy(float)))[0])
+            copies[col] = copies[col].astype(float) + m * per_turn
+    if "message" in copies:
+        copies["message"] = "periodic continuation of the last simulated turn"
+    copies = copies[(copies["t_s"] > t_sim) & (copies["t_s"] <= duration + 1e-12)]
+    return pd.concat([events, copies], ignore_index=True) if len(copies) else events

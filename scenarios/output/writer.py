@@ -12,6 +12,7 @@ import tomli_w
 from mechsim.dynamics.result import Result
 
 from mechsim.scenarios.output.atomic import atomic_folder, json_default
+from mechsim.scenarios.output.csv import write_csv
 
 
 def _toml_clean(d):
@@ -35,10 +36,10 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
     the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically."""
     with atomic_folder(out_dir, force) as tmp:
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-        result.timeseries.to_csv(tmp / "timeseries.csv", index=False)
-        result.events.to_csv(tmp / "events.csv", index=False)
+        write_csv(result.timeseries, tmp / "timeseries.csv")
+        write_csv(result.events, tmp / "events.csv")
         for name, table in result.extra_tables.items():
-            table.to_csv(tmp / f"{name}.csv", index=False)
+            write_csv(table, tmp / f"{name}.csv")
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
         scenario_toml = resolved_scenario_toml(result.scenario)
         (tmp / "scenario.toml").write_text(scenario_toml)
