@@ -126,27 +126,40 @@ def compare(scenario: Scenario | str | Path, set: Overrides = None, rtol: float 
 
 def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: bool = False,  # noqa: A002
           out: str | Path | None = None, workers: int | None = 0, timeseries: bool = False, plots: bool = False,
-          force: bool = False, batch: bool = False):
-    """A parameter sweep (`mechsim sweep`): the table with one row per case (parameters, peaks, cycle figures,
-    success and failure reason), as a DataFrame.
+          force: bool = False, batch: bool = False, *, dask_local: int | None = None, scheduler: str | None = None,
+          default_folder: bool = False, progress=None):
+    """A parameter sweep (`mechsim sweep` is this function): the table with one row per case (parameters, peaks,
+    cycle figures, success and failure reason), as a DataFrame.
 
     vary: ["section.key=SPEC", ...] or {"section.key": "SPEC"}, SPEC as on the command line ("5,7,14 N*m",
     "0.1:0.4:7", "log:1e-3:1e-1:5"); zip=True pairs the axes instead of a full grid. out: the sweep folder
-    (resumable, as the CLI writes it); None runs in a temporary folder and keeps only the table. workers: local
-    processes (0 runs here, None all cores). batch: one vmapped diffrax solve per model structure."""
+    (resumable, as the CLI writes it); None runs in a temporary folder and keeps only the table, or with
+    default_folder=True writes results/sweep-<name> as the CLI does. workers: local processes (0 runs here,
+    None all cores); dask_local / scheduler: a Dask LocalCluster of N workers / the scheduler at an address.
+    batch: one vmapped diffrax solve per model structure. progress: an object with start(total, done, failed)
+    and advance(ok) (the CLI's progress bar). The table's attrs: "report" (the one-line account), "exit_code"
+    (the CLI's), "interrupted" (why, or None), "recomputed" ([(case, why)]: stored cases that did not verify).
+    User errors raise ScenarioError before any case runs."""
     import pandas as pd
 
+    from mechsim.scenarios.output.paths import default_folder as results_folder
     from mechsim.scenarios.sweep.execute import make_runner
-    from mechsim.scenarios.sweep.run import plan, run_sweep
+    from mechsim.scenarios.sweep.run import check_runner_options, exit_code, plan, run_sweep
     from mechsim.scenarios.sweep.spec import build_spec
+    check_runner_options(workers, dask_local, scheduler)
     if isinstance(vary, Mapping):
         vary = [f"{key}={spec}" for key, spec in vary.items()]
     spec = build_spec(str(scenario), [str(v) for v in (vary or [])], _override_list(set), zip)
     pl = plan(spec)
-    runner = make_runner(workers, None, None, batch)
+    runner = make_runner(workers, dask_local, scheduler, batch)
     with tempfile.TemporaryDirectory(prefix="mechsim-sweep-") as scratch:
-        folder = Path(out) if out is not None else Path(scratch) / "sweep"
-        report = run_sweep(pl, folder, runner, timeseries=timeseries, force=force, plots=plots)
-        table = pd.read_parquet(folder / "sweep.parquet")
-    table.attrs["report"] = report.line()
+        if out is not None:
+            folder = Path(out)
+        else:
+            folder = results_folder(pl.cases[0].scenario.name, "sweep-") if default_folder else Path(scratch) / "s"
+        report = run_sweep(pl, folder, runner, timeseries=timeseries, force=force, progress=progress, plots=plots)
+        stored = folder / "sweep.parquet"
+        table = pd.read_parquet(stored) if stored.exists() else pd.DataFrame()
+    table.attrs.update(report=report.line(), exit_code=exit_code(report), interrupted=report.interrupted,
+                       recomputed=list(report.discarded or []))
     return table

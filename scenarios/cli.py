@@ -255,15 +255,22 @@ def sweep(
                                "solve (the rest on the pool; docs/sweeps.md, 'Batching')"),
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
-    from mechsim.scenarios.sweep.run import cli_main
+    from mechsim.scenarios.api import sweep as run_sweep
+    from mechsim.scenarios.sweep.run import RichProgress
     try:
-        code = cli_main(target, vary, set_, zip_, out_dir, workers, dask_local, scheduler, timeseries, plots, force,
-                        quiet, out.console, err.console, batch)
+        with RichProgress(err.console, f"sweep {Path(target).stem}", disable=quiet) as bar:
+            table = run_sweep(target, vary, set_, zip_, out_dir, workers, timeseries, plots, force, batch,
+                              dask_local=dask_local, scheduler=scheduler, default_folder=True, progress=bar)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
         _os_refused(exc, "sweep")
-    raise typer.Exit(code)
+    for key, why in table.attrs["recomputed"]:
+        err.print(f"sweep: stored case {key} did not verify ({why}); it was computed again", markup=False,
+                  highlight=False, soft_wrap=True)
+    (err if table.attrs["interrupted"] else out).print(table.attrs["report"], markup=False, highlight=False,
+                                                       soft_wrap=True)
+    raise typer.Exit(table.attrs["exit_code"])
 
 
 @app.command()

@@ -213,32 +213,19 @@ def batching_note(pl: Plan) -> str:
 INTERRUPTED_EXIT, INCOMPLETE_EXIT = 130, 3
 
 
-def cli_main(target: str, vary: list[str], base: list[str], zip_: bool, out_dir: Path | None,
-             workers: int | None, dask_local: int | None, scheduler: str | None, timeseries: bool,
-             plots: bool, force: bool, quiet: bool, out, err, batch: bool = False) -> int:
-    """`mechsim sweep`: returns the exit code (0 every case has a record; 130 Ctrl-C; 3 workers lost).
-
-    User errors (spec, keys, units, options, output folder) raise ScenarioError before anything runs.
-    """
-    from mechsim.scenarios.sweep.execute import make_runner
-    from mechsim.scenarios.sweep.spec import build_spec
+def check_runner_options(workers: int | None, dask_local: int | None, scheduler: str | None) -> None:
+    """ScenarioError (named as the CLI option) when the runner options contradict each other or are out of range;
+    workers = 0 (run here) or None (all cores) are the defaults and give way to Dask."""
     if dask_local is not None and scheduler:
         raise ScenarioError("--dask-local", "give either --dask-local N or --scheduler ADDRESS, not both")
-    if workers is not None and (dask_local is not None or scheduler):
+    if workers not in (None, 0) and (dask_local is not None or scheduler):
         raise ScenarioError("--workers", "sets the local process pool; with Dask the cluster has the workers")
     if workers is not None and workers < 0 or dask_local is not None and dask_local < 1:
         raise ScenarioError("--workers" if dask_local is None else "--dask-local", "must be a positive number")
-    spec = build_spec(target, vary, base, zip_)
-    pl = plan(spec)
-    target_dir = out_dir if out_dir is not None else default_folder(pl.cases[0].scenario.name, "sweep-")
-    runner = make_runner(workers, dask_local, scheduler, batch)
-    with RichProgress(err, f"sweep {pl.cases[0].scenario.name}", disable=quiet) as bar:
-        report = run_sweep(pl, target_dir, runner, timeseries=timeseries, force=force, progress=bar, plots=plots)
-    for key, why in report.discarded or []:
-        err.print(f"sweep: stored case {key} did not verify ({why}); it was computed again", markup=False,
-                  highlight=False, soft_wrap=True)
-    if report.interrupted:
-        err.print(report.line(), markup=False, highlight=False, soft_wrap=True)
-        return INTERRUPTED_EXIT if "Ctrl-C" in report.interrupted else INCOMPLETE_EXIT
-    out.print(report.line(), markup=False, highlight=False, soft_wrap=True)
-    return 0
+
+
+def exit_code(report: Report) -> int:
+    """`mechsim sweep`'s exit code: 0 every case has a record; 130 Ctrl-C; 3 workers lost."""
+    if not report.interrupted:
+        return 0
+    return INTERRUPTED_EXIT if "Ctrl-C" in report.interrupted else INCOMPLETE_EXIT
