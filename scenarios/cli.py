@@ -88,6 +88,23 @@ def show(name: str) -> None:
 
 
 @app.command()
+def docs(topic: Optional[str] = typer.Argument(None, help="a document: theory, limits, api, ... (docs/<topic>.md)")
+         ) -> None:
+    """Where the documentation is installed (it ships with the package): the docs folder and its documents, or
+    the path of one, e.g. `mechsim docs theory` for the docs/theory.md that messages and summary.json cite."""
+    folder = Path(__file__).resolve().parents[1] / "docs"
+    names = sorted(p.stem for p in folder.glob("*.md"))
+    if topic is None:
+        print(folder)
+        print("documents: " + ", ".join(names))
+        return
+    stem = Path(topic).name.removesuffix(".md")
+    if stem not in names:
+        _fail(f"docs: no document '{topic}'; there are: {', '.join(names)}")
+    print(folder / f"{stem}.md")
+
+
+@app.command()
 def run(
     scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/<name>)"),
