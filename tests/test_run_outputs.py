@@ -1,0 +1,107 @@
+"""An output folder is all or nothing, and the same run writes the same bytes (docs/limits.md, "Where results go"):
+Ctrl-C while solving or while writing leaves no folder and no temporary folder (exit 130); two runs racing into
+one --out leave one complete folder, never a mix; two identical runs differ only in their timing fields."""
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from cli_helpers import invoke
+
+#: fields that measure this machine rather than the simulation (docs/limits.md, "Identical runs")
+TIMING = re.compile(r'"(derive|solve|wall)_time_s": [0-9.e+-]+')
+TIMING_HTML = re.compile(r"<td>(derive|solve|wall)_time_s</td><td class=\"num\">[0-9.e+-]+</td>")
+
+
+def mechsim(*args, **popen):
+    """`mechsim ARGS` in a fresh interpreter with the default SIGINT handler (a background job may inherit
+    SIGINT ignored), seeing the same mechsim as this test."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    return subprocess.Popen([sys.executable, "-m", "mechsim.scenarios.cli", *map(str, args)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **popen)
+
+
+def temporaries(parent: Path) -> list[str]:
+    return [p.name for p in parent.iterdir() if p.name.startswith(".")]
+
+
+def files(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def complete(folder: Path) -> dict:
+    """The folder is one whole run: marker, summary, every table readable and as long as the summary says."""
+    import pandas as pd
+    names = set(os.listdir(folder))
+    assert {".mechsim-output", "summary.json", "scenario.toml", "timeseries.parquet", "timeseries.csv",
+            "events.csv"} <= names, names
+    assert not any(n.startswith(".") and n != ".mechsim-output" for n in names)
+    summary = json.loads((folder / "summary.json").read_text())
+    rows = len(pd.read_parquet(folder / "timeseries.parquet"))
+    assert rows == len(pd.read_csv(folder / "timeseries.csv")) == summary["solver"]["output_rows"]
+    return summary
+
+
+@pytest.mark.parametrize("moment", ["computing", "writing"])
+def test_ctrl_c_leaves_no_folder_and_no_temporary(tmp_path, moment):
+    out = tmp_path / "o"
+    # computing: a DAE run of 20 s (seconds of work); writing: a closed-form run whose figures take seconds to draw
+    args = (["geneva-torque", "--set", "duration=20 s", "--set", "output.plots=false"] if moment == "computing"
+            else ["geneva-lc1"])
+    proc = mechsim("run", *args, "--out", out, "--quiet")
+    t0 = time.monotonic()
+    while proc.poll() is None and time.monotonic() - t0 < 120:
+        writing = bool(temporaries(tmp_path))
+        if (moment == "writing" and writing) or (moment == "computing" and time.monotonic() - t0 > 3.0):
+            break
+        time.sleep(0.01)
+    assert proc.poll() is None, proc.communicate()
+    caught_writing = bool(temporaries(tmp_path))
+    assert caught_writing == (moment == "writing")
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert not out.exists() and temporaries(tmp_path) == []
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_two_runs_racing_into_one_folder_leave_one_whole_run(tmp_path, force):
+    out = tmp_path / "o"
+    args = ["run", "geneva-lc1", "--out", out, "--quiet", "--set", "output.plots=false"] + (["--force"] if force else [])
+    procs = [mechsim(*args) for _ in range(2)]
+    results = [(p.wait(timeout=120), p.communicate()[1]) for p in procs]
+    codes = sorted(code for code, _ in results)
+    if force:
+        assert codes == [0, 0], results                      # each replaced the folder whole
+    else:
+        assert codes == [0, 2], results                      # one wins, the other refuses in one line
+        refusal = next(err for code, err in results if code == 2).strip().splitlines()
+        assert len(refusal) == 1 and refusal[0].startswith("error: --out:") and "exists" in refusal[0]
+    complete(out)
+    assert temporaries(tmp_path) == []
+
+
+def test_identical_runs_write_identical_bytes_but_the_timing_fields(tmp_path):
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for out in outs:
+        r = invoke("run", "geneva-torque", "--set", "duration=0.3 s", "--out", out, "--quiet")
+        assert r.exit_code == 0, r.output
+    a, b = (files(o) for o in outs)
+    assert a.keys() == b.keys() and {"timeseries.parquet", "mechanism.png", "report.html"} <= a.keys()
+    for name in a:
+        if name == "summary.json":
+            assert TIMING.sub("", a[name].decode()) == TIMING.sub("", b[name].decode())
+            assert len(TIMING.findall(a[name].decode())) == 3
+        elif name == "report.html":
+            assert TIMING_HTML.sub("", a[name].decode()) == TIMING_HTML.sub("", b[name].decode())
+            assert len(TIMING_HTML.findall(a[name].decode())) == 3
+        else:
+            assert a[name] == b[name], name
+    complete(outs[0])
