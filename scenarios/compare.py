@@ -83,7 +83,8 @@ def column_table(ida: pd.DataFrame, dfx: pd.DataFrame, angle_column: str, rtol: 
         worst = float(diff[i]) if n else 0.0
         if n and np.isnan(diff).any():
             worst = np.inf
-        scale = float(np.nanmax(np.abs(x))) if n else 0.0
+        finite = np.abs(x[~np.isnan(x)])          # a column NaN on every row (both runs) has no scale: 0
+        scale = float(finite.max()) if len(finite) else 0.0
         rel = worst / scale if scale > 0 else (0.0 if worst == 0 else np.inf)
         tol = tolerance_for(col, rtol)
         if tol is None:

@@ -44,7 +44,7 @@ def test_run_writes_every_output(tmp_path):
     assert summary["model"]["method"] == "dae" and summary["solver"]["residual_evaluations"] > 0
     assert summary["versions"]["scikit-sundae"]
     # the resolved scenario is valid input again and reproduces the same run
-    r2 = invoke("run", out / "scenario.toml", "--out", tmp_path / "again", "--quiet")
+    r2 = invoke("run", out / "scenario.toml", "--out", tmp_path / "again", "--quiet", "--set", "output.plots=false")
     assert r2.exit_code == 0, r2.output
     df2 = pd.read_parquet(tmp_path / "again" / "timeseries.parquet")
     pd.testing.assert_frame_equal(df, df2)
@@ -52,10 +52,11 @@ def test_run_writes_every_output(tmp_path):
 
 def test_existing_output_needs_force(tmp_path):
     out = tmp_path / "o"
-    assert invoke("run", "geneva-lc1", "--out", out, "--quiet", "--set", "duration=0.1 s").exit_code == 0
-    r = invoke("run", "geneva-lc1", "--out", out, "--quiet", "--set", "duration=0.1 s")
+    quick = ["--quiet", "--set", "output.plots=false"]
+    assert invoke("run", "geneva-lc1", "--out", out, *quick, "--set", "duration=0.1 s").exit_code == 0
+    r = invoke("run", "geneva-lc1", "--out", out, *quick, "--set", "duration=0.1 s")
     assert r.exit_code == 2 and "--force" in one_line_error(r)
-    assert invoke("run", "geneva-lc1", "--out", out, "--quiet", "--force", "--set", "duration=0.2 s").exit_code == 0
+    assert invoke("run", "geneva-lc1", "--out", out, *quick, "--force", "--set", "duration=0.2 s").exit_code == 0
     assert pd.read_csv(out / "timeseries.csv")["t_s"].iloc[-1] == pytest.approx(0.2)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folders left
 
