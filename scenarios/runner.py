@@ -15,6 +15,7 @@ import pandas as pd
 
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.invariants import first_violation
 from mechsim.dynamics.result import Failure, Result
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
@@ -124,6 +125,23 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict
             "closure_error_relative": closure / scale}
 
 
+def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
+             exact: bool = False, columns: list[str] | None = None):
+    """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
+    becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept."""
+    v = first_violation(df if columns is None else df[columns], events, settings.rtol, settings.atol, exact)
+    if v is None or (failure is not None and failure.time <= v.time):
+        return df, events, failure
+    failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver", hint=(
+        "a model that no longer holds was integrated; tighten rtol, or try formulation = 'index2' or "
+        "solver.backend = 'diffrax', and please report the scenario"))
+    keep = df["t_s"].to_numpy(float) < v.time
+    df = df[keep].reset_index(drop=True)
+    if len(events):
+        events = events[events["t_s"].to_numpy(float) < v.time].reset_index(drop=True)
+    return df, events, failure
+
+
 @dataclass
 class Plan:
     """Everything decided before anything is integrated; the mechanism is built once, here."""
@@ -206,11 +224,15 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"))
+    df, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form")
     thermal_summary, thermal_tables = None, {}
     if thermal is not None:
         df, events, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(df, events,
                                                                                      failed=failure is not None)
         warnings += thermal_warnings
+        heat = [c for c in ("t_s", "mode", "heat_rate_W", "heat_generated_J", "friction_force_N", "slip_speed_m_s")
+                if c in df]
+        df, events, failure = _checked(df, events, failure, settings, columns=heat)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     summary = {
         "scenario": scenario.name,

@@ -1,0 +1,83 @@
+"""Physical invariants on every output row (issue 17 item 3): a broken one is a failure with its time.
+
+The forced violations are the real symptom: a friction force pointing along the slip (the sign of the Geneva's
+`slide` flipped on one segment, as a missed stall did), which makes friction power negative - energy created -
+while the work states stay consistent; and a jump in a work column that the kinetic energy does not follow.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.invariants import energy_closure, first_violation
+from mechsim.scenarios.runner import run
+
+TORQUE = ["duration=0.6 s", "contact.friction=0.15"]
+
+
+def flipped_slide(piece_index: int):
+    """A backend call whose trajectory has the friction direction of one segment reversed."""
+    def integrate(*args, **kwargs):
+        traj = simulate(*args, **kwargs)
+        piece = traj.pieces[piece_index]
+        k = traj.model.parameter_names.index("slide")
+        params = list(piece.params)
+        params[k] = -params[k]
+        piece.params = tuple(params)
+        integrate.first_time = float(piece.t[0])
+        return traj
+    return integrate
+
+
+def test_friction_along_the_slip_is_a_failure_at_its_first_row():
+    sc = mechsim.load("geneva-torque", set=TORQUE)
+    good = run(sc)
+    assert good.success and first_violation(good.timeseries, good.events, 1e-8, 1e-10) is None
+    engaged = good.timeseries[(good.timeseries["mode"] == "engaged") & (good.timeseries["friction_power_W"] > 1.0)]
+    assert len(engaged), "the scenario must slide with friction"
+    # the first engaged segment is piece 2 (piece 0: the initial state, piece 1: the first dwell)
+    integrate = flipped_slide(2)
+    bad = run(sc, integrate=integrate)
+    assert not bad.success
+    assert "friction power" in bad.failure.reason and "invariant" in bad.failure.reason
+    ts = good.timeseries.set_index("t_s")
+    first_bad = ts.index[(ts.index >= integrate.first_time) & (ts["friction_power_W"] > 0)][0]
+    assert bad.failure.time == pytest.approx(first_bad, abs=1e-12)
+    # nothing from the violating row on is written; everything before it is the good run's
+    assert bad.timeseries["t_s"].max() < first_bad
+    n = len(bad.timeseries)
+    assert np.array_equal(bad.timeseries["crank_angle_rad"].to_numpy(), good.timeseries["crank_angle_rad"][:n])
+
+
+def test_energy_created_in_a_work_column_is_caught_at_its_row():
+    r = run(mechsim.load("geneva-torque", set=TORQUE))
+    df = r.timeseries.copy()
+    closure = energy_closure(df, r.events)
+    scale = df["work_drive_J"].abs().max()
+    assert np.max(np.abs(closure)) < 1e-6 * scale       # closes to the integrator's tolerance (rtol 1e-8)
+    i = len(df) // 3
+    df.loc[i:, "work_drive_J"] += 1e-3 * scale          # 0.1 % of the drive work appears from nowhere
+    v = first_violation(df, r.events, 1e-8, 1e-10)
+    assert v is not None and v.invariant.startswith("energy") and v.time == df["t_s"].iloc[i]
+
+
+def test_heat_that_decreases_is_caught():
+    r = run(mechsim.load("geneva-lc1", set=["duration=0.5 s", "thermal.model=lumped"]))
+    df = r.timeseries
+    assert "heat_generated_J" in df and first_violation(df, r.events, 1e-8, 1e-10, exact=True) is None
+    bad = df[["t_s", "mode", "heat_generated_J"]].copy()
+    i = len(bad) // 2
+    bad.loc[i:, "heat_generated_J"] -= bad["heat_generated_J"].iloc[i] + 1e-3   # below its start
+    v = first_violation(bad, None, 1e-8, 1e-10)
+    assert v is not None and v.invariant.startswith("heat generated") and v.time == bad["t_s"].iloc[i]
+
+
+@pytest.mark.parametrize("name", mechsim.builtins())
+def test_every_builtin_keeps_its_invariants(name):
+    r = run(mechsim.load(name, set=["duration=0.3 s"]))
+    assert r.failure is None or r.failure.kind == "physics", r.failure and r.failure.message()
+    exact = r.summary["model"]["method"] == "closed-form"
+    assert first_violation(r.timeseries, r.events, r.summary["model"]["rtol"], r.summary["model"]["atol"],
+                           exact) is None
