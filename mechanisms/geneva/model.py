@@ -225,7 +225,13 @@ class Geneva(Mechanism):
             return Transition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * g.pitch}, kind="exit")
         if guard == "flank_switch":
             new = -values["flank"]
-            return Transition("engaged", {"flank": new}, kind="flank switch", message=(
+            # the slip u = v_s + flank R (w1 + w2) changes with the flank (the pin's spin term changes sign), so
+            # the friction direction is re-chosen from it: keeping the old one can leave friction pointing along
+            # the slip, and the slip-reversal guard (falling only) would never fire from there
+            alpha, beta = q[0] - 2 * np.pi * k, q[1] - k * g.pitch
+            u = g.crank_radius * v[0] * np.sin(alpha + beta) + new * g.pin_radius * (v[0] + v[1])
+            slide = values["slide"] if u == 0 else float(np.sign(u))
+            return Transition("engaged", {"flank": new, "slide": slide}, kind="flank switch", message=(
                 f"normal force changed sign at crank angle {np.degrees(q[0] - 2 * np.pi * k):.2f} deg "
                 f"(local): the pin crossed to the {'driving' if new > 0 else 'trailing'} flank "
                 "(with slot clearance this is a backlash impact)"))
