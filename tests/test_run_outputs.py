@@ -18,13 +18,17 @@ TIMING = re.compile(r'"(derive|solve|wall)_time_s": [0-9.e+-]+')
 TIMING_HTML = re.compile(r"<td>(derive|solve|wall)_time_s</td><td class=\"num\">[0-9.e+-]+</td>")
 
 
-def mechsim(*args, **popen):
-    """`mechsim ARGS` in a fresh interpreter with the default SIGINT handler (a background job may inherit
-    SIGINT ignored), seeing the same mechsim as this test."""
+#: the CLI with Python's own Ctrl-C handler, whatever SIGINT disposition the test process passes on (a worker may
+#: ignore SIGINT; a preexec_fn would fork a multithreaded JAX process)
+CLI = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+       "sys.argv = ['mechsim', *sys.argv[1:]]; runpy.run_module('mechsim.scenarios.cli', run_name='__main__')")
+
+
+def mechsim(*args):
+    """`mechsim ARGS` in a fresh interpreter seeing the same mechsim as this test."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
-    return subprocess.Popen([sys.executable, "-m", "mechsim.scenarios.cli", *map(str, args)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **popen)
+    return subprocess.Popen([sys.executable, "-c", CLI, *map(str, args)], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
 
 
 def temporaries(parent: Path) -> list[str]:

@@ -25,6 +25,8 @@ from mechsim.thermal.lumped import ambient_temperatures
 
 #: rows of the bulk history table over the whole duration
 HISTORY_ROWS = 1001
+#: phases within the period are resolved to this fraction of it (bulk_response)
+PHASE_RESOLUTION = 1e-10
 
 
 def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarray:
@@ -70,7 +72,13 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     mean, _ = ModalNetwork(system).constant(ambient_temperatures(system), u_bar, times)
     P = means.period
     s0 = (-means.t_start) % P                      # phase of t = 0 within the periodic turn
-    tau = np.unique(np.concatenate([[0.0, P], times % P]))
+    # output rows a whole number of steps apart repeat the same few phases, up to the round-off of `t mod P`
+    # (and of P itself); phases are snapped to PHASE_RESOLUTION * P so that an hour of rows integrates the
+    # period once over those few phases, not over a million that differ in their last digits (the ripple then
+    # moves by at most PHASE_RESOLUTION * P * |dT/dt|: ~1e-9 K at the seed's rates)
+    phase = np.round((times % P) / (PHASE_RESOLUTION * P)) * (PHASE_RESOLUTION * P)
+    phase = np.minimum(phase, P)
+    tau = np.unique(np.concatenate([[0.0, P], phase]))
     breaks = sorted({(b - s0) % P for b in list(phase_breaks) + [0.0]} - {0.0})
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
@@ -83,7 +91,7 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
     start = homogeneous.resolvent_periodic(Z[-1], P)
     periodic = homogeneous.exp(tau, start) + Z
-    ripple = periodic[np.searchsorted(tau, times % P)] - homogeneous.exp(times, start)
+    ripple = periodic[np.searchsorted(tau, phase)] - homogeneous.exp(times, start)
     return mean, mean + ripple
 
 
