@@ -29,10 +29,11 @@ from mechsim.mechanisms.base import Mechanism
 
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, prepare
+from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, prepare, transition_failure_code
 from mechsim.dynamics.transitions import apply_transition, chattering, stepped_over_failure
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
 from mechsim.dynamics.model import ModeFunctions, StateExtension
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -429,7 +430,8 @@ class Lane:
         if len(t_rows):
             self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows, self.offset))
         if crossed:
-            self._fail(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + self.offset)))
+            self._fail(dict(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + self.offset)),
+                            code=FailureCode.STEPPED_OVER))
             return
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
@@ -437,7 +439,10 @@ class Lane:
         if not ok or not np.all(np.isfinite(out["z_end"])):
             q = out["z_end"][:jmod.nq] + self.offset
             msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
+            failure_code = (FailureCode.NON_FINITE if ok else FailureCode.MAX_STEPS
+                            if code == int(diffrax.RESULTS.max_steps_reached._value) else FailureCode.INTEGRATOR_FAILED)
             self._fail(dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
+                            code=failure_code,
                             where={c: float(val) for c, val in zip(model.coordinates, q)},
                             hint="raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver "
                                  "(Kvaerno5 if the motion is stiff); check for a singular configuration here"))
@@ -469,6 +474,7 @@ class Lane:
         self.t = t_seg
         if self.stuck > 50:
             self._fail(dict(time=t_seg, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
+                            code=FailureCode.CHATTERING,
                             where={c: float(val) for c, val in zip(model.coordinates, q + self.offset)},
                             hint="the mode sequence chatters here (Zeno behaviour?)"))
             return
@@ -479,7 +485,7 @@ class Lane:
             return
         failure = chattering(model, mode, guard, t_seg, q + self.offset, self.last)
         if failure:
-            self._fail(failure)
+            self._fail(dict(failure, code=FailureCode.CHATTERING))
             return
         self.last = (guard, t_seg)
         stats["events"] += 1
@@ -488,7 +494,7 @@ class Lane:
         self.events += res.rows
         self.warnings += res.warnings
         if res.failure:
-            self._fail(res.failure)
+            self._fail(dict(res.failure, code=transition_failure_code(res.failure)))
             return
         self.mode, self.values, self.p, self.y, self.yp = res.mode, res.values, res.p, res.y, res.yp
         self.offset = res.offset

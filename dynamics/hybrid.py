@@ -17,6 +17,7 @@ from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.ida import integrate_segment
 from mechsim.dynamics.model import DerivedModel, StateExtension, derive
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.transitions import apply_transition, chattering, rebased, stepped_over_failure
 from mechsim.dynamics.settings import SolverSettings
 
@@ -135,7 +136,8 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         if progress:
             progress(seg.t_end)
         if crossed:
-            failure = stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + offset))
+            failure = dict(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + offset)),
+                           code=FailureCode.STEPPED_OVER)
             break
         if seg.status == "failed":
             recovered = recover(mf, p, seg, in_row, t_end)
@@ -158,7 +160,10 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
                 hint = ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
                         "error test breaks down at restarts and tight tolerances (docs/theory.md §K4); use "
                         "formulation = 'index2'")
-            failure = dict(time=seg.t_end, mode=mode, reason=reason,
+            code = FailureCode.MAX_STEPS if seg.ida_status == IDA_TOO_MUCH_WORK else FailureCode.INTEGRATOR_FAILED
+            if not np.all(np.isfinite(seg.y_end)):
+                code = FailureCode.NON_FINITE
+            failure = dict(time=seg.t_end, mode=mode, reason=reason, code=code,
                            where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=hint)
             break
         first_step, in_row = 0.0, 0
@@ -172,6 +177,7 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         guard = mf.guard_names[seg.guard]
         failure = chattering(model, mode, guard, t, q + offset, last)
         if failure:
+            failure = dict(failure, code=FailureCode.CHATTERING)
             break
         last = (guard, t)
         stats["events"] += 1
@@ -180,13 +186,24 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
         events += out.rows
         warnings += out.warnings
         if out.failure:
-            failure = out.failure
+            failure = dict(out.failure, code=transition_failure_code(out.failure))
             break
         mode, values, p, y, yp, offset = out.mode, out.values, out.p, out.y, out.yp, out.offset
         mf = model.modes[mode]
         stats["restarts"] += 1
     stats["solve_time_s"] = _time.perf_counter() - solve0
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+#: IDA's return flag for "max_num_steps reached" (IDA_TOO_MUCH_WORK in the SUNDIALS IDA guide)
+IDA_TOO_MUCH_WORK = -1
+
+
+def transition_failure_code(failure: dict) -> FailureCode:
+    """The code of a failure that `apply_transition` reports: a physical stop, or a failed re-initialisation."""
+    if failure.get("kind", "solver") != "solver":
+        return FailureCode.PHYSICAL_STOP
+    return FailureCode.REINITIALISATION_FAILED
 
 
 #: restarts of failed segments allowed in a row (without a segment that ends normally) before giving up

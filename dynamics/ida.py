@@ -30,6 +30,7 @@ class Segment:
     nfev: int = 0
     njev: int = 0
     fired: tuple[int, ...] = ()   # every guard that found a root at t_end (guard is the first of them)
+    ida_status: int = 0           # IDA's return flag (-1: max_num_steps reached; other negatives: failures)
 
 
 def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray | None = None) -> np.ndarray:
@@ -78,6 +79,6 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
                        np.asarray(sol.yp_events)[-1], fired[0], nfev=sol.nfev, njev=sol.njev, fired=fired)
     if not sol.success:
         return Segment(t[requested], y[requested], yp[requested], "failed", float(t[-1]), y[-1], yp[-1],
-                       message=str(sol.message), nfev=sol.nfev, njev=sol.njev)
+                       message=str(sol.message), nfev=sol.nfev, njev=sol.njev, ida_status=int(sol.status))
     return Segment(t[requested], y[requested], yp[requested], "end", float(t[-1]), y[-1], yp[-1],
                    nfev=sol.nfev, njev=sol.njev)

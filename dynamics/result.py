@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import Enum
 
 import pandas as pd
 
@@ -23,15 +24,38 @@ class Result:
         return self.failure is None
 
 
+class FailureCode(str, Enum):
+    """What stopped a run, as a value to switch on (the reason text is for people, not for code).
+
+    Every backend and the hybrid loop report one of these; `kind` says whether it is the solver's trouble or
+    the physics' answer (a physical stop is a result, not an error, though the run still exits 3).
+    """
+
+    INTEGRATOR_FAILED = "integrator_failed"        # the integrator gave up (error or Newton test, min step)
+    MAX_STEPS = "max_steps"                        # the step limit (solver.max_steps) was reached
+    NON_FINITE = "non_finite"                      # the state became NaN or infinite
+    STEPPED_OVER = "stepped_over"                  # with events off, a guard crossed between samples
+    CHATTERING = "chattering"                      # a guard keeps firing without time advancing
+    REINITIALISATION_FAILED = "reinitialisation_failed"   # no consistent state after a transition
+    INITIAL_STATE = "initial_state"                # no consistent initial state
+    INVARIANT_VIOLATED = "invariant_violated"      # a physical invariant broke on an output row
+    PHYSICAL_STOP = "physical_stop"                # stall, reversal, dead centre: the mechanism cannot go on
+
+    @property
+    def kind(self) -> str:
+        return "physics" if self is FailureCode.PHYSICAL_STOP else "solver"
+
+
 @dataclass(frozen=True)
 class Failure:
-    """Why a run stopped early: when (time), where (mode, crank angle), why, and a hint."""
+    """Why a run stopped early: when (time), where (mode, crank angle), why, and a hint; `code` to switch on."""
 
     time: float
     mode: str
     reason: str
     hint: str = ""
     kind: str = "solver"   # "solver" (integrator failed) or "physics" (stall, reversal, ...)
+    code: FailureCode = FailureCode.INTEGRATOR_FAILED
 
     def message(self) -> str:
         text = f"stopped at t = {self.time:.6g} s in mode '{self.mode}': {self.reason}"

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mechsim.dynamics.result import FailureCode
+
 #: stability limit |h lambda| of explicit methods on the negative real axis (approximate; Hairer & Wanner II)
 STABILITY_LIMIT = {"Euler": 2.0, "Heun": 2.0, "Midpoint": 2.0, "Ralston": 2.0, "Bosh3": 2.5, "Tsit5": 3.5,
                    "Dopri5": 3.3, "Dopri8": 6.0}
@@ -21,7 +23,7 @@ def explain(traj, settings, t_end: float) -> dict | None:
     f = traj.failure
     if not f or settings.backend != "diffrax" or settings.diffrax_solver not in STABILITY_LIMIT:
         return f
-    if "maximum number" not in f.get("reason", "") and "max_steps" not in f.get("reason", ""):
+    if f.get("code") is not FailureCode.MAX_STEPS:
         return f
     try:
         stiff = fastest_mode(traj)

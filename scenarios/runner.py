@@ -16,7 +16,7 @@ import pandas as pd
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.invariants import first_violation
-from mechsim.dynamics.result import Failure, Result
+from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
@@ -132,9 +132,10 @@ def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, se
     v = first_violation(df if columns is None else df[columns], events, settings.rtol, settings.atol, exact)
     if v is None or (failure is not None and failure.time <= v.time):
         return df, events, failure
-    failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver", hint=(
-        "a model that no longer holds was integrated; tighten rtol, or try formulation = 'index2' or "
-        "solver.backend = 'diffrax', and please report the scenario"))
+    failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver",
+                      code=FailureCode.INVARIANT_VIOLATED, hint=(
+                          "a model that no longer holds was integrated; tighten rtol, or try formulation = 'index2' "
+                          "or solver.backend = 'diffrax', and please report the scenario"))
     keep = df["t_s"].to_numpy(float) < v.time
     df = df[keep].reset_index(drop=True)
     if len(events):
@@ -223,7 +224,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             f = explain(traj, settings, si["duration"])     # names the cause where the backend gives a symptom
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
-                              hint=f.get("hint", ""), kind=f.get("kind", "solver"))
+                              hint=f.get("hint", ""), kind=f.get("kind", "solver"),
+                              code=f.get("code", FailureCode.INTEGRATOR_FAILED))
     df, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form")
     thermal_summary, thermal_tables = None, {}
     if thermal is not None:
@@ -254,6 +256,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "warning_groups": group_warnings(warnings),
         "success": failure is None,
         "failure": failure.message() if failure else None,
+        "failure_code": failure.code.value if failure else None,
         "versions": dict(versions()),
     }
     if thermal_summary is not None:

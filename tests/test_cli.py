@@ -110,6 +110,7 @@ def test_stall_exits_3_and_keeps_what_ran(tmp_path, lc1_raw):
     assert "stalled" in r.stderr and "t =" in r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is False and "stalled" in summary["failure"]
+    assert summary["failure_code"] == "physical_stop"
     df = pd.read_csv(out / "timeseries.csv")
     assert 0 < df["t_s"].iloc[-1] < 3.0
 
@@ -119,7 +120,7 @@ def test_solver_failure_exits_3(tmp_path):
     r = invoke("run", "geneva-motor", "--out", out, "--quiet", "--set", "solver.max_steps=3")
     assert r.exit_code == 3
     assert "IDA failed" in r.stderr
-    assert (out / "summary.json").is_file()
+    assert json.loads((out / "summary.json").read_text())["failure_code"] == "max_steps"
 
 
 def test_console_script_user_error_has_no_traceback(tmp_path):

@@ -7,6 +7,7 @@ import pytest
 
 import mechsim.dynamics.diffrax_backend as dbk
 from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
 from mechsim.mechanisms.geneva.model import Geneva
@@ -89,7 +90,7 @@ def test_failure_is_a_value(seed_geometry):
     f = traj.failure
     assert f is not None
     assert set(f) >= {"time", "mode", "reason", "where", "hint"}
-    assert "maximum number of solver steps" in f["reason"]
+    assert "maximum number of solver steps" in f["reason"] and f["code"] is FailureCode.MAX_STEPS
     assert 0.0 < f["time"] < 1.0 and set(f["where"]) == {"crank", "wheel"}
     assert len(traj.pieces) >= 1   # what ran so far is kept
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from mechsim.dynamics.drives import Drive
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
@@ -112,6 +113,7 @@ def test_stall_is_detected_not_integrated_through(seed_geometry):
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=20.0, friction=0.15)
     traj = simulate(mech, Drive("torque", torque=1.0), SolverSettings(), 3.0, 1e-3, -np.pi / 3, 2.0)
     assert traj.failure is not None and traj.failure["kind"] == "physics"
+    assert traj.failure["code"] is FailureCode.PHYSICAL_STOP and FailureCode.PHYSICAL_STOP.kind == "physics"
     assert "stalled" in traj.failure["reason"]
     assert traj.pieces[-1].t[-1] < 3.0
 

@@ -11,6 +11,7 @@ import pytest
 
 import mechsim
 from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.invariants import energy_closure, first_violation
 from mechsim.scenarios.runner import run
 
@@ -42,6 +43,7 @@ def test_friction_along_the_slip_is_a_failure_at_its_first_row():
     bad = run(sc, integrate=integrate)
     assert not bad.success
     assert "friction power" in bad.failure.reason and "invariant" in bad.failure.reason
+    assert bad.failure.code is FailureCode.INVARIANT_VIOLATED
     ts = good.timeseries.set_index("t_s")
     first_bad = ts.index[(ts.index >= integrate.first_time) & (ts["friction_power_W"] > 0)][0]
     assert bad.failure.time == pytest.approx(first_bad, abs=1e-12)

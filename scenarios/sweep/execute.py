@@ -69,6 +69,7 @@ def run_case(task: CaseTask, integrate=None) -> Outcome:
         row = summary_row(result.summary)
         if result.failure is not None:
             row["failure_kind"] = result.failure.kind
+            row["failure_code"] = result.failure.code.value
         df = result.timeseries
         row.update(cycle_figures(df, _drive_angle_column(task.scenario.si)))
         row["simulated_time_s"] = float(df["t_s"].iloc[-1]) if len(df) else 0.0
