@@ -131,7 +131,8 @@ def translate(mech: Mechanism, ext=None) -> PeerModel:
             xp_sol = -ca.solve(ca.jacobian(r, Xp), ca.substitute(r, Xp, ca.DM.zeros(Xp.shape)))
             rhs.append(ca.substitute(xp_sol, lam, lam_x))
         f = ca.substitute(ca.vertcat(*rhs), lam, lam_x)
-        gexprs = ca.vertcat(*_to_casadi([g.expr for g in mode.guards], sym_all, val_all))
+        gexprs = ca.vertcat(*_to_casadi([g.expr for g in mode.guards], sym_all + list(s.a),
+                                        val_all + [acc[i] for i in range(nq)]))
         gexprs = ca.substitute(gexprs, lam, lam_x)
         gdot = ca.jtimes(gexprs, x, f)
         modes[name] = dict(x=x, p=P, rhs=f, guards=gexprs, gdot=gdot, phi=phi, G=G, M=M, q=q, v=v)
@@ -146,7 +147,7 @@ def geneva_transition(mech, mode: str, guard: str, values: dict, q) -> tuple[str
     stop reason or None)."""
     g = mech.geometry
     k = values["slot"]
-    if guard == "stall":
+    if guard in ("stall", "rest"):
         return mode, {}, "crank stalled"
     if guard == "exit":
         return "dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * g.pitch}, None

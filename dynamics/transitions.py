@@ -98,6 +98,8 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
             alt = mech.on_guard(mode, mf.guard_names[other], values, t, q, v)
             if alt.stop:
                 guard, tr = mf.guard_names[other], alt
+    if tr.stop and tr.kind in mf.guard_names:
+        guard = tr.kind     # the mechanism recognised its own stop guard at another guard's root (a stall)
     row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
                **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q + offset)})
     out = Outcome(mode, values, p, offset=offset)
@@ -110,6 +112,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q + offset),
                            hint=tr.hint or DEFAULT_STOP_HINT, kind="physics")
         return out
+    values_before, p_before, q_before, offset_before = values, p, q, offset
     values = {**values, **tr.updates}
     values, q, offset = rebased(mech, model, values, t, q, offset)
     new_mode = tr.mode
@@ -138,6 +141,50 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
             f"'{new_mode}': removed by a plastic projection onto its constraints"))
     row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
     row.setdefault("message", tr.message or "")
+    carried = carried_stop(mech, model, mode, out.mode, values_before, p_before, p, t, y_end, y)
+    if carried is not None:
+        # the restart itself moved the state past a stop guard (a stall located a hair after the guard that
+        # fired): that guard will never cross zero in the new mode, so it fires here and the stop wins
+        name, stop = carried
+        out.mode, out.values, out.p, out.offset, out.y, out.yp = mode, values_before, p_before, offset_before, None, None
+        out.rows = [dict(row, to_mode=stop.mode, kind=stop.kind, guard=name, kinetic_energy_after_J=row[
+            "kinetic_energy_before_J"], message=stop.stop)]
+        out.failure = dict(time=t, mode=mode, reason=stop.stop, where=_where(model, q_before + offset_before),
+                           hint=stop.hint or DEFAULT_STOP_HINT, kind="physics")
+        return out
     out.rows.append(row)
     out.y, out.yp = y, yp
     return out
+
+
+def guard_values(mf, t: float, y: np.ndarray, p: tuple) -> np.ndarray:
+    """The mode's guard values at state y (guards are functions of t and y; y' is not read)."""
+    g = np.zeros(len(mf.guard_names))
+    if len(g):
+        mf.events(t, y, np.zeros_like(y), g, p)
+    return g
+
+
+def carried_stop(mech: Mechanism, model: DerivedModel, mode: str, new_mode: str, values: dict, p: tuple,
+                 new_p: tuple, t: float, y_end: np.ndarray, y_new: np.ndarray):
+    """(guard, stop transition) for a stop guard that the restart carried across zero in its direction.
+
+    A guard present in both modes (same name) that was on its before-side at the end of the old segment and is
+    past zero at the restart state would never be root-found: the new segment starts beyond it. This happens
+    when two guards vanish at the same instant (the Geneva crank coming to rest makes the slip vanish too) and
+    the one that is not a stop was located first; the velocity projection of the restart then moves the
+    other's value by round-off across zero. Only stops are looked at: they end the run, so nothing is skipped.
+    """
+    old, new = model.modes[mode], model.modes[new_mode]
+    before, after = guard_values(old, t, y_end, p), guard_values(new, t, y_new, new_p)
+    ix = old.index
+    q, v = y_end[ix["q"]], y_end[ix["v"]]
+    for j, name in enumerate(new.guard_names):
+        if name not in old.guard_names:
+            continue
+        d, b, a = new.guard_directions[j], before[old.guard_names.index(name)], after[j]
+        if (d < 0 and b >= 0 > a) or (d > 0 and b <= 0 < a):
+            tr = mech.on_guard(mode, name, values, t, q, v)
+            if tr.stop and tr.kind == name:   # the guard's own stop (not one the mechanism infers from q, v)
+                return name, tr
+    return None

@@ -39,7 +39,13 @@ class Geneva(Mechanism):
         "r", "c", "R", "J1", "J2", "T_L", "mu", "c1", "c2", "pitch", "alpha0",
         # discrete (mode) parameters
         "slot", "lock_angle", "flank", "slide", "slot_base",
+        # the creeping-rest guard: at rest once |theta'| + rest_time |theta''| < rest_speed
+        "rest_speed", "rest_time",
     )
+    #: a crank creeping to rest (speed and acceleration both vanishing, an exponential approach to the static
+    #: equilibrium that never reaches theta' = 0) is stopped once theta' + REST_TIME |theta''| < REST_SPEED
+    REST_SPEED = 1e-5   # rad/s
+    REST_TIME = 1.0     # s
 
     has_sliding_contact = True
     schema = {
@@ -100,6 +106,7 @@ class Geneva(Mechanism):
         theta, psi = s.q
         w1, w2 = s.v
         a1, a2 = s.a
+        rest = Guard("rest", w1 + P("rest_time") * sp.Abs(a1) - P("rest_speed"), -1)
         lam = s.lam[0]
         r, c, R, mu = P("r"), P("c"), P("R"), P("mu")
         c1, c2, T_L = P("c1"), P("c2"), P("T_L")
@@ -138,6 +145,7 @@ class Geneva(Mechanism):
                 Guard("flank_switch", flank * lam, -1),
                 Guard("slip_reversal", slide * u, -1),
                 Guard("stall", w1, -1),
+                rest,
             ),
             powers={"load": -T_L * w2, "friction": -fric_mag * slide * u, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts=engaged_readouts,
@@ -153,6 +161,7 @@ class Geneva(Mechanism):
             guards=(
                 Guard("entry", theta - (2 * sp.pi * k - P("alpha0")), +1),
                 Guard("stall", w1, -1),
+                rest,
             ),
             powers={"load": zero, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts={
@@ -175,6 +184,7 @@ class Geneva(Mechanism):
             "mu": self.friction, "c1": self.crank_damping, "c2": self.wheel_damping,
             "pitch": g.pitch, "alpha0": g.engagement_half_angle,
             "slot": 0.0, "lock_angle": 0.0, "flank": 1.0, "slide": 1.0, "slot_base": 0.0,
+            "rest_speed": self.REST_SPEED, "rest_time": self.REST_TIME,
         }
 
     def initial_state(self, angle: float, speed: float) -> InitialState:
@@ -211,10 +221,15 @@ class Geneva(Mechanism):
                  q: np.ndarray, v: np.ndarray) -> Transition:
         g = self.geometry
         k = values["slot"]
-        if guard == "stall":
+        if guard == "stall" or (guard == "slip_reversal" and self.slip_stopped_by_crank(values, q)):
             return Transition(mode, stop=(
                 f"crank stalled: its speed fell to zero at crank angle {np.degrees(q[0]):.2f} deg "
                 f"({mode}); the drive cannot carry the load past this point"), kind="stall")
+        if guard == "rest":
+            return Transition(mode, stop=(
+                f"crank stalled: it crept to rest at crank angle {np.degrees(q[0]):.4f} deg ({mode}), speed "
+                f"{v[0]:.2e} rad/s with speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} "
+                "rad/s; it settles where the drive's torque at zero speed balances the load"), kind="rest")
         if guard == "entry":
             lam = g.ratio
             alpha = q[0] - 2 * np.pi * k
@@ -238,6 +253,25 @@ class Geneva(Mechanism):
         if guard == "slip_reversal":
             return Transition("engaged", {"slide": -values["slide"]}, kind="slip reversal")
         raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
+
+    def slip_stopped_by_crank(self, values: Mapping[str, float], q: np.ndarray) -> bool:
+        """True when an engaged slip reversal is the crank coming to rest, not the slip changing sign.
+
+        Engaged, the slip is u = theta' s(alpha) with s = r sin(alpha + beta) + flank R (1 + G(alpha)) (the
+        wheel follows w2 = G theta', docs/theory.md §G1-2), so u = 0 either where the kinematic factor s
+        vanishes (a slip reversal, at a fixed crank angle) or where theta' does (a stall). The two roots
+        coincide exactly, and the integrator may locate either first; the guard's position decides: s away
+        from zero (more than 1e-3 (r + R); at a true reversal |s| is the position error of the root, round-off)
+        means the crank stopped. A stall must win: after a slip reversal at rest the model that runs on (the
+        crank turning backwards against a forward friction) no longer holds.
+        """
+        g = self.geometry
+        k = values["slot"]
+        alpha = q[0] - 2 * np.pi * k
+        beta = q[1] - k * g.pitch
+        s = (g.crank_radius * np.sin(alpha + beta)
+             + values["flank"] * g.pin_radius * (1.0 + float(speed_ratio(g.ratio, alpha))))
+        return abs(s) > 1e-3 * (g.crank_radius + g.pin_radius)
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
         """Crank angle from the reduced-coordinate equation (`geneva_reduced`, docs/theory.md §G2) on DOP853;
