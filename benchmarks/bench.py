@@ -184,7 +184,7 @@ def bench_one(method, problem: Problem, rtol: float, atol: float, ref: dict, rep
     except Exception as exc:  # noqa: BLE001 - a method that raises is a row with its reason, not a crash
         return {**row, "status": "error", "failure": f"{type(exc).__name__}: {exc}", "error_rad": NAN,
                 "wall_time_s": NAN, "cpu_time_s": NAN, "setup_time_s": NAN, "setup_scope": ""}
-    stats = {**run.stats, **{k: v for k, v in counts.items() if k not in run.stats or
+    stats = {**run.stats, **{k: v for k, v in counts.items() if k not in run.stats or run.stats[k] is None or
                              (isinstance(run.stats[k], float) and math.isnan(run.stats[k]))}}
     row.update(status="failed" if run.failure else "ok", error_rad=_error(run, ref),
                wall_time_s=min(walls[1:]) if len(walls) > 1 else walls[0],

@@ -34,6 +34,7 @@ from mechsim.dynamics.transitions import apply_transition, chattering, stepped_o
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
 from mechsim.dynamics.model import ModeFunctions, StateExtension
 from mechsim.dynamics.result import FailureCode
+from mechsim.dynamics.stats import new_stats
 from mechsim.dynamics.settings import SolverSettings
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -324,7 +325,6 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
                   ext_initial=None, progress: Callable[[float], None] | None = None,
                   t0: float = 0.0) -> Trajectory:
     """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
-    wall0 = _time.perf_counter()
     lane = Lane.start(options, mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
     solve0 = _time.perf_counter()
     while not lane.done:
@@ -339,7 +339,6 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
         if progress:
             progress(lane.t_seg)
     lane.stats["solve_time_s"] = _time.perf_counter() - solve0 - lane.stats["compile_time_s"]
-    lane.stats["wall_time_backend_s"] = _time.perf_counter() - wall0
     return lane.trajectory()
 
 
@@ -360,13 +359,12 @@ class Lane:
                              self.offset)]
         self.events: list[dict] = []
         self.per_step = _evaluations_per_step(o)
-        self.stats = {"backend": "diffrax", "solver": o.solver, "segments": 0, "steps": 0, "accepted_steps": 0,
-                      "rejected_steps": 0, "residual_evaluations": 0 if self.per_step else None,
-                      "residual_evaluations_note": ("estimated: attempted steps x new stages per step + 3 per "
-                                                    "segment" if self.per_step else
-                                                    "not exposed by diffrax for implicit solvers"),
-                      "jacobian_evaluations": None, "events": 0, "derive_time_s": start.derive_time,
-                      "compile_time_s": 0.0, "compile_cpu_time_s": 0.0, "compilations": 0}
+        self.stats = new_stats("diffrax", o.solver, start.derive_time, unavailable={
+            "jacobian_evaluations": "not exposed by diffrax",
+            **({} if self.per_step else {"residual_evaluations": "not exposed by diffrax for implicit solvers"})})
+        if self.per_step:
+            self.stats["notes"]["residual_evaluations"] = ("estimated: attempted steps x new stages per step + 3 "
+                                                           "per segment")
         self.failure = None
         self.warnings: list[str] = []
         self.t = t0
@@ -496,6 +494,7 @@ class Lane:
         if res.failure:
             self._fail(dict(res.failure, code=transition_failure_code(res.failure)))
             return
+        stats["restarts"] += 1
         self.mode, self.values, self.p, self.y, self.yp = res.mode, res.values, res.p, res.y, res.yp
         self.offset = res.offset
         self.mf = model.modes[self.mode]

@@ -84,7 +84,6 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
     o = options or default_options(settings)
     ext_list = list(ext_list) if ext_list is not None else [None] * n
     ext_initial_list = list(ext_initial_list) if ext_initial_list is not None else [None] * n
-    wall0 = _time.perf_counter()
     lanes = []
     for mech, drive, t_end, a0, s0, ext, x0 in zip(mech_list, drive_list, t_end_list, angle0_list, speed0_list,
                                                     ext_list, ext_initial_list, strict=True):
@@ -115,12 +114,10 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
             if not lane.done:
                 lane.after_segment(jmod, {key: val[j] for key, val in out.items()}, per_lane[j][1])
     solve = _time.perf_counter() - solve0
-    wall = _time.perf_counter() - wall0
     for lane in lanes:
         lane.stats["compile_time_s"] = compile_time / n
         lane.stats["compile_cpu_time_s"] = compile_cpu / n
         lane.stats["compilations"] = 1 if fresh else 0
         lane.stats["solve_time_s"] = solve / n
-        lane.stats["wall_time_backend_s"] = wall / n
     last_batch.update(lanes=n, rounds=rounds, compile_time_s=compile_time, solve_time_s=solve)
     return [lane.trajectory() for lane in lanes]

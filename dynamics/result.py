@@ -37,7 +37,6 @@ class FailureCode(str, Enum):
     STEPPED_OVER = "stepped_over"                  # with events off, a guard crossed between samples
     CHATTERING = "chattering"                      # a guard keeps firing without time advancing
     REINITIALISATION_FAILED = "reinitialisation_failed"   # no consistent state after a transition
-    INITIAL_STATE = "initial_state"                # no consistent initial state
     INVARIANT_VIOLATED = "invariant_violated"      # a physical invariant broke on an output row
     PHYSICAL_STOP = "physical_stop"                # stall, reversal, dead centre: the mechanism cannot go on
 
