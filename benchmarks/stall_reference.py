@@ -9,6 +9,11 @@ Engaged, driving flank (N > 0), slip u = theta' s_u with s_u = r sin(alpha + bet
     crank:  J1 theta''                   = T_in - c1 theta' - N (r cos(alpha + beta) + sigma mu (r sin(alpha + beta) + R))
 so, with h = (x G + sigma mu (r sin(alpha + beta) + R)) / (x - sigma mu R) (x G = r cos(alpha + beta)):
     (J1 + h J2 G) theta'' = T_in - c1 theta' - h (J2 G' theta'^2 + c2 G theta' + T_L).
+On the trailing flank (N < 0: the wheel decelerates faster than the load alone would) the pin touches the
+other side of the slot: the contact point's offset from the pin centre is s R with s = sign(N) = -1, so the
+slip is u = theta' (r sin(alpha + beta) + s R (1 + G)) and the friction force sigma mu |N| = sigma mu s N acts at
+that offset: the wheel's friction moment stays N sigma mu R and the crank's becomes N sigma mu (s r sin(alpha +
+beta) + R). The flank switch (N crossing zero) is a located event.
 Dwell: J1 theta'' = T_in - c1 theta'. T_in = T0 - slope theta' (constant torque or linear motor curve).
 The crank stalls where theta' reaches 0 (a located event); a crank creeping to rest (theta' and theta'' both
 vanishing) is reported where theta' + rest_time |theta''| first falls below rest_speed; the static equilibrium
@@ -56,22 +61,37 @@ class GenevaCase:
         Gp = (-r * c * np.sin(alpha) * x2 - num * 2 * c * r * np.sin(alpha)) / x2**2
         return np.arctan2(r * np.sin(alpha), c - r * np.cos(alpha)), np.sqrt(x2), G, Gp
 
-    def slip_factor(self, alpha: float) -> float:
+    def slip_factor(self, alpha: float, s: float = 1.0) -> float:
+        """u / theta' on flank s (+1 driving, -1 trailing)."""
         beta, _, G, _ = self.kinematics(alpha)
-        return self.r * np.sin(alpha + beta) + self.R * (1 + G)
+        return self.r * np.sin(alpha + beta) + s * self.R * (1 + G)
 
-    def gain(self, alpha: float, sigma: float) -> tuple[float, float, float]:
-        """(h, G, G') of the engaged equation."""
+    def gain(self, alpha: float, sigma: float, s: float = 1.0) -> tuple[float, float, float]:
+        """(h, G, G') of the engaged equation: friction sign sigma = sign(u), flank s."""
         beta, x, G, Gp = self.kinematics(alpha)
-        arm = self.r * np.sin(alpha + beta) + self.R
+        arm = s * self.r * np.sin(alpha + beta) + self.R
         return (x * G + sigma * self.mu * arm) / (x - sigma * self.mu * self.R), G, Gp
 
-    def accel(self, alpha: float, w: float, engaged: bool, sigma: float) -> float:
+    def accel(self, alpha: float, w: float, engaged: bool, sigma: float, s: float = 1.0) -> float:
         T_in = self.T0 - self.slope * w - self.c1 * w
         if not engaged:
             return T_in / self.J1
-        h, G, Gp = self.gain(alpha, sigma)
+        h, G, Gp = self.gain(alpha, sigma, s)
         return (T_in - h * (self.J2 * Gp * w * w + self.c2 * G * w + self.T_L)) / (self.J1 + h * self.J2 * G)
+
+    def normal_force(self, alpha: float, w: float, sigma: float, s: float = 1.0) -> float:
+        """N from the wheel's equation at the engaged acceleration."""
+        _, x, G, Gp = self.kinematics(alpha)
+        a = self.accel(alpha, w, True, sigma, s)
+        return (self.J2 * (G * a + Gp * w * w) + self.c2 * G * w + self.T_L) / (x - sigma * self.mu * self.R)
+
+    def contact(self, alpha: float, w: float) -> tuple[float, float]:
+        """(sigma, s) that hold at (alpha, w): the driving flank unless its normal force would be negative."""
+        for s in (1.0, -1.0):
+            sigma = 1.0 if self.slip_factor(alpha, s) * w >= 0 else -1.0
+            if s < 0 or self.normal_force(alpha, w, sigma, s) >= 0:
+                return sigma, s
+        raise AssertionError
 
 
 @dataclass
@@ -94,11 +114,11 @@ def first_stop(case: GenevaCase, theta0: float, w0: float, t_end: float, rest_sp
     while t < t_end:
         k, alpha = local(y[0])
         engaged = -a0 <= alpha < a0
-        sigma = 1.0 if case.slip_factor(alpha) * y[1] >= 0 else -1.0
+        sigma, s = case.contact(alpha, y[1]) if engaged else (1.0, 1.0)
         base = 2 * np.pi * k
 
         def rhs(_t, z):
-            return [z[1], case.accel(z[0] - base, z[1], engaged, sigma)]
+            return [z[1], case.accel(z[0] - base, z[1], engaged, sigma, s)]
 
         def boundary(_t, z):   # the engagement boundary ahead
             al = z[0] - base
@@ -112,15 +132,19 @@ def first_stop(case: GenevaCase, theta0: float, w0: float, t_end: float, rest_sp
         stall.terminal, stall.direction = True, -1
 
         def rest(_t, z):
-            return z[1] + rest_time * abs(case.accel(z[0] - base, z[1], engaged, sigma)) - rest_speed
+            return z[1] + rest_time * abs(case.accel(z[0] - base, z[1], engaged, sigma, s)) - rest_speed
         rest.terminal, rest.direction = True, -1
 
         def slip(_t, z):
-            return case.slip_factor(z[0] - base) if engaged else 1.0
+            return case.slip_factor(z[0] - base, s) if engaged else 1.0
         slip.terminal, slip.direction = True, 0
 
+        def flank(_t, z):
+            return case.normal_force(z[0] - base, z[1], sigma, s) * s if engaged else 1.0
+        flank.terminal, flank.direction = True, -1
+
         sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=rtol, atol=atol,
-                        events=[boundary, stall, rest, slip])
+                        events=[boundary, stall, rest, slip, flank])
         if sol.status != 1:
             return StallOutcome("running", float(sol.t[-1]), float(sol.y[0, -1]))
         which = next(i for i, te in enumerate(sol.t_events) if len(te))
