@@ -4,8 +4,8 @@ For the work-precision benchmark only. The SUNDIALS IDA memory pointer is the fi
 scikit-sundae's `_cy_ida.IDA` extension object (after the object header and Cython's vtable pointer), and
 `NEQ` follows eight pointers later; the pointer is used only when that `NEQ` equals the system size and
 IDA's residual count read through it equals the count scikit-sundae reports, otherwise the counters are
-reported as unavailable. `counting()` swaps the `IDA` class that `dynamics.ida` uses for one that reads
-the counters after each segment's solve, and restores it on exit.
+reported as unavailable. `counting()` registers an observer in `dynamics.ida.SOLVE_OBSERVERS` that reads the
+counters after each segment's solve, and removes it on exit.
 """
 from __future__ import annotations
 
@@ -59,23 +59,18 @@ def read(solver, neq: int, nfev: int) -> dict | None:
 @contextmanager
 def counting():
     """Within the block, every IDA segment of `dynamics.ida` adds its counters to the yielded dict
-    (values are NaN when they could not be read)."""
-    import mechsim.dynamics.ida as ida_module
-    from sksundae.ida import IDA
+    (values are NaN when they could not be read); through the module's documented SOLVE_OBSERVERS hook."""
+    from mechsim.dynamics.ida import SOLVE_OBSERVERS
 
     totals = {name: 0.0 for name in COUNTERS}
 
-    class CountingIDA(IDA):
-        def solve(self, tspan, y0, yp0):
-            sol = super().solve(tspan, y0, yp0)
-            got = read(self, len(np.asarray(y0)), int(sol.nfev))
-            for name in COUNTERS:
-                totals[name] += got[name] if got else np.nan
-            return sol
+    def observe(solver, sol, neq):
+        got = read(solver, neq, int(sol.nfev))
+        for name in COUNTERS:
+            totals[name] += got[name] if got else np.nan
 
-    original = ida_module.IDA
-    ida_module.IDA = CountingIDA
+    SOLVE_OBSERVERS.append(observe)
     try:
         yield totals
     finally:
-        ida_module.IDA = original
+        SOLVE_OBSERVERS.remove(observe)

@@ -13,6 +13,10 @@ from sksundae.ida import IDA
 from mechsim.dynamics.model import ModeFunctions
 from mechsim.dynamics.settings import SolverSettings
 
+#: callables `observer(solver, solution, neq)` run after every IDA solve: the documented way for a benchmark to
+#: read IDA's own counters (benchmarks/ida_counters.py), which scikit-sundae does not return
+SOLVE_OBSERVERS: list = []
+
 
 @dataclass
 class Segment:
@@ -67,6 +71,8 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
     if len(tspan) == 2:
         tspan = np.array([t0, 0.5 * (t0 + t_end), t_end])  # force output at the given times
     sol = solver.solve(tspan, y0, yp0)
+    for observe in SOLVE_OBSERVERS:
+        observe(solver, sol, len(y0))
     t, y, yp = np.asarray(sol.t), np.asarray(sol.y), np.asarray(sol.yp)
     # rows at requested output instants only (tspan[0] is the start; a terminal event is appended last)
     requested = np.isin(t, t_out) & (t > t0)
