@@ -12,10 +12,11 @@ failure (the integrator gave up, an invariant broke, a re-initialisation failed)
 the first stop is compared with the independent one-coordinate model (`reference_stop`), and the
 smallest friction power of every run is kept (negative = energy created).
 
-    python -m mechsim.benchmarks.robustness_grid [--cases N] [--duration S] [--workers W] [--out docs]
+    python -m mechsim.benchmarks.robustness_grid [--cases N] [--duration S] [--workers W] [--out DIR] [--resume]
 
-writes docs/stability_grid.csv (one row per case x backend) and prints the count table that
-docs/stability.md shows (`--markdown`).
+writes DIR/stability_grid.csv (one row per case x backend) and prints the count table that the
+robustness-grid section of the stability document shows. Rows are appended to
+DIR/stability_grid.partial.csv as cases finish; `--resume` keeps that file and runs only the missing cases.
 """
 from __future__ import annotations
 
@@ -179,12 +180,16 @@ def run_grid(n: int, duration: float, workers: int = 1, partial: Path | None = N
     partial: a CSV appended as cases finish (a long run can be inspected, or cut short, on the way)."""
     jobs = [(c, duration) for c in sorted(cases(n), key=lambda c: (c.rtol, c.index))]
     rows: list[dict] = []
+    if partial is not None and partial.exists():
+        rows = pd.read_csv(partial).to_dict("records")
+        finished = {r["index"] for r in rows}
+        jobs = [j for j in jobs if j[0].index not in finished]
 
     def done(rs):
         rows.extend(rs)
         if partial is not None:
             pd.DataFrame(rs).to_csv(partial, mode="a", header=not partial.exists(), index=False)
-        print(f"{len(rows) // len(BACKENDS)}/{len(jobs)} cases", flush=True)
+        print(f"{len(rows) // len(BACKENDS)}/{n} cases", flush=True)
 
     if workers <= 1:
         for j in jobs:
@@ -234,10 +239,12 @@ def main(argv=None) -> None:
     ap.add_argument("--duration", type=float, default=5.0)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[1] / "docs")
+    ap.add_argument("--resume", action="store_true", help="keep the partial table and run only missing cases")
     a = ap.parse_args(argv)
     wall = time.perf_counter()
     partial = a.out / "stability_grid.partial.csv"
-    partial.unlink(missing_ok=True)
+    if not a.resume:
+        partial.unlink(missing_ok=True)
     table = run_grid(a.cases, a.duration, a.workers, partial)
     partial.unlink(missing_ok=True)
     table.to_csv(a.out / "stability_grid.csv", index=False)
