@@ -1,10 +1,10 @@
-"""The hybrid loop on diffrax: the same derived model, integrated as an ODE with the whole per-mode solve compiled.
+"""The diffrax backend: the same derived model, integrated as an ODE with the whole per-mode solve compiled.
 
 Each mode's vector field comes from `jax_model` (accelerations and multipliers from the Baumgarte-stabilised
 KKT system, work and thermal rates alongside), built from the same sympy description as the IDA residual.
 A segment is one `diffrax.diffeqsolve` with one `diffrax.Event` per guard (optimistix root finder for the
-crossing time); the first crossing ends it, and the transition logic is the IDA loop's (`mech.on_guard`,
-`consistent_state`), so the events table has the same rows. Parameters (slot, flank, drive, gains, ...) are
+crossing time); the first crossing ends it and the hybrid loop (`dynamics/hybrid.py`, the same loop as IDA's)
+applies the transition, so the events table has the same rows. Parameters (slot, flank, drive, gains, ...) are
 traced arguments, so one compilation per (mode, model structure, solver options) serves every segment; output
 rows at the requested times come from `SaveAt(ts=...)` over a fixed-size padded array (segments with more
 outputs than that are continued in chunks, re-projected onto the constraints at each restart).
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass, replace
-from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -29,12 +28,12 @@ from mechsim.mechanisms.base import Mechanism
 
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, prepare, transition_failure_code
-from mechsim.dynamics.transitions import apply_transition, chattering, stepped_over_failure
+import mechsim.dynamics.hybrid as hybrid
+from mechsim.dynamics.backend import End, Request, Segment
+from mechsim.dynamics.hybrid import Trajectory
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
 from mechsim.dynamics.model import ModeFunctions, StateExtension
 from mechsim.dynamics.result import FailureCode
-from mechsim.dynamics.stats import new_stats
 from mechsim.dynamics.settings import SolverSettings
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -203,7 +202,7 @@ class FirstCrossing(optx.AbstractRootFinder):
         return y, aux, {}
 
 
-def _make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
+def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
     """solve(k, t0, t1, z0, p, enabled, ts) -> dict of arrays, for mode number k; to be jitted.
 
     The segment's single event function is min_i sign(ref_i) g_i over the enabled guards: positive at the
@@ -259,7 +258,7 @@ class _Compiled:
 _CACHE: dict[tuple, _Compiled] = {}
 
 
-def _args(k, t0, t1, z0, p, enabled, ts, dt0):
+def segment_arguments(k, t0, t1, z0, p, enabled, ts, dt0):
     """Arguments of the compiled solve as numpy values of the compiled dtypes (cheaper than jnp.asarray)."""
     f64 = np.float64
     return (np.int32(k), f64(t0), f64(t1), np.asarray(z0, f64), np.asarray(p, f64), np.asarray(enabled, np.bool_),
@@ -275,9 +274,9 @@ def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]
         return hit, jax_model(model), False
     wall, cpu = _time.perf_counter(), _time.process_time()
     jmod = jax_model(model)          # sympy -> jax lambdification (once per model), counted with the compilation
-    example = _args(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+    example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                     np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3)
-    fn = jax.jit(_make_solve(jmod, o)).lower(*example).compile()
+    fn = jax.jit(make_solve(jmod, o)).lower(*example).compile()
     entry = _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
     _CACHE[key] = entry
     return entry, jmod, True
@@ -299,25 +298,13 @@ def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.n
     return y, yp
 
 
-def _stepped_over(mf, p, t0, y0, yp0, t_rows, y_rows, yp_rows, out, nq) -> dict | None:
-    """With events disabled: the first guard that crossed in its direction between the segment's samples
-    (the IDA loop's check, `dynamics.hybrid.stepped_over`, where available)."""
-    import mechsim.dynamics.hybrid as hybrid
-    check = getattr(hybrid, "stepped_over", None)
-    if check is None:
-        return None
-    y_end, yp_end = (r[0] for r in _ida_rows(mf, nq, out["z_end"], out["zp_end"], out["a_end"], out["lam_end"]))
-    seg = SimpleNamespace(t=t_rows, y=y_rows, yp=yp_rows, t_end=float(out["t_end"]), y_end=y_end, yp_end=yp_end)
-    return check(mf, p, t0, y0, yp0, seg)
-
-
-# -- the hybrid loop ---------------------------------------------------------------------------------------
+# -- the backend ----------------------------------------------------------------------------------------------
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
              angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
              progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
-    """Integrate the hybrid model from t0 to t_end with outputs every dt_out (same contract as hybrid.simulate)."""
-    return simulate_with(default_options(settings), mech, drive, settings, t_end, dt_out, angle0, speed0, ext,
-                         ext_initial, progress, t0)
+    """`hybrid.simulate` on this backend with the options the settings imply."""
+    return hybrid.simulate(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, progress, t0,
+                           backend=DiffraxBackend(settings))
 
 
 def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settings: SolverSettings,
@@ -325,182 +312,108 @@ def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settin
                   ext_initial=None, progress: Callable[[float], None] | None = None,
                   t0: float = 0.0) -> Trajectory:
     """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
-    lane = Lane.start(options, mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
-    solve0 = _time.perf_counter()
-    while not lane.done:
-        entry, jmod, fresh = compiled_solve(lane.model, options)
-        if fresh:
-            lane.stats["compile_time_s"] += entry.compile_time
-            lane.stats["compile_cpu_time_s"] += entry.compile_cpu_time
-            lane.stats["compilations"] += 1
-        args, n_chunk = lane.segment_args(jmod)
-        out = jax.device_get(entry.fn(*args))
-        lane.after_segment(jmod, out, n_chunk)
-        if progress:
-            progress(lane.t_seg)
-    lane.stats["solve_time_s"] = _time.perf_counter() - solve0 - lane.stats["compile_time_s"]
-    return lane.trajectory()
+    return hybrid.simulate(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, progress, t0,
+                           backend=DiffraxBackend(settings, options))
 
 
-class Lane:
-    """The state of one run's hybrid loop between segments: shared by `simulate_with` (one lane) and
-    `dynamics.diffrax_batch` (many lanes advanced by one vmapped solve per round).
+class DiffraxBackend:
+    """diffrax on the mode's index-1 ODE (`jax_model`), one compiled `diffeqsolve` per segment, under the
+    contract of `dynamics/backend.py`.
 
-    `segment_args` gives the compiled solve's arguments for the next segment; `after_segment` does everything
-    after it (output rows, failure checks, guard identification, the transition) and sets `done` at the end.
+    `integrate` = `arguments` (the compiled solve's inputs) + the compiled call + `segment` (its outputs as a
+    `Segment`); `dynamics.diffrax_batch` uses the two halves around one vmapped call for many lanes.
+    A segment with more output times than one call holds (`DiffraxOptions.rows`) ends in a pause at the last
+    row (restarted from the state projected onto the constraints when `options.projection`).
     """
 
-    def __init__(self, o: DiffraxOptions, mech, settings, start, t0: float, t_end: float):
-        self.o, self.mech, self.settings, self.t_end = o, mech, settings, t_end
-        self.model, self.values, self.mode, self.t_out, self.mf, self.p, self.y, self.yp = (
-            start.model, start.values, start.mode, start.t_out, start.mf, start.p, start.y, start.yp)
-        self.offset = start.offset         # the coordinates' re-based offset (transitions.rebased)
-        self.pieces = [Piece(self.mode, self.p, np.array([t0]), self.y[None, :].copy(), self.yp[None, :].copy(),
-                             self.offset)]
-        self.events: list[dict] = []
-        self.per_step = _evaluations_per_step(o)
-        self.stats = new_stats("diffrax", o.solver, start.derive_time, unavailable={
-            "jacobian_evaluations": "not exposed by diffrax",
-            **({} if self.per_step else {"residual_evaluations": "not exposed by diffrax for implicit solvers"})})
+    name = "diffrax"
+    initial_step = DT0_FIRST
+    recoverable = frozenset({FailureCode.INTEGRATOR_FAILED})
+
+    def __init__(self, settings: SolverSettings, options: DiffraxOptions | None = None):
+        self.settings = settings
+        self.o = options or default_options(settings)
+        self.solver = self.o.solver
+        self.per_step = _evaluations_per_step(self.o)
+        self.unavailable = {"jacobian_evaluations": "not exposed by diffrax"}
+        self.notes = {}
         if self.per_step:
-            self.stats["notes"]["residual_evaluations"] = ("estimated: attempted steps x new stages per step + 3 "
-                                                           "per segment")
-        self.failure = None
-        self.warnings: list[str] = []
-        self.t = t0
-        self.t_seg = t0
-        self.z = _z(self.mf, self.y)
-        self.dt0 = DT0_FIRST
-        self.last = None
-        self.stuck = 0
-        self.done = not self.t < t_end - 1e-12
+            self.notes["residual_evaluations"] = "estimated: attempted steps x new stages per step + 3 per segment"
+        else:
+            self.unavailable["residual_evaluations"] = "not exposed by diffrax for implicit solvers"
 
-    @classmethod
-    def start(cls, o: DiffraxOptions, mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float,
-              dt_out: float, angle0: float, speed0: float, ext=None, ext_initial=None, t0: float = 0.0) -> "Lane":
-        start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
-        return cls(o, mech, settings, start, t0, t_end)
+    def hint(self, code: FailureCode) -> str:
+        return ("raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver (Kvaerno5 if the "
+                "motion is stiff); check for a singular configuration here")
 
-    def trajectory(self) -> Trajectory:
-        return Trajectory(self.model, self.pieces, self.events, self.stats, self.failure, self.warnings)
+    def integrate(self, request: Request) -> Segment:
+        entry, jmod, fresh = compiled_solve(request.model, self.o)
+        args, n_chunk = self.arguments(request, jmod)
+        seg = self.segment(request, jmod, jax.device_get(entry.fn(*args)), n_chunk)
+        if fresh:
+            seg.counts.update(compile_time_s=entry.compile_time, compile_cpu_time_s=entry.compile_cpu_time,
+                              compilations=1)
+        return seg
 
-    def segment_args(self, jmod: JaxModel) -> tuple[tuple, int]:
-        """Arguments of the compiled solve for the next segment, and the number of real output times in it."""
+    def arguments(self, r: Request, jmod: JaxModel) -> tuple[tuple, int]:
+        """Arguments of the compiled solve for the request, and the number of real output times in them."""
         n_save = self.o.rows(jmod.nz)
-        remaining = self.t_out[self.t_out > self.t]
-        chunk = remaining[:n_save]
-        t1 = self.t_end if len(remaining) <= n_save else float(chunk[-1])
+        chunk = r.t_out[:n_save]
+        t1 = r.t_end if len(r.t_out) <= n_save else float(chunk[-1])
         ts = np.full(n_save, t1)
         ts[:len(chunk)] = chunk
         enabled = np.zeros(jmod.ng_max, bool)
-        enabled[:len(self.mf.guard_names)] = bool(self.settings.events)
-        return _args(jmod.index(self.mode), self.t, t1, self.z, np.asarray(self.p), enabled, ts, self.dt0), len(chunk)
+        enabled[:len(r.mf.guard_names)] = bool(self.settings.events)
+        dt0 = r.first_step if r.first_step > 0 else DT0_FIRST
+        return segment_arguments(jmod.index(r.mode), r.t0, t1, _z(r.mf, r.y0), np.asarray(r.p), enabled, ts,
+                                 dt0), len(chunk)
 
-    def after_segment(self, jmod: JaxModel, out: dict, n_chunk: int) -> None:
-        """Process one segment's results (numpy values of the compiled solve's outputs)."""
-        self._after_segment(jmod, out, n_chunk)
-        if not self.t < self.t_end - 1e-12:
-            self.done = True
-
-    def _after_segment(self, jmod: JaxModel, out: dict, n_chunk: int) -> None:
-        o, settings, mf, model, mode, p = self.o, self.settings, self.mf, self.model, self.mode, self.p
-        t, y, yp = self.t, self.y, self.yp
-        stats = self.stats
+    def segment(self, r: Request, jmod: JaxModel, out: dict, n_chunk: int) -> Segment:
+        """The compiled solve's outputs (numpy values) as a Segment in the IDA layout of the mode."""
+        o, mf, t = self.o, r.mf, r.t0
         n_save = o.rows(jmod.nz)
-        ng = len(mf.guard_names)
-        stats["segments"] += 1
-        # the next call starts with this one's mean accepted step (a tenth of it after a mode change)
-        self.dt0 = max((float(out["t_end"]) - t) / max(int(out["accepted"]), 1), DT0_FLOOR * max(1.0, abs(t)))
-        stats["steps"] += int(out["steps"])
-        stats["accepted_steps"] += int(out["accepted"])
-        stats["rejected_steps"] += int(out["rejected"])
+        counts = dict(steps=int(out["steps"]), accepted_steps=int(out["accepted"]),
+                      rejected_steps=int(out["rejected"]))
         if self.per_step:
-            stats["residual_evaluations"] += int(out["steps"]) * self.per_step + 3
-        t_seg = self.t_seg = float(out["t_end"])
+            counts["residual_evaluations"] = int(out["steps"]) * self.per_step + 3
+        t_seg = float(out["t_end"])
+        # the next call starts with this one's mean accepted step (the loop takes a tenth after a mode change)
+        next_step = max((t_seg - t) / max(int(out["accepted"]), 1), DT0_FLOOR * max(1.0, abs(t)))
         keep = np.arange(n_save) < n_chunk
         keep &= np.isfinite(out["ts"]) & (out["ts"] <= t_seg)
         y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep], out["lam"][keep])
         t_rows = out["ts"][keep].copy()
-        crossed = None if settings.events else _stepped_over(mf, p, t, y, yp, t_rows, y_rows, yp_rows, out, jmod.nq)
-        if crossed:
-            n_rows = crossed["rows"]
-            t_rows, y_rows, yp_rows = t_rows[:n_rows], y_rows[:n_rows], yp_rows[:n_rows]
-        if len(t_rows):
-            self.pieces.append(Piece(mode, p, t_rows, y_rows, yp_rows, self.offset))
-        if crossed:
-            self._fail(dict(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + self.offset)),
-                            code=FailureCode.STEPPED_OVER))
-            return
+        y_end, yp_end = (row[0] for row in _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
+                                                     out["lam_end"]))
+        seg = Segment(t_rows, y_rows, yp_rows, End.END, t_seg, y_end, yp_end, counts=counts, next_step=next_step)
         code = int(out["result"])
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
         ok = code == int(diffrax.RESULTS.successful._value) or is_event
         if not ok or not np.all(np.isfinite(out["z_end"])):
-            q = out["z_end"][:jmod.nq] + self.offset
             msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
-            failure_code = (FailureCode.NON_FINITE if ok else FailureCode.MAX_STEPS
-                            if code == int(diffrax.RESULTS.max_steps_reached._value) else FailureCode.INTEGRATOR_FAILED)
-            self._fail(dict(time=t_seg, mode=mode, reason=f"diffrax {o.solver} failed: {msg.splitlines()[0]}",
-                            code=failure_code,
-                            where={c: float(val) for c, val in zip(model.coordinates, q)},
-                            hint="raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver "
-                                 "(Kvaerno5 if the motion is stiff); check for a singular configuration here"))
-            return
+            seg.end, seg.message = End.FAILED, f"diffrax {o.solver} failed: {msg.splitlines()[0]}"
+            seg.code = (FailureCode.NON_FINITE if ok else FailureCode.MAX_STEPS
+                        if code == int(diffrax.RESULTS.max_steps_reached._value) else FailureCode.INTEGRATOR_FAILED)
+            return seg
         ix = mf.index
-        y_end, yp_end = (r[0] for r in _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
-                                                   out["lam_end"]))
-        q, v = y_end[ix["q"]], y_end[ix["v"]]
         if not is_event:
-            self.t = t_seg
-            if self.t >= self.t_end - 1e-12:
-                self.done = True
-                return
-            if o.projection:     # a chunk boundary: restart from the state projected onto the constraints
-                self.y, self.yp, _ = consistent_state(mf, self.t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p)
-                self.z = _z(mf, self.y)
-            else:
-                self.y, self.yp = y_end, yp_end
-                self.z = np.asarray(out["z_end"])
-            return
+            if t_seg >= r.t_end - 1e-12:
+                return seg
+            seg.end = End.PAUSE
+            if o.projection:     # an output-chunk boundary: restart from the state projected onto the constraints
+                seg.y_end, seg.yp_end, _ = consistent_state(mf, t_seg, y_end[ix["q"]], y_end[ix["v"]],
+                                                            y_end[ix["work"]], y_end[ix["ext"]], r.p)
+            return seg
         # a guard crossed: the one whose heading value is at or past zero at the (just-past) crossing time
+        ng = len(mf.guard_names)
         h = np.asarray(out["h_end"])[:ng]
         i = int(np.argmin(np.where(h <= 0, h, np.inf))) if (h <= 0).any() else int(np.argmin(h))
-        guard = mf.guard_names[i]
-        # every guard past zero at the crossing instant, in the allowed direction (the IDA loop's `seg.fired`)
-        fired = [j for j in np.flatnonzero(h <= 0) if j != i and not (
-            mf.guard_directions[j] and np.sign(out["ref"][j]) == mf.guard_directions[j])]
-        self.stuck = self.stuck + 1 if t_seg - t <= 1e-12 * max(1.0, abs(t)) else 0
-        self.t = t_seg
-        if self.stuck > 50:
-            self._fail(dict(time=t_seg, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
-                            code=FailureCode.CHATTERING,
-                            where={c: float(val) for c, val in zip(model.coordinates, q + self.offset)},
-                            hint="the mode sequence chatters here (Zeno behaviour?)"))
-            return
         direction = mf.guard_directions[i]
         if direction and np.sign(out["ref"][i]) == direction:
-            self.y, self.yp = y_end, yp_end          # crossed against its direction: not an event, re-arm and go on
-            self.z = np.asarray(out["z_end"])
-            return
-        failure = chattering(model, mode, guard, t_seg, q + self.offset, self.last)
-        if failure:
-            self._fail(dict(failure, code=FailureCode.CHATTERING))
-            return
-        self.last = (guard, t_seg)
-        stats["events"] += 1
-        res = apply_transition(self.mech, model, parameter_tuple, mode, self.values, t_seg, y_end, [i, *fired],
-                               self.offset)
-        self.events += res.rows
-        self.warnings += res.warnings
-        if res.failure:
-            self._fail(dict(res.failure, code=transition_failure_code(res.failure)))
-            return
-        stats["restarts"] += 1
-        self.mode, self.values, self.p, self.y, self.yp = res.mode, res.values, res.p, res.y, res.yp
-        self.offset = res.offset
-        self.mf = model.modes[self.mode]
-        self.z = _z(self.mf, self.y)
-        self.dt0 *= 0.1
-
-    def _fail(self, failure: dict) -> None:
-        self.failure = failure
-        self.done = True
+            seg.end = End.PAUSE          # crossed against its direction: not an event; re-armed, go on
+            return seg
+        # every guard past zero at the crossing instant, in the allowed direction (as IDA reports its roots)
+        fired = [j for j in np.flatnonzero(h <= 0) if j != i and not (
+            mf.guard_directions[j] and np.sign(out["ref"][j]) == mf.guard_directions[j])]
+        seg.end, seg.fired = End.GUARD, (i, *(int(j) for j in fired))
+        return seg

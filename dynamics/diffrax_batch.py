@@ -1,11 +1,12 @@
 """Many cases of one model structure on the diffrax backend: one vmapped, compiled segment solve per round.
 
-Each case is a lane with its own parameter tuple, state, mode and output times (`diffrax_backend.Lane`, the
-same loop state and per-segment post-processing as `diffrax_backend.simulate_with`). Every round, ONE call of
+Each case is a lane: its own run of THE hybrid loop (`hybrid.hybrid_loop`, a generator that asks for one
+segment at a time), with its own parameter tuple, state, mode and output times. Every round, ONE call of
 `jax.vmap` over the compiled segment solve advances every unfinished lane to its own next guard crossing or
 output-chunk end: diffrax's Event stops each lane at its own root inside the vmapped while-loop, and the mode
-number k is a traced argument, so lanes in different modes share the call. Then the Python transition step
-(`apply_transition`) runs per lane. Finished lanes are masked with t0 = t1 (their solve takes no step).
+number k is a traced argument, so lanes in different modes share the call. Each lane's outputs become a
+`Segment` (`DiffraxBackend.segment`) sent back into its loop, which applies the transition and asks for the
+next segment. Finished lanes are masked with t0 = t1 (their solve takes no step).
 
 Under vmap the while-loop runs until its slowest lane has finished, so one round costs about the longest
 lane's segment; lanes whose events fall far apart in time wait for each other. See docs/sweeps.md, 'Batching'.
@@ -24,9 +25,9 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from mechsim.dynamics.diffrax_backend import DiffraxOptions, Lane, _args, _make_solve, default_options
+from mechsim.dynamics.diffrax_backend import DiffraxBackend, DiffraxOptions, make_solve, segment_arguments
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.hybrid import Trajectory, prepare
+from mechsim.dynamics.hybrid import Trajectory, hybrid_loop, prepare
 from mechsim.dynamics.jax_model import JaxModel, jax_model
 from mechsim.dynamics.model import StateExtension
 from mechsim.dynamics.settings import SolverSettings
@@ -56,10 +57,10 @@ def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched
         return hit, jax_model(model), False
     wall, cpu = _time.perf_counter(), _time.process_time()
     jmod = jax_model(model)
-    one = _args(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+    one = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                 np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3)
     example = tuple(np.stack([a] * lanes) for a in one)
-    fn = jax.jit(jax.vmap(_make_solve(jmod, o))).lower(*example).compile()
+    fn = jax.jit(jax.vmap(make_solve(jmod, o))).lower(*example).compile()
     entry = _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
     _CACHE[key] = entry
     return entry, jmod, True
@@ -81,43 +82,62 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
     n = len(mech_list)
     if not n:
         return []
-    o = options or default_options(settings)
+    backend = DiffraxBackend(settings, options)
+    o = backend.o
     ext_list = list(ext_list) if ext_list is not None else [None] * n
     ext_initial_list = list(ext_initial_list) if ext_initial_list is not None else [None] * n
-    lanes = []
-    for mech, drive, t_end, a0, s0, ext, x0 in zip(mech_list, drive_list, t_end_list, angle0_list, speed0_list,
-                                                    ext_list, ext_initial_list, strict=True):
-        start = prepare(mech, drive, settings, t_end, dt_out, a0, s0, ext, x0, t0)
-        lanes.append(Lane(o, mech, settings, start, t0, t_end))
-    model = lanes[0].model
-    if any(lane.model is not model for lane in lanes):
+    starts = [prepare(mech, drive, settings, t_end, dt_out, a0, s0, ext, x0, t0)
+              for mech, drive, t_end, a0, s0, ext, x0 in zip(mech_list, drive_list, t_end_list, angle0_list,
+                                                              speed0_list, ext_list, ext_initial_list, strict=True)]
+    model = starts[0].model
+    if any(start.model is not model for start in starts):
         raise ValueError("simulate_batch: the cases do not share one derived model structure (derive key); "
                          "group them by structure first")
     entry, jmod, fresh = compiled_batch_solve(model, o, n)
     compile_time = entry.compile_time if fresh else 0.0
     compile_cpu = entry.compile_cpu_time if fresh else 0.0
     solve0 = _time.perf_counter()
+    loops = [hybrid_loop(mech, start, settings, backend, t0, t_end)
+             for mech, start, t_end in zip(mech_list, starts, t_end_list)]
+    requests: list = [None] * n
+    results: list[Trajectory | None] = [None] * n
+    idle = segment_arguments(0, t0, t0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+                             np.zeros(jmod.ng_max, bool), np.full(o.rows(jmod.nz), t0), 1e-3)
+    masked: list = [idle] * n       # a finished lane's last call with t1 = t0 (it takes no step)
+    for j, loop in enumerate(loops):
+        requests[j] = _advance(loop, None, results, j)
     rounds = 0
-    while not all(lane.done for lane in lanes):
+    while any(r is not None for r in requests):
         rounds += 1
         per_lane = []
-        for lane in lanes:
-            if lane.done:       # masked: t0 = t1, the solve takes no step; its outputs are ignored
-                args, n_chunk = lane.segment_args(jmod)
-                args = args[:2] + (args[1],) + args[3:]
-                per_lane.append((args, 0))
+        for j, request in enumerate(requests):
+            if request is None:
+                per_lane.append((masked[j], 0))
             else:
-                per_lane.append(lane.segment_args(jmod))
+                args, n_chunk = backend.arguments(request, jmod)
+                masked[j] = args[:2] + (args[1],) + args[3:6] + (np.full_like(args[6], args[1]), args[7])
+                per_lane.append((args, n_chunk))
         batched = tuple(np.stack(col) for col in zip(*(a for a, _ in per_lane)))
         out = jax.device_get(entry.fn(*batched))
-        for j, lane in enumerate(lanes):
-            if not lane.done:
-                lane.after_segment(jmod, {key: val[j] for key, val in out.items()}, per_lane[j][1])
+        for j, request in enumerate(requests):
+            if request is not None:
+                seg = backend.segment(request, jmod, {key: val[j] for key, val in out.items()}, per_lane[j][1])
+                requests[j] = _advance(loops[j], seg, results, j)
     solve = _time.perf_counter() - solve0
-    for lane in lanes:
-        lane.stats["compile_time_s"] = compile_time / n
-        lane.stats["compile_cpu_time_s"] = compile_cpu / n
-        lane.stats["compilations"] = 1 if fresh else 0
-        lane.stats["solve_time_s"] = solve / n
+    for traj in results:
+        traj.stats["compile_time_s"] = compile_time / n
+        traj.stats["compile_cpu_time_s"] = compile_cpu / n
+        traj.stats["compilations"] = 1 if fresh else 0
+        traj.stats["solve_time_s"] = solve / n
     last_batch.update(lanes=n, rounds=rounds, compile_time_s=compile_time, solve_time_s=solve)
-    return [lane.trajectory() for lane in lanes]
+    return results
+
+
+def _advance(loop, segment, results: list, j: int):
+    """Send a lane's segment into its loop (None: start it); the next request, or None with the lane's
+    Trajectory stored in results[j] when the loop has finished."""
+    try:
+        return next(loop) if segment is None else loop.send(segment)
+    except StopIteration as done:
+        results[j] = done.value
+        return None

@@ -1,13 +1,14 @@
 """The hybrid loop: integrate a mode, find its guard, apply the transition, re-initialise, go on.
 
-One loop serves every mechanism; everything mechanism-specific comes through the `Mechanism` interface.
+One loop serves every mechanism and every backend: everything mechanism-specific comes through the
+`Mechanism` interface, everything integrator-specific through the backend contract (`dynamics/backend.py`).
 Each transition is an events-table row (time, from, to, kind, kinetic energy before and after).
 """
 from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Generator
 
 import numpy as np
 
@@ -15,7 +16,7 @@ from mechsim.mechanisms.base import Mechanism
 
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.ida import integrate_segment
+from mechsim.dynamics.backend import End, Request, Segment, backend_for
 from mechsim.dynamics.model import DerivedModel, StateExtension, derive
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.stats import new_stats
@@ -107,29 +108,60 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
 
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
              angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
-             progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
-    """Integrate the hybrid DAE from t0 to t_end with outputs every dt_out."""
+             progress: Callable[[float], None] | None = None, t0: float = 0.0, backend=None) -> Trajectory:
+    """Integrate the hybrid DAE from t0 to t_end with outputs every dt_out, on `backend` (default: the one
+    `settings.backend` names, see `dynamics.backend.REGISTRY`)."""
+    backend = backend if backend is not None else backend_for(settings.backend, settings)
     start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+    loop = hybrid_loop(mech, start, settings, backend, t0, t_end, progress)
+    return drive_loop(loop, backend.integrate)
+
+
+def drive_loop(loop: Generator[Request, Segment, Trajectory], integrate: Callable[[Request], Segment]
+               ) -> Trajectory:
+    """Run one hybrid loop to its end, integrating every segment it asks for."""
+    try:
+        request = next(loop)
+        while True:
+            request = loop.send(integrate(request))
+    except StopIteration as done:
+        return done.value
+
+
+#: a first step after a mode change: this fraction of the step the previous segment suggests
+RESTART_STEP_FACTOR = 0.1
+#: segments in a row that end without time advancing before the loop calls it chattering
+MAX_STUCK = 50
+
+
+def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend, t0: float, t_end: float,
+                progress: Callable[[float], None] | None = None) -> Generator[Request, Segment, Trajectory]:
+    """THE hybrid loop, for every backend: yields a `Request` per segment, is sent the backend's `Segment`,
+    and returns the `Trajectory`.
+
+    It owns guards and transitions (`apply_transition`), re-initialisation, recoveries from integrator failures
+    (`recover`), events stepped over when root-finding is off (`stepped_over`), chattering, output pieces,
+    statistics (same keys for every backend) and failures (a `FailureCode` each). Written as a generator so
+    that one loop also serves many lanes advanced together (`dynamics.diffrax_batch`).
+    """
     model, values, mode, t_out, mf, p, y, yp, offset = (start.model, start.values, start.mode, start.t_out,
                                                          start.mf, start.p, start.y, start.yp, start.offset)
-    derive_time = start.derive_time
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
     events: list[dict] = []
-    stats = new_stats("ida", f"IDA (BDF, {settings.formulation})", derive_time, unavailable={
-        key: "scikit-sundae returns IDA's residual and Jacobian counts only (`mechsim bench` reads IDA's own "
-             "step counters)" for key in ("steps", "accepted_steps", "rejected_steps")})
+    stats = new_stats(backend.name, backend.solver, start.derive_time, unavailable=backend.unavailable)
+    stats["notes"].update(backend.notes)
     failure = None
     warnings: list[str] = []
     t = t0
     last = None
-    first_step = 0.0
-    in_row = 0
-    solve0 = _time.perf_counter()
+    first_step = backend.initial_step
+    in_row = stuck = 0
+    wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
-        seg = integrate_segment(mf, p, t, y, yp, t_out[t_out > t], t_end, settings, first_step)
+        seg = yield Request(model, mode, mf, p, t, y, yp, t_out[t_out > t], t_end, first_step)
         stats["segments"] += 1
-        stats["residual_evaluations"] += seg.nfev
-        stats["jacobian_evaluations"] += seg.njev
+        for key, count in seg.counts.items():
+            stats[key] += count
         crossed = None if settings.events else stepped_over(mf, p, t, y, yp, seg)
         if crossed:
             seg.t, seg.y, seg.yp = seg.t[:crossed["rows"]], seg.y[:crossed["rows"]], seg.yp[:crossed["rows"]]
@@ -141,50 +173,45 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
             failure = dict(stepped_over_failure(model, mode, dict(crossed, q=crossed["q"] + offset)),
                            code=FailureCode.STEPPED_OVER)
             break
-        if seg.status == "failed":
-            recovered = recover(mf, p, seg, in_row, t_end)
+        if seg.end is End.FAILED:
+            recovered = recover(mf, p, seg, in_row, t_end) if seg.code in backend.recoverable else None
             if recovered is not None:
-                # IDA gave up (error or convergence test): restart from its last state, re-initialised
-                # consistently (a fresh order-1 history) with a small first step; at most twice per instant
+                # the integrator gave up: restart from its last state, re-initialised consistently (a fresh
+                # order-1 history) with a small first step; at most MAX_RECOVERIES times per instant
                 t, y, yp, first_step = recovered
                 in_row += 1
                 stats["recoveries"] += 1
                 continue
             q = seg.y_end[mf.index["q"]] + offset
-            reason, hint = f"IDA failed: {seg.message}", (
-                "tighten or loosen rtol; formulation = 'index1' (or solver.backend = 'diffrax') where index2 fails; "
-                "check for a singular configuration at this point")
-            if settings.formulation == "index1":
-                hint = ("tighten or loosen rtol; formulation = 'index2' (or solver.backend = 'diffrax'); check for "
-                        "a singular configuration at this point")
-            if settings.formulation == "index3":
-                reason = f"IDA failed on the index-3 formulation: {seg.message}"
-                hint = ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
-                        "error test breaks down at restarts and tight tolerances (docs/theory.md §K4); use "
-                        "formulation = 'index2'")
-            code = FailureCode.MAX_STEPS if seg.ida_status == IDA_TOO_MUCH_WORK else FailureCode.INTEGRATOR_FAILED
-            if not np.all(np.isfinite(seg.y_end)):
-                code = FailureCode.NON_FINITE
-            failure = dict(time=seg.t_end, mode=mode, reason=reason, code=code,
-                           where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=hint)
+            code = seg.code if np.all(np.isfinite(seg.y_end)) else FailureCode.NON_FINITE
+            failure = dict(time=seg.t_end, mode=mode, reason=seg.message, code=code,
+                           where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=backend.hint(code))
             break
-        first_step, in_row = 0.0, 0
-        if seg.status == "end":
-            t = seg.t_end
-            break
-        # a guard fired
+        in_row = 0
+        stuck = stuck + 1 if seg.t_end - t <= 1e-12 * max(1.0, abs(t)) else 0
         t = seg.t_end
-        ix = mf.index
-        q = seg.y_end[ix["q"]]
-        guard = mf.guard_names[seg.guard]
+        if seg.end is End.END:
+            break
+        q = seg.y_end[mf.index["q"]]
+        if stuck > MAX_STUCK:
+            guard = mf.guard_names[seg.fired[0]] if seg.fired else "?"
+            failure = dict(time=t, mode=mode, reason=f"guard '{guard}' keeps firing without time advancing",
+                           code=FailureCode.CHATTERING,
+                           where={c: float(v) for c, v in zip(model.coordinates, q + offset)},
+                           hint="the mode sequence chatters here (Zeno behaviour?)")
+            break
+        if seg.end is End.PAUSE:
+            y, yp, first_step = seg.y_end, seg.yp_end, seg.next_step
+            continue
+        # a guard fired
+        guard = mf.guard_names[seg.fired[0]]
         failure = chattering(model, mode, guard, t, q + offset, last)
         if failure:
             failure = dict(failure, code=FailureCode.CHATTERING)
             break
         last = (guard, t)
         stats["events"] += 1
-        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, [seg.guard, *seg.fired[1:]],
-                               offset)
+        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, list(seg.fired), offset)
         events += out.rows
         warnings += out.warnings
         if out.failure:
@@ -192,13 +219,10 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
             break
         mode, values, p, y, yp, offset = out.mode, out.values, out.p, out.y, out.yp, out.offset
         mf = model.modes[mode]
+        first_step = RESTART_STEP_FACTOR * seg.next_step
         stats["restarts"] += 1
-    stats["solve_time_s"] = _time.perf_counter() - solve0
+    stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
     return Trajectory(model, pieces, events, stats, failure, warnings)
-
-
-#: IDA's return flag for "max_num_steps reached" (IDA_TOO_MUCH_WORK in the SUNDIALS IDA guide)
-IDA_TOO_MUCH_WORK = -1
 
 
 def transition_failure_code(failure: dict) -> FailureCode:
@@ -212,13 +236,14 @@ def transition_failure_code(failure: dict) -> FailureCode:
 MAX_RECOVERIES = 2
 
 
-def recover(mf, p: tuple, seg, in_row: int, t_end: float):
-    """(t, y, yp, first_step) to restart a failed IDA segment from, or None when not possible.
+def recover(mf, p: tuple, seg: Segment, in_row: int, t_end: float):
+    """(t, y, yp, first_step) to restart a failed segment from, or None when not possible.
 
-    IDA's last reached state is re-initialised consistently (positions to round-off, velocities, accelerations
-    and multipliers from the KKT system: `consistent_state`) and restarted with a fresh order-1 history and a
-    first step of 1e-6 of the remaining time (IDA's own estimate is what failed). More than MAX_RECOVERIES
-    failures in a row, a non-finite state or a state that cannot be made consistent gives up.
+    The integrator's last reached state is re-initialised consistently (positions to round-off, velocities,
+    accelerations and multipliers from the KKT system: `consistent_state`) and restarted with a fresh
+    history and a first step of 1e-6 of the remaining time (the integrator's own estimate is what failed).
+    More than MAX_RECOVERIES failures in a row, a non-finite state or a state that cannot be made consistent
+    gives up.
     """
     t = float(seg.t_end)
     if in_row >= MAX_RECOVERIES:

@@ -1,40 +1,22 @@
-"""One smooth segment on SUNDIALS IDA (scikit-sundae): from a consistent state to the next guard or the end.
+"""The IDA backend (SUNDIALS IDA through scikit-sundae): one smooth segment from a consistent state to the
+next guard or the end, under the contract of `dynamics/backend.py`.
 
 The residual, exact Jacobian and guards are the generated plain-Python functions of `model`; the mode's
 parameter tuple travels as IDA's userdata.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from sksundae.ida import IDA
 
+from mechsim.dynamics.backend import End, Request, Segment
 from mechsim.dynamics.model import ModeFunctions
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 
 #: callables `observer(solver, solution, neq)` run after every IDA solve: the documented way for a benchmark to
 #: read IDA's own counters (benchmarks/ida_counters.py), which scikit-sundae does not return
 SOLVE_OBSERVERS: list = []
-
-
-@dataclass
-class Segment:
-    """Output of one segment: rows at the requested output times, and how it ended."""
-
-    t: np.ndarray
-    y: np.ndarray
-    yp: np.ndarray
-    status: str                   # "end", "event" or "failed"
-    t_end: float
-    y_end: np.ndarray
-    yp_end: np.ndarray
-    guard: int | None = None
-    message: str = ""
-    nfev: int = 0
-    njev: int = 0
-    fired: tuple[int, ...] = ()   # every guard that found a root at t_end (guard is the first of them)
-    ida_status: int = 0           # IDA's return flag (-1: max_num_steps reached; other negatives: failures)
 
 
 def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray | None = None) -> np.ndarray:
@@ -45,6 +27,48 @@ def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray 
     if scales is not None:
         atol[mf.index["work"]] = settings.atol * np.maximum(1.0, scales)
     return atol
+
+
+#: IDA's return flag for "max_num_steps reached" (IDA_TOO_MUCH_WORK in the SUNDIALS IDA guide)
+IDA_TOO_MUCH_WORK = -1
+
+
+class IdaBackend:
+    """SUNDIALS IDA (variable-order BDF) on the mode's residual F(t, y, y') = 0 with its exact Jacobian."""
+
+    name = "ida"
+    initial_step = 0.0
+    #: IDA's error or convergence test failing (often right after a restart) and its step budget: the loop
+    #: re-initialises and restarts (`hybrid.recover`) before it gives up
+    recoverable = frozenset({FailureCode.INTEGRATOR_FAILED, FailureCode.MAX_STEPS})
+    unavailable = {key: "scikit-sundae returns IDA's residual and Jacobian counts only (`mechsim bench` reads "
+                        "IDA's own step counters)" for key in ("steps", "accepted_steps", "rejected_steps")}
+    notes: dict = {}
+
+    def __init__(self, settings: SolverSettings):
+        self.settings = settings
+        self.solver = f"IDA (BDF, {settings.formulation})"
+
+    def integrate(self, request: Request) -> Segment:
+        r = request
+        return integrate_segment(r.mf, r.p, r.t0, r.y0, r.yp0, r.t_out, r.t_end, self.settings, r.first_step)
+
+    def hint(self, code: FailureCode) -> str:
+        formulation = self.settings.formulation
+        if formulation == "index3":
+            return ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
+                    "error test breaks down at restarts and tight tolerances (docs/theory.md §K4); use "
+                    "formulation = 'index2'")
+        other = "index2" if formulation == "index1" else "index1"
+        return (f"tighten or loosen rtol; formulation = '{other}' (or solver.backend = 'diffrax') where "
+                f"{formulation} fails; check for a singular configuration at this point")
+
+
+def _failed(t, y, yp, t_end, y_end, yp_end, sol, settings) -> Segment:
+    code = FailureCode.MAX_STEPS if int(sol.status) == IDA_TOO_MUCH_WORK else FailureCode.INTEGRATOR_FAILED
+    what = "IDA failed on the index-3 formulation" if settings.formulation == "index3" else "IDA failed"
+    return Segment(t, y, yp, End.FAILED, t_end, y_end, yp_end, code=code, message=f"{what}: {sol.message}",
+                   counts=dict(residual_evaluations=sol.nfev, jacobian_evaluations=sol.njev))
 
 
 def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray,
@@ -74,6 +98,7 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
     for observe in SOLVE_OBSERVERS:
         observe(solver, sol, len(y0))
     t, y, yp = np.asarray(sol.t), np.asarray(sol.y), np.asarray(sol.yp)
+    counts = dict(residual_evaluations=sol.nfev, jacobian_evaluations=sol.njev)
     # rows at requested output instants only (tspan[0] is the start; a terminal event is appended last)
     requested = np.isin(t, t_out) & (t > t0)
     if sol.t_events is not None and len(sol.t_events) and sol.success:
@@ -81,10 +106,8 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
         fired = tuple(int(i) for i in np.flatnonzero(ie))
         te = float(np.asarray(sol.t_events)[-1])
         requested &= t < te
-        return Segment(t[requested], y[requested], yp[requested], "event", te, np.asarray(sol.y_events)[-1],
-                       np.asarray(sol.yp_events)[-1], fired[0], nfev=sol.nfev, njev=sol.njev, fired=fired)
+        return Segment(t[requested], y[requested], yp[requested], End.GUARD, te, np.asarray(sol.y_events)[-1],
+                       np.asarray(sol.yp_events)[-1], fired=fired, counts=counts)
     if not sol.success:
-        return Segment(t[requested], y[requested], yp[requested], "failed", float(t[-1]), y[-1], yp[-1],
-                       message=str(sol.message), nfev=sol.nfev, njev=sol.njev, ida_status=int(sol.status))
-    return Segment(t[requested], y[requested], yp[requested], "end", float(t[-1]), y[-1], yp[-1],
-                   nfev=sol.nfev, njev=sol.njev)
+        return _failed(t[requested], y[requested], yp[requested], float(t[-1]), y[-1], yp[-1], sol, settings)
+    return Segment(t[requested], y[requested], yp[requested], End.END, float(t[-1]), y[-1], yp[-1], counts=counts)

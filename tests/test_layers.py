@@ -72,3 +72,61 @@ def test_imports_follow_the_layers(path):
         if parts[0] == "mechsim" and len(parts) > 1 and parts[1] in FORBIDDEN.get(layer, ()):
             problems.append(f"line {line}: {layer}/ must not import {name!r}")
     assert not problems, "\n".join(problems)
+
+
+PRODUCT = [p for p in FILES if p.relative_to(ROOT).parts[0] != "tests"]
+
+
+def import_source(node: ast.ImportFrom, module: list[str], is_package: bool) -> str:
+    """The absolute dotted name a `from ... import` reads from (relative imports resolved)."""
+    if not node.level:
+        return node.module or ""
+    package = module if is_package else module[:-1]
+    base = package[: len(package) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def reaching_into_others(text: str, module: list[str], is_package: bool = False) -> list[str]:
+    """Private names imported from another of our modules, and assignments to an attribute of one of our
+    imported modules (monkeypatching): both couple a module to another's internals."""
+    tree = ast.parse(text)
+    here = ".".join(module)
+    ours: set[str] = set()          # local names bound to one of our modules or their members
+    problems = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            source = import_source(node, module, is_package)
+            if source.startswith("mechsim") and source != here:
+                for alias in node.names:
+                    if alias.name.startswith("_"):
+                        problems.append(f"line {node.lineno}: imports private {alias.name!r} from {source}")
+                    ours.add(alias.asname or alias.name)
+        elif isinstance(node, ast.Import):
+            ours.update(alias.asname or alias.name.split(".")[0] for alias in node.names
+                        if alias.name.startswith("mechsim"))
+    for node in ast.walk(tree):
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(
+            node, (ast.AugAssign, ast.AnnAssign)) else []
+        for target in targets:
+            base = target
+            while isinstance(base, ast.Attribute):
+                base = base.value
+            if isinstance(target, ast.Attribute) and isinstance(base, ast.Name) and base.id in ours:
+                problems.append(f"line {node.lineno}: assigns {ast.unparse(target)} on one of our modules")
+    return problems
+
+
+@pytest.mark.parametrize("path", PRODUCT, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_private_imports_or_monkeypatching(path):
+    problems = reaching_into_others(path.read_text(encoding="utf-8"), module_name(path), path.name == "__init__.py")
+    assert not problems, "\n".join(problems)
+
+
+def test_the_private_import_check_catches_both_kinds():
+    probe = ("from mechsim.dynamics.ida import _hidden\nfrom ..dynamics import hybrid\n"
+             "import mechsim.dynamics.ida as ida\nida.IDA = None\nhybrid.MAX_STUCK += 1\n"
+             "from .runner import _own_package_private\n")
+    problems = reaching_into_others(probe, ["mechsim", "scenarios", "probe"])
+    assert len(problems) == 4, problems
+    assert "_hidden" in problems[0] and "_own_package_private" in problems[1]
+    assert "ida.IDA" in problems[2] and "hybrid.MAX_STUCK" in problems[3]

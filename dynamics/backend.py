@@ -1,0 +1,90 @@
+"""The contract between the hybrid loop and an integrator: integrate ONE mode, say how the segment ended.
+
+The loop (`dynamics/hybrid.py`) owns everything hybrid: guards that fired, transitions, impacts, consistent
+re-initialisation, recoveries, output assembly, statistics and failures. A backend only integrates one smooth
+mode from a consistent state (a `Request`) to the first guard crossing, the end time, or a pause of its own
+choosing, and returns a `Segment`. Every backend reports the same statistics keys (`dynamics/stats.py`); the
+counters of one segment travel in `Segment.counts`.
+
+A backend is a class with:
+
+- `name` (the `solver.backend` value), `solver` (a label for the summary), `unavailable` (statistics it cannot
+  report, with the reason), `notes` (how a reported number is obtained when it is not a plain count),
+  `initial_step` (first trial step of a run, 0 = the integrator's own estimate), `recoverable` (failure codes
+  after which the loop re-initialises and tries again);
+- `integrate(request) -> Segment`;
+- `hint(code) -> str`: what a user can change after a failure with that code.
+
+Adding a backend is one new module in `dynamics/` and its line in `REGISTRY`; the loop does not change.
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from mechsim.dynamics.model import DerivedModel, ModeFunctions
+from mechsim.dynamics.result import FailureCode
+
+#: solver.backend value -> "module:class" of its backend (imported on first use: diffrax pulls in JAX)
+REGISTRY = {
+    "ida": "mechsim.dynamics.ida:IdaBackend",
+    "diffrax": "mechsim.dynamics.diffrax_backend:DiffraxBackend",
+}
+
+
+class End(str, Enum):
+    """How a segment ended."""
+
+    END = "end"          # reached the request's end time
+    GUARD = "guard"      # a guard crossed zero in its direction (Segment.fired says which)
+    PAUSE = "pause"      # the backend stopped early in the same mode (output chunk, a guard re-armed);
+    #                      the loop continues from (t_end, y_end, yp_end)
+    FAILED = "failed"    # the integrator gave up (Segment.code, Segment.message)
+
+
+@dataclass
+class Request:
+    """One mode to integrate: from the consistent state (t0, y0, yp0) through the output times t_out
+    (all > t0, <= t_end) to t_end or the first guard crossing. States are in the IDA layout of the mode
+    (`ModeFunctions.index`: q, v, lam, mu, work, ext); p is the mode's parameter tuple."""
+
+    model: DerivedModel
+    mode: str
+    mf: ModeFunctions
+    p: tuple
+    t0: float
+    y0: np.ndarray
+    yp0: np.ndarray
+    t_out: np.ndarray
+    t_end: float
+    first_step: float = 0.0
+
+
+@dataclass
+class Segment:
+    """What a backend returns: rows at the requested output times (IDA layout), the end state, how it ended."""
+
+    t: np.ndarray
+    y: np.ndarray
+    yp: np.ndarray
+    end: End
+    t_end: float
+    y_end: np.ndarray
+    yp_end: np.ndarray
+    fired: tuple[int, ...] = ()          # End.GUARD: guards past zero at t_end, the one to handle first
+    code: FailureCode | None = None      # End.FAILED: what went wrong
+    message: str = ""                    # End.FAILED: the integrator's words, for people
+    counts: dict = field(default_factory=dict)   # this segment's increments of the statistics counters
+    next_step: float = 0.0               # a first step for the next segment (0: the integrator's estimate)
+
+
+def backend_for(name: str, settings, **options):
+    """The backend registered under `name`, built for these solver settings."""
+    try:
+        module, cls = REGISTRY[name].split(":")
+    except KeyError:
+        raise ValueError(f"solver.backend must be one of {', '.join(REGISTRY)}; got {name!r}") from None
+    return getattr(importlib.import_module(module), cls)(settings, **options)
