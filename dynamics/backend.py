@@ -22,11 +22,14 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mechsim.dynamics.model import DerivedModel, ModeFunctions
 from mechsim.dynamics.result import FailureCode
+
+if TYPE_CHECKING:      # the contract is imported by the settings: no sympy model behind it
+    from mechsim.dynamics.model import DerivedModel, ModeFunctions
 
 #: solver.backend value -> "module:class" of its backend (imported on first use: diffrax pulls in JAX)
 REGISTRY = {

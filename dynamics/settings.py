@@ -3,9 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from mechsim.dynamics.backend import REGISTRY
 from mechsim.dynamics.formulation import FORMULATIONS
 
-BACKENDS = ("ida", "diffrax")
+BACKENDS = tuple(REGISTRY)
 METHODS = ("auto", "dae", "closed-form")
 
 
