@@ -120,11 +120,13 @@ def first_stop(case: GenevaCase, theta0: float, w0: float, t_end: float, rest_sp
         def rhs(_t, z):
             return [z[1], case.accel(z[0] - base, z[1], engaged, sigma, s)]
 
-        def boundary(_t, z):   # the engagement boundary ahead
-            al = z[0] - base
-            if engaged:
-                return al - a0
-            return al - (2 * np.pi - a0) if al >= a0 else al + a0
+        # the engagement boundary ahead, fixed for the piece: a boundary function that switched its target
+        # with the angle would be discontinuous, and a long step of the smooth dwell motion could jump over the
+        # whole engagement zone without a sign change (it did: grid case g029, 3 slots, 47 rad/s)
+        ahead = a0 if engaged else (2 * np.pi - a0 if alpha >= a0 else -a0)
+
+        def boundary(_t, z):
+            return z[0] - base - ahead
         boundary.terminal, boundary.direction = True, 1
 
         def stall(_t, z):
