@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mechsim.dynamics import kkt
 from mechsim.dynamics.model import ModeFunctions
 
 
@@ -77,18 +78,16 @@ def project_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray
 
 def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Accelerations and multipliers from the KKT system of the mode."""
+    """Accelerations and multipliers from the KKT system of the mode (`kkt.solve`)."""
     M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
     nq = len(q)
     Q0 = np.asarray(mf.force0(t, q, v, x, p), dtype=float).ravel()
     if mf.m == 0:
-        return np.linalg.solve(M, Q0), np.zeros(0)
+        return kkt.solve(M, np.zeros((0, nq)), np.zeros((nq, 0)), Q0, np.zeros(0))
     G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
     Ql = np.asarray(mf.force_lam(t, q, v, x, p), dtype=float).reshape(nq, mf.m)
     gamma = np.asarray(mf.gamma(t, q, v, p), dtype=float).ravel()
-    K = np.block([[M, G.T - Ql], [G, np.zeros((mf.m, mf.m))]])
-    sol = np.linalg.solve(K, np.concatenate([Q0, -gamma]))
-    return sol[:nq], sol[nq:]
+    return kkt.solve(M, G, Ql, Q0, -gamma)
 
 
 def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, work: np.ndarray,

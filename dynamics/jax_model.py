@@ -23,6 +23,7 @@ import jax.numpy as jnp  # noqa: E402
 import sympy as sp  # noqa: E402
 from sympy.printing.numpy import JaxPrinter  # noqa: E402
 
+from mechsim.dynamics import kkt  # noqa: E402
 from mechsim.dynamics.model import ModeFunctions  # noqa: E402
 
 
@@ -105,13 +106,8 @@ class JaxMode:
         Q0 = take(nq, (nq,))
         Ql = take(nq * m, (nq, m))
         gamma, phi, phi_dot = take(m, (m,)), take(m, (m,)), take(m, (m,))
-        if m == 0:
-            return jnp.linalg.solve(M, Q0), jnp.zeros(0)
         alpha, beta = p[self.alpha_index], p[self.beta_index]
-        K = jnp.block([[M, G.T - Ql], [G, jnp.zeros((m, m))]])
-        rhs = jnp.concatenate([Q0, -gamma - 2.0 * alpha * phi_dot - beta ** 2 * phi])
-        sol = jnp.linalg.solve(K, rhs)
-        return sol[:nq], sol[nq:]
+        return kkt.solve(M, G, Ql, Q0, -gamma - 2.0 * alpha * phi_dot - beta ** 2 * phi, xp=jnp)
 
     def _post_parts(self, t, q, v, a, lam, x, p):
         vals = self._post(t, q, v, a, lam, x, p)

@@ -20,6 +20,7 @@ import sympy as sp
 
 from mechsim.mechanisms.base import Mechanism, Mode
 
+from mechsim.dynamics import kkt
 from mechsim.dynamics.codegen import emit
 from mechsim.dynamics.drives import DRIVE_PARAMETERS
 from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
@@ -225,11 +226,9 @@ def _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m):
         return [g.subs({a[i]: vp[i] for i in range(nq)}) for g in guards]
     Ql = force.jacobian(lam) if m else sp.zeros(nq, 0)
     Q0 = force.subs({li: 0 for li in lam})
-    K = sp.Matrix(sp.BlockMatrix([[M, cd.G.T - Ql], [cd.G, sp.zeros(m, m)]]))
-    rhs = sp.Matrix(list(Q0) + list(-cd.gamma))
-    sol = K.LUsolve(rhs)
-    sub = {a[i]: sol[i] for i in range(nq)}
-    sub.update({lam[j]: sol[nq + j] for j in range(m)})
+    acc, mult = kkt.solve_symbolic(M, cd.G if m else sp.zeros(0, nq), Ql, Q0, -cd.gamma if m else [])
+    sub = {a[i]: acc[i] for i in range(nq)}
+    sub.update({lam[j]: mult[j] for j in range(m)})
     return [g.subs(sub, simultaneous=True) for g in guards]
 
 

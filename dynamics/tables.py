@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from mechsim.dynamics import kkt
 from mechsim.dynamics.hybrid import Trajectory
 
 
@@ -49,14 +50,11 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
     M = _rows(f["mass"](q.T, p), n, (nq, nq))
     Q0 = _rows(f["force0"](t, q.T, v.T, x.T, p), n, (nq,))
     if m == 0:
-        return np.linalg.solve(M, Q0[..., None])[..., 0], np.zeros((n, 0))
+        return kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), Q0, np.zeros((n, 0)))
     G = _rows(f["G"](t, q.T, p), n, (m, nq))
     Ql = _rows(f["force_lam"](t, q.T, v.T, x.T, p), n, (nq, m))
     gamma = _rows(f["gamma"](t, q.T, v.T, p), n, (m,))
-    K = np.zeros((n, nq + m, nq + m))
-    K[:, :nq, :nq], K[:, :nq, nq:], K[:, nq:, :nq] = M, np.swapaxes(G, 1, 2) - Ql, G
-    sol = np.linalg.solve(K, np.concatenate([Q0, -gamma], axis=1)[..., None])[..., 0]
-    return sol[:, :nq], sol[:, nq:]
+    return kkt.solve(M, G, Ql, Q0, -gamma)
 
 
 def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:

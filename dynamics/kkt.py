@@ -1,0 +1,41 @@
+"""The one KKT solve of a constrained mode, for numpy, JAX and sympy alike.
+
+Accelerations a and multipliers lam of a mode with mass matrix M, constraint Jacobian G and generalized forces
+Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/theory.md §G1, §K4):
+
+    [[M, G^T - Ql], [G, 0]] [a; lam] = [Q0; c],
+
+with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
+c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
+Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
+(every output row at once, numpy), `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read
+a or lam, solved symbolically with sympy).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def solve(M, G, Ql, Q0, c, xp=np):
+    """(a, lam) for one system or a stack of them (leading axes): M (..., nq, nq), G (..., m, nq),
+    Ql (..., nq, m), Q0 (..., nq), c (..., m); xp is numpy or jax.numpy."""
+    nq, m = M.shape[-1], G.shape[-2]
+    if m == 0:
+        return xp.linalg.solve(M, Q0[..., None])[..., 0], xp.zeros(Q0.shape[:-1] + (0,))
+    top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
+    bottom = xp.concatenate([G, xp.zeros(G.shape[:-1] + (m,))], axis=-1)
+    K = xp.concatenate([top, bottom], axis=-2)
+    sol = xp.linalg.solve(K, xp.concatenate([Q0, c], axis=-1)[..., None])[..., 0]
+    return sol[..., :nq], sol[..., nq:]
+
+
+def solve_symbolic(M, G, Ql, Q0, c):
+    """(a, lam) as sympy column matrices: the same system, solved by LU on the symbolic matrix."""
+    import sympy as sp
+
+    nq, m = M.shape[0], G.shape[0]
+    if m == 0:
+        return M.LUsolve(sp.Matrix(list(Q0))), sp.zeros(0, 1)
+    K = sp.Matrix(sp.BlockMatrix([[M, G.T - Ql], [G, sp.zeros(m, m)]]))
+    sol = K.LUsolve(sp.Matrix(list(Q0) + list(c)))
+    return sol[:nq, :], sol[nq:, :]

@@ -1,0 +1,60 @@
+"""The one KKT solve (dynamics/kkt.py): the same (a, lam) from numpy (single and stacked), JAX and sympy, and
+both equations of the system satisfied to the system's conditioning."""
+import numpy as np
+import pytest
+import sympy as sp
+
+from mechsim.dynamics import kkt
+
+
+def system(rng, nq=3, m=2):
+    A = rng.standard_normal((nq, nq))
+    M = A @ A.T + nq * np.eye(nq)                  # symmetric positive definite
+    G = rng.standard_normal((m, nq))               # full row rank (almost surely)
+    Ql = 0.1 * rng.standard_normal((nq, m))        # friction: forces linear in the multipliers
+    return M, G, Ql, rng.standard_normal(nq), rng.standard_normal(m)
+
+
+def kkt_matrix(M, G, Ql):
+    return np.block([[M, G.T - Ql], [G, np.zeros((G.shape[0], G.shape[0]))]])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_solution_satisfies_both_equations(seed):
+    M, G, Ql, Q0, c = system(np.random.default_rng(seed))
+    a, lam = kkt.solve(M, G, Ql, Q0, c)
+    eps = np.finfo(float).eps
+    scale = np.linalg.cond(kkt_matrix(M, G, Ql)) * eps * (1 + np.abs(np.r_[a, lam]).max())
+    assert np.abs(M @ a + (G.T - Ql) @ lam - Q0).max() <= 10 * scale * np.abs(M).max()
+    assert np.abs(G @ a - c).max() <= 10 * scale * np.abs(G).max()
+
+
+def test_stacked_equals_one_by_one_and_unconstrained_is_newton():
+    rng = np.random.default_rng(7)
+    systems = [system(rng) for _ in range(4)]
+    stacked = kkt.solve(*(np.stack(parts) for parts in zip(*systems)))
+    for j, parts in enumerate(systems):
+        a, lam = kkt.solve(*parts)
+        np.testing.assert_allclose(stacked[0][j], a, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(stacked[1][j], lam, rtol=1e-12, atol=1e-12)
+    M, _, _, Q0, _ = systems[0]
+    a, lam = kkt.solve(M, np.zeros((0, 3)), np.zeros((3, 0)), Q0, np.zeros(0))
+    np.testing.assert_allclose(M @ a, Q0, rtol=1e-12, atol=1e-12)
+    assert lam.shape == (0,)
+
+
+def test_jax_and_sympy_give_the_same_solution():
+    import jax.numpy as jnp
+
+    import mechsim.dynamics.jax_model  # noqa: F401  (switches JAX to float64)
+
+    M, G, Ql, Q0, c = system(np.random.default_rng(3))
+    a, lam = kkt.solve(M, G, Ql, Q0, c)
+    aj, lamj = kkt.solve(*(jnp.asarray(x) for x in (M, G, Ql, Q0, c)), xp=jnp)
+    np.testing.assert_allclose(np.asarray(aj), a, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(lamj), lam, rtol=1e-10, atol=1e-12)
+    # sympy on exact rationals of the same numbers: LU in exact arithmetic, so it checks numpy's solve too
+    exact = [sp.Matrix(np.atleast_2d(x).T if x.ndim == 1 else x).applyfunc(lambda e: sp.Rational(float(e))) for x in (M, G, Ql, Q0, c)]
+    acc, mult = kkt.solve_symbolic(*exact)
+    np.testing.assert_allclose(np.array(acc, dtype=float).ravel(), a, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(np.array(mult, dtype=float).ravel(), lam, rtol=1e-10, atol=1e-12)
