@@ -7,7 +7,8 @@
     figs = r.plot()                 # {name: matplotlib Figure}, the CLI's figures
     r.save("results/motor")         # the CLI's output folder, written atomically
 
-`mechsim sweep` and `mechsim compare` are `sweep(...)` and `compare(...)`. The command line is a thin layer over
+`mechsim sweep`, `mechsim compare` and `mechsim sensitivity` are `sweep(...)`, `compare(...)` and
+`sensitivity(...)`. The command line is a thin layer over
 these functions (scenarios/cli.py), so both give the same numbers and files.
 """
 from __future__ import annotations
@@ -22,7 +23,7 @@ from mechsim.scenarios.loader import Scenario, builtin_names
 from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sweep"]
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sensitivity", "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
 
@@ -163,3 +164,29 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
     table.attrs.update(report=report.line(), exit_code=exit_code(report), interrupted=report.interrupted,
                        recomputed=list(report.discarded or []))
     return table
+
+
+def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: str | Iterable[str] | None = None,
+                set: Overrides = None, change: float = 0.01):  # noqa: A002
+    """Exact derivatives of the run's headline results with respect to scenario values (`mechsim sensitivity`,
+    docs/sensitivity.md): a DataFrame with one row per (quantity, value): `value`, `derivative` (SI, quantity unit
+    per the value's unit), `elasticity` (p/y) dy/dp, and `quantity_change` for a change of the value by `change`
+    (relative, first order). `.attrs` holds `warnings` (peaks that nearly tie, ...) and `cost` (the run's and the
+    sensitivities' wall time).
+
+    wrt: "section.key" names (a list or one comma-separated string), e.g. ["load.wheel_torque", "contact.friction"];
+    of: quantities (default: all), e.g. "peak_contact_force_N,index_time_s". Raises ScenarioError on a key or
+    quantity that is not traced, and `SensitivityUnavailable` (a ValueError) where the derivative does not exist on
+    this run (a grazing event, a transition that recomputes a traced value)."""
+    from mechsim.scenarios.sensitivity import sensitivity as sensitivity_table
+    if not isinstance(scenario, Scenario):
+        scenario = load(scenario, set)
+    elif set:
+        raise ValueError("sensitivity(scenario, set=...): pass the overrides to load(); this scenario is already loaded")
+
+    def names(x):
+        if x is None:
+            return None
+        items = x.split(",") if isinstance(x, str) else list(x)
+        return [s.strip() for s in items if s.strip()]
+    return sensitivity_table(scenario, names(wrt), names(of), change)

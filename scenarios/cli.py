@@ -377,6 +377,68 @@ def report(
         out.print(line, markup=False, highlight=False, soft_wrap=True)
 
 
+@app.command()
+def sensitivity(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    wrt: str = typer.Option(..., "--wrt", help="scenario values to differentiate by: section.key[,section.key...]"),
+    of: Optional[str] = typer.Option(None, "--of", help="quantities (default all): peak_contact_force_N,index_time_s,..."),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+    change: float = typer.Option(0.01, "--change", help="relative change of each value for the quantity_change column"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/sensitivity-<name>)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
+) -> None:
+    """Exact derivatives of the run's headline results by scenario values (docs/sensitivity.md); writes
+    sensitivity.csv, tornado.png (elasticities) and summary.json."""
+    from mechsim.scenarios import api
+    from mechsim.scenarios.console import native_output
+    try:
+        sc = api.load(scenario, set_)
+        target = _output_folder(out_dir, sc.name, force, prefix="sensitivity-")
+        with native_output():
+            table = api.sensitivity(sc, wrt, of, change=change)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except ValueError as exc:       # SensitivityUnavailable: the derivative does not exist on this run
+        _fail(f"sensitivity: {exc}", SOLVER_FAILURE)
+    except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
+        _fail(f"sensitivity: stopped on an internal error ({type(exc).__name__}: "
+              f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'})", SOLVER_FAILURE)
+    from mechsim.scenarios.sensitivity import write_sensitivity
+    try:
+        write_sensitivity(table, target, force=force)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except OSError as exc:
+        _os_refused(exc, f"{sc.name}: the sensitivities")
+    if quiet:
+        return
+    _print_sensitivity(table)
+    for w in table.attrs["warnings"]:
+        err.print(f"warning: {w}", markup=False, highlight=False, soft_wrap=True)
+    c = table.attrs["cost"]
+    out.print(f"{sc.name}: {len(table)} derivatives; run ({c['run_backend']}) {c['run_wall_time_s']:.3f} s, "
+              f"sensitivities {c['sensitivity_wall_time_s']:.3f} s (compilation "
+              f"{c['sensitivity_compile_time_s']:.3f} s) -> {target}", markup=False, highlight=False, soft_wrap=True)
+
+
+def _print_sensitivity(table) -> None:
+    """The table on stdout: rich on a terminal, plain full-precision text when piped."""
+    head = ("quantity", "value", "wrt", "parameter", "derivative", "elasticity", "quantity_change")
+    if out.is_terminal:
+        from rich.table import Table
+        view = Table(title=f"{table.attrs['scenario']}: sensitivities (change of y for a "
+                           f"{table.attrs['change']:.3g} relative change of p)")
+        for name in head:
+            view.add_column(name, justify="left" if name in ("quantity", "wrt") else "right")
+        for r in table.itertuples():
+            view.add_row(r.quantity, f"{r.value:.6g}", r.wrt, f"{r.parameter:.6g} {r.wrt_unit}".strip(),
+                         f"{r.derivative:.6g}", f"{r.elasticity:.4g}", f"{r.quantity_change:.4g}")
+        out.print(view)
+        return
+    sys.stdout.write(table[list(head)].to_string(index=False, float_format=lambda v: f"{v:.10g}") + "\n")
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:

@@ -1,0 +1,414 @@
+"""Forward trajectory sensitivities of a hybrid run along its mode sequence (exact, not by differencing).
+
+Between events the state z = [q, v, work, ext] of the diffrax form (`jax_model`, docs/theory.md §K4) obeys
+z' = f(t, z, p), and its sensitivity S = dz/dtheta to the design values theta obeys the variational equation
+
+    S' = f_z S + f_p P,          P = dp/dtheta,
+
+integrated alongside z (one jax.jvp per column, so the cost grows with the number of design values, not with
+the size of p). At an event where guard g reaches zero at time tau the implicit-function rule gives the
+event time's derivative and the reset map R (re-initialisation in the new mode) the jump
+
+    dtau/dtheta = -(g_z S- + g_p P) / (g_t + g_z f-),
+    S+ = R_z (S- + f- dtau/dtheta) + R_p P - f+ dtau/dtheta
+
+(Hiskens & Pai 2000, "Trajectory sensitivity analysis of hybrid systems", IEEE TCAS-I 47(2), eqs. (14)-(17)).
+R is the project's consistent re-initialisation (dynamics/consistent.py): positions projected onto Phi = 0 with
+minimum-norm corrections, velocities projected in the kinetic-energy metric (the plastic impact law; an impact
+with restitution whose rebound the new mode absorbs ends at the same velocities), work and thermal states kept.
+It is written here again in jax so that jax differentiates it; every restart state it gives is checked against
+the one `apply_transition` computes, so the two cannot drift apart unnoticed.
+
+The mode sequence, event times and discrete updates come from a finished run (its events table) and from the
+project's own transition logic (`apply_transition`); this module adds the derivatives. Not covered (raises
+`SensitivityUnavailable`): runs that failed or stopped, prescribed-speed DAE runs (their drive reference is
+re-based with the event time), and transitions that change a parameter not declared discrete (a continuous
+value recomputed at the event would need its own derivative).
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mechsim.dynamics.hybrid import parameter_tuple, prepare
+from mechsim.dynamics.jax_model import jax_model  # also enables float64
+from mechsim.dynamics.transitions import apply_transition
+
+import diffrax  # noqa: E402  (after jax_model has switched on float64)
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import sympy as sp  # noqa: E402
+
+
+class SensitivityUnavailable(ValueError):
+    """The derivatives do not exist here, or this module does not trace them (the message says which)."""
+
+
+@dataclass(frozen=True)
+class Seed:
+    """The run's inputs differentiated with respect to n design values.
+
+    dp: (len(model.parameter_names), n) d(parameter tuple)/dtheta, in the model's parameter order.
+    dq0, dv0: (nq, n) derivatives of the initial guess of positions and velocities (before projection).
+    discrete: parameters a transition may change (mode flags, slot counters, ...): their values follow from
+        integers and signs only, so their derivative is zero; a transition changing any other parameter raises.
+    """
+
+    dp: np.ndarray
+    dq0: np.ndarray
+    dv0: np.ndarray
+    discrete: frozenset = frozenset()
+
+    @property
+    def n(self) -> int:
+        return self.dp.shape[1]
+
+
+@dataclass
+class EventSensitivity:
+    """One transition: its time and the time's derivative; the state just before it and that state's total
+    derivative along the moving event time, dz-/dtheta = S- + f- dtau/dtheta."""
+
+    t: float
+    kind: str
+    guard: str
+    from_mode: str
+    to_mode: str
+    dt: np.ndarray
+    z: np.ndarray
+    dz: np.ndarray
+
+
+@dataclass
+class Sample:
+    """Requested columns at one output time: values and their gradients (n,) at that fixed time."""
+
+    t: float
+    mode: str
+    values: dict
+    grads: dict
+
+
+@dataclass
+class PathSensitivity:
+    events: list[EventSensitivity]
+    samples: list[Sample]
+    stats: dict = field(default_factory=dict)
+
+
+# -- jax pieces built from the model's sympy description -----------------------------------------------------
+def _jax_fn(args, exprs):
+    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True)
+
+
+class _ModePieces:
+    """Constraints, mass matrix and read-outs of one mode as jax functions of (t, q, v, a, lam, x, p)."""
+
+    def __init__(self, mf, mech):
+        s = mf.symbolic
+        t, q, v, lam, x, params = s["t"], list(s["q"]), list(s["v"]), list(s["lam"]), list(s["x"]), list(s["params"])
+        self.nq, self.m = len(q), len(lam)
+        cd = s["constraints"]
+        nq, m = self.nq, self.m
+        M = sp.Matrix(s["mass"])
+        self._mass = _jax_fn([q, params], list(M))
+        self._phi = _jax_fn([t, q, params], list(cd.phi)) if m else None
+        self._G = _jax_fn([t, q, params], list(cd.G)) if m else None
+        self._phi_dot = _jax_fn([t, q, v, params], list(cd.phi_dot)) if m else None
+        a_mech = list(mech.symbols.a)
+        self.readout_names = list(mf.readout_names)
+        self._readouts = _jax_fn([t, q, v, a_mech, lam, x, params], s["readout_exprs"])
+
+    def mass(self, q, p):
+        return jnp.reshape(jnp.stack([jnp.asarray(e, jnp.float64) for e in self._mass(q, p)]), (self.nq, self.nq))
+
+    def project(self, t, q, v, p):
+        """One minimum-norm Newton step onto Phi = 0, then the kinetic-energy-metric velocity projection onto
+        G v + Phi_t = 0 (dynamics/consistent.py). At a point with Phi = 0 the step's derivative is the exact
+        derivative of the converged projection (the terms it drops carry a factor Phi)."""
+        if not self.m:
+            return q, v
+        nq, m = self.nq, self.m
+
+        def stack(vals, shape):
+            return jnp.reshape(jnp.stack([jnp.asarray(e, jnp.float64) for e in vals]), shape)
+
+        phi = stack(self._phi(t, q, p), (m,))
+        G = stack(self._G(t, q, p), (m, nq))
+        q = q - G.T @ jnp.linalg.solve(G @ G.T, phi)
+        G = stack(self._G(t, q, p), (m, nq))
+        rel = stack(self._phi_dot(t, q, v, p), (m,))
+        M = self.mass(q, p)
+        Minv_Gt = jnp.linalg.solve(M, G.T)
+        v = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt, rel)
+        return q, v
+
+    def readouts(self, t, q, v, a, lam, x, p):
+        return [jnp.asarray(e, jnp.float64) for e in self._readouts(t, q, v, a, lam, x, p)]
+
+
+# -- the compiled segment solve of z and S -------------------------------------------------------------------
+N_SAVE = 16
+#: sensitivity columns per compiled solve (a request for fewer is padded with zeros, more takes a multiple)
+COLUMNS = 8
+
+
+def _padded(a, n: int) -> np.ndarray:
+    a = np.asarray(a, float)
+    return np.hstack([a, np.zeros((a.shape[0], n - a.shape[1]))])
+_SOLVES: dict = {}
+
+
+def _segment_solve(jmod, model, n: int, rtol: float, atol: float, solver: str, max_steps: int):
+    key = (id(model), n, rtol, atol, solver, max_steps)
+    hit = _SOLVES.get(key)
+    if hit is not None and hit[1] is model:
+        return hit[0], False
+
+    def field_(t, y, args):
+        k, p, P = args
+        z, S = y
+
+        def f(zz, pp):
+            return jmod.rates(k, t, zz, pp)
+        zdot = f(z, p)
+        Sdot = jax.vmap(lambda s, dp: jax.jvp(f, (z, p), (s, dp))[1], in_axes=(1, 1), out_axes=1)(S, P)
+        return zdot, Sdot
+
+    term = diffrax.ODETerm(field_)
+    controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    method = getattr(diffrax, solver)()
+
+    def solve(k, t0, t1, z0, S0, p, P, ts):
+        saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
+        sol = diffrax.diffeqsolve(term, method, t0, t1, None, (z0, S0), args=(k, p, P), saveat=saveat,
+                                  stepsize_controller=controller, max_steps=max_steps, throw=False,
+                                  adjoint=diffrax.ForwardMode())
+        return dict(z=sol.ys[0][0], S=sol.ys[0][1], z1=sol.ys[1][0][0], S1=sol.ys[1][1][0],
+                    result=sol.result._value, steps=sol.stats["num_steps"])
+
+    wall = _time.perf_counter()
+    nz, npar = jmod.nz, len(model.parameter_names)
+    example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
+               np.ones(N_SAVE))
+    fn = jax.jit(solve).lower(*example).compile()
+    _SOLVES[key] = (fn, model)
+    return fn, _time.perf_counter() - wall
+
+
+def _z(mf, y):
+    ix = mf.index
+    return np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
+
+
+class _Tools:
+    """The jitted pieces of one model (jax dispatches the lambdified expressions op by op otherwise, which costs
+    seconds per call): the reset and the read-outs of each mode, the event rule of all modes."""
+
+    def __init__(self, mech, model, jmod, columns: tuple, n: int):
+        wall = _time.perf_counter()
+        self.model, self.jmod, self.columns = model, jmod, columns
+        self.pieces = {name: _ModePieces(mf, mech) for name, mf in model.modes.items()}
+        nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
+        i32, f = np.int32(0), 0.0
+        z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
+        # compiled ahead of time (the examples fix the shapes), so the compilation is counted apart from the solve
+        self.event = _event_fn(jmod).lower(i32, i32, f, z, S, p, P).compile()
+        self.reset = {name: self._reset_fn(name, pc).lower(f, z, np.zeros(nq), p, S, P).compile()
+                      for name, pc in self.pieces.items()}
+        self.sample = {name: self._sample_fn(name, pc).lower(f, z, S, p, P, np.zeros(nq)).compile()
+                       for name, pc in self.pieces.items()}
+        self.compile_time = _time.perf_counter() - wall
+
+    def _reset_fn(self, name, pc):
+        """(z+, dz+ = R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name`."""
+        nq = self.jmod.nq
+        jm = self.jmod.modes[self.jmod.index(name)]
+
+        def reset(t, z, shift, p, dz, P):
+            def r(zz, pp):
+                qq, vv = pc.project(t, zz[:nq] - shift, zz[nq:2 * nq], pp)
+                return jnp.concatenate([qq, vv, zz[2 * nq:]])
+            z_new, dz_new = jax.vmap(lambda a, b: jax.jvp(r, (z, p), (a, b)), in_axes=(1, 1),
+                                     out_axes=(None, 1))(dz, P)
+            return z_new, dz_new, jm.rates(t, z_new, p)
+        return jax.jit(reset)
+
+    def _sample_fn(self, name, pc):
+        jm = self.jmod.modes[self.jmod.index(name)]
+        coords, work_names, columns = self.model.coordinates, self.model.work_names, self.columns
+
+        def everything(t, zz, pp, offset):
+            q, v, w, x = jm.split(zz)
+            a, lam = jm.kkt(t, q, v, x, pp)
+            cols = {}
+            for i, c in enumerate(coords):
+                for suffix, val in (("angle_rad", q[i] + offset[i]), ("speed_rad_s", v[i]), ("accel_rad_s2", a[i]),
+                                    ("position_m", q[i] + offset[i]), ("speed_m_s", v[i]), ("accel_m_s2", a[i])):
+                    cols[f"{c}_{suffix}"] = val
+            for rname, val in zip(pc.readout_names, pc.readouts(t, q, v, a, lam, x, pp)):
+                cols[rname] = val
+            for i, wname in enumerate(work_names):
+                cols[f"work_{wname}_J"] = w[i]
+            return jnp.stack([jnp.asarray(cols[c] if c in cols else jnp.nan, jnp.float64) for c in columns])
+
+        def sample(t, z, S, p, P, offset):
+            return jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: everything(t, zz, pp, offset), (z, p), (s, dp)),
+                            in_axes=(1, 1), out_axes=(None, 1))(S, P)
+        return jax.jit(sample)
+
+
+_TOOLS: dict = {}
+
+
+def _tools(mech, model, jmod, columns: tuple, n: int) -> tuple[_Tools, float]:
+    """The model's jitted tools and the seconds spent compiling them now (0 when cached)."""
+    key = (id(model), columns, n)
+    hit = _TOOLS.get(key)
+    if hit is None or hit.model is not model:
+        hit = _TOOLS[key] = _Tools(mech, model, jmod, columns, n)
+        return hit, hit.compile_time
+    return hit, 0.0
+
+
+def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sample_times, columns,
+                       t_end: float, dt_out: float, angle0: float, speed0: float, ext=None, ext_initial=None,
+                       t0: float = 0.0, solver: str = "Dopri8") -> PathSensitivity:
+    """Integrate z and S = dz/dtheta along the mode sequence of a finished run.
+
+    events: the run's events-table rows (t_s, from_mode, to_mode, kind, guard), in order; the run must have
+    reached t_end. sample_times: output times at which `columns` (coordinate columns like `wheel_accel_rad_s2`,
+    mode read-outs like `contact_force_N`, work columns `work_<name>_J`) are evaluated with their gradients.
+    Tolerances are the run's (settings.rtol, settings.atol), applied to z and S alike.
+    """
+    wall0, cpu0 = _time.perf_counter(), _time.process_time()
+    if drive.is_prescribed:
+        raise SensitivityUnavailable("prescribed-speed DAE runs are not traced yet (the drive reference is "
+                                     "re-based with the event time at each transition)")
+    start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+    model = start.model
+    jmod = jax_model(model)
+    columns = tuple(columns)
+    n_used = seed.n
+    n = COLUMNS * -(-n_used // COLUMNS)      # padded with zero columns: one compilation serves 1..COLUMNS values
+    tools, tools_s = _tools(mech, model, jmod, columns, n)
+    nq, nz = jmod.nq, jmod.nz
+    P = _padded(seed.dp, n)
+    stats = dict(segments=0, steps=0, compile_time_s=tools_s)
+    solve, compile_s = _segment_solve(jmod, model, n, settings.rtol, settings.atol, solver, settings.max_steps)
+    stats["compile_time_s"] += compile_s
+
+    # the initial state: the projection of the initial guess, differentiated (the guess is re-based by a constant)
+    mode, values, p, offset = start.mode, start.values, np.asarray(start.p), np.asarray(start.offset, float)
+    init = mech.initial_state(angle0, speed0)
+    guess = np.concatenate([np.asarray(init.q, float), np.asarray(init.v, float), np.zeros(nz - 2 * nq)])
+    dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nz - 2 * nq, n))])
+    z = _z(model.modes[mode], start.y)
+    z_init, S, _ = (np.asarray(x) for x in tools.reset[mode](t0, guess, offset, p, dguess, P))
+    _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
+
+    samples_t = np.sort(np.asarray(list(sample_times), float))
+    samples: list[Sample] = []
+    out_events: list[EventSensitivity] = []
+    rows = [e for e in events if e.get("kind") != "rebound absorbed"]
+    t = t0
+    for ts_j in samples_t[samples_t == t0]:
+        vals, grads = (np.asarray(x) for x in tools.sample[mode](t0, z, S, p, P, offset))
+        samples.append(Sample(t0, mode, dict(zip(columns, map(float, vals))), dict(zip(columns, grads[:, :n_used]))))
+    for i in range(len(rows) + 1):
+        t1 = float(rows[i]["t_s"]) if i < len(rows) else t_end
+        k = jmod.index(mode)
+        # integrate to t1, saving at the sample times inside (t, t1], in chunks of N_SAVE
+        inside = samples_t[(samples_t > t) & (samples_t <= t1)] if i < len(rows) else samples_t[samples_t > t]
+        while True:
+            chunk = inside[:N_SAVE]
+            stop = t1 if len(inside) <= N_SAVE else float(chunk[-1])
+            ts = np.full(N_SAVE, stop)
+            ts[:len(chunk)] = chunk
+            out = jax.device_get(solve(np.int32(k), float(t), float(stop), z, S, p, P, ts))
+            stats["segments"] += 1
+            stats["steps"] += int(out["steps"])
+            if int(out["result"]) != int(diffrax.RESULTS.successful._value):
+                raise SensitivityUnavailable(f"the sensitivity integration failed in mode '{mode}' after "
+                                             f"t = {t:.6g} s: {diffrax.RESULTS._index_to_message[int(out['result'])]}")
+            for j, ts_j in enumerate(chunk):
+                vals, grads = (np.asarray(x) for x in tools.sample[mode](float(ts_j), out["z"][j], out["S"][j], p, P,
+                                                                         offset))
+                samples.append(Sample(float(ts_j), mode, dict(zip(columns, map(float, vals))),
+                                      dict(zip(columns, grads[:, :n_used]))))
+            t, z, S = float(stop), np.asarray(out["z1"]), np.asarray(out["S1"])
+            inside = inside[len(chunk):]
+            if stop == t1:
+                break
+        if i == len(rows):
+            break
+        row = rows[i]
+        mf = model.modes[mode]
+        if row["from_mode"] != mode:
+            raise SensitivityUnavailable(f"events table out of step: row at t = {t1:.6g} s leaves "
+                                         f"'{row['from_mode']}', the path is in '{mode}'")
+        j = list(mf.guard_names).index(row["guard"])
+        t, z, dtau, dz, gdot, a_end, lam_end = (np.asarray(x) for x in tools.event(np.int32(k), np.int32(j), float(t),
+                                                                                   z, S, p, P))
+        t = float(t)
+        if not (np.isfinite(gdot) and abs(gdot) > 0):
+            raise SensitivityUnavailable(f"guard '{row['guard']}' reaches zero tangentially at t = {t:.6g} s "
+                                         "(grazing): the event time is not differentiable there")
+        ix = mf.index
+        y_end = np.zeros(mf.ny)
+        y_end[ix["q"]], y_end[ix["v"]], y_end[ix["work"]], y_end[ix["ext"]] = (
+            z[:nq], z[nq:2 * nq], z[2 * nq:2 * nq + len(model.work_names)], z[2 * nq + len(model.work_names):])
+        y_end[ix["lam"]] = lam_end[:mf.m]
+        res = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, [j], offset)
+        if res.failure or res.y is None:
+            raise SensitivityUnavailable(f"the transition at t = {t:.6g} s does not restart here "
+                                         f"({(res.failure or {}).get('reason', 'no state')})")
+        changed = [key for key in res.values if res.values[key] != values.get(key)]
+        traced = [key for key in changed if key not in seed.discrete]
+        if traced:
+            raise SensitivityUnavailable(f"the transition '{row['kind']}' at t = {t:.6g} s recomputes "
+                                         f"{', '.join(traced)}, whose derivative is not traced")
+        out_events.append(EventSensitivity(t, row["kind"], row["guard"], mode, res.mode, dtau[:n_used], z.copy(),
+                                           dz[:, :n_used]))
+        shift = np.asarray(res.offset, float) - offset
+        new_mode, p_new = res.mode, np.asarray(res.p)
+        z_new, dz_new, f_new = (np.asarray(x) for x in tools.reset[new_mode](t, z, shift, p_new, dz, P))
+        z_ref = _z(model.modes[new_mode], res.y)
+        _check_restart(z_new, z_ref, f"the restart after '{row['kind']}' at t = {t:.6g} s")
+        S = dz_new - np.outer(f_new, dtau)
+        z = z_ref
+        mode, values, p, offset = new_mode, res.values, p_new, np.asarray(res.offset, float)
+    stats["wall_time_s"] = _time.perf_counter() - wall0
+    stats["cpu_time_s"] = _time.process_time() - cpu0
+    return PathSensitivity(out_events, samples, stats)
+
+
+def _check_restart(mine: np.ndarray, ref: np.ndarray, what: str) -> None:
+    """The jax reset must give the project's restart state (to far below any tolerance of a run)."""
+    scale = max(1.0, float(np.max(np.abs(ref))))
+    if not np.max(np.abs(mine - ref)) <= 1e-8 * scale:
+        raise SensitivityUnavailable(f"{what}: the differentiated reset does not reproduce the project's "
+                                     f"re-initialisation (difference {np.max(np.abs(mine - ref)):.2e})")
+
+
+def _event_fn(jmod):
+    """Event time refined by one Newton step on the guard, its derivative by the implicit-function rule
+    (Hiskens & Pai 2000, eq. (14)), and the state's total derivative at the moving event, S + f dtau (jitted;
+    mode k and guard j are traced)."""
+    def event(k, j, t, z, S, p, P):
+        def g(tt, zz, pp):
+            return jmod.guards(k, tt, zz, pp)[j]
+        f = jmod.rates(k, t, z, p)
+        g0, gdot = jax.jvp(lambda tt, zz: g(tt, zz, p), (t, z), (jnp.ones_like(t), f))
+        delta = jnp.where(jnp.abs(g0) < 1e-6 * jnp.abs(gdot) * jnp.maximum(1.0, jnp.abs(t)), -g0 / gdot, 0.0)
+        t = t + delta
+        z = z + f * delta
+        f = jmod.rates(k, t, z, p)
+        gdot = jax.jvp(lambda tt, zz: g(tt, zz, p), (t, z), (jnp.ones_like(t), f))[1]
+        dg = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: g(t, zz, pp), (z, p), (s, dp))[1], in_axes=(1, 1))(S, P)
+        dtau = -dg / gdot
+        _, a, lam, _ = jmod.evaluate(k, t, z, p)
+        return t, z, dtau, S + jnp.outer(f, dtau), gdot, a, lam
+    return jax.jit(event)

@@ -1,0 +1,353 @@
+"""Design sensitivities of a run's headline results (`mechsim sensitivity`, `mechsim.sensitivity`).
+
+The derivatives come from `dynamics/sensitivity.py` (forward sensitivities through the events, Hiskens & Pai
+2000); this module maps scenario values to the model's parameters (exactly: jax differentiates the same formulas
+the mechanism evaluates, and the map is checked against the mechanism at the scenario's values), defines the
+headline quantities on the run, and builds the table, the tornado chart and the summary entry (docs/sensitivity.md).
+
+Quantities (the run's reported numbers, so that a finite difference of `mechsim run` checks them):
+- peaks: the largest |value| over the output rows, as summary.json's `peaks` (signed value). The output times are
+  fixed, so its derivative is the row's derivative at the arg-max row (the envelope rule of a maximum over a fixed
+  set); a second peak within PEAK_MARGIN relative is reported with the change of the design value that swaps them.
+- index_time_s: the last complete engagement (entry to exit); cycle_time_s: between the last two entries (one
+  drive revolution); energy_per_cycle_J: the drive's work over that cycle. Event times are differentiated by the
+  implicit-function rule, the work at an event as W(tau) with the state's total derivative.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from mechsim.scenarios.units import ScenarioError
+
+#: a second peak within this relative distance of the first is reported (the maximum may switch between them)
+PEAK_MARGIN = 1e-2
+
+PEAKS = {
+    "peak_contact_force_N": "contact_force_N",
+    "peak_drive_torque_N_m": "drive_torque_N_m",
+    "peak_wheel_accel_rad_s2": "wheel_accel_rad_s2",
+    "peak_wheel_speed_rad_s": "wheel_speed_rad_s",
+}
+CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
+QUANTITIES = tuple(PEAKS) + CYCLE
+#: quantities of issue 16 that exist in mechsim but are not differentiated yet, and why
+NOT_TRACED = {
+    "peak_temp_contact_C": "the thermal models' read-outs are evaluated after the run (thermal/), not traced yet",
+    "peak_temp_flash_rise_K": "the flash temperature is evaluated after the run (thermal/flash.py), not traced yet",
+    "heat_per_index_J": "the thermal read-outs are not traced yet",
+}
+
+
+@dataclass(frozen=True)
+class ParameterMap:
+    """How the scenario values of one mechanism type enter the model.
+
+    keys: the supported scenario keys (SI). parameters(x, si): the model parameters they set, as jax-traceable
+    formulas of the dict x (key -> value); each is checked against the mechanism's own `parameter_values()`.
+    speed_key: the initial-speed key (the initial velocities are linear in it). discrete: parameters that
+    transitions may change, whose values follow from integers and signs only.
+    """
+
+    keys: tuple[str, ...]
+    parameters: Callable
+    speed_key: str
+    discrete: frozenset
+    engage: str
+    release: str
+
+
+def _geneva_parameters(x: dict, si: dict) -> dict:
+    """Geneva: c = r / sin(pi/n) (tangential entry, docs/theory.md §G1); the others enter as they are."""
+    import jax.numpy as jnp
+    n = si["mechanism"]["slots"]
+    r = x["mechanism.crank_radius"]
+    return {"r": r, "c": r / jnp.sin(jnp.pi / n), "R": x["mechanism.pin_radius"],
+            "J1": x["mechanism.crank_inertia"], "J2": x["mechanism.wheel_inertia"], "T_L": x["load.wheel_torque"],
+            "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
+
+
+MAPS = {
+    "geneva": ParameterMap(
+        keys=("mechanism.crank_radius", "mechanism.pin_radius", "mechanism.thickness", "mechanism.crank_inertia",
+              "mechanism.wheel_inertia", "mechanism.crank_damping", "mechanism.wheel_damping", "load.wheel_torque",
+              "contact.friction"),
+        parameters=_geneva_parameters, speed_key="initial.crank_speed",
+        discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit"),
+}
+DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed")}
+
+
+def _drive_parameters(x: dict, kind: str) -> dict:
+    """The drive's T = T0 - slope w (dynamics/drives.py): motor T0 = stall torque, slope = stall / no-load speed."""
+    if kind == "motor":
+        return {"drive_T0": x["drive.stall_torque"], "drive_slope": x["drive.stall_torque"] / x["drive.no_load_speed"]}
+    return {"drive_T0": x["drive.torque"]}
+
+
+def _lookup(si: dict, key: str):
+    node = si
+    for part in key.split("."):
+        node = node[part]
+    return node
+
+
+def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
+    """(Seed with columns scaled by each value, scales): columns are d/d(ln theta) (theta for theta = 0), so that
+    every sensitivity has the state's own units and one error control serves them all."""
+    import jax
+    from mechsim.dynamics.sensitivity import Seed
+    si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
+    drive_keys = DRIVE_KEYS.get(drive.kind, ())
+    keys = list(pmap.keys) + list(drive_keys)
+    x0 = {k: float(_lookup(si, k) or 0.0) for k in keys}
+
+    def params(xs):
+        x = dict(zip(keys, xs))
+        return {**pmap.parameters(x, si), **_drive_parameters(x, drive.kind)}
+    values = {**mech.parameter_values(), **drive.parameter_values(0.0)}
+    mapped = params([x0[k] for k in keys])
+    for name, v in mapped.items():
+        if not np.isclose(float(v), values[name], rtol=1e-13, atol=0.0):
+            raise RuntimeError(f"sensitivity map of '{name}' gives {float(v)!r}, the mechanism {values[name]!r}")
+    names = list(model.parameter_names)
+    jac = jax.jacfwd(lambda xs: [mapped_v for mapped_v in params(xs).values()])(np.array([x0[k] for k in keys]))
+    scales = np.array([abs(float(_lookup(si, k) or 0.0)) or 1.0 for k in wrt])
+    n = len(wrt)
+    nq = len(model.coordinates)
+    dp = np.zeros((len(names), n))
+    dq0, dv0 = np.zeros((nq, n)), np.zeros((nq, n))
+    for j, key in enumerate(wrt):
+        if key == pmap.speed_key:
+            angle_key = mech.initial_keys[0]
+            dv0[:, j] = np.asarray(mech.initial_state(si["initial"][angle_key], 1.0).v, float) * scales[j]
+            continue
+        col = keys.index(key)
+        for name, row in zip(mapped, jac):
+            dp[names.index(name), j] = float(np.asarray(row)[col]) * scales[j]
+    return Seed(dp, dq0, dv0, pmap.discrete), scales
+
+
+def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
+    si = plan.scenario.si
+    mtype = si["mechanism"]["type"]
+    pmap = MAPS.get(mtype)
+    if pmap is None:
+        raise ScenarioError("mechanism.type", f"sensitivities are traced for the Geneva drive only so far, not for "
+                            f"'{mtype}' (docs/sensitivity.md, 'Not covered yet')")
+    if plan.method != "dae":
+        raise ScenarioError("drive.type", "sensitivities follow the DAE path; at prescribed speed the run uses the "
+                            "closed form, which is not differentiated yet (use a torque or motor drive)")
+    if plan.thermal is not None:
+        raise ScenarioError("thermal.model", "sensitivities with a thermal model are not traced yet: set "
+                            "thermal.model = 'none' (docs/sensitivity.md, 'Not covered yet')")
+    allowed = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ())) + [pmap.speed_key]
+    if not wrt:
+        raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
+    for key in wrt:
+        if key not in allowed:
+            raise ScenarioError(key, f"not a value sensitivities are traced for here; traced: {', '.join(allowed)}")
+    if len(set(wrt)) != len(wrt):
+        raise ScenarioError("--wrt", "a key is named twice")
+    for q in of:
+        if q in NOT_TRACED:
+            raise ScenarioError("--of", f"{q}: {NOT_TRACED[q]}")
+        if q not in QUANTITIES:
+            raise ScenarioError("--of", f"unknown quantity {q!r}; one of {', '.join(QUANTITIES)}")
+    return pmap
+
+
+def _peak_rows(df: pd.DataFrame, column: str) -> list[int]:
+    """Row of the largest |value|, then the rows that could take its place: the rows next to it (the output step
+    samples the peak) and other local maxima of |value| (a repeating motion repeats its peaks) within PEAK_MARGIN."""
+    y = np.abs(df[column].to_numpy(float))
+    i = int(np.nanargmax(y))
+    rows = [i]
+    if np.nanmax(y) - np.nanmin(y) <= 1e-12 * y[i]:
+        return rows                       # a constant column (a constant drive torque): every row is the peak
+    inner = np.zeros(len(y), bool)
+    inner[1:-1] = (y[1:-1] > y[:-2]) & (y[1:-1] >= y[2:])       # the first row of a plateau counts once
+    inner[[j for j in (i - 1, i + 1) if 0 <= j < len(y)]] = True
+    inner[i] = False
+    rows += [int(j) for j in np.flatnonzero(inner) if y[j] >= (1 - PEAK_MARGIN) * y[i]]
+    return rows
+
+
+def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int], by_time: dict, column: str,
+                change: float) -> str | None:
+    """A warning where another candidate row (`_peak_rows`) becomes the maximum within the stated change of a value
+    (relative, or absolute for a value at zero): there the maximum's derivative jumps (a non-smooth point), so
+    the first-order change is not to be trusted that far. Gradients are per relative change (per unit for a value
+    at zero), see `_seed`."""
+    first = by_time[float(df["t_s"].iloc[rows[0]])]
+    y, g = first.values[column], first.grads[column]
+    nearest = {}
+    for j in rows[1:]:
+        other = by_time[float(df["t_s"].iloc[j])]
+        y2, g2 = other.values[column], other.grads[column]
+        gap = abs(y) - abs(y2)
+        rate = np.sign(y2) * g2 - np.sign(y) * g     # d(|y2| - |y|) per relative change of each value
+        for key, r in zip(wrt, rate):
+            if r != 0 and gap / abs(r) < nearest.get(key, (np.inf, 0, 0.0))[0]:
+                nearest[key] = (gap / abs(r), np.sign(r), other.t)
+    rel = dict(zip(wrt, relative))
+    swap = [f"{key} {'+' if s > 0 else '-'}" + (f"{d * 100:.2g}%" if rel[key] else f"{d:.2g} (absolute)")
+            + f" (to t = {t2:.6g} s)" for key, (d, s, t2) in nearest.items() if d < change]
+    if not swap:
+        return None
+    return (f"{q}: the peak at t = {first.t:.6g} s is the largest of {len(rows)} nearly equal output rows (the rows "
+            "next to it, or the same peak of another cycle); another one takes over, and the derivative jumps, "
+            "within the stated change: " + ", ".join(swap))
+
+
+def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: float = 0.01) -> pd.DataFrame:
+    """The table of derivatives of the headline quantities `of` (default: all) with respect to the scenario values
+    `wrt` (a loaded Scenario). One row per (quantity, value): value, derivative (SI), elasticity (p/y) dy/dp,
+    and the first-order change of y for a change of p by `change` (relative). attrs: cost, warnings, scenario."""
+    from mechsim.dynamics.hybrid import prepare
+    from mechsim.dynamics.sensitivity import path_sensitivities
+    from mechsim.scenarios import runner
+    from mechsim.scenarios.sweep.rows import field_unit
+    if not 0 < change < 1:
+        raise ScenarioError("--change", f"must be a relative change in (0, 1), got {change}")
+    plan = runner.plan(scenario)
+    of = list(of) if of else list(QUANTITIES)
+    wrt = list(wrt)
+    pmap = _check_request(plan, wrt, of)
+    si, mech, drive, settings = scenario.si, plan.mechanism, plan.drive, plan.settings
+    wall = time.perf_counter()
+    result = runner.execute(plan)
+    run_wall = time.perf_counter() - wall
+    if result.failure is not None:
+        raise ScenarioError("scenario", f"the run failed ({result.failure.message()}): no derivatives of a run that "
+                            "did not reach its end")
+    df, events = result.timeseries, result.events
+    warnings: list[str] = []
+    angle_key, speed_key = mech.initial_keys
+    angle0, speed0 = si["initial"][angle_key], si["initial"][speed_key]
+    model = prepare(mech, drive, settings, si["duration"], si["output_step"], angle0, speed0).model
+    seed, scales = _seed(plan, model, wrt, pmap)
+
+    peak_rows = {q: _peak_rows(df, PEAKS[q]) for q in of if q in PEAKS and PEAKS[q] in df}
+    sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows})
+    columns = sorted({PEAKS[q] for q in peak_rows} | {"work_drive_J"})
+    wall = time.perf_counter()
+    path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, columns,
+                              si["duration"], si["output_step"], angle0, speed0)
+    sens_wall = time.perf_counter() - wall
+    by_time = {s.t: s for s in path.samples}
+
+    results: dict[str, tuple[float, np.ndarray]] = {}
+    for q in of:
+        if q in PEAKS:
+            if q not in peak_rows:
+                warnings.append(f"{q}: this run has no column {PEAKS[q]}")
+                continue
+            rows = peak_rows[q]
+            first = by_time[float(df["t_s"].iloc[rows[0]])]
+            y, g = first.values[PEAKS[q]], first.grads[PEAKS[q]]
+            results[q] = (y, g)
+            if len(rows) > 1:
+                relative = [float(_lookup(si, key) or 0.0) != 0.0 for key in wrt]
+                note = _near_peaks(q, wrt, relative, df, rows, by_time, PEAKS[q], change)
+                if note:
+                    warnings.append(note)
+        else:
+            got = _cycle_quantity(q, path.events, pmap, model)
+            if got is None:
+                warnings.append(f"{q}: the run has no complete {'engagement' if q == 'index_time_s' else 'cycle'} "
+                                f"({pmap.engage} to {pmap.release if q == 'index_time_s' else pmap.engage}); "
+                                "lengthen duration")
+                continue
+            results[q] = got
+    rows = []
+    for q, (y, g) in results.items():
+        for j, key in enumerate(wrt):
+            p = float(_lookup(si, key) or 0.0)
+            deriv = float(g[j]) / scales[j]
+            unit = field_unit(si, key)
+            elasticity = p / y * deriv if y != 0 else float("nan")
+            dp = change * abs(p) if p != 0 else float("nan")
+            rows.append(dict(quantity=q, value=y, wrt=key, wrt_unit=unit, parameter=p, derivative=deriv,
+                             elasticity=elasticity, parameter_change=dp, quantity_change=deriv * dp))
+    table = pd.DataFrame(rows, columns=["quantity", "value", "wrt", "wrt_unit", "parameter", "derivative",
+                                        "elasticity", "parameter_change", "quantity_change"])
+    table.attrs.update(
+        scenario=scenario.name, change=change, warnings=warnings,
+        cost={"run_wall_time_s": run_wall, "run_backend": settings.backend,
+              "sensitivity_wall_time_s": sens_wall, "sensitivity_compile_time_s": path.stats["compile_time_s"],
+              "sensitivity_steps": path.stats["steps"], "values": len(wrt)})
+    return table
+
+
+def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
+    """(value, gradient per scaled value) of an event-based quantity, or None where the run has no such cycle."""
+    entries = [e for e in events if e.kind == pmap.engage]
+    if q == "index_time_s":
+        pairs = []
+        for i in range(len(events) - 1, -1, -1):
+            if events[i].kind == pmap.release:
+                start = [e for e in events[:i] if e.kind == pmap.engage]
+                if start:
+                    pairs = [(start[-1], events[i])]
+                break
+        if not pairs:
+            return None
+        a, b = pairs[0]
+        return b.t - a.t, b.dt - a.dt
+    if len(entries) < 2:
+        return None
+    a, b = entries[-2], entries[-1]
+    if q == "cycle_time_s":
+        return b.t - a.t, b.dt - a.dt
+    # the drive's work at each event (a work state: z = [q, v, work, ext]); dz holds S + f dtau
+    k = 2 * len(model.coordinates) + list(model.work_names).index("drive")
+    return float(b.z[k] - a.z[k]), b.dz[k] - a.dz[k]
+
+
+def tornado_figure(table: pd.DataFrame):
+    """One panel per quantity: horizontal bars of the elasticities (p/y) dy/dp, largest on top."""
+    from matplotlib.figure import Figure
+    quantities = list(dict.fromkeys(table["quantity"]))
+    fig = Figure(figsize=(8, 1.2 + 0.45 * len(table)), constrained_layout=True)
+    heights = [max(1, (table["quantity"] == q).sum()) + 1 for q in quantities]
+    axes = fig.subplots(len(quantities), 1, gridspec_kw={"height_ratios": heights}, squeeze=False)[:, 0]
+    for ax, q in zip(axes, quantities):
+        part = table[table["quantity"] == q].copy()
+        part = part.iloc[np.argsort(np.abs(part["elasticity"].fillna(0).to_numpy()))]
+        e = part["elasticity"].to_numpy(float)
+        bars = ax.barh(part["wrt"], e, color=["C3" if v > 0 else "C0" for v in e])
+        ax.bar_label(bars, labels=[f"{v:.3g}" for v in e], fontsize=7, padding=2)
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.set_title(f"{q} = {part['value'].iloc[0]:.6g}", fontsize=9, loc="left")
+        ax.tick_params(labelsize=8)
+        lim = max(1e-12, float(np.nanmax(np.abs(e)))) * 1.15
+        ax.set_xlim(-lim, lim)
+    axes[-1].set_xlabel("elasticity (p/y) dy/dp: % change of the quantity per % change of the value "
+                        "(red: raises it, blue: lowers it)")
+    fig.suptitle(f"{table.attrs.get('scenario', '')}: design sensitivities", fontsize=10)
+    return fig
+
+
+def write_sensitivity(table: pd.DataFrame, folder, force: bool = False):
+    """sensitivity.csv, tornado.png and summary.json (entry `sensitivity`) into `folder`, atomically."""
+    import json
+    from pathlib import Path
+
+    from mechsim.scenarios.output.atomic import atomic_folder, json_default
+    from mechsim.scenarios.output.csv import write_csv
+    folder = Path(folder)
+    with atomic_folder(folder, force) as tmp:
+        write_csv(table, tmp / "sensitivity.csv")
+        fig = tornado_figure(table)
+        fig.savefig(tmp / "tornado.png", dpi=110)
+        summary = {"scenario": table.attrs.get("scenario"), "sensitivity": {
+            "rows": table.to_dict("records"), "change_relative": table.attrs.get("change"),
+            "cost": table.attrs.get("cost"), "warnings": table.attrs.get("warnings", []),
+            "method": "forward sensitivities through the events (docs/sensitivity.md)"}}
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
+    return folder

@@ -1,0 +1,168 @@
+"""Design sensitivities (scenarios/sensitivity.py on dynamics/sensitivity.py) against central finite differences of
+the IDA path at a tight tolerance, Richardson-extrapolated (docs/sensitivity.md, 'How it is checked').
+
+The finite differences re-run the scenario (IDA, index-2, rtol 1e-12; the sensitivities run at 1e-10) with one value moved by +-h and +-h/2
+(relative) and read each quantity the way the sensitivity defines it: a peak at the nominal arg-max row (the
+output times are fixed), event times from the events table, the drive's work at an event by cubic Hermite
+interpolation of the output rows before it (work' = drive torque x crank speed). Step: the IDA solution moves
+by about rtol relative in a way that is not smooth in the values (adaptive steps), so a central difference has
+noise ~ rtol/h (2e-9 at h = 5e-4), and Richardson-extrapolated, truncation ~ h^4 times the fourth derivative. That
+one is large for geneva-torque's peak contact force (just after an entry, two flank switches later in the same
+engagement): the plain central difference in the drive torque is off by 6e-3 at h = 1e-3 and by 6e-5 at 1e-4
+(measured), so h = 5e-4 with h/2. The derivatives must agree to 1e-4 relative, each entry on its own (see
+ELASTICITY_FLOOR for the ones that are zero).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.scenarios.sensitivity import PEAKS, sensitivity
+
+BASE = ["duration=1.45 s", "solver.rtol=1e-10", "solver.atol=1e-12"]
+#: the finite differences run tighter than the sensitivities, so that they are the more accurate side
+FD_RTOL = 1e-12
+FD = ["duration=1.45 s", f"solver.rtol={FD_RTOL}", f"solver.atol={FD_RTOL / 100}"]
+WRT = ["load.wheel_torque", "contact.friction", "mechanism.crank_radius", "mechanism.wheel_inertia"]
+H = 5e-4
+#: a derivative that is zero (the energy of a constant-torque cycle, 2 pi T, does not depend on an inertia) is
+#: compared absolutely: both sides are then integration noise, elasticities ~1e-8 here (the derivative is assembled
+#: from S at rtol 1e-10 over ~1e3 steps and several events); 1e-6 is far below anything a design reads
+ELASTICITY_FLOOR = 1e-6
+
+
+def _run(name, sets):
+    r = mechsim.run(mechsim.load(name, set=sets))
+    assert r.failure is None, r.failure.message()
+    return r
+
+
+def _work_at(df, t_event):
+    """The drive's work at t_event: cubic Hermite on the two output rows before it (work' = torque x speed)."""
+    t = df["t_s"].to_numpy(float)
+    w = df["work_drive_J"].to_numpy(float)
+    pw = (df["drive_torque_N_m"] * df["crank_speed_rad_s"]).to_numpy(float)
+    i = int(np.searchsorted(t, t_event)) - 1          # the last row before the event
+    t0, t1, h = t[i - 1], t[i], t[i] - t[i - 1]
+    s = (t_event - t0) / h
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * w[i - 1] + h10 * h * pw[i - 1] + h01 * w[i] + h11 * h * pw[i]
+
+
+def quantities(result, rows: dict) -> dict:
+    """The table's quantities read off an IDA result (peaks at the given rows)."""
+    df, ev = result.timeseries, result.events
+    out = {q: float(df[PEAKS[q]].iloc[i]) for q, i in rows.items()}
+    entries = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)
+    exits = ev.loc[ev["kind"] == "exit", "t_s"].to_numpy(float)
+    last_exit = exits[-1]
+    out["index_time_s"] = last_exit - entries[entries < last_exit][-1]
+    out["cycle_time_s"] = entries[-1] - entries[-2]
+    out["energy_per_cycle_J"] = _work_at(df, entries[-1]) - _work_at(df, entries[-2])
+    return out
+
+
+def _literal(si_value, unit):
+    return f"{si_value!r} {unit}" if unit else repr(si_value)
+
+
+CASES = {
+    # motor drive from its running speed: two entries, friction 0.15 with slip reversals
+    "geneva-motor": (["duration=1.45 s"], WRT),
+    # constant torque, frictionless, viscous crank damping: running up, four entries in 0.75 s
+    "geneva-torque": (["duration=0.75 s"], ["drive.torque", "mechanism.crank_inertia", "mechanism.crank_damping",
+                                            "initial.crank_speed"]),
+}
+
+
+@pytest.fixture(scope="module")
+def tables():
+    return {name: sensitivity(mechsim.load(name, set=sets + BASE[1:]), wrt) for name, (sets, wrt) in CASES.items()}
+
+
+@pytest.fixture(scope="module")
+def motor_table(tables):
+    return tables["geneva-motor"], None
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_geneva_matches_finite_differences(tables, name):
+    sets, wrt = CASES[name]
+    table = tables[name]
+    fd_sets = sets + FD[1:]
+    nominal = _run(name, fd_sets)
+    df = nominal.timeseries
+    rows = {q: int(np.nanargmax(np.abs(df[c].to_numpy(float)))) for q, c in PEAKS.items()}
+    ref0 = quantities(nominal, rows)
+    worst = {}
+    for key in wrt:
+        part = table[table["wrt"] == key].set_index("quantity")
+        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
+        diffs = {}
+        for step in (H, H / 2):
+            plus = quantities(_run(name, fd_sets + [f"{key}={_literal(p * (1 + step), unit)}"]), rows)
+            minus = quantities(_run(name, fd_sets + [f"{key}={_literal(p * (1 - step), unit)}"]), rows)
+            diffs[step] = {q: (plus[q] - minus[q]) / (2 * p * step) for q in plus}
+        for q in ref0:
+            fd = (4 * diffs[H / 2][q] - diffs[H][q]) / 3
+            assert part.loc[q, "value"] == pytest.approx(ref0[q], rel=1e-7)
+            d = part.loc[q, "derivative"]
+            # elasticities (p/y) dy/dp: 1e-4 of the finite difference's, or ELASTICITY_FLOOR where that is smaller
+            e, e_fd = p / ref0[q] * d, p / ref0[q] * fd
+            assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + ELASTICITY_FLOOR, (q, key, d, fd)
+            if abs(e_fd) > 100 * ELASTICITY_FLOOR:
+                worst[q] = max(worst.get(q, 0.0), abs(d - fd) / abs(fd))
+    print(name, "largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
+
+
+def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
+    import json
+
+    import pandas as pd
+    from cli_helpers import invoke
+    out = tmp_path / "s"
+    r = invoke("sensitivity", "geneva-motor", "--wrt", ",".join(WRT), *sum((["--set", s] for s in BASE), []),
+               "--out", out)
+    assert r.exit_code == 0, r.output
+    assert "peak_contact_force_N" in r.stdout and "elasticity" in r.stdout
+    written = pd.read_csv(out / "sensitivity.csv")
+    table, _ = motor_table
+    assert list(written["quantity"]) == list(table["quantity"])
+    assert written["derivative"].to_numpy() == pytest.approx(table["derivative"].to_numpy(), rel=1e-12)
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["sensitivity"]["rows"]) == len(table)
+    assert summary["sensitivity"]["cost"]["sensitivity_wall_time_s"] > 0
+    assert (out / "tornado.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--wrt", "mechanism.slots"], "mechanism.slots"),                      # an integer: no derivative
+    (["--wrt", "load.wheel_torque", "--of", "peak_temp_contact_C"], "--of"),   # not traced yet
+    (["--wrt", "load.wheel_torque", "--of", "no_such_quantity"], "--of"),
+    (["--wrt", "load.wheel_torque", "--set", "drive.type=speed", "--set", "drive.speed=5 rad/s"], "drive.type"),
+])
+def test_cli_refuses_what_is_not_traced_in_one_line(tmp_path, args, field):
+    from cli_helpers import invoke, one_line_error
+    out = tmp_path / "s"
+    r = invoke("sensitivity", "geneva-motor", *args, "--out", out)
+    assert r.exit_code == 2, r.output
+    assert one_line_error(r).startswith(f"error: {field}:")
+    assert not out.exists()
+
+
+def test_chain_is_refused_not_guessed():
+    with pytest.raises(mechsim.ScenarioError, match="mechanism.type"):
+        mechsim.sensitivity("chain-mech1-torque", wrt="load.crank_torque")
+
+
+def test_constant_torque_cycle_energy_is_exact(tables):
+    """Over one drive revolution a constant torque T does the work 2 pi T whatever else changes: the derivative is
+    exactly 2 pi in T and zero in every other value (docs/sensitivity.md, 'How it is checked'). The sensitivities,
+    integrated at rtol 1e-10, accumulate ~1e-7 relative over the run's four cycles (measured 7e-8): 1e-6."""
+    table = tables["geneva-torque"].set_index(["quantity", "wrt"])
+    energy = table.xs("energy_per_cycle_J")
+    assert energy["value"].iloc[0] == pytest.approx(2 * np.pi * 6.0, rel=1e-9)
+    assert energy.loc["drive.torque", "derivative"] == pytest.approx(2 * np.pi, rel=1e-6)
+    others = energy.drop(index="drive.torque")
+    assert np.all(np.abs(others["elasticity"]) <= 1e-7), others["elasticity"]
