@@ -10,9 +10,11 @@ the size of p). At an event where guard g reaches zero at time tau the implicit-
 event time's derivative and the reset map R (re-initialisation in the new mode) the jump
 
     dtau/dtheta = -(g_z S- + g_p P) / (g_t + g_z f-),
-    S+ = R_z (S- + f- dtau/dtheta) + R_p P - f+ dtau/dtheta
+    S+ = R_z (S- + f- dtau/dtheta) + R_t dtau/dtheta + R_p P - f+ dtau/dtheta
 
-(Hiskens & Pai 2000, "Trajectory sensitivity analysis of hybrid systems", IEEE TCAS-I 47(2), eqs. (14)-(17)).
+(Hiskens & Pai 2000, "Trajectory sensitivity analysis of hybrid systems", IEEE TCAS-I 47(2), eqs. (14)-(17); R_t
+is there because a prescribed drive's constraint depends on t, and P is the parameters' derivative after the
+event, which moves with the event time where a transition re-bases a prescribed drive's reference).
 R is the project's consistent re-initialisation (dynamics/consistent.py): positions projected onto Phi = 0 with
 minimum-norm corrections, velocities projected in the kinetic-energy metric (the plastic impact law; an impact
 with restitution whose rebound the new mode absorbs ends at the same velocities), work and thermal states kept.
@@ -21,9 +23,9 @@ the one `apply_transition` computes, so the two cannot drift apart unnoticed.
 
 The mode sequence, event times and discrete updates come from a finished run (its events table) and from the
 project's own transition logic (`apply_transition`); this module adds the derivatives. Not covered (raises
-`SensitivityUnavailable`): runs that failed or stopped, prescribed-speed DAE runs (their drive reference is
-re-based with the event time), and transitions that change a parameter not declared discrete (a continuous
-value recomputed at the event would need its own derivative).
+`SensitivityUnavailable`): runs that failed or stopped, and transitions that change a parameter not declared
+discrete (a continuous value recomputed at the event would need its own derivative) other than a prescribed
+drive's reference, which is re-based with the event time and differentiated here (`_rebased_drive`).
 """
 from __future__ import annotations
 
@@ -216,23 +218,24 @@ class _Tools:
         z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
         # compiled ahead of time (the examples fix the shapes), so the compilation is counted apart from the solve
         self.event = _event_fn(jmod).lower(i32, i32, f, z, S, p, P).compile()
-        self.reset = {name: self._reset_fn(name, pc).lower(f, z, np.zeros(nq), p, S, P).compile()
+        self.reset = {name: self._reset_fn(name, pc).lower(f, z, np.zeros(nq), p, S, P, np.zeros(n)).compile()
                       for name, pc in self.pieces.items()}
         self.sample = {name: self._sample_fn(name, pc).lower(f, z, S, p, P, np.zeros(nq)).compile()
                        for name, pc in self.pieces.items()}
         self.compile_time = _time.perf_counter() - wall
 
     def _reset_fn(self, name, pc):
-        """(z+, dz+ = R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name`."""
+        """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name` at time t."""
         nq = self.jmod.nq
         jm = self.jmod.modes[self.jmod.index(name)]
 
-        def reset(t, z, shift, p, dz, P):
-            def r(zz, pp):
-                qq, vv = pc.project(t, zz[:nq] - shift, zz[nq:2 * nq], pp)
+        def reset(t, z, shift, p, dz, P, dt):
+            # R depends on t through rheonomic constraints (a prescribed drive): R_t dtau is part of the jump
+            def r(tt, zz, pp):
+                qq, vv = pc.project(tt, zz[:nq] - shift, zz[nq:2 * nq], pp)
                 return jnp.concatenate([qq, vv, zz[2 * nq:]])
-            z_new, dz_new = jax.vmap(lambda a, b: jax.jvp(r, (z, p), (a, b)), in_axes=(1, 1),
-                                     out_axes=(None, 1))(dz, P)
+            z_new, dz_new = jax.vmap(lambda c, a, b: jax.jvp(r, (t, z, p), (c, a, b)), in_axes=(0, 1, 1),
+                                     out_axes=(None, 1))(dt, dz, P)
             return z_new, dz_new, jm.rates(t, z_new, p)
         return jax.jit(reset)
 
@@ -284,9 +287,6 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     Tolerances are the run's (settings.rtol, settings.atol), applied to z and S alike.
     """
     wall0, cpu0 = _time.perf_counter(), _time.process_time()
-    if drive.is_prescribed:
-        raise SensitivityUnavailable("prescribed-speed DAE runs are not traced yet (the drive reference is "
-                                     "re-based with the event time at each transition)")
     start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
     model = start.model
     jmod = jax_model(model)
@@ -306,7 +306,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     guess = np.concatenate([np.asarray(init.q, float), np.asarray(init.v, float), np.zeros(nz - 2 * nq)])
     dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nz - 2 * nq, n))])
     z = _z(model.modes[mode], start.y)
-    z_init, S, _ = (np.asarray(x) for x in tools.reset[mode](t0, guess, offset, p, dguess, P))
+    z_init, S, _ = (np.asarray(x) for x in tools.reset[mode](t0, guess, offset, p, dguess, P, np.zeros(n)))
     _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
 
     samples_t = np.sort(np.asarray(list(sample_times), float))
@@ -366,7 +366,11 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             raise SensitivityUnavailable(f"the transition at t = {t:.6g} s does not restart here "
                                          f"({(res.failure or {}).get('reason', 'no state')})")
         changed = [key for key in res.values if res.values[key] != values.get(key)]
-        traced = [key for key in changed if key not in seed.discrete]
+        names = list(model.parameter_names)
+        if model.prescribed and "drive_time0" in changed:
+            P = _rebased_drive(P, names, values, t, dtau)
+        traced = [key for key in changed if key not in seed.discrete and not (
+            model.prescribed and key in ("drive_angle0", "drive_time0"))]
         if traced:
             raise SensitivityUnavailable(f"the transition '{row['kind']}' at t = {t:.6g} s recomputes "
                                          f"{', '.join(traced)}, whose derivative is not traced")
@@ -374,7 +378,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
                                            dz[:, :n_used]))
         shift = np.asarray(res.offset, float) - offset
         new_mode, p_new = res.mode, np.asarray(res.p)
-        z_new, dz_new, f_new = (np.asarray(x) for x in tools.reset[new_mode](t, z, shift, p_new, dz, P))
+        z_new, dz_new, f_new = (np.asarray(x) for x in tools.reset[new_mode](t, z, shift, p_new, dz, P, dtau))
         z_ref = _z(model.modes[new_mode], res.y)
         _check_restart(z_new, z_ref, f"the restart after '{row['kind']}' at t = {t:.6g} s")
         S = dz_new - np.outer(f_new, dtau)
@@ -383,6 +387,20 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     stats["wall_time_s"] = _time.perf_counter() - wall0
     stats["cpu_time_s"] = _time.process_time() - cpu0
     return PathSensitivity(out_events, samples, stats)
+
+
+def _rebased_drive(P: np.ndarray, names: list[str], values: dict, t: float, dtau: np.ndarray) -> np.ndarray:
+    """dp/dtheta after a re-based prescribed drive (dynamics/transitions.py `rebased`): its reference becomes
+    angle0' = angle0 - shift + speed (tau - time0) and time0' = tau at the event time tau, so
+    d angle0' = d angle0 + (tau - time0) d speed + speed (d tau - d time0) and d time0' = d tau (the shift is a
+    whole number of symmetry steps: no derivative)."""
+    P = P.copy()
+    ia, it, isp = names.index("drive_angle0"), names.index("drive_time0"), names.index("drive_speed")
+    d_tau = np.zeros(P.shape[1])
+    d_tau[:len(dtau)] = dtau
+    P[ia] = P[ia] + (t - values["drive_time0"]) * P[isp] + values["drive_speed"] * (d_tau - P[it])
+    P[it] = d_tau
+    return P
 
 
 def _check_restart(mine: np.ndarray, ref: np.ndarray, what: str) -> None:

@@ -15,6 +15,7 @@ Quantities (the run's reported numbers, so that a finite difference of `mechsim 
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -79,11 +80,15 @@ MAPS = {
         parameters=_geneva_parameters, speed_key="initial.crank_speed",
         discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit"),
 }
-DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed")}
+DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed"),
+              "speed": ("drive.speed",)}
 
 
 def _drive_parameters(x: dict, kind: str) -> dict:
-    """The drive's T = T0 - slope w (dynamics/drives.py): motor T0 = stall torque, slope = stall / no-load speed."""
+    """The drive's T = T0 - slope w (dynamics/drives.py): motor T0 = stall torque, slope = stall / no-load speed;
+    a prescribed speed enters as itself (the constraint q = angle0 + speed (t - time0))."""
+    if kind == "speed":
+        return {"drive_speed": x["drive.speed"]}
     if kind == "motor":
         return {"drive_T0": x["drive.stall_torque"], "drive_slope": x["drive.stall_torque"] / x["drive.no_load_speed"]}
     return {"drive_T0": x["drive.torque"]}
@@ -122,9 +127,11 @@ def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
     dp = np.zeros((len(names), n))
     dq0, dv0 = np.zeros((nq, n)), np.zeros((nq, n))
     for j, key in enumerate(wrt):
-        if key == pmap.speed_key:
+        if key == pmap.speed_key or (drive.is_prescribed and key == "drive.speed"):
+            # the initial velocities are linear in the drive's initial speed (Mechanism.initial_state)
             angle_key = mech.initial_keys[0]
             dv0[:, j] = np.asarray(mech.initial_state(si["initial"][angle_key], 1.0).v, float) * scales[j]
+        if key == pmap.speed_key:
             continue
         col = keys.index(key)
         for name, row in zip(mapped, jac):
@@ -139,13 +146,11 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if pmap is None:
         raise ScenarioError("mechanism.type", f"sensitivities are traced for the Geneva drive only so far, not for "
                             f"'{mtype}' (docs/sensitivity.md, 'Not covered yet')")
-    if plan.method != "dae":
-        raise ScenarioError("drive.type", "sensitivities follow the DAE path; at prescribed speed the run uses the "
-                            "closed form, which is not differentiated yet (use a torque or motor drive)")
     if plan.thermal is not None:
         raise ScenarioError("thermal.model", "sensitivities with a thermal model are not traced yet: set "
                             "thermal.model = 'none' (docs/sensitivity.md, 'Not covered yet')")
-    allowed = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ())) + [pmap.speed_key]
+    allowed = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ())) + (
+        [] if plan.drive.is_prescribed else [pmap.speed_key])
     if not wrt:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
     for key in wrt:
@@ -206,8 +211,9 @@ def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int
 
 def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: float = 0.01) -> pd.DataFrame:
     """The table of derivatives of the headline quantities `of` (default: all) with respect to the scenario values
-    `wrt` (a loaded Scenario). One row per (quantity, value): value, derivative (SI), elasticity (p/y) dy/dp,
-    and the first-order change of y for a change of p by `change` (relative). attrs: cost, warnings, scenario."""
+    `wrt` (a loaded Scenario). One row per (quantity, value): value, t_s (the peak's output row, or the end of the
+    cycle), derivative (SI), elasticity (p/y) dy/dp, and the first-order change of y for a change of p by `change`
+    (relative). attrs: cost, warnings, scenario."""
     from mechsim.dynamics.hybrid import prepare
     from mechsim.dynamics.sensitivity import path_sensitivities
     from mechsim.scenarios import runner
@@ -215,6 +221,13 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if not 0 < change < 1:
         raise ScenarioError("--change", f"must be a relative change in (0, 1), got {change}")
     plan = runner.plan(scenario)
+    notes = []
+    if plan.method == "closed-form":
+        # the closed form is not differentiated: the same motion as a DAE with the speed as a constraint
+        plan = dataclasses.replace(plan, method="dae", settings=dataclasses.replace(plan.settings, method="dae"),
+                                   why="sensitivities follow the DAE path")
+        notes.append("prescribed speed: the run and its derivatives follow the DAE with the speed as a constraint "
+                     "(solver.method = 'dae'); the closed form gives the same motion to the solver's tolerance")
     of = list(of) if of else list(QUANTITIES)
     wrt = list(wrt)
     pmap = _check_request(plan, wrt, of)
@@ -226,9 +239,10 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         raise ScenarioError("scenario", f"the run failed ({result.failure.message()}): no derivatives of a run that "
                             "did not reach its end")
     df, events = result.timeseries, result.events
-    warnings: list[str] = []
+    warnings: list[str] = list(notes)
     angle_key, speed_key = mech.initial_keys
-    angle0, speed0 = si["initial"][angle_key], si["initial"][speed_key]
+    angle0 = si["initial"][angle_key]
+    speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
     model = prepare(mech, drive, settings, si["duration"], si["output_step"], angle0, speed0).model
     seed, scales = _seed(plan, model, wrt, pmap)
 
@@ -250,7 +264,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             rows = peak_rows[q]
             first = by_time[float(df["t_s"].iloc[rows[0]])]
             y, g = first.values[PEAKS[q]], first.grads[PEAKS[q]]
-            results[q] = (y, g)
+            results[q] = (y, g, first.t)
             if len(rows) > 1:
                 relative = [float(_lookup(si, key) or 0.0) != 0.0 for key in wrt]
                 note = _near_peaks(q, wrt, relative, df, rows, by_time, PEAKS[q], change)
@@ -265,16 +279,16 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 continue
             results[q] = got
     rows = []
-    for q, (y, g) in results.items():
+    for q, (y, g, at) in results.items():
         for j, key in enumerate(wrt):
             p = float(_lookup(si, key) or 0.0)
             deriv = float(g[j]) / scales[j]
             unit = field_unit(si, key)
             elasticity = p / y * deriv if y != 0 else float("nan")
             dp = change * abs(p) if p != 0 else float("nan")
-            rows.append(dict(quantity=q, value=y, wrt=key, wrt_unit=unit, parameter=p, derivative=deriv,
+            rows.append(dict(quantity=q, value=y, t_s=at, wrt=key, wrt_unit=unit, parameter=p, derivative=deriv,
                              elasticity=elasticity, parameter_change=dp, quantity_change=deriv * dp))
-    table = pd.DataFrame(rows, columns=["quantity", "value", "wrt", "wrt_unit", "parameter", "derivative",
+    table = pd.DataFrame(rows, columns=["quantity", "value", "t_s", "wrt", "wrt_unit", "parameter", "derivative",
                                         "elasticity", "parameter_change", "quantity_change"])
     table.attrs.update(
         scenario=scenario.name, change=change, warnings=warnings,
@@ -285,7 +299,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
 
 
 def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
-    """(value, gradient per scaled value) of an event-based quantity, or None where the run has no such cycle."""
+    """(value, gradient per scaled value, time of its end) of an event-based quantity, or None where the run has no
+    such cycle."""
     entries = [e for e in events if e.kind == pmap.engage]
     if q == "index_time_s":
         pairs = []
@@ -298,15 +313,15 @@ def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
         if not pairs:
             return None
         a, b = pairs[0]
-        return b.t - a.t, b.dt - a.dt
+        return b.t - a.t, b.dt - a.dt, b.t
     if len(entries) < 2:
         return None
     a, b = entries[-2], entries[-1]
     if q == "cycle_time_s":
-        return b.t - a.t, b.dt - a.dt
+        return b.t - a.t, b.dt - a.dt, b.t
     # the drive's work at each event (a work state: z = [q, v, work, ext]); dz holds S + f dtau
     k = 2 * len(model.coordinates) + list(model.work_names).index("drive")
-    return float(b.z[k] - a.z[k]), b.dz[k] - a.dz[k]
+    return float(b.z[k] - a.z[k]), b.dz[k] - a.dz[k], b.t
 
 
 def tornado_figure(table: pd.DataFrame):
