@@ -182,7 +182,7 @@ def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: s
     if not isinstance(scenario, Scenario):
         scenario = load(scenario, set)
     elif set:
-        raise ValueError("sensitivity(scenario, set=...): pass the overrides to load(); this scenario is already loaded")
+        raise ValueError("sensitivity(scenario, set=...): pass the overrides to load(); the scenario is loaded")
 
     def names(x):
         if x is None:

@@ -381,7 +381,7 @@ def report(
 def sensitivity(
     scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
     wrt: str = typer.Option(..., "--wrt", help="scenario values to differentiate by: section.key[,section.key...]"),
-    of: Optional[str] = typer.Option(None, "--of", help="quantities (default all): peak_contact_force_N,index_time_s,..."),
+    of: Optional[str] = typer.Option(None, "--of", help="quantities (default all): peak_drive_torque_N_m,..."),
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     change: float = typer.Option(0.01, "--change", help="relative change of each value for the quantity_change column"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/sensitivity-<name>)"),

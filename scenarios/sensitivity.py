@@ -33,6 +33,9 @@ PEAKS = {
     "peak_drive_torque_N_m": "drive_torque_N_m",
     "peak_wheel_accel_rad_s2": "wheel_accel_rad_s2",
     "peak_wheel_speed_rad_s": "wheel_speed_rad_s",
+    "peak_coupler_force_N": "coupler_force_N",
+    "peak_crank_accel_rad_s2": "crank_accel_rad_s2",
+    "peak_crank_speed_rad_s": "crank_speed_rad_s",
 }
 CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
 QUANTITIES = tuple(PEAKS) + CYCLE
@@ -48,10 +51,12 @@ NOT_TRACED = {
 class ParameterMap:
     """How the scenario values of one mechanism type enter the model.
 
-    keys: the supported scenario keys (SI). parameters(x, si): the model parameters they set, as jax-traceable
-    formulas of the dict x (key -> value); each is checked against the mechanism's own `parameter_values()`.
-    speed_key: the initial-speed key (the initial velocities are linear in it). discrete: parameters that
-    transitions may change, whose values follow from integers and signs only.
+    keys: the supported scenario keys (SI). parameters(x, si, mech): the model parameters they set, as
+    jax-traceable formulas of the dict x (key -> value); each is checked against the mechanism's own
+    `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
+    parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
+    geometry that is not traced). engage/release: the event kinds that start and end an index (the cycle runs from
+    one `engage` to the next). peaks: the peak quantities the mechanism has.
     """
 
     keys: tuple[str, ...]
@@ -60,9 +65,10 @@ class ParameterMap:
     discrete: frozenset
     engage: str
     release: str
+    peaks: tuple[str, ...] = tuple(PEAKS)
 
 
-def _geneva_parameters(x: dict, si: dict) -> dict:
+def _geneva_parameters(x: dict, si: dict, mech) -> dict:
     """Geneva: c = r / sin(pi/n) (tangential entry, docs/theory.md §G1); the others enter as they are."""
     import jax.numpy as jnp
     n = si["mechanism"]["slots"]
@@ -72,13 +78,38 @@ def _geneva_parameters(x: dict, si: dict) -> dict:
             "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
 
 
+def _chain_parameters(x: dict, si: dict, mech) -> dict:
+    """Chain dwell mechanism (mechanisms/chain/model.py): the drive's inertia reduced to the driving sprocket,
+    J1 = m_chain r1^2 + sum_i J_i (r1 / r_i)^2, the crank a uniform rod J_Q = m R^2 / 3 and the coupler one of length
+    L, J_3 = m L^2 / 12, unless their inertias are given. The geometry (r1, r_i, R, L) is not traced: constants."""
+    m = si["mechanism"]
+    r1, radii = mech.path.r1, np.asarray(mech.path.radii, float)
+    sprockets = float(np.sum(np.asarray(m["sprocket_inertias"], float) * (r1 / radii) ** 2))
+    R, L = mech.kin.R, mech.kin.L
+    jq = x["mechanism.crank_mass"] * R**2 / 3 if m["crank_inertia"] is None else x["mechanism.crank_inertia"]
+    j3 = x["mechanism.coupler_mass"] * L**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"]
+    return {"J1": x["mechanism.chain_mass"] * r1**2 + sprockets, "JQ": jq, "m3": x["mechanism.coupler_mass"],
+            "J3": j3, "T_L": x["load.crank_torque"], "c1": x["mechanism.drive_damping"],
+            "c2": x["mechanism.crank_damping"]}
+
+
 MAPS = {
+    "chain_dwell": ParameterMap(
+        keys=("mechanism.chain_mass", "mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass",
+              "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque"),
+        parameters=_chain_parameters, speed_key="initial.drive_speed",
+        # the chain path's pieces (segment, its geometry, the apex, the dyad's branch) follow from the geometry
+        discrete=frozenset({"seg", "s0", "s1", "Px", "Py", "tx", "ty", "Ox", "Oy", "rr", "psi0", "alpha", "s_apex",
+                            "sigma"}),
+        engage="dwell end", release="stop impact",
+        peaks=("peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2", "peak_crank_speed_rad_s")),
     "geneva": ParameterMap(
         keys=("mechanism.crank_radius", "mechanism.pin_radius", "mechanism.thickness", "mechanism.crank_inertia",
               "mechanism.wheel_inertia", "mechanism.crank_damping", "mechanism.wheel_damping", "load.wheel_torque",
               "contact.friction"),
         parameters=_geneva_parameters, speed_key="initial.crank_speed",
-        discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit"),
+        discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit",
+        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_wheel_speed_rad_s")),
 }
 DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed"),
               "speed": ("drive.speed",)}
@@ -113,7 +144,7 @@ def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
 
     def params(xs):
         x = dict(zip(keys, xs))
-        return {**pmap.parameters(x, si), **_drive_parameters(x, drive.kind)}
+        return {**pmap.parameters(x, si, mech), **_drive_parameters(x, drive.kind)}
     values = {**mech.parameter_values(), **drive.parameter_values(0.0)}
     mapped = params([x0[k] for k in keys])
     for name, v in mapped.items():
@@ -144,8 +175,8 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     mtype = si["mechanism"]["type"]
     pmap = MAPS.get(mtype)
     if pmap is None:
-        raise ScenarioError("mechanism.type", f"sensitivities are traced for the Geneva drive only so far, not for "
-                            f"'{mtype}' (docs/sensitivity.md, 'Not covered yet')")
+        raise ScenarioError("mechanism.type", f"sensitivities are traced for the Geneva drive and the chain so far, "
+                            f"not for '{mtype}' (docs/sensitivity.md, 'Not covered yet')")
     if plan.thermal is not None:
         raise ScenarioError("thermal.model", "sensitivities with a thermal model are not traced yet: set "
                             "thermal.model = 'none' (docs/sensitivity.md, 'Not covered yet')")
@@ -154,6 +185,8 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if not wrt:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
     for key in wrt:
+        if key in pmap.keys and _lookup(si, key) is None:
+            raise ScenarioError(key, "not set in this scenario (it is derived from other values): set it to trace it")
         if key not in allowed:
             raise ScenarioError(key, f"not a value sensitivities are traced for here; traced: {', '.join(allowed)}")
     if len(set(wrt)) != len(wrt):
@@ -161,8 +194,9 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     for q in of:
         if q in NOT_TRACED:
             raise ScenarioError("--of", f"{q}: {NOT_TRACED[q]}")
-        if q not in QUANTITIES:
-            raise ScenarioError("--of", f"unknown quantity {q!r}; one of {', '.join(QUANTITIES)}")
+        if q not in pmap.peaks + CYCLE:
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of "
+                                f"{', '.join(pmap.peaks + CYCLE)}")
     return pmap
 
 
@@ -209,6 +243,29 @@ def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int
             "within the stated change: " + ", ".join(swap))
 
 
+def _event_crosses_row(q: str, wrt: list[str], relative: list[bool], t_row: float, events, change: float):
+    """A warning where the events next to a peak's row (the last before it, the first after it) move past the row
+    within the stated change of a value: the row then lies in another mode and the peak jumps (a non-smooth
+    point; the derivative holds only for smaller changes). Event-time gradients are per relative change."""
+    before = [e for e in events if e.t <= t_row]
+    after = [e for e in events if e.t > t_row]
+    near = ([before[-1]] if before else []) + ([after[0]] if after else [])
+    rel = dict(zip(wrt, relative))
+    found = []
+    for e in near:
+        for key, d in zip(wrt, e.dt):
+            if d == 0:
+                continue
+            step = (t_row - e.t) / d              # the change of the value that brings the event to the row
+            if abs(step) < change:
+                amount = f"{step * 100:+.2g}%" if rel[key] else f"{step:+.2g} (absolute)"
+                found.append(f"{key} {amount} ('{e.kind}' at t = {e.t:.6g} s)")
+    if not found:
+        return None
+    return (f"{q}: its row t = {t_row:.6g} s is next to a mode change that reaches it within the stated change, "
+            "after which the row lies in another mode and the peak jumps: " + ", ".join(found))
+
+
 def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: float = 0.01) -> pd.DataFrame:
     """The table of derivatives of the headline quantities `of` (default: all) with respect to the scenario values
     `wrt` (a loaded Scenario). One row per (quantity, value): value, t_s (the peak's output row, or the end of the
@@ -228,9 +285,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                                    why="sensitivities follow the DAE path")
         notes.append("prescribed speed: the run and its derivatives follow the DAE with the speed as a constraint "
                      "(solver.method = 'dae'); the closed form gives the same motion to the solver's tolerance")
-    of = list(of) if of else list(QUANTITIES)
     wrt = list(wrt)
-    pmap = _check_request(plan, wrt, of)
+    pmap = _check_request(plan, wrt, list(of or []))
+    of = list(of) if of else list(pmap.peaks + CYCLE)
     si, mech, drive, settings = scenario.si, plan.mechanism, plan.drive, plan.settings
     wall = time.perf_counter()
     result = runner.execute(plan)
@@ -265,11 +322,14 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             first = by_time[float(df["t_s"].iloc[rows[0]])]
             y, g = first.values[PEAKS[q]], first.grads[PEAKS[q]]
             results[q] = (y, g, first.t)
+            relative = [float(_lookup(si, key) or 0.0) != 0.0 for key in wrt]
             if len(rows) > 1:
-                relative = [float(_lookup(si, key) or 0.0) != 0.0 for key in wrt]
                 note = _near_peaks(q, wrt, relative, df, rows, by_time, PEAKS[q], change)
                 if note:
                     warnings.append(note)
+            note = _event_crosses_row(q, wrt, relative, first.t, path.events, change)
+            if note:
+                warnings.append(note)
         else:
             got = _cycle_quantity(q, path.events, pmap, model)
             if got is None:
