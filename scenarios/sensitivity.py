@@ -56,7 +56,7 @@ class ParameterMap:
     `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
     parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
     geometry that is not traced). engage/release: the event kinds that start and end an index (the cycle runs from
-    one `engage` to the next). peaks: the peak quantities the mechanism has.
+    one `engage` to the next; empty for a mechanism that does not index). peaks: its peak quantities.
     """
 
     keys: tuple[str, ...]
@@ -66,6 +66,11 @@ class ParameterMap:
     engage: str
     release: str
     peaks: tuple[str, ...] = tuple(PEAKS)
+
+    @property
+    def cycle(self) -> tuple[str, ...]:
+        """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not)."""
+        return CYCLE if self.engage else ()
 
 
 def _geneva_parameters(x: dict, si: dict, mech) -> dict:
@@ -93,7 +98,38 @@ def _chain_parameters(x: dict, si: dict, mech) -> dict:
             "c2": x["mechanism.crank_damping"]}
 
 
+def _rolling_parameters(x: dict, si: dict, mech) -> dict:
+    """Rolling-pair four-bar (mechanisms/rolling/model.py `Bodies.uniform`): slender crank and coupler rods
+    (I = m l^2 / 12 at mid-length), the rolling link a uniform disc (m r^2 / 2 about B0) welded to a slender arm
+    (m l4^2 / 3 about B0), moved to the joint centre of mass c4 = m_arm l4 / 2 / m4 (docs/theory.md §K3), unless
+    the scenario gives the inertias and centres itself (then those are traced). The geometry is not traced."""
+    m = si["mechanism"]
+    kin = mech.kin
+    l2, l3, l4, r = kin.l2, kin.l3, kin.l4, kin.pair.r
+    m2, m3 = x["mechanism.crank_mass"], x["mechanism.coupler_mass"]
+    disc, arm = x["mechanism.disc_mass"], x["mechanism.arm_mass"]
+    m4 = disc + arm
+    c4 = arm * l4 / 2 / m4 if m["rolling_com"] is None else m["rolling_com"]
+    i4 = (disc * r**2 / 2 + arm * l4**2 / 3 - m4 * c4**2) if m["rolling_inertia"] is None else (
+        x["mechanism.rolling_inertia"])
+    out = {"m2": m2, "I2": m2 * l2**2 / 12 if m["crank_inertia"] is None else x["mechanism.crank_inertia"],
+           "m3": m3, "I3": m3 * l3**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"],
+           "m4": m4, "I4": i4, "g": x["load.gravity"], "b2": x["load.crank_damping"],
+           "b4": x["load.rolling_damping"]}
+    if m["rolling_com"] is None:
+        out["c4"] = c4
+    return out
+
+
 MAPS = {
+    "rolling_pair": ParameterMap(
+        keys=("mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass", "mechanism.coupler_inertia",
+              "mechanism.disc_mass", "mechanism.arm_mass", "mechanism.rolling_inertia", "load.gravity",
+              "load.crank_damping", "load.rolling_damping"),
+        parameters=_rolling_parameters, speed_key="initial.drive_speed",
+        discrete=frozenset({"dead_sign"}), engage="", release="",
+        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2",
+               "peak_crank_speed_rad_s")),
     "chain_dwell": ParameterMap(
         keys=("mechanism.chain_mass", "mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass",
               "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque"),
@@ -175,8 +211,7 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     mtype = si["mechanism"]["type"]
     pmap = MAPS.get(mtype)
     if pmap is None:
-        raise ScenarioError("mechanism.type", f"sensitivities are traced for the Geneva drive and the chain so far, "
-                            f"not for '{mtype}' (docs/sensitivity.md, 'Not covered yet')")
+        raise ScenarioError("mechanism.type", f"sensitivities are not traced for '{mtype}' (docs/sensitivity.md)")
     if plan.thermal is not None:
         raise ScenarioError("thermal.model", "sensitivities with a thermal model are not traced yet: set "
                             "thermal.model = 'none' (docs/sensitivity.md, 'Not covered yet')")
@@ -194,9 +229,9 @@ def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     for q in of:
         if q in NOT_TRACED:
             raise ScenarioError("--of", f"{q}: {NOT_TRACED[q]}")
-        if q not in pmap.peaks + CYCLE:
+        if q not in pmap.peaks + pmap.cycle:
             raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of "
-                                f"{', '.join(pmap.peaks + CYCLE)}")
+                                f"{', '.join(pmap.peaks + pmap.cycle)}")
     return pmap
 
 
@@ -287,7 +322,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                      "(solver.method = 'dae'); the closed form gives the same motion to the solver's tolerance")
     wrt = list(wrt)
     pmap = _check_request(plan, wrt, list(of or []))
-    of = list(of) if of else list(pmap.peaks + CYCLE)
+    of = list(of) if of else list(pmap.peaks + pmap.cycle)
     si, mech, drive, settings = scenario.si, plan.mechanism, plan.drive, plan.settings
     wall = time.perf_counter()
     result = runner.execute(plan)
