@@ -10,7 +10,8 @@ Quantities (the run's reported numbers, so that a finite difference of `mechsim 
   fixed, so its derivative is the row's derivative at the arg-max row (the envelope rule of a maximum over a fixed
   set); a second peak within PEAK_MARGIN relative is reported with the change of the design value that swaps them.
 - index_time_s: the last complete engagement (entry to exit); cycle_time_s: between the last two entries (one
-  drive revolution); energy_per_cycle_J: the drive's work over that cycle. Event times are differentiated by the
+  drive revolution); energy_per_cycle_J: the drive's work over that cycle; heat_per_index_J: the frictional heat
+  of the last complete engagement (minus the friction work over it). Event times are differentiated by the
   implicit-function rule, the work at an event as W(tau) with the state's total derivative.
 """
 from __future__ import annotations
@@ -38,12 +39,13 @@ PEAKS = {
     "peak_crank_speed_rad_s": "crank_speed_rad_s",
 }
 CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
-QUANTITIES = tuple(PEAKS) + CYCLE
+#: the frictional heat of the last complete index: minus the friction work (a work state) from engage to release
+HEAT = "heat_per_index_J"
+QUANTITIES = tuple(PEAKS) + CYCLE + (HEAT,)
 #: quantities of issue 16 that exist in mechsim but are not differentiated yet, and why
 NOT_TRACED = {
     "peak_temp_contact_C": "the thermal models' read-outs are evaluated after the run (thermal/), not traced yet",
     "peak_temp_flash_rise_K": "the flash temperature is evaluated after the run (thermal/flash.py), not traced yet",
-    "heat_per_index_J": "the thermal read-outs are not traced yet",
 }
 
 
@@ -66,11 +68,13 @@ class ParameterMap:
     engage: str
     release: str
     peaks: tuple[str, ...] = tuple(PEAKS)
+    sliding: bool = False
 
     @property
     def cycle(self) -> tuple[str, ...]:
-        """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not)."""
-        return CYCLE if self.engage else ()
+        """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not); the
+        heat per index where it has a sliding contact."""
+        return (CYCLE + ((HEAT,) if self.sliding else ())) if self.engage else ()
 
 
 def _geneva_parameters(x: dict, si: dict, mech) -> dict:
@@ -145,6 +149,7 @@ MAPS = {
               "contact.friction"),
         parameters=_geneva_parameters, speed_key="initial.crank_speed",
         discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit",
+        sliding=True,
         peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_wheel_speed_rad_s")),
 }
 DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed"),
@@ -368,9 +373,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         else:
             got = _cycle_quantity(q, path.events, pmap, model)
             if got is None:
-                warnings.append(f"{q}: the run has no complete {'engagement' if q == 'index_time_s' else 'cycle'} "
-                                f"({pmap.engage} to {pmap.release if q == 'index_time_s' else pmap.engage}); "
-                                "lengthen duration")
+                index = q in ("index_time_s", HEAT)
+                warnings.append(f"{q}: the run has no complete {'index' if index else 'cycle'} "
+                                f"({pmap.engage} to {pmap.release if index else pmap.engage}); lengthen duration")
                 continue
             results[q] = got
     rows = []
@@ -397,7 +402,7 @@ def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
     """(value, gradient per scaled value, time of its end) of an event-based quantity, or None where the run has no
     such cycle."""
     entries = [e for e in events if e.kind == pmap.engage]
-    if q == "index_time_s":
+    if q in ("index_time_s", HEAT):
         pairs = []
         for i in range(len(events) - 1, -1, -1):
             if events[i].kind == pmap.release:
@@ -408,6 +413,9 @@ def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
         if not pairs:
             return None
         a, b = pairs[0]
+        if q == HEAT:       # the friction work is negative (dissipated): its drop over the index is the heat
+            k = 2 * len(model.coordinates) + list(model.work_names).index("friction")
+            return float(a.z[k] - b.z[k]), a.dz[k] - b.dz[k], b.t
         return b.t - a.t, b.dt - a.dt, b.t
     if len(entries) < 2:
         return None
