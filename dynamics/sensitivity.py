@@ -54,8 +54,9 @@ class Seed:
 
     dp: (len(model.parameter_names), n) d(parameter tuple)/dtheta, in the model's parameter order.
     dq0, dv0: (nq, n) derivatives of the initial guess of positions and velocities (before projection).
-    discrete: parameters a transition may change (mode flags, slot counters, ...): their values follow from
-        integers and signs only, so their derivative is zero; a transition changing any other parameter raises.
+    discrete: parameters a transition may change (mode flags, slot counters, geometry that is not traced, ...):
+        their values do not depend on the design values, so their derivative is zero; a transition changing any
+        other parameter raises (a prescribed drive's re-based reference excepted: `_rebased_drive`).
     """
 
     dp: np.ndarray
