@@ -417,9 +417,11 @@ def sensitivity(
     for w in table.attrs["warnings"]:
         err.print(f"warning: {w}", markup=False, highlight=False, soft_wrap=True)
     c = table.attrs["cost"]
+    ratio = c["sensitivity_per_run"]
     out.print(f"{sc.name}: {len(table)} derivatives; run ({c['run_backend']}) {c['run_wall_time_s']:.3f} s, "
               f"sensitivities {c['sensitivity_wall_time_s']:.3f} s (compilation "
-              f"{c['sensitivity_compile_time_s']:.3f} s) -> {target}", markup=False, highlight=False, soft_wrap=True)
+              f"{c['sensitivity_compile_time_s']:.3f} s" + (f"; without it {ratio:.2g}x the run" if ratio else "")
+              + f") -> {target}", markup=False, highlight=False, soft_wrap=True)
 
 
 def _print_sensitivity(table) -> None:

@@ -233,3 +233,17 @@ def test_prescribed_speed_against_the_closed_form():
     assert table.loc[("peak_contact_force_N", "drive.speed"), "value"] == pytest.approx(
         (m["wheel_inertia"] * a2 + si["load"]["wheel_torque"]) / arm, rel=1e-8)
     print("deviation from the closed form (relative to the scale):", seen)
+
+
+def test_lengths_scale_out():
+    """Scaling every length of the Geneva (r and R; c = r / sin(pi/n) follows) by s with the inertias, torques and
+    friction kept leaves the motion in angle and time unchanged and every force times 1/s (the moment arms grow by
+    s): the elasticities in crank and pin radius add up to -1 for the contact force and to 0 for the angular,
+    time, torque and energy quantities, exactly (dimensional analysis); to the integration's ~1e-7 here."""
+    sc = mechsim.load("geneva-motor", set=BASE)
+    table = sensitivity(sc, ["mechanism.crank_radius", "mechanism.pin_radius"])
+    total = table.groupby("quantity")["elasticity"].sum()
+    assert total.pop("peak_contact_force_N") == pytest.approx(-1.0, abs=1e-7)
+    assert np.all(np.abs(total.to_numpy()) <= 1e-7), total
+    # and the single elasticities are not trivially zero
+    assert np.all(np.abs(table["elasticity"]) > 1e-4)
