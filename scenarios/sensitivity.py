@@ -8,7 +8,9 @@ headline quantities on the run, and builds the table, the tornado chart and the 
 Quantities (the run's reported numbers, so that a finite difference of `mechsim run` checks them):
 - peaks: the largest |value| over the output rows, as summary.json's `peaks` (signed value). The output times are
   fixed, so its derivative is the row's derivative at the arg-max row (the envelope rule of a maximum over a fixed
-  set); a second peak within PEAK_MARGIN relative is reported with the change of the design value that swaps them.
+  set). A warning names the change of a value at which another row becomes the maximum (a neighbouring row, or
+  the same peak of another cycle, within PEAK_MARGIN), or at which an event next to the row reaches it, where that
+  change is smaller than the stated one: there the maximum has a kink.
 - index_time_s: the last complete engagement (entry to exit); cycle_time_s: between the last two entries (one
   drive revolution); energy_per_cycle_J: the drive's work over that cycle; heat_per_index_J: the frictional heat
   of the last complete engagement (minus the friction work over it). Event times are differentiated by the
@@ -200,15 +202,58 @@ def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
     dq0, dv0 = np.zeros((nq, n)), np.zeros((nq, n))
     for j, key in enumerate(wrt):
         if key == pmap.speed_key or (drive.is_prescribed and key == "drive.speed"):
-            # the initial velocities are linear in the drive's initial speed (Mechanism.initial_state)
-            angle_key = mech.initial_keys[0]
-            dv0[:, j] = np.asarray(mech.initial_state(si["initial"][angle_key], 1.0).v, float) * scales[j]
+            # the initial velocities are linear in the drive's initial speed (Mechanism.initial_state): checked
+            angle = si["initial"][mech.initial_keys[0]]
+            speed = drive.speed if drive.is_prescribed else si["initial"][mech.initial_keys[1]]
+            unit_v = np.asarray(mech.initial_state(angle, 1.0).v, float)
+            v = np.asarray(mech.initial_state(angle, speed).v, float)
+            if not np.allclose(v, speed * unit_v, rtol=1e-12, atol=1e-15 * max(1.0, float(np.max(np.abs(v))))):
+                raise ScenarioError(key, "the initial velocities of this mechanism are not linear in the initial "
+                                    "speed here: not traced")
+            dv0[:, j] = unit_v * scales[j]
         if key == pmap.speed_key:
             continue
         col = keys.index(key)
         for name, row in zip(mapped, jac):
             dp[names.index(name), j] = float(np.asarray(row)[col]) * scales[j]
+    _check_map(plan, wrt, keys, mapped, jac, pmap)
     return Seed(dp, dq0, dv0, pmap.discrete), scales
+
+
+def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: ParameterMap) -> None:
+    """The map must be complete and right: the mechanism rebuilt with each traced value moved (central differences,
+    1e-5 relative) changes no parameter the map does not set, and those it sets by the map's derivative (to 1e-6 of
+    the parameter's size: the differences' truncation is ~1e-10, their round-off ~1e-11). A RuntimeError otherwise:
+    a map out of step with the mechanism is a bug, not a user error."""
+    import copy
+
+    from mechsim.scenarios.loader import build_mechanism
+    from mechsim.scenarios.runner import make_drive
+    si, drive = plan.scenario.si, plan.drive
+    for key in wrt:
+        if key == pmap.speed_key:
+            continue
+        p = float(_lookup(si, key) or 0.0)
+        h = 1e-5 * abs(p) if p else 1e-5
+        values = []
+        for sign in (1, -1):
+            moved = copy.deepcopy(si)
+            node = moved
+            *path, last = key.split(".")
+            for part in path:
+                node = node[part]
+            node[last] = p + sign * h
+            mech = build_mechanism(moved)
+            values.append({**mech.parameter_values(), **make_drive(moved).parameter_values(0.0)})
+        col = keys.index(key)
+        derivative = dict(zip(mapped, (float(np.asarray(row)[col]) for row in jac)))
+        for name in values[0]:
+            fd = (values[0][name] - values[1][name]) / (2 * h)
+            exact = derivative.get(name, 0.0)
+            size = max(abs(values[0][name]), abs(exact) * max(abs(p), 1.0), 1e-300)
+            if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
+                raise RuntimeError(f"sensitivity map: '{name}' moves by {fd:.6g} per unit of {key}, the map says "
+                                   f"{exact:.6g} ({drive.kind} drive)")
 
 
 def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:

@@ -247,3 +247,20 @@ def test_lengths_scale_out():
     assert np.all(np.abs(total.to_numpy()) <= 1e-7), total
     # and the single elasticities are not trivially zero
     assert np.all(np.abs(table["elasticity"]) > 1e-4)
+
+
+def test_a_map_out_of_step_with_the_mechanism_is_caught(monkeypatch):
+    """The scenario-to-parameter map is checked against the mechanism rebuilt with each value moved: a map that
+    forgets the centre distance c = r / sin(pi/n) (it moves with the crank radius) is refused, not used."""
+    import dataclasses
+
+    import mechsim.scenarios.sensitivity as sens
+    right = sens.MAPS["geneva"]
+
+    def forgets_c(x, si, mech):
+        out = right.parameters(x, si, mech)
+        out.pop("c")
+        return out
+    monkeypatch.setitem(sens.MAPS, "geneva", dataclasses.replace(right, parameters=forgets_c))
+    with pytest.raises(RuntimeError, match="'c' moves by"):
+        sensitivity(mechsim.load("geneva-motor", set=["duration=0.2 s"]), ["mechanism.crank_radius"])
