@@ -330,8 +330,8 @@ def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int
 
 def _event_crosses_row(q: str, wrt: list[str], relative: list[bool], t_row: float, events, change: float):
     """A warning where the events next to a peak's row (the last before it, the first after it) move past the row
-    within the stated change of a value: the row then lies in another mode and the peak jumps (a non-smooth
-    point; the derivative holds only for smaller changes). Event-time gradients are per relative change."""
+    within the stated change of a value: the row then lies in another mode, where the quantity may jump (a
+    non-smooth point; the derivative holds only for smaller changes). Event-time gradients are per relative change."""
     before = [e for e in events if e.t <= t_row]
     after = [e for e in events if e.t > t_row]
     near = ([before[-1]] if before else []) + ([after[0]] if after else [])
@@ -347,8 +347,9 @@ def _event_crosses_row(q: str, wrt: list[str], relative: list[bool], t_row: floa
                 found.append(f"{key} {amount} ('{e.kind}' at t = {e.t:.6g} s)")
     if not found:
         return None
-    return (f"{q}: its row t = {t_row:.6g} s is next to a mode change that reaches it within the stated change, "
-            "after which the row lies in another mode and the peak jumps: " + ", ".join(found))
+    return (f"{q}: its row t = {t_row:.6g} s is next to a mode change that reaches it within the stated change; "
+            "beyond it the row lies in the other mode, where the quantity may jump (the derivative holds up to "
+            "there): " + ", ".join(found))
 
 
 def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: float = 0.01) -> pd.DataFrame:
@@ -492,8 +493,8 @@ def tornado_figure(table: pd.DataFrame):
         ax.tick_params(labelsize=8)
         lim = max(1e-12, float(np.nanmax(np.abs(e)))) * 1.15
         ax.set_xlim(-lim, lim)
-    axes[-1].set_xlabel("elasticity (p/y) dy/dp: % change of the quantity per % change of the value "
-                        "(red: raises it, blue: lowers it)")
+    axes[-1].set_xlabel("elasticity (p/y) dy/dp: % change of the quantity per % change of the value\n"
+                        "(red: the value raises the quantity, blue: it lowers it)")
     fig.suptitle(f"{table.attrs.get('scenario', '')}: design sensitivities", fontsize=10)
     return fig
 
