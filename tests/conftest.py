@@ -49,3 +49,31 @@ def m2():
     """El-Shakery Mech 2 (4 sprockets), docs/theory.md §K1.3."""
     from mechsim.mechanisms.chain.dwell import MECH2, ChainDwellMechanism
     return ChainDwellMechanism(MECH2)
+
+
+def richardson_central(evaluate, p: float, h: float) -> dict:
+    """d(quantity)/dp for every quantity evaluate(value) returns: central differences with relative steps h and
+    h/2, Richardson-extrapolated (error O(h^4) instead of O(h^2))."""
+    diffs = {}
+    for step in (h, h / 2):
+        plus, minus = evaluate(p * (1 + step)), evaluate(p * (1 - step))
+        diffs[step] = {q: (plus[q] - minus[q]) / (2 * p * step) for q in plus}
+    return {q: (4 * diffs[h / 2][q] - diffs[h][q]) / 3 for q in diffs[h]}
+
+
+def assert_matches_finite_differences(part, ref0: dict, fd: dict, p: float, key: str, value_rel: float,
+                                      floor: float, worst: dict) -> None:
+    """Each quantity's value equals the finite differences' nominal run to value_rel, and its elasticity
+    (p/y) dy/dp that of the finite difference to 1e-4 relative, or `floor` absolute where that is larger (a
+    derivative that is zero to the differences' own accuracy). Exact zeros must be exact in both.
+    `worst` collects the relative deviations of the derivatives that are not near zero."""
+    for q in ref0:
+        assert part.loc[q, "value"] == pytest.approx(ref0[q], rel=value_rel)
+        d = part.loc[q, "derivative"]
+        if ref0[q] == 0.0:                 # no friction, no heat: exactly zero, and so its derivatives
+            assert d == 0.0 and fd[q] == 0.0, (q, key, d, fd[q])
+            continue
+        e, e_fd = p / ref0[q] * d, p / ref0[q] * fd[q]
+        assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + floor, (q, key, d, fd[q])
+        if abs(e_fd) > 100 * floor:
+            worst[q] = max(worst.get(q, 0.0), abs(d - fd[q]) / abs(fd[q]))

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import mechsim
+from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.sensitivity import PEAKS, sensitivity
 
 BASE = ["duration=1.45 s", "solver.rtol=1e-10", "solver.atol=1e-12"]
@@ -46,7 +47,7 @@ def _work_at(df, t_event, name="drive"):
     pw = ((df["drive_torque_N_m"] * df["crank_speed_rad_s"]).to_numpy(float) if name == "drive"
           else -df["friction_power_W"].to_numpy(float))
     i = int(np.searchsorted(t, t_event)) - 1          # the last row before the event
-    t0, t1, h = t[i - 1], t[i], t[i] - t[i - 1]
+    t0, h = t[i - 1], t[i] - t[i - 1]
     s = (t_event - t0) / h
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
     return h00 * w[i - 1] + h10 * h * pw[i - 1] + h01 * w[i] + h11 * h * pw[i]
@@ -104,23 +105,9 @@ def test_geneva_matches_finite_differences(tables, name):
     for key in wrt:
         part = table[table["wrt"] == key].set_index("quantity")
         p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        diffs = {}
-        for step in (H, H / 2):
-            plus = quantities(_run(name, fd_sets + [f"{key}={_literal(p * (1 + step), unit)}"]), rows)
-            minus = quantities(_run(name, fd_sets + [f"{key}={_literal(p * (1 - step), unit)}"]), rows)
-            diffs[step] = {q: (plus[q] - minus[q]) / (2 * p * step) for q in plus}
-        for q in ref0:
-            fd = (4 * diffs[H / 2][q] - diffs[H][q]) / 3
-            assert part.loc[q, "value"] == pytest.approx(ref0[q], rel=1e-7)
-            d = part.loc[q, "derivative"]
-            if ref0[q] == 0.0:                 # no friction, no heat: exactly zero, and so its derivatives
-                assert d == 0.0 and fd == 0.0, (q, key, d, fd)
-                continue
-            # elasticities (p/y) dy/dp: 1e-4 of the finite difference's, or ELASTICITY_FLOOR where that is smaller
-            e, e_fd = p / ref0[q] * d, p / ref0[q] * fd
-            assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + ELASTICITY_FLOOR, (q, key, d, fd)
-            if abs(e_fd) > 100 * ELASTICITY_FLOOR:
-                worst[q] = max(worst.get(q, 0.0), abs(d - fd) / abs(fd))
+        fd = richardson_central(lambda value: quantities(_run(name, fd_sets + [f"{key}={_literal(value, unit)}"]),
+                                                         rows), p, H)
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, worst)
     print(name, "largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
 
 

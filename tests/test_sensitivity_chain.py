@@ -10,9 +10,9 @@ must agree to 1e-4 relative, or to 1e-6 in elasticity where the derivative is ze
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import mechsim
+from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.sensitivity import PEAKS, sensitivity
 
 NAME = "chain-mech1-torque"
@@ -67,22 +67,10 @@ def test_chain_matches_finite_differences():
     for key in WRT:
         part = table[table["wrt"] == key].set_index("quantity")
         p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        diffs = {}
-        h = H[key]
-        for step in (h, h / 2):
-            plus = quantities(_run(FD + [f"{key}={p * (1 + step)!r} {unit}"]), rows)
-            minus = quantities(_run(FD + [f"{key}={p * (1 - step)!r} {unit}"]), rows)
-            diffs[step] = {q: (plus[q] - minus[q]) / (2 * p * step) for q in plus}
-        for q in ref0:
-            fd = (4 * diffs[h / 2][q] - diffs[h][q]) / 3
-            # the coupler-force peak next to the stop amplifies the solution's error ~1e3-fold (its elasticities):
-            # the value at rtol 1e-10 is ~1e-7..1e-6 from the rtol-1e-12 run's (measured 8e-7)
-            assert part.loc[q, "value"] == pytest.approx(ref0[q], rel=1e-5)
-            d = part.loc[q, "derivative"]
-            e, e_fd = p / ref0[q] * d, p / ref0[q] * fd
-            assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + ELASTICITY_FLOOR, (q, key, d, fd)
-            if abs(e_fd) > 100 * ELASTICITY_FLOOR:
-                worst[q] = max(worst.get(q, 0.0), abs(d - fd) / abs(fd))
+        fd = richardson_central(lambda value: quantities(_run(FD + [f"{key}={value!r} {unit}"]), rows), p, H[key])
+        # the coupler-force peak next to the stop amplifies the solution's error ~1e3-fold (its elasticities):
+        # the value at rtol 1e-10 is ~1e-7..1e-6 from the rtol-1e-12 run's (measured 8e-7)
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
     print("chain: largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
     # the coupler-force peak is next to the first stop: the table says how far the derivative holds
     assert any("peak_coupler_force_N" in w and "stop impact" in w for w in table.attrs["warnings"])

@@ -9,9 +9,9 @@ to 1e-4 relative, or to 1e-6 in elasticity where the derivative is zero (the con
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import mechsim
+from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.sensitivity import PEAKS, sensitivity
 
 NAME = "rolling-a-torque"
@@ -39,18 +39,7 @@ def test_rolling_pair_matches_finite_differences():
     for key in WRT:
         part = table[table["wrt"] == key].set_index("quantity")
         p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        diffs = {}
-        for step in (H, H / 2):
-            plus = _peaks(FD + [f"{key}={p * (1 + step)!r} {unit}"], rows)
-            minus = _peaks(FD + [f"{key}={p * (1 - step)!r} {unit}"], rows)
-            diffs[step] = {q: (plus[q] - minus[q]) / (2 * p * step) for q in plus}
-        for q in ref0:
-            fd = (4 * diffs[H / 2][q] - diffs[H][q]) / 3
-            assert part.loc[q, "value"] == pytest.approx(ref0[q], rel=1e-7)
-            d = part.loc[q, "derivative"]
-            e, e_fd = p / ref0[q] * d, p / ref0[q] * fd
-            assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + ELASTICITY_FLOOR, (q, key, d, fd)
-            if abs(e_fd) > 100 * ELASTICITY_FLOOR:
-                worst[q] = max(worst.get(q, 0.0), abs(d - fd) / abs(fd))
+        fd = richardson_central(lambda value: _peaks(FD + [f"{key}={value!r} {unit}"], rows), p, H)
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, worst)
     print("rolling pair: largest relative deviation from the finite differences:",
           {q: f"{e:.1e}" for q, e in worst.items()})
