@@ -220,11 +220,12 @@ def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
         return jnp.minimum(jnp.min(heading(t, y, args)), 1.0)
 
     event = diffrax.Event(cond, FirstCrossing(rtol=o.event_rtol, atol=o.event_atol), direction=False)
-    controller = diffrax.PIDController(rtol=o.rtol, atol=o.atol, pcoeff=o.pcoeff, icoeff=o.icoeff,
-                                       dcoeff=o.dcoeff)
     solver = _solver(o)
 
-    def solve(k, t0, t1, z0, p, enabled, ts, dt0):
+    def solve(k, t0, t1, z0, p, enabled, ts, dt0, tol):
+        # the step controller's (rtol, atol) are traced: one compilation serves every tolerance (compile_key)
+        controller = diffrax.PIDController(rtol=tol[0], atol=tol[1], pcoeff=o.pcoeff, icoeff=o.icoeff,
+                                           dcoeff=o.dcoeff)
         f0 = jmod.rates(k, t0, z0, p)
         g0, gdot0 = jax.jvp(lambda tt, zz: jmod.guards(k, tt, zz, p), (t0, z0), (jnp.ones_like(t0), f0))
         # a guard at zero (it would cross within 1e-10 relative time) is referenced to where it is heading
@@ -258,24 +259,31 @@ class _Compiled:
 _CACHE: dict[tuple, _Compiled] = {}
 
 
-def segment_arguments(k, t0, t1, z0, p, enabled, ts, dt0):
-    """Arguments of the compiled solve as numpy values of the compiled dtypes (cheaper than jnp.asarray)."""
+def segment_arguments(k, t0, t1, z0, p, enabled, ts, dt0, tol):
+    """Arguments of the compiled solve as numpy values of the compiled dtypes (cheaper than jnp.asarray);
+    tol = (rtol, atol) of the step controller."""
     f64 = np.float64
     return (np.int32(k), f64(t0), f64(t1), np.asarray(z0, f64), np.asarray(p, f64), np.asarray(enabled, np.bool_),
-            np.asarray(ts, f64), f64(dt0))
+            np.asarray(ts, f64), f64(dt0), np.asarray(tol, f64))
+
+
+def compile_key(o: DiffraxOptions) -> DiffraxOptions:
+    """The options that shape the compiled code: an explicit solver's tolerances are traced arguments, so every
+    tolerance shares one compilation; an implicit solver's stage root finder takes them as constants."""
+    return o if o.implicit else replace(o, rtol=0.0, atol=0.0)
 
 
 def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]:
     """The compiled segment solve of a model (all its modes; AOT-compiled once per model structure and
     options); True if it was compiled by this call."""
-    key = (id(model), o)
+    key = (id(model), compile_key(o))
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, jax_model(model), False
     wall, cpu = _time.perf_counter(), _time.process_time()
     jmod = jax_model(model)          # sympy -> jax lambdification (once per model), counted with the compilation
     example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                    np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3)
+                    np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
     fn = jax.jit(make_solve(jmod, o)).lower(*example).compile()
     entry = _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
     _CACHE[key] = entry
@@ -366,7 +374,7 @@ class DiffraxBackend:
         enabled[:len(r.mf.guard_names)] = bool(self.settings.events)
         dt0 = r.first_step if r.first_step > 0 else DT0_FIRST
         return segment_arguments(jmod.index(r.mode), r.t0, t1, _z(r.mf, r.y0), np.asarray(r.p), enabled, ts,
-                                 dt0), len(chunk)
+                                 dt0, (self.o.rtol, self.o.atol)), len(chunk)
 
     def segment(self, r: Request, jmod: JaxModel, out: dict, n_chunk: int) -> Segment:
         """The compiled solve's outputs (numpy values) as a Segment in the IDA layout of the mode."""

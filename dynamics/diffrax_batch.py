@@ -25,7 +25,8 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from mechsim.dynamics.diffrax_backend import DiffraxBackend, DiffraxOptions, make_solve, segment_arguments
+from mechsim.dynamics.diffrax_backend import (DiffraxBackend, DiffraxOptions, compile_key, make_solve,
+                                              segment_arguments)
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import Trajectory, hybrid_loop, prepare
 from mechsim.dynamics.jax_model import JaxModel, jax_model
@@ -51,14 +52,14 @@ last_batch: dict = {}
 def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched, JaxModel, bool]:
     """The vmapped segment solve for `lanes` lanes (AOT-compiled once per model structure, options and batch
     size); True if it was compiled by this call."""
-    key = (id(model), o, lanes)
+    key = (id(model), compile_key(o), lanes)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, jax_model(model), False
     wall, cpu = _time.perf_counter(), _time.process_time()
     jmod = jax_model(model)
     one = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3)
+                np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
     example = tuple(np.stack([a] * lanes) for a in one)
     fn = jax.jit(jax.vmap(make_solve(jmod, o))).lower(*example).compile()
     entry = _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
@@ -102,7 +103,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
     requests: list = [None] * n
     results: list[Trajectory | None] = [None] * n
     idle = segment_arguments(0, t0, t0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                             np.zeros(jmod.ng_max, bool), np.full(o.rows(jmod.nz), t0), 1e-3)
+                             np.zeros(jmod.ng_max, bool), np.full(o.rows(jmod.nz), t0), 1e-3, (o.rtol, o.atol))
     masked: list = [idle] * n       # a finished lane's last call with t1 = t0 (it takes no step)
     for j, loop in enumerate(loops):
         requests[j] = _advance(loop, None, results, j)
@@ -115,7 +116,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
                 per_lane.append((masked[j], 0))
             else:
                 args, n_chunk = backend.arguments(request, jmod)
-                masked[j] = args[:2] + (args[1],) + args[3:6] + (np.full_like(args[6], args[1]), args[7])
+                masked[j] = args[:2] + (args[1],) + args[3:6] + (np.full_like(args[6], args[1]),) + args[7:]
                 per_lane.append((args, n_chunk))
         batched = tuple(np.stack(col) for col in zip(*(a for a, _ in per_lane)))
         out = jax.device_get(entry.fn(*batched))

@@ -129,3 +129,18 @@ def test_patient_verychord_terminates_only_on_convergence_or_divergence(step, si
     terminate, result = finder.terminate(None, None, None, {}, state, frozenset())
     assert bool(terminate) is done
     assert bool(result == optx.RESULTS.successful) is ok
+
+
+def test_one_compilation_serves_every_tolerance(motor):
+    """An explicit solver's (rtol, atol) are traced arguments: after the rtol-1e-10 run of the `motor` fixture,
+    the same model at rtol 1e-5 compiles nothing, and the tolerance still governs the solve: fewer steps, and an
+    error the size of a loose run's (against the tight run), not of the tight one's."""
+    sc = load("geneva-motor", ["solver.backend='diffrax'", "solver.rtol=1e-5", "solver.atol=1e-7",
+                               "duration='2.4 s'", "output_step='2 ms'"])
+    loose = run(sc)
+    assert loose.summary["solver"]["compilations"] == 0 and loose.summary["solver"]["compile_time_s"] == 0.0
+    assert loose.summary["solver"]["steps"] < motor.summary["solver"]["steps"] / 3
+    q_tight = motor.timeseries["crank_angle_rad"].to_numpy()
+    error = np.abs(loose.timeseries["crank_angle_rad"].to_numpy() - q_tight).max()
+    scale = np.abs(q_tight).max()
+    assert 1e-10 * scale < error <= 1000 * (1e-5 * scale + 1e-7)
