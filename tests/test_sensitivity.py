@@ -127,7 +127,10 @@ def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
     assert written["derivative"].to_numpy() == pytest.approx(table["derivative"].to_numpy(), rel=1e-12)
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["sensitivity"]["rows"]) == len(table)
-    assert summary["sensitivity"]["cost"]["sensitivity_wall_time_s"] > 0
+    cost = summary["sensitivity"]["cost"]      # the cost record: what was differentiated and how it is stated
+    assert cost["values"] == len(WRT) and cost["sensitivity_steps"] > 0
+    assert cost["sensitivity_per_run"] == pytest.approx(
+        (cost["sensitivity_wall_time_s"] - cost["sensitivity_compile_time_s"]) / cost["run_wall_time_s"], rel=1e-9)
     assert (out / "tornado.png").stat().st_size > 10_000
 
 
