@@ -306,6 +306,12 @@ def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.n
     return y, yp
 
 
+def result_message(code: int) -> str:
+    """diffrax's words for a solve's result code, first line (diffrax keeps its message table private: read
+    in this one place)."""
+    return diffrax.RESULTS._index_to_message[int(code)].splitlines()[0]
+
+
 # -- the backend ----------------------------------------------------------------------------------------------
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
              angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
@@ -398,8 +404,8 @@ class DiffraxBackend:
         is_event = code == int(diffrax.RESULTS.event_occurred._value)
         ok = code == int(diffrax.RESULTS.successful._value) or is_event
         if not ok or not np.all(np.isfinite(out["z_end"])):
-            msg = diffrax.RESULTS._index_to_message[code] if not ok else "non-finite state"
-            seg.end, seg.message = End.FAILED, f"diffrax {o.solver} failed: {msg.splitlines()[0]}"
+            msg = result_message(code) if not ok else "non-finite state"
+            seg.end, seg.message = End.FAILED, f"diffrax {o.solver} failed: {msg}"
             seg.code = (FailureCode.NON_FINITE if ok else FailureCode.MAX_STEPS
                         if code == int(diffrax.RESULTS.max_steps_reached._value) else FailureCode.INTEGRATOR_FAILED)
             return seg

@@ -89,8 +89,8 @@ class JaxMode:
         nq, nw = self.nq, self.nw
         return z[:nq], z[nq:2 * nq], z[2 * nq:2 * nq + nw], z[2 * nq + nw:]
 
-    def kkt(self, t, q, v, x, p):
-        """Accelerations a and multipliers lam from the Baumgarte-stabilised KKT system."""
+    def _kkt_pieces(self, t, q, v, x, p) -> tuple:
+        """(M, G, Q0, Ql, gamma, Phi, Phi') at one state, from the one lambdified list of the mode."""
         nq, m = self.nq, self.m
         parts = self._kkt_parts(t, q, v, x, p)
         i = 0
@@ -105,7 +105,17 @@ class JaxMode:
         G = take(m * nq, (m, nq))
         Q0 = take(nq, (nq,))
         Ql = take(nq * m, (nq, m))
-        gamma, phi, phi_dot = take(m, (m,)), take(m, (m,)), take(m, (m,))
+        return M, G, Q0, Ql, take(m, (m,)), take(m, (m,)), take(m, (m,))
+
+    def constraint_parts(self, t, q, v, p) -> tuple:
+        """(M, G, Phi, Phi') at one state: the mass matrix and the constraints' value, Jacobian and time
+        derivative G v + Phi_t (what a projection onto the constraints needs; `dynamics/sensitivity.py`)."""
+        M, G, _, _, _, phi, phi_dot = self._kkt_pieces(t, q, v, jnp.zeros(self.ne), p)
+        return M, G, phi, phi_dot
+
+    def kkt(self, t, q, v, x, p):
+        """Accelerations a and multipliers lam from the Baumgarte-stabilised KKT system."""
+        M, G, Q0, Ql, gamma, phi, phi_dot = self._kkt_pieces(t, q, v, x, p)
         alpha, beta = p[self.alpha_index], p[self.beta_index]
         return kkt.solve(M, G, Ql, Q0, -gamma - 2.0 * alpha * phi_dot - beta ** 2 * phi, xp=jnp)
 

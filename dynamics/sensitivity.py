@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
+from mechsim.dynamics.diffrax_backend import result_message
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
 from mechsim.dynamics.transitions import apply_transition
 
@@ -107,25 +108,16 @@ def _jax_fn(args, exprs):
 
 
 class _ModePieces:
-    """Constraints, mass matrix and read-outs of one mode as jax functions of (t, q, v, a, lam, x, p)."""
+    """One mode's projection onto its constraints (from the mode's `JaxMode.constraint_parts`) and its read-outs,
+    as jax functions."""
 
-    def __init__(self, mf, mech):
+    def __init__(self, mf, mech, jmode):
         s = mf.symbolic
         t, q, v, lam, x, params = s["t"], list(s["q"]), list(s["v"]), list(s["lam"]), list(s["x"]), list(s["params"])
-        self.nq, self.m = len(q), len(lam)
-        cd = s["constraints"]
-        nq, m = self.nq, self.m
-        M = sp.Matrix(s["mass"])
-        self._mass = _jax_fn([q, params], list(M))
-        self._phi = _jax_fn([t, q, params], list(cd.phi)) if m else None
-        self._G = _jax_fn([t, q, params], list(cd.G)) if m else None
-        self._phi_dot = _jax_fn([t, q, v, params], list(cd.phi_dot)) if m else None
+        self.jmode, self.m = jmode, len(lam)
         a_mech = list(mech.symbols.a)
         self.readout_names = list(mf.readout_names)
         self._readouts = _jax_fn([t, q, v, a_mech, lam, x, params], s["readout_exprs"])
-
-    def mass(self, q, p):
-        return jnp.reshape(jnp.stack([jnp.asarray(e, jnp.float64) for e in self._mass(q, p)]), (self.nq, self.nq))
 
     def project(self, t, q, v, p):
         """One minimum-norm Newton step onto Phi = 0, then the kinetic-energy-metric velocity projection onto
@@ -133,17 +125,9 @@ class _ModePieces:
         derivative of the converged projection (the terms it drops carry a factor Phi)."""
         if not self.m:
             return q, v
-        nq, m = self.nq, self.m
-
-        def stack(vals, shape):
-            return jnp.reshape(jnp.stack([jnp.asarray(e, jnp.float64) for e in vals]), shape)
-
-        phi = stack(self._phi(t, q, p), (m,))
-        G = stack(self._G(t, q, p), (m, nq))
+        _, G, phi, _ = self.jmode.constraint_parts(t, q, v, p)
         q = q - G.T @ jnp.linalg.solve(G @ G.T, phi)
-        G = stack(self._G(t, q, p), (m, nq))
-        rel = stack(self._phi_dot(t, q, v, p), (m,))
-        M = self.mass(q, p)
+        M, G, _, rel = self.jmode.constraint_parts(t, q, v, p)
         Minv_Gt = jnp.linalg.solve(M, G.T)
         v = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt, rel)
         return q, v
@@ -213,7 +197,8 @@ class _Tools:
     def __init__(self, mech, model, jmod, columns: tuple, n: int):
         wall = _time.perf_counter()
         self.model, self.jmod, self.columns = model, jmod, columns
-        self.pieces = {name: _ModePieces(mf, mech) for name, mf in model.modes.items()}
+        self.pieces = {name: _ModePieces(mf, mech, jmod.modes[jmod.index(name)])
+                       for name, mf in model.modes.items()}
         nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
         i32, f = np.int32(0), 0.0
         z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
@@ -333,7 +318,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             stats["steps"] += int(out["steps"])
             if int(out["result"]) != int(diffrax.RESULTS.successful._value):
                 raise SensitivityUnavailable(f"the sensitivity integration failed in mode '{mode}' after "
-                                             f"t = {t:.6g} s: {diffrax.RESULTS._index_to_message[int(out['result'])]}")
+                                             f"t = {t:.6g} s: {result_message(out['result'])}")
             for j, ts_j in enumerate(chunk):
                 vals, grads = (np.asarray(x) for x in tools.sample[mode](float(ts_j), out["z"][j], out["S"][j], p, P,
                                                                          offset))
