@@ -115,16 +115,19 @@ def _failure_text(f: dict | None) -> str | None:
 @dataclass
 class IdaMethod(Method):
     formulation: str = "index2"
+    backend: str = "ida"
 
     def settings(self, problem: Problem, rtol: float, atol: float) -> SolverSettings:
         a, b = problem.baumgarte
-        return SolverSettings(formulation=self.formulation, rtol=rtol, atol=atol, baumgarte_alpha=a,
-                              baumgarte_beta=b, method="dae")
+        return SolverSettings(backend=self.backend, formulation=self.formulation, rtol=rtol, atol=atol,
+                              baumgarte_alpha=a, baumgarte_beta=b, method="dae")
 
     def setup(self, problem, rtol, atol):
         from mechsim.dynamics.model import derive
         wall = time.perf_counter()
         derive(problem.mech, self.formulation, False, problem.ext)     # the first call in a process derives
+        if self.backend != "ida":          # and the compiled backend compiles (or loads) its callbacks
+            self.run(None, problem, rtol, atol)
         return None, time.perf_counter() - wall, "per process (first call)"
 
     def run(self, handle, problem, rtol, atol):
@@ -139,6 +142,12 @@ class IdaMethod(Method):
                           "segments": s["segments"]}, _failure_text(traj.failure))
 
     def count(self, handle, problem, rtol, atol):
+        if self.backend != "ida":          # IDA's own counters, read by the backend itself
+            from mechsim.dynamics.hybrid import simulate
+            s = simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
+                         problem.dt_out, problem.angle0, problem.speed0, ext=problem.ext,
+                         ext_initial=problem.ext_initial).stats
+            return {"steps": s["accepted_steps"], "rejected_steps": s["rejected_steps"]}
         from mechsim.benchmarks.ida_counters import counting
         with counting() as totals:
             self.run(handle, problem, rtol, atol)
@@ -281,6 +290,10 @@ METHODS: dict[str, Method] = {m.name: m for m in [
     IdaMethod("ida-index1", "mechsim IDA", "DAE", "index-1 DAE + Baumgarte (9 states)", formulation="index1"),
     IdaMethod("ida-index2", "mechsim IDA", "DAE", "stabilized index-2 DAE, GGL (10 states)", formulation="index2"),
     IdaMethod("ida-index3", "mechsim IDA", "DAE", "index-3 DAE (9 states)", formulation="index3"),
+    IdaMethod("ida-compiled-index1", "mechsim IDA", "DAE", "index-1 DAE + Baumgarte (9 states), compiled callbacks",
+              formulation="index1", backend="ida-compiled"),
+    IdaMethod("ida-compiled-index2", "mechsim IDA", "DAE", "stabilized index-2 DAE (10 states), compiled callbacks",
+              formulation="index2", backend="ida-compiled"),
     DiffraxMethod("diffrax-Tsit5", "mechsim diffrax", "explicit", "KKT ODE + Baumgarte", "diffrax", solver="Tsit5"),
     DiffraxMethod("diffrax-Dopri8", "mechsim diffrax", "explicit", "KKT ODE + Baumgarte", "diffrax",
                   solver="Dopri8"),

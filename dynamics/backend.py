@@ -34,6 +34,7 @@ if TYPE_CHECKING:      # the contract is imported by the settings: no sympy mode
 #: solver.backend value -> "module:class" of its backend (imported on first use: diffrax pulls in JAX)
 REGISTRY = {
     "ida": "mechsim.dynamics.ida:IdaBackend",
+    "ida-compiled": "mechsim.dynamics.ida_compiled:IdaCompiledBackend",
     "diffrax": "mechsim.dynamics.diffrax_backend:DiffraxBackend",
 }
 

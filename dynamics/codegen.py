@@ -45,13 +45,28 @@ def emit(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequen
     outputs: (target, expression), the target being e.g. "out[3]" or "JJ[1, 2]".
     prologue: extra source lines run first (e.g. "JJ.fill(0.0)"). result: the expression returned.
     """
+    source = source_of(name, signature, unpack, outputs, prologue, result, indexed=False)
+    namespace = dict(_GLOBALS)
+    exec(compile(source, f"<mechsim-generated {name}>", "exec"), namespace)
+    fn = namespace[name]
+    fn.__source__ = source
+    return fn
+
+
+def source_of(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequence[sp.Symbol]]],
+              outputs: Sequence[tuple[str, sp.Expr]], prologue: Sequence[str] = (), result: str | None = None,
+              indexed: bool = True) -> str:
+    """The source `emit` compiles. indexed=True unpacks each symbol by indexing (`a = y[0]`), the form numba
+    compiles (dynamics/compiled_model.py); False converts the array to a list once (fastest in CPython)."""
     printer = _Printer({"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": False})
     exprs = [sp.sympify(e) for _, e in outputs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_x"), optimizations="basic")
     lines = [f"def {name}({', '.join(signature)}):"]
     lines += [f"    {line}" for line in prologue]
     for array, symbols in unpack:
-        if symbols:
+        if indexed:
+            lines += [f"    {printer._print(s)} = {array}[{i}]" for i, s in enumerate(symbols)]
+        elif symbols:
             names = ", ".join(printer._print(s) for s in symbols)
             trailing = "," if len(symbols) == 1 else ""
             lines.append(f"    {names}{trailing} = {array}.tolist() if hasattr({array}, 'tolist') else {array}")
@@ -61,9 +76,4 @@ def emit(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequen
         lines.append(f"    {target} = {printer.doprint(expr)}")
     if result:
         lines.append(f"    return {result}")
-    source = "\n".join(lines) + "\n"
-    namespace = dict(_GLOBALS)
-    exec(compile(source, f"<mechsim-generated {name}>", "exec"), namespace)
-    fn = namespace[name]
-    fn.__source__ = source
-    return fn
+    return "\n".join(lines) + "\n"

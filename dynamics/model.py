@@ -195,7 +195,8 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
         symbolic=dict(t=t, q=q, v=v, lam=lam, x=x, xp=xp, params=params, mass=M, force=force,
                       constraints=cd, powers=powers, work_names=work_names, guards=guards,
                       guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
-                      readout_exprs=ro_exprs),
+                      readout_exprs=ro_exprs, residual_rows=rows, residual_jacobian=J, y=y_syms, yp=yp_syms,
+                      cj=cj),
     )
 
 

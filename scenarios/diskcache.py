@@ -15,16 +15,12 @@ import os
 import tempfile
 from pathlib import Path
 
+from mechsim.dynamics.user_cache import cache_dir
+
 #: entries kept per cache file (the oldest are dropped beyond this)
 MAX_ENTRIES = 20000
 
 
-def cache_dir() -> Path:
-    env = os.environ.get("MECHSIM_CACHE_DIR")
-    if env:
-        return Path(env)
-    from platformdirs import user_cache_dir
-    return Path(user_cache_dir("mechsim", appauthor=False))
 
 
 class JsonCache:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from mechsim.dynamics.settings import BACKENDS
 from mechsim.mechanisms.base import Field
 
 from mechsim.scenarios.units import ScenarioError, to_si
@@ -29,7 +30,7 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "no_load_speed": Field("quantity", "rad/s", default=None, positive=True, help="motor no-load speed"),
     },
     "solver": {
-        "backend": Field("str", default="ida", choices=("ida", "diffrax")),
+        "backend": Field("str", default="ida", choices=BACKENDS),
         "formulation": Field("str", default="index2", choices=("index1", "index2", "index3")),
         "method": Field("str", default="auto", choices=("auto", "dae", "closed-form"),
                         help="auto: closed form where the drive is prescribed and the model allows it"),

@@ -8,7 +8,7 @@ import mechsim
 from mechsim.benchmarks.stall_reference import GenevaCase, first_stop, static_equilibrium
 
 BACKENDS = {"index1": {"solver.formulation": "index1"}, "index2": {"solver.formulation": "index2"},
-            "diffrax": {"solver.backend": "diffrax"}}
+            "diffrax": {"solver.backend": "diffrax"}, "compiled": {"solver.backend": "ida-compiled"}}
 
 # the first reproducer: the crank comes to rest mid-engagement, where the slip vanishes with it
 HARD = {"mechanism.slots": 4, "load.wheel_torque": "20 N*m", "contact.friction": 0.15, "solver.rtol": 1e-10,

@@ -1,0 +1,215 @@
+"""The compiled IDA backend (`solver.backend = "ida-compiled"`): the same SUNDIALS IDA as the `ida` backend, with
+no Python call inside a segment.
+
+`ida` (scikit-sundae's binding) calls a Python function for every residual, Jacobian and guard evaluation and
+returns to Python at every output time; on the benchmark's case A that glue is about 90 % of the run
+(docs/benchmarks.md). Here the mode's residual, exact Jacobian and guards are native callbacks
+(`compiled_model.py`), and the loop over output times is numba-compiled code that calls IDASolve through the C
+interface of the same SUNDIALS libraries (`sundials_c.py`). The algorithm is the `ida` backend's, option for
+option (variable-order BDF, dense direct linear solver, exact Jacobian, multipliers' ids, tolerances per
+component, IDA_NORMAL at each output time with the end as stop time, guards root-found by IDA and terminal),
+so the two backends take the same steps and agree to round-off in the compiled expressions. Each mode keeps
+one IDA memory for the backend's lifetime, re-initialised (IDAReInit) at each segment instead of rebuilt.
+"""
+from __future__ import annotations
+
+import ctypes
+from functools import lru_cache
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mechsim.dynamics.backend import End, Request, Segment
+from mechsim.dynamics.ida import IdaBackend, atol_vector
+from mechsim.dynamics.result import FailureCode
+from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.sundials_c import IDA_NORMAL, IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, sundials
+from mechsim.dynamics.user_cache import cache_dir
+
+#: scikit-sundae's defaults, kept so both IDA backends run the same algorithm
+MAX_NONLINEAR_ITERATIONS, MAX_CONVERGENCE_FAILURES, MAX_ORDER = 4, 10, 5
+
+
+@lru_cache(maxsize=1)
+def _driver(lib):
+    """numba-compiled (once per process): IDASolve at each output time until the last, a root or a failure; copies the rows."""
+    from numba import njit
+    solve = lib.IDASolve
+
+    @njit(cache=False)
+    def advance(mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
+        flag = 0
+        k = 0
+        while k < t_out.size:
+            flag = solve(mem, t_out[k], tret_address, yy, yp, IDA_NORMAL)
+            if flag == IDA_ROOT_RETURN or flag < 0:
+                break
+            rows_t[k] = tret[0]
+            rows_y[k, :] = y_view
+            rows_yp[k, :] = yp_view
+            k += 1
+            if flag == 1:          # IDA_TSTOP_RETURN: the end of the segment
+                break
+        return flag, k
+    return advance
+
+
+@dataclass
+class _Memory:
+    """One mode's IDA memory and the arrays its vectors live in (kept alive with it)."""
+
+    mem: int
+    y: np.ndarray
+    yp: np.ndarray
+    yy_nv: int
+    yp_nv: int
+    p: np.ndarray
+    owned_vectors: list = field(default_factory=list)
+    matrix: int = 0
+    linear_solver: int = 0
+    n_guards: int = 0
+    roots: np.ndarray | None = None
+    keep: list = field(default_factory=list)
+
+
+class IdaCompiledBackend:
+    """SUNDIALS IDA (variable-order BDF) on the mode's residual with its exact Jacobian, every call compiled."""
+
+    name = "ida-compiled"
+    initial_step = 0.0
+    recoverable = IdaBackend.recoverable
+    unavailable: dict = {}
+    notes = {"rejected_steps": "IDA's error-test and nonlinear-convergence failures",
+             "compile_time_s": "compiling (or loading from the cache) the modes' callbacks and the segment driver"}
+
+    def __init__(self, settings: SolverSettings):
+        self.settings = settings
+        self.solver = f"IDA (BDF, {settings.formulation}; compiled callbacks)"
+        self.lib = sundials()
+        self._memories: dict[int, tuple[object, _Memory]] = {}
+        self._tret = np.zeros(1)
+
+    def hint(self, code: FailureCode) -> str:
+        return IdaBackend.hint(self, code)
+
+    # -- per-mode IDA memory ---------------------------------------------------------------------------------
+    def _memory(self, mf, compiled) -> _Memory:
+        hit = self._memories.get(id(mf))
+        if hit is not None and hit[0] is mf:
+            return hit[1]
+        lib, s, ctx = self.lib, self.settings, self.lib.context
+        y, yp = np.zeros(mf.ny), np.zeros(mf.ny)
+        m = _Memory(mem=lib.IDACreate(ctx), y=y, yp=yp, yy_nv=lib.vector(y), yp_nv=lib.vector(yp),
+                    p=np.zeros(len(mf.symbolic["params"])))
+        if not m.mem:
+            raise MemoryError("IDACreate failed")
+        atol, ids = np.ascontiguousarray(atol_vector(mf, s)), np.ones(mf.ny)
+        ids[mf.algebraic] = 0.0
+        m.keep += [atol, ids]
+        atol_nv, id_nv = lib.vector(atol), lib.vector(ids)
+        m.owned_vectors += [m.yy_nv, m.yp_nv, atol_nv, id_nv]
+        check = self._check
+        check(lib.IDAInit(m.mem, compiled.residual, 0.0, m.yy_nv, m.yp_nv), "IDAInit")
+        check(lib.IDASVtolerances(m.mem, s.rtol, atol_nv), "IDASVtolerances")
+        m.matrix = lib.SUNDenseMatrix(mf.ny, mf.ny, ctx)
+        m.linear_solver = lib.SUNLinSol_Dense(m.yy_nv, m.matrix, ctx)
+        check(lib.IDASetLinearSolver(m.mem, m.linear_solver, m.matrix), "IDASetLinearSolver")
+        if s.jacobian == "exact":
+            check(lib.IDASetJacFn(m.mem, compiled.jacobian), "IDASetJacFn")
+        check(lib.IDASetMaxNonlinIters(m.mem, MAX_NONLINEAR_ITERATIONS), "IDASetMaxNonlinIters")
+        check(lib.IDASetMaxConvFails(m.mem, MAX_CONVERGENCE_FAILURES), "IDASetMaxConvFails")
+        check(lib.IDASetMaxOrd(m.mem, MAX_ORDER), "IDASetMaxOrd")
+        check(lib.IDASetMaxNumSteps(m.mem, s.max_steps), "IDASetMaxNumSteps")
+        check(lib.IDASetId(m.mem, id_nv), "IDASetId")
+        m.n_guards = len(mf.guard_names) if s.events else 0
+        if m.n_guards:
+            check(lib.IDARootInit(m.mem, m.n_guards, compiled.guards), "IDARootInit")
+            directions = np.ascontiguousarray(mf.guard_directions, dtype=np.intc)
+            m.keep.append(directions)
+            check(lib.IDASetRootDirection(m.mem, directions.ctypes.data), "IDASetRootDirection")
+            check(lib.IDASetNoInactiveRootWarn(m.mem), "IDASetNoInactiveRootWarn")
+            m.roots = np.zeros(m.n_guards, dtype=np.intc)
+        self._memories[id(mf)] = (mf, m)
+        return m
+
+    @staticmethod
+    def _check(flag: int, what: str) -> None:
+        if flag < 0:
+            raise RuntimeError(f"{what} failed with flag {flag}")
+
+    def close(self) -> None:
+        """Free every IDA memory (also done when the backend is garbage-collected)."""
+        lib = self.lib
+        for _, m in self._memories.values():
+            box = ctypes.c_size_t(m.mem)
+            lib.IDAFree(ctypes.addressof(box))
+            lib.SUNLinSolFree(m.linear_solver)
+            lib.SUNMatDestroy(m.matrix)
+            for v in m.owned_vectors:
+                lib.N_VDestroy(v)
+        self._memories.clear()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:   # interpreter shutdown: the libraries may be gone already
+            pass
+
+    # -- one segment -------------------------------------------------------------------------------------------
+    def integrate(self, request: Request) -> Segment:
+        from mechsim.dynamics.compiled_model import compiled_mode
+        r, lib = request, self.lib
+        counts = {}
+        started = _time.perf_counter(), _time.process_time()
+        compiled, fresh = compiled_mode(r.mf, cache_dir() / "compiled")
+        if _driver.cache_info().currsize == 0:
+            fresh = True
+        driver = _driver(lib)
+        m = self._memory(r.mf, compiled)
+        if fresh:
+            counts.update(compile_time_s=_time.perf_counter() - started[0],
+                          compile_cpu_time_s=_time.process_time() - started[1], compilations=1)
+        m.y[:] = r.y0
+        m.yp[:] = r.yp0
+        m.p[:] = r.p
+        self._check(lib.IDAReInit(m.mem, r.t0, m.yy_nv, m.yp_nv), "IDAReInit")
+        self._check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")
+        self._check(lib.IDASetInitStep(m.mem, r.first_step), "IDASetInitStep")
+        self._check(lib.IDASetStopTime(m.mem, r.t_end), "IDASetStopTime")
+        t_out = r.t_out[r.t_out > r.t0]
+        n_req = len(t_out)
+        if not (n_req and t_out[-1] >= r.t_end):
+            t_out = np.append(t_out, r.t_end)
+        t_out = np.ascontiguousarray(t_out, dtype=float)
+        rows_t = np.empty(len(t_out))
+        rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
+        flag, k = driver(m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
+                               rows_t, rows_y, rows_yp)
+        flag, k = int(flag), int(k)
+        counts.update(self._counters(m.mem))
+        keep = min(k, n_req)
+        t_rows, y_rows, yp_rows = rows_t[:keep], rows_y[:keep], rows_yp[:keep]
+        t_now = float(self._tret[0])
+        if flag == IDA_ROOT_RETURN:
+            lib.IDAGetRootInfo(m.mem, m.roots.ctypes.data)
+            fired = tuple(int(i) for i in np.flatnonzero(m.roots))
+            below = t_rows < t_now
+            return Segment(t_rows[below], y_rows[below], yp_rows[below], End.GUARD, t_now, m.y.copy(),
+                           m.yp.copy(), fired=fired, counts=counts)
+        if flag < 0:
+            code = FailureCode.MAX_STEPS if flag == IDA_TOO_MUCH_WORK else FailureCode.INTEGRATOR_FAILED
+            what = ("IDA failed on the index-3 formulation" if self.settings.formulation == "index3"
+                    else "IDA failed")
+            return Segment(t_rows, y_rows, yp_rows, End.FAILED, t_now, m.y.copy(), m.yp.copy(), code=code,
+                           message=f"{what}: {lib.flag_name(flag)}", counts=counts)
+        return Segment(t_rows, y_rows, yp_rows, End.END, t_now, m.y.copy(), m.yp.copy(), counts=counts)
+
+    def _counters(self, mem: int) -> dict:
+        lib = self.lib
+        steps = lib.counter(lib.IDAGetNumSteps, mem)
+        rejected = (lib.counter(lib.IDAGetNumErrTestFails, mem)
+                    + lib.counter(lib.IDAGetNumNonlinSolvConvFails, mem))
+        return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,
+                    residual_evaluations=lib.counter(lib.IDAGetNumResEvals, mem),
+                    jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))

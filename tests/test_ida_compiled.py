@@ -1,0 +1,178 @@
+"""The compiled IDA backend (`solver.backend = "ida-compiled"`, dynamics/ida_compiled.py) runs the `ida`
+backend's algorithm with native callbacks: its callbacks must equal the generated Python functions they are
+printed from, called by SUNDIALS through real N_Vectors and a real dense matrix (so the data offsets the
+callbacks read are exercised), and its runs must give the `ida` backend's events and results within the runs'
+own accuracy on every mechanism type (Geneva with friction, chain with impacts, rolling pair through a branch
+swap, Geneva with lumped thermal states).
+
+Two runs whose step sequences differ by round-off differ by their global errors; the bound is the one of the
+restart-perturbation test, GLOBAL_FACTOR (1000) x (rtol x scale + atol) (dynamics/invariants.py).
+"""
+import ctypes
+import functools
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.dynamics.backend import backend_for
+from mechsim.dynamics.compiled_model import compiled_mode
+from mechsim.dynamics.hybrid import simulate
+from mechsim.dynamics.invariants import GLOBAL_FACTOR
+from mechsim.dynamics.result import FailureCode
+from mechsim.dynamics.sundials_c import sundials
+from mechsim.dynamics.user_cache import cache_dir
+from mechsim.scenarios.runner import execute, plan
+
+pytestmark = pytest.mark.hybrid
+
+CASES = {
+    "geneva-motor-index1": ("geneva-motor", {"duration": "2 s", "solver.formulation": "index1"}),
+    "geneva-motor-index2": ("geneva-motor", {"duration": "2 s"}),
+    "chain-mech2-torque": ("chain-mech2-torque", {}),
+    "rolling-b-components": ("rolling-b-components", {}),
+    "geneva-lumped-thermal": ("geneva-seed-lc1-mu015", {"solver.method": "dae", "duration": "1.5 s"}),
+}
+
+
+class Recorder:
+    """Wraps a backend and keeps every request it integrates (the states the callbacks are checked at)."""
+
+    def __init__(self, inner):
+        self.inner, self.requests = inner, []
+        for key in ("name", "solver", "initial_step", "recoverable", "unavailable", "notes"):
+            setattr(self, key, getattr(inner, key))
+
+    def hint(self, code):
+        return self.inner.hint(code)
+
+    def integrate(self, request):
+        self.requests.append(request)
+        return self.inner.integrate(request)
+
+
+def run(name, sets, backend_name, wrap=None):
+    the_plan = plan(mechsim.load(name, set={**sets, "solver.backend": backend_name}))
+    backend = backend_for(backend_name, the_plan.settings)
+    if wrap:
+        backend = wrap(backend)
+    return execute(the_plan, integrate=functools.partial(simulate, backend=backend)), the_plan.settings, backend
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def both(request):
+    name, sets = CASES[request.param]
+    ida, settings, recorder = run(name, sets, "ida", Recorder)
+    compiled, _, _ = run(name, sets, "ida-compiled")
+    return request.param, ida, compiled, settings, recorder.requests
+
+
+def _call(cfunc, *args):
+    return cfunc.ctypes(*args)
+
+
+def test_callbacks_equal_the_generated_python_functions(both):
+    """Residual, exact Jacobian (column-major dense SUNMatrix) and guards of every mode met in the run, at the
+    run's own restart states and at states moved off the constraint manifold (where no term cancels), through
+    SUNDIALS' vectors: equal to the plain-Python functions to 1e-12 of each output's scale (the same
+    straight-line expressions, compiled differently; round-off is ~1e-16 of the terms)."""
+    _, _, _, _, requests = both
+    lib = sundials()
+    rng = np.random.default_rng(3)
+    seen = {}
+    for r in requests:
+        seen.setdefault(r.mf.name, []).append(r)
+    assert seen
+    for mode, reqs in seen.items():
+        mf = reqs[0].mf
+        cm, _ = compiled_mode(mf, cache_dir() / "compiled")
+        m = cm.module
+        for r in reqs[:3]:
+            p = np.array(r.p, dtype=float)
+            for shift in (0.0, 1e-2):
+                y = np.array(r.y0) + shift * rng.normal(size=mf.ny) * (1 + np.abs(r.y0))
+                yp = np.array(r.yp0) + shift * rng.normal(size=mf.ny) * (1 + np.abs(r.yp0))
+                t, cj = r.t0 + 1e-3, 3.7e3
+                ny, ng = mf.ny, max(len(mf.guard_names), 1)
+                out_c, jac_c, g_c = np.zeros(ny), np.zeros(ny * ny), np.zeros(ng)
+                vy, vyp, vr = lib.vector(y), lib.vector(yp), lib.vector(out_c)
+                mat = lib.SUNDenseMatrix(ny, ny, lib.context)
+                try:
+                    pp = ctypes.cast(p.ctypes.data, ctypes.POINTER(ctypes.c_double))
+                    ptr = ctypes.c_void_p
+                    assert m.residual.ctypes(t, ptr(vy), ptr(vyp), ptr(vr), pp) == 0
+                    assert m.jacobian.ctypes(t, cj, ptr(vy), ptr(vyp), ptr(vr), ptr(mat), pp, None, None, None) == 0
+                    jac_c[:] = np.ctypeslib.as_array(ctypes.cast(lib.SUNDenseMatrix_Data(mat),
+                                                                  ctypes.POINTER(ctypes.c_double)), (ny * ny,))
+                    gp = ctypes.cast(g_c.ctypes.data, ctypes.POINTER(ctypes.c_double))
+                    assert m.guards.ctypes(t, ptr(vy), ptr(vyp), gp, pp) == 0
+                finally:
+                    for v in (vy, vyp, vr):
+                        lib.N_VDestroy(v)
+                    lib.SUNMatDestroy(mat)
+                out_py, jac_py = np.zeros(ny), np.zeros((ny, ny))
+                mf.residual(t, y, yp, out_py, r.p)
+                mf.jacobian(t, y, yp, out_py, cj, jac_py, r.p)
+                g_py = np.zeros(len(mf.guard_names))
+                if len(mf.guard_names):
+                    mf.events(t, y, yp, g_py, r.p)
+                for name, a, b in (("residual", out_c, out_py), ("jacobian", jac_c.reshape(ny, ny).T, jac_py),
+                                   ("guards", g_c[:len(g_py)], g_py)):
+                    scale = max(float(np.abs(b).max(initial=0.0)), 1e-300)
+                    assert np.abs(a - b).max(initial=0.0) <= 1e-12 * scale, (mode, name, shift)
+
+
+def test_runs_agree_with_the_scikit_sundae_backend(both):
+    """Same events in the same order, at the same times and states, and the same motion at every output row,
+    within GLOBAL_FACTOR x (rtol x scale + atol); both runs complete."""
+    case, ida, compiled, settings, _ = both
+    assert ida.failure is None and compiled.failure is None, (ida.failure, compiled.failure)
+    rtol, atol = settings.rtol, settings.atol
+    ea, eb = ida.events, compiled.events
+    assert list(ea["kind"]) == list(eb["kind"]) and list(ea["to_mode"]) == list(eb["to_mode"]), case
+    if len(ea):
+        t_scale = max(1.0, float(ea["t_s"].abs().max()))
+        assert np.abs(ea["t_s"].to_numpy() - eb["t_s"].to_numpy()).max() <= GLOBAL_FACTOR * (rtol * t_scale + atol)
+    a, b = ida.timeseries, compiled.timeseries
+    assert len(a) == len(b) and np.array_equal(a["t_s"], b["t_s"])
+    angles = [c for c in a.columns if c.endswith("_angle_rad") or c.endswith("_speed_rad_s")
+              or c.endswith("temperature_C") or c.endswith("_energy_J")]
+    assert angles
+    for c in angles:
+        x, y = a[c].to_numpy(), b[c].to_numpy()
+        scale = max(1.0, float(np.nanmax(np.abs(x))))
+        assert np.nanmax(np.abs(x - y)) <= GLOBAL_FACTOR * (rtol * scale + atol), (case, c)
+    sa, sb = ida.summary["solver"], compiled.summary["solver"]
+    assert sb["backend"] == "ida-compiled" and sb["events"] == sa["events"]
+    assert sb["accepted_steps"] > 0 and sb["rejected_steps"] >= 0
+    assert sb["steps"] == sb["accepted_steps"] + sb["rejected_steps"]
+
+
+def test_step_budget_failure_keeps_what_ran_like_the_ida_backend():
+    """Too small a step budget: both IDA backends stop with MAX_STEPS at the same instant, keep the rows
+    before it, and name IDA's flag."""
+    sets = {"duration": "1 s", "solver.max_steps": 15}
+    ida, _, _ = run("geneva-motor", sets, "ida")
+    compiled, _, _ = run("geneva-motor", sets, "ida-compiled")
+    assert ida.failure is not None and compiled.failure is not None
+    assert compiled.failure.code is FailureCode.MAX_STEPS is ida.failure.code
+    assert compiled.failure.time == pytest.approx(ida.failure.time, rel=1e-9)
+    assert "IDA_TOO_MUCH_WORK" in compiled.failure.reason
+    assert len(compiled.timeseries) == len(ida.timeseries) > 0
+
+
+def test_a_new_process_loads_the_callbacks_from_the_cache(tmp_path):
+    """Compiled once per machine: a second process finds numba's cache in the cache folder and compiles none
+    of the callbacks again."""
+    code = ("import mechsim; from mechsim.dynamics.compiled_model import loaded_modes;"
+            "mechsim.run('geneva-motor', set={'solver.backend': 'ida-compiled', 'duration': '0.3 s'});"
+            "print(all(cm.loaded_from_cache for cm in loaded_modes()), len(loaded_modes()))")
+    env = {**os.environ, "MECHSIM_CACHE_DIR": str(tmp_path)}
+    first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert first.stdout.split() == ["False", "2"], first.stderr[-2000:]
+    assert second.stdout.split() == ["True", "2"], second.stderr[-2000:]
+    assert list((tmp_path / "compiled").glob("mode_*.py"))
