@@ -14,7 +14,6 @@ one IDA memory for the backend's lifetime, re-initialised (IDAReInit) at each se
 from __future__ import annotations
 
 import ctypes
-from functools import lru_cache
 import time as _time
 from dataclasses import dataclass, field
 
@@ -24,35 +23,12 @@ from mechsim.dynamics.backend import End, Request, Segment
 from mechsim.dynamics.ida import IdaBackend, atol_vector
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
-from mechsim.dynamics.sundials_c import IDA_NORMAL, IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, sundials
+from mechsim.dynamics.native import advance
+from mechsim.dynamics.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, sundials
 from mechsim.dynamics.user_cache import cache_dir
 
 #: scikit-sundae's defaults, kept so both IDA backends run the same algorithm
 MAX_NONLINEAR_ITERATIONS, MAX_CONVERGENCE_FAILURES, MAX_ORDER = 4, 10, 5
-
-
-@lru_cache(maxsize=1)
-def _driver(lib):
-    """numba-compiled (once per process): IDASolve at each output time until the last, a root or a failure; copies the rows."""
-    from numba import njit
-    solve = lib.IDASolve
-
-    @njit(cache=False)
-    def advance(mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
-        flag = 0
-        k = 0
-        while k < t_out.size:
-            flag = solve(mem, t_out[k], tret_address, yy, yp, IDA_NORMAL)
-            if flag == IDA_ROOT_RETURN or flag < 0:
-                break
-            rows_t[k] = tret[0]
-            rows_y[k, :] = y_view
-            rows_yp[k, :] = yp_view
-            k += 1
-            if flag == 1:          # IDA_TSTOP_RETURN: the end of the segment
-                break
-        return flag, k
-    return advance
 
 
 @dataclass
@@ -81,7 +57,7 @@ class IdaCompiledBackend:
     recoverable = IdaBackend.recoverable
     unavailable: dict = {}
     notes = {"rejected_steps": "IDA's error-test and nonlinear-convergence failures",
-             "compile_time_s": "compiling (or loading from the cache) the modes' callbacks and the segment driver"}
+             "compile_time_s": "compiling (or loading from the cache) the modes' callbacks "}
 
     def __init__(self, settings: SolverSettings):
         self.settings = settings
@@ -89,6 +65,7 @@ class IdaCompiledBackend:
         self.lib = sundials()
         self._memories: dict[int, tuple[object, _Memory]] = {}
         self._tret = np.zeros(1)
+        self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
 
     def hint(self, code: FailureCode) -> str:
         return IdaBackend.hint(self, code)
@@ -162,7 +139,6 @@ class IdaCompiledBackend:
         counts = {}
         hit = self._memories.get(id(r.mf))
         m = hit[1] if hit is not None and hit[0] is r.mf else self._first_use(r.mf, counts)
-        driver = _driver(lib)
         m.y[:] = r.y0
         m.yp[:] = r.yp0
         m.p[:] = r.p
@@ -177,7 +153,7 @@ class IdaCompiledBackend:
         t_out = np.ascontiguousarray(t_out, dtype=float)
         rows_t = np.empty(len(t_out))
         rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
-        flag, k = driver(m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
+        flag, k = advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
                                rows_t, rows_y, rows_yp)
         flag, k = int(flag), int(k)
         counts.update(self._counters(m.mem))
@@ -203,10 +179,8 @@ class IdaCompiledBackend:
         first time in the process: the time goes into the compile counters)."""
         from mechsim.dynamics.compiled_model import compiled_mode
         started = _time.perf_counter(), _time.process_time()
-        fresh = _driver.cache_info().currsize == 0
-        _driver(self.lib)
         compiled, built = compiled_mode(mf, cache_dir() / "compiled")
-        if fresh or built:
+        if built:
             counts.update(compile_time_s=_time.perf_counter() - started[0],
                           compile_cpu_time_s=_time.process_time() - started[1], compilations=1)
         return self._memory(mf, compiled)

@@ -1,4 +1,5 @@
-"""numba intrinsics that read the data pointer of a SUNDIALS serial vector or dense matrix inside compiled code.
+"""numba pieces that talk to SUNDIALS from compiled code: the data pointer of a serial vector or dense matrix,
+IDASolve called through its address, and the compiled loop over a segment's output times.
 
 A SUNDIALS object is a struct whose first member points to its content; the content of a serial N_Vector and of
 a dense SUNMatrix holds the data pointer at a byte offset that `sundials_c.Sundials` measures at load time
@@ -8,7 +9,8 @@ under which compiled callbacks are cached (`compiled_model.py`).
 from __future__ import annotations
 
 from llvmlite import ir
-from numba import types
+import numpy as np
+from numba import njit, types
 from numba.extending import intrinsic
 
 from mechsim.dynamics.sundials_c import sundials
@@ -39,3 +41,38 @@ def matrix_data(typingctx, matrix):
     def codegen(context, builder, signature, args):
         return _data_pointer(builder, args[0], offset)
     return types.CPointer(types.float64)(types.voidptr), codegen
+
+
+@intrinsic
+def ida_solve(typingctx, address, mem, tout, tret, yy, yp, itask):
+    """IDASolve(mem, tout, &tret, yy, yp, itask) called through its address (an integer), so that compiled code
+    calling it holds no process-specific constant and numba can cache it."""
+    i64, i32 = ir.IntType(64), ir.IntType(32)
+    fnty = ir.FunctionType(i32, [i64, ir.DoubleType(), i64, i64, i64, i32])
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(fn, list(args[1:]))
+    return types.int32(types.int64, types.int64, types.float64, types.int64, types.int64, types.int64,
+                       types.int32), codegen
+
+
+@njit(cache=True)
+def advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
+    """IDASolve in IDA_NORMAL mode at each output time until the last one, a root (flag 2) or a failure (< 0);
+    copies each row. Returns (last flag, rows written)."""
+    flag = 0
+    k = 0
+    n = y_view.size
+    while k < t_out.size:
+        flag = ida_solve(solve_address, mem, t_out[k], tret_address, yy, yp, np.int32(1))
+        if flag == 2 or flag < 0:
+            break
+        rows_t[k] = tret[0]
+        for j in range(n):
+            rows_y[k, j] = y_view[j]
+            rows_yp[k, j] = yp_view[j]
+        k += 1
+        if flag == 1:          # IDA_TSTOP_RETURN: the end of the segment
+            break
+    return flag, k
