@@ -34,7 +34,7 @@ from mechsim.benchmarks.peer_bench import CASE_A
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 RTOL = 1e-7
-METHODS_SCALED = ("ida-index2", "diffrax-Tsit5", "casadi-idas")
+METHODS_SCALED = ("ida-compiled-index2", "ida-index2", "diffrax-Tsit5", "casadi-idas")
 
 
 def exponent(size, cost) -> float:
@@ -88,7 +88,7 @@ def mesh_scaling(rounds: int) -> pd.DataFrame:
             "drive.no_load_speed=6 rad/s", "contact.friction=0.15", 'thermal.model="1d"',
             f"thermal.mesh_growth={growth}")))
         problems[f"growth {growth:g}"] = (len(p.ext.names), p)
-    return pd.DataFrame(_median_cpu(problems, ("ida-index2",), rounds)).assign(axis="thermal_states")
+    return pd.DataFrame(_median_cpu(problems, ("ida-compiled-index2", "ida-index2"), rounds)).assign(axis="thermal_states")
 
 
 def sweep_scaling(workers: int = 2) -> tuple[pd.DataFrame, dict]:

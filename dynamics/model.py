@@ -68,6 +68,8 @@ class ModeFunctions:
     symbolic: dict = field(default_factory=dict)   # the sympy pieces, for other backends (diffrax)
     #: the KKT pieces as flat lists of entries, vectorised over output rows (dynamics/tables.py)
     kkt_flat: dict = field(default_factory=dict)
+    #: (derivation key, mode name): identifies these expressions across processes (compiled_model's cache)
+    cache_key: tuple = ()
 
 
 @dataclass
@@ -247,6 +249,8 @@ def _derive_cached(key, mech_ref, formulation, prescribed, ext_ref):
 
     modes = {name: _build_mode(mech, mode, formulation, prescribed, ext, params, P)
              for name, mode in mech.modes().items()}
+    for name, mf in modes.items():
+        mf.cache_key = (key, name)
     work_names = tuple(n for n in _work_names(mech))
     return DerivedModel(coordinates=mech.coordinates, parameter_names=pnames, work_names=work_names,
                         extension_names=tuple(ext.names) if ext else (), modes=modes,
