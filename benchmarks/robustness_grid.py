@@ -170,15 +170,16 @@ def _run(args):
 
 def _run_case_all(args):
     """One case on every backend (one process: the reference is computed once, diffrax compiles per rtol)."""
-    case, duration = args
-    rows = [_run((case, b, f, duration)) for b, f in BACKENDS]
+    case, duration, backends = args
+    rows = [_run((case, b, f, duration)) for b, f in backends]
     return rows
 
 
-def run_grid(n: int, duration: float, workers: int = 1, partial: Path | None = None) -> pd.DataFrame:
-    """Every case on every backend; cases sorted by tolerance so that a worker reuses diffrax's compiled solve.
-    partial: a CSV appended as cases finish (a long run can be inspected, or cut short, on the way)."""
-    jobs = [(c, duration) for c in sorted(cases(n), key=lambda c: (c.rtol, c.index))]
+def run_grid(n: int, duration: float, workers: int = 1, partial: Path | None = None,
+             backends: tuple[tuple[str, str], ...] = BACKENDS) -> pd.DataFrame:
+    """Every case on every (backend, formulation); cases sorted by tolerance so that a worker reuses diffrax's
+    compiled solve. partial: a CSV appended as cases finish (a long run can be inspected, or cut short)."""
+    jobs = [(c, duration, backends) for c in sorted(cases(n), key=lambda c: (c.rtol, c.index))]
     rows: list[dict] = []
     if partial is not None and partial.exists():
         rows = pd.read_csv(partial).to_dict("records")
@@ -189,7 +190,7 @@ def run_grid(n: int, duration: float, workers: int = 1, partial: Path | None = N
         rows.extend(rs)
         if partial is not None:
             pd.DataFrame(rs).to_csv(partial, mode="a", header=not partial.exists(), index=False)
-        print(f"{len(rows) // len(BACKENDS)}/{n} cases", flush=True)
+        print(f"{len(rows) // len(backends)}/{n} cases", flush=True)
 
     if workers <= 1:
         for j in jobs:
@@ -240,12 +241,15 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[1] / "docs")
     ap.add_argument("--resume", action="store_true", help="keep the partial table and run only missing cases")
+    ap.add_argument("--backends", default=",".join(f"{b}:{f}" for b, f in BACKENDS),
+                    help="comma list of backend:formulation (default: %(default)s)")
     a = ap.parse_args(argv)
+    backends = tuple(tuple(item.split(":")) for item in a.backends.split(","))
     wall = time.perf_counter()
     partial = a.out / "stability_grid.partial.csv"
     if not a.resume:
         partial.unlink(missing_ok=True)
-    table = run_grid(a.cases, a.duration, a.workers, partial)
+    table = run_grid(a.cases, a.duration, a.workers, partial, backends)
     partial.unlink(missing_ok=True)
     table.to_csv(a.out / "stability_grid.csv", index=False)
     summary = counts(table)
