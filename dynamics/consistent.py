@@ -36,20 +36,21 @@ def project_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_
     if mf.m == 0:
         return q
 
-    def residual(x):
-        return float(np.max(np.abs(np.asarray(mf.phi(t, x, p), dtype=float))))
+    def constraint(x):
+        return np.atleast_1d(np.asarray(mf.phi(t, x, p), dtype=float).ravel())
 
-    best = residual(q)
+    phi = constraint(q)
+    best = float(np.max(np.abs(phi)))
     for _ in range(max_iter):
         if best == 0.0:
             break
-        phi = np.atleast_1d(np.asarray(mf.phi(t, q, p), dtype=float).ravel())
         G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
         trial = q - np.linalg.lstsq(G, phi, rcond=None)[0]
-        r = residual(trial)
+        phi_trial = constraint(trial)
+        r = float(np.max(np.abs(phi_trial)))
         if not r < best:
             break
-        q, previous, best = trial, best, r
+        q, phi, previous, best = trial, phi_trial, best, r
         if r > 0.5 * previous:
             break
     if not best <= 1e-9:

@@ -14,6 +14,7 @@ one IDA memory for the backend's lifetime, re-initialised (IDAReInit) at each se
 from __future__ import annotations
 
 import ctypes
+import importlib
 import time as _time
 from dataclasses import dataclass, field
 
@@ -24,7 +25,7 @@ from mechsim.dynamics.ida import IdaBackend, atol_vector
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.native import advance
-from mechsim.dynamics.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, sundials
+from mechsim.dynamics.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable, sundials
 from mechsim.dynamics.user_cache import cache_dir
 
 #: scikit-sundae's defaults, kept so both IDA backends run the same algorithm
@@ -62,7 +63,12 @@ class IdaCompiledBackend:
     def __init__(self, settings: SolverSettings):
         self.settings = settings
         self.solver = f"IDA (BDF, {settings.formulation}; compiled callbacks)"
-        self.lib = sundials()
+        try:
+            importlib.import_module("numba")
+            self.lib = sundials()
+        except (ImportError, OSError, SundialsUnavailable) as exc:
+            raise ValueError(f"solver.backend = 'ida-compiled' is not available in this installation ({exc}); "
+                             "use solver.backend = 'ida'") from None
         self._memories: dict[int, tuple[object, _Memory]] = {}
         self._tret = np.zeros(1)
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value

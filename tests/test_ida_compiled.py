@@ -176,3 +176,17 @@ def test_a_new_process_loads_the_callbacks_from_the_cache(tmp_path):
     assert first.stdout.split() == ["False", "2"], first.stderr[-2000:]
     assert second.stdout.split() == ["True", "2"], second.stderr[-2000:]
     assert list((tmp_path / "compiled").glob("mode_*.py"))
+
+
+def test_without_the_sundials_libraries_the_backend_says_so_in_one_line(monkeypatch):
+    """An installation whose scikit-sundae ships no usable SUNDIALS libraries: a ValueError naming the backend,
+    the reason and the way out (the CLI prints it as one line, exit 2), not a crash inside a run."""
+    from mechsim.dynamics import ida_compiled
+    from mechsim.dynamics.sundials_c import SundialsUnavailable
+
+    def missing():
+        raise SundialsUnavailable("scikit-sundae's SUNDIALS library 'ida' was not found")
+    monkeypatch.setattr(ida_compiled, "sundials", missing)
+    with pytest.raises(ValueError, match=r"solver.backend = 'ida-compiled' is not available .*'ida' was not "
+                                         r"found.*use solver.backend = 'ida'"):
+        mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.1 s"})
