@@ -7,8 +7,8 @@
     figs = r.plot()                 # {name: matplotlib Figure}, the CLI's figures
     r.save("results/motor")         # the CLI's output folder, written atomically
 
-`mechsim sweep`, `mechsim compare` and `mechsim sensitivity` are `sweep(...)`, `compare(...)` and
-`sensitivity(...)`. The command line is a thin layer over
+`mechsim sweep`, `mechsim compare`, `mechsim sensitivity` and `mechsim size` are `sweep(...)`, `compare(...)`,
+`sensitivity(...)` and `size(...)`. The command line is a thin layer over
 these functions (scenarios/cli.py), so both give the same numbers and files.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from mechsim.scenarios.loader import Scenario, builtin_names
 from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sensitivity", "sweep"]
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sensitivity", "size", "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
 
@@ -190,3 +190,31 @@ def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: s
         items = x.split(",") if isinstance(x, str) else list(x)
         return [s.strip() for s in items if s.strip()]
     return sensitivity_table(scenario, names(wrt), names(of), change)
+
+
+def size(scenario: Scenario | str | Path, vary: str | Iterable[str] | Mapping[str, str], minimize: str,
+         subject_to: str | Iterable[str] | None = None, set: Overrides = None,  # noqa: A002
+         method: str = "slsqp", tolerance: float | None = None, max_iterations: int = 100):
+    """The best design within bounds (`mechsim size`, docs/sensitivity.md "Sizing"): minimise a headline quantity
+    (or one of the varied values) over scenario values, subject to limits on headline quantities, with the exact
+    gradients of `sensitivity`. Returns a SizingResult: `.design` (the chosen scenario, a Scenario that runs),
+    `.values` (key -> SI value), `.objective_value`, `.constraints` (value, activity, multiplier, shadow price
+    d objective / d limit), `.bounds`, `.history` (the convergence table), `.summary`, `.save(folder)`.
+
+    vary: ["section.key=LOW:HIGH unit", ...] or {"section.key": "LOW:HIGH unit"}; `mechanism.slots=3:6` enumerates
+    the slot counts. subject_to: ["peak_contact_force_N <= 500", ...]. Raises ScenarioError on a bad request and
+    `mechsim.scenarios.sizing.SizingFailed` (a RuntimeError, `.result` holding what ran) without a feasible
+    optimum."""
+    from mechsim.scenarios.sizing import size as size_design
+    if not isinstance(scenario, Scenario):
+        scenario = load(scenario, set)
+    elif set:
+        raise ValueError("size(scenario, set=...): pass the overrides to load(); the scenario is loaded")
+    if isinstance(vary, Mapping):
+        vary = [f"{key}={spec}" for key, spec in vary.items()]
+    elif isinstance(vary, str):
+        vary = [vary]
+    if isinstance(subject_to, str):
+        subject_to = [subject_to]
+    return size_design(scenario, list(vary), minimize, list(subject_to or []), method=method, tolerance=tolerance,
+                       max_iterations=max_iterations)

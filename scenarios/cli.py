@@ -441,6 +441,73 @@ def _print_sensitivity(table) -> None:
     sys.stdout.write(table[list(head)].to_string(index=False, float_format=lambda v: f"{v:.10g}") + "\n")
 
 
+@app.command()
+def size(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    vary: List[str] = typer.Option(..., "--vary", help="a value to size and its bounds: section.key=LOW:HIGH "
+                                   "[unit], e.g. mechanism.crank_radius=40:120 mm (repeatable)"),
+    minimize: str = typer.Option(..., "--minimize", help="a quantity (peak_contact_force_N, index_time_s, ...) "
+                                 "or one of the --vary keys"),
+    subject_to: List[str] = typer.Option([], "--subject-to", help="a limit: \"QUANTITY <= VALUE\" or >=, VALUE in "
+                                         "the quantity's unit (repeatable)"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+    method: str = typer.Option("slsqp", "--method", help="slsqp or trust-constr"),
+    tolerance: Optional[float] = typer.Option(None, "--tolerance", help="optimiser tolerance (default 10x "
+                                              "solver.rtol)"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/size-<name>)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
+) -> None:
+    """The best design within bounds and limits, by exact gradients (docs/sensitivity.md, "Sizing"); writes
+    design.toml (a scenario that runs), convergence.csv, convergence.png and summary.json."""
+    from mechsim.scenarios import api
+    from mechsim.scenarios.console import native_output
+    from mechsim.scenarios.sizing import SizingFailed
+    failed = None
+    try:
+        sc = api.load(scenario, set_)
+        target = _output_folder(out_dir, sc.name, force, prefix="size-")
+        with native_output():
+            result = api.size(sc, vary, minimize, subject_to, method=method, tolerance=tolerance)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except SizingFailed as exc:
+        failed, result = exc, exc.result
+    except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
+        _fail(f"size: stopped on an internal error ({type(exc).__name__}: "
+              f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'})", SOLVER_FAILURE)
+    if result is not None:
+        try:
+            result.save(target, force=force)
+        except ScenarioError as exc:
+            _fail(str(exc))
+        except OSError as exc:
+            _os_refused(exc, f"{sc.name}: the sizing")
+    if failed is not None:
+        _fail(f"size: {failed}" + (f"; the convergence history is in {target}" if result is not None else ""),
+              SOLVER_FAILURE)
+    if not quiet:
+        _print_size(result, target)
+
+
+def _print_size(result, target: Path) -> None:
+    """The design, the objective and the limits with their activity, as plain lines."""
+    s = result.summary
+    lines = [f"{s['scenario']}: minimise {s['objective']['name']} ({s['method']}, {s['iterations']} iterations, "
+             f"{s['evaluations']} runs, {s['wall_time_s']:.1f} s): {s['message']}"]
+    lines += [f"  slots = {c['slots']}: " + (f"optimum {c['objective']:.10g}" if c["feasible"] else
+                                             f"no feasible design ({c.get('why', '')})") for c in s.get("slot_choices", [])]
+    lines += [f"  {d['key']} = {d['value']:.10g} {d['unit']}".rstrip() + f"   (bounds {d['low']:.6g}..{d['high']:.6g}"
+              + (f", at its {b['active']} bound" if b["active"] else "") + ")" for d, b in zip(s["design"], s["bounds"])]
+    lines.append(f"  {s['objective']['name']} = {s['objective']['value']:.10g} (start {s['objective']['start']:.6g})")
+    for c in s["constraints"]:
+        state = (f"active, d objective / d limit = {c['shadow_price']:.6g}" if c["active"] else "inactive")
+        lines.append(f"  {c['constraint']}: {c['value']:.10g} ({state})")
+    lines.append(f"-> {target}")
+    for line in lines:
+        out.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
     try:

@@ -256,7 +256,9 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
                                    f"{exact:.6g} ({drive.kind} drive)")
 
 
-def _check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
+def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
+    """The mechanism's ParameterMap, after checking that every value in `wrt` and every quantity in `of` is traced
+    on this plan (ScenarioError naming the first that is not; `mechsim size` checks its requests with it too)."""
     si = plan.scenario.si
     mtype = si["mechanism"]["type"]
     pmap = MAPS.get(mtype)
@@ -372,7 +374,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         notes.append("prescribed speed: the run and its derivatives follow the DAE with the speed as a constraint "
                      "(solver.method = 'dae'); the closed form gives the same motion to the solver's tolerance")
     wrt = list(wrt)
-    pmap = _check_request(plan, wrt, list(of or []))
+    pmap = check_request(plan, wrt, list(of or []))
     of = list(of) if of else list(pmap.peaks + pmap.cycle)
     si, mech, drive, settings = scenario.si, plan.mechanism, plan.drive, plan.settings
     wall = time.perf_counter()

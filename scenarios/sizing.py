@@ -1,0 +1,521 @@
+"""Sizing (`mechsim size`, `mechsim.size`): the best design within bounds and limits, driven by exact gradients.
+
+A bounded, constrained optimisation over scenario values (`--vary section.key=LOW:HIGH`), minimising one headline
+quantity of the run or one of the varied values themselves, subject to limits on headline quantities
+(`--subject-to "QUANTITY <= VALUE"`). Every evaluation is one run and its forward sensitivities
+(`scenarios/sensitivity.py`, docs/sensitivity.md), so the optimiser gets the objective and the constraints with
+their exact gradients from one solve. The optimiser is scipy's SLSQP (docs/sensitivity.md, "Sizing", says why,
+with the measurements against trust-constr).
+
+The problem is solved in normalised values u = (x - low) / (high - low) in [0, 1], the objective divided by its
+size at the start and each limit written as (limit - q) / |limit| >= 0, so that one tolerance serves every
+value and quantity. Peak quantities are limited and minimised by their magnitude (a contact force limit holds
+for either flank). The multipliers at the optimum follow from the KKT conditions on the active set (non-negative
+least squares on the gradients), reported as shadow prices: the change of the optimal objective per unit change
+of each active limit or bound (Nocedal & Wright, "Numerical Optimization", 2nd ed., Theorem 12.1 and eq. 12.34).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from mechsim.scenarios.units import ScenarioError
+
+NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_BOUND = re.compile(rf"^\s*({NUMBER})\s*([^:]*?)\s*:\s*({NUMBER})\s*(.*?)\s*$")
+_LIMIT = re.compile(rf"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(<=|>=)\s*({NUMBER})\s*$")
+#: the optimisers offered; SLSQP is the default (docs/sensitivity.md, "Sizing": measured against trust-constr)
+METHODS = ("slsqp", "trust-constr")
+#: a design's largest constraint violation, relative to the limit, that still counts as feasible
+FEASIBLE = 1e-8
+#: a constraint (scaled as (limit - q) / |limit|) or a normalised bound this close is active at the optimum
+ACTIVE = 1e-6
+#: the slot count is enumerated over at most this many whole values
+MAX_SLOT_CHOICES = 12
+SLOTS = "mechanism.slots"
+
+
+class SizingFailed(RuntimeError):
+    """The optimiser stopped without a feasible optimum; `.result` holds what ran (the convergence history)."""
+
+    def __init__(self, message: str, result: "SizingResult | None" = None):
+        super().__init__(message)
+        self.result = result
+
+
+@dataclass(frozen=True)
+class Bound:
+    """One varied scenario value: its key, bounds in SI and SI unit ('' for a number without unit)."""
+
+    key: str
+    low: float
+    high: float
+    unit: str
+
+    @property
+    def column(self) -> str:
+        from mechsim.scenarios.sweep.rows import unit_suffix
+        return f"{self.key}_{unit_suffix(self.unit)}" if self.unit else self.key
+
+
+@dataclass(frozen=True)
+class Limit:
+    """A limit on a headline quantity: quantity <= value or quantity >= value (value in the quantity's unit)."""
+
+    quantity: str
+    sense: str
+    value: float
+
+    @property
+    def text(self) -> str:
+        return f"{self.quantity} {self.sense} {self.value:.12g}"
+
+    @property
+    def scale(self) -> float:
+        return abs(self.value) or 1.0
+
+    def margin(self, q: float) -> float:
+        """The scaled constraint, >= 0 when satisfied: (limit - q) / |limit| for <=, (q - limit) / |limit| for >=."""
+        return ((self.value - q) if self.sense == "<=" else (q - self.value)) / self.scale
+
+
+def parse_bound(text: str, si: dict) -> Bound:
+    """'section.key=LOW:HIGH unit' (or 'LOW unit:HIGH unit') -> Bound in SI. ScenarioError naming the problem."""
+    from mechsim.scenarios.loader import sections_for
+    from mechsim.scenarios.units import to_si
+    if "=" not in text:
+        raise ScenarioError("--vary", f"expected section.key=LOW:HIGH, got {text!r}")
+    key, spec = (s.strip() for s in text.split("=", 1))
+    parts = key.split(".")
+    fields = sections_for(si["mechanism"]["type"]).get(parts[0], {}) if len(parts) == 2 else {}
+    spec_field = fields.get(parts[-1]) if len(parts) == 2 else None
+    if spec_field is None:
+        raise ScenarioError("--vary", f"unknown scenario key {key!r} for a {si['mechanism']['type']} scenario")
+    m = _BOUND.match(spec)
+    if not m:
+        raise ScenarioError(f"--vary {key}", f"expected LOW:HIGH with an optional unit (e.g. 40:120 mm), got {spec!r}")
+    low_t, low_unit, high_t, high_unit = m.groups()
+    unit = spec_field.unit if spec_field.kind == "quantity" else ""
+    if key == SLOTS:
+        if low_unit or high_unit or not re.fullmatch(r"\d+", low_t) or not re.fullmatch(r"\d+", high_t):
+            raise ScenarioError(f"--vary {key}", f"the slot count takes whole numbers LOW:HIGH, got {spec!r}")
+        low, high = float(low_t), float(high_t)
+    elif unit:
+        low_unit = low_unit or high_unit
+        high_unit = high_unit or low_unit
+        low = to_si(key, f"{low_t} {low_unit}".strip(), unit)
+        high = to_si(key, f"{high_t} {high_unit}".strip(), unit)
+    elif spec_field.kind in ("float", "int"):
+        if low_unit or high_unit:
+            raise ScenarioError(f"--vary {key}", f"takes plain numbers (no unit), got {spec!r}")
+        low, high = float(low_t), float(high_t)
+    else:
+        raise ScenarioError(f"--vary {key}", "is not a numeric scenario value")
+    if not (math.isfinite(low) and math.isfinite(high)) or low >= high:
+        raise ScenarioError(f"--vary {key}", f"LOW must be below HIGH, got {spec!r}")
+    return Bound(key, low, high, unit)
+
+
+def parse_limit(text: str) -> Limit:
+    """'QUANTITY <= VALUE' (or >=) -> Limit; the value is in the quantity's own unit (its name's suffix)."""
+    m = _LIMIT.match(text)
+    if not m:
+        raise ScenarioError("--subject-to", f"expected \"QUANTITY <= VALUE\" or \"QUANTITY >= VALUE\" with VALUE a "
+                            f"number in the quantity's unit, got {text!r}")
+    value = float(m.group(3))
+    if not math.isfinite(value):
+        raise ScenarioError("--subject-to", f"the limit must be a finite number, got {text!r}")
+    return Limit(m.group(1), m.group(2), value)
+
+
+@dataclass
+class Evaluation:
+    """One design: the quantities (peaks as magnitudes) and their gradients per SI unit of each varied value."""
+
+    x: np.ndarray
+    values: dict
+    grads: dict
+    warnings: list
+    wall: float
+
+
+@dataclass
+class SizingResult:
+    """What `size` found: the design (a loaded Scenario that runs), its values, the quantities there, the
+    convergence history (one row per optimiser iteration), the constraint activity and shadow prices."""
+
+    design: object
+    values: dict
+    objective: str
+    objective_value: float
+    constraints: list
+    bounds: list
+    history: pd.DataFrame
+    summary: dict
+    success: bool = True
+    message: str = ""
+    choices: list = field(default_factory=list)
+
+    def design_toml(self) -> str:
+        from mechsim.scenarios.output.writer import resolved_scenario_toml
+        return resolved_scenario_toml(self.design.si)
+
+    def save(self, folder, force: bool = False):
+        """design.toml (the chosen design, a scenario `mechsim run` accepts), convergence.csv, convergence.png and
+        summary.json, atomically. Without a feasible optimum, everything but design.toml (what ran)."""
+        import json
+        from pathlib import Path
+
+        from mechsim.scenarios.output.atomic import atomic_folder, json_default
+        from mechsim.scenarios.output.csv import write_csv
+        folder = Path(folder)
+        with atomic_folder(folder, force) as tmp:
+            if self.success:
+                (tmp / "design.toml").write_text(self.design_toml())
+            write_csv(self.history, tmp / "convergence.csv")
+            convergence_figure(self).savefig(tmp / "convergence.png", dpi=110)
+            (tmp / "summary.json").write_text(json.dumps({"sizing": self.summary}, indent=2, default=json_default))
+        return folder
+
+
+class Problem:
+    """The sizing problem in normalised values u in [0, 1]: objective, constraints and gradients, each design
+    evaluated once (one run and its sensitivities), the history recorded per optimiser iteration."""
+
+    def __init__(self, base, bounds: list[Bound], objective: str, limits: list[Limit], fixed: list[str]):
+        self.base, self.bounds, self.objective, self.limits, self.fixed = base, bounds, objective, limits, fixed
+        self.keys = [b.key for b in bounds]
+        self.low = np.array([b.low for b in bounds])
+        self.span = np.array([b.high - b.low for b in bounds])
+        self.quantities = list(dict.fromkeys(([] if objective in self.keys else [objective])
+                                             + [lim.quantity for lim in limits]))
+        self.cache: dict[tuple, Evaluation] = {}
+        self.rows: list[dict] = []
+        self.f_scale = 1.0
+        self.evaluations = 0
+
+    def x_of(self, u) -> np.ndarray:
+        return self.low + np.clip(np.asarray(u, float), 0.0, 1.0) * self.span
+
+    def scenario_at(self, x):
+        """The base scenario with the varied values set to x (SI), validated like any scenario."""
+        from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, validate
+        from mechsim.scenarios.sweep.spec import toml_literal
+        overrides = list(self.fixed) + [f"{b.key}={toml_literal(f'{float(v)!r} {b.unit}' if b.unit else float(v))}"
+                                        for b, v in zip(self.bounds, x)]
+        raw = apply_overrides(self.base.raw, overrides)
+        si = validate(raw)
+        build_mechanism(si)
+        return Scenario(si["name"], raw, si, self.base.source)
+
+    def evaluate(self, u) -> Evaluation:
+        from mechsim.scenarios.sensitivity import sensitivity
+        x = self.x_of(u)
+        key = tuple(x.tolist())
+        if key in self.cache:
+            return self.cache[key]
+        wall = time.perf_counter()
+        try:
+            table = sensitivity(self.scenario_at(x), self.keys, self.quantities) if self.quantities else None
+        except ScenarioError as exc:
+            raise SizingFailed(f"the design {self.describe(x)} cannot be evaluated: {exc}") from None
+        except ValueError as exc:       # SensitivityUnavailable: no derivative at this design
+            raise SizingFailed(f"no derivatives at the design {self.describe(x)}: {exc}") from None
+        values, grads = {}, {}
+        for q in self.quantities:
+            part = table[table["quantity"] == q]
+            if part.empty:
+                why = [w for w in table.attrs["warnings"] if w.startswith(q)]
+                raise SizingFailed(f"{q} does not exist at the design {self.describe(x)}"
+                                   + (f": {why[0]}" if why else ""))
+            y = float(part["value"].iloc[0])
+            g = np.array([float(part[part["wrt"] == k]["derivative"].iloc[0]) for k in self.keys])
+            sign = np.sign(y) if q.startswith("peak_") and y != 0 else 1.0   # peaks: magnitudes
+            values[q], grads[q] = sign * y, sign * g
+        if self.objective in self.keys:
+            j = self.keys.index(self.objective)
+            values[self.objective], grads[self.objective] = float(x[j]), np.eye(len(x))[j]
+        ev = Evaluation(x, values, grads, list(table.attrs["warnings"]) if table is not None else [],
+                        time.perf_counter() - wall)
+        self.cache[key] = ev
+        self.evaluations += 1
+        return ev
+
+    def describe(self, x) -> str:
+        return ", ".join(f"{b.key} = {v:.9g} {b.unit}".rstrip() for b, v in zip(self.bounds, x))
+
+    # the scaled functions scipy sees
+    def f(self, u) -> float:
+        return self.evaluate(u).values[self.objective] / self.f_scale
+
+    def f_grad(self, u) -> np.ndarray:
+        return self.evaluate(u).grads[self.objective] * self.span / self.f_scale
+
+    def c(self, u) -> np.ndarray:
+        ev = self.evaluate(u)
+        return np.array([lim.margin(ev.values[lim.quantity]) for lim in self.limits])
+
+    def c_jac(self, u) -> np.ndarray:
+        ev = self.evaluate(u)
+        rows = [(-1.0 if lim.sense == "<=" else 1.0) * ev.grads[lim.quantity] * self.span / lim.scale
+                for lim in self.limits]
+        return np.array(rows).reshape(len(self.limits), len(self.keys))
+
+    def violation(self, u) -> float:
+        return float(max([0.0] + [-v for v in self.c(u)]))
+
+    def record(self, u) -> None:
+        ev = self.evaluate(u)
+        row = {"iteration": len(self.rows)}
+        row.update({b.column: v for b, v in zip(self.bounds, ev.x)})
+        row[f"objective_{self.objective}"] = ev.values[self.objective]
+        for lim in self.limits:
+            row[lim.quantity] = ev.values[lim.quantity]
+        row["max_violation"] = self.violation(u)
+        row["evaluations"] = self.evaluations
+        self.rows.append(row)
+
+
+def _kkt(problem: Problem, u) -> tuple[list[dict], list[dict], float]:
+    """Constraint and bound activity at u with their multipliers: the non-negative least-squares solution of
+    grad f = sum_i lambda_i grad c_i over the active set (the KKT stationarity condition, Nocedal & Wright
+    Theorem 12.1), and the relative residual of that condition. Shadow prices are d f* / d limit (eq. 12.34),
+    in the objective's unit per the limit's unit."""
+    from scipy.optimize import nnls
+    g = problem.f_grad(u)
+    c, jac = problem.c(u), problem.c_jac(u)
+    columns, owners = [], []
+    for i, lim in enumerate(problem.limits):
+        if c[i] <= ACTIVE:
+            columns.append(jac[i])
+            owners.append(("limit", i))
+    for j in range(len(problem.keys)):
+        if u[j] <= ACTIVE:
+            columns.append(np.eye(len(u))[j])
+            owners.append(("low", j))
+        elif u[j] >= 1 - ACTIVE:
+            columns.append(-np.eye(len(u))[j])
+            owners.append(("high", j))
+    lam = np.zeros(0)
+    residual = float(np.linalg.norm(g))
+    if columns:
+        lam, residual = nnls(np.array(columns).T, g)
+    size = max(float(np.linalg.norm(g)), 1e-300)
+    multipliers = dict(zip(owners, lam))
+    ev = problem.evaluate(u)
+    limits = []
+    for i, lim in enumerate(problem.limits):
+        m = multipliers.get(("limit", i))
+        price = None if m is None else float(m * problem.f_scale / lim.scale * (-1 if lim.sense == "<=" else 1)) + 0.0
+        limits.append({"constraint": lim.text, "quantity": lim.quantity, "value": ev.values[lim.quantity],
+                       "limit": lim.value, "margin_relative": float(c[i]), "active": m is not None,
+                       "multiplier": None if m is None else float(m), "shadow_price": price})
+    bounds = []
+    for j, b in enumerate(problem.bounds):
+        side = "low" if ("low", j) in multipliers else "high" if ("high", j) in multipliers else None
+        m = multipliers.get((side, j)) if side else None
+        price = None if m is None else float(m * problem.f_scale / problem.span[j] * (1 if side == "low" else -1)) + 0.0
+        bounds.append({"key": b.key, "unit": b.unit, "value": float(ev.x[j]), "low": b.low, "high": b.high,
+                       "active": side, "multiplier": None if m is None else float(m), "shadow_price": price})
+    return limits, bounds, float(residual) / size
+
+
+def _optimise(problem: Problem, u0: np.ndarray, method: str, tolerance: float, max_iterations: int):
+    """Run scipy's optimiser from u0; returns scipy's result."""
+    from scipy import optimize
+    problem.record(u0)
+    if method == "slsqp":
+        cons = [{"type": "ineq", "fun": problem.c, "jac": problem.c_jac}] if problem.limits else []
+        return optimize.minimize(problem.f, u0, jac=problem.f_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(u0),
+                                 constraints=cons, callback=problem.record,
+                                 options={"ftol": tolerance, "maxiter": max_iterations})
+    cons = [optimize.NonlinearConstraint(problem.c, 0.0, np.inf, jac=problem.c_jac)] if problem.limits else []
+    return optimize.minimize(problem.f, u0, jac=problem.f_grad, method="trust-constr",
+                             bounds=optimize.Bounds(np.zeros(len(u0)), np.ones(len(u0))), constraints=cons,
+                             callback=lambda xk, state: problem.record(xk),
+                             options={"gtol": tolerance, "xtol": tolerance, "maxiter": max_iterations})
+
+
+def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None = None, *,
+         method: str = "slsqp", tolerance: float | None = None, max_iterations: int = 100,
+         start: dict | None = None, progress: Callable[[str], None] | None = None) -> SizingResult:
+    """The design within `vary`'s bounds that minimises `minimize` (a headline quantity, or one of the varied
+    keys) subject to `subject_to` limits, from a loaded Scenario. Raises ScenarioError on a bad request (before
+    anything runs) and SizingFailed when the optimiser finds no feasible optimum (with what ran).
+
+    tolerance: the optimiser's (SLSQP's ftol on the normalised objective; trust-constr's gtol and xtol); default
+    10x the scenario's solver.rtol, within [1e-12, 1e-4]: the quantities carry the run's error, and a tolerance
+    below it makes the line search chase integration noise."""
+    if tolerance is None:
+        tolerance = min(max(10 * float(scenario.si["solver"]["rtol"]), 1e-12), 1e-4)
+    from mechsim.scenarios import runner
+    from mechsim.scenarios.sensitivity import check_request
+    if method not in METHODS:
+        raise ScenarioError("--method", f"one of {', '.join(METHODS)}, got {method!r}")
+    if not 0 < tolerance <= 1e-2:
+        raise ScenarioError("--tolerance", f"must be in (0, 0.01), got {tolerance}")
+    bounds = [parse_bound(v, scenario.si) for v in vary]
+    if not bounds:
+        raise ScenarioError("--vary", "name at least one scenario value to size: section.key=LOW:HIGH")
+    if len({b.key for b in bounds}) != len(bounds):
+        raise ScenarioError("--vary", "a key is named twice")
+    limits = [parse_limit(s) for s in (subject_to or [])]
+    slots = [b for b in bounds if b.key == SLOTS]
+    continuous = [b for b in bounds if b.key != SLOTS]
+    if minimize == SLOTS:
+        raise ScenarioError("--minimize", "the slot count is enumerated, not minimised: name a quantity or a "
+                            "continuous value")
+    if minimize.startswith(("mechanism.", "load.", "drive.", "contact.", "initial.")) and minimize not in [
+            b.key for b in continuous]:
+        raise ScenarioError("--minimize", f"{minimize!r} is a scenario value but not one of the --vary keys")
+    if slots:
+        low, high = int(slots[0].low), int(slots[0].high)
+        if high - low + 1 > MAX_SLOT_CHOICES:
+            raise ScenarioError(f"--vary {SLOTS}", f"at most {MAX_SLOT_CHOICES} slot counts are enumerated, "
+                                f"got {low}:{high}")
+        if scenario.si["mechanism"]["type"] != "geneva":
+            raise ScenarioError("--vary", f"{SLOTS} exists only for a Geneva")
+    if not continuous:
+        raise ScenarioError("--vary", "name at least one continuous value besides the slot count")
+    wall = time.perf_counter()
+    choices = [int(n) for n in range(int(slots[0].low), int(slots[0].high) + 1)] if slots else [None]
+    results, failures = [], []
+    for n in choices:
+        fixed = [f"{SLOTS}={n}"] if n is not None else []
+        base = _with(scenario, fixed)
+        plan = runner.plan(base)
+        keys = [b.key for b in continuous]
+        check_request(plan, keys, [])
+        for q, where in [(minimize, "--minimize")] + [(lim.quantity, "--subject-to") for lim in limits]:
+            if q in keys:
+                continue
+            try:
+                check_request(plan, keys, [q])
+            except ScenarioError as exc:
+                raise ScenarioError(where, exc.problem) from None
+        problem = Problem(base, continuous, minimize, limits, fixed)
+        try:
+            results.append(_solve(problem, method, tolerance, max_iterations, start, progress, n))
+        except SizingFailed as exc:
+            if n is None:
+                raise
+            failures.append((n, str(exc)))
+    feasible = [r for r in results if r.success]
+    if not feasible:
+        message = "; ".join(f"{SLOTS} = {n}: {why}" for n, why in failures) or results[0].message
+        raise SizingFailed(message, results[0] if results else None)
+    best = min(feasible, key=lambda r: r.objective_value)      # the fewest slots among equal objectives
+    best.summary["wall_time_s"] = time.perf_counter() - wall
+    if slots:
+        best.choices = [{"slots": r.summary["slots"], "objective": r.objective_value, "feasible": r.success}
+                        for r in results] + [{"slots": n, "objective": None, "feasible": False, "why": why}
+                                             for n, why in failures]
+        best.summary["slot_choices"] = best.choices
+    return best
+
+
+def _with(scenario, overrides: list[str]):
+    from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, validate
+    if not overrides:
+        return scenario
+    raw = apply_overrides(scenario.raw, overrides)
+    si = validate(raw)
+    build_mechanism(si)
+    return Scenario(si["name"], raw, si, scenario.source)
+
+
+def _solve(problem: Problem, method: str, tolerance: float, max_iterations: int, start, progress, slots):
+    """One continuous optimisation: start at the scenario's values (clipped into the bounds) or `start`."""
+    wall = time.perf_counter()
+    from mechsim.scenarios.sweep.rows import lookup
+    x0 = []
+    for b in problem.bounds:
+        v = (start or {}).get(b.key, lookup(problem.base.si, b.key))
+        x0.append(min(max(float(v if v is not None else (b.low + b.high) / 2), b.low), b.high))
+    u0 = (np.array(x0) - problem.low) / problem.span
+    first = problem.evaluate(u0)
+    problem.f_scale = abs(first.values[problem.objective]) or 1.0
+    res = _optimise(problem, u0, method, tolerance, max_iterations)
+    u = np.clip(res.x, 0.0, 1.0)
+    ev = problem.evaluate(u)
+    if problem.rows and not np.allclose([problem.rows[-1][b.column] for b in problem.bounds], ev.x, rtol=0,
+                                        atol=0):
+        problem.record(u)
+    violation = problem.violation(u)
+    limits, bounds, kkt = _kkt(problem, u)
+    history = pd.DataFrame(problem.rows)
+    success = violation <= FEASIBLE and (res.success or kkt <= 1e-6)
+    message = str(res.message)
+    if violation > FEASIBLE:
+        message = (f"no feasible design found: the largest limit violation is {violation:.3g} of its limit "
+                   f"({method}: {res.message})")
+    elif not success:
+        message = f"{method} stopped without convergence: {res.message}"
+    design = problem.scenario_at(ev.x)
+    design.si["name"] = f"{problem.base.name}-sized"
+    design.si["description"] = (f"Sized by mechsim size: minimise {problem.objective} over "
+                                f"{', '.join(problem.keys)}" + (f" subject to {'; '.join(l.text for l in problem.limits)}"
+                                                                 if problem.limits else ""))
+    summary = {
+        "scenario": problem.base.name, "method": method, "success": success, "message": message,
+        "objective": {"name": problem.objective, "value": ev.values[problem.objective],
+                      "start": first.values[problem.objective]},
+        "design": [{"key": b.key, "unit": b.unit, "value": float(v), "low": b.low, "high": b.high,
+                    "start": float(s)} for b, v, s in zip(problem.bounds, ev.x, x0)],
+        "constraints": limits, "bounds": bounds, "kkt_residual_relative": kkt,
+        "max_violation_relative": violation, "iterations": int(getattr(res, "nit", len(problem.rows) - 1)),
+        "evaluations": problem.evaluations, "tolerance": tolerance, "slots": slots,
+        "evaluation_wall_time_s": sum(e.wall for e in problem.cache.values()),
+        "solve_wall_time_s": time.perf_counter() - wall,
+        "warnings_at_optimum": ev.warnings,
+        "quantities_at_optimum": dict(ev.values),
+    }
+    if method == "trust-constr" and problem.limits:
+        summary["trust_constr_multipliers"] = [float(v) for v in np.atleast_1d(res.v[0])]
+    if progress:
+        progress(f"{method}: {summary['iterations']} iterations, {problem.evaluations} runs, {message}")
+    return SizingResult(design=design, values=dict(zip(problem.keys, ev.x.tolist())), objective=problem.objective,
+                        objective_value=ev.values[problem.objective], constraints=limits, bounds=bounds,
+                        history=history, summary=summary, success=success, message=message)
+
+
+def convergence_figure(result: SizingResult):
+    """Objective, normalised design values and constraint ratios q / limit per iteration."""
+    from matplotlib.figure import Figure
+    h = result.history
+    s = result.summary
+    fig = Figure(figsize=(8, 10), constrained_layout=True)
+    ax1, ax2, ax3, ax4 = fig.subplots(4, 1, sharex=True, gridspec_kw={"height_ratios": [1, 1, 1, 0.8]})
+    it = h["iteration"].to_numpy()
+    obj = f"objective_{result.objective}"
+    ax1.plot(it, h[obj], "o-", color="k")
+    unit = next((d["unit"] for d in s["design"] if d["key"] == result.objective), "")
+    ax1.set_ylabel(result.objective + (f" ({unit})" if unit else ""))
+    ax1.set_title(f"{s['scenario']}: minimise {result.objective} ({s['method']}; "
+                  f"{'converged' if result.success else 'NOT converged'})", fontsize=10, loc="left")
+    for d in s["design"]:
+        col = f"{d['key']}_{d['unit'].replace('*', '_').replace('/', '_').replace('^', '')}" if d["unit"] else d["key"]
+        ax2.plot(it, (h[col] - d["low"]) / (d["high"] - d["low"]), "o-",
+                 label=f"{d['key']} [{d['low']:.4g}, {d['high']:.4g}] {d['unit']}")
+    ax2.set_ylabel("design value\n(0 = LOW, 1 = HIGH)")
+    ax2.set_ylim(-0.05, 1.05)
+    ax2.legend(fontsize=8)
+    for c in s["constraints"]:
+        limit = c["limit"] if c["limit"] != 0 else 1.0
+        ax3.plot(it, h[c["quantity"]] / limit, "o-", label=c["constraint"] + (" (active)" if c["active"] else ""))
+    ax3.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax3.set_ylabel("quantity / limit")
+    if s["constraints"]:
+        ax3.legend(fontsize=8)
+    ax4.semilogy(it, np.maximum(h["max_violation"].to_numpy(float), 1e-16), "o-", color="C3")
+    ax4.axhline(FEASIBLE, color="k", lw=0.8, ls="--")
+    ax4.set_ylabel("largest violation\n(relative to its limit)")
+    ax4.set_xlabel("iteration (values below 1e-16 drawn at 1e-16; dashed: feasible)")
+    return fig

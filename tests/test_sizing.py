@@ -1,0 +1,194 @@
+"""`mechsim size` against a sizing problem with a closed-form optimum (docs/sensitivity.md, "Sizing").
+
+A 4-slot Geneva at a prescribed crank speed w whose wheel is a pure inertia J2 (no load torque, damping or
+friction): the contact force is N = J2 w^2 G'(alpha) / x(alpha) (docs/theory.md §G1-§G2), so its peak is
+J2 w^2 Phi_n / r with Phi_n from the peak angle cos(alpha_N) = (-(1 + l^2) + sqrt((1 + l^2)^2 + 60 l^2)) / (6 l),
+l = sin(pi/n); the index time is (pi - 2 pi/n) / w. The smallest crank radius with peak force <= N_max and index
+time <= t_max is then w* = (pi - 2 pi/n) / t_max, r* = J2 w*^2 Phi_n / N_max, with both limits active and shadow
+prices dr*/dN_max = -r*/N_max and dr*/dt_max = -2 r*/t_max. The run starts at the force peak, so that its first
+output row is the peak for every design.
+
+One optimisation for the whole module (the sensitivity pass compiles once, ~15 s on the shared machine); the
+refusals run nothing.
+"""
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from cli_helpers import invoke, one_line_error
+
+N_MAX, T_MAX, J2, SLOTS = 8.0, 0.3, 1.5626e-3, 4
+
+
+def closed_form(n: int = SLOTS):
+    """(alpha_N, w*, r*) of the module's problem (derivation in docs/sensitivity.md, "Sizing")."""
+    lam = math.sin(math.pi / n)
+    cos_a = (-(1 + lam**2) + math.sqrt((1 + lam**2) ** 2 + 60 * lam**2)) / (6 * lam)
+    alpha = math.acos(cos_a)
+    d = 1 - 2 * lam * cos_a + lam**2
+    phi = lam**2 * (1 - lam**2) * math.sin(alpha) / d**2.5
+    w = (math.pi - 2 * math.pi / n) / T_MAX
+    return alpha, w, J2 * w**2 * phi / N_MAX
+
+
+def scenario_text() -> str:
+    alpha, _, _ = closed_form()
+    return f"""name = "geneva-sizing-inertia"
+duration = "1.9 s"
+output_step = "10 ms"
+
+[mechanism]
+type = "geneva"
+slots = {SLOTS}
+crank_radius = "75 mm"
+pin_radius = "4 mm"
+thickness = "4 mm"
+crank_inertia = "0.02 kg*m^2"
+wheel_inertia = "{J2!r} kg*m^2"
+
+[initial]
+crank_angle = "{-alpha!r} rad"
+crank_speed = "6 rad/s"
+
+[drive]
+type = "speed"
+speed = "6 rad/s"
+
+[contact]
+friction = 0.0
+
+[solver]
+backend = "ida"
+method = "dae"
+rtol = 1e-10
+atol = 1e-12
+
+[thermal]
+model = "none"
+"""
+
+
+REQUEST = ["--vary", "mechanism.crank_radius=30:120 mm", "--vary", "drive.speed=4:10 rad/s",
+           "--minimize", "mechanism.crank_radius",
+           "--subject-to", f"peak_contact_force_N <= {N_MAX}", "--subject-to", f"index_time_s <= {T_MAX}"]
+
+
+@pytest.fixture(scope="module")
+def scenario_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sizing") / "inertia.toml"
+    path.write_text(scenario_text())
+    return path
+
+
+@pytest.fixture(scope="module")
+def sized(scenario_file, tmp_path_factory):
+    out = tmp_path_factory.mktemp("sized") / "out"
+    r = invoke("size", scenario_file, *REQUEST, "--out", out)
+    assert r.exit_code == 0, r.output
+    return out, json.loads((out / "summary.json").read_text())["sizing"]
+
+
+def test_reproduces_the_closed_form_optimum(sized):
+    """Both limits are active at the optimum, so it is the solution of two equations the run evaluates to its
+    tolerance (rtol 1e-10): 1e-6 relative leaves four orders of magnitude for the optimiser's ftol (1e-9)."""
+    _, s = sized
+    _, w, r = closed_form()
+    got = {d["key"]: d["value"] for d in s["design"]}
+    assert s["success"]
+    assert got["mechanism.crank_radius"] == pytest.approx(r, rel=1e-6)
+    assert got["drive.speed"] == pytest.approx(w, rel=1e-6)
+    assert s["objective"]["value"] == pytest.approx(r, rel=1e-6)
+
+
+def test_kkt_conditions_hold_at_the_optimum(sized, scenario_file):
+    """Activity and shadow prices as the closed form says, and stationarity checked with an independent
+    sensitivity run at the design: grad r + sum_i mu_i grad q_i = 0 with mu_i = -shadow price_i >= 0."""
+    import mechsim
+    out, s = sized
+    _, w, r = closed_form()
+    limits = {c["quantity"]: c for c in s["constraints"]}
+    assert all(c["active"] for c in limits.values())
+    assert not any(b["active"] for b in s["bounds"])
+    assert limits["peak_contact_force_N"]["shadow_price"] == pytest.approx(-r / N_MAX, rel=1e-6)
+    assert limits["index_time_s"]["shadow_price"] == pytest.approx(-2 * r / T_MAX, rel=1e-6)
+    assert s["kkt_residual_relative"] < 1e-6
+    keys = ["mechanism.crank_radius", "drive.speed"]
+    table = mechsim.sensitivity(out / "design.toml", wrt=keys, of=list(limits))
+    grad = np.array([1.0, 0.0])
+    for q, c in limits.items():
+        part = table[table["quantity"] == q].set_index("wrt")
+        grad += -c["shadow_price"] * part.loc[keys, "derivative"].to_numpy(float)
+    scale = np.array([r, w])          # per relative change of each value
+    assert np.max(np.abs(grad * scale)) < 1e-6 * r
+
+
+def test_written_design_runs_and_meets_the_limits(sized):
+    """design.toml is a scenario `mechsim run` accepts; re-run, its peak force and index time are at their limits
+    (active) and within them to the feasibility tolerance (1e-8 relative)."""
+    out, _ = sized
+    r = invoke("run", out / "design.toml", "--out", out.parent / "rerun", "--quiet", "--set", "output.plots=false")
+    assert r.exit_code == 0, r.output
+    ts = pd.read_parquet(out.parent / "rerun" / "timeseries.parquet")
+    ev = pd.read_csv(out.parent / "rerun" / "events.csv")
+    peak = float(np.max(np.abs(ts["contact_force_N"])))
+    exit_t = ev[ev["kind"] == "exit"]["t_s"].iloc[-1]
+    entry_t = ev[(ev["kind"] == "entry") & (ev["t_s"] < exit_t)]["t_s"].iloc[-1]
+    assert peak <= N_MAX * (1 + 1e-8) and peak == pytest.approx(N_MAX, rel=1e-6)
+    assert exit_t - entry_t <= T_MAX * (1 + 1e-8) and exit_t - entry_t == pytest.approx(T_MAX, rel=1e-6)
+
+
+def test_convergence_table_and_plot(sized):
+    """One row per iteration with the design values in their units; the last row is the design, feasible."""
+    out, s = sized
+    h = pd.read_csv(out / "convergence.csv")
+    assert list(h.columns) == ["iteration", "mechanism.crank_radius_m", "drive.speed_rad_s",
+                               "objective_mechanism.crank_radius", "peak_contact_force_N", "index_time_s",
+                               "max_violation", "evaluations"]
+    assert h["iteration"].tolist() == list(range(len(h)))
+    assert h["mechanism.crank_radius_m"].iloc[-1] == pytest.approx(s["design"][0]["value"], rel=1e-12)
+    assert h["max_violation"].iloc[0] > 0.05 and h["max_violation"].iloc[-1] <= 1e-8   # the start breaks a limit
+    assert (out / "convergence.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--vary", "mechanism.crank_radiu=30:120 mm", "--minimize", "peak_contact_force_N"], "--vary"),
+    (["--vary", "mechanism.crank_radius=120:30 mm", "--minimize", "peak_contact_force_N"],
+     "--vary mechanism.crank_radius"),
+    (["--vary", "mechanism.crank_radius=30:120 mm", "--minimize", "peak_contact_temp_K"], "--minimize"),
+    (["--vary", "mechanism.crank_radius=30:120 mm", "--minimize", "peak_temp_contact_C"], "--minimize"),
+    (["--vary", "mechanism.crank_radius=30:120 mm", "--minimize", "mechanism.crank_radius",
+      "--subject-to", "peak_contact_force_N < 8"], "--subject-to"),
+    (["--vary", "mechanism.crank_radius=30:120 mm", "--minimize", "mechanism.crank_radius",
+      "--subject-to", "peak_flux_W <= 8"], "--subject-to"),
+    (["--vary", "mechanism.slots=3:40", "--vary", "mechanism.crank_radius=30:120 mm", "--minimize",
+      "mechanism.crank_radius"], "--vary mechanism.slots"),
+    (["--vary", "mechanism.crank_radius=30:120 mm", "--minimize", "mechanism.wheel_inertia"], "--minimize"),
+])
+def test_bad_requests_are_refused_in_one_line(scenario_file, tmp_path, args, field):
+    out = tmp_path / "out"
+    r = invoke("size", scenario_file, *args, "--out", out)
+    assert r.exit_code == 2
+    assert one_line_error(r).startswith(f"error: {field}:")
+    assert not out.exists()
+
+
+def test_slot_count_is_enumerated(sized, scenario_file):
+    """The slot count is not differentiable (a whole number): each count gets its own continuous optimum and the
+    best feasible one wins. At w = 6 rad/s the 4-slot optimum is the closed form r = J2 w^2 Phi_4 / N_max; the
+    5-slot wheel's gentler kinematics allow a smaller crank, so 5 slots win."""
+    import mechsim
+    result = mechsim.size(scenario_file, vary=["mechanism.slots=4:5", "mechanism.crank_radius=30:120 mm"],
+                          minimize="mechanism.crank_radius", subject_to=[f"peak_contact_force_N <= {N_MAX}"])
+    choices = {c["slots"]: c for c in result.summary["slot_choices"]}
+    assert set(choices) == {4, 5} and all(c["feasible"] for c in choices.values())
+    lam = math.sin(math.pi / 4)
+    alpha, _, _ = closed_form()
+    d = 1 - 2 * lam * math.cos(alpha) + lam**2
+    r4 = J2 * 6.0**2 * lam**2 * (1 - lam**2) * math.sin(alpha) / d**2.5 / N_MAX
+    assert choices[4]["objective"] == pytest.approx(r4, rel=1e-6)
+    assert choices[5]["objective"] < r4
+    assert result.design.si["mechanism"]["slots"] == 5
+    assert result.objective_value == choices[5]["objective"]
+    assert abs(result.summary["quantities_at_optimum"]["peak_contact_force_N"]) <= N_MAX * (1 + 1e-8)
