@@ -192,3 +192,35 @@ def test_slot_count_is_enumerated(sized, scenario_file):
     assert result.design.si["mechanism"]["slots"] == 5
     assert result.objective_value == choices[5]["objective"]
     assert abs(result.summary["quantities_at_optimum"]["peak_contact_force_N"]) <= N_MAX * (1 + 1e-8)
+
+
+def test_minimising_a_quantity_with_a_bound_active(scenario_file):
+    """Minimise the peak force itself: the crank radius goes to its upper bound and the speed to the index-time
+    limit, N* = J2 w*^2 Phi_4 / r_high; the shadow prices are dN*/dr_high = -N*/r_high and dN*/dt_max = -2 N*/t_max
+    (the bound's multiplier from the same KKT solve as the limits')."""
+    import mechsim
+    alpha, w, r = closed_form()
+    n_star = r * N_MAX / 0.12           # J2 w*^2 Phi / r_high
+    result = mechsim.size(scenario_file, vary=["mechanism.crank_radius=30:120 mm", "drive.speed=4:10 rad/s"],
+                          minimize="peak_contact_force_N", subject_to=[f"index_time_s <= {T_MAX}"])
+    assert result.objective_value == pytest.approx(n_star, rel=1e-6)
+    assert result.values["drive.speed"] == pytest.approx(w, rel=1e-6)
+    radius, speed = result.bounds
+    assert radius["active"] == "high" and speed["active"] is None
+    assert radius["shadow_price"] == pytest.approx(-n_star / 0.12, rel=1e-6)
+    assert result.constraints[0]["active"]
+    assert result.constraints[0]["shadow_price"] == pytest.approx(-2 * n_star / T_MAX, rel=1e-6)
+
+
+def test_infeasible_limits_exit_3_with_the_history(scenario_file, tmp_path):
+    """No design within the bounds meets a 0.5 N limit (the largest crank at the slowest admissible speed gives
+    4.1 N): exit 3 with one line saying so; the convergence table and summary are written, no design.toml."""
+    out = tmp_path / "out"
+    r = invoke("size", scenario_file, "--vary", "mechanism.crank_radius=30:120 mm", "--vary", "drive.speed=4:10 rad/s",
+               "--minimize", "mechanism.crank_radius", "--subject-to", "peak_contact_force_N <= 0.5",
+               "--subject-to", f"index_time_s <= {T_MAX}", "--out", out)
+    assert r.exit_code == 3
+    assert "no feasible design found" in one_line_error(r)
+    s = json.loads((out / "summary.json").read_text())["sizing"]
+    assert not s["success"] and s["max_violation_relative"] > 1
+    assert (out / "convergence.csv").exists() and not (out / "design.toml").exists()
