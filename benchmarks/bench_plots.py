@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from matplotlib import rcParams
+from matplotlib import colormaps, rcParams
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -20,6 +20,8 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
     fig = Figure(figsize=(17, max(6.4, 2.2 + 0.42 * len(methods))), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.25, 1.0, 0.8]})
     colors = rcParams["axes.prop_cycle"].by_key()["color"]
+    if len(methods) > len(colors):      # more methods than the default cycle: 20 distinct colours
+        colors = [colormaps["tab20"](k) for k in range(20)]
     for i, name in enumerate(methods):
         d = rows[rows.method == name].sort_values("rtol", ascending=False)
         family = d.family.iloc[0]
