@@ -13,8 +13,10 @@ Phi' and Phi'' are derived by sympy from Phi (no hand-written derivatives).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import sympy as sp
+if TYPE_CHECKING:      # sympy is loaded by the functions that derive (the solver settings only need the names)
+    import sympy as sp
 
 FORMULATIONS = ("index1", "index2", "index3")
 
@@ -32,6 +34,7 @@ class ConstraintDerivatives:
 
 def differentiate_constraints(phi: list[sp.Expr], t: sp.Symbol, q, v, a) -> ConstraintDerivatives:
     """Time derivatives of Phi(t, q) along q' = v, v' = a."""
+    import sympy as sp
     phi_m = sp.Matrix(phi) if phi else sp.zeros(0, 1)
     G = phi_m.jacobian(list(q)) if phi else sp.zeros(0, len(q))
 
@@ -57,6 +60,7 @@ def mechanical_residual(formulation: str, M: sp.Matrix, Q: sp.Matrix, cd: Constr
     qp, vp are the symbols standing for q', v' (IDA's yp). Returns rows in the order
     [q rows (nq), v rows (nq), constraint rows (m, or 2m for index2)].
     """
+    import sympy as sp
     if formulation not in FORMULATIONS:
         raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
     nq = len(q)

@@ -1,11 +1,15 @@
 """Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
 
 from mechsim.dynamics import kkt
-from mechsim.dynamics.hybrid import Trajectory
+
+if TYPE_CHECKING:      # the tables read a finished Trajectory; importing the loop would load sympy for nothing
+    from mechsim.dynamics.hybrid import Trajectory
 
 
 def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:

@@ -13,10 +13,13 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Mapping
+from functools import cached_property
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
-import sympy as sp
+
+if TYPE_CHECKING:                      # sympy is imported where a model is derived, not to run a closed form
+    import sympy as sp
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,7 @@ class Symbols:
 
     @classmethod
     def make(cls, coordinates: tuple[str, ...], max_constraints: int, params: tuple[str, ...]) -> "Symbols":
+        import sympy as sp
         real = dict(real=True)
         return cls(
             t=sp.Symbol("t", **real),
@@ -195,8 +199,11 @@ class Mechanism(ABC):
     #: default thermal model and whether the mechanism has a sliding contact at all
     has_sliding_contact: bool = False
 
-    def __init__(self) -> None:
-        self.symbols = Symbols.make(self.coordinates, self.max_constraints, self.parameter_names)
+    @cached_property
+    def symbols(self) -> Symbols:
+        """The symbols of this model's expressions, made on first use (so that a closed-form run, which derives
+        nothing, need not import sympy)."""
+        return Symbols.make(self.coordinates, self.max_constraints, self.parameter_names)
 
     @classmethod
     def from_config(cls, config: dict[str, dict]) -> "Mechanism":

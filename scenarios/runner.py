@@ -14,7 +14,6 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.invariants import first_violation
 from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
@@ -209,9 +208,10 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     else:
         speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
         if integrate is None:   # a caller (the batched sweep) may supply the backend call itself
-            integrate = simulate
             if settings.backend == "diffrax":
                 from mechsim.dynamics.diffrax_backend import simulate as integrate
+            else:               # imported here: a closed-form run derives no DAE and need not load sympy
+                from mechsim.dynamics.hybrid import simulate as integrate
         traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)

@@ -133,12 +133,12 @@ def test_console_script_user_error_has_no_traceback(tmp_path):
 
 
 def test_unforeseen_backend_error_is_one_line_exit_3(tmp_path, monkeypatch):
-    import mechsim.scenarios.runner as runner_module
+    import mechsim.dynamics.hybrid as hybrid_module      # the runner imports the DAE loop from here when it runs one
 
     def broken(*args, **kwargs):
         raise RuntimeError("saveat.ts must be increasing\nmore lines of jax noise")
 
-    monkeypatch.setattr(runner_module, "simulate", broken)
+    monkeypatch.setattr(hybrid_module, "simulate", broken)
     r = invoke("run", "geneva-motor", "--out", tmp_path / "o", "--quiet")
     assert r.exit_code == 3
     line = one_line_error(r)

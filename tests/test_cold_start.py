@@ -53,3 +53,16 @@ def test_errors_are_never_cached(tmp_path):
     cache = tmp_path / "cache"
     assert fresh(code, cache, tmp_path).strip() == "mechanism.crank_radius"
     assert fresh(code, cache, tmp_path).strip() == "mechanism.crank_radius"
+
+
+def test_a_closed_form_run_derives_nothing_and_loads_no_solver_stack(tmp_path):
+    """A prescribed-speed Geneva run with lumped thermal (geneva-lc1) is the closed form plus the thermal network
+    in numpy: it must not import sympy (no model is derived), scipy's interpolate/special/optimize/integrate (the
+    band-source table ships its spline), the solvers or matplotlib."""
+    code = ("import sys\nimport mechsim\nr = mechsim.run('geneva-lc1')\n"
+            "print(sorted(m for m in ('sympy', 'scipy.interpolate', 'scipy.special', 'scipy.optimize', "
+            "'scipy.integrate', 'jax', 'sksundae', 'matplotlib') if m in sys.modules))\n"
+            "print(r.summary['model']['method'], len(r.timeseries))")
+    lines = fresh(code, tmp_path / "cache", tmp_path).split("\n")
+    assert lines[0] == "[]"
+    assert lines[1] == "closed-form 3001"

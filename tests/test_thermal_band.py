@@ -142,3 +142,22 @@ def test_shipped_table_nodes_are_the_exact_integral():
     for kind in bs.KINDS:
         for stat in bs.STATISTICS:
             np.testing.assert_allclose(data.VALUES[(kind, stat)], bs.table_nodes_exact(kind, stat), rtol=1e-10)
+
+
+def test_shipped_spline_is_scipys_cubic_spline_through_the_nodes():
+    """band_table_data.py's coefficients are scipy's CubicSpline (not-a-knot) of ln(theta) in ln(L) through the
+    shipped node values, and `evaluate_piecewise_cubic` gives PPoly's values (its interval rule at and between
+    the nodes, the end pieces beyond them): so the fast table is the spline it was before the coefficients were
+    shipped (to scipy's own round-off; bit for bit on x86-64) without importing scipy.interpolate in a run."""
+    from scipy.interpolate import CubicSpline, PPoly
+
+    from mechsim.thermal import band_table_data as data
+    x = bs.table_log_nodes()
+    rng = np.random.default_rng(7)
+    at = np.concatenate([x, np.nextafter(x, -np.inf), np.nextafter(x, np.inf), rng.uniform(x[0] - 0.5, x[-1] + 0.5, 5000),
+                         np.log([1e-4, 1e4])])
+    for key, values in data.VALUES.items():
+        spline = CubicSpline(x, np.log(values))
+        shipped = np.asarray(data.COEFFICIENTS[key])
+        np.testing.assert_allclose(shipped, spline.c, rtol=1e-12, atol=1e-15 * np.abs(spline.c).max())
+        np.testing.assert_array_max_ulp(bs.evaluate_piecewise_cubic(x, shipped, at), PPoly(shipped, x)(at), maxulp=2)

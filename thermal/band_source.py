@@ -18,8 +18,18 @@ import functools
 import math
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.special import k0e
+
+
+def k0e(z):
+    """scipy.special.k0e (the exact integrals' kernel), imported on first call: a run evaluates the shipped table
+    and need not load scipy.special."""
+    return _special().k0e(z)
+
+
+@functools.lru_cache(maxsize=None)
+def _special():
+    import scipy.special
+    return scipy.special
 
 
 def quad(*args, **kwargs):
@@ -210,23 +220,42 @@ def table_nodes_exact(kind: str, statistic: str) -> np.ndarray:
     return band_theta_exact(np.exp(table_log_nodes()), kind, statistic)
 
 
+def table_spline_coefficients(values) -> np.ndarray:
+    """The coefficients (4, nodes - 1) of scipy's CubicSpline (not-a-knot) of ln(theta) in ln(L) through the node
+    values: row 0 the cubic term, in each interval's local coordinate (scipy.interpolate.PPoly's layout)."""
+    from scipy.interpolate import CubicSpline
+    return CubicSpline(table_log_nodes(), np.log(np.asarray(values, dtype=float))).c
+
+
+def evaluate_piecewise_cubic(breaks: np.ndarray, c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A piecewise cubic (scipy.interpolate.PPoly's layout: c[k, i] multiplies (x - breaks[i])^(3-k) on
+    breaks[i] <= x < breaks[i+1], the end pieces extended beyond the ends) at x, in numpy with PPoly's own
+    interval rule and order of operations (sum of c[3-k] (x - b)^k for k = 0..3, powers by repeated
+    multiplication), so it gives scipy's values; tests/test_thermal_band.py compares the two."""
+    i = np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
+    s = x - breaks[i]
+    s2 = s * s
+    return ((c[3, i] + c[2, i] * s) + c[1, i] * s2) + c[0, i] * (s2 * s)
+
+
 @functools.lru_cache(maxsize=None)
-def _table(kind: str, statistic: str) -> CubicSpline:
-    """The spline through the node values shipped in band_table_data.py (the same numbers as
-    `table_nodes_exact`, checked by the tests), or computed here when the table's grid has changed."""
+def _table(kind: str, statistic: str) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, coefficients) of the spline through the node values: as shipped in band_table_data.py (the values
+    `table_nodes_exact` gives and the coefficients `table_spline_coefficients` makes of them, both checked by the
+    tests), or computed here when the table's grid has changed."""
     from mechsim.thermal import band_table_data as data
-    values = data.VALUES.get((kind, statistic))
+    coefficients = data.COEFFICIENTS.get((kind, statistic))
     if (data.LOG10_RANGE != tuple(TABLE_LOG10_RANGE) or data.NODES_PER_DECADE != TABLE_NODES_PER_DECADE
-            or values is None):
-        values = table_nodes_exact(kind, statistic)
-    return CubicSpline(table_log_nodes(), np.log(np.asarray(values, dtype=float)))
+            or coefficients is None):
+        coefficients = table_spline_coefficients(table_nodes_exact(kind, statistic))
+    return table_log_nodes(), np.asarray(coefficients, dtype=float)
 
 
 def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
     """Fast theta_max/theta_avg for arrays of L (the evaluator to use at every output instant).
 
-    A cubic spline of ln(theta) in ln(L) through the exact values at 5 nodes per decade on 1e-4..1e4 (shipped
-    in band_table_data.py, built into a spline once per (kind, statistic) on first use); outside that range the exact asymptotes
+    A cubic spline of ln(theta) in ln(L) through the exact values at 5 nodes per decade on 1e-4..1e4 (the
+    values and the spline's coefficients shipped in band_table_data.py); outside that range the exact asymptotes
     `band_theta_high`/`band_theta_low` (relative mismatch at the table ends < 1e-4). Measured max relative
     error against the exact integral over 1e-3 < L < 1e3 (600 log-spaced points): max 2.1e-6 / 3.9e-6
     (uniform / semi-elliptic), avg 1.4e-5 / 1.4e-5; bound asserted: TABLE_MAX_REL_ERROR = 2e-5.
@@ -237,11 +266,13 @@ def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
     if np.any(L < 0) or np.any(np.isnan(L)):
         raise ValueError("band_theta_table: Peclet numbers must be >= 0")
     lo, hi = (10.0**v for v in TABLE_LOG10_RANGE)
-    spline = _table(kind, statistic)
+    nodes, coefficients = _table(kind, statistic)
     with np.errstate(divide="ignore"):
-        inside = np.exp(spline(np.log(np.clip(L, lo, hi))))
-        out = np.where(L < lo, band_theta_low(L, kind, statistic),
-                       np.where(L > hi, band_theta_high(np.maximum(L, hi), kind, statistic), inside))
+        out = np.asarray(np.exp(evaluate_piecewise_cubic(nodes, coefficients, np.log(np.clip(L, lo, hi)))))
+        if np.any(L < lo):                 # the asymptotes only where needed: the high one costs a quadrature
+            out = np.where(L < lo, band_theta_low(L, kind, statistic), out)
+        if np.any(L > hi):
+            out = np.where(L > hi, band_theta_high(np.maximum(L, hi), kind, statistic), out)
     return out
 
 
@@ -301,19 +332,31 @@ def band_stationary_transient_centre_asymptote(fourier):
     return (np.log(4.0 * np.asarray(fourier, dtype=float)) + 2.0 - EULER_GAMMA) / np.pi
 
 
-def write_table_data(path) -> None:
-    """Regenerate band_table_data.py (the exact node values of every kind and statistic)."""
+def write_table_data(path, values: dict | None = None) -> None:
+    """Regenerate band_table_data.py: the exact node values of every kind and statistic (`values`, keyed like
+    band_table_data.VALUES, or None to integrate them afresh) and the spline coefficients made of them."""
     from pathlib import Path
     from mechsim.thermal import band_table_data as data
     head = data.__doc__.strip()
+    keys = [(kind, statistic) for kind in ("uniform", "semi-elliptic") for statistic in ("max", "avg")]
+    values = {key: (values or {}).get(key) for key in keys}
+    values = {key: v if v is not None else table_nodes_exact(*key) for key, v in values.items()}
+
+    def block(numbers, indent):
+        numbers = [repr(float(x)) for x in numbers]
+        return [indent + ", ".join(numbers[i:i + 4]) + "," for i in range(0, len(numbers), 4)]
+
     lines = [f'"""{head}"""', "", f"LOG10_RANGE = {tuple(TABLE_LOG10_RANGE)!r}",
              f"NODES_PER_DECADE = {TABLE_NODES_PER_DECADE!r}", "", "VALUES = {"]
-    for kind in ("uniform", "semi-elliptic"):
-        for statistic in ("max", "avg"):
-            values = [repr(float(x)) for x in table_nodes_exact(kind, statistic)]
-            lines.append(f"    ({kind!r}, {statistic!r}): (")
-            lines += ["        " + ", ".join(values[i:i + 4]) + "," for i in range(0, len(values), 4)]
-            lines.append("    ),")
+    for key in keys:
+        lines += [f"    {key!r}: ("] + block(values[key], "        ") + ["    ),"]
+    lines += ["}", "", "#: table_spline_coefficients(VALUES[key]): rows of the cubic, quadratic, linear and constant terms",
+              "COEFFICIENTS = {"]
+    for key in keys:
+        lines.append(f"    {key!r}: (")
+        for row in table_spline_coefficients(values[key]):
+            lines += ["        ("] + block(row, "            ") + ["        ),"]
+        lines.append("    ),")
     Path(path).write_text("\n".join(lines + ["}"]) + "\n")
 
 

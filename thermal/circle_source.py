@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import i0e
 
 
 def quad(*args, **kwargs):
@@ -77,5 +76,6 @@ def circle_theta_avg_exact(peclet: float) -> float:
     (overlap area of two unit discs; the angular integral of exp(-Pe rho (1 + cos phi)) is 2 pi e^{-Pe rho} I0).
     Pe = 0 gives 8/(3 pi) (docs/theory.md §G4.5).
     """
+    from scipy.special import i0e      # here: a fresh `mechsim run` need not load scipy.special
     area = lambda r: 2.0 * math.acos(0.5 * r) - 0.5 * r * math.sqrt(max(0.0, 4.0 - r * r))
     return quad(lambda r: area(r) * i0e(peclet * r), 0.0, 2.0, limit=200, epsabs=1e-13, epsrel=1e-11)[0] / math.pi

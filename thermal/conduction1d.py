@@ -15,7 +15,6 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sps
-from scipy.special import erfc
 
 from mechsim.thermal.linear import LinearThermalSystem
 from mechsim.thermal.materials import Material, get_material
@@ -163,6 +162,7 @@ def conduction_system(mesh: Mesh1D, material: Material | str, *, h: float = 0.0,
 # ---------------------------------------------------------------------------------------------- exact solutions
 def ierfc(u):
     """ierfc(u) = e^{-u^2}/sqrt(pi) - u erfc(u) (Carslaw & Jaeger 1959, App. II)."""
+    from scipy.special import erfc     # here: a fresh `mechsim run` need not load scipy.special
     u = np.asarray(u, dtype=float)
     return np.exp(-u * u) / math.sqrt(math.pi) - u * erfc(u)
 

@@ -23,15 +23,17 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sps
-import sympy as sp
 
 from mechsim.thermal.band_source import band_fit
 from mechsim.thermal.flash import TRANSIENT_FLOOR_COEFFICIENT
 from mechsim.thermal.linear import LinearThermalSystem
+
+if TYPE_CHECKING:      # sympy is imported by the functions that build residual rows (the numpy path needs none)
+    import sympy as sp
 
 #: Regularising half-width b0 (m): of the order of the roughness of ground steel (Rq 0.2-1 µm), below which a
 #: smooth Hertz contact is not meaningful anyway; it changes b only for N below ~0.1 N (seed geometry).
@@ -65,8 +67,13 @@ class ShareModel:
                 "th_chi_wheel": self.chi_wheel, "th_t_ref": self.t_ref}
 
 
+def _is_sympy(xp) -> bool:
+    """Whether the array namespace `xp` is sympy (told by name, so that the numpy path never imports it)."""
+    return getattr(xp, "__name__", "") == "sympy"
+
+
 def _abs(x, xp):
-    return sp.Abs(x) if xp is sp else np.abs(x)
+    return xp.Abs(x) if _is_sympy(xp) else np.abs(x)
 
 
 def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> type[sp.Function]:
@@ -76,6 +83,7 @@ def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> ty
     (for the heat share this cut the model derivation from ~6 s to ~1 s); every code printer (plain Python,
     numpy, jax, lambdify) prints the explicit expression with the call's arguments substituted.
     """
+    import sympy as sp
     cache: dict[int, type[sp.Function]] = {}
 
     def fdiff(self, argindex=1):
@@ -94,6 +102,7 @@ def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> ty
 @functools.lru_cache(maxsize=None)
 def _share_function(distribution: str) -> tuple[type[sp.Function], tuple[sp.Symbol, ...]]:
     """gamma_pin(N, U_pin, U_wheel, share parameters) as one opaque sympy function (see `heat_share_pin`)."""
+    import sympy as sp
     N, u_pin, u_wheel = sp.symbols("N U_pin U_wheel", real=True)
     params = sp.symbols(SHARE_PARAMETERS, positive=True)
     by_name = dict(zip(SHARE_PARAMETERS, params))
@@ -123,7 +132,7 @@ def heat_share_pin(contact: dict, P: Callable[[str], object], distribution: str,
     P(name) gives the SHARE_PARAMETERS (symbols or numbers). With xp = sympy the result is one opaque call
     (`opaque_function`) of the same expression. docs/theory.md §G4.3 (fit), §4.6 (partition, transient floor).
     """
-    if xp is not sp:
+    if not _is_sympy(xp):
         return _share_expression(contact, P, distribution, xp)
     fn, _ = _share_function(distribution)
     return fn(contact["normal_force"], contact["source_speed_driver"], contact["source_speed_driven"],
@@ -152,8 +161,8 @@ def heat_inputs(contact: dict, P: Callable[[str], object], inputs: Sequence[Heat
         rate = gamma * Q if spec.body == "pin" else (1 - gamma) * Q
         if spec.tracks:
             track = contact.get("track", 0)
-            if xp is sp:
-                on = sp.Piecewise((1, sp.Eq(sp.Mod(track, spec.tracks), spec.track)), (0, True))
+            if _is_sympy(xp):
+                on = xp.Piecewise((1, xp.Eq(xp.Mod(track, spec.tracks), spec.track)), (0, True))
             else:
                 on = np.where(np.mod(np.rint(np.asarray(track, dtype=float)), spec.tracks) == spec.track, 1.0, 0.0)
             rate = rate * on
@@ -213,6 +222,7 @@ class ThermalExtension:
         return values
 
     def rows(self, x: Sequence[sp.Symbol], xp: Sequence[sp.Symbol], contact: dict, P) -> list[sp.Expr]:
+        import sympy as sp
         n = self.system.size
         T, Tp = list(x[:n]), list(xp[:n])
         u, Q, gamma = heat_inputs(contact, P, self.inputs, self.share.distribution, sp)

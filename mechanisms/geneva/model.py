@@ -16,15 +16,17 @@ unit); the load torque is then carried by the lock and locking friction is negle
 """
 from __future__ import annotations
 
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
-import sympy as sp
 
 from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
+
+if TYPE_CHECKING:                      # the symbolic model imports sympy when it is built (a closed form needs none)
+    import sympy as sp
 
 
 class Geneva(Mechanism):
@@ -101,10 +103,12 @@ class Geneva(Mechanism):
 
     # -- symbolic model -------------------------------------------------------------------------------
     def mass_matrix(self) -> sp.Matrix:
+        import sympy as sp
         P = self.symbols.p
         return sp.diag(P("J1"), P("J2"))
 
     def modes(self) -> dict[str, Mode]:
+        import sympy as sp
         s, P = self.symbols, self.symbols.p
         t = s.t
         theta, psi = s.q
