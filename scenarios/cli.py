@@ -506,6 +506,8 @@ def _print_size(result, target: Path) -> None:
     lines.append(f"-> {target}")
     for line in lines:
         out.print(line, markup=False, highlight=False, soft_wrap=True)
+    for w in s["warnings_at_optimum"]:
+        err.print(f"warning (at the design): {w}", markup=False, highlight=False, soft_wrap=True)
 
 
 def main() -> None:
