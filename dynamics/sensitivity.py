@@ -55,6 +55,8 @@ class Seed:
 
     dp: (len(model.parameter_names), n) d(parameter tuple)/dtheta, in the model's parameter order.
     dq0, dv0: (nq, n) derivatives of the initial guess of positions and velocities (before projection).
+    dx0: (n_ext, n) derivatives of the extension's initial state (thermal: the bulk temperatures start at the
+        ambient); None: zero.
     discrete: parameters a transition may change (mode flags, slot counters, geometry that is not traced, ...):
         their values do not depend on the design values, so their derivative is zero; a transition changing any
         other parameter raises (a prescribed drive's re-based reference excepted: `_rebased_drive`).
@@ -64,6 +66,7 @@ class Seed:
     dq0: np.ndarray
     dv0: np.ndarray
     discrete: frozenset = frozenset()
+    dx0: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -228,6 +231,7 @@ class _Tools:
     def _sample_fn(self, name, pc):
         jm = self.jmod.modes[self.jmod.index(name)]
         coords, work_names, columns = self.model.coordinates, self.model.work_names, self.columns
+        ext_names = self.model.extension_names
 
         def everything(t, zz, pp, offset):
             q, v, w, x = jm.split(zz)
@@ -241,6 +245,8 @@ class _Tools:
                 cols[rname] = val
             for i, wname in enumerate(work_names):
                 cols[f"work_{wname}_J"] = w[i]
+            for i, xname in enumerate(ext_names):
+                cols[xname] = x[i]
             return jnp.stack([jnp.asarray(cols[c] if c in cols else jnp.nan, jnp.float64) for c in columns])
 
         def sample(t, z, S, p, P, offset):
@@ -290,8 +296,11 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     mode, values, p, offset = start.mode, start.values, np.asarray(start.p), np.asarray(start.offset, float)
     init = mech.initial_state(angle0, speed0)
     guess = np.concatenate([np.asarray(init.q, float), np.asarray(init.v, float), np.zeros(nz - 2 * nq)])
-    dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nz - 2 * nq, n))])
+    nw = len(model.work_names)
+    dx0 = np.zeros((nz - 2 * nq - nw, seed.n)) if seed.dx0 is None else seed.dx0
+    dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nw, n)), _padded(dx0, n)])
     z = _z(model.modes[mode], start.y)
+    guess[2 * nq + nw:] = z[2 * nq + nw:]
     z_init, S, _ = (np.asarray(x) for x in tools.reset[mode](t0, guess, offset, p, dguess, P, np.zeros(n)))
     _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
 

@@ -40,15 +40,24 @@ PEAKS = {
     "peak_crank_accel_rad_s2": "crank_accel_rad_s2",
     "peak_crank_speed_rad_s": "crank_speed_rad_s",
 }
+#: the thermal peaks (a thermal model on): the run's columns, evaluated after the run (thermal/plan.py) from the
+#: traced state at the peak's row by the same formulas in jax (thermal/contact_row.py)
+THERMAL_PEAKS = {"peak_temp_contact_C": "temp_contact_C", "peak_temp_flash_rise_K": "temp_flash_rise_K"}
 CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
 #: the frictional heat of the last complete index: minus the friction work (a work state) from engage to release
 HEAT = "heat_per_index_J"
-QUANTITIES = tuple(PEAKS) + CYCLE + (HEAT,)
-#: quantities of issue 16 that exist in mechsim but are not differentiated yet, and why
-NOT_TRACED = {
-    "peak_temp_contact_C": "the thermal models' read-outs are evaluated after the run (thermal/), not traced yet",
-    "peak_temp_flash_rise_K": "the flash temperature is evaluated after the run (thermal/flash.py), not traced yet",
-}
+QUANTITIES = tuple(PEAKS) + tuple(THERMAL_PEAKS) + CYCLE + (HEAT,)
+#: thermal models whose temperatures are traced (the bulk states in the DAE, the flash rise after it); the others
+#: are refused, with the reason
+THERMAL_TRACED = ("lumped", "flash")
+#: [thermal] values traced: the material (library value unless the scenario overrides it), the surroundings, and
+#: the body geometry where the scenario sets it (its defaults follow from the mechanism's values: traced through them)
+THERMAL_MATERIAL_KEYS = ("thermal.conductivity", "thermal.density", "thermal.specific_heat", "thermal.E",
+                         "thermal.nu")
+THERMAL_KEYS = THERMAL_MATERIAL_KEYS + (
+    "thermal.ambient_temperature", "thermal.convection_pin", "thermal.convection_wheel",
+    "thermal.pin_crank_conductance", "thermal.pin_exposed_length", "thermal.crank_volume", "thermal.crank_area",
+    "thermal.wheel_radius", "thermal.wheel_thickness")
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,82 @@ def _geneva_parameters(x: dict, si: dict, mech) -> dict:
     return {"r": r, "c": r / jnp.sin(jnp.pi / n), "R": x["mechanism.pin_radius"],
             "J1": x["mechanism.crank_inertia"], "J2": x["mechanism.wheel_inertia"], "T_L": x["load.wheel_torque"],
             "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
+
+
+def _thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str) -> dict:
+    """The thermal model's values as formulas of the scenario values (Geneva), checked against the run's own
+    (`_thermal_values`): the flash formulas' inputs `flash_*` (friction, contact radius R = pin radius and length
+    l = thickness, E* = E/(2 (1 - nu^2)) of two equal bodies (docs/theory.md §G3), k, chi = k/(rho c_p), ambient)
+    and, with bulk states, the DAE network's `th_*` (thermal/network.py `bulk_bodies`, `assemble`;
+    docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set), crank bar
+    r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of radius c cos(pi/n)
+    and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the share's
+    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`)."""
+    import jax.numpy as jnp
+    th = si["thermal"]
+    n = si["mechanism"]["slots"]
+    r, R, l = x["mechanism.crank_radius"], x["mechanism.pin_radius"], x["mechanism.thickness"]
+    k, rho_c = x["thermal.conductivity"], x["thermal.density"] * x["thermal.specific_heat"]
+    E, nu = x["thermal.E"], x["thermal.nu"]
+    estar = E / (2.0 * (1.0 - nu**2))
+    chi = k / rho_c
+    t_amb = x["thermal.ambient_temperature"]
+    out = {"flash_mu": x["contact.friction"], "flash_R": R, "flash_l": l, "flash_Estar": estar, "flash_k": k,
+           "flash_chi": chi, "flash_T_amb": t_amb}
+    if setup.system is None:
+        return out
+
+    def given(key, default):
+        return x[f"thermal.{key}"] if th.get(key) is not None else default
+    if drive_kind == "speed":
+        w_nom = x["drive.speed"]
+    elif abs(float(si["initial"][speed_key.split(".")[1]])) > 0:
+        w_nom = jnp.abs(x[speed_key])
+    elif drive_kind == "motor" and si["drive"].get("no_load_speed"):
+        w_nom = x["drive.no_load_speed"]
+    else:
+        w_nom = 1.0
+    l_pin = given("pin_exposed_length", 2.5 * l)
+    width = 4.0 * R
+    bodies = {"pin": (jnp.pi * R**2 * l_pin, 2 * jnp.pi * R * l_pin + jnp.pi * R**2, x["thermal.convection_pin"]),
+              "crank": (given("crank_volume", r * width * l),
+                        given("crank_area", 2 * r * width + 2 * (r + width) * l), x["thermal.convection_pin"])}
+    radius_w = given("wheel_radius", r / jnp.sin(jnp.pi / n) * jnp.cos(jnp.pi / n))
+    thick_w = given("wheel_thickness", l)
+    bodies["wheel"] = (jnp.pi * radius_w**2 * thick_w, 2 * jnp.pi * radius_w**2 + 2 * jnp.pi * radius_w * thick_w,
+                       x["thermal.convection_wheel"])
+    names = [b.name for b in setup.bodies]
+    G = given("pin_crank_conductance", k * jnp.pi * R**2 / (0.5 * l_pin))
+    K = {}
+    for i, name in enumerate(names):
+        V, A, h = bodies[name]
+        out[f"th_C_{i}"] = rho_c * V
+        out[f"th_s_{i}"] = h * A * t_amb
+        out[f"th_loss_{i}"] = h * A
+        K[(i, i)] = h * A
+    if len(names) == 3:                 # pin and crank joined by G (network.assemble)
+        K[(0, 0)], K[(1, 1)], K[(0, 1)], K[(1, 0)] = K[(0, 0)] + G, K[(1, 1)] + G, -G, -G
+    out.update({f"th_K_{i}_{j}": v for (i, j), v in K.items()})
+    out.update({"th_R": R, "th_l": l, "th_Estar": estar, "th_k_pin": k, "th_k_wheel": k, "th_chi_pin": chi,
+                "th_chi_wheel": chi, "th_t_ref": 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom})
+    return out
+
+
+def _thermal_values(si: dict, mech) -> dict:
+    """The thermal model's values as the run computes them (thermal/network.py `prepare`): the DAE extension's
+    parameters and the flash formulas' inputs (names as `_thermal_parameters`)."""
+    from mechsim.thermal.hertz import effective_modulus
+    from mechsim.thermal.models import MODELS
+    from mechsim.thermal.network import prepare
+    setup = prepare(si, mech, MODELS[si["thermal"]["model"]])
+    mat, geo = setup.material, setup.geometry
+    out = {"flash_mu": float(si["contact"]["friction"]), "flash_R": geo.contact_radius,
+           "flash_l": geo.contact_length, "flash_Estar": effective_modulus(mat), "flash_k": mat.conductivity,
+           "flash_chi": mat.diffusivity, "flash_T_amb": setup.temp_ambient}
+    if setup.extension is not None:
+        out.update({k: v for k, v in setup.extension.parameter_values().items() if not k.startswith("th_B_")
+                    and k != "th_b0"})
+    return out
 
 
 def _chain_parameters(x: dict, si: dict, mech) -> dict:
@@ -175,31 +260,66 @@ def _lookup(si: dict, key: str):
     return node
 
 
-def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
-    """(Seed with columns scaled by each value, scales): columns are d/d(ln theta) (theta for theta = 0), so that
-    every sensitivity has the state's own units and one error control serves them all."""
-    import jax
-    from mechsim.dynamics.sensitivity import Seed
+def _value(plan, key: str) -> float:
+    """A scenario value (SI); a material value the scenario leaves to the library is the library's."""
+    if key in THERMAL_MATERIAL_KEYS and plan.thermal is not None:
+        return float(getattr(plan.thermal.setup.material, key.split(".")[1]))
+    return float(_lookup(plan.scenario.si, key) or 0.0)
+
+
+def _traced_keys(plan, pmap: ParameterMap) -> list[str]:
+    """Every value the map is a function of: the mechanism's, the drive's, the thermal model's (with the initial
+    speed, which sets the thermal model's nominal speed, thermal/network.py `nominal_speed`)."""
+    keys = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ()))
+    if plan.thermal is not None:
+        keys += [k for k in THERMAL_KEYS if k in THERMAL_MATERIAL_KEYS or _lookup(plan.scenario.si, k) is not None]
+        if not plan.drive.is_prescribed:
+            keys.append(pmap.speed_key)
+    return keys
+
+
+def _mapped(plan, pmap: ParameterMap, keys: list[str]):
+    """params(xs): the model's parameters (and the thermal formulas' inputs) as jax formulas of the values."""
+    import jax.numpy as jnp
     si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
-    drive_keys = DRIVE_KEYS.get(drive.kind, ())
-    keys = list(pmap.keys) + list(drive_keys)
-    x0 = {k: float(_lookup(si, k) or 0.0) for k in keys}
 
     def params(xs):
         x = dict(zip(keys, xs))
-        return {**pmap.parameters(x, si, mech), **_drive_parameters(x, drive.kind)}
-    values = {**mech.parameter_values(), **drive.parameter_values(0.0)}
+        out = {**pmap.parameters(x, si, mech), **_drive_parameters(x, drive.kind)}
+        if plan.thermal is not None:
+            out.update(_thermal_parameters(x, si, plan.thermal.setup, pmap.speed_key, drive.kind))
+        return {k: jnp.asarray(v, jnp.float64) for k, v in out.items()}
+    return params
+
+
+def _reference_values(si: dict, mech, drive, thermal: bool) -> dict:
+    return {**mech.parameter_values(), **drive.parameter_values(0.0), **(_thermal_values(si, mech) if thermal else {})}
+
+
+def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
+    """(Seed with columns scaled by each value, scales, flash: name -> (n,) derivatives of the thermal formulas'
+    inputs per scaled value): columns are d/d(ln theta) (theta for theta = 0), so that every sensitivity has the
+    state's own units and one error control serves them all."""
+    import jax
+    from mechsim.dynamics.sensitivity import Seed
+    si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
+    keys = _traced_keys(plan, pmap)
+    x0 = {k: _value(plan, k) for k in keys}
+    params = _mapped(plan, pmap, keys)
+    values = _reference_values(si, mech, drive, plan.thermal is not None)
     mapped = params([x0[k] for k in keys])
     for name, v in mapped.items():
         if not np.isclose(float(v), values[name], rtol=1e-13, atol=0.0):
             raise RuntimeError(f"sensitivity map of '{name}' gives {float(v)!r}, the mechanism {values[name]!r}")
     names = list(model.parameter_names)
-    jac = jax.jacfwd(lambda xs: [mapped_v for mapped_v in params(xs).values()])(np.array([x0[k] for k in keys]))
-    scales = np.array([abs(float(_lookup(si, k) or 0.0)) or 1.0 for k in wrt])
+    jac = jax.jacfwd(lambda xs: list(params(xs).values()))(np.array([x0[k] for k in keys]))
+    scales = np.array([abs(_value(plan, k)) or 1.0 for k in wrt])
     n = len(wrt)
     nq = len(model.coordinates)
     dp = np.zeros((len(names), n))
     dq0, dv0 = np.zeros((nq, n)), np.zeros((nq, n))
+    dx0 = np.zeros((len(model.extension_names), n))
+    flash = {name: np.zeros(n) for name in mapped if name.startswith("flash_")}
     for j, key in enumerate(wrt):
         if key == pmap.speed_key or (drive.is_prescribed and key == "drive.speed"):
             # the initial velocities are linear in the drive's initial speed (Mechanism.initial_state): checked
@@ -211,29 +331,36 @@ def _seed(plan, model, wrt: list[str], pmap: ParameterMap):
                 raise ScenarioError(key, "the initial velocities of this mechanism are not linear in the initial "
                                     "speed here: not traced")
             dv0[:, j] = unit_v * scales[j]
-        if key == pmap.speed_key:
+        if key == "thermal.ambient_temperature" and plan.thermal.setup.system is not None:
+            # the bulk states start at the ambient (ThermalSetup.initial)
+            dx0[:plan.thermal.setup.system.size, j] = scales[j]
+        if key not in keys:
             continue
         col = keys.index(key)
         for name, row in zip(mapped, jac):
-            dp[names.index(name), j] = float(np.asarray(row)[col]) * scales[j]
+            d = float(np.asarray(row)[col]) * scales[j]
+            if name in flash:
+                flash[name][j] = d
+            else:
+                dp[names.index(name), j] = d
     _check_map(plan, wrt, keys, mapped, jac, pmap)
-    return Seed(dp, dq0, dv0, pmap.discrete), scales
+    return Seed(dp, dq0, dv0, pmap.discrete, dx0), scales, flash
 
 
 def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: ParameterMap) -> None:
-    """The map must be complete and right: the mechanism rebuilt with each traced value moved (central differences,
-    1e-5 relative) changes no parameter the map does not set, and those it sets by the map's derivative (to 1e-6 of
-    the parameter's size: the differences' truncation is ~1e-10, their round-off ~1e-11). A RuntimeError otherwise:
-    a map out of step with the mechanism is a bug, not a user error."""
+    """The map must be complete and right: the mechanism (and thermal model) rebuilt with each traced value moved
+    (central differences, 1e-5 relative) changes no parameter the map does not set, and those it sets by the map's
+    derivative (to 1e-6 of the parameter's size: the differences' truncation is ~1e-10, their round-off ~1e-11). A
+    RuntimeError otherwise: a map out of step with the mechanism is a bug, not a user error."""
     import copy
 
     from mechsim.scenarios.loader import build_mechanism
     from mechsim.scenarios.runner import make_drive
     si, drive = plan.scenario.si, plan.drive
     for key in wrt:
-        if key == pmap.speed_key:
+        if key not in keys:
             continue
-        p = float(_lookup(si, key) or 0.0)
+        p = _value(plan, key)
         h = 1e-5 * abs(p) if p else 1e-5
         values = []
         for sign in (1, -1):
@@ -244,7 +371,7 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
                 node = node[part]
             node[last] = p + sign * h
             mech = build_mechanism(moved)
-            values.append({**mech.parameter_values(), **make_drive(moved).parameter_values(0.0)})
+            values.append(_reference_values(moved, mech, make_drive(moved), plan.thermal is not None))
         col = keys.index(key)
         derivative = dict(zip(mapped, (float(np.asarray(row)[col]) for row in jac)))
         for name in values[0]:
@@ -265,26 +392,56 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if pmap is None:
         raise ScenarioError("mechanism.type", f"sensitivities are not traced for '{mtype}' (docs/sensitivity.md)")
     if plan.thermal is not None:
-        raise ScenarioError("thermal.model", "sensitivities with a thermal model are not traced yet: set "
-                            "thermal.model = 'none' (docs/sensitivity.md, 'Not covered yet')")
-    allowed = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ())) + (
-        [] if plan.drive.is_prescribed else [pmap.speed_key])
+        _check_thermal(plan, mtype)
+    allowed = _traced_keys(plan, pmap) + ([] if plan.drive.is_prescribed else [pmap.speed_key])
+    allowed = list(dict.fromkeys(allowed))
     if not wrt:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
     for key in wrt:
-        if key in pmap.keys and _lookup(si, key) is None:
+        if (key in pmap.keys or key in THERMAL_KEYS) and key not in THERMAL_MATERIAL_KEYS and (
+                _lookup_or_none(si, key) is None):
             raise ScenarioError(key, "not set in this scenario (it is derived from other values): set it to trace it")
         if key not in allowed:
             raise ScenarioError(key, f"not a value sensitivities are traced for here; traced: {', '.join(allowed)}")
     if len(set(wrt)) != len(wrt):
         raise ScenarioError("--wrt", "a key is named twice")
+    known = _quantities(plan, pmap)
     for q in of:
-        if q in NOT_TRACED:
-            raise ScenarioError("--of", f"{q}: {NOT_TRACED[q]}")
-        if q not in pmap.peaks + pmap.cycle:
-            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of "
-                                f"{', '.join(pmap.peaks + pmap.cycle)}")
+        if q in THERMAL_PEAKS and plan.thermal is None:
+            raise ScenarioError("--of", f"{q}: this scenario has no thermal model (set thermal.model = 'lumped' or "
+                                "'flash')")
+        if q not in known:
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}")
     return pmap
+
+
+def _lookup_or_none(si: dict, key: str):
+    try:
+        return _lookup(si, key)
+    except KeyError:
+        return None
+
+
+def _check_thermal(plan, mtype: str) -> None:
+    """The thermal models and options whose temperatures are traced; one line naming the refused one otherwise."""
+    th = plan.scenario.si["thermal"]
+    if mtype != "geneva":
+        raise ScenarioError("thermal.model", f"thermal sensitivities are traced for the Geneva only, not '{mtype}'")
+    if th["model"] not in THERMAL_TRACED:
+        raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its wall-track mesh is not in the "
+                            "sensitivity map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")
+    if th["flash"] != "jaeger":
+        raise ScenarioError("thermal.flash", f"'{th['flash']}' (the seed's formula, for comparison only) is not "
+                            "traced; use 'jaeger'")
+    if plan.thermal.averaging == "cycle":
+        raise ScenarioError("thermal.averaging", "cycle averaging (the last simulated turn continued periodically, "
+                            "the cycle-mean heat through the exact bulk solution) is not traced: set thermal.averaging "
+                            "= 'resolved' with a duration the mechanics can run (docs/sensitivity.md)")
+
+
+def _quantities(plan, pmap: ParameterMap) -> tuple[str, ...]:
+    thermal = tuple(THERMAL_PEAKS) if plan.thermal is not None else ()
+    return pmap.peaks + thermal + pmap.cycle
 
 
 def _peak_rows(df: pd.DataFrame, column: str) -> list[int]:
@@ -368,15 +525,17 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     plan = runner.plan(scenario)
     notes = []
     if plan.method == "closed-form":
-        # the closed form is not differentiated: the same motion as a DAE with the speed as a constraint
+        # the closed form is not differentiated: the same motion as a DAE with the speed as a constraint (and the
+        # thermal states in it)
         plan = dataclasses.replace(plan, method="dae", settings=dataclasses.replace(plan.settings, method="dae"),
-                                   why="sensitivities follow the DAE path")
+                                   why="sensitivities follow the DAE path",
+                                   thermal=plan.thermal and dataclasses.replace(plan.thermal, method="dae"))
         notes.append("prescribed speed: the run and its derivatives follow the DAE with the speed as a constraint "
                      "(solver.method = 'dae'); the closed form gives the same motion to the solver's tolerance")
     wrt = list(wrt)
     pmap = check_request(plan, wrt, list(of or []))
-    of = list(of) if of else list(pmap.peaks + pmap.cycle)
-    si, mech, drive, settings = scenario.si, plan.mechanism, plan.drive, plan.settings
+    of = list(of) if of else list(_quantities(plan, pmap))
+    si, mech, drive, settings, thermal = scenario.si, plan.mechanism, plan.drive, plan.settings, plan.thermal
     wall = time.perf_counter()
     result = runner.execute(plan)
     run_wall = time.perf_counter() - wall
@@ -388,31 +547,42 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     angle_key, speed_key = mech.initial_keys
     angle0 = si["initial"][angle_key]
     speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
-    model = prepare(mech, drive, settings, si["duration"], si["output_step"], angle0, speed0).model
-    seed, scales = _seed(plan, model, wrt, pmap)
+    ext, ext_initial = (thermal.extension, thermal.ext_initial) if thermal is not None else (None, None)
+    model = prepare(mech, drive, settings, si["duration"], si["output_step"], angle0, speed0, ext, ext_initial).model
+    seed, scales, flash = _seed(plan, model, wrt, pmap)
 
-    peak_rows = {q: _peak_rows(df, PEAKS[q]) for q in of if q in PEAKS and PEAKS[q] in df}
+    peak_columns = {**PEAKS, **THERMAL_PEAKS}
+    peak_rows = {q: _peak_rows(df, peak_columns[q]) for q in of if q in peak_columns and peak_columns[q] in df
+                 and np.nanmax(np.abs(df[peak_columns[q]].to_numpy(float)), initial=0.0) > 0}
     sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows})
-    columns = sorted({PEAKS[q] for q in peak_rows} | {"work_drive_J"})
+    thermal_times = sorted({float(df["t_s"].iloc[i]) for q, rows in peak_rows.items() if q in THERMAL_PEAKS
+                            for i in rows})
+    columns = {PEAKS[q] for q in peak_rows if q in PEAKS} | {"work_drive_J"}
+    if thermal_times:
+        columns |= set(CONTACT_COLUMNS) | {c for c in model.extension_names if c.startswith("temp_bulk_")}
     wall = time.perf_counter()
-    path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, columns,
-                              si["duration"], si["output_step"], angle0, speed0)
-    sens_wall = time.perf_counter() - wall
+    path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
+                              si["duration"], si["output_step"], angle0, speed0, ext, ext_initial)
     by_time = {s.t: s for s in path.samples}
+    if thermal_times:
+        _thermal_samples(plan, df, events, path, [by_time[t] for t in thermal_times], flash)
+    sens_wall = time.perf_counter() - wall
 
     results: dict[str, tuple[float, np.ndarray]] = {}
+    relative = [_value(plan, key) != 0.0 for key in wrt]
     for q in of:
-        if q in PEAKS:
+        if q in peak_columns:
+            column = peak_columns[q]
             if q not in peak_rows:
-                warnings.append(f"{q}: this run has no column {PEAKS[q]}")
+                warnings.append(f"{q}: this run has no column {column}" if column not in df else
+                                f"{q}: zero on every row (no contact, or no frictional heat): no peak to differentiate")
                 continue
             rows = peak_rows[q]
             first = by_time[float(df["t_s"].iloc[rows[0]])]
-            y, g = first.values[PEAKS[q]], first.grads[PEAKS[q]]
+            y, g = first.values[column], first.grads[column]
             results[q] = (y, g, first.t)
-            relative = [float(_lookup(si, key) or 0.0) != 0.0 for key in wrt]
             if len(rows) > 1:
-                note = _near_peaks(q, wrt, relative, df, rows, by_time, PEAKS[q], change)
+                note = _near_peaks(q, wrt, relative, df, rows, by_time, column, change)
                 if note:
                     warnings.append(note)
             note = _event_crosses_row(q, wrt, relative, first.t, path.events, change)
@@ -429,7 +599,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     rows = []
     for q, (y, g, at) in results.items():
         for j, key in enumerate(wrt):
-            p = float(_lookup(si, key) or 0.0)
+            p = _value(plan, key)
             deriv = float(g[j]) / scales[j]
             unit = field_unit(si, key)
             elasticity = p / y * deriv if y != 0 else float("nan")
@@ -446,6 +616,110 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
               "sensitivity_per_run": (sens_wall - path.stats["compile_time_s"]) / run_wall if run_wall > 0 else None,
               "sensitivity_steps": path.stats["steps"], "values": len(wrt)})
     return table
+
+
+#: the columns the contact temperature of a Geneva row is made of (mechanisms/geneva/contact.py `state`)
+CONTACT_COLUMNS = ("crank_speed_rad_s", "wheel_speed_rad_s", "crank_accel_rad_s2", "pin_sliding_speed_m_s",
+                   "pin_distance_m", "contact_force_N", "slip_speed_m_s")
+#: the events at which a contact begins (the pin's transient floor counts from there; mechanisms/geneva/contact.py)
+CONTACT_STARTS = ("entry", "flank switch")
+FLASH_INPUTS = ("flash_mu", "flash_R", "flash_l", "flash_Estar", "flash_k", "flash_chi")
+
+
+def _geneva_row_temperatures(u, distribution: str, xp=np):
+    """(flash rise K, contact temperature degC) of one Geneva row from u = [CONTACT_COLUMNS, base_pin, base_wheel,
+    t_on_pin, FLASH_INPUTS]: the contact state of mechanisms/geneva/contact.py `state` (source speeds R (w1 + w2)
+    over the pin and v_s over the wall, a_s = (w1' v_s + w1 (w1 + w2) w2 x)/w1, docs/theory.md §G1, §G4.6) with the
+    pin radius traced, then thermal/contact_row.py `contact_temperature` (docs/theory.md §G3-§G4.6)."""
+    from mechsim.thermal.contact_row import KELVIN, contact_temperature
+    w1, w2, a1, v_s, x, N, slip, base_pin, base_wheel, t_on, mu, R, length, estar, k, chi = (u[i] for i in range(16))
+    contact = {"normal_force": N, "slip_speed": slip, "source_speed_driver": R * (w1 + w2),
+               "source_speed_driven": v_s, "sliding_accel": (a1 * v_s + w1 * (w1 + w2) * w2 * x) / w1}
+    out = contact_temperature(contact, t_on, base_pin, base_wheel, mu, R, length, estar, k, chi, distribution, xp)
+    return xp.stack([out["temp_flash_rise_K"], out["temp_contact_K"] - KELVIN])
+
+
+_ROW_JACOBIANS: dict = {}
+
+
+def _row_jacobian(distribution: str):
+    """(values, Jacobian) of `_geneva_row_temperatures` in u, jitted once per process and distribution."""
+    import jax
+    import jax.numpy as jnp
+    fn = _ROW_JACOBIANS.get(distribution)
+    if fn is None:
+        def f(u):
+            return _geneva_row_temperatures(u, distribution, jnp)
+        fn = _ROW_JACOBIANS[distribution] = jax.jit(lambda u: (f(u), jax.jacfwd(f)(u)))
+    return fn
+
+
+def _thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples: list, flash: dict) -> None:
+    """Add the flash rise and the contact temperature (values and gradients per scaled value) to the samples at
+    thermal peak rows: the traced columns and bulk states at the row, the time since the contact began (the last
+    entry or flank switch: its time's derivative from the implicit-function rule), and the thermal formulas'
+    inputs, pushed through the row's formulas by their exact Jacobian (jax). The formulas are first checked to
+    give the run's own columns at the row (they are the thermal finish's, thermal/plan.py)."""
+    from mechsim.dynamics.sensitivity import SensitivityUnavailable
+    setup = plan.thermal.setup
+    distribution = setup.section["distribution"]
+    starts = [e for e in path.events if e.kind in CONTACT_STARTS]
+    fn = _row_jacobian(distribution)
+    t_all = df["t_s"].to_numpy(float)
+    for s in samples:
+        prior = [e for e in starts if e.t <= s.t + 1e-12]
+        if not prior:
+            raise SensitivityUnavailable(f"the contact at t = {s.t:.6g} s began before the run started: the time "
+                                         "since its start is not traced (start the run in a dwell)")
+        start = prior[-1]
+        n = len(start.dt)
+        if setup.system is not None:
+            names = ("temp_bulk_pin_K", "temp_bulk_wheel_K")
+            base = [s.values[c] for c in names]
+            dbase = [s.grads[c] for c in names]
+        else:
+            base = [setup.temp_ambient] * 2
+            dbase = [flash["flash_T_amb"]] * 2
+        u = np.array([s.values[c] for c in CONTACT_COLUMNS] + base + [s.t - start.t]
+                     + [_flash_value(setup, plan, name) for name in FLASH_INPUTS])
+        du = np.vstack([s.grads[c] for c in CONTACT_COLUMNS] + dbase + [-start.dt]
+                       + [flash[name] for name in FLASH_INPUTS])
+        row = int(np.argmin(np.abs(t_all - s.t)))
+        _check_row_formula(plan, df, events, row, distribution)
+        values, jac = (np.asarray(a) for a in fn(u))
+        grads = jac @ du
+        for i, column in enumerate(("temp_flash_rise_K", "temp_contact_C")):
+            s.values[column], s.grads[column] = float(values[i]), grads[i][:n]
+
+
+def _flash_value(setup, plan, name: str) -> float:
+    from mechsim.thermal.hertz import effective_modulus
+    mat, geo = setup.material, setup.geometry
+    return {"flash_mu": float(plan.scenario.si["contact"]["friction"]), "flash_R": geo.contact_radius,
+            "flash_l": geo.contact_length, "flash_Estar": effective_modulus(mat), "flash_k": mat.conductivity,
+            "flash_chi": mat.diffusivity}[name]
+
+
+def _check_row_formula(plan, df: pd.DataFrame, events: pd.DataFrame, row: int, distribution: str) -> None:
+    """The row formulas evaluated on the run's own row give the run's flash and contact temperature columns (to
+    1e-9): the differentiated formulas cannot drift away from the thermal finish unnoticed."""
+    from mechsim.dynamics.sensitivity import SensitivityUnavailable
+    setup = plan.thermal.setup
+    r = df.iloc[row]
+    t = float(r["t_s"])
+    starts = plan.mechanism.contact_starts(df, events)
+    start = starts[np.searchsorted(starts, t + 1e-12, side="right") - 1]
+    if setup.system is not None:
+        base = [float(r["temp_bulk_pin_C"]) + 273.15, float(r["temp_bulk_wheel_C"]) + 273.15]
+    else:
+        base = [setup.temp_ambient] * 2
+    u = np.array([float(r[c]) for c in CONTACT_COLUMNS] + base + [t - start]
+                 + [_flash_value(setup, plan, name) for name in FLASH_INPUTS])
+    mine = _geneva_row_temperatures(u, distribution, np)
+    theirs = np.array([float(r["temp_flash_rise_K"]), float(r["temp_contact_C"])])
+    if not np.all(np.abs(mine - theirs) <= 1e-9 * np.maximum(1.0, np.abs(theirs))):
+        raise SensitivityUnavailable(f"the traced thermal formulas give {mine} at t = {t:.6g} s, the run "
+                                     f"{theirs}: not the run's thermal model")
 
 
 def _cycle_quantity(q: str, events, pmap: ParameterMap, model):

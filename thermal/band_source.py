@@ -276,6 +276,25 @@ def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
     return out
 
 
+def band_theta_table_xp(L, kind: str = "semi-elliptic", statistic: str = "max", xp=np):
+    """`band_theta_table` in the array namespace `xp` (numpy or jax.numpy), so that jax can differentiate the
+    flash rise (docs/sensitivity.md): the same cubic pieces of ln(theta) in ln(L) (scipy's CubicSpline
+    coefficients, evaluated as polynomials on their intervals) and the same asymptotes outside the table;
+    docs/theory.md §G4.3. L > 0."""
+    _check(kind, statistic)
+    spline = _table(kind, statistic)
+    nodes, coef = np.asarray(spline.x), np.asarray(spline.c)
+    lo, hi = (10.0**v for v in TABLE_LOG10_RANGE)
+    s = xp.log(xp.clip(L, lo, hi))
+    i = xp.clip(xp.searchsorted(xp.asarray(nodes), s, side="right") - 1, 0, len(nodes) - 2)
+    dx = s - xp.asarray(nodes)[i]
+    c = xp.asarray(coef)
+    inside = xp.exp(((c[0][i] * dx + c[1][i]) * dx + c[2][i]) * dx + c[3][i])
+    low = (2.0 / np.pi) * (xp.log(1.0 / xp.maximum(L, 1e-300)) + low_peclet_constant(kind, statistic))
+    high = high_peclet_coefficient(kind, statistic) / xp.sqrt(xp.maximum(L, hi))
+    return xp.where(L < lo, low, xp.where(L > hi, high, inside))
+
+
 # ---------------------------------------------------------------------------------------------- closed-form fit
 #: (A', B, m) of the all-L fit theta = (2/pi) ln(1 + g), g = [(A'/sqrt L)^m + (B/L)^m]^(1/m),
 #: A' = pi A/2, B = e^d; docs/theory.md §G4.3 (max error 3.0/5.0/2.9/5.1 % over 1e-3 < L < 1e3).
