@@ -136,9 +136,9 @@ def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
 
 @pytest.mark.parametrize("args, field", [
     (["--wrt", "mechanism.slots"], "mechanism.slots"),                      # an integer: no derivative
-    (["--wrt", "load.wheel_torque", "--of", "peak_temp_contact_C"], "--of"),   # not traced yet
+    (["--wrt", "load.wheel_torque", "--of", "peak_temp_contact_C"], "--of"),   # no thermal model here
     (["--wrt", "load.wheel_torque", "--of", "no_such_quantity"], "--of"),
-    (["--wrt", "load.wheel_torque", "--set", "thermal.model=lumped"], "thermal.model"),     # not traced yet
+    (["--wrt", "load.wheel_torque", "--set", "thermal.model=1d"], "thermal.model"),     # its mesh: not traced
 ])
 def test_cli_refuses_what_is_not_traced_in_one_line(tmp_path, args, field):
     from cli_helpers import invoke, one_line_error
