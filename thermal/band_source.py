@@ -227,12 +227,13 @@ def table_spline_coefficients(values) -> np.ndarray:
     return CubicSpline(table_log_nodes(), np.log(np.asarray(values, dtype=float))).c
 
 
-def evaluate_piecewise_cubic(breaks: np.ndarray, c: np.ndarray, x: np.ndarray) -> np.ndarray:
+def evaluate_piecewise_cubic(breaks: np.ndarray, c: np.ndarray, x: np.ndarray, xp=np) -> np.ndarray:
     """A piecewise cubic (scipy.interpolate.PPoly's layout: c[k, i] multiplies (x - breaks[i])^(3-k) on
     breaks[i] <= x < breaks[i+1], the end pieces extended beyond the ends) at x, in numpy with PPoly's own
     interval rule and order of operations (sum of c[3-k] (x - b)^k for k = 0..3, powers by repeated
-    multiplication), so it gives scipy's values; tests/test_thermal_band.py compares the two."""
-    i = np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
+    multiplication), so it gives scipy's values; tests/test_thermal_band.py compares the two. `xp`: the array
+    namespace (numpy, or jax.numpy to differentiate it)."""
+    i = xp.clip(xp.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
     s = x - breaks[i]
     s2 = s * s
     return ((c[3, i] + c[2, i] * s) + c[1, i] * s2) + c[0, i] * (s2 * s)
@@ -278,18 +279,14 @@ def band_theta_table(L, kind: str = "semi-elliptic", statistic: str = "max"):
 
 def band_theta_table_xp(L, kind: str = "semi-elliptic", statistic: str = "max", xp=np):
     """`band_theta_table` in the array namespace `xp` (numpy or jax.numpy), so that jax can differentiate the
-    flash rise (docs/sensitivity.md): the same cubic pieces of ln(theta) in ln(L) (scipy's CubicSpline
-    coefficients, evaluated as polynomials on their intervals) and the same asymptotes outside the table;
+    flash rise (docs/sensitivity.md): the same cubic pieces of ln(theta) in ln(L) (`evaluate_piecewise_cubic` on
+    the shipped coefficients) and the same asymptotes outside the table;
     docs/theory.md §G4.3. L > 0."""
     _check(kind, statistic)
-    spline = _table(kind, statistic)
-    nodes, coef = np.asarray(spline.x), np.asarray(spline.c)
+    nodes, coef = _table(kind, statistic)
     lo, hi = (10.0**v for v in TABLE_LOG10_RANGE)
     s = xp.log(xp.clip(L, lo, hi))
-    i = xp.clip(xp.searchsorted(xp.asarray(nodes), s, side="right") - 1, 0, len(nodes) - 2)
-    dx = s - xp.asarray(nodes)[i]
-    c = xp.asarray(coef)
-    inside = xp.exp(((c[0][i] * dx + c[1][i]) * dx + c[2][i]) * dx + c[3][i])
+    inside = xp.exp(evaluate_piecewise_cubic(xp.asarray(nodes), xp.asarray(coef), s, xp))
     low = (2.0 / np.pi) * (xp.log(1.0 / xp.maximum(L, 1e-300)) + low_peclet_constant(kind, statistic))
     high = high_peclet_coefficient(kind, statistic) / xp.sqrt(xp.maximum(L, hi))
     return xp.where(L < lo, low, xp.where(L > hi, high, inside))
