@@ -13,14 +13,20 @@ from matplotlib.figure import Figure
 THERMAL_CYCLES = "thermal_cycles"
 
 
+def result_figure_makers(result, mechanism=None) -> list:
+    """The figures of a result as functions that build them ({stem: Figure} each; plots.figure_makers): the plot
+    writer's, then the whole-run thermal figure where there is one."""
+    from mechsim.scenarios.output.plots import figure_makers
+
+    def cycles():
+        fig = thermal_cycle_figure(result)
+        return {THERMAL_CYCLES: fig} if fig is not None else {}
+    return figure_makers(result, mechanism) + [cycles]
+
+
 def result_figures(result, mechanism=None) -> dict[str, Figure]:
-    """Every figure of a result: the plot writer's, then the whole-run thermal figure where there is one."""
-    from mechsim.scenarios.output.plots import figures
-    figs = dict(figures(result, mechanism))
-    cycle = thermal_cycle_figure(result)
-    if cycle is not None:
-        figs[THERMAL_CYCLES] = cycle
-    return figs
+    """Every figure of a result, built (`result_figure_makers`)."""
+    return {stem: fig for make in result_figure_makers(result, mechanism) for stem, fig in make().items()}
 
 
 def cycle_table(timeseries, angle_column: str | None = None):

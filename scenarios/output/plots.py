@@ -236,33 +236,39 @@ def _instants(rows: pd.DataFrame, n: int, force_column: str | None) -> np.ndarra
     return np.sort(np.r_[picks, farthest])
 
 
-def figures(result: Result, mechanism=None) -> dict[str, Figure]:
-    """Every figure of a run by file stem: <group>_vs_time, <group>_vs_angle, mechanism, and the mechanism's
-    own figures (chain: El-Shakery's kinematics figures). `mechanism` defaults to the scenario's."""
+def figure_makers(result: Result, mechanism=None) -> list:
+    """The figures of a run as functions that build them, in order: each returns {file stem: Figure} (empty where
+    the run has nothing to show), so a caller may build them apart (scenarios/output/writer.py renders them in
+    two processes). Stems: <group>_vs_time, <group>_vs_angle, mechanism, and the mechanism's own figures (chain:
+    El-Shakery's kinematics figures). `mechanism` defaults to the scenario's."""
     df = result.timeseries
     if mechanism is None and result.scenario:
         from mechsim.scenarios.loader import build_mechanism
         mechanism = build_mechanism(result.scenario)
+    if not len(df):
+        return []
     name = result.summary.get("scenario", "")
     cycle = drive_cycle(mechanism) if mechanism is not None else None
-    out: dict[str, Figure] = {}
-    if not len(df):
-        return out
+
+    def one(stem, build, *args):
+        return lambda: {stem: fig} if (fig := build(*args)) is not None else {}
+
+    makers = []
     for group in FIGURES:
-        fig = time_figure(df, group, f"{name}: {group}")
-        if fig is not None:
-            out[f"{group}_vs_time"] = fig
+        makers.append(one(f"{group}_vs_time", time_figure, df, group, f"{name}: {group}"))
         if cycle is not None and group in PER_CYCLE:
-            fig = angle_figure(df, group, f"{name}: {group}", cycle)
-            if fig is not None:
-                out[f"{group}_vs_angle"] = fig
-    fig = drawing_figure(df, mechanism, result.scenario.get("output", {}).get("drawing_instants", 4), cycle)
-    if fig is not None:
-        out["mechanism"] = fig
+            makers.append(one(f"{group}_vs_angle", angle_figure, df, group, f"{name}: {group}", cycle))
+    instants = result.scenario.get("output", {}).get("drawing_instants", 4)
+    makers.append(one("mechanism", drawing_figure, df, mechanism, instants, cycle))
     if type(mechanism).__name__ == "ChainDwell":
         from mechsim.scenarios.output.chain_plots import extra_figures
-        out.update(extra_figures(mechanism, df, result.extra_tables))
-    return out
+        makers.append(lambda: extra_figures(mechanism, df, result.extra_tables))
+    return makers
+
+
+def figures(result: Result, mechanism=None) -> dict[str, Figure]:
+    """Every figure of a run by file stem (`figure_makers`, all built)."""
+    return {stem: fig for make in figure_makers(result, mechanism) for stem, fig in make().items()}
 
 
 def save(fig: Figure, path: Path) -> Path:

@@ -35,19 +35,21 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
     """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv),
     the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically."""
     with atomic_folder(out_dir, force) as tmp:
-        result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-        write_csv(result.timeseries, tmp / "timeseries.csv")
-        write_csv(result.events, tmp / "events.csv")
-        for name, table in result.extra_tables.items():
-            write_csv(table, tmp / f"{name}.csv")
-        (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
-        scenario_toml = resolved_scenario_toml(result.scenario)
-        (tmp / "scenario.toml").write_text(scenario_toml)
+        makers = []
         if plots and len(result.timeseries):
-            from mechsim.scenarios.output.figures import result_figures
-            from mechsim.scenarios.output.plots import save
-            for stem, fig in result_figures(result, mechanism).items():
-                save(fig, tmp / f"{stem}.png")
+            from mechsim.scenarios.output.figures import result_figure_makers
+            makers = result_figure_makers(result, mechanism)
+        from mechsim.scenarios.output.render import FigureWriter
+        with FigureWriter(makers, tmp) as figures:        # half the figures drawn meanwhile, in another process
+            result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
+            write_csv(result.timeseries, tmp / "timeseries.csv")
+            write_csv(result.events, tmp / "events.csv")
+            for name, table in result.extra_tables.items():
+                write_csv(table, tmp / f"{name}.csv")
+            (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
+            scenario_toml = resolved_scenario_toml(result.scenario)
+            (tmp / "scenario.toml").write_text(scenario_toml)
+            figures.finish()
         output = result.scenario.get("output", {})
         if output.get("animation") and len(result.timeseries):
             from mechsim.scenarios.output.animation import write_animation
