@@ -643,15 +643,19 @@ _ROW_JACOBIANS: dict = {}
 
 
 def _row_jacobian(distribution: str):
-    """(values, Jacobian) of `_geneva_row_temperatures` in u, jitted once per process and distribution."""
+    """(u -> (values, Jacobian) of `_geneva_row_temperatures`, seconds spent compiling it now): compiled ahead of
+    time once per process and distribution."""
     import jax
     import jax.numpy as jnp
     fn = _ROW_JACOBIANS.get(distribution)
-    if fn is None:
-        def f(u):
-            return _geneva_row_temperatures(u, distribution, jnp)
-        fn = _ROW_JACOBIANS[distribution] = jax.jit(lambda u: (f(u), jax.jacfwd(f)(u)))
-    return fn
+    if fn is not None:
+        return fn, 0.0
+    wall = time.perf_counter()
+
+    def f(u):
+        return _geneva_row_temperatures(u, distribution, jnp)
+    fn = _ROW_JACOBIANS[distribution] = jax.jit(lambda u: (f(u), jax.jacfwd(f)(u))).lower(np.ones(16)).compile()
+    return fn, time.perf_counter() - wall
 
 
 def _thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples: list, flash: dict) -> None:
@@ -664,7 +668,8 @@ def _thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples
     setup = plan.thermal.setup
     distribution = setup.section["distribution"]
     starts = [e for e in path.events if e.kind in CONTACT_STARTS]
-    fn = _row_jacobian(distribution)
+    fn, path.stats["row_compile_time_s"] = _row_jacobian(distribution)
+    path.stats["compile_time_s"] += path.stats["row_compile_time_s"]
     t_all = df["t_s"].to_numpy(float)
     for s in samples:
         prior = [e for e in starts if e.t <= s.t + 1e-12]
