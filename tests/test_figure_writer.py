@@ -46,7 +46,19 @@ def test_a_share_the_forked_process_fails_is_drawn_here(tmp_path):
     assert all(p.read_bytes().startswith(b"\x89PNG") for p in tmp_path.glob("*.png"))
 
 
-@pytest.mark.skipif(not render.can_fork(), reason="figures are drawn in one process on this platform")
+def test_no_fork_once_jax_is_loaded(tmp_path):
+    """A diffrax run loads JAX, whose threads make a fork unsafe: then every figure is drawn here."""
+    import subprocess
+    import sys
+    code = ("import sys\nfrom mechsim.scenarios.output import render\nbefore = render.can_fork()\nimport jax\n"
+            "print(before == sys.platform.startswith('linux'), render.can_fork())")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "False"]
+
+
+@pytest.mark.skipif(not render.can_fork(), reason="figures are drawn in one process here")
 def test_half_of_the_figures_go_to_a_forked_process(tmp_path):
     writer = render.FigureWriter([lambda: {}] * 5, tmp_path)
     try:

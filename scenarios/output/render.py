@@ -4,7 +4,8 @@ Drawing the figures is most of what a `mechsim run` costs after the physics (doc
 and matplotlib draws them one by one on one core. On Linux a forked process (it shares this one's memory: the
 result, the imported modules, nothing to pickle) builds and saves every other figure while this one writes the
 tables and saves the rest. A child that fails leaves its figures to this process, so the folder is complete
-either way; on other platforms, or inside a daemonic worker (a sweep's process pool), all are drawn here.
+either way; on other platforms, inside a daemonic worker (a sweep's process pool) or once JAX is loaded (its
+threads make a fork unsafe), all are drawn here.
 """
 from __future__ import annotations
 
@@ -29,9 +30,10 @@ def _child(makers, folder: Path) -> None:
 
 
 def can_fork() -> bool:
-    """Whether this process may fork a figure worker: Linux, and not itself a daemonic pool worker."""
+    """Whether this process may fork a figure worker: Linux, not itself a daemonic pool worker, and JAX not loaded
+    (a diffrax run: XLA's threads make a fork unsafe, and JAX warns about it)."""
     return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
-            and not multiprocessing.current_process().daemon)
+            and not multiprocessing.current_process().daemon and "jax" not in sys.modules)
 
 
 class FigureWriter:
