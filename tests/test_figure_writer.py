@@ -3,6 +3,8 @@ the folder must hold the same PNG files, byte for byte, as drawing them one by o
 forked process fails to draw is drawn by this one."""
 import io
 import os
+import subprocess
+import sys
 
 import pytest
 from matplotlib.figure import Figure
@@ -48,8 +50,6 @@ def test_a_share_the_forked_process_fails_is_drawn_here(tmp_path):
 
 def test_no_fork_once_jax_is_loaded(tmp_path):
     """A diffrax run loads JAX, whose threads make a fork unsafe: then every figure is drawn here."""
-    import subprocess
-    import sys
     code = ("import sys\nfrom mechsim.scenarios.output import render\nbefore = render.can_fork()\nimport jax\n"
             "print(before == sys.platform.startswith('linux'), render.can_fork())")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
@@ -58,10 +58,35 @@ def test_no_fork_once_jax_is_loaded(tmp_path):
     assert out.stdout.split() == ["True", "False"]
 
 
-@pytest.mark.skipif(not render.can_fork(), reason="figures are drawn in one process here")
-def test_half_of_the_figures_go_to_a_forked_process(tmp_path):
-    writer = render.FigureWriter([lambda: {}] * 5, tmp_path)
-    try:
-        assert writer.child is not None and len(writer.mine) == 3 and len(writer.theirs) == 2
-    finally:
-        writer.finish()
+_FORKED = """
+import io, os, sys, tempfile
+from pathlib import Path
+from mechsim.scenarios import api
+from mechsim.scenarios.output import render
+from mechsim.scenarios.output.figures import result_figures
+from mechsim.scenarios.output.plots import DPI
+assert render.can_fork()
+tmp = Path(tempfile.mkdtemp())
+writer = render.FigureWriter([lambda: {}] * 5, tmp / "split")
+split = (writer.child is not None, len(writer.mine), len(writer.theirs))
+writer.finish()
+result = api.run("geneva-lc1", set=["duration='1.5 s'", "output_step='5 ms'"])
+folder = result.save(tmp / "out")
+def png(fig):
+    buf = io.BytesIO(); fig.savefig(buf, dpi=DPI, format="png"); return buf.getvalue()
+expected = {stem: png(fig) for stem, fig in result_figures(result, result.mechanism).items()}
+same = {p.stem: p.read_bytes() for p in folder.glob("*.png")} == expected
+print(*split, len(expected), same)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="figures are drawn in one process off Linux")
+def test_a_fresh_process_forks_and_its_folder_is_byte_identical():
+    """In a process without JAX (as `mechsim run` of a closed-form or IDA scenario): a forked writer takes two of
+    five figures, and a whole output folder drawn that way equals drawing every figure here, byte for byte.
+    (In the test session other files may have loaded JAX, which turns forking off, so this runs apart.)"""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    out = subprocess.run([sys.executable, "-c", _FORKED], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    child, mine, theirs, n, same = out.stdout.split()
+    assert (child, mine, theirs, same) == ("True", "3", "2", "True") and int(n) >= 7
