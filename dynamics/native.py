@@ -16,31 +16,26 @@ from numba.extending import intrinsic
 from mechsim.dynamics.sundials_c import sundials
 
 
-def _data_pointer(builder, obj, offset: int):
-    byte_pp = ir.PointerType(ir.PointerType(ir.IntType(8)))
-    content = builder.load(builder.bitcast(obj, byte_pp))
-    slot = builder.gep(content, [ir.Constant(ir.IntType(64), offset)])
-    return builder.load(builder.bitcast(slot, ir.PointerType(ir.PointerType(ir.DoubleType()))))
+def _data_pointer(offset: int):
+    """(signature, codegen) of an intrinsic loading the double* at `offset` in a SUNDIALS object's content."""
+    def codegen(context, builder, signature, args):
+        byte_pp = ir.PointerType(ir.PointerType(ir.IntType(8)))
+        content = builder.load(builder.bitcast(args[0], byte_pp))
+        slot = builder.gep(content, [ir.Constant(ir.IntType(64), offset)])
+        return builder.load(builder.bitcast(slot, ir.PointerType(ir.PointerType(ir.DoubleType()))))
+    return types.CPointer(types.float64)(types.voidptr), codegen
 
 
 @intrinsic
 def vector_data(typingctx, nvector):
     """double* data of a serial N_Vector (N_VGetArrayPointer, inlined)."""
-    offset = sundials().vector_data_offset
-
-    def codegen(context, builder, signature, args):
-        return _data_pointer(builder, args[0], offset)
-    return types.CPointer(types.float64)(types.voidptr), codegen
+    return _data_pointer(sundials().vector_data_offset)
 
 
 @intrinsic
 def matrix_data(typingctx, matrix):
     """double* data (column-major) of a dense SUNMatrix (SUNDenseMatrix_Data, inlined)."""
-    offset = sundials().matrix_data_offset
-
-    def codegen(context, builder, signature, args):
-        return _data_pointer(builder, args[0], offset)
-    return types.CPointer(types.float64)(types.voidptr), codegen
+    return _data_pointer(sundials().matrix_data_offset)
 
 
 @intrinsic
