@@ -34,3 +34,17 @@ def test_vectorised_switch_times_equal_scalar_bisection():
     for s in fast:                                   # the contact code changes across each time
         c = contact_code(columns(np.array([s - 1e-9, s + 1e-9])))
         assert c[0] != c[1]
+
+
+def test_multilevel_search_gives_the_bisection_times_to_the_bit():
+    """Several halvings per closed-form call walk the tree of the midpoints bisection would compute, in the same
+    floating-point operations, so the times equal one-at-a-time bisection exactly (not merely within tol)."""
+    for friction, torque, speed in ((0.05, "2 N*m", 3.0), (0.3, "12 N*m", 8.0), (0.15, "0 N*m", 5.34)):
+        si = load("geneva-lc1", ["duration=2.5 s", f"contact.friction={friction}",
+                                 f'load.wheel_torque="{torque}"']).si
+        columns = closed_form_columns(build_mechanism(si), 0.3, speed)
+        t = np.arange(0.0, 2.5 + 0.0025, 0.005)
+        ref = _one_at_a_time(columns, t)
+        assert len(ref) >= 4
+        for levels in (1, 3, 6, 8):
+            assert switch_times(columns, t, levels=levels) == ref
