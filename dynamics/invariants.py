@@ -51,15 +51,24 @@ class Violation:
                 f"{self.bound:.3g} from the solver tolerances; the rows from here on are not written")
 
 
-def _column(df: pd.DataFrame, name: str) -> np.ndarray | None:
-    return df[name].to_numpy(float) if name in df else None
+def _column(df: pd.DataFrame, name: str, names=None) -> np.ndarray | None:
+    return df[name].to_numpy(float) if name in (df.columns if names is None else names) else None
 
 
-def _friction(df, rtol, atol, power_col, label):
-    power = _column(df, power_col)
+def _works(df: pd.DataFrame, names=None) -> list[str]:
+    return [c for c in (df.columns if names is None else names) if c.startswith("work_") and c.endswith("_J")]
+
+
+def _matrix(df: pd.DataFrame, names: list[str]) -> np.ndarray:
+    """The columns as one (rows, len(names)) array (a column at a time: a list selection copies the frame)."""
+    return np.stack([df[c].to_numpy(float) for c in names], axis=1)
+
+
+def _friction(df, rtol, atol, power_col, label, names=None):
+    power = _column(df, power_col, names)
     if power is None:
         return None
-    force, slip = _column(df, "friction_force_N"), _column(df, "slip_speed_m_s")
+    force, slip = _column(df, "friction_force_N", names), _column(df, "slip_speed_m_s", names)
     if force is not None and slip is not None:
         du = GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(slip), initial=0.0)) + atol * LEVER_M)
         bound = -np.abs(force) * du
@@ -68,8 +77,8 @@ def _friction(df, rtol, atol, power_col, label):
     return label, power, bound
 
 
-def _heat_generated(df, rtol, atol):
-    heat = _column(df, "heat_generated_J")
+def _heat_generated(df, rtol, atol, names=None):
+    heat = _column(df, "heat_generated_J", names)
     if heat is None:
         return None
     scale = float(np.nanmax(np.abs(heat), initial=0.0))
@@ -78,13 +87,14 @@ def _heat_generated(df, rtol, atol):
         rtol * scale + atol * max(1.0, scale)))
 
 
-def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None) -> np.ndarray | None:
-    """Per row: works (signed into the system) - change of kinetic energy - impact losses up to that row (J)."""
-    works = [c for c in df.columns if c.startswith("work_") and c.endswith("_J")]
-    if not works or "kinetic_energy_J" not in df or not len(df):
+def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=None) -> np.ndarray | None:
+    """Per row: works (signed into the system) - change of kinetic energy - impact losses up to that row (J).
+    names: the columns to look at (default: all)."""
+    works = _works(df, names)
+    if not works or "kinetic_energy_J" not in (df.columns if names is None else names) or not len(df):
         return None
     t = df["t_s"].to_numpy(float)
-    w = df[works].to_numpy(float)
+    w = _matrix(df, works)
     ke = df["kinetic_energy_J"].to_numpy(float)
     lost = np.zeros(len(t))
     if events is not None and len(events) and "energy_lost_J" in events:
@@ -98,12 +108,11 @@ def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None) -> np.n
     return (w - w[0]).sum(axis=1) - (ke - ke[0]) - lost
 
 
-def _energy(df, events, rtol, atol, exact):
-    closure = energy_closure(df, events)
+def _energy(df, events, rtol, atol, exact, names=None):
+    closure = energy_closure(df, events, names)
     if closure is None:
         return None
-    works = [c for c in df.columns if c.startswith("work_") and c.endswith("_J")]
-    w = df[works].to_numpy(float)
+    w = _matrix(df, _works(df, names))
     if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
         inc = np.diff(w.sum(axis=1))
         panel = np.zeros(len(inc))
@@ -118,13 +127,15 @@ def _energy(df, events, rtol, atol, exact):
 
 
 def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, atol: float,
-                    exact: bool = False) -> Violation | None:
-    """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature)."""
+                    exact: bool = False, columns: list[str] | None = None) -> Violation | None:
+    """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature);
+    columns: check only the invariants these columns carry (default: every column)."""
     if df is None or not len(df):
         return None
-    checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)"),
-              _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)"),
-              _heat_generated(df, rtol, atol), _energy(df, events, rtol, atol, exact)]
+    names = None if columns is None else [c for c in columns if c in df.columns]
+    checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names),
+              _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names),
+              _heat_generated(df, rtol, atol, names), _energy(df, events, rtol, atol, exact, names)]
     worst = None
     for check in checks:
         if check is None:
@@ -138,5 +149,5 @@ def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, 
     if worst is None:
         return None
     i, label, value, bound = worst
-    mode = str(df["mode"].iloc[i]) if "mode" in df else ""
+    mode = str(df["mode"].iloc[i]) if "mode" in (df.columns if names is None else names) else ""
     return Violation(float(df["t_s"].iloc[i]), mode, label, value, bound)

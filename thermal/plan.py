@@ -36,6 +36,17 @@ CYCLE_TURNS_DAE = 6
 #: warn when the last two turns' mean heat differ by more than this (mechanics not yet periodic)
 PERIODICITY_TOLERANCE = 1e-3
 
+def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
+    """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
+    as assigning them one at a time would, but in one step (each insertion into a frame costs ~0.1 ms)."""
+    kept = df.drop(columns=drop) if drop else df
+    present = {k: v for k, v in new.items() if k in kept.columns}
+    if present:
+        kept = kept.assign(**present)
+    fresh = {k: v for k, v in new.items() if k not in kept.columns}
+    return pd.concat([kept, pd.DataFrame(fresh, index=kept.index)], axis=1) if fresh else kept
+
+
 def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
     text = f"thermal.model = '{model}' (scenario): {MODELS[model].description}"
     if MODELS[model].build is None:
@@ -105,10 +116,9 @@ class ThermalPlan:
             summary["averaging"] = "resolved"
             summary["averaging_why"] += ("; the run failed before a periodic cycle" if failed else
                                          "; no full crank turn to average") + ", so what ran is shown resolved"
-        df = df.copy()
         t_on_pin = self._time_since(df["t_s"].to_numpy(float), mech.contact_starts(df, events))
         contact = mech.contact_state(df)
-        self._add_columns(df, contact, states, t_on_pin)
+        df = self._add_columns(df, contact, states, t_on_pin)
         if states is not None and window is None:
             summary["heat_balance"] = self._balance(states)
         summary.update(setup.describe())
@@ -129,7 +139,8 @@ class ThermalPlan:
         return np.clip(out, 0.0, None)
 
     # ---------------------------------------------------------------------------------------------- columns
-    def _add_columns(self, df: pd.DataFrame, contact: dict, states, t_on_pin) -> None:
+    def _add_columns(self, df: pd.DataFrame, contact: dict, states, t_on_pin) -> pd.DataFrame:
+        """The table with the thermal columns (module docstring) and without the DAE's temperature states."""
         setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
         th = setup.section
         N = contact["normal_force"]
@@ -154,32 +165,34 @@ class ThermalPlan:
                                      mat, distribution=th["distribution"], method="seed-blok")["temp_flash_rise_K"]
         share = np.where(engaged, res["heat_share_pin"], np.nan)
         base_pin = base_wheel = np.full(len(df), setup.temp_ambient)
+        new: dict[str, np.ndarray] = {}
+        drop: list[str] = []
         if states is not None:
             names = setup.system.state_names
             base_pin = states[:, names.index("temp_bulk_pin_K")]
             base_wheel = states[:, names.index("temp_bulk_wheel_K")]
             for j, name in enumerate(setup.extension.names):
                 if name.startswith("temp_bulk_"):
-                    df[name[:-2] + "_C"] = states[:, j] - KELVIN
+                    new[name[:-2] + "_C"] = states[:, j] - KELVIN
                 elif not name.startswith("temp_wall_") and not np.all(np.isnan(states[:, j])):
-                    df[name] = states[:, j]
+                    new[name] = states[:, j]
             u, _, gamma_bulk = setup.extension.inputs_numeric(contact)
-            df["heat_share_pin_bulk"] = np.where(engaged, gamma_bulk, np.nan)
+            new["heat_share_pin_bulk"] = np.where(engaged, gamma_bulk, np.nan)
             if setup.mesh is not None:
                 surface = self._wall_surface(states, u, contact["track"])
-                df["temp_wall_surface_C"] = surface - KELVIN
+                new["temp_wall_surface_C"] = surface - KELVIN
                 base_wheel = surface
-            for c in [c for c in setup.extension.names if c in df and c.startswith("temp_")]:
-                del df[c]
+            drop = [c for c in setup.extension.names if c in df and c.startswith("temp_")]
         base = np.where(engaged, share * base_pin + (1.0 - share) * base_wheel, np.nan)
-        df["heat_rate_W"] = res["heat_rate_W"]
-        df["heat_share_pin"] = share
-        df["hertz_half_width_m"] = b
-        df["hertz_pressure_max_Pa"] = peak_pressure(N, geo.contact_radius, geo.contact_length, E_star)
-        df["peclet_pin"] = res["peclet_pin"]
-        df["peclet_wheel"] = res["peclet_wheel"]
-        df["temp_flash_rise_K"] = rise
-        df["temp_contact_C"] = base + rise - KELVIN
+        new["heat_rate_W"] = res["heat_rate_W"]
+        new["heat_share_pin"] = share
+        new["hertz_half_width_m"] = b
+        new["hertz_pressure_max_Pa"] = peak_pressure(N, geo.contact_radius, geo.contact_length, E_star)
+        new["peclet_pin"] = res["peclet_pin"]
+        new["peclet_wheel"] = res["peclet_wheel"]
+        new["temp_flash_rise_K"] = rise
+        new["temp_contact_C"] = base + rise - KELVIN
+        return _with_columns(df, new, drop)
 
     def _wall_surface(self, states, u, track) -> np.ndarray:
         """Surface temperature of the wall track under the contact: T_0 + q dz_0/(2k), q = heat into it / area."""
