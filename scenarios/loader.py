@@ -6,6 +6,7 @@ UTF-8 text of at most MAX_FILE_BYTES with tables nested at most MAX_DEPTH deep (
 from __future__ import annotations
 
 import copy
+import functools
 import re
 import tomllib
 from dataclasses import dataclass
@@ -124,11 +125,17 @@ def parse_override(text: str) -> tuple[list[str], object]:
     keys = [k.strip() for k in path.strip().split(".") if k.strip()]
     if not keys:
         raise ScenarioError("--set", f"missing key in {text!r}")
+    return keys, copy.deepcopy(_override_value(value.strip()))
+
+
+@functools.lru_cache(maxsize=4096)
+def _override_value(text: str):
+    """An override's value read as TOML when it can be, else the text (cached: a sweep repeats its values; the
+    caller copies it, as a value may be a table or array)."""
     try:
-        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+        return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
-        parsed = value.strip()
-    return keys, parsed
+        return text
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
@@ -238,7 +245,11 @@ def build_mechanism(si: dict) -> Mechanism:
 
 def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:
     """Read, override, validate. Raises ScenarioError (one line) on any user error."""
-    raw, source = read_raw(name_or_path)
+    return from_raw(*read_raw(name_or_path), overrides)
+
+
+def from_raw(raw: dict, source: str, overrides: list[str] | None = None) -> Scenario:
+    """Override and validate a parsed scenario (`read_raw`), e.g. once per sweep case."""
     raw = apply_overrides(raw, overrides or [])
     si = validate(raw)
     build_mechanism(si)  # geometry checks now, before anything runs

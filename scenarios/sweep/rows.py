@@ -5,6 +5,7 @@ unit appended (`load.wheel_torque_N_m`, `contact.friction`).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -28,11 +29,17 @@ def unit_suffix(unit: str) -> str:
 
 def field_unit(si: dict, key: str) -> str:
     """The SI unit of a scenario key ('' for dimensionless, words, booleans)."""
+    return _field_unit(si["mechanism"]["type"], key)
+
+
+@functools.lru_cache(maxsize=1024)
+def _field_unit(mtype: str, key: str) -> str:
+    """(cached: the schema's units are fixed, and a sweep asks for every key of every case)"""
     parts = key.split(".")
     if len(parts) == 1:
         spec = TOP.get(parts[0])
     else:
-        spec = sections_for(si["mechanism"]["type"]).get(parts[0], {}).get(parts[1])
+        spec = sections_for(mtype).get(parts[0], {}).get(parts[1])
     return (spec.unit or "") if spec is not None and spec.kind == "quantity" else ""
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from mechsim.scenarios.loader import Scenario, load, read_raw
+from mechsim.scenarios.loader import Scenario, from_raw, read_raw
 from mechsim.scenarios.output.paths import default_folder
 from mechsim.scenarios.sweep.execute import CaseTask, Outcome, SweepInterrupted
 from mechsim.scenarios.sweep.rows import case_key, parameter_columns
@@ -50,14 +50,14 @@ def plan(spec: SweepSpec, extra: list[list[str]] | None = None) -> Plan:
     extra: per case, further overrides derived from its values (Python API only, e.g. a duration of three
     crank turns at each case's crank speed in benchmarks/sweep_bench.py).
     """
-    base_raw, _ = read_raw(spec.scenario)
+    base_raw, source = read_raw(spec.scenario)       # parsed once; each case is overridden and validated
     cases = []
     per_case = spec.case_overrides()
     if extra is not None:
         per_case = [o + list(e) for o, e in zip(per_case, extra, strict=True)]
     for i, overrides in enumerate(per_case):
         try:
-            sc = load(spec.scenario, overrides)
+            sc = from_raw(base_raw, source, overrides)
         except ScenarioError as exc:
             varied = ", ".join(overrides[len(spec.base):])
             raise ScenarioError(exc.field, f"{exc.problem} (sweep case {i + 1}: {varied})") from None
