@@ -16,6 +16,7 @@ exactly, from the modal integral of T), so the heat balance closes to round-off 
 """
 from __future__ import annotations
 
+from itertools import accumulate
 from typing import Callable
 
 import numpy as np
@@ -185,13 +186,13 @@ class ModalNetwork:
         else:                                                      # no heat rows: no bookkeeping energies
             q_int = np.zeros(len(h)), np.zeros(len(h))
         y = np.asarray(y0, dtype=float)
-        # the modal recurrence z_{k+1} = decay_k z_k + forcing_k is the only sequential part (a short loop over
-        # length-n vectors); the rest is whole-array work. cumsum adds in order, as the step-by-step sum did.
+        # the modal recurrence z_{k+1} = decay_k z_k + forcing_k is the only sequential part: per mode, over Python
+        # floats (the same IEEE operations as numpy's, ~4x faster than a loop of length-n array steps); the rest
+        # is whole-array work. cumsum adds in order, as the step-by-step sum did.
         Z = np.empty((len(cuts), self.n))
-        Z[0] = self.Vinv @ y[:self.n]
-        decay_t, forcing_t = decay.T.copy(), forcing.T.copy()
-        for k in range(len(h)):
-            Z[k + 1] = decay_t[k] * Z[k] + forcing_t[k]
+        for i, z0 in enumerate((self.Vinv @ y[:self.n]).tolist()):
+            Z[:, i] = list(accumulate(zip(decay[i].tolist(), forcing[i].tolist()),
+                                      lambda z, step: step[0] * z + step[1], initial=z0))
         z_int = carry_int.T * Z[:-1] + forcing_int.T                                   # (K, n)
         conv = z_int @ self.loss_m - float(np.sum(self.s)) * h
         out = np.empty((len(cuts), self.n + 3))
