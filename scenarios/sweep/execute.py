@@ -105,8 +105,15 @@ class SerialRunner:
             raise SweepInterrupted("interrupted (Ctrl-C)") from None
 
 
+#: imported once by the pool's fork server, before it forks the workers: each worker then starts with them
+#: loaded (~1 s of imports, pandas the most, instead of once per worker; DAE-only modules load on first use)
+WORKER_PRELOAD = ("mechsim.scenarios.sweep.execute", "mechsim.scenarios.sweep.rows", "mechsim.scenarios.runner",
+                  "mechsim.thermal.plan")
+
+
 class PoolRunner:
-    """A local concurrent.futures.ProcessPoolExecutor (forkserver processes, so no fork of a threaded parent)."""
+    """A local concurrent.futures.ProcessPoolExecutor (forkserver processes, so no fork of a threaded parent;
+    the fork server imports WORKER_PRELOAD first)."""
 
     name = "pool"
 
@@ -120,8 +127,10 @@ class PoolRunner:
         import multiprocessing as mp
         if not tasks:
             return
-        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)),
-                                 mp_context=mp.get_context("forkserver"), initializer=_ignore_sigint)
+        context = mp.get_context("forkserver")
+        context.set_forkserver_preload(list(WORKER_PRELOAD))     # used when the fork server starts (once a process)
+        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=context,
+                                 initializer=_ignore_sigint)
         futures = [ex.submit(run_case, t) for t in tasks]
         delivered: set = set()
         try:
