@@ -87,14 +87,15 @@ def _heat_generated(df, rtol, atol, names=None):
         rtol * scale + atol * max(1.0, scale)))
 
 
-def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=None) -> np.ndarray | None:
+def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=None,
+                   works: np.ndarray | None = None) -> np.ndarray | None:
     """Per row: works (signed into the system) - change of kinetic energy - impact losses up to that row (J).
-    names: the columns to look at (default: all)."""
-    works = _works(df, names)
-    if not works or "kinetic_energy_J" not in (df.columns if names is None else names) or not len(df):
+    names: the columns to look at (default: all); works: their work columns as one array, if already read."""
+    work_names = _works(df, names)
+    if not work_names or "kinetic_energy_J" not in (df.columns if names is None else names) or not len(df):
         return None
     t = df["t_s"].to_numpy(float)
-    w = _matrix(df, works)
+    w = _matrix(df, work_names) if works is None else works
     ke = df["kinetic_energy_J"].to_numpy(float)
     lost = np.zeros(len(t))
     if events is not None and len(events) and "energy_lost_J" in events:
@@ -109,10 +110,11 @@ def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=N
 
 
 def _energy(df, events, rtol, atol, exact, names=None):
-    closure = energy_closure(df, events, names)
+    work_names = _works(df, names)
+    w = _matrix(df, work_names) if work_names else None
+    closure = energy_closure(df, events, names, w)
     if closure is None:
         return None
-    w = _matrix(df, _works(df, names))
     if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
         inc = np.diff(w.sum(axis=1))
         panel = np.zeros(len(inc))

@@ -114,12 +114,16 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict
     all works signed into the system)."""
     if "work_drive_J" not in df or len(df) < 2:
         return {}
-    works = {c[5:-2]: float(df[c].iloc[-1] - df[c].iloc[0]) for c in df.columns
-             if c.startswith("work_") and c.endswith("_J")}
-    dke = float(df["kinetic_energy_J"].iloc[-1] - df["kinetic_energy_J"].iloc[0])
+    def change(column: str) -> float:
+        values = df[column].to_numpy(float)
+        return float(values[-1] - values[0])
+
+    works = {c[5:-2]: change(c) for c in df.columns if c.startswith("work_") and c.endswith("_J")}
+    dke = change("kinetic_energy_J")
     lost = 0.0
     if events is not None and "energy_lost_J" in events and len(events):
-        t0, t1 = float(df["t_s"].iloc[0]), float(df["t_s"].iloc[-1])
+        t = df["t_s"].to_numpy(float)
+        t0, t1 = float(t[0]), float(t[-1])
         inside = (events["t_s"] > t0) & (events["t_s"] <= t1)
         lost = float(events.loc[inside, "energy_lost_J"].fillna(0.0).sum())
     closure = sum(works.values()) - dke - lost

@@ -48,3 +48,4 @@ def test_multilevel_search_gives_the_bisection_times_to_the_bit():
         assert len(ref) >= 4
         for levels in (1, 3, 6, 8):
             assert switch_times(columns, t, levels=levels) == ref
+        assert switch_times(columns, t, grid_columns=columns(t)) == ref     # the run's table saves the grid call

@@ -63,7 +63,8 @@ def contact_code(cols: dict) -> np.ndarray:
     return code
 
 
-def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int = SEARCH_LEVELS) -> list[float]:
+def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int = SEARCH_LEVELS,
+                 grid_columns=None) -> list[float]:
     """Times where the closed form's contact changes (see contact_code), by bisection between output rows, so
     that every quadrature interval sees a smooth input.
 
@@ -71,8 +72,9 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
     tree of midpoints the next `levels` halvings can visit (2^levels - 1 per bracket, each computed as the
     bisection computes it, 0.5 (a + b) of its own parents), then the halvings walk down that tree. About 36
     halvings take 6 calls instead of 36 (the call's fixed cost dominates: ~0.2 ms against ~0.3 us a point);
-    each bracket stops on its own tolerance, so the times are those of one-at-a-time bisection, to the bit."""
-    code = contact_code(columns_fn(t_grid))
+    each bracket stops on its own tolerance, so the times are those of one-at-a-time bisection, to the bit.
+    grid_columns: columns_fn(t_grid) when already at hand (the run's closed-form table), to save that call."""
+    code = contact_code(columns_fn(t_grid) if grid_columns is None else grid_columns)
     idx = np.flatnonzero(code[1:] != code[:-1])
     if not len(idx):
         return []
@@ -204,10 +206,11 @@ class ModalNetwork:
 
 
 def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: float, t_out: np.ndarray,
-                          y0: np.ndarray) -> tuple[np.ndarray, Callable, list[float]]:
+                          y0: np.ndarray, table=None) -> tuple[np.ndarray, Callable, list[float]]:
     """Thermal states [T..., E_gen, E_pin, E_conv] at t_out for the closed-form motion; also the input function
-    and the contact switch times (for reuse by the cycle-averaged model)."""
+    and the contact switch times (for reuse by the cycle-averaged model). table: the closed form's columns at
+    t_out, if already computed (the run's table)."""
     columns = closed_form_columns(mech, angle0, speed)
     inputs = input_function(ext, mech, columns)
-    breaks = switch_times(columns, t_out)
+    breaks = switch_times(columns, t_out, grid_columns=table)
     return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks), inputs, breaks

@@ -106,7 +106,7 @@ class ThermalPlan:
             else:
                 states, inputs, breaks = integrate_closed_form(
                     ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
-                    df["t_s"].to_numpy(float), setup.initial)
+                    df["t_s"].to_numpy(float), setup.initial, table=df)
         window = None
         if self.averaging == "cycle" and not failed:
             window = self._cycle(df, events, states, inputs, breaks, summary, warnings, extra)

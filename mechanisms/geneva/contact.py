@@ -49,6 +49,7 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     t = df["t_s"].to_numpy(float)
     theta = df["crank_angle_rad"].to_numpy(float)
     w1 = df["crank_speed_rad_s"].to_numpy(float)
+    mode = df["mode"].to_numpy()
     found: list[float] = []
     kinds = events["kind"].astype(str).to_numpy() if len(events) and "kind" in events else np.array([], str)
     times = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
@@ -60,10 +61,10 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
         found += np.interp(entries[inside], theta, t).tolist()
     if "flank switch" not in kinds:     # a closed form lists no flank switches: the normal force changes sign
         N = df["contact_force_N"].to_numpy(float)
-        engaged = (df["mode"] == "engaged").to_numpy()
+        engaged = mode == "engaged"
         flip = np.flatnonzero(engaged[1:] & engaged[:-1] & (np.sign(N[1:]) * np.sign(N[:-1]) < 0))
         found += [t[i] - N[i] * (t[i + 1] - t[i]) / (N[i + 1] - N[i]) for i in flip]
-    if len(t) and df["mode"].iloc[0] == "engaged" and w1[0] > 0:
+    if len(t) and mode[0] == "engaged" and w1[0] > 0:
         alpha = theta[0] - 2 * np.pi * np.floor((theta[0] + np.pi) / (2 * np.pi))
         found.append(t[0] - (alpha + a0) / w1[0])
     return np.sort(np.unique(np.asarray(found, dtype=float)))
