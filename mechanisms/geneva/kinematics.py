@@ -128,7 +128,7 @@ def engaged_slot(geom: GenevaGeometry, crank_angle):
 
 
 def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float) -> dict[str, np.ndarray]:
-    """Wheel angle (unwrapped), speed, acceleration and jerk at constant crank speed.
+    """Wheel angle (unwrapped), speed and acceleration at constant crank speed (the jerk: speed_ratio_second_derivative).
 
     crank_angle is the unwrapped crank angle theta (0 at the first mid-engagement). During a dwell the wheel
     rests at the nearest half-pitch: it has indexed once per engagement passed (docs/theory.md §G1-2).
@@ -145,7 +145,6 @@ def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float)
         "wheel_angle": k * geom.pitch + beta,
         "wheel_speed": np.where(engaged, w * speed_ratio(lam, alpha), 0.0),
         "wheel_accel": np.where(engaged, w * w * speed_ratio_derivative(lam, alpha), 0.0),
-        "wheel_jerk": np.where(engaged, w ** 3 * speed_ratio_second_derivative(lam, alpha), 0.0),
     }
 
 

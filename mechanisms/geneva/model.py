@@ -28,6 +28,9 @@ from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wh
 if TYPE_CHECKING:                      # the symbolic model imports sympy when it is built (a closed form needs none)
     import sympy as sp
 
+#: the closed form's mode names by engaged (0/1): a row's name is taken from here, not made anew per row
+MODE_NAMES = np.array(["dwell", "engaged"], dtype=object)
+
 
 class Geneva(Mechanism):
     """External Geneva drive with n >= 3 slots, driven at the crank, loaded at the wheel."""
@@ -330,7 +333,8 @@ class Geneva(Mechanism):
         w2, a2 = kin["wheel_speed"], kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
         x = gk.pin_distance(g, alpha)
-        v_s = np.where(eng, r * speed * np.sin(alpha + beta), 0.0)
+        sin_ab = np.sin(alpha + beta)
+        v_s = np.where(eng, r * speed * sin_ab, 0.0)
         wheel_moment = self.wheel_inertia * a2 + self.wheel_damping * w2 + self.wheel_torque
 
         def balance(flank):
@@ -347,10 +351,10 @@ class Geneva(Mechanism):
         flank = np.where(eng, flank, 0.0)
         fric = mu * np.abs(N) * sigma
         torque = (self.crank_damping * speed + N * r * np.cos(alpha + beta)
-                  + fric * (r * np.sin(alpha + beta) + flank * R))
+                  + fric * (r * sin_ab + flank * R))
         torque = np.where(eng, torque, self.crank_damping * speed)
         return {
-            "mode": np.where(eng, "engaged", "dwell").astype(object),
+            "mode": MODE_NAMES[eng.astype(np.intp)],
             "crank_angle_rad": theta, "crank_speed_rad_s": np.full_like(theta, speed),
             "crank_accel_rad_s2": np.zeros_like(theta),
             "wheel_angle_rad": kin["wheel_angle"], "wheel_speed_rad_s": w2, "wheel_accel_rad_s2": a2,
