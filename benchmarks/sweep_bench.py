@@ -9,8 +9,10 @@ instead. Thermal: lumped (bulk pin/crank/wheel temperatures alongside) when the 
 Output rows every 5 ms (a sweep wants summary figures; peaks move by < 1e-5 relative against 1 ms here).
 
 Reports, per runner: the time to validate every case (the loader, in this process), the wall time of the run
-(worker start-up, model derivation per worker, cases, table), cases per second; and checks that every runner
-produced the same table. Results are printed and written as JSON next to this file (sweep_bench.json).
+(worker start-up, model derivation per worker, cases, table), cases per second, the CPU time of this (main)
+process and of the cases (median, mean), the load average before and after; and checks that every runner
+produced the same table. Results are printed and written as JSON next to this file (sweep_bench.json);
+--table PATH also keeps the last runner's sweep table (Parquet; benchmarks/scaling.py reads it).
 """
 from __future__ import annotations
 
@@ -61,6 +63,7 @@ def main() -> None:
     ap.add_argument("--runners", default="pool,dask", help="comma list of pool, dask, serial")
     ap.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
     ap.add_argument("--json", default=str(Path(__file__).with_name("sweep_bench.json")))
+    ap.add_argument("--table", default=None, help="write the (last runner's) sweep table here (Parquet)")
     args = ap.parse_args()
     thermal = args.thermal or ("lumped" if thermal_available() else "none")
     runners = args.runners.split(",")
@@ -69,7 +72,8 @@ def main() -> None:
     for name in runners:
         backend, method = "ida", args.method
         spec, extra = build(args.per_axis, method, thermal, backend)
-        t0 = time.perf_counter()
+        load_before = os.getloadavg()[0]
+        t0, cpu0 = time.perf_counter(), time.process_time()
         pl = plan(spec, extra)
         t_plan = time.perf_counter() - t0
         if name == "pool":
@@ -85,7 +89,10 @@ def main() -> None:
             t0 = time.perf_counter()
             report = run_sweep(pl, out / "sweep", runner, plots=False)
             t_run = time.perf_counter() - t0
+            main_cpu = time.process_time() - cpu0
             df = pd.read_parquet(out / "sweep" / "sweep.parquet")
+            if args.table:
+                shutil.copyfile(out / "sweep" / "sweep.parquet", args.table)
         finally:
             shutil.rmtree(out, ignore_errors=True)
         tables[name] = df
@@ -96,8 +103,12 @@ def main() -> None:
                "cases_per_s": round(n / (t_plan + t_run), 1),
                "median_case_s": round(float(df["case_wall_time_s"].median()), 4),
                "median_case_cpu_s": round(float(df["case_cpu_time_s"].median()), 4),
+               "mean_case_cpu_s": round(float(df["case_cpu_time_s"].mean()), 4),
+               "sum_case_cpu_s": round(float(df["case_cpu_time_s"].sum()), 2),
+               "main_process_cpu_s": round(main_cpu, 2),
                "first_case_per_worker_s": round(float(df.groupby("worker")["case_wall_time_s"].max().mean()), 2),
                "extrapolated_1000_s": round((t_plan + t_run) * 1000 / n, 1) if n != 1000 else None,
+               "load_average_before": round(load_before, 1),
                "load_average": round(os.getloadavg()[0], 1), "batching": "none (docs/sweeps.md)",
                "computed": report.computed}
         results.append(row)
