@@ -151,8 +151,8 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
     if isinstance(vary, Mapping):
         vary = [f"{key}={spec}" for key, spec in vary.items()]
     spec = build_spec(str(scenario), [str(v) for v in (vary or [])], _override_list(set), zip)
+    runner = make_runner(workers, dask_local, scheduler, batch)   # first: a pool's workers start while cases validate
     pl = plan(spec)
-    runner = make_runner(workers, dask_local, scheduler, batch)
     with tempfile.TemporaryDirectory(prefix="mechsim-sweep-") as scratch:
         if out is not None:
             folder = Path(out)

@@ -111,25 +111,34 @@ WORKER_PRELOAD = ("mechsim.scenarios.sweep.execute", "mechsim.scenarios.sweep.ro
                   "mechsim.thermal.plan")
 
 
+def _start_fork_server():
+    """The forkserver context, its server started now with WORKER_PRELOAD: the server imports them in its own
+    process while this one goes on (validating the cases), instead of the workers waiting for them later."""
+    import multiprocessing as mp
+    from multiprocessing import forkserver
+    context = mp.get_context("forkserver")
+    context.set_forkserver_preload(list(WORKER_PRELOAD))     # used when the server starts (once a process)
+    forkserver.ensure_running()                              # returns at once; the server imports on its own
+    return context
+
+
 class PoolRunner:
     """A local concurrent.futures.ProcessPoolExecutor (forkserver processes, so no fork of a threaded parent;
-    the fork server imports WORKER_PRELOAD first)."""
+    the fork server starts with the runner and imports WORKER_PRELOAD first)."""
 
     name = "pool"
 
     def __init__(self, workers: int | None = None):
         self.workers = workers or len(os.sched_getaffinity(0))
+        self.context = _start_fork_server()
 
     def describe(self) -> str:
         return f"local process pool, {self.workers} workers"
 
     def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
-        import multiprocessing as mp
         if not tasks:
             return
-        context = mp.get_context("forkserver")
-        context.set_forkserver_preload(list(WORKER_PRELOAD))     # used when the fork server starts (once a process)
-        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=context,
+        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=self.context,
                                  initializer=_ignore_sigint)
         futures = [ex.submit(run_case, t) for t in tasks]
         delivered: set = set()
