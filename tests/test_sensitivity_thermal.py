@@ -114,7 +114,6 @@ def test_exact_identities(tables):
 @pytest.mark.parametrize("sets, field", [
     (["thermal.model=1d"], "thermal.model"),                               # the wall-track mesh: not traced
     (["thermal.flash=seed-blok"], "thermal.flash"),                        # the seed's formula: not traced
-    (["thermal.averaging=cycle", "duration=60 s"], "thermal.averaging"),   # cycle averaging: not traced
 ])
 def test_refused_thermal_options(sets, field):
     sc = mechsim.load("geneva-motor", set=["thermal.model=lumped"] + sets)

@@ -73,7 +73,7 @@ def _is_sympy(xp) -> bool:
 
 
 def _abs(x, xp):
-    return xp.Abs(x) if _is_sympy(xp) else np.abs(x)
+    return xp.Abs(x) if _is_sympy(xp) else xp.abs(x)
 
 
 def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> type[sp.Function]:

@@ -286,9 +286,10 @@ class ThermalPlan:
             return (lambda s: inputs(a + s)[:n_in]), [b - a for b in breaks if a < b < a + P]
         t = df["t_s"].to_numpy(float)
         u, _, _ = self.setup.extension.inputs_numeric(self.mech.contact_state(df))
-        mode = df["mode"].to_numpy()
-        jumps = [0.5 * (t[i] + t[i + 1]) - a for i in np.flatnonzero(mode[1:] != mode[:-1]) if a < t[i] < a + P]
-        return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), jumps
+        # the input is linear between output rows: every row inside the turn is a break, so that the quadratures
+        # of the mean and of the ripple are exact for it (thermal/cycle_exact.py gives the same in closed form)
+        rows = [float(x) - a for x in t[(t > a) & (t < a + P)]]
+        return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), rows
 
     def _mean_balance(self, means, duration) -> dict:
         """Heat balance of the mean model at the end of the run (exact: modal solution, convected integral)."""

@@ -1,0 +1,213 @@
+"""Cycle-averaged bulk temperatures at the periodic turn's own output rows, in closed form and array-neutral
+(numpy or jax.numpy), so that jax can differentiate them for the design sensitivities (docs/sensitivity.md).
+
+The model is thermal/cycle.py's (docs/theory.md §G5): the last full crank turn [a, b) of the mechanics (its ends
+where the drive angle passes angle0 + 2 pi m, linearly interpolated between output rows, `turn_boundaries`) gives
+the cycle-mean heat Q = dE_gen/P and pin share gamma = dE_pin/dE_gen (`cycle_means_from_energies`); the linear
+network C T' = -K T + s + B u then responds with
+- the mean response from ambient to the constant input u_bar = [gamma Q, (1 - gamma) Q], exact in the network's
+  modes (`ModalNetwork.constant`), and
+- the ripple T_p(t) - e^{At} T_p(0), T_p the periodic response to the zero-mean remainder u(t) - mean(u) of the
+  turn's input u (the rows' network inputs, linearly interpolated between output rows, `ThermalPlan._period_input`).
+
+Here the ripple is exact for that piecewise-linear input: over an interval of length h with end values g0, g1
+(modal coordinates, eigenvalue lambda, x = lambda h) the zero-state response is
+h [(phi1(x) - phi2(x)) g0 + phi2(x) g1], phi1 = (e^x - 1)/x, phi2 = (e^x - 1 - x)/x^2, and the mean of the input
+is the trapezoid sum; thermal/cycle.py's `bulk_response` reaches the same by Gauss-Legendre quadrature on finer
+pieces (tested equal to that quadrature's error). The periodic start is (I - e^{AP})^-1 Z(P).
+
+The temperatures are evaluated at the times t_k + M P of the turn's rows t_k in the last full turn of the run
+(`TurnLayout.periods`): the rows the peak of the periodic turn is read at (docs/sensitivity.md, "Cycle averaging").
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: below this |x| phi1 and phi2 are evaluated by their series (their closed forms lose digits to cancellation)
+SERIES_BELOW = 0.1
+
+
+def phi1(x, xp=np):
+    """(e^x - 1)/x, 1 at x = 0 (series below SERIES_BELOW; safe for differentiation at 0)."""
+    small = xp.abs(x) < SERIES_BELOW
+    safe = xp.where(small, 1.0, x)
+    series = 1.0 + x * (1 / 2 + x * (1 / 6 + x * (1 / 24 + x * (1 / 120 + x * (1 / 720 + x * (1 / 5040 + x * (
+        1 / 40320 + x / 362880)))))))
+    return xp.where(small, series, xp.expm1(safe) / safe)
+
+
+def phi2(x, xp=np):
+    """(e^x - 1 - x)/x^2, 1/2 at x = 0 (series below SERIES_BELOW: truncation < 1e-14 relative)."""
+    small = xp.abs(x) < SERIES_BELOW
+    safe = xp.where(small, 1.0, x)
+    series = 1 / 2 + x * (1 / 6 + x * (1 / 24 + x * (1 / 120 + x * (1 / 720 + x * (1 / 5040 + x * (
+        1 / 40320 + x * (1 / 362880 + x / 3628800)))))))
+    return xp.where(small, series, (xp.expm1(safe) - safe) / (safe * safe))
+
+
+def modes(capacity, conductance, xp=np):
+    """(lambda, V, V^-1) of A = -C^-1 K = V diag(lambda) V^-1 from the symmetric -C^-1/2 K C^-1/2 (as
+    thermal/exact.py `ModalNetwork`)."""
+    d = 1.0 / xp.sqrt(capacity)
+    lam, Q = xp.linalg.eigh(-(d[:, None] * conductance * d[None, :]))
+    return lam, d[:, None] * Q, Q.T / d[None, :]
+
+
+def periodic_response(lam, sigma, g, period, xp=np):
+    """Modal periodic response (nodes x n) at the nodes sigma (0 = sigma_0 <= ... <= sigma_N = period) to the input
+    that is linear between nodes with modal values g (nodes x n): z_k = e^{lambda sigma_k} z_0 + Z_k, Z the
+    zero-state response, z_0 = Z_N / (1 - e^{lambda P}). Z_k = sum_{j<k} e^{lambda (sigma_k - sigma_{j+1})} f_j with
+    f_j the interval's response (module docstring), summed as e^{lambda (sigma_k - P)} cumsum(e^{lambda (P - sigma_{j+1})}
+    f_j): every weight <= 1 for decaying modes (needs |lambda| P < 700)."""
+    h = sigma[1:] - sigma[:-1]
+    x = lam[None, :] * h[:, None]
+    p2 = phi2(x, xp)
+    f = h[:, None] * ((phi1(x, xp) - p2) * g[:-1] + p2 * g[1:])
+    weights = xp.exp(lam[None, :] * (period - sigma[1:, None]))
+    cs = xp.cumsum(weights * f, axis=0)
+    Z = xp.concatenate([xp.zeros((1, lam.shape[0])), xp.exp(lam[None, :] * (sigma[1:, None] - period)) * cs], axis=0)
+    z0 = Z[-1] / (-xp.expm1(lam * period))
+    return xp.exp(lam[None, :] * sigma[:, None]) * z0[None, :] + Z
+
+
+def mean_response(lam, V, Vinv, capacity, conductance, source, input_matrix, u_bar, times, xp=np):
+    """Network states (rows = times) from ambient under the constant input u_bar: z = e^{lambda t} z0 +
+    t phi1(lambda t) g (thermal/exact.py `ModalNetwork.constant`), the ambient per body s / (K 1)
+    (thermal/lumped.py `ambient_temperatures`)."""
+    ambient = source / xp.sum(conductance, axis=1)
+    z0 = Vinv @ ambient
+    g = Vinv @ ((source + input_matrix @ u_bar) / capacity)
+    lt = lam[None, :] * times[:, None]
+    return (xp.exp(lt) * z0[None, :] + times[:, None] * phi1(lt, xp) * g[None, :]) @ V.T
+
+
+def _linear(x, x0, x1, y0, y1):
+    """The straight line through (x0, y0), (x1, y1) at x (np.interp between two rows)."""
+    return y0 + (y1 - y0) * ((x - x0) / (x1 - x0))
+
+
+#: the turn's inner rows are padded to a multiple of this (zero-length intervals), so that a compiled evaluation
+#: serves every design whose turn has about as many rows
+PAD = 256
+
+
+@dataclass(frozen=True)
+class TurnLayout:
+    """Which output rows make up the last full turn, and the run's whole periods after it (discrete: fixed for a
+    derivative). t: the rows' times; ia, ib: the rows just before the turn's ends a, b (a, b in [t[i], t[i+1]));
+    inner: the rows strictly inside (a, b); targets: the drive angles at a and b (angle0 + 2 pi m); periods: M,
+    whole periods from the turn to the last full turn of the duration; zero_turns: k with t = 0 at phase kP - a;
+    zero_node: the node j (nodes [0, t_inner - a, P]) with node_j <= kP - a < node_j+1."""
+
+    t: np.ndarray
+    ia: int
+    ib: int
+    inner: np.ndarray
+    targets: tuple[float, float]
+    periods: int
+    zero_turns: int
+    zero_node: int
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The rows whose values the turn uses: both boundary pairs and the inner rows."""
+        return np.unique(np.concatenate([[self.ia, self.ia + 1, self.ib, self.ib + 1], self.inner]))
+
+    @property
+    def edges(self) -> np.ndarray:
+        """The rows around the turn's ends: ia, ia + 1, ib, ib + 1."""
+        return np.array([self.ia, self.ia + 1, self.ib, self.ib + 1])
+
+    @property
+    def pad(self) -> int:
+        """How many copies of the first inner row precede it in `padded`."""
+        return PAD * -(-len(self.inner) // PAD) - len(self.inner)
+
+    @property
+    def padded(self) -> np.ndarray:
+        """The inner rows padded in front to a multiple of PAD by copies of the first (zero-length intervals): row
+        k of the turn is row k + pad of `turn_bulk`'s result."""
+        return np.concatenate([np.full(self.pad, self.inner[0]), self.inner])
+
+    def data(self) -> dict:
+        """The layout as arrays (what `turn_bulk` needs besides the traced values)."""
+        node = self.zero_node + (self.pad if self.zero_node > 0 else 0)
+        return {"t_edges": self.t[self.edges], "t_inner": self.t[self.padded], "targets": np.asarray(self.targets),
+                "periods": float(self.periods), "zero_turns": float(self.zero_turns), "zero_node": node}
+
+    @classmethod
+    def of(cls, t: np.ndarray, angle: np.ndarray, duration: float) -> "TurnLayout | None":
+        """The layout of a run's rows (thermal/cycle.py `turn_boundaries` on the drive angle from its first row);
+        None with fewer than two boundaries (no full turn)."""
+        from mechsim.thermal.cycle import turn_boundaries
+        bounds = turn_boundaries(t, angle, angle[0])
+        if len(bounds) < 2:
+            return None
+        a, b = float(bounds[-2]), float(bounds[-1])
+        m = len(bounds)
+        targets = (float(angle[0] + 2 * np.pi * (m - 1)), float(angle[0] + 2 * np.pi * m))
+        ia, ib = (int(np.clip(np.searchsorted(angle, x, side="right") - 1, 0, len(t) - 2)) for x in targets)
+        inner = np.flatnonzero((t > a) & (t < b))
+        P = b - a
+        periods = int(math.floor((duration - a) / P + 1e-12)) - 1
+        zero_turns = int(math.ceil(a / P))
+        nodes = np.concatenate([[0.0], t[inner] - a, [P]])
+        zero_node = int(np.clip(np.searchsorted(nodes, zero_turns * P - a, side="right") - 1, 0, len(nodes) - 2))
+        return cls(t, ia, ib, inner, targets, periods, zero_turns, zero_node)
+
+
+def turn_ends(t_edges, targets, angle_edges) -> tuple:
+    """(a, b): the turn's ends where the drive angle passes the targets, linear between the rows around them
+    (thermal/cycle.py `turn_boundaries`); *_edges: the values at rows ia, ia + 1, ib, ib + 1."""
+    return tuple(_linear(targets[k], angle_edges[2 * k], angle_edges[2 * k + 1], t_edges[2 * k], t_edges[2 * k + 1])
+                 for k in (0, 1))
+
+
+def turn_means(t_edges, targets, angle_edges, gen_edges, pin_edges) -> dict:
+    """a, P, Q_bar, gamma_bar of the turn from the drive angle and the generated and pin energies at the rows
+    around its ends (thermal/cycle.py `cycle_means_from_energies` written out on them)."""
+    a, b = turn_ends(t_edges, targets, angle_edges)
+    G = [_linear(x, t_edges[2 * k], t_edges[2 * k + 1], gen_edges[2 * k], gen_edges[2 * k + 1])
+         for k, x in enumerate((a, b))]
+    Pn = [_linear(x, t_edges[2 * k], t_edges[2 * k + 1], pin_edges[2 * k], pin_edges[2 * k + 1])
+          for k, x in enumerate((a, b))]
+    energy = G[1] - G[0]
+    return {"t_start": a, "period": b - a, "heat_mean": energy / (b - a), "share_mean": (Pn[1] - Pn[0]) / energy}
+
+
+def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, network: dict, xp=np):
+    """Network states (rows = the padded inner rows, `TurnLayout.padded`) of the cycle-averaged solution at t_k + M P,
+    and the turn's
+    means. data: `TurnLayout.data()`; *_edges: values at the rows around the turn's ends; u_edges (4 x m),
+    u_inner (padded rows x m): the rows' network inputs; network: capacity C, conductance K (dense), source s,
+    input_matrix B."""
+    t_edges, t_inner = data["t_edges"], data["t_inner"]
+    means = turn_means(t_edges, data["targets"], angle_edges, gen_edges, pin_edges)
+    a, P = means["t_start"], means["period"]
+    Q, gamma = means["heat_mean"], means["share_mean"]
+    u_bar = xp.stack([gamma * Q, (1.0 - gamma) * Q])
+    u_a = _linear(a, t_edges[0], t_edges[1], u_edges[0], u_edges[1])
+    u_b = _linear(a + P, t_edges[2], t_edges[3], u_edges[2], u_edges[3])
+    sigma = xp.concatenate([xp.zeros(1), t_inner - a, xp.reshape(P, (1,))])
+    U = xp.concatenate([u_a[None, :], u_inner, u_b[None, :]], axis=0)
+    C, K, s, B = network["capacity"], network["conductance"], network["source"], network["input_matrix"]
+    lam, V, Vinv = modes(C, K, xp)
+    h = sigma[1:] - sigma[:-1]
+    mean_u = xp.sum(0.5 * h[:, None] * (U[1:] + U[:-1]), axis=0) / P       # exact for the piecewise-linear input
+    g = (U - mean_u[None, :]) @ (Vinv @ (B / C[:, None])).T
+    Tp = periodic_response(lam, sigma, g, P, xp)
+    # the periodic response at t = 0 (phase kP - a, inside node j's interval): node j's value carried over the
+    # part of the interval, with the input linear through it
+    j = data["zero_node"]
+    part = data["zero_turns"] * P - a - sigma[j]
+    g_zero = g[j] + (g[j + 1] - g[j]) * (part / h[j])
+    x = lam * part
+    p2 = phi2(x, xp)
+    T_zero = xp.exp(x) * Tp[j] + part * ((phi1(x, xp) - p2) * g[j] + p2 * g_zero)
+    times = t_inner + data["periods"] * P
+    mean = mean_response(lam, V, Vinv, C, K, s, B, u_bar, times, xp)
+    ripple = (Tp[1:-1] - xp.exp(lam[None, :] * times[:, None]) * T_zero[None, :]) @ V.T
+    return mean + ripple, means
