@@ -113,6 +113,9 @@ def test_stall_exits_3_and_keeps_what_ran(tmp_path, lc1_raw):
     assert summary["failure_code"] == "physical_stop"
     df = pd.read_csv(out / "timeseries.csv")
     assert 0 < df["t_s"].iloc[-1] < 3.0
+    # the figures of what ran are kept too (tests/test_stability.py runs its failure cases without them)
+    for name in ("motion_vs_time.png", "forces_vs_time.png", "thermal_vs_time.png", "report.html"):
+        assert (out / name).stat().st_size > 1000, name
 
 
 def test_solver_failure_exits_3(tmp_path):

@@ -16,7 +16,9 @@ CASE = {c.name: c for c in CASES}
 
 
 def invoke_case(case, out):
-    args = ["run", case.scenario, "--out", str(out), "--quiet"]
+    """The case's CLI run without figures (these tests read messages and tables; tests/test_cli.py checks that a
+    failed run keeps its figures too)."""
+    args = ["run", case.scenario, "--out", str(out), "--quiet", "--set", "output.plots=false"]
     for o in case.overrides:
         args += ["--set", o]
     return runner.invoke(app, args)
@@ -121,7 +123,7 @@ def test_explicit_solver_on_a_refined_thermal_mesh_exits_3_and_ida_runs(tmp_path
     r = invoke_case(case, tmp_path / "o")
     assert r.exit_code == 3, r.output
     assert "stiff for the explicit Tsit5" in r.stderr and "temp_wall" in r.stderr and "'ida'" in r.stderr
-    args = ["run", case.scenario, "--out", str(tmp_path / "ida"), "--quiet"]
+    args = ["run", case.scenario, "--out", str(tmp_path / "ida"), "--quiet", "--set", "output.plots=false"]
     for o in case.overrides:
         args += ["--set", o if not o.startswith("solver.backend") else "solver.backend=ida"]
     r = runner.invoke(app, args)
