@@ -575,11 +575,13 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                             for i in rows})
     columns = {PEAKS[q] for q in peak_rows if q in PEAKS} | {"work_drive_J"}
     if thermal_times:
+        # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
+        # averagings share one compiled set of read-outs
         columns |= set(CONTACT_COLUMNS) | {c for c in model.extension_names if c.startswith("temp_bulk_")}
+        columns |= set(CYCLE_COLUMNS) if ext is not None else set()
     if turn is not None and thermal_times and ext is not None:
         # the cycle-averaged bulk depends on every row of the turn (its input) and on the rows at its ends
         sample_times = sorted(set(sample_times) | {float(x) for x in df["t_s"].to_numpy(float)[turn["layout"].rows]})
-        columns |= set(CYCLE_COLUMNS)
     wall = time.perf_counter()
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
                               t_end, si["output_step"], angle0, speed0, ext, ext_initial)

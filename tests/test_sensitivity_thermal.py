@@ -5,7 +5,8 @@ thermal model; the refusals of what is not traced.
 
 geneva-motor for 0.7 s (motor drive, friction 0.15: one engagement with a slip reversal) and geneva-torque with
 friction 0.15 for 0.5 s (constant torque with crank damping, running up: two engagements with slip reversals). Both request the same quantities, so the compiled pass
-(the model with its thermal states, the same for both drives) serves both cases.
+(the model with its thermal states, the same for both drives) serves both cases. The cycle-averaged temperatures
+(the seed's load case 1 with a motor, 60 s; last section) reuse it too.
 """
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ import pytest
 import mechsim
 from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.units import ScenarioError
-from mechsim.scenarios.sensitivity import THERMAL_PEAKS, sensitivity
+from mechsim.scenarios import runner
+from mechsim.scenarios.sensitivity import THERMAL_PEAKS, cycle_temperatures, cycle_window, sensitivity
 from test_sensitivity import _work_at
 
 THERMAL = ["thermal.model=lumped", "thermal.averaging=resolved"]
@@ -144,3 +146,116 @@ def test_band_table_in_jax_is_the_table():
     fd = (band_theta_table(L * (1 + h)) - band_theta_table(L * (1 - h))) / (2 * h * L)
     inside = (L > 1.1e-4) & (L < 0.9e4)        # away from the table's ends, where the pieces meet the asymptotes
     np.testing.assert_allclose(slope[inside], fd[inside], rtol=1e-7)
+
+
+# ------------------------------------------------------------------------------------------------ cycle averaging
+# Sensitivities of the cycle-averaged temperatures (`thermal.averaging = "cycle"`, docs/sensitivity.md "Cycle
+# averaging"): the periodic turn's peak contact temperature and flash rise at their last time in the run, against
+# central finite differences of the IDA path, exact identities, and the closed-form cycle bulk (thermal/cycle_exact.py)
+# against the run's own (thermal/cycle.py `bulk_response`). The seed's load case 1 with a motor drive for 60 s: the
+# mechanics runs six turns and the bulk is the cycle-averaged solution at a minute, so every piece of the cycle model
+# is in the derivative (the turn's ends, its mean heat and share, the network's modes, the periodic ripple, the time
+# t_k + M P) at a fraction of an hour's cost. Here, after the resolved cases, its pass reuses their compiled model
+# (same network, same read-outs): only the cycle bulk's jvp compiles.
+CYCLE_NAME = "geneva-seed-lc1-mu015"
+CYCLE_SETS = ["duration=60 s", "drive.type=motor", "drive.stall_torque=40 N*m", "drive.no_load_speed=8 rad/s",
+              "thermal.averaging=cycle"]
+CYCLE_COLUMNS = {"peak_temp_contact_C": "temp_contact_C", "peak_temp_flash_rise_K": "temp_flash_rise_K"}
+#: the first two are checked by finite differences (the geometry, which moves the mechanics, the network's areas
+#: and volumes and the flash; the motor, and with it the period, the turn's ends and the phases); the others serve
+#: the exact identities (which tie the material values to each other)
+CYCLE_WRT = ["mechanism.crank_radius", "drive.no_load_speed", "thermal.conductivity", "thermal.density",
+             "thermal.specific_heat", "thermal.ambient_temperature", "thermal.convection_pin", "drive.stall_torque"]
+CYCLE_CHECKED = 2
+#: relative steps 1e-5 and 5e-6: small enough that no event of the turn crosses an output row (asserted: there the
+#: turn's piecewise-linear heat input, and the bulk with it, jump by a row's heat), large against rtol 1e-12
+CYCLE_H = 1e-5
+
+
+@pytest.fixture(scope="module")
+def cycle_table():
+    return sensitivity(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS), CYCLE_WRT, OF)
+
+
+def _cycle_window(sets):
+    """The plan and its mechanics window's run (the run cycle averaging averages), and the turn's temperatures."""
+    plan = runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + sets))
+    result = runner.execute(cycle_window(plan))
+    assert result.failure is None
+    return plan, result, cycle_temperatures(plan, result.timeseries)
+
+
+def test_cycle_temperatures_match_finite_differences(cycle_table):
+    _, nominal, turn = _cycle_window(FD)
+    modes = nominal.timeseries["mode"].to_numpy()[turn["rows"]]
+    rows = {q: int(turn["rows"][np.nanargmax(turn[c])]) for q, c in CYCLE_COLUMNS.items()}
+    for q, row in rows.items():         # the sensitivity's peak is this row, at its last time in the run
+        k = list(turn["rows"]).index(row)
+        assert cycle_table.loc[cycle_table["quantity"] == q, "t_s"].iloc[0] == pytest.approx(turn["t_s"][k], abs=1e-6)
+
+    def quantities(sets):
+        _, result, got = _cycle_window(FD + sets)
+        assert np.array_equal(result.timeseries["mode"].to_numpy()[got["rows"]], modes), "an event crossed a row"
+        return {q: float(got[CYCLE_COLUMNS[q]][list(got["rows"]).index(row)]) for q, row in rows.items()}
+
+    ref0 = quantities([])
+    worst = {}
+    for key in CYCLE_WRT[:CYCLE_CHECKED]:
+        part = cycle_table[cycle_table["wrt"] == key].set_index("quantity")
+        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
+        fd = richardson_central(lambda v: quantities([f"{key}={v!r} {unit}".strip()]), p, CYCLE_H)
+        mine = {}
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, mine)
+        print(key, {q: f"{e:.1e}" for q, e in mine.items()})
+        worst.update({q: max(e, worst.get(q, 0.0)) for q, e in mine.items()})
+    print("largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
+
+
+def test_cycle_exact_identities(cycle_table):
+    """(1) The network is linear and starts at the ambient, and the cycle model keeps that (the mean response from
+    ambient, a zero-mean ripple): the contact temperature's derivative in T_amb is 1, the flash rise's 0.
+    (2) rho and c_p enter only as rho c_p (capacities C = rho c_p V, diffusivity k/(rho c_p)): equal elasticities.
+    (3) The flash rise depends on k and rho c_p only through k and the Peclet numbers U b/(2 chi): scaling both keeps
+    every Peclet number and scales the rise by 1/k, so its elasticities in k and rho add up to -1
+    (docs/theory.md §G4.2-§G4.6). (4) The heat per index is mechanics: no thermal value moves it."""
+    t = cycle_table.set_index(["quantity", "wrt"])
+    assert t.loc[("peak_temp_contact_C", "thermal.ambient_temperature"), "derivative"] == pytest.approx(1.0, abs=1e-9)
+    assert t.loc[("peak_temp_flash_rise_K", "thermal.ambient_temperature"), "derivative"] == 0.0
+    for q in OF:
+        assert t.loc[(q, "thermal.density"), "elasticity"] == pytest.approx(
+            t.loc[(q, "thermal.specific_heat"), "elasticity"], rel=1e-12, abs=1e-15)
+    flash = "peak_temp_flash_rise_K"
+    assert (t.loc[(flash, "thermal.conductivity"), "elasticity"] + t.loc[(flash, "thermal.density"), "elasticity"]
+            == pytest.approx(-1.0, abs=1e-10))
+    for key in ("thermal.conductivity", "thermal.convection_pin", "thermal.ambient_temperature"):
+        assert t.loc[("heat_per_index_J", key), "derivative"] == 0.0
+
+
+def test_closed_form_cycle_bulk_is_the_runs():
+    """The cycle bulk the derivatives go through (thermal/cycle_exact.py: exact for the turn's piecewise-linear
+    input) equals the run's (thermal/cycle.py `bulk_response`, Gauss-Legendre on pieces between the turn's rows,
+    exact for that input to its quadrature error) at the rows' last times in the run."""
+    from mechsim.thermal import cycle as cyc
+    plan, result, turn = _cycle_window([])
+    df = result.timeseries
+    t, angle = df["t_s"].to_numpy(float), df["crank_angle_rad"].to_numpy(float)
+    bounds = cyc.turn_boundaries(t, angle, angle[0])
+    means = cyc.cycle_means_from_energies(t, bounds, df["heat_generated_J"].to_numpy(float),
+                                          df["heat_pin_J"].to_numpy(float))
+    setup = plan.thermal.setup
+    u = setup.extension.inputs_numeric(plan.mechanism.contact_state(df))[0]
+    a, P = means.t_start, means.period
+    rows = [float(x) - a for x in t[(t > a) & (t < a + P)]]
+    _, bulk = cyc.bulk_response(setup.system, means, lambda s: np.array([np.interp(a + s, t, ui) for ui in u]),
+                                rows, turn["t_s"])
+    assert turn["period"] == pytest.approx(P, rel=1e-14)
+    np.testing.assert_allclose(turn["bulk"], bulk, rtol=0, atol=1e-9)
+    ripple = bulk - bulk.mean(axis=0)
+    assert np.ptp(ripple[:, 0]) > 0.1          # the pin's ripple over the turn is in it (K)
+
+
+def test_cycle_at_prescribed_speed_is_refused():
+    sc = mechsim.load("geneva-seed-lc1-mu015", set=["duration=60 s", "thermal.averaging=cycle"])
+    with pytest.raises(ScenarioError) as err:
+        sensitivity(sc, ["load.wheel_torque"], OF)
+    assert err.value.field == "thermal.averaging"
