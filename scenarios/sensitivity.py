@@ -586,7 +586,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
                               t_end, si["output_step"], angle0, speed0, ext, ext_initial)
     by_time = {s.t: s for s in path.samples}
-    if turn is not None and thermal_times:
+    if turn is not None and thermal_times and ext is not None:       # (the flash model's base is the ambient)
         _cycle_bulk_samples(plan, df, turn, by_time, seed, model, [by_time[t] for t in thermal_times], path.stats)
     if thermal_times:
         _thermal_samples(plan, df, events, path, [by_time[t] for t in thermal_times], flash)
