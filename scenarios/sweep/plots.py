@@ -1,5 +1,6 @@
-"""Sweep plots (matplotlib Agg): each key summary figure against each varied parameter, and heat maps over
-the first two varied parameters.
+"""Sweep plots (matplotlib Figures, no pyplot state): each key summary figure against each varied parameter, and
+heat maps over the first two varied parameters; drawn half in a forked process where the platform allows
+(scenarios/output/render.py: the plots were most of a small sweep's time).
 
     plots/vs_<parameter>.png     one panel per figure; a line per combination of the other parameters (up to
                                  8, else points); failed cases marked with a red x on the axis
@@ -8,17 +9,15 @@ the first two varied parameters.
 """
 from __future__ import annotations
 
+import functools
 import re
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from mechsim.scenarios.sweep.rows import KEY_FIGURES  # noqa: E402
+from mechsim.scenarios.sweep.rows import KEY_FIGURES
 
 MAX_LINES = 8
 
@@ -60,14 +59,14 @@ def figure_columns(df: pd.DataFrame) -> list[str]:
     return [c for c in KEY_FIGURES if c in df and _numeric(df[c]) and df[c].notna().any()]
 
 
-def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[str], path: Path,
-                 log_x: bool = False) -> None:
+def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[str], log_x: bool = False) -> Figure:
     ok = df[df["success"].astype(bool)]
     bad = df[~df["success"].astype(bool)]
     n = len(figures)
     cols = 2 if n > 1 else 1
     rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 2.8 * rows), squeeze=False)
+    fig = Figure(figsize=(6.5 * cols, 2.8 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     groups = list(ok.groupby(others, sort=True)) if others else [((), ok)]
     as_lines = len(groups) <= MAX_LINES
     for ax, figname in zip(axes.flat, figures):
@@ -99,15 +98,15 @@ def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[
         fig.tight_layout(rect=(0, 0, 1, 0.93))
     else:
         fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
-def heatmap(df: pd.DataFrame, a: str, b: str, value: str, path: Path) -> None:
+def heatmap(df: pd.DataFrame, a: str, b: str, value: str) -> Figure:
     data = df.copy()
     data["success"] = data["success"].astype(float)
     table = data.pivot_table(index=b, columns=a, values=value, aggfunc="mean", dropna=False)
-    fig, ax = plt.subplots(figsize=(6.5, 4.8))
+    fig = Figure(figsize=(6.5, 4.8))
+    ax = fig.subplots()
     im = ax.imshow(table.to_numpy(float), origin="lower", aspect="auto", cmap="viridis")
     ax.set_xticks(range(len(table.columns)), [f"{v:.4g}" if isinstance(v, (float, int)) else str(v)
                                               for v in table.columns], rotation=45, fontsize=7)
@@ -118,32 +117,31 @@ def heatmap(df: pd.DataFrame, a: str, b: str, value: str, path: Path) -> None:
     fig.colorbar(im, ax=ax, label=_label(value) if value != "success" else "fraction of cases that succeeded")
     ax.set_title(_label(value) + ("" if value == "success" else " (successful cases)"), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def write_plots(df: pd.DataFrame, pl, folder: Path) -> list[Path]:
     """Every plot of a sweep table into `folder` (returns the files written)."""
+    from mechsim.scenarios.output.render import FigureWriter
     folder.mkdir(parents=True, exist_ok=True)
     params = [p for p in pl.param_columns if p in df and df[p].nunique() > 1]
     figures = figure_columns(df)
-    written = []
     if not params or not figures:
-        return written
+        return []
     logs = _log_axes(pl)
-    for p in params:
-        path = folder / f"vs_{_safe(p)}.png"
-        plot_against(df, p, [o for o in params if o != p], figures, path, log_x=p in logs)
-        written.append(path)
+    makers = [functools.partial(_one, f"vs_{_safe(p)}", plot_against, df, p, [o for o in params if o != p], figures,
+                                log_x=p in logs) for p in params]
     if len(params) >= 2 and pl.spec.mode == "grid":
         a, b = params[0], params[1]
         ok = df[df["success"].astype(bool)]
-        for value in figures:
-            if len(ok):
-                path = folder / f"heatmap_{_safe(value)}.png"
-                heatmap(ok, a, b, value, path)
-                written.append(path)
-        path = folder / "heatmap_success.png"
-        heatmap(df, a, b, "success", path)
-        written.append(path)
-    return written
+        if len(ok):
+            makers += [functools.partial(_one, f"heatmap_{_safe(value)}", heatmap, ok, a, b, value) for value in figures]
+        makers.append(functools.partial(_one, "heatmap_success", heatmap, df, a, b, "success"))
+    with FigureWriter(makers, folder) as writer:
+        writer.finish()
+    return [folder / f"{make.args[0]}.png" for make in makers]
+
+
+def _one(stem: str, draw, *args, **kwargs) -> dict[str, Figure]:
+    """{stem: figure} of one plot (a figure maker for FigureWriter)."""
+    return {stem: draw(*args, **kwargs)}
