@@ -101,7 +101,13 @@ def test_exact_identities(tables):
     rho c_p together keeps every L_i and scales the rise by 1/k, so its elasticities in k and rho add up to -1.
     (3) The bulk network is linear, C T' = -K T + h A T_amb + B u, and starts at T_amb (docs/theory.md §G5): T - T_amb
     does not depend on T_amb, so d(contact temperature)/d T_amb = 1 and the flash rise does not depend on it."""
-    t = tables["geneva-motor"].set_index(["quantity", "wrt"])
+    assert_exact_identities(tables["geneva-motor"], ["thermal.conductivity"])
+
+
+def assert_exact_identities(table, mechanics_only):
+    """The identities above on a sensitivity table; `mechanics_only`: thermal values the heat per index must not
+    depend on (exactly zero derivative)."""
+    t = table.set_index(["quantity", "wrt"])
     for q in OF:
         assert t.loc[(q, "thermal.density"), "elasticity"] == pytest.approx(
             t.loc[(q, "thermal.specific_heat"), "elasticity"], rel=1e-12, abs=1e-15)
@@ -110,7 +116,8 @@ def test_exact_identities(tables):
             == pytest.approx(-1.0, abs=1e-10))
     assert t.loc[("peak_temp_contact_C", "thermal.ambient_temperature"), "derivative"] == pytest.approx(1.0, abs=1e-9)
     assert t.loc[(flash, "thermal.ambient_temperature"), "derivative"] == 0.0
-    assert t.loc[("heat_per_index_J", "thermal.conductivity"), "derivative"] == 0.0
+    for key in mechanics_only:
+        assert t.loc[("heat_per_index_J", key), "derivative"] == 0.0
 
 
 @pytest.mark.parametrize("sets, field", [
@@ -218,17 +225,8 @@ def test_cycle_exact_identities(cycle_table):
     (3) The flash rise depends on k and rho c_p only through k and the Peclet numbers U b/(2 chi): scaling both keeps
     every Peclet number and scales the rise by 1/k, so its elasticities in k and rho add up to -1
     (docs/theory.md §G4.2-§G4.6). (4) The heat per index is mechanics: no thermal value moves it."""
-    t = cycle_table.set_index(["quantity", "wrt"])
-    assert t.loc[("peak_temp_contact_C", "thermal.ambient_temperature"), "derivative"] == pytest.approx(1.0, abs=1e-9)
-    assert t.loc[("peak_temp_flash_rise_K", "thermal.ambient_temperature"), "derivative"] == 0.0
-    for q in OF:
-        assert t.loc[(q, "thermal.density"), "elasticity"] == pytest.approx(
-            t.loc[(q, "thermal.specific_heat"), "elasticity"], rel=1e-12, abs=1e-15)
-    flash = "peak_temp_flash_rise_K"
-    assert (t.loc[(flash, "thermal.conductivity"), "elasticity"] + t.loc[(flash, "thermal.density"), "elasticity"]
-            == pytest.approx(-1.0, abs=1e-10))
-    for key in ("thermal.conductivity", "thermal.convection_pin", "thermal.ambient_temperature"):
-        assert t.loc[("heat_per_index_J", key), "derivative"] == 0.0
+    assert_exact_identities(cycle_table, ["thermal.conductivity", "thermal.convection_pin",
+                                          "thermal.ambient_temperature"])
 
 
 def test_closed_form_cycle_bulk_is_the_runs():
