@@ -51,6 +51,22 @@ def _fail(message: str, code: int = USER_ERROR) -> None:
     raise typer.Exit(code)
 
 
+def _internal_error(exc: Exception) -> str:
+    """`Type: first line of the message` of a fault we did not foresee (one line, never a traceback)."""
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0] if text else 'no message'}"
+
+
+def _save_or_fail(result, target: Path, force: bool, doing: str) -> None:
+    """result.save(target): a refused folder is a user error (exit 2), an OSError one line with exit 4."""
+    try:
+        result.save(target, force=force)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except OSError as exc:
+        _os_refused(exc, doing)
+
+
 def _os_refused(exc: OSError, doing: str) -> None:
     """One line for an OSError (permission, read-only, full disk, ...), exit 4."""
     where = exc.filename if exc.filename is not None else "?"
@@ -135,17 +151,11 @@ def run(
         except ValueError as exc:
             _fail(f"scenario: {exc}")
         except Exception as exc:  # a backend fault we did not foresee: one line, exit 3, never a traceback
-            _fail(f"the integration stopped on an internal error ({type(exc).__name__}: "
-                  f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'}); "
+            _fail(f"the integration stopped on an internal error ({_internal_error(exc)}); "
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
         result.summary["solver_messages"] = native
         bar.update(task, description=f"{sc.name}: writing files")
-        try:
-            result.save(target, force=force)
-        except ScenarioError as exc:
-            _fail(str(exc))
-        except OSError as exc:
-            _os_refused(exc, f"{sc.name}: the results")
+        _save_or_fail(result, target, force, f"{sc.name}: the results")
     _report_run(result, sc.name, target, quiet)
 
 
@@ -402,8 +412,7 @@ def sensitivity(
     except ValueError as exc:       # SensitivityUnavailable: the derivative does not exist on this run
         _fail(f"sensitivity: {exc}", SOLVER_FAILURE)
     except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
-        _fail(f"sensitivity: stopped on an internal error ({type(exc).__name__}: "
-              f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'})", SOLVER_FAILURE)
+        _fail(f"sensitivity: stopped on an internal error ({_internal_error(exc)})", SOLVER_FAILURE)
     from mechsim.scenarios.sensitivity import write_sensitivity
     try:
         write_sensitivity(table, target, force=force)
@@ -474,15 +483,9 @@ def size(
     except SizingFailed as exc:
         failed, result = exc, exc.result
     except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
-        _fail(f"size: stopped on an internal error ({type(exc).__name__}: "
-              f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no message'})", SOLVER_FAILURE)
+        _fail(f"size: stopped on an internal error ({_internal_error(exc)})", SOLVER_FAILURE)
     if result is not None:
-        try:
-            result.save(target, force=force)
-        except ScenarioError as exc:
-            _fail(str(exc))
-        except OSError as exc:
-            _os_refused(exc, f"{sc.name}: the sizing")
+        _save_or_fail(result, target, force, f"{sc.name}: the sizing")
     if failed is not None:
         _fail(f"size: {failed}" + (f"; the convergence history is in {target}" if result is not None else ""),
               SOLVER_FAILURE)
