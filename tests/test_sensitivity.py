@@ -244,7 +244,7 @@ def test_a_map_out_of_step_with_the_mechanism_is_caught(monkeypatch):
     forgets the centre distance c = r / sin(pi/n) (it moves with the crank radius) is refused, not used."""
     import dataclasses
 
-    import mechsim.scenarios.sensitivity as sens
+    import mechsim.scenarios.sensitivity_map as sens
     right = sens.MAPS["geneva"]
 
     def forgets_c(x, si, mech):

@@ -1,0 +1,199 @@
+"""Cycle averaging (thermal.averaging = "cycle") for the design sensitivities: the periodic turn's temperatures
+at their last time in the run and the traced cycle-averaged bulk (docs/sensitivity.md, "Cycle averaging")."""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pandas as pd
+
+from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS
+
+
+#: (the cycle means) and the contact of every row of the turn (its heat input, the ripple)
+CYCLE_COLUMNS = CONTACT_COLUMNS + ("crank_angle_rad", "heat_generated_J", "heat_pin_J", "friction_power_W")
+#: the contact columns of the network's heat input (thermal/coupling.py `heat_inputs`)
+_INPUT_COLUMNS = ("contact_force_N", "crank_speed_rad_s", "wheel_speed_rad_s", "pin_sliding_speed_m_s",
+                  "friction_power_W")
+
+
+def cycle_window(plan):
+    """The plan of a cycle-averaged scenario's mechanics window, resolved: the very run that cycle averaging
+    averages (the runner integrates `plan.mechanics_duration`), with the DAE's bulk and bookkeeping states on every
+    row and no periodic continuation."""
+    return dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, averaging="resolved"))
+
+
+def _network(system, xp=np) -> dict:
+    return {"capacity": xp.asarray(system.capacity), "conductance": xp.asarray(system.dense_conductance()),
+            "source": xp.asarray(system.source), "input_matrix": xp.asarray(system.input_matrix)}
+
+
+def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
+    """The contact temperature and flash rise of the periodic turn's rows at their last time in the run
+    (docs/sensitivity.md, "Cycle averaging"): the rows inside the last full turn of the mechanics window (`df`,
+    the run of `cycle_window(plan)`), each at t_k + M P in the last full turn of the scenario's duration, with the
+    cycle-averaged bulk there (thermal/cycle_exact.py) under the row's flash rise and Blok share. None without a
+    full turn. Keys: rows (indices into df), t_s, temp_contact_C, temp_flash_rise_K, layout, period, bulk."""
+    from mechsim.thermal.contact_row import KELVIN
+    from mechsim.thermal.cycle_exact import TurnLayout, turn_bulk, turn_ends
+    setup, mech = plan.thermal.setup, plan.mechanism
+    t = df["t_s"].to_numpy(float)
+    angle = df["crank_angle_rad"].to_numpy(float)
+    layout = TurnLayout.of(t, angle, float(plan.scenario.si["duration"]))
+    if layout is None:
+        return None
+    inner, edges, data = layout.inner, layout.edges, layout.data()
+    flash = df["temp_flash_rise_K"].to_numpy(float)[inner]
+    share = df["heat_share_pin"].to_numpy(float)[inner]
+    a, b = turn_ends(data["t_edges"], data["targets"], angle[edges])
+    bulk = None
+    if setup.system is None:
+        base_pin = base_wheel = setup.temp_ambient
+    else:
+        u = setup.extension.inputs_numeric(mech.contact_state(df))[0].T
+        bulk = turn_bulk(data, angle[edges], df["heat_generated_J"].to_numpy(float)[edges],
+                         df["heat_pin_J"].to_numpy(float)[edges], u[edges], u[layout.padded],
+                         _network(setup.system))[0][layout.pad:]
+        names = list(setup.system.state_names)
+        base_pin, base_wheel = bulk[:, names.index("temp_bulk_pin_K")], bulk[:, names.index("temp_bulk_wheel_K")]
+    return {"rows": inner, "t_s": t[inner] + layout.periods * (b - a), "period": float(b - a), "layout": layout,
+            "temp_flash_rise_K": flash, "bulk": bulk,
+            "temp_contact_C": share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN}
+
+
+_CYCLE_FNS: dict = {}
+
+
+def _cycle_bulk_fn(ext, distribution: str):
+    """(x, data) -> (bulk, its jvp along the columns of dx) of the cycle-averaged bulk as a function of the traced
+    values x (thermal/cycle_exact.py `turn_bulk`, the heat input of each row by thermal/coupling.py `heat_inputs`),
+    jitted once per network and distribution (the turn's rows are padded, so a new design needs no new one)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mechsim.thermal.coupling import heat_inputs
+    from mechsim.thermal.cycle_exact import turn_bulk
+    B = np.asarray(ext.system.input_matrix)
+    key = (ext.structure_key(), B.tobytes())
+    fn = _CYCLE_FNS.get(key)
+    if fn is not None:
+        return fn, False
+
+    def inputs(x, cols, engaged):
+        contact = {"normal_force": cols[:, 0], "heat_rate": cols[:, 4],
+                   "source_speed_driver": x["R"] * (cols[:, 1] + cols[:, 2]), "source_speed_driven": cols[:, 3]}
+        u, _, _ = heat_inputs(contact, x.__getitem__, ext.inputs, distribution, jnp)
+        return jnp.where(engaged[:, None], jnp.stack(u, axis=1), 0.0)
+
+    def bulk(x, data):
+        network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
+                   "input_matrix": jnp.asarray(B)}
+        return turn_bulk(data, x["angle"], x["gen"], x["pin"], inputs(x, x["cols_edges"], data["engaged_edges"]),
+                         inputs(x, x["cols_inner"], data["engaged_inner"]), network, jnp)[0]
+
+    def both(x, dx, data):
+        return bulk(x, data), jax.vmap(lambda d: jax.jvp(lambda y: bulk(y, data), (x,), (d,))[1])(dx)
+    fn = _CYCLE_FNS[key] = jax.jit(both)
+    return fn, True
+
+
+def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, model, samples: list,
+                        stats: dict) -> None:
+    """Replace the bulk temperatures (values, gradients) of the samples at the turn's rows by the cycle-averaged
+    ones: thermal/cycle_exact.py `turn_bulk` evaluated in jax on the run's rows and pushed forward (jvp) along the
+    traced columns of every row of the turn (the drive angle and the energies at its ends, the contact that makes
+    the heat input) and the network's and heat share's parameters. The jax evaluation must give the numpy one (to
+    1e-9 K), as the row formulas must give the run's columns."""
+    import jax.numpy as jnp
+
+    from mechsim.dynamics.sensitivity import SensitivityUnavailable
+    from mechsim.thermal.coupling import SHARE_PARAMETERS
+    setup = plan.thermal.setup
+    ext, sysm, layout = setup.extension, setup.system, turn["layout"]
+    t = layout.t
+    n = seed.n
+    engaged = df["mode"].to_numpy() == "engaged"
+    names = list(model.parameter_names)
+    values = {**plan.mechanism.parameter_values(), **ext.parameter_values()}
+
+    def parameter(name):
+        return values[name], seed.dp[names.index(name)]
+
+    def columns(cols, rows, contact=True):
+        """The run's columns (primal) and the samples' gradients (tangent, rows x columns x n) at `rows`; with
+        `contact`, rows without contact get 1 and no gradient (their heat input is masked to zero)."""
+        x = np.ones((len(rows), len(cols)))
+        dx = np.zeros((len(rows), len(cols), n))
+        for r, i in enumerate(rows):
+            if engaged[i] or not contact:
+                x[r] = [float(df[c].iloc[i]) for c in cols]
+                dx[r] = [by_time[float(t[i])].grads[c] for c in cols]
+        return x, dx
+
+    primal, tangent = {}, {}
+    edges = layout.edges
+    for key, col in (("angle", "crank_angle_rad"), ("gen", "heat_generated_J"), ("pin", "heat_pin_J")):
+        x, dx = columns([col], edges, contact=False)
+        primal[key], tangent[key] = x[:, 0], dx[:, 0]
+    primal["cols_edges"], tangent["cols_edges"] = columns(_INPUT_COLUMNS, edges)
+    primal["cols_inner"], tangent["cols_inner"] = columns(_INPUT_COLUMNS, layout.padded)
+    for name in SHARE_PARAMETERS + ("R",):
+        primal[name], tangent[name] = parameter(name)
+    size = sysm.size
+    for key, prefix, shape in (("capacity", "th_C_", (size,)), ("conductance", "th_K_", (size, size)),
+                               ("source", "th_s_", (size,))):
+        x, dx = np.zeros(shape), np.zeros(shape + (n,))
+        for idx in np.ndindex(*shape):
+            name = prefix + "_".join(map(str, idx))
+            if name in values:
+                x[idx], dx[idx] = parameter(name)
+        primal[key], tangent[key] = x, dx
+    reference = _network(sysm)
+    for key in ("capacity", "conductance", "source"):
+        if not np.allclose(primal[key], reference[key], rtol=1e-13, atol=0.0):
+            raise SensitivityUnavailable(f"the network's {key} from the model's parameters is not the run's")
+    data = {**layout.data(), "engaged_edges": engaged[edges], "engaged_inner": engaged[layout.padded]}
+    x = {k: jnp.asarray(v, jnp.float64) for k, v in primal.items()}
+    dx = {k: jnp.moveaxis(jnp.asarray(v, jnp.float64), -1, 0) for k, v in tangent.items()}
+    fn, fresh = _cycle_bulk_fn(ext, setup.section["distribution"])
+    wall = time.perf_counter()
+    value, grads = fn(x, dx, data)
+    if fresh:            # compiled on its first call (with a first evaluation of ~0.2 s): counted as compilation
+        stats["compile_time_s"] += time.perf_counter() - wall
+    value, grads = np.asarray(value)[layout.pad:], np.asarray(grads)[:, layout.pad:]      # grads: (n, rows, states)
+    if not np.all(np.abs(value - turn["bulk"]) <= 1e-9 * np.maximum(1.0, np.abs(turn["bulk"]))):
+        raise SensitivityUnavailable("the traced cycle-averaged bulk is not the one the quantity is read from "
+                                     f"(difference {np.max(np.abs(value - turn['bulk'])):.2e} K)")
+    state_names = list(sysm.state_names)
+    where = {int(i): k for k, i in enumerate(layout.inner)}
+    for s in samples:
+        k = where[int(np.argmin(np.abs(t - s.t)))]
+        for name in ("temp_bulk_pin_K", "temp_bulk_wheel_K"):
+            j = state_names.index(name)
+            s.values[name], s.grads[name] = float(value[k, j]), grads[:, k, j]
+
+
+
+def event_crosses_turn_row(q: str, wrt: list[str], relative: list[bool], turn: dict, events, change: float):
+    """A warning where an event inside the periodic turn moves past an output row within the stated change of a
+    value: that row's heat input (the turn's input is linear between rows) then changes mode, and the cycle-averaged
+    bulk jumps by about one row's heat (the run's reported temperatures with it); the derivative holds up to there."""
+    t = turn["layout"].t
+    inner = t[turn["layout"].inner]
+    rel = dict(zip(wrt, relative))
+    found = {}
+    for e in events:
+        if not inner[0] <= e.t <= inner[-1]:
+            continue
+        gap = float(np.min(np.abs(inner - e.t)))
+        for key, d in zip(wrt, e.dt):
+            if d != 0 and gap / abs(d) < min(change, found.get(key, (np.inf,))[0]):
+                found[key] = (gap / abs(d), e.kind, e.t)
+    if not found:
+        return None
+    return (f"{q}: an event of the periodic turn crosses an output row within the stated change, where the turn's "
+            "heat input (linear between rows) and with it the cycle-averaged bulk jump by about one row's heat: "
+            + ", ".join(f"{key} " + (f"{d * 100:.2g}%" if rel[key] else f"{d:.2g} (absolute)")
+                        + f" ('{kind}' at t = {te:.6g} s)" for key, (d, kind, te) in found.items()))

@@ -1,0 +1,428 @@
+"""How scenario values enter a mechanism's model, for the design sensitivities (docs/sensitivity.md).
+
+The headline quantities' names, the traced scenario keys of each mechanism type (`MAPS`: a `ParameterMap` each,
+its parameters as jax formulas of the values), the drive's and the thermal model's, the seed of the forward
+sensitivities (`make_seed`), the check of the map against the mechanism rebuilt with each value moved, and the
+check of a request (`check_request`: which values and quantities are traced on a plan).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from mechsim.scenarios.units import ScenarioError
+
+
+PEAKS = {
+    "peak_contact_force_N": "contact_force_N",
+    "peak_drive_torque_N_m": "drive_torque_N_m",
+    "peak_wheel_accel_rad_s2": "wheel_accel_rad_s2",
+    "peak_wheel_speed_rad_s": "wheel_speed_rad_s",
+    "peak_coupler_force_N": "coupler_force_N",
+    "peak_crank_accel_rad_s2": "crank_accel_rad_s2",
+    "peak_crank_speed_rad_s": "crank_speed_rad_s",
+}
+#: the thermal peaks (a thermal model on): the run's columns, evaluated after the run (thermal/plan.py) from the
+#: traced state at the peak's row by the same formulas in jax (thermal/contact_row.py)
+THERMAL_PEAKS = {"peak_temp_contact_C": "temp_contact_C", "peak_temp_flash_rise_K": "temp_flash_rise_K"}
+CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
+#: the frictional heat of the last complete index: minus the friction work (a work state) from engage to release
+HEAT = "heat_per_index_J"
+QUANTITIES = tuple(PEAKS) + tuple(THERMAL_PEAKS) + CYCLE + (HEAT,)
+#: thermal models whose temperatures are traced (the bulk states in the DAE, the flash rise after it); the others
+#: are refused, with the reason
+THERMAL_TRACED = ("lumped", "flash")
+#: [thermal] values traced: the material (library value unless the scenario overrides it), the surroundings, and
+#: the body geometry where the scenario sets it (its defaults follow from the mechanism's values: traced through them)
+THERMAL_MATERIAL_KEYS = ("thermal.conductivity", "thermal.density", "thermal.specific_heat", "thermal.E",
+                         "thermal.nu")
+THERMAL_KEYS = THERMAL_MATERIAL_KEYS + (
+    "thermal.ambient_temperature", "thermal.convection_pin", "thermal.convection_wheel",
+    "thermal.pin_crank_conductance", "thermal.pin_exposed_length", "thermal.crank_volume", "thermal.crank_area",
+    "thermal.wheel_radius", "thermal.wheel_thickness")
+
+
+@dataclass(frozen=True)
+class ParameterMap:
+    """How the scenario values of one mechanism type enter the model.
+
+    keys: the supported scenario keys (SI). parameters(x, si, mech): the model parameters they set, as
+    jax-traceable formulas of the dict x (key -> value); each is checked against the mechanism's own
+    `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
+    parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
+    geometry that is not traced). engage/release: the event kinds that start and end an index (the cycle runs from
+    one `engage` to the next; empty for a mechanism that does not index). peaks: its peak quantities.
+    """
+
+    keys: tuple[str, ...]
+    parameters: Callable
+    speed_key: str
+    discrete: frozenset
+    engage: str
+    release: str
+    peaks: tuple[str, ...] = tuple(PEAKS)
+    sliding: bool = False
+
+    @property
+    def cycle(self) -> tuple[str, ...]:
+        """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not); the
+        heat per index where it has a sliding contact."""
+        return (CYCLE + ((HEAT,) if self.sliding else ())) if self.engage else ()
+
+
+def _geneva_parameters(x: dict, si: dict, mech) -> dict:
+    """Geneva: c = r / sin(pi/n) (tangential entry, docs/theory.md §G1); the others enter as they are."""
+    import jax.numpy as jnp
+    n = si["mechanism"]["slots"]
+    r = x["mechanism.crank_radius"]
+    return {"r": r, "c": r / jnp.sin(jnp.pi / n), "R": x["mechanism.pin_radius"],
+            "J1": x["mechanism.crank_inertia"], "J2": x["mechanism.wheel_inertia"], "T_L": x["load.wheel_torque"],
+            "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
+
+
+def _thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str) -> dict:
+    """The thermal model's values as formulas of the scenario values (Geneva), checked against the run's own
+    (`_thermal_values`): the flash formulas' inputs `flash_*` (friction, contact radius R = pin radius and length
+    l = thickness, E* = E/(2 (1 - nu^2)) of two equal bodies (docs/theory.md §G3), k, chi = k/(rho c_p), ambient)
+    and, with bulk states, the DAE network's `th_*` (thermal/network.py `bulk_bodies`, `assemble`;
+    docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set), crank bar
+    r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of radius c cos(pi/n)
+    and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the share's
+    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`)."""
+    import jax.numpy as jnp
+    th = si["thermal"]
+    n = si["mechanism"]["slots"]
+    r, R, l = x["mechanism.crank_radius"], x["mechanism.pin_radius"], x["mechanism.thickness"]
+    k, rho_c = x["thermal.conductivity"], x["thermal.density"] * x["thermal.specific_heat"]
+    E, nu = x["thermal.E"], x["thermal.nu"]
+    estar = E / (2.0 * (1.0 - nu**2))
+    chi = k / rho_c
+    t_amb = x["thermal.ambient_temperature"]
+    out = {"flash_mu": x["contact.friction"], "flash_R": R, "flash_l": l, "flash_Estar": estar, "flash_k": k,
+           "flash_chi": chi, "flash_T_amb": t_amb}
+    if setup.system is None:
+        return out
+
+    def given(key, default):
+        return x[f"thermal.{key}"] if th.get(key) is not None else default
+    if drive_kind == "speed":
+        w_nom = x["drive.speed"]
+    elif abs(float(si["initial"][speed_key.split(".")[1]])) > 0:
+        w_nom = jnp.abs(x[speed_key])
+    elif drive_kind == "motor" and si["drive"].get("no_load_speed"):
+        w_nom = x["drive.no_load_speed"]
+    else:
+        w_nom = 1.0
+    l_pin = given("pin_exposed_length", 2.5 * l)
+    width = 4.0 * R
+    bodies = {"pin": (jnp.pi * R**2 * l_pin, 2 * jnp.pi * R * l_pin + jnp.pi * R**2, x["thermal.convection_pin"]),
+              "crank": (given("crank_volume", r * width * l),
+                        given("crank_area", 2 * r * width + 2 * (r + width) * l), x["thermal.convection_pin"])}
+    radius_w = given("wheel_radius", r / jnp.sin(jnp.pi / n) * jnp.cos(jnp.pi / n))
+    thick_w = given("wheel_thickness", l)
+    bodies["wheel"] = (jnp.pi * radius_w**2 * thick_w, 2 * jnp.pi * radius_w**2 + 2 * jnp.pi * radius_w * thick_w,
+                       x["thermal.convection_wheel"])
+    names = [b.name for b in setup.bodies]
+    G = given("pin_crank_conductance", k * jnp.pi * R**2 / (0.5 * l_pin))
+    K = {}
+    for i, name in enumerate(names):
+        V, A, h = bodies[name]
+        out[f"th_C_{i}"] = rho_c * V
+        out[f"th_s_{i}"] = h * A * t_amb
+        out[f"th_loss_{i}"] = h * A
+        K[(i, i)] = h * A
+    if len(names) == 3:                 # pin and crank joined by G (network.assemble)
+        K[(0, 0)], K[(1, 1)], K[(0, 1)], K[(1, 0)] = K[(0, 0)] + G, K[(1, 1)] + G, -G, -G
+    out.update({f"th_K_{i}_{j}": v for (i, j), v in K.items()})
+    out.update({"th_R": R, "th_l": l, "th_Estar": estar, "th_k_pin": k, "th_k_wheel": k, "th_chi_pin": chi,
+                "th_chi_wheel": chi, "th_t_ref": 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom})
+    return out
+
+
+def _thermal_values(si: dict, mech) -> dict:
+    """The thermal model's values as the run computes them (thermal/network.py `prepare`): the DAE extension's
+    parameters and the flash formulas' inputs (names as `_thermal_parameters`)."""
+    from mechsim.thermal.hertz import effective_modulus
+    from mechsim.thermal.models import MODELS
+    from mechsim.thermal.network import prepare
+    setup = prepare(si, mech, MODELS[si["thermal"]["model"]])
+    mat, geo = setup.material, setup.geometry
+    out = {"flash_mu": float(si["contact"]["friction"]), "flash_R": geo.contact_radius,
+           "flash_l": geo.contact_length, "flash_Estar": effective_modulus(mat), "flash_k": mat.conductivity,
+           "flash_chi": mat.diffusivity, "flash_T_amb": setup.temp_ambient}
+    if setup.extension is not None:
+        out.update({k: v for k, v in setup.extension.parameter_values().items() if not k.startswith("th_B_")
+                    and k != "th_b0"})
+    return out
+
+
+def _chain_parameters(x: dict, si: dict, mech) -> dict:
+    """Chain dwell mechanism (mechanisms/chain/model.py): the drive's inertia reduced to the driving sprocket,
+    J1 = m_chain r1^2 + sum_i J_i (r1 / r_i)^2, the crank a uniform rod J_Q = m R^2 / 3 and the coupler one of length
+    L, J_3 = m L^2 / 12, unless their inertias are given. The geometry (r1, r_i, R, L) is not traced: constants."""
+    m = si["mechanism"]
+    r1, radii = mech.path.r1, np.asarray(mech.path.radii, float)
+    sprockets = float(np.sum(np.asarray(m["sprocket_inertias"], float) * (r1 / radii) ** 2))
+    R, L = mech.kin.R, mech.kin.L
+    jq = x["mechanism.crank_mass"] * R**2 / 3 if m["crank_inertia"] is None else x["mechanism.crank_inertia"]
+    j3 = x["mechanism.coupler_mass"] * L**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"]
+    return {"J1": x["mechanism.chain_mass"] * r1**2 + sprockets, "JQ": jq, "m3": x["mechanism.coupler_mass"],
+            "J3": j3, "T_L": x["load.crank_torque"], "c1": x["mechanism.drive_damping"],
+            "c2": x["mechanism.crank_damping"]}
+
+
+def _rolling_parameters(x: dict, si: dict, mech) -> dict:
+    """Rolling-pair four-bar (mechanisms/rolling/model.py `Bodies.uniform`): slender crank and coupler rods
+    (I = m l^2 / 12 at mid-length), the rolling link a uniform disc (m r^2 / 2 about B0) welded to a slender arm
+    (m l4^2 / 3 about B0), moved to the joint centre of mass c4 = m_arm l4 / 2 / m4 (docs/theory.md §K3), unless
+    the scenario gives the inertias and centres itself (then those are traced). The geometry is not traced."""
+    m = si["mechanism"]
+    kin = mech.kin
+    l2, l3, l4, r = kin.l2, kin.l3, kin.l4, kin.pair.r
+    m2, m3 = x["mechanism.crank_mass"], x["mechanism.coupler_mass"]
+    disc, arm = x["mechanism.disc_mass"], x["mechanism.arm_mass"]
+    m4 = disc + arm
+    c4 = arm * l4 / 2 / m4 if m["rolling_com"] is None else m["rolling_com"]
+    i4 = (disc * r**2 / 2 + arm * l4**2 / 3 - m4 * c4**2) if m["rolling_inertia"] is None else (
+        x["mechanism.rolling_inertia"])
+    out = {"m2": m2, "I2": m2 * l2**2 / 12 if m["crank_inertia"] is None else x["mechanism.crank_inertia"],
+           "m3": m3, "I3": m3 * l3**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"],
+           "m4": m4, "I4": i4, "g": x["load.gravity"], "b2": x["load.crank_damping"],
+           "b4": x["load.rolling_damping"]}
+    if m["rolling_com"] is None:
+        out["c4"] = c4
+    return out
+
+
+MAPS = {
+    "rolling_pair": ParameterMap(
+        keys=("mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass", "mechanism.coupler_inertia",
+              "mechanism.disc_mass", "mechanism.arm_mass", "mechanism.rolling_inertia", "load.gravity",
+              "load.crank_damping", "load.rolling_damping"),
+        parameters=_rolling_parameters, speed_key="initial.drive_speed",
+        discrete=frozenset({"dead_sign"}), engage="", release="",
+        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2",
+               "peak_crank_speed_rad_s")),
+    "chain_dwell": ParameterMap(
+        keys=("mechanism.chain_mass", "mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass",
+              "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque"),
+        parameters=_chain_parameters, speed_key="initial.drive_speed",
+        # the chain path's pieces (segment, its geometry, the apex, the dyad's branch) follow from the geometry
+        discrete=frozenset({"seg", "s0", "s1", "Px", "Py", "tx", "ty", "Ox", "Oy", "rr", "psi0", "alpha", "s_apex",
+                            "sigma"}),
+        engage="dwell end", release="stop impact",
+        peaks=("peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2", "peak_crank_speed_rad_s")),
+    "geneva": ParameterMap(
+        keys=("mechanism.crank_radius", "mechanism.pin_radius", "mechanism.thickness", "mechanism.crank_inertia",
+              "mechanism.wheel_inertia", "mechanism.crank_damping", "mechanism.wheel_damping", "load.wheel_torque",
+              "contact.friction"),
+        parameters=_geneva_parameters, speed_key="initial.crank_speed",
+        discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit",
+        sliding=True,
+        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_wheel_speed_rad_s")),
+}
+DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed"),
+              "speed": ("drive.speed",)}
+
+
+def _drive_parameters(x: dict, kind: str) -> dict:
+    """The drive's T = T0 - slope w (dynamics/drives.py): motor T0 = stall torque, slope = stall / no-load speed;
+    a prescribed speed enters as itself (the constraint q = angle0 + speed (t - time0))."""
+    if kind == "speed":
+        return {"drive_speed": x["drive.speed"]}
+    if kind == "motor":
+        return {"drive_T0": x["drive.stall_torque"], "drive_slope": x["drive.stall_torque"] / x["drive.no_load_speed"]}
+    return {"drive_T0": x["drive.torque"]}
+
+
+def _lookup(si: dict, key: str):
+    node = si
+    for part in key.split("."):
+        node = node[part]
+    return node
+
+
+def scenario_value(plan, key: str) -> float:
+    """A scenario value (SI); a material value the scenario leaves to the library is the library's."""
+    if key in THERMAL_MATERIAL_KEYS and plan.thermal is not None:
+        return float(getattr(plan.thermal.setup.material, key.split(".")[1]))
+    return float(_lookup(plan.scenario.si, key) or 0.0)
+
+
+def _traced_keys(plan, pmap: ParameterMap) -> list[str]:
+    """Every value the map is a function of: the mechanism's, the drive's, the thermal model's (with the initial
+    speed, which sets the thermal model's nominal speed, thermal/network.py `nominal_speed`)."""
+    keys = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ()))
+    if plan.thermal is not None:
+        keys += [k for k in THERMAL_KEYS if k in THERMAL_MATERIAL_KEYS or _lookup(plan.scenario.si, k) is not None]
+        if not plan.drive.is_prescribed:
+            keys.append(pmap.speed_key)
+    return keys
+
+
+def _mapped(plan, pmap: ParameterMap, keys: list[str]):
+    """params(xs): the model's parameters (and the thermal formulas' inputs) as jax formulas of the values."""
+    import jax.numpy as jnp
+    si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
+
+    def params(xs):
+        x = dict(zip(keys, xs))
+        out = {**pmap.parameters(x, si, mech), **_drive_parameters(x, drive.kind)}
+        if plan.thermal is not None:
+            out.update(_thermal_parameters(x, si, plan.thermal.setup, pmap.speed_key, drive.kind))
+        return {k: jnp.asarray(v, jnp.float64) for k, v in out.items()}
+    return params
+
+
+def _reference_values(si: dict, mech, drive, thermal: bool) -> dict:
+    return {**mech.parameter_values(), **drive.parameter_values(0.0), **(_thermal_values(si, mech) if thermal else {})}
+
+
+def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
+    """(Seed with columns scaled by each value, scales, flash: name -> (n,) derivatives of the thermal formulas'
+    inputs per scaled value): columns are d/d(ln theta) (theta for theta = 0), so that every sensitivity has the
+    state's own units and one error control serves them all."""
+    import jax
+    from mechsim.dynamics.sensitivity import Seed
+    si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
+    keys = _traced_keys(plan, pmap)
+    x0 = {k: scenario_value(plan, k) for k in keys}
+    params = _mapped(plan, pmap, keys)
+    values = _reference_values(si, mech, drive, plan.thermal is not None)
+    mapped = params([x0[k] for k in keys])
+    for name, v in mapped.items():
+        if not np.isclose(float(v), values[name], rtol=1e-13, atol=0.0):
+            raise RuntimeError(f"sensitivity map of '{name}' gives {float(v)!r}, the mechanism {values[name]!r}")
+    names = list(model.parameter_names)
+    jac = jax.jacfwd(lambda xs: list(params(xs).values()))(np.array([x0[k] for k in keys]))
+    scales = np.array([abs(scenario_value(plan, k)) or 1.0 for k in wrt])
+    n = len(wrt)
+    nq = len(model.coordinates)
+    dp = np.zeros((len(names), n))
+    dq0, dv0 = np.zeros((nq, n)), np.zeros((nq, n))
+    dx0 = np.zeros((len(model.extension_names), n))
+    flash = {name: np.zeros(n) for name in mapped if name.startswith("flash_")}
+    for j, key in enumerate(wrt):
+        if key == pmap.speed_key or (drive.is_prescribed and key == "drive.speed"):
+            # the initial velocities are linear in the drive's initial speed (Mechanism.initial_state): checked
+            angle = si["initial"][mech.initial_keys[0]]
+            speed = drive.speed if drive.is_prescribed else si["initial"][mech.initial_keys[1]]
+            unit_v = np.asarray(mech.initial_state(angle, 1.0).v, float)
+            v = np.asarray(mech.initial_state(angle, speed).v, float)
+            if not np.allclose(v, speed * unit_v, rtol=1e-12, atol=1e-15 * max(1.0, float(np.max(np.abs(v))))):
+                raise ScenarioError(key, "the initial velocities of this mechanism are not linear in the initial "
+                                    "speed here: not traced")
+            dv0[:, j] = unit_v * scales[j]
+        if key == "thermal.ambient_temperature" and plan.thermal.setup.system is not None:
+            # the bulk states start at the ambient (ThermalSetup.initial)
+            dx0[:plan.thermal.setup.system.size, j] = scales[j]
+        if key not in keys:
+            continue
+        col = keys.index(key)
+        for name, row in zip(mapped, jac):
+            d = float(np.asarray(row)[col]) * scales[j]
+            if name in flash:
+                flash[name][j] = d
+            else:
+                dp[names.index(name), j] = d
+    _check_map(plan, wrt, keys, mapped, jac, pmap)
+    return Seed(dp, dq0, dv0, pmap.discrete, dx0), scales, flash
+
+
+def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: ParameterMap) -> None:
+    """The map must be complete and right: the mechanism (and thermal model) rebuilt with each traced value moved
+    (central differences, 1e-5 relative) changes no parameter the map does not set, and those it sets by the map's
+    derivative (to 1e-6 of the parameter's size: the differences' truncation is ~1e-10, their round-off ~1e-11). A
+    RuntimeError otherwise: a map out of step with the mechanism is a bug, not a user error."""
+    import copy
+
+    from mechsim.scenarios.loader import build_mechanism
+    from mechsim.scenarios.runner import make_drive
+    si, drive = plan.scenario.si, plan.drive
+    for key in wrt:
+        if key not in keys:
+            continue
+        p = scenario_value(plan, key)
+        h = 1e-5 * abs(p) if p else 1e-5
+        values = []
+        for sign in (1, -1):
+            moved = copy.deepcopy(si)
+            node = moved
+            *path, last = key.split(".")
+            for part in path:
+                node = node[part]
+            node[last] = p + sign * h
+            mech = build_mechanism(moved)
+            values.append(_reference_values(moved, mech, make_drive(moved), plan.thermal is not None))
+        col = keys.index(key)
+        derivative = dict(zip(mapped, (float(np.asarray(row)[col]) for row in jac)))
+        for name in values[0]:
+            fd = (values[0][name] - values[1][name]) / (2 * h)
+            exact = derivative.get(name, 0.0)
+            size = max(abs(values[0][name]), abs(exact) * max(abs(p), 1.0), 1e-300)
+            if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
+                raise RuntimeError(f"sensitivity map: '{name}' moves by {fd:.6g} per unit of {key}, the map says "
+                                   f"{exact:.6g} ({drive.kind} drive)")
+
+
+def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
+    """The mechanism's ParameterMap, after checking that every value in `wrt` and every quantity in `of` is traced
+    on this plan (ScenarioError naming the first that is not; `mechsim size` checks its requests with it too)."""
+    si = plan.scenario.si
+    mtype = si["mechanism"]["type"]
+    pmap = MAPS.get(mtype)
+    if pmap is None:
+        raise ScenarioError("mechanism.type", f"sensitivities are not traced for '{mtype}' (docs/sensitivity.md)")
+    if plan.thermal is not None:
+        _check_thermal(plan, mtype)
+    allowed = _traced_keys(plan, pmap) + ([] if plan.drive.is_prescribed else [pmap.speed_key])
+    allowed = list(dict.fromkeys(allowed))
+    if not wrt:
+        raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
+    for key in wrt:
+        if (key in pmap.keys or key in THERMAL_KEYS) and key not in THERMAL_MATERIAL_KEYS and (
+                _lookup_or_none(si, key) is None):
+            raise ScenarioError(key, "not set in this scenario (it is derived from other values): set it to trace it")
+        if key not in allowed:
+            raise ScenarioError(key, f"not a value sensitivities are traced for here; traced: {', '.join(allowed)}")
+    if len(set(wrt)) != len(wrt):
+        raise ScenarioError("--wrt", "a key is named twice")
+    known = traced_quantities(plan, pmap)
+    for q in of:
+        if q in THERMAL_PEAKS and plan.thermal is None:
+            raise ScenarioError("--of", f"{q}: this scenario has no thermal model (set thermal.model = 'lumped' or "
+                                "'flash')")
+        if q not in known:
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}")
+    return pmap
+
+
+def _lookup_or_none(si: dict, key: str):
+    try:
+        return _lookup(si, key)
+    except KeyError:
+        return None
+
+
+def _check_thermal(plan, mtype: str) -> None:
+    """The thermal models and options whose temperatures are traced; one line naming the refused one otherwise."""
+    th = plan.scenario.si["thermal"]
+    if mtype != "geneva":
+        raise ScenarioError("thermal.model", f"thermal sensitivities are traced for the Geneva only, not '{mtype}'")
+    if th["model"] not in THERMAL_TRACED:
+        raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its wall-track mesh is not in the "
+                            "sensitivity map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")
+    if th["flash"] != "jaeger":
+        raise ScenarioError("thermal.flash", f"'{th['flash']}' (the seed's formula, for comparison only) is not "
+                            "traced; use 'jaeger'")
+    if plan.thermal.averaging == "cycle" and plan.method == "closed-form":
+        raise ScenarioError("thermal.averaging", "cycle averaging at a prescribed speed is not traced (its closed form "
+                            "is not differentiated, and the DAE's mechanics window differs): set drive.type = 'motor' "
+                            "or 'torque', or thermal.averaging = 'resolved' (docs/sensitivity.md)")
+
+
+def traced_quantities(plan, pmap: ParameterMap) -> tuple[str, ...]:
+    thermal = tuple(THERMAL_PEAKS) if plan.thermal is not None else ()
+    return pmap.peaks + thermal + pmap.cycle
