@@ -1,0 +1,113 @@
+"""The thermal model's values as traced formulas of the scenario values, for the design sensitivities
+(docs/sensitivity.md, "Temperatures"): which thermal models and keys are traced, the flash formulas' inputs and the
+bulk network's parameters as jax formulas (`thermal_parameters`), the same as the run computes them
+(`thermal_values`), and the check that refuses a model or option that is not traced (`check_thermal`)."""
+from __future__ import annotations
+
+from mechsim.scenarios.units import ScenarioError
+
+
+#: thermal models whose temperatures are traced (the bulk states in the DAE, the flash rise after it); the others
+#: are refused, with the reason
+THERMAL_TRACED = ("lumped", "flash")
+#: [thermal] values traced: the material (library value unless the scenario overrides it), the surroundings, and
+#: the body geometry where the scenario sets it (its defaults follow from the mechanism's values: traced through them)
+THERMAL_MATERIAL_KEYS = ("thermal.conductivity", "thermal.density", "thermal.specific_heat", "thermal.E",
+                         "thermal.nu")
+THERMAL_KEYS = THERMAL_MATERIAL_KEYS + (
+    "thermal.ambient_temperature", "thermal.convection_pin", "thermal.convection_wheel",
+    "thermal.pin_crank_conductance", "thermal.pin_exposed_length", "thermal.crank_volume", "thermal.crank_area",
+    "thermal.wheel_radius", "thermal.wheel_thickness")
+
+
+def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str) -> dict:
+    """The thermal model's values as formulas of the scenario values (Geneva), checked against the run's own
+    (`thermal_values`): the flash formulas' inputs `flash_*` (friction, contact radius R = pin radius and length
+    l = thickness, E* = E/(2 (1 - nu^2)) of two equal bodies (docs/theory.md §G3), k, chi = k/(rho c_p), ambient)
+    and, with bulk states, the DAE network's `th_*` (thermal/network.py `bulk_bodies`, `assemble`;
+    docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set), crank bar
+    r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of radius c cos(pi/n)
+    and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the share's
+    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`)."""
+    import jax.numpy as jnp
+    th = si["thermal"]
+    n = si["mechanism"]["slots"]
+    r, R, l = x["mechanism.crank_radius"], x["mechanism.pin_radius"], x["mechanism.thickness"]
+    k, rho_c = x["thermal.conductivity"], x["thermal.density"] * x["thermal.specific_heat"]
+    E, nu = x["thermal.E"], x["thermal.nu"]
+    estar = E / (2.0 * (1.0 - nu**2))
+    chi = k / rho_c
+    t_amb = x["thermal.ambient_temperature"]
+    out = {"flash_mu": x["contact.friction"], "flash_R": R, "flash_l": l, "flash_Estar": estar, "flash_k": k,
+           "flash_chi": chi, "flash_T_amb": t_amb}
+    if setup.system is None:
+        return out
+
+    def given(key, default):
+        return x[f"thermal.{key}"] if th.get(key) is not None else default
+    if drive_kind == "speed":
+        w_nom = x["drive.speed"]
+    elif abs(float(si["initial"][speed_key.split(".")[1]])) > 0:
+        w_nom = jnp.abs(x[speed_key])
+    elif drive_kind == "motor" and si["drive"].get("no_load_speed"):
+        w_nom = x["drive.no_load_speed"]
+    else:
+        w_nom = 1.0
+    l_pin = given("pin_exposed_length", 2.5 * l)
+    width = 4.0 * R
+    bodies = {"pin": (jnp.pi * R**2 * l_pin, 2 * jnp.pi * R * l_pin + jnp.pi * R**2, x["thermal.convection_pin"]),
+              "crank": (given("crank_volume", r * width * l),
+                        given("crank_area", 2 * r * width + 2 * (r + width) * l), x["thermal.convection_pin"])}
+    radius_w = given("wheel_radius", r / jnp.sin(jnp.pi / n) * jnp.cos(jnp.pi / n))
+    thick_w = given("wheel_thickness", l)
+    bodies["wheel"] = (jnp.pi * radius_w**2 * thick_w, 2 * jnp.pi * radius_w**2 + 2 * jnp.pi * radius_w * thick_w,
+                       x["thermal.convection_wheel"])
+    names = [b.name for b in setup.bodies]
+    G = given("pin_crank_conductance", k * jnp.pi * R**2 / (0.5 * l_pin))
+    K = {}
+    for i, name in enumerate(names):
+        V, A, h = bodies[name]
+        out[f"th_C_{i}"] = rho_c * V
+        out[f"th_s_{i}"] = h * A * t_amb
+        out[f"th_loss_{i}"] = h * A
+        K[(i, i)] = h * A
+    if len(names) == 3:                 # pin and crank joined by G (network.assemble)
+        K[(0, 0)], K[(1, 1)], K[(0, 1)], K[(1, 0)] = K[(0, 0)] + G, K[(1, 1)] + G, -G, -G
+    out.update({f"th_K_{i}_{j}": v for (i, j), v in K.items()})
+    out.update({"th_R": R, "th_l": l, "th_Estar": estar, "th_k_pin": k, "th_k_wheel": k, "th_chi_pin": chi,
+                "th_chi_wheel": chi, "th_t_ref": 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom})
+    return out
+
+
+def thermal_values(si: dict, mech) -> dict:
+    """The thermal model's values as the run computes them (thermal/network.py `prepare`): the DAE extension's
+    parameters and the flash formulas' inputs (names as `thermal_parameters`)."""
+    from mechsim.thermal.hertz import effective_modulus
+    from mechsim.thermal.models import MODELS
+    from mechsim.thermal.network import prepare
+    setup = prepare(si, mech, MODELS[si["thermal"]["model"]])
+    mat, geo = setup.material, setup.geometry
+    out = {"flash_mu": float(si["contact"]["friction"]), "flash_R": geo.contact_radius,
+           "flash_l": geo.contact_length, "flash_Estar": effective_modulus(mat), "flash_k": mat.conductivity,
+           "flash_chi": mat.diffusivity, "flash_T_amb": setup.temp_ambient}
+    if setup.extension is not None:
+        out.update({k: v for k, v in setup.extension.parameter_values().items() if not k.startswith("th_B_")
+                    and k != "th_b0"})
+    return out
+
+
+def check_thermal(plan, mtype: str) -> None:
+    """The thermal models and options whose temperatures are traced; one line naming the refused one otherwise."""
+    th = plan.scenario.si["thermal"]
+    if mtype != "geneva":
+        raise ScenarioError("thermal.model", f"thermal sensitivities are traced for the Geneva only, not '{mtype}'")
+    if th["model"] not in THERMAL_TRACED:
+        raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its wall-track mesh is not in the "
+                            "sensitivity map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")
+    if th["flash"] != "jaeger":
+        raise ScenarioError("thermal.flash", f"'{th['flash']}' (the seed's formula, for comparison only) is not "
+                            "traced; use 'jaeger'")
+    if plan.thermal.averaging == "cycle" and plan.method == "closed-form":
+        raise ScenarioError("thermal.averaging", "cycle averaging at a prescribed speed is not traced (its closed form "
+                            "is not differentiated, and the DAE's mechanics window differs): set drive.type = 'motor' "
+                            "or 'torque', or thermal.averaging = 'resolved' (docs/sensitivity.md)")
