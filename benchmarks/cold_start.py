@@ -2,6 +2,7 @@
 
     python benchmarks/cold_start.py                          # --help and `run geneva-lc1`, 7 runs each
     python benchmarks/cold_start.py --runs 9 --compare /path/to/other/root
+    python benchmarks/cold_start.py --only "run geneva-motor no-plots"    # a DAE run (derived model cached)
 
 Each command runs in a new Python process (`python -m mechsim.scenarios.cli ...`), the OS file cache warm (one
 unrecorded warm-up run first, which also writes the bytecode caches an installed package has). CPU time is
@@ -29,6 +30,8 @@ COMMANDS = {
     "--help": ["--help"],
     "run geneva-lc1": ["run", "geneva-lc1", "--out", "{out}"],
     "run geneva-lc1 no-plots": ["run", "geneva-lc1", "--quiet", "--set", "output.plots=false", "--out", "{out}"],
+    # a DAE run (IDA): the derived model comes from the disk cache the warm-up run wrote
+    "run geneva-motor no-plots": ["run", "geneva-motor", "--quiet", "--set", "output.plots=false", "--out", "{out}"],
 }
 
 

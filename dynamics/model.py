@@ -14,16 +14,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
-import sympy as sp
-
-from mechsim.mechanisms.base import Mechanism, Mode
-
-from mechsim.dynamics import kkt
-from mechsim.dynamics.codegen import emit
 from mechsim.dynamics.drives import DRIVE_PARAMETERS
-from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
+
+if TYPE_CHECKING:      # sympy is imported where a model is derived: a model loaded from the disk cache needs none
+    import sympy as sp
+
+    from mechsim.mechanisms.base import Mechanism, Mode
 
 SOLVER_PARAMETERS = ("baumgarte_alpha", "baumgarte_beta")
 
@@ -65,11 +63,22 @@ class ModeFunctions:
     gamma: object             # (t, q, v, p) -> (m,)
     readouts: dict[str, object] = field(default_factory=dict)   # vectorised (t, q, v, a, lam, x, p)
     readout_names: list[str] = field(default_factory=list)
-    symbolic: dict = field(default_factory=dict)   # the sympy pieces, for other backends (diffrax)
     #: the KKT pieces as flat lists of entries, vectorised over output rows (dynamics/tables.py)
     kkt_flat: dict = field(default_factory=dict)
     #: (derivation key, mode name): identifies these expressions across processes (compiled_model's cache)
     cache_key: tuple = ()
+    #: the sympy pieces (for the diffrax backend, the compiled callbacks, the sensitivities): see `symbolic`
+    symbolic_pieces: dict = field(default_factory=dict, repr=False)
+    #: where the functions were loaded from the disk cache (dynamics/derivation_cache.py): derives the sympy
+    #: pieces on first use
+    symbolic_source: Callable[[], dict] | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def symbolic(self) -> dict:
+        """The sympy pieces the functions were made from (derived now if the functions came from the cache)."""
+        if not self.symbolic_pieces and self.symbolic_source is not None:
+            self.symbolic_pieces = self.symbolic_source()
+        return self.symbolic_pieces
 
 
 @dataclass
@@ -91,6 +100,10 @@ def _as_list(x) -> list:
 
 def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                 ext: StateExtension | None, params: tuple[sp.Symbol, ...], P) -> ModeFunctions:
+    import sympy as sp
+
+    from mechsim.dynamics.codegen import emit
+    from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
     s = mech.symbols
     t, q, v, a = s.t, list(s.q), list(s.v), list(s.a)
     nq = len(q)
@@ -194,7 +207,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
             force_lam=lamb([t, q, v, x, params], list(force_lam)) if m else None,
             gamma=lamb([t, q, v, params], list(cd.gamma)) if m else None,
         ),
-        symbolic=dict(t=t, q=q, v=v, lam=lam, x=x, xp=xp, params=params, mass=M, force=force,
+        symbolic_pieces=dict(t=t, q=q, v=v, lam=lam, x=x, xp=xp, params=params, mass=M, force=force,
                       constraints=cd, powers=powers, work_names=work_names, guards=guards,
                       guard_acc_symbols=vp, ext_rows=rows[len(rows) - len(x):] if x else [],
                       readout_exprs=ro_exprs, residual_rows=rows, residual_jacobian=J, y=y_syms, yp=yp_syms,
@@ -205,6 +218,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
 def _residual_jacobian(rows, y_syms, yp_syms, cj) -> sp.Matrix:
     """dF/dy + cj dF/dy', differentiating each row only by the symbols it contains (same result as
     Matrix.jacobian, but linear in the number of nonzeros instead of rows x states: matters for 1-D meshes)."""
+    import sympy as sp
     J = sp.zeros(len(rows), len(y_syms))
     col_y = {s: j for j, s in enumerate(y_syms)}
     col_yp = {s: j for j, s in enumerate(yp_syms)}
@@ -225,6 +239,9 @@ def _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m):
     state's lam is too noisy to root-find on; the KKT solution is exact for the current (q, v). Solved
     symbolically for small systems; larger ones fall back to the state's lam and v'.
     """
+    import sympy as sp
+
+    from mechsim.dynamics import kkt
     if nq + m > 6:
         return [g.subs({a[i]: vp[i] for i in range(nq)}) for g in guards]
     Ql = force.jacobian(lam) if m else sp.zeros(nq, 0)
@@ -237,7 +254,27 @@ def _guards_on_kkt(guards, M, force, cd, lam, a, vp, nq, m):
 
 @lru_cache(maxsize=64)
 def _derive_cached(key, mech_ref, formulation, prescribed, ext_ref):
+    """One model per derivation key and process: from the disk cache where it holds the key (the sympy pieces
+    then derived on first use), else derived and stored there (dynamics/derivation_cache.py)."""
+    from mechsim.dynamics import derivation_cache
     mech, ext = mech_ref.obj, (ext_ref.obj if ext_ref else None)
+    fresh: dict = {}
+
+    def symbolic_of(mode: str) -> dict:
+        if "model" not in fresh:
+            fresh["model"] = _derive_fresh(key, mech, formulation, prescribed, ext)
+        return fresh["model"].modes[mode].symbolic
+
+    model = derivation_cache.load(key, symbolic_of)
+    if model is None:
+        model = _derive_fresh(key, mech, formulation, prescribed, ext)
+        derivation_cache.store(key, model)
+    return model
+
+
+def _derive_fresh(key, mech, formulation, prescribed, ext) -> DerivedModel:
+    """Every mode's functions derived from the mechanism's sympy description."""
+    import sympy as sp
     pnames = tuple(mech.parameter_names) + DRIVE_PARAMETERS + SOLVER_PARAMETERS + (
         tuple(ext.parameter_names) if ext else ())
     existing = {s.name: s for s in mech.symbols.params}

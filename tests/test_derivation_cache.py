@@ -1,0 +1,114 @@
+"""The derived model kept on disk (dynamics/derivation_cache.py): a model loaded from the cache is the derived one,
+bit for bit, for every mechanism type; its sympy pieces come on demand; a damaged file is derived again; a second
+process runs a DAE scenario without importing sympy. Behaviour only: the time it saves is in docs/benchmarks.md."""
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.dynamics import derivation_cache, model as model_module
+from mechsim.dynamics.hybrid import prepare
+from mechsim.scenarios import runner
+
+CASES = [("geneva-motor", ['thermal.model="lumped"']), ("chain-mech1-torque", []), ("rolling-a-torque", [])]
+
+
+def _prepared(name, overrides):
+    plan = runner.plan(mechsim.load(name, set=overrides))
+    si, mech, drive = plan.scenario.si, plan.mechanism, plan.drive
+    ext = plan.thermal.extension if plan.thermal is not None else None
+    ext_initial = plan.thermal.ext_initial if plan.thermal is not None else None
+    angle_key, speed_key = mech.initial_keys
+    speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
+    return prepare(mech, drive, plan.settings, 0.05, si["output_step"], si["initial"][angle_key], speed0, ext,
+                   ext_initial)
+
+
+def _outputs(mf, p, rng):
+    """Every stored function of a mode on one random state: residual, Jacobian, guards, the KKT pieces and the
+    read-outs (the lambdified functions are vectorised over rows: evaluated on three)."""
+    ny, nq = mf.ny, mf.index["q"].stop
+    y, yp = rng.normal(size=ny), rng.normal(size=ny)
+    res, jac, ev = np.zeros(ny), np.zeros((ny, ny)), np.zeros(len(mf.guard_names))
+    mf.residual(0.3, y, yp, res, p)
+    mf.jacobian(0.3, y, yp, res, 7.5, jac, p)
+    mf.events(0.3, y, yp, ev, p)
+    t, q, v = 0.3, y[:nq], y[nq:2 * nq]
+    x = y[mf.index["ext"]]
+    lam = y[mf.index["lam"]]
+    out = [res, jac, ev, np.asarray(mf.mass(q, p), float), np.asarray(mf.force0(t, q, v, x, p), float),
+           np.asarray(mf.G(t, q, p), float), np.asarray(mf.phi(t, q, p), float),
+           np.asarray(mf.phi_dot(t, q, v, p), float), np.asarray(mf.gamma(t, q, v, p), float),
+           np.asarray(mf.force_lam(t, q, v, x, p), float)]
+    a = rng.normal(size=nq)
+    out += [np.asarray(np.broadcast_arrays(*mf.readouts["_all"](t, q, v, a, lam, x, p)), float)]
+    return out
+
+
+@pytest.mark.parametrize("name,overrides", CASES, ids=[c[0] for c in CASES])
+def test_a_loaded_model_is_the_derived_one_bit_for_bit(name, overrides, tmp_path, monkeypatch):
+    monkeypatch.setenv("MECHSIM_CACHE_DIR", str(tmp_path))
+    model_module._derive_cached.cache_clear()
+    start = _prepared(name, overrides)            # derived, and stored
+    files = list((tmp_path / "derived").glob("*.json"))
+    assert len(files) == 1
+    model_module._derive_cached.cache_clear()
+    loaded = _prepared(name, overrides).model     # loaded from the file
+    assert loaded is not start.model
+    assert list(loaded.modes) == list(start.model.modes)
+    for mode, mf in start.model.modes.items():
+        other = loaded.modes[mode]
+        assert other.symbolic_pieces == {}                      # nothing derived yet
+        assert (other.index, other.algebraic, other.guard_names, other.guard_directions, other.readout_names) == (
+            mf.index, mf.algebraic, mf.guard_names, mf.guard_directions, mf.readout_names)
+        p = np.asarray(start.p, float) * (1.0 + 0.1 * np.random.default_rng(1).random(len(start.p)))
+        for mine, theirs in zip(_outputs(other, p, np.random.default_rng(2)), _outputs(mf, p, np.random.default_rng(2))):
+            np.testing.assert_array_equal(mine, theirs)
+    # the sympy pieces are derived on demand, the same expressions as the derivation's own
+    mode = next(iter(loaded.modes))
+    assert [str(r) for r in loaded.modes[mode].symbolic["residual_rows"]] == [
+        str(r) for r in start.model.modes[mode].symbolic["residual_rows"]]
+    model_module._derive_cached.cache_clear()
+
+
+def test_a_damaged_or_foreign_file_is_derived_again(tmp_path, monkeypatch):
+    monkeypatch.setenv("MECHSIM_CACHE_DIR", str(tmp_path))
+    model_module._derive_cached.cache_clear()
+    start = _prepared("geneva-torque", [])
+    (path,) = (tmp_path / "derived").glob("*.json")
+    good = path.read_text()
+    for bad in ("{not json", good.replace('"format": 1', '"format": 0'), good.replace('def ', 'df ', 1), ""):
+        path.write_text(bad)
+        model_module._derive_cached.cache_clear()
+        again = _prepared("geneva-torque", []).model
+        mf, ref = next(iter(again.modes.values())), next(iter(start.model.modes.values()))
+        assert mf.symbolic_pieces != {}                           # derived, not loaded
+        np.testing.assert_array_equal(_outputs(mf, start.p, np.random.default_rng(3))[0],
+                                      _outputs(ref, start.p, np.random.default_rng(3))[0])
+        # and stored again (the same file but for sympy's numbering of its dummy argument names)
+        assert re.sub(r"_Dummy_\d+", "_Dummy", path.read_text()) == re.sub(r"_Dummy_\d+", "_Dummy", good)
+    model_module._derive_cached.cache_clear()
+
+
+def test_the_file_name_follows_the_key_and_the_code():
+    a = derivation_cache.file_for(("Geneva",))
+    assert a == derivation_cache.file_for(("Geneva",))
+    assert a != derivation_cache.file_for(("Geneva", "index1"))
+
+
+def test_a_second_process_runs_a_dae_scenario_without_sympy(tmp_path):
+    """The first process derives geneva-torque (IDA) and stores it; the second loads it and never imports sympy,
+    and both write the same time series."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), "MECHSIM_CACHE_DIR": str(tmp_path)}
+    code = ("import sys, mechsim\nr = mechsim.run('geneva-torque', set=['duration=0.3 s'])\n"
+            "print('sympy' in sys.modules)\nprint(r.timeseries.to_csv(float_format='%.17g'))")
+    outs = [subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                           timeout=240) for _ in range(2)]
+    assert all(o.returncode == 0 for o in outs), outs[0].stderr + outs[1].stderr
+    first, second = (o.stdout.split("\n", 1) for o in outs)
+    assert first[0] == "True" and second[0] == "False"
+    assert first[1] == second[1]
