@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.scenarios.sensitivity_cycle import (CYCLE_COLUMNS, cycle_bulk_samples, cycle_temperatures, cycle_window,
-                                                 event_crosses_turn_row)
+                                                 event_crosses_turn_row, period_gradient, repetition_crosses_end,
+                                                 turn_peak)
 from mechsim.scenarios.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
                                                scenario_value, traced_quantities)
 from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS, thermal_samples
@@ -198,10 +199,16 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             y, g = first.values[column], first.grads[column]
             results[q] = (y, g, first.t)
             if turn is not None and q in THERMAL_PEAKS:
-                results[q] = (y, g, first.t + turn["layout"].periods * turn["period"])
+                value, at = turn_peak(turn, column, first.t)        # the run's reported peak, and its time
+                results[q] = (value, g, at)
                 note = event_crosses_turn_row(q, wrt, relative, turn, path.events, change)
                 if note and q == "peak_temp_contact_C" and ext is not None:
                     warnings.append(note)
+                if q == "peak_temp_contact_C" and ext is not None:
+                    note = repetition_crosses_end(q, wrt, relative, turn, first.t, period_gradient(turn, by_time),
+                                                  change)
+                    if note:
+                        warnings.append(note)
             if len(rows) > 1:
                 note = _near_peaks(q, wrt, relative, df, rows, by_time, column, change)
                 if note:

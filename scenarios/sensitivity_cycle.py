@@ -33,34 +33,100 @@ def _network(system, xp=np) -> dict:
 def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
     """The contact temperature and flash rise of the periodic turn's rows at their last time in the run
     (docs/sensitivity.md, "Cycle averaging"): the rows inside the last full turn of the mechanics window (`df`,
-    the run of `cycle_window(plan)`), each at t_k + M P in the last full turn of the scenario's duration, with the
-    cycle-averaged bulk there (thermal/cycle_exact.py) under the row's flash rise and Blok share. None without a
-    full turn. Keys: rows (indices into df), t_s, temp_contact_C, temp_flash_rise_K, layout, period, bulk."""
+    the run of `cycle_window(plan)`), each at its last repetition t_k + m_k P <= duration (m_k per row,
+    thermal/cycle.py `last_repetitions`: the rows the run's continuation writes there), with the cycle-averaged bulk
+    there (thermal/cycle_exact.py) under the row's flash rise and Blok share. The bulk's mean response rises
+    monotonically from ambient, so a row's last repetition is its hottest and the largest of these is the run's
+    reported peak. None without a full turn. Keys: rows (indices into df), t_s, temp_contact_C, temp_flash_rise_K,
+    temp_contact_previous_C (one repetition earlier: the jump where a row's last repetition leaves the run),
+    layout, period, duration, bulk."""
     from mechsim.thermal.contact_row import KELVIN
     from mechsim.thermal.cycle_exact import TurnLayout, turn_bulk, turn_ends
     setup, mech = plan.thermal.setup, plan.mechanism
     t = df["t_s"].to_numpy(float)
     angle = df["crank_angle_rad"].to_numpy(float)
-    layout = TurnLayout.of(t, angle, float(plan.scenario.si["duration"]))
+    duration = float(plan.scenario.si["duration"])
+    layout = TurnLayout.of(t, angle, duration)
     if layout is None:
         return None
     inner, edges, data = layout.inner, layout.edges, layout.data()
     flash = df["temp_flash_rise_K"].to_numpy(float)[inner]
     share = df["heat_share_pin"].to_numpy(float)[inner]
     a, b = turn_ends(data["t_edges"], data["targets"], angle[edges])
-    bulk = None
+    bulk = previous = None
     if setup.system is None:
         base_pin = base_wheel = setup.temp_ambient
+        contact_previous = share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN
     else:
         u = setup.extension.inputs_numeric(mech.contact_state(df))[0].T
-        bulk = turn_bulk(data, angle[edges], df["heat_generated_J"].to_numpy(float)[edges],
-                         df["heat_pin_J"].to_numpy(float)[edges], u[edges], u[layout.padded],
-                         _network(setup.system))[0][layout.pad:]
+
+        def at(periods):
+            return turn_bulk({**data, "periods": periods}, angle[edges], df["heat_generated_J"].to_numpy(float)[edges],
+                             df["heat_pin_J"].to_numpy(float)[edges], u[edges], u[layout.padded],
+                             _network(setup.system))[0][layout.pad:]
+        bulk, previous = at(data["periods"]), at(data["periods"] - 1.0)
         names = list(setup.system.state_names)
-        base_pin, base_wheel = bulk[:, names.index("temp_bulk_pin_K")], bulk[:, names.index("temp_bulk_wheel_K")]
+        pin, wheel = names.index("temp_bulk_pin_K"), names.index("temp_bulk_wheel_K")
+        base_pin, base_wheel = bulk[:, pin], bulk[:, wheel]
+        contact_previous = share * previous[:, pin] + (1.0 - share) * previous[:, wheel] + flash - KELVIN
     return {"rows": inner, "t_s": t[inner] + layout.periods * (b - a), "period": float(b - a), "layout": layout,
-            "temp_flash_rise_K": flash, "bulk": bulk,
-            "temp_contact_C": share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN}
+            "duration": duration, "temp_flash_rise_K": flash, "bulk": bulk,
+            "temp_contact_C": share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN,
+            "temp_contact_previous_C": contact_previous}
+
+
+def turn_peak(turn: dict, column: str, t_row: float) -> tuple[float, float]:
+    """(value, time) of the periodic turn's row at t_row at its last time in the run: the value from the run's own
+    columns and the cycle bulk in numpy (`cycle_temperatures`), so that it is the run's reported peak itself (the
+    traced pass, which integrates the path anew, gives its derivative and agrees with it to its tolerance)."""
+    k = int(np.argmin(np.abs(turn["layout"].t[turn["rows"]] - t_row)))
+    return float(turn[column][k]), float(turn["t_s"][k])
+
+
+def period_gradient(turn: dict, by_time: dict) -> np.ndarray:
+    """dP per scaled value of the turn's period P = b - a, its ends where the drive angle passes its targets, linear
+    between the rows around them (thermal/cycle_exact.py `turn_ends`): da = -h (dphi_i (1 - w) + dphi_(i+1) w) /
+    (phi_(i+1) - phi_i), the implicit-function rule on the interpolated angle (docs/sensitivity.md, "Cycle
+    averaging"); the rows' times are fixed output times. by_time: the traced samples, which hold the rows around
+    the turn's ends with the drive angle's gradient wherever the cycle bulk is traced."""
+    layout = turn["layout"]
+    t = layout.t
+    ends = []
+    for k, i in enumerate((layout.ia, layout.ib)):
+        s0, s1 = by_time[float(t[i])], by_time[float(t[i + 1])]
+        p0, p1 = s0.values["crank_angle_rad"], s1.values["crank_angle_rad"]
+        w = (layout.targets[k] - p0) / (p1 - p0)
+        ends.append(-(t[i + 1] - t[i]) * (np.asarray(s0.grads["crank_angle_rad"]) * (1.0 - w)
+                                          + np.asarray(s1.grads["crank_angle_rad"]) * w) / (p1 - p0))
+    return ends[1] - ends[0]
+
+
+def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], turn: dict, t_row: float,
+                           period_grad: np.ndarray, change: float):
+    """A warning where the last repetition t_k + m_k P of the peak's row crosses the run's end within the stated
+    change of a value (d(t_k + m_k P) = m_k dP: t_k is a fixed output row): there the row's last repetition leaves
+    the run (or one more enters), m_k changes and the value jumps by one period's rise of the bulk (the difference
+    to the row's previous repetition, stated); the derivative is that of the row at fixed m_k."""
+    layout = turn["layout"]
+    k = int(np.argmin(np.abs(layout.t[turn["rows"]] - t_row)))
+    m, P = int(layout.periods[k]), turn["period"]
+    time = float(turn["t_s"][k])
+    leave, enter = turn["duration"] - time, time + P - turn["duration"]      # both >= 0
+    found = {}
+    for key, d in zip(wrt, period_grad):
+        if d != 0:
+            need = min(leave / (m * abs(d)) if m > 0 else np.inf, enter / ((m + 1) * abs(d)))
+            if need < change:
+                found[key] = need
+    if not found:
+        return None
+    rel = dict(zip(wrt, relative))
+    jump = float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k])
+    return (f"{q}: the last repetition of its row in the run (t = {time:.6g} s, {leave:.3g} s before the end) "
+            f"crosses the run's end within the stated change, where the value jumps by about {jump:.2g} K (one "
+            "period's rise of the bulk; the derivative is that of the row at a fixed repetition): "
+            + ", ".join(f"{key} " + (f"{d * 100:.2g}%" if rel[key] else f"{d:.2g} (absolute)")
+                        for key, d in found.items()))
 
 
 _CYCLE_FNS: dict = {}

@@ -252,6 +252,50 @@ def test_closed_form_cycle_bulk_is_the_runs():
     assert np.ptp(ripple[:, 0]) > 0.1          # the pin's ripple over the turn is in it (K)
 
 
+def test_cycle_peak_is_the_runs_reported_peak(cycle_table):
+    """The run continues the periodic turn by its own rows at t_k + m P (thermal/cycle.py `continue_periodically`)
+    and the sensitivity reads each row at its last repetition t_k + m_k P (`cycle_temperatures`), with the same flash
+    rise and share and the same cycle-averaged bulk (the run's by quadrature cut at every row, the table's in closed
+    form: equal to 5e-11 K, `test_closed_form_cycle_bulk_is_the_runs`): so the run's reported peak contact temperature
+    and its time are the table's value and t_s, to that agreement (1e-9 K) and to the round-off of t_k + m P."""
+    run = mechsim.run(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS))
+    assert run.failure is None
+    peak = run.summary["peaks"]["temp_contact_C"]
+    row = cycle_table[cycle_table["quantity"] == "peak_temp_contact_C"].iloc[0]
+    assert peak["value"] == pytest.approx(row["value"], rel=0, abs=1e-9)
+    assert peak["t_s"] == pytest.approx(row["t_s"], rel=0, abs=1e-9)
+    assert peak["t_s"] > 60.0 - run.summary["thermal"]["cycle"]["period_s"]       # in the last turn of the run
+
+
+def test_last_repetition_crossing_the_end_is_warned(cycle_table):
+    """The peak's row is read at its last repetition t_k + m_k P <= duration; a value that changes the period moves
+    it by m_k dP (t_k is a fixed output row), and where that reaches the run's end within the stated change the row's
+    last repetition leaves the run (or one more enters) and the value jumps by one period's rise of the bulk. The
+    warning states the change that gets there: min(gap to the end / m_k, gap to the next repetition / (m_k + 1)) / |dP|,
+    here checked with dP from central differences of the window's period (step 1e-4 relative: truncation ~1e-8,
+    round-off ~ rtol 1e-12 / 1e-4, both far below the two digits stated)."""
+    from mechsim.thermal import cycle as cyc
+    key = "drive.no_load_speed"
+    table = sensitivity(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS), [key], ["peak_temp_contact_C"], change=0.5)
+    notes = [w for w in table.attrs["warnings"] if "last repetition" in w]
+    assert len(notes) == 1 and "\n" not in notes[0]
+
+    def period(v):
+        _, result, _ = _cycle_window(FD + [f"{key}={v!r} rad/s"])
+        df = result.timeseries
+        b = cyc.turn_boundaries(df["t_s"].to_numpy(float), df["crank_angle_rad"].to_numpy(float),
+                                float(df["crank_angle_rad"].iloc[0]))
+        return b[-1] - b[-2]
+    p, h = 8.0, 1e-4
+    dP = (period(p * (1 + h)) - period(p * (1 - h))) / (2 * h)         # per relative change of the value
+    P, at = period(p), float(table["t_s"].iloc[0])
+    _, _, turn = _cycle_window(FD)
+    m_k = int(turn["layout"].periods[int(np.argmin(np.abs(turn["t_s"] - at)))])
+    leave, enter = 60.0 - at, at + P - 60.0
+    need = min(leave / (m_k * abs(dP)), enter / ((m_k + 1) * abs(dP)))
+    assert need < 0.5 and f"{key} {need * 100:.2g}%" in notes[0], (need, notes[0])
+
+
 def test_cycle_at_prescribed_speed_is_refused():
     sc = mechsim.load("geneva-seed-lc1-mu015", set=["duration=60 s", "thermal.averaging=cycle"])
     with pytest.raises(ScenarioError) as err:

@@ -1,5 +1,6 @@
 """The whole history with cycle averaging (docs/thermal.md, "Cycle averaging"): a long lumped-thermal run keeps
-one row per output step over the whole duration — the simulated start-up, then the periodic turn continued —
+its rows over the whole duration — the simulated start-up on the output grid, then the periodic turn's own rows
+repeated a whole number of periods later —
 with the bulk temperatures of the averaged solution on every row; events continue with the turn; the
 per-cycle temperature figure covers the run."""
 import math
@@ -17,16 +18,25 @@ def motor_120s():
     return mechsim.run("geneva-motor", set={"thermal.model": "lumped", "duration": "120 s"})
 
 
-def test_one_row_per_output_step_over_the_whole_duration(motor_120s, tmp_path):
+def test_rows_over_the_whole_duration(motor_120s, tmp_path):
+    """The simulated rows on the output grid; after them the turn's rows (t_k in (a, a + P)) at t_k + m P: a row
+    step apart inside a turn, (t_first - a) + (a + P - t_last) in (0, 2 step) across the turn's ends; the last row
+    within two steps of the end (the turn's rows leave no phase gap of two steps or more)."""
     r = motor_120s
     assert r.success and r.summary["thermal"]["averaging"] == "cycle"
-    ts = r.timeseries
-    step = r.scenario["output_step"]
-    assert len(ts) == round(120.0 / step) + 1
-    np.testing.assert_allclose(ts["t_s"].to_numpy(), step * np.arange(len(ts)), rtol=0, atol=1e-9)
+    ts, cycle = r.timeseries, r.summary["thermal"]["cycle"]
+    step, P, t_sim = r.scenario["output_step"], cycle["period_s"], cycle["mechanics_simulated_until_s"]
+    t = ts["t_s"].to_numpy()
+    sim = t[t <= t_sim]
+    np.testing.assert_allclose(sim, step * np.arange(len(sim)), rtol=0, atol=1e-9)
+    gaps = np.diff(t)
+    assert np.all(gaps > 0) and np.all(gaps < 2 * step)
+    # per period as many rows as the turn has (one row count per period, up to the rows at the two ends)
+    assert abs(len(t) - len(sim) - (120.0 - t_sim) / step) <= (120.0 - t_sim) / P + 2
+    assert 120.0 - 2 * step < t[-1] <= 120.0
     r.save(tmp_path / "out", plots=False)
     written = pd.read_parquet(tmp_path / "out" / "timeseries.parquet", columns=["t_s"])
-    assert len(written) == len(ts) and written["t_s"].iloc[-1] == pytest.approx(120.0)
+    assert len(written) == len(ts) and written["t_s"].iloc[-1] == t[-1]
     assert (tmp_path / "out" / "thermal_history.csv").exists()
 
 
@@ -39,12 +49,17 @@ def test_the_start_up_is_simulated_and_the_rest_is_the_periodic_turn(motor_120s)
     # the motor starts from rest-ish speed and settles: the first turn is slower than the periodic one
     w = ts["crank_speed_rad_s"].to_numpy()
     assert abs(w[0] - w[t < t_sim][-1]) > 0.1
-    # continued rows repeat the simulated turn: same speed one period apart (to the interpolation between
-    # output rows, ~ max|dw/dt| x step), and the crank advances exactly one turn per period
+    # continued rows are the simulated turn's rows: the mechanics columns the same, bit for bit, one period apart,
+    # and the crank advances exactly one turn per period
     later = np.flatnonzero(t > t_sim + P)[::997]
-    back = np.interp(t[later] - P, t, w)
-    accel = np.abs(ts["crank_accel_rad_s2"]).max()
-    assert np.max(np.abs(w[later] - back)) <= accel * r.scenario["output_step"]
+    back = np.searchsorted(t, t[later] - P - 1e-9)
+    np.testing.assert_allclose(t[back], t[later] - P, rtol=0, atol=1e-9)
+    for col in ("crank_speed_rad_s", "contact_force_N", "friction_power_W"):
+        assert np.array_equal(ts[col].to_numpy()[later], ts[col].to_numpy()[back], equal_nan=True), col
+    # the flash rise is recomputed on every row from those columns (the same formula: to round-off)
+    flash = ts["temp_flash_rise_K"].to_numpy()
+    np.testing.assert_allclose(flash[later], flash[back], rtol=1e-12, atol=1e-12 * np.nanmax(flash))
+    assert (ts["mode"].to_numpy()[later] == ts["mode"].to_numpy()[back]).all()
     theta = ts["crank_angle_rad"].to_numpy()
     i = np.flatnonzero(t > t_sim)[0]
     advance = np.interp(t[-1] - P, t, theta)

@@ -132,44 +132,56 @@ def cumulative(column: str) -> bool:
     return column.endswith("_angle_rad") or (column.startswith("work_") and column.endswith("_J"))
 
 
+def last_repetitions(t_rows: np.ndarray, period: float, duration: float) -> np.ndarray:
+    """m_k = floor((duration - t_k)/P): how many whole periods after the periodic turn's row t_k its last repetition
+    t_k + m_k P in the run lies (t_k + m_k P <= duration, to 1e-12 of a period). One rule for the run's continuation
+    (`continue_periodically`) and the sensitivities' rows (thermal/cycle_exact.py `TurnLayout`)."""
+    return np.floor((duration - np.asarray(t_rows, dtype=float)) / period + 1e-12).astype(np.int64)
+
+
+def turn_rows(t: np.ndarray, t_start: float, period: float) -> np.ndarray:
+    """Indices of the rows strictly inside the periodic turn (t_start, t_start + period): the rows it repeats."""
+    return np.flatnonzero((t > t_start) & (t < t_start + period))
+
+
 def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
                           step: float) -> tuple[pd.DataFrame, pd.DataFrame, float]:
-    """The whole run at the output step: the simulated rows on the output grid, then the periodic turn
-    [t_start, t_start + period) repeated up to `duration` (the mechanics is periodic there: cycle averaging
-    checks it). A repeated row at time t takes the turn's row at phase t_start + ((t - t_start) mod period),
-    linearly interpolated between the two simulated rows around it, or the nearer one where the mode changes
-    between them (no value the motion never takes); cumulative columns advance by their increase over one turn
-    per period. Events of the turn repeat the same way (`message` says so). Returns (table, events, the last
-    simulated time)."""
+    """The whole run: the simulated rows on the output grid up to the last simulated one, then the periodic turn's
+    own rows t_k (t_start < t_k < t_start + period) repeated at t_k + m P (m = 1, 2, ..., up to
+    `last_repetitions`), the rows after the simulated window (the mechanics is periodic there: cycle averaging
+    checks it). No interpolation in phase: a continued row is a simulated row, so the largest of the run's rows is
+    the largest of the turn's rows at their last repetition (docs/thermal.md, "Cycle averaging"); those rows are a
+    row step apart within a turn and (t_k,first + P - t_k,last) across its ends, not on multiples of `step`.
+    Cumulative columns advance by their increase over one turn per period. Events of the turn repeat the same way
+    (`message` says so). Returns (table, events, the last simulated time)."""
     t = df["t_s"].to_numpy(float)
     grid = output_times(duration, step)
     on_grid = np.isin(np.round(t / step, 6), np.round(grid / step, 6))
     simulated = df[on_grid]
     t_sim = float(simulated["t_s"].iloc[-1])
-    new_t = grid[grid > t_sim + 1e-9 * step]
+    own = turn_rows(t, t_start, period)
+    own = own[on_grid[own]]
+    if not len(own):
+        return df, events, float(t[-1])
+    last = last_repetitions(t[own], period, duration)
+    m = np.arange(1, max(int(last.max()), 0) + 1)
+    reps = (m[:, None] * np.ones((1, len(own)), dtype=np.int64)).ravel()      # period-major: times ascend
+    idx = np.tile(own, len(m))
+    new_t = t[idx] + reps * period
+    keep = (reps <= np.tile(last, len(m))) & (new_t > t_sim + 1e-9 * step)
+    idx, reps, new_t = idx[keep], reps[keep], new_t[keep]
     if not len(new_t):
         return df, events, float(t[-1])
-    m = np.floor((new_t - t_start) / period + 1e-12)
-    phase = np.clip(new_t - m * period, t[0], t[-1])
-    i = np.clip(np.searchsorted(t, phase, side="right") - 1, 0, len(t) - 2)
-    j = i + 1
-    w = (phase - t[i]) / (t[j] - t[i])
-    mode = df["mode"].to_numpy() if "mode" in df else np.zeros(len(t))
-    same = mode[i] == mode[j]
-    nearest = np.where(w < 0.5, i, j)
     new = {}
     for col in df.columns:
         values = df[col].to_numpy()
         if col == "t_s":
             new[col] = new_t
-        elif np.issubdtype(values.dtype, np.number) and not np.issubdtype(values.dtype, np.bool_):
-            v = values.astype(float)
-            out = np.where(same, v[i] + w * (v[j] - v[i]), v[nearest])
-            if cumulative(col):
-                out = out + m * float(np.diff(np.interp([t_start, t_start + period], t, v))[0])
-            new[col] = out.astype(values.dtype) if np.issubdtype(values.dtype, np.integer) else out
+        elif cumulative(col):
+            per_turn = float(np.diff(np.interp([t_start, t_start + period], t, values.astype(float)))[0])
+            new[col] = values.astype(float)[idx] + reps * per_turn
         else:
-            new[col] = values[nearest]
+            new[col] = values[idx]
     table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
     return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim
 

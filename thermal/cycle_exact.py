@@ -16,8 +16,9 @@ h [(phi1(x) - phi2(x)) g0 + phi2(x) g1], phi1 = (e^x - 1)/x, phi2 = (e^x - 1 - x
 is the trapezoid sum; thermal/cycle.py's `bulk_response` reaches the same by Gauss-Legendre quadrature on finer
 pieces (tested equal to that quadrature's error). The periodic start is (I - e^{AP})^-1 Z(P).
 
-The temperatures are evaluated at the times t_k + M P of the turn's rows t_k in the last full turn of the run
-(`TurnLayout.periods`): the rows the peak of the periodic turn is read at (docs/sensitivity.md, "Cycle averaging").
+The temperatures are evaluated at the times t_k + m_k P, the last repetition of each of the turn's rows t_k in the
+run (`TurnLayout.periods`, thermal/cycle.py `last_repetitions`): the very rows the run's continuation writes there,
+so that the periodic turn's peak is the run's (docs/sensitivity.md, "Cycle averaging").
 """
 from __future__ import annotations
 
@@ -98,8 +99,9 @@ PAD = 256
 class TurnLayout:
     """Which output rows make up the last full turn, and the run's whole periods after it (discrete: fixed for a
     derivative). t: the rows' times; ia, ib: the rows just before the turn's ends a, b (a, b in [t[i], t[i+1]));
-    inner: the rows strictly inside (a, b); targets: the drive angles at a and b (angle0 + 2 pi m); periods: M,
-    whole periods from the turn to the last full turn of the duration; zero_turns: k with t = 0 at phase kP - a;
+    inner: the rows strictly inside (a, b); targets: the drive angles at a and b (angle0 + 2 pi m); periods: m_k
+    per inner row, the whole periods to its last repetition t_k + m_k P <= duration in the run (thermal/cycle.py
+    `last_repetitions`; the rows near the turn's end may have one less); zero_turns: k with t = 0 at phase kP - a;
     zero_node: the node j (nodes [0, t_inner - a, P]) with node_j <= kP - a < node_j+1."""
 
     t: np.ndarray
@@ -107,7 +109,7 @@ class TurnLayout:
     ib: int
     inner: np.ndarray
     targets: tuple[float, float]
-    periods: int
+    periods: np.ndarray
     zero_turns: int
     zero_node: int
 
@@ -135,14 +137,15 @@ class TurnLayout:
     def data(self) -> dict:
         """The layout as arrays (what `turn_bulk` needs besides the traced values)."""
         node = self.zero_node + (self.pad if self.zero_node > 0 else 0)
+        periods = np.concatenate([np.full(self.pad, self.periods[0]), self.periods]).astype(float)
         return {"t_edges": self.t[self.edges], "t_inner": self.t[self.padded], "targets": np.asarray(self.targets),
-                "periods": float(self.periods), "zero_turns": float(self.zero_turns), "zero_node": node}
+                "periods": periods, "zero_turns": float(self.zero_turns), "zero_node": node}
 
     @classmethod
     def of(cls, t: np.ndarray, angle: np.ndarray, duration: float) -> "TurnLayout | None":
         """The layout of a run's rows (thermal/cycle.py `turn_boundaries` on the drive angle from its first row);
         None with fewer than two boundaries (no full turn)."""
-        from mechsim.thermal.cycle import turn_boundaries
+        from mechsim.thermal.cycle import last_repetitions, turn_boundaries, turn_rows
         bounds = turn_boundaries(t, angle, angle[0])
         if len(bounds) < 2:
             return None
@@ -150,9 +153,9 @@ class TurnLayout:
         m = len(bounds)
         targets = (float(angle[0] + 2 * np.pi * (m - 1)), float(angle[0] + 2 * np.pi * m))
         ia, ib = (int(np.clip(np.searchsorted(angle, x, side="right") - 1, 0, len(t) - 2)) for x in targets)
-        inner = np.flatnonzero((t > a) & (t < b))
         P = b - a
-        periods = int(math.floor((duration - a) / P + 1e-12)) - 1
+        inner = turn_rows(t, a, P)
+        periods = last_repetitions(t[inner], P, duration)
         zero_turns = int(math.ceil(a / P))
         nodes = np.concatenate([[0.0], t[inner] - a, [P]])
         zero_node = int(np.clip(np.searchsorted(nodes, zero_turns * P - a, side="right") - 1, 0, len(nodes) - 2))
@@ -179,7 +182,8 @@ def turn_means(t_edges, targets, angle_edges, gen_edges, pin_edges) -> dict:
 
 
 def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, network: dict, xp=np):
-    """Network states (rows = the padded inner rows, `TurnLayout.padded`) of the cycle-averaged solution at t_k + M P,
+    """Network states (rows = the padded inner rows, `TurnLayout.padded`) of the cycle-averaged solution at their
+    last repetitions t_k + m_k P (data["periods"]),
     and the turn's
     means. data: `TurnLayout.data()`; *_edges: values at the rows around the turn's ends; u_edges (4 x m),
     u_inner (padded rows x m): the rows' network inputs; network: capacity C, conductance K (dense), source s,

@@ -245,7 +245,7 @@ class ThermalPlan:
         duration = float(self.si["duration"])
         full, full_events, t_sim = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
                                                              float(self.si["output_step"]))
-        if self.method == "closed-form":     # the closed form is exact at any time: no interpolation in phase
+        if self.method == "closed-form":     # the closed form is exact at any time: its own values there
             columns = closed_form_columns(mech, self.si["initial"][mech.initial_keys[0]], self.speed)
             later = full["t_s"].to_numpy(float) > t_sim
             exact = columns(full["t_s"].to_numpy(float)[later])
@@ -256,9 +256,10 @@ class ThermalPlan:
                 "mean_heat_share_pin": None if states is None else means.share_mean,
                 "turns_simulated": int(len(bounds)), "mechanics_simulated_until_s": t_sim,
                 "rows_continued_periodically": int((full["t_s"] > t_sim).sum()),
-                "continuation": ("rows after mechanics_simulated_until_s repeat the last simulated turn "
-                                 + ("(closed form: exact at every row)" if self.method == "closed-form" else
-                                    "(interpolated in phase between its output rows)")
+                "continuation": ("rows after mechanics_simulated_until_s repeat the last simulated turn's own "
+                                 "rows t_k at t_k + m P (m = 1, 2, ...; not on multiples of output_step)"
+                                 + ("; the closed form gives the mechanics exactly at those times"
+                                    if self.method == "closed-form" else "")
                                  + "; bulk temperatures on every row come from the cycle-averaged solution"),
                 "periodicity_of_mean_heat": means.periodicity}
         if means.periodicity is not None and means.periodicity > PERIODICITY_TOLERANCE:
