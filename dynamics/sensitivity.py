@@ -59,7 +59,14 @@ class Seed:
         ambient); None: zero.
     discrete: parameters a transition may change (mode flags, slot counters, geometry that is not traced, ...):
         their values do not depend on the design values, so their derivative is zero; a transition changing any
-        other parameter raises (a prescribed drive's re-based reference excepted: `_rebased_drive`).
+        other parameter raises (a prescribed drive's re-based reference excepted: `_rebased_drive`) unless piece_dp
+        gives its derivative.
+    piece_dp: values -> {parameter: (n,) derivative} of the parameters a transition sets for the mode with those
+        values (the chain's path pieces: scenarios/sensitivity_map.py `_chain_piece`); applied at the start and after
+        every transition. None: transitions set only discrete parameters.
+    hold: the coordinate the initial state holds while the others assemble (Mechanism.initial_state: the drive's),
+        so that the initial guess's derivative is completed on the constraints with that coordinate's derivative
+        kept (the implicit-function rule, `_ModePieces.hold`); None: the guess's derivative is taken as given.
     """
 
     dp: np.ndarray
@@ -67,6 +74,8 @@ class Seed:
     dv0: np.ndarray
     discrete: frozenset = frozenset()
     dx0: np.ndarray | None = None
+    piece_dp: object = None
+    hold: int | None = None
 
     @property
     def n(self) -> int:
@@ -135,6 +144,21 @@ class _ModePieces:
         v = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt, rel)
         return q, v
 
+    def hold(self, t, q, v, p, i: int):
+        """One Newton step on Phi = 0 and on G v + Phi_t = 0 in every coordinate but i (held, as the mechanism's
+        initial assembly holds the drive's): at a consistent point it changes nothing, and its derivative is the
+        implicit-function rule dq_o = -Phi_qo^-1 (Phi_qi dq_i + Phi_p dp), likewise for v. Needs as many other
+        coordinates as constraints (else the guess is left as it is)."""
+        nq = q.shape[0]
+        if not self.m or self.m != nq - 1:
+            return q, v
+        keep = jnp.array([c for c in range(nq) if c != i])
+        _, G, phi, _ = self.jmode.constraint_parts(t, q, v, p)
+        q = q.at[keep].add(-jnp.linalg.solve(G[:, keep], phi))
+        _, G, _, rel = self.jmode.constraint_parts(t, q, v, p)
+        v = v.at[keep].add(-jnp.linalg.solve(G[:, keep], rel))
+        return q, v
+
     def readouts(self, t, q, v, a, lam, x, p):
         return [jnp.asarray(e, jnp.float64) for e in self._readouts(t, q, v, a, lam, x, p)]
 
@@ -199,7 +223,7 @@ class _Tools:
 
     def __init__(self, mech, model, jmod, columns: tuple, n: int):
         wall = _time.perf_counter()
-        self.model, self.jmod, self.columns = model, jmod, columns
+        self.model, self.jmod, self.columns, self.n = model, jmod, columns, n
         self.pieces = {name: _ModePieces(mf, mech, jmod.modes[jmod.index(name)])
                        for name, mf in model.modes.items()}
         nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
@@ -212,16 +236,34 @@ class _Tools:
         self.sample = {name: self._sample_fn(name, pc).lower(f, z, S, p, P, np.zeros(nq)).compile()
                        for name, pc in self.pieces.items()}
         self.compile_time = _time.perf_counter() - wall
+        self._initial: dict = {}
 
-    def _reset_fn(self, name, pc):
-        """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name` at time t."""
+    def initial(self, name: str, hold: int | None):
+        """The initial state's reset in mode `name` (compiled on first use; `hold`: `_reset_fn`)."""
+        if hold is None:
+            return self.reset[name], 0.0
+        if name not in self._initial:
+            wall = _time.perf_counter()
+            nz, nq, npar, n = self.jmod.nz, self.jmod.nq, len(self.model.parameter_names), self.n
+            z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
+            self._initial[name] = self._reset_fn(name, self.pieces[name], hold).lower(
+                0.0, z, np.zeros(nq), p, S, P, np.zeros(n)).compile()
+            return self._initial[name], _time.perf_counter() - wall
+        return self._initial[name], 0.0
+
+    def _reset_fn(self, name, pc, hold: int | None = None):
+        """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name` at time t (the initial
+        state's: with `hold`, the guess first completed with that coordinate held, `_ModePieces.hold`)."""
         nq = self.jmod.nq
         jm = self.jmod.modes[self.jmod.index(name)]
 
         def reset(t, z, shift, p, dz, P, dt):
             # R depends on t through rheonomic constraints (a prescribed drive): R_t dtau is part of the jump
             def r(tt, zz, pp):
-                qq, vv = pc.project(tt, zz[:nq] - shift, zz[nq:2 * nq], pp)
+                qq, vv = zz[:nq] - shift, zz[nq:2 * nq]
+                if hold is not None:
+                    qq, vv = pc.hold(tt, qq, vv, pp, hold)
+                qq, vv = pc.project(tt, qq, vv, pp)
                 return jnp.concatenate([qq, vv, zz[2 * nq:]])
             z_new, dz_new = jax.vmap(lambda c, a, b: jax.jvp(r, (t, z, p), (c, a, b)), in_axes=(0, 1, 1),
                                      out_axes=(None, 1))(dt, dz, P)
@@ -301,7 +343,12 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nw, n)), _padded(dx0, n)])
     z = _z(model.modes[mode], start.y)
     guess[2 * nq + nw:] = z[2 * nq + nw:]
-    z_init, S, _ = (np.asarray(x) for x in tools.reset[mode](t0, guess, offset, p, dguess, P, np.zeros(n)))
+    names = list(model.parameter_names)
+    if seed.piece_dp is not None:
+        P = _pieces_set(P, names, seed.piece_dp(values))
+    initial, initial_s = tools.initial(mode, seed.hold)
+    stats["compile_time_s"] += initial_s
+    z_init, S, _ = (np.asarray(x) for x in initial(t0, guess, offset, p, dguess, P, np.zeros(n)))
     _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
 
     samples_t = np.sort(np.asarray(list(sample_times), float))
@@ -361,10 +408,14 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             raise SensitivityUnavailable(f"the transition at t = {t:.6g} s does not restart here "
                                          f"({(res.failure or {}).get('reason', 'no state')})")
         changed = [key for key in res.values if res.values[key] != values.get(key)]
-        names = list(model.parameter_names)
         if model.prescribed and "drive_time0" in changed:
             P = _rebased_drive(P, names, values, t, dtau)
-        traced = [key for key in changed if key not in seed.discrete and not (
+        pieces = {}
+        if seed.piece_dp is not None:
+            # every parameter of the new piece gets its own derivative (even one whose number did not change)
+            pieces = seed.piece_dp(res.values)
+            P = _pieces_set(P, names, pieces)
+        traced = [key for key in changed if key not in seed.discrete and key not in pieces and not (
             model.prescribed and key in ("drive_angle0", "drive_time0"))]
         if traced:
             raise SensitivityUnavailable(f"the transition '{row['kind']}' at t = {t:.6g} s recomputes "
@@ -395,6 +446,15 @@ def _rebased_drive(P: np.ndarray, names: list[str], values: dict, t: float, dtau
     d_tau[:len(dtau)] = dtau
     P[ia] = P[ia] + (t - values["drive_time0"]) * P[isp] + values["drive_speed"] * (d_tau - P[it])
     P[it] = d_tau
+    return P
+
+
+def _pieces_set(P: np.ndarray, names: list[str], rows: dict) -> np.ndarray:
+    """dp/dtheta with the rows of the parameters a transition sets replaced by their derivatives (`Seed.piece_dp`)."""
+    P = P.copy()
+    for name, row in rows.items():
+        P[names.index(name)] = 0.0
+        P[names.index(name), :len(row)] = row
     return P
 
 

@@ -41,7 +41,7 @@ class ParameterMap:
     jax-traceable formulas of the dict x (key -> value); each is checked against the mechanism's own
     `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
     parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
-    geometry that is not traced). engage/release: the event kinds that start and end an index (the cycle runs from
+    geometry that is not traced). list_keys, piece_parameters, pieces, refuse, hold_drive: below. engage/release: the event kinds that start and end an index (the cycle runs from
     one `engage` to the next; empty for a mechanism that does not index). peaks: its peak quantities.
     """
 
@@ -53,6 +53,17 @@ class ParameterMap:
     release: str
     peaks: tuple[str, ...] = tuple(PEAKS)
     sliding: bool = False
+    #: (si) -> the keys of list entries traced in this scenario ('mechanism.sprocket_radii[0]', ...)
+    list_keys: Callable | None = None
+    #: (x, si, mech, values) -> the parameters a transition sets for the mode whose values are `values` (a piece of
+    #: the chain's path), as jax formulas of x like `parameters`; None: transitions change only `discrete` ones
+    piece_parameters: Callable | None = None
+    #: (mech) -> every such set of values the mechanism's transitions can set (checked like `parameters`)
+    pieces: Callable | None = None
+    #: (plan, key) -> why the key cannot be traced on this plan (a tuned design's geometry), or None
+    refuse: Callable | None = None
+    #: the initial state assembles with the drive coordinate held (Mechanism.initial_state): its derivative too
+    hold_drive: bool = False
 
     @property
     def cycle(self) -> tuple[str, ...]:
@@ -71,19 +82,124 @@ def _geneva_parameters(x: dict, si: dict, mech) -> dict:
             "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
 
 
-def _chain_parameters(x: dict, si: dict, mech) -> dict:
-    """Chain dwell mechanism (mechanisms/chain/model.py): the drive's inertia reduced to the driving sprocket,
-    J1 = m_chain r1^2 + sum_i J_i (r1 / r_i)^2, the crank a uniform rod J_Q = m R^2 / 3 and the coupler one of length
-    L, J_3 = m L^2 / 12, unless their inertias are given. The geometry (r1, r_i, R, L) is not traced: constants."""
+def _chain_list_keys(si: dict) -> tuple[str, ...]:
+    """The chain's list entries: sprocket centres and radii, the pivot, the sprocket inertias where set."""
     m = si["mechanism"]
-    r1, radii = mech.path.r1, np.asarray(mech.path.radii, float)
-    sprockets = float(np.sum(np.asarray(m["sprocket_inertias"], float) * (r1 / radii) ** 2))
-    R, L = mech.kin.R, mech.kin.L
+    n = len(m["sprockets"])
+    keys = [f"mechanism.sprockets[{i}][{c}]" for i in range(n) for c in (0, 1)]
+    keys += [f"mechanism.sprocket_radii[{i}]" for i in range(n)] + ["mechanism.pivot[0]", "mechanism.pivot[1]"]
+    if m.get("sprocket_inertias") is not None:
+        keys += [f"mechanism.sprocket_inertias[{i}]" for i in range(n)]
+    return tuple(keys)
+
+
+def _chain_geometry(x: dict, si: dict) -> tuple:
+    """(centres, radii, Q, R, L, loop) of the chain as jax values of x: L = coupler + detuning
+    (ChainDwellParams.detuned), the loop's pieces by the path's own formulas (mechanisms/chain/path.py
+    `loop_geometry`, docs/theory.md §K1.1)."""
+    from mechsim.mechanisms.chain.path import jax_math, loop_geometry
+    n = len(si["mechanism"]["sprockets"])
+    centres = [(x[f"mechanism.sprockets[{i}][0]"], x[f"mechanism.sprockets[{i}][1]"]) for i in range(n)]
+    radii = [x[f"mechanism.sprocket_radii[{i}]"] for i in range(n)]
+    Q = (x["mechanism.pivot[0]"], x["mechanism.pivot[1]"])
+    L = x["mechanism.coupler_length"] + x["mechanism.detuning"]
+    return centres, radii, Q, x["mechanism.crank_radius"], L, loop_geometry(centres, radii, jax_math())
+
+
+def _chain_parameters(x: dict, si: dict, mech) -> dict:
+    """Chain dwell mechanism (mechanisms/chain/model.py): the geometry (pivot Q, crank R, coupler L, driving radius
+    r1, the coupler's centre c3 = L/2), the drive's inertia reduced to the driving sprocket,
+    J1 = m_chain r1^2 + sum_i J_i (r1 / r_i)^2, the crank a uniform rod J_Q = m R^2 / 3 and the coupler one of length
+    L, J_3 = m L^2 / 12, unless their inertias are given; and the first piece's path values (`_chain_piece`)."""
+    import jax.numpy as jnp
+    m = si["mechanism"]
+    centres, radii, Q, R, L, _ = _chain_geometry(x, si)
+    r1 = radii[0]
+    n = len(radii)
+    inertias = ([x[f"mechanism.sprocket_inertias[{i}]"] for i in range(n)] if m["sprocket_inertias"] is not None
+                else [0.0] * n)
+    sprockets = sum(inertias[i] * (r1 / radii[i]) ** 2 for i in range(n))
     jq = x["mechanism.crank_mass"] * R**2 / 3 if m["crank_inertia"] is None else x["mechanism.crank_inertia"]
     j3 = x["mechanism.coupler_mass"] * L**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"]
-    return {"J1": x["mechanism.chain_mass"] * r1**2 + sprockets, "JQ": jq, "m3": x["mechanism.coupler_mass"],
-            "J3": j3, "T_L": x["load.crank_torque"], "c1": x["mechanism.drive_damping"],
-            "c2": x["mechanism.crank_damping"]}
+    out = {"Qx": Q[0], "Qy": Q[1], "R": R, "L": L, "r1": r1, "c3": L / 2,
+           "J1": x["mechanism.chain_mass"] * r1**2 + sprockets, "JQ": jq, "m3": x["mechanism.coupler_mass"],
+           "J3": j3, "T_L": x["load.crank_torque"], "c1": x["mechanism.drive_damping"],
+           "c2": x["mechanism.crank_damping"]}
+    out.update(_chain_piece(x, si, mech, mech.parameter_values()))
+    return {k: jnp.asarray(v, jnp.float64) for k, v in out.items()}
+
+
+def _chain_piece(x: dict, si: dict, mech, values: dict) -> dict:
+    """The path values a transition sets for the piece `values` describes (ChainDwell._piece_values): its travel
+    range s0, s1 (the loop's s0 plus whole cycles of its length), a line's start P and direction t, an arc's centre
+    O, radius and start angle psi0, on a tuned arc the stop angle alpha = arg(O - Q) and the apex travel (where the
+    dyad is stretched: psi - arg(O - Q) = 0 mod 2 pi, `ArcPiece.apex_travel`), else s_apex = s1 + length (also once
+    the apex is behind). The piece, its cycle and whether the apex is behind are read from the numbers (discrete)."""
+    import jax
+    import jax.numpy as jnp
+    centres, radii, Q, _, _, geo = _chain_geometry(x, si)
+    n, path = len(radii), mech.path
+    k = int(values["seg"])
+    Lc = path.length
+    cycle = int(round((values["s0"] - path.pieces[k].s0) / Lc))
+    length = geo["s0"][-1]
+    base = cycle * length
+    out = {"s0": base + geo["s0"][k], "s1": base + geo["s0"][k + 1]}
+    out["s_apex"] = out["s1"] + length
+    i = k // 2
+    if k % 2 == 0:
+        out.update(Px=geo["starts"][i][0], Py=geo["starts"][i][1], tx=geo["directions"][i][0],
+                   ty=geo["directions"][i][1])
+        return out
+    j = (i + 1) % n
+    O, r, psi0 = centres[j], radii[j], geo["psi0"][j]
+    out.update(Ox=O[0], Oy=O[1], rr=r, psi0=psi0)
+    if j not in mech.tuned:
+        return out
+    alpha = jnp.arctan2(O[1] - Q[1], O[0] - Q[0])
+    out["alpha"] = alpha
+    if abs(values["s_apex"] - (values["s1"] + Lc)) <= 1e-9 * Lc:
+        return out                      # the apex is behind
+    d = psi0 - alpha
+    dpsi0 = d - 2 * jnp.pi * jnp.round(d / (2 * jnp.pi))
+    sg = jax.lax.stop_gradient
+    turns = jnp.round(((values["s_apex"] - sg(out["s0"])) / sg(r) + sg(dpsi0)) / (2 * jnp.pi))
+    out["s_apex"] = out["s0"] + r * (2 * jnp.pi * turns - dpsi0)
+    return out
+
+
+def _chain_pieces(mech) -> list[dict]:
+    """Every piece's values (two cycles, and each tuned arc with its apex ahead and behind)."""
+    out = []
+    Lc = mech.path.length
+    for cycle in (0, 1):
+        for k in range(len(mech.path.pieces)):
+            vals = mech._piece_values(k, cycle)
+            out.append(vals)
+            if "alpha" in vals:
+                out.append({**vals, "s_apex": vals["s1"] + Lc})
+    return out
+
+
+def _chain_refuse(plan, key: str) -> str | None:
+    """A tuned sprocket (|QO_i| = R, r_i = L, paper eq. 35) makes the exact dwell and its stop: moving R, L, Q or
+    that sprocket alone detunes it, the dwells and impacts disappear and the run changes its whole mode sequence, so
+    the derivative does not exist there. The detuning exists only with apex = 'detuned'."""
+    mech = plan.mechanism
+    if key == "mechanism.detuning" and mech.apex != "detuned":
+        return "the detuning exists only with apex = 'detuned' (it must be 0 here)"
+    tuned = sorted(mech.tuned)
+    if not tuned:
+        return None
+    touches = {"mechanism.crank_radius", "mechanism.coupler_length", "mechanism.pivot[0]", "mechanism.pivot[1]"}
+    for i in tuned:
+        touches |= {f"mechanism.sprockets[{i}][0]", f"mechanism.sprockets[{i}][1]", f"mechanism.sprocket_radii[{i}]"}
+    if key in touches:
+        return (f"sprocket(s) {', '.join(str(i + 1) for i in tuned)} are tuned for an exact dwell (|QO_i| = R, "
+                "r_i = L, docs/theory.md §K1.2): this value alone detunes them, the dwells and stops disappear and "
+                "the run changes its mode sequence, so the derivative does not exist; trace the other sprockets' "
+                "geometry, or a detuned design (apex = 'detuned')")
+    return None
 
 
 def _rolling_parameters(x: dict, si: dict, mech) -> dict:
@@ -120,11 +236,13 @@ MAPS = {
                "peak_crank_speed_rad_s")),
     "chain_dwell": ParameterMap(
         keys=("mechanism.chain_mass", "mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass",
-              "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque"),
+              "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque",
+              "mechanism.crank_radius", "mechanism.coupler_length", "mechanism.detuning"),
         parameters=_chain_parameters, speed_key="initial.drive_speed",
-        # the chain path's pieces (segment, its geometry, the apex, the dyad's branch) follow from the geometry
-        discrete=frozenset({"seg", "s0", "s1", "Px", "Py", "tx", "ty", "Ox", "Oy", "rr", "psi0", "alpha", "s_apex",
-                            "sigma"}),
+        # the piece index and the dyad's branch; the pieces' geometry is traced (`_chain_piece`)
+        discrete=frozenset({"seg", "sigma"}),
+        list_keys=_chain_list_keys, piece_parameters=_chain_piece, pieces=_chain_pieces, refuse=_chain_refuse,
+        hold_drive=True,
         engage="dwell end", release="stop impact",
         peaks=("peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2", "peak_crank_speed_rad_s")),
     "geneva": ParameterMap(
@@ -150,11 +268,30 @@ def _drive_parameters(x: dict, kind: str) -> dict:
     return {"drive_T0": x["drive.torque"]}
 
 
+def _path(key: str) -> list:
+    """'mechanism.sprockets[1][0]' -> ['mechanism', 'sprockets', 1, 0] (a list entry as the loader's messages name
+    it)."""
+    out = []
+    for part in key.split("."):
+        name, *idx = part.split("[")
+        out.append(name)
+        out += [int(i.rstrip("]")) for i in idx]
+    return out
+
+
 def _lookup(si: dict, key: str):
     node = si
-    for part in key.split("."):
+    for part in _path(key):
         node = node[part]
     return node
+
+
+def _set(si: dict, key: str, value) -> None:
+    *path, last = _path(key)
+    node = si
+    for part in path:
+        node = node[part]
+    node[last] = value
 
 
 def scenario_value(plan, key: str) -> float:
@@ -167,7 +304,8 @@ def scenario_value(plan, key: str) -> float:
 def _traced_keys(plan, pmap: ParameterMap) -> list[str]:
     """Every value the map is a function of: the mechanism's, the drive's, the thermal model's (with the initial
     speed, which sets the thermal model's nominal speed, thermal/network.py `nominal_speed`)."""
-    keys = list(pmap.keys) + list(DRIVE_KEYS.get(plan.drive.kind, ()))
+    keys = list(pmap.keys) + list(pmap.list_keys(plan.scenario.si) if pmap.list_keys else ())
+    keys += list(DRIVE_KEYS.get(plan.drive.kind, ()))
     if plan.thermal is not None:
         keys += [k for k in THERMAL_KEYS if k in THERMAL_MATERIAL_KEYS or _lookup(plan.scenario.si, k) is not None]
         if not plan.drive.is_prescribed:
@@ -240,8 +378,44 @@ def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
                 flash[name][j] = d
             else:
                 dp[names.index(name), j] = d
+    piece_dp = _piece_derivatives(plan, pmap, keys, x0, wrt, scales) if pmap.piece_parameters else None
     _check_map(plan, wrt, keys, mapped, jac, pmap)
-    return Seed(dp, dq0, dv0, pmap.discrete, dx0), scales, flash
+    hold = mech.drive_coordinate if pmap.hold_drive else None
+    return Seed(dp, dq0, dv0, pmap.discrete, dx0, piece_dp=piece_dp, hold=hold), scales, flash
+
+
+def _piece_derivatives(plan, pmap: ParameterMap, keys: list[str], x0: dict, wrt: list[str], scales):
+    """values -> {parameter: (n,) derivative per scaled value} of the parameters a transition sets for the mode whose
+    values are `values` (`ParameterMap.piece_parameters`), checked against those values (a piece the formulas
+    do not reproduce stops the computation)."""
+    import jax
+    si, mech = plan.scenario.si, plan.mechanism
+    cols = [k for k in wrt if k in keys]
+
+    def formulas(values):
+        def f(xw):
+            x = {**x0, **dict(zip(cols, xw))}
+            return pmap.piece_parameters(x, si, mech, values)
+        return f
+
+    def piece_dp(values: dict) -> dict:
+        f = formulas(values)
+        xw = np.array([x0[k] for k in cols])
+        got = f(xw)
+        for name, v in got.items():
+            ref = values[name]
+            if not abs(float(v) - ref) <= 1e-12 * max(abs(ref), mech.path.length if hasattr(mech, "path") else 1.0):
+                raise RuntimeError(f"sensitivity map of the transition's '{name}' gives {float(v)!r}, the mechanism "
+                                   f"{ref!r}")
+        out = {name: np.zeros(len(wrt)) for name in got}
+        if cols:
+            jac = jax.jacfwd(lambda xs: [jax.numpy.asarray(v, float) for v in f(xs).values()])(xw)
+            for name, row in zip(got, jac):
+                for c, key in enumerate(cols):
+                    j = wrt.index(key)
+                    out[name][j] = float(np.asarray(row)[c]) * scales[j]
+        return out
+    return piece_dp
 
 
 def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: ParameterMap) -> None:
@@ -259,16 +433,13 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
             continue
         p = scenario_value(plan, key)
         h = 1e-5 * abs(p) if p else 1e-5
-        values = []
+        values, pieces = [], []
         for sign in (1, -1):
             moved = copy.deepcopy(si)
-            node = moved
-            *path, last = key.split(".")
-            for part in path:
-                node = node[part]
-            node[last] = p + sign * h
+            _set(moved, key, p + sign * h)
             mech = build_mechanism(moved)
             values.append(_reference_values(moved, mech, make_drive(moved), plan.thermal is not None))
+            pieces.append(pmap.pieces(mech) if pmap.pieces else [])
         col = keys.index(key)
         derivative = dict(zip(mapped, (float(np.asarray(row)[col]) for row in jac)))
         for name in values[0]:
@@ -278,6 +449,31 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
             if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
                 raise RuntimeError(f"sensitivity map: '{name}' moves by {fd:.6g} per unit of {key}, the map says "
                                    f"{exact:.6g} ({drive.kind} drive)")
+        _check_pieces(plan, key, keys, pmap, pieces, p, h)
+
+
+def _check_pieces(plan, key: str, keys: list[str], pmap: ParameterMap, moved: list, p: float, h: float) -> None:
+    """The values transitions set (`ParameterMap.pieces`) checked like the parameters: the formulas'
+    derivative against the central difference of the mechanism rebuilt with the value moved (the same tolerance)."""
+    import jax
+    if not pmap.pieces:
+        return
+    si, mech = plan.scenario.si, plan.mechanism
+    x0 = {k: scenario_value(plan, k) for k in keys}
+    for idx, values in enumerate(pmap.pieces(mech)):
+        def f(xk):
+            return pmap.piece_parameters({**x0, key: xk}, si, mech, values)
+        derivative = {name: float(d) for name, d in jax.jacfwd(
+            lambda xk: {n: jax.numpy.asarray(v, float) for n, v in f(xk).items()})(x0[key]).items()}
+        for name in values:
+            if name in pmap.discrete:
+                continue
+            fd = (moved[0][idx][name] - moved[1][idx][name]) / (2 * h)
+            exact = derivative.get(name, 0.0)
+            size = max(abs(values[name]), abs(exact) * max(abs(p), 1.0), 1e-300)
+            if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
+                raise RuntimeError(f"sensitivity map: the transition's '{name}' (piece {int(values.get('seg', idx))}) "
+                                   f"moves by {fd:.6g} per unit of {key}, the map says {exact:.6g}")
 
 
 def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
@@ -295,6 +491,9 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if not wrt:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
     for key in wrt:
+        why = pmap.refuse(plan, key) if pmap.refuse else None
+        if why:
+            raise ScenarioError(key, f"not traced on this design: {why}")
         if (key in pmap.keys or key in THERMAL_KEYS) and key not in THERMAL_MATERIAL_KEYS and (
                 _lookup_or_none(si, key) is None):
             raise ScenarioError(key, "not set in this scenario (it is derived from other values): set it to trace it")
@@ -315,7 +514,7 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
 def _lookup_or_none(si: dict, key: str):
     try:
         return _lookup(si, key)
-    except KeyError:
+    except (KeyError, IndexError, TypeError):
         return None
 
 

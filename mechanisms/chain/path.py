@@ -273,6 +273,76 @@ def _angle(v) -> float:
     return math.atan2(v[1], v[0])
 
 
+
+# ----------------------------------------------------------------------------------------------------------
+# the loop's geometry as formulas (numpy scalars for the path, jax arrays for the design sensitivities)
+# ----------------------------------------------------------------------------------------------------------
+
+
+class _ScalarMath:
+    """The scalar functions the loop's formulas use, as ChainPath has always evaluated them (bit for bit)."""
+
+    hypot = staticmethod(lambda x, y: np.hypot(x, y))
+    asin, cos, sin, sqrt, atan2 = math.asin, math.cos, math.sin, math.sqrt, math.atan2
+    where = staticmethod(lambda c, a, b: a if c else b)
+
+
+def jax_math():
+    """The same functions in jax (differentiable): for `loop_geometry(..., xp=jax_math())`."""
+    import jax.numpy as jnp
+
+    class _JaxMath:
+        hypot, asin, cos, sin, sqrt, atan2, where = (jnp.hypot, jnp.arcsin, jnp.cos, jnp.sin, jnp.sqrt, jnp.arctan2,
+                                                     jnp.where)
+    return _JaxMath
+
+
+def loop_geometry(centres, radii, xp=_ScalarMath) -> dict:
+    """The closed loop's pieces as formulas of the sprocket centres and radii (docs/theory.md §K1.1).
+
+    For sprocket i and the next j: Z = |O_j - O_i|, u = (O_j - O_i)/Z, g = asin((r_i - r_j)/Z); the external
+    common tangent's direction t = u turned by g, its outward normal n = (t_y, -t_x) (right of the travel of the
+    counter-clockwise loop), its start O_i + r_i n and length sqrt((Z - (r_i - r_j))(Z + (r_i - r_j))); the wrap of
+    sprocket i runs from the normal of the incoming line to that of the outgoing, w_i = (arg n_i - arg n_(i-1))
+    mod 2 pi, its arc starts at psi0 = arg n_(i-1) and is r_i w_i long. s0: the pieces' start travel (line 1->2,
+    arc 2, ..., line n->1, arc 1) and the loop's length last.
+
+    Array-neutral: `xp` gives the scalar functions (hypot, asin, cos, sin, sqrt, atan2, where); ChainPath passes
+    Python's, the design sensitivities jax's (`jax_math`), so that both differentiate the same formulas. No checks
+    here: ChainPath validates the layout.
+    """
+    n = len(radii)
+    directions, normals, starts, lengths = [], [], [], []
+    for i in range(n):
+        j = (i + 1) % n
+        dx, dy = centres[j][0] - centres[i][0], centres[j][1] - centres[i][1]
+        Z = xp.hypot(dx, dy)
+        ux, uy = dx / Z, dy / Z
+        g = xp.asin((radii[i] - radii[j]) / Z)
+        tx, ty = ux * xp.cos(g) - uy * xp.sin(g), ux * xp.sin(g) + uy * xp.cos(g)
+        nx, ny = ty, -tx
+        directions.append((tx, ty))
+        normals.append((nx, ny))
+        starts.append((centres[i][0] + radii[i] * nx, centres[i][1] + radii[i] * ny))
+        lengths.append(xp.sqrt((Z - (radii[i] - radii[j])) * (Z + (radii[i] - radii[j]))))
+    angles = [xp.atan2(nm[1], nm[0]) for nm in normals]
+    wraps, psi0 = [], []
+    for i in range(n):
+        w = (angles[i] - angles[i - 1]) % TWO_PI
+        wraps.append(xp.where(w > TWO_PI - 1e-12, w - TWO_PI, w))
+        psi0.append(angles[i - 1])
+    s0, s = [], 0.0
+    for i in range(n):
+        j = (i + 1) % n
+        s0.append(s)
+        s = s + lengths[i]
+        s0.append(s)
+        s = s + radii[j] * wraps[j]
+    s0.append(s)
+    return dict(directions=directions, normals=normals, starts=starts, lengths=lengths, wraps=wraps, psi0=psi0,
+                s0=s0)
+
+
 class ChainPath:
     """The closed chain loop over sprockets listed counter-clockwise (docs/theory.md §K1.1).
 
@@ -312,30 +382,12 @@ class ChainPath:
         self.radii = radii
         self.n = n
 
-        # external common tangents i -> i+1 (docs/theory.md §K1.1)
-        t_dir, normals, starts, lengths = [], [], [], []
-        for i in range(n):
-            j = (i + 1) % n
-            dvec = centres[j] - centres[i]
-            Z = float(np.hypot(*dvec))
-            u = dvec / Z
-            g = math.asin((radii[i] - radii[j]) / Z)
-            t = np.array([u[0] * math.cos(g) - u[1] * math.sin(g), u[0] * math.sin(g) + u[1] * math.cos(g)])
-            nrm = np.array([t[1], -t[0]])  # outward normal: right of the travel direction (CCW loop)
-            t_dir.append(t)
-            normals.append(nrm)
-            starts.append(centres[i] + radii[i] * nrm)
-            lengths.append(math.sqrt((Z - (radii[i] - radii[j])) * (Z + (radii[i] - radii[j]))))
-
-        # wrap of sprocket i: from the normal of the incoming line (i-1 -> i) to that of the outgoing (i -> i+1)
-        wraps, turns = [], []
-        for i in range(n):
-            a_in, a_out = _angle(normals[i - 1]), _angle(normals[i])
-            w = (a_out - a_in) % TWO_PI
-            if w > TWO_PI - 1e-12:
-                w -= TWO_PI
-            wraps.append(w)
-            turns.append(math.remainder(a_out - a_in, TWO_PI))
+        geo = loop_geometry(centres, radii)
+        t_dir = [np.array(t) for t in geo["directions"]]
+        normals = [np.array(nm) for nm in geo["normals"]]
+        starts = [np.array(st) for st in geo["starts"]]
+        lengths, wraps = geo["lengths"], geo["wraps"]
+        turns = [math.remainder(_angle(normals[i]) - _angle(normals[i - 1]), TWO_PI) for i in range(n)]
         total = sum(wraps)
         if abs(total - TWO_PI) > 1e-9:
             bad = [i + 1 for i in range(n) if turns[i] < 0]
@@ -374,15 +426,13 @@ class ChainPath:
 
         # pieces from s = 0 where the chain leaves sprocket 1 towards sprocket 2
         pieces = []
-        s = 0.0
         for i in range(n):
             j = (i + 1) % n
-            pieces.append(LinePiece(len(pieces), s, s + lengths[i], tuple(starts[i]), tuple(t_dir[i]), i, j))
-            s += lengths[i]
-            arc_len = radii[j] * wraps[j]
-            pieces.append(ArcPiece(len(pieces), s, s + arc_len, tuple(centres[j]), float(radii[j]),
-                                   _angle(normals[i]), j))
-            s += arc_len
+            pieces.append(LinePiece(2 * i, geo["s0"][2 * i], geo["s0"][2 * i + 1], tuple(starts[i]),
+                                    tuple(t_dir[i]), i, j))
+            pieces.append(ArcPiece(2 * i + 1, geo["s0"][2 * i + 1], geo["s0"][2 * i + 2], tuple(centres[j]),
+                                   float(radii[j]), geo["psi0"][j], j))
+        s = geo["s0"][-1]
         self.pieces: tuple = tuple(pieces)
         self.length = s
         self.boundaries = np.array([p.s0 for p in pieces] + [s])
