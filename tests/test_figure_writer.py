@@ -1,6 +1,7 @@
 """The figures of an output folder are drawn in two processes where the platform forks (scenarios/output/render.py):
-the folder must hold the same PNG files, byte for byte, as drawing them one by one here, and a share that the
-forked process fails to draw is drawn by this one."""
+the folder must hold the same PNG files, byte for byte, as drawing them one by one here with matplotlib's own
+`savefig` (so the one-draw save of plots.py `save` changes no pixel), and a share that the forked process fails to
+draw is drawn by this one."""
 import io
 import os
 import subprocess
