@@ -150,11 +150,14 @@ def test_cli_refuses_what_is_not_traced_in_one_line(tmp_path, args, field):
 
 
 def test_an_untraced_value_is_refused_not_guessed():
-    # the chain's and the rolling pair's geometry is recomputed at transitions: not traced, so refused by name
-    with pytest.raises(mechsim.ScenarioError, match="^mechanism.crank_length:"):
-        mechsim.sensitivity("rolling-a-torque", wrt="mechanism.crank_length")
-    with pytest.raises(mechsim.ScenarioError, match="^mechanism.crank_radius:"):
+    # a tuned chain's crank alone would detune its dwells (no derivative exists), a rolling pair on a circle has no
+    # line angle, and a value the map does not know is not guessed: each refused by name
+    with pytest.raises(mechsim.ScenarioError, match="^mechanism.crank_radius: .*tuned"):
         mechsim.sensitivity("chain-mech1-torque", wrt="mechanism.crank_radius")
+    with pytest.raises(mechsim.ScenarioError, match="^mechanism.line_angle:"):
+        mechsim.sensitivity("rolling-a-torque", wrt="mechanism.line_angle")
+    with pytest.raises(mechsim.ScenarioError, match="^mechanism.start_rolling_angle:"):
+        mechsim.sensitivity("rolling-a-torque", wrt="mechanism.start_rolling_angle")
 
 
 def test_constant_torque_cycle_energy_is_exact(tables):
