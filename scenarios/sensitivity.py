@@ -30,7 +30,7 @@ from mechsim.scenarios.sensitivity_cycle import (CYCLE_COLUMNS, cycle_bulk_sampl
                                                  turn_peak)
 from mechsim.scenarios.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
                                                scenario_value, traced_quantities)
-from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS, thermal_samples
+from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS, row_state_columns, thermal_samples
 from mechsim.scenarios.units import ScenarioError
 
 #: a second peak within this relative distance of the first is reported (the maximum may switch between them)
@@ -170,7 +170,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if thermal_times:
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
         # averagings share one compiled set of read-outs
-        columns |= set(CONTACT_COLUMNS) | {c for c in model.extension_names if c.startswith("temp_bulk_")}
+        columns |= set(CONTACT_COLUMNS) | row_state_columns(model.extension_names)
         columns |= set(CYCLE_COLUMNS) if ext is not None else set()
     if turn is not None and thermal_times and ext is not None:
         # the cycle-averaged bulk depends on every row of the turn (its input) and on the rows at its ends

@@ -4,12 +4,14 @@ bulk network's parameters as jax formulas (`thermal_parameters`), the same as th
 (`thermal_values`), and the check that refuses a model or option that is not traced (`check_thermal`)."""
 from __future__ import annotations
 
+import numpy as np
+
 from mechsim.scenarios.units import ScenarioError
 
 
 #: thermal models whose temperatures are traced (the bulk states in the DAE, the flash rise after it); the others
 #: are refused, with the reason
-THERMAL_TRACED = ("lumped", "flash")
+THERMAL_TRACED = ("lumped", "flash", "1d")
 #: [thermal] values traced: the material (library value unless the scenario overrides it), the surroundings, and
 #: the body geometry where the scenario sets it (its defaults follow from the mechanism's values: traced through them)
 THERMAL_MATERIAL_KEYS = ("thermal.conductivity", "thermal.density", "thermal.specific_heat", "thermal.E",
@@ -64,19 +66,81 @@ def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str
                        x["thermal.convection_wheel"])
     names = [b.name for b in setup.bodies]
     G = given("pin_crank_conductance", k * jnp.pi * R**2 / (0.5 * l_pin))
+    wall = _wall_track(x, si, setup, r, l, k, rho_c, w_nom) if setup.mesh is not None else None
+    if wall is not None:                # the driven body loses the track meshes' volume (network.track_mesh)
+        V, A, h = bodies["wheel"]
+        bodies["wheel"] = (V - n * wall["area"] * wall["depth"], A, h)
     K = {}
     for i, name in enumerate(names):
         V, A, h = bodies[name]
         out[f"th_C_{i}"] = rho_c * V
         out[f"th_s_{i}"] = h * A * t_amb
-        out[f"th_loss_{i}"] = h * A
         K[(i, i)] = h * A
     if len(names) == 3:                 # pin and crank joined by G (network.assemble)
         K[(0, 0)], K[(1, 1)], K[(0, 1)], K[(1, 0)] = K[(0, 0)] + G, K[(1, 1)] + G, -G, -G
+    if wall is not None:
+        _add_wall_network(out, K, wall, setup)
+    # loss = K^T 1, summed over the rows in order as the run does (coupling.ThermalExtension); a mesh cell's is
+    # zero (its run value is round-off, held: `thermal_values` leaves it out)
+    for j in range(len(names)):
+        out[f"th_loss_{j}"] = sum((K[(i, jj)] for (i, jj) in sorted(K) if jj == j), 0.0)
     out.update({f"th_K_{i}_{j}": v for (i, j), v in K.items()})
+    t_ref = 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom
     out.update({"th_R": R, "th_l": l, "th_Estar": estar, "th_k_pin": k, "th_k_wheel": k, "th_chi_pin": chi,
-                "th_chi_wheel": chi, "th_t_ref": 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom})
+                "th_chi_wheel": chi, "th_t_ref": t_ref})
+    if wall is not None:                # the wall surface's inputs for the contact temperature (sensitivity_rows)
+        out.update({"flash_dz0": wall["widths"][0], "flash_track_area": wall["area"], "flash_t_ref": t_ref})
     return out
+
+
+def _wall_track(x: dict, si: dict, setup, r, l, k, rho_c, w_nom) -> dict:
+    """The 1-D wall-track mesh of a Geneva slot wall as formulas of the scenario values (thermal/network.py
+    `track_mesh`, thermal/conduction1d.py `graded_mesh_cells`; docs/theory.md §G6), with the run's cell count and
+    growth held (a discretisation choice, integer): faces z_i = H (g^i - 1)/(g^n - 1), the depth
+    H = 3 sqrt(chi n_slots P/pi) (P = 2 pi / nominal speed) unless the scenario sets it, so every face moves with
+    chi and the nominal speed exactly as the rebuilt mesh does (its first cell only picks n); the track area
+    A = l (c cos(pi/n) - (c - r)), c = r/sin(pi/n) (mechanisms/geneva/contact.py `contact_geometry`)."""
+    import jax.numpy as jnp
+    from mechsim.thermal.network import MESH_DEPTH_PENETRATIONS
+    th, n = si["thermal"], si["mechanism"]["slots"]
+    chi = k / rho_c
+    period = 2 * jnp.pi / w_nom
+    depth = (float(th["mesh_depth"]) if th.get("mesh_depth") is not None
+             else MESH_DEPTH_PENETRATIONS * jnp.sqrt(chi * n * period / jnp.pi))
+    cells, growth = setup.mesh.n_cells, float(setup.section["mesh_growth"])
+    i = np.arange(cells + 1)
+    faces = depth * i / cells if growth == 1.0 else depth * (growth**i - 1.0) / (growth**cells - 1.0)
+    c = r / jnp.sin(jnp.pi / n)
+    return {"depth": depth, "widths": jnp.diff(faces), "centres": 0.5 * (faces[1:] + faces[:-1]),
+            "area": l * (c * jnp.cos(jnp.pi / n) - (c - r)), "k": k, "rho_c": rho_c}
+
+
+def _add_wall_network(out: dict, K: dict, wall: dict, setup) -> None:
+    """One mesh per track (thermal/conduction1d.py `conduction_system` with h = 0 and the far face fixed, per
+    unit area, times the track area; thermal/network.py `assemble`): C_i = rho c_p dz_i A, neighbours joined by
+    k A/(z_{i+1} - z_i), the far face by g_far = 2 k A/dz_n to the driven body's bulk node (the last body)."""
+    import jax.numpy as jnp
+    k, A, dz = wall["k"], wall["area"], wall["widths"]
+    g_int = k / jnp.diff(wall["centres"])
+    g_far = 2.0 * k / dz[-1]
+    cells = dz.shape[0]
+    diag = [0.0] * cells
+    for i in range(cells - 1):
+        diag[i] = diag[i] + g_int[i]
+        diag[i + 1] = diag[i + 1] + g_int[i]
+    diag[-1] = diag[-1] + g_far
+    cap = wall["rho_c"] * dz
+    iw = len(setup.bodies) - 1
+    for idx in setup.mesh_states.values():
+        for m, state in enumerate(idx):
+            out[f"th_C_{state}"] = cap[m] * A
+            K[(state, state)] = diag[m] * A
+            if m + 1 < cells:
+                K[(state, idx[m + 1])] = -g_int[m] * A
+                K[(idx[m + 1], state)] = -g_int[m] * A
+        K[(idx[-1], iw)] = -(g_far * A)
+        K[(iw, idx[-1])] = -(g_far * A)
+        K[(iw, iw)] = K[(iw, iw)] + g_far * A
 
 
 def thermal_values(si: dict, mech) -> dict:
@@ -91,8 +155,12 @@ def thermal_values(si: dict, mech) -> dict:
            "flash_l": geo.contact_length, "flash_Estar": effective_modulus(mat), "flash_k": mat.conductivity,
            "flash_chi": mat.diffusivity, "flash_T_amb": setup.temp_ambient}
     if setup.extension is not None:
+        n_bulk = len(setup.bodies)
         out.update({k: v for k, v in setup.extension.parameter_values().items() if not k.startswith("th_B_")
-                    and k != "th_b0"})
+                    and k != "th_b0" and not (k.startswith("th_loss_") and int(k[8:]) >= n_bulk)})
+    if setup.mesh is not None:
+        out.update({"flash_dz0": float(setup.mesh.widths[0]), "flash_track_area": setup.track_area,
+                    "flash_t_ref": setup.extension.share.t_ref})
     return out
 
 

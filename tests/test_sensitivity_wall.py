@@ -1,0 +1,102 @@
+"""Sensitivities of the temperatures under the 1-D wall-track model (thermal.model = "1d"; docs/sensitivity.md,
+"The 1-D wall-track model"): the peak contact temperature, the peak flash rise and the heat per index against
+central finite differences of the IDA path, and the exact identities of the model.
+
+geneva-motor for 0.7 s (motor drive from 5.34 rad/s, friction 0.15: one engagement with a slip reversal) on a
+coarse mesh (growth 3, first cell 1 mm: 3 cells into each of the 4 slot walls, 12 mesh states) so that the
+compiled pass stays small; the derivatives are those of the discretised model on that mesh whatever its
+coarseness. The values traced move every part of the wall model: the mesh depth 3 sqrt(chi n P/pi) moves with
+the conductivity, the density and the nominal speed (here initial.crank_speed), the track area with the crank
+radius and the thickness, the heat into the track with the friction and the load.
+
+Finite differences as tests/test_sensitivity_thermal.py: IDA at rtol 1e-12 (the reference is the more accurate
+side), relative steps 5e-4 and 2.5e-4, Richardson-extrapolated: truncation O(h^4) ~ 1e-13, round-off
+~ rtol/h = 2e-9, both far below the 1e-4 asserted. Each quantity is read at the sensitivity's own row (a peak
+that moves to a neighbouring row within a step does not change which row is differentiated).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsim
+from conftest import assert_matches_finite_differences, richardson_central
+from mechsim.scenarios.sensitivity import THERMAL_PEAKS, sensitivity
+from test_sensitivity import _work_at
+
+NAME = "geneva-motor"
+SETS = ["thermal.model=1d", "duration=0.7 s", "thermal.mesh_growth=3", "thermal.mesh_first_cell=1 mm"]
+SENS = ["solver.rtol=1e-10", "solver.atol=1e-12"]
+FD = ["solver.rtol=1e-12", "solver.atol=1e-14"]
+OF = list(THERMAL_PEAKS) + ["heat_per_index_J"]
+H = 5e-4
+#: an elasticity that is zero (a thermal value cannot move the heat per index) is compared absolutely, as in
+#: tests/test_sensitivity_thermal.py
+ELASTICITY_FLOOR = 1e-6
+WRT = ["load.wheel_torque", "contact.friction", "mechanism.crank_radius", "mechanism.thickness",
+       "thermal.conductivity", "thermal.density", "initial.crank_speed", "thermal.ambient_temperature"]
+#: the values also compared with finite differences (the ambient is checked exactly: test_exact_identities)
+CHECKED = 7
+
+
+def _run(sets):
+    r = mechsim.run(mechsim.load(NAME, set=SETS + sets))
+    assert r.failure is None, r.failure.message()
+    return r
+
+
+def quantities(result, rows: dict) -> dict:
+    """The thermal peaks at the given rows, and the heat of the last complete engagement (the friction work from
+    entry to exit, as tests/test_sensitivity.py reads it)."""
+    df, ev = result.timeseries, result.events
+    out = {q: float(df[THERMAL_PEAKS[q]].iloc[i]) for q, i in rows.items()}
+    entries = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)
+    last_exit = ev.loc[ev["kind"] == "exit", "t_s"].to_numpy(float)[-1]
+    out["heat_per_index_J"] = (_work_at(df, entries[entries < last_exit][-1], "friction")
+                               - _work_at(df, last_exit, "friction"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def table():
+    return sensitivity(mechsim.load(NAME, set=SETS + SENS), WRT, OF)
+
+
+def _literal(si_value, unit):
+    return f"{si_value!r} {unit}" if unit else repr(si_value)
+
+
+def test_wall_temperatures_match_finite_differences(table):
+    nominal = _run(FD)
+    assert nominal.summary["thermal"]["mesh"]["cells_per_track"] == 3
+    df = nominal.timeseries
+    rows = {q: int(np.nanargmax(np.abs(df[c].to_numpy(float)))) for q, c in THERMAL_PEAKS.items()}
+    for q, i in rows.items():       # the sensitivity's peak is the run's (same row)
+        assert table.loc[table["quantity"] == q, "t_s"].iloc[0] == pytest.approx(float(df["t_s"].iloc[i]))
+    ref0 = quantities(nominal, rows)
+    worst = {}
+    for key in WRT[:CHECKED]:
+        part = table[table["wrt"] == key].set_index("quantity")
+        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
+        fd = richardson_central(lambda value: quantities(_run(FD + [f"{key}={_literal(value, unit)}"]), rows), p, H)
+        mine = {}
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, mine)
+        print(key, {q: f"{e:.1e}" for q, e in mine.items()})
+        worst.update({q: max(e, worst.get(q, 0.0)) for q, e in mine.items()})
+    print("largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
+
+
+def test_exact_identities(table):
+    """(1) The flash rise's elasticities in k and rho add up to -1 (scaling k and rho c_p together keeps every Peclet
+    number and scales the band rises by 1/k; docs/theory.md §G4.2-§G4.6). (2) The network, meshes included, is
+    linear with every source h A T_amb and starts at T_amb (docs/theory.md §G5-§G6): T - T_amb does not depend on
+    T_amb, so d(contact temperature)/d T_amb = 1 and the flash rise does not depend on it. (3) No thermal value
+    moves the heat per index."""
+    t = table.set_index(["quantity", "wrt"])
+    flash = "peak_temp_flash_rise_K"
+    assert (t.loc[(flash, "thermal.conductivity"), "elasticity"] + t.loc[(flash, "thermal.density"), "elasticity"]
+            == pytest.approx(-1.0, abs=1e-10))
+    assert t.loc[("peak_temp_contact_C", "thermal.ambient_temperature"), "derivative"] == pytest.approx(1.0, abs=1e-9)
+    assert t.loc[(flash, "thermal.ambient_temperature"), "derivative"] == 0.0
+    for key in ("thermal.conductivity", "thermal.density", "thermal.ambient_temperature"):
+        assert t.loc[("heat_per_index_J", key), "derivative"] == 0.0
