@@ -9,8 +9,8 @@ import numpy as np
 from mechsim.scenarios.units import ScenarioError
 
 
-#: thermal models whose temperatures are traced (the bulk states in the DAE, the flash rise after it); the others
-#: are refused, with the reason
+#: thermal models whose temperatures are traced (the bulk states and the 1-D wall-track meshes in the DAE, the
+#: flash rise after it); the others are refused, with the reason
 THERMAL_TRACED = ("lumped", "flash", "1d")
 #: [thermal] values traced: the material (library value unless the scenario overrides it), the surroundings, and
 #: the body geometry where the scenario sets it (its defaults follow from the mechanism's values: traced through them)
@@ -30,7 +30,10 @@ def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str
     docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set), crank bar
     r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of radius c cos(pi/n)
     and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the share's
-    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`)."""
+    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`). With the 1-D wall-track model
+    (thermal.model = "1d") also the meshes' C, K and far-face conductances and the driven body's volume less the
+    meshes' (`_wall_track`, `_add_wall_network`), and the wall surface's inputs `flash_dz0`, `flash_track_area`,
+    `flash_t_ref`; the network's loss K^T 1 is the column sums of K in the run's order (zero at a mesh cell)."""
     import jax.numpy as jnp
     th = si["thermal"]
     n = si["mechanism"]["slots"]
@@ -170,8 +173,8 @@ def check_thermal(plan, mtype: str) -> None:
     if mtype != "geneva":
         raise ScenarioError("thermal.model", f"thermal sensitivities are traced for the Geneva only, not '{mtype}'")
     if th["model"] not in THERMAL_TRACED:
-        raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its wall-track mesh is not in the "
-                            "sensitivity map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")
+        raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its network is not in the sensitivity "
+                            "map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")
     if th["flash"] != "jaeger":
         raise ScenarioError("thermal.flash", f"'{th['flash']}' (the seed's formula, for comparison only) is not "
                             "traced; use 'jaeger'")

@@ -100,3 +100,14 @@ def test_exact_identities(table):
     assert t.loc[(flash, "thermal.ambient_temperature"), "derivative"] == 0.0
     for key in ("thermal.conductivity", "thermal.density", "thermal.ambient_temperature"):
         assert t.loc[("heat_per_index_J", key), "derivative"] == 0.0
+
+
+@pytest.mark.parametrize("key", ["thermal.mesh_depth", "thermal.mesh_first_cell", "thermal.mesh_growth"])
+def test_mesh_settings_are_refused(key):
+    """The mesh is a discretisation choice (its depth and first cell set the cells, not the physics): its settings
+    are not values to differentiate, and are refused by name before anything runs."""
+    from mechsim.scenarios.units import ScenarioError
+    sc = mechsim.load(NAME, set=SETS + ["thermal.mesh_depth=10 mm"])
+    with pytest.raises(ScenarioError) as err:
+        sensitivity(sc, [key], OF)
+    assert err.value.field == key
