@@ -21,7 +21,6 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from mechsim.dynamics.codegen import source_of
 from mechsim.dynamics.sundials_c import sundials
 from mechsim.dynamics.user_cache import code_fingerprint
 
@@ -85,6 +84,7 @@ class CompiledMode:
 
 def module_source(mf) -> str:
     """The generated module of one mode: three kernels on arrays (njit) and their IDA callback wrappers."""
+    from mechsim.dynamics.codegen import source_of       # sympy: only where the module is not on disk yet
     s = mf.symbolic
     rows, J, y, yp, params = s["residual_rows"], s["residual_jacobian"], s["y"], s["yp"], s["params"]
     guards = list(s["guards"])

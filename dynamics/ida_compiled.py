@@ -77,14 +77,14 @@ class IdaCompiledBackend:
         return IdaBackend.hint(self, code)
 
     # -- per-mode IDA memory ---------------------------------------------------------------------------------
-    def _memory(self, mf, compiled) -> _Memory:
+    def _memory(self, mf, compiled, n_params: int) -> _Memory:
         hit = self._memories.get(id(mf))
         if hit is not None and hit[0] is mf:
             return hit[1]
         lib, s, ctx = self.lib, self.settings, self.lib.context
         y, yp = np.zeros(mf.ny), np.zeros(mf.ny)
         m = _Memory(mem=lib.IDACreate(ctx), y=y, yp=yp, yy_nv=lib.vector(y), yp_nv=lib.vector(yp),
-                    p=np.zeros(len(mf.symbolic["params"])))
+                    p=np.zeros(n_params))
         if not m.mem:
             raise MemoryError("IDACreate failed")
         atol, ids = np.ascontiguousarray(atol_vector(mf, s)), np.ones(mf.ny)
@@ -144,7 +144,7 @@ class IdaCompiledBackend:
         r, lib = request, self.lib
         counts = {}
         hit = self._memories.get(id(r.mf))
-        m = hit[1] if hit is not None and hit[0] is r.mf else self._first_use(r.mf, counts)
+        m = hit[1] if hit is not None and hit[0] is r.mf else self._first_use(r.mf, counts, len(r.p))
         m.y[:] = r.y0
         m.yp[:] = r.yp0
         m.p[:] = r.p
@@ -180,7 +180,7 @@ class IdaCompiledBackend:
                            message=f"{what}: {lib.flag_name(flag)}", counts=counts)
         return Segment(t_rows, y_rows, yp_rows, End.END, t_now, m.y.copy(), m.yp.copy(), counts=counts)
 
-    def _first_use(self, mf, counts: dict) -> _Memory:
+    def _first_use(self, mf, counts: dict, n_params: int) -> _Memory:
         """The mode's IDA memory, built on the mode's compiled callbacks (compiled, or loaded from the cache, the
         first time in the process: the time goes into the compile counters)."""
         from mechsim.dynamics.compiled_model import compiled_mode
@@ -189,7 +189,7 @@ class IdaCompiledBackend:
         if built:
             counts.update(compile_time_s=_time.perf_counter() - started[0],
                           compile_cpu_time_s=_time.process_time() - started[1], compilations=1)
-        return self._memory(mf, compiled)
+        return self._memory(mf, compiled, n_params)
 
     def _counters(self, mem: int) -> dict:
         lib = self.lib
