@@ -506,6 +506,12 @@ def _print_size(result, target: Path) -> None:
     for c in s["constraints"]:
         state = (f"active, d objective / d limit = {c['shadow_price']:.6g}" if c["active"] else "inactive")
         lines.append(f"  {c['constraint']}: {c['value']:.10g} ({state})")
+    v = s.get("verification")
+    if v:
+        lines.append("  checked on its own run" + (f" after {v['resolves']} re-solves with tightened limits"
+                                                   if v["resolves"] else "") + ": " + "; ".join(
+            f"{e['constraint']}: {e['run_value']:.10g} ({'holds' if e['holds'] else 'BREAKS'})" if e["checked"]
+            else f"{e['constraint']}: not checked ({e['why']})" for e in v["limits"]))
     lines.append(f"-> {target}")
     for line in lines:
         out.print(line, markup=False, highlight=False, soft_wrap=True)

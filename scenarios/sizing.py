@@ -39,6 +39,10 @@ FEASIBLE = 1e-8
 ACTIVE = 1e-6
 #: the slot count is enumerated over at most this many whole values
 MAX_SLOT_CHOICES = 12
+#: a limit the design's own run breaks is tightened and the sizing solved again at most this many times
+MAX_RESOLVES = 3
+#: the part of the excess added to it when a limit is tightened (`tightening`)
+EXCESS_MARGIN = 0.1
 SLOTS = "mechanism.slots"
 
 
@@ -162,6 +166,7 @@ class SizingResult:
     success: bool = True
     message: str = ""
     choices: list = field(default_factory=list)
+    problem: object = None
 
     def design_toml(self) -> str:
         from mechsim.scenarios.output.writer import resolved_scenario_toml
@@ -345,10 +350,15 @@ def _optimise(problem: Problem, u0: np.ndarray, method: str, tolerance: float, m
 
 def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None = None, *,
          method: str = "slsqp", tolerance: float | None = None, max_iterations: int = 100,
-         start: dict | None = None, progress: Callable[[str], None] | None = None) -> SizingResult:
+         start: dict | None = None, progress: Callable[[str], None] | None = None,
+         check: Callable | None = None, max_resolves: int = MAX_RESOLVES) -> SizingResult:
     """The design within `vary`'s bounds that minimises `minimize` (a headline quantity, or one of the varied
     keys) subject to `subject_to` limits, from a loaded Scenario. Raises ScenarioError on a bad request (before
-    anything runs) and SizingFailed when the optimiser finds no feasible optimum (with what ran).
+    anything runs) and SizingFailed when the optimiser finds no feasible optimum, or when the design's own run
+    breaks a limit after `max_resolves` tightened re-solves (`verify`), with what ran.
+
+    check: design Scenario -> the run's quantities ({quantity: value or None}, `run_quantities`); default: the
+    design's own run (`design_run`). Only a test passes another (to force a discrepancy).
 
     tolerance: the optimiser's (SLSQP's ftol on the normalised objective; trust-constr's gtol and xtol); default
     10x the scenario's solver.rtol, within [1e-12, 1e-4]: the quantities carry the run's error, and a tolerance
@@ -402,7 +412,9 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
                 raise ScenarioError(where, exc.problem) from None
         problem = Problem(base, continuous, minimize, limits, fixed)
         try:
-            results.append(_solve(problem, method, tolerance, max_iterations, start, progress, n))
+            result = _solve(problem, method, tolerance, max_iterations, start, progress, n)
+            result.problem = problem
+            results.append(result)
         except SizingFailed as exc:
             if n is None:
                 raise
@@ -412,6 +424,7 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
         message = "; ".join(f"{SLOTS} = {n}: {why}" for n, why in failures) or results[0].message
         raise SizingFailed(message, results[0] if results else None)
     best = min(feasible, key=lambda r: r.objective_value)      # the fewest slots among equal objectives
+    best = verify(best, method, tolerance, max_iterations, progress, check or design_run, max_resolves)
     best.summary["wall_time_s"] = time.perf_counter() - wall
     if slots:
         best.choices = [{"slots": r.summary["slots"], "objective": r.objective_value, "feasible": r.success}
@@ -419,6 +432,138 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
                                              for n, why in failures]
         best.summary["slot_choices"] = best.choices
     return best
+
+
+def design_run(design) -> dict:
+    """The design's own run (as `mechsim run design.toml`): its quantities (`run_quantities`) and its wall time."""
+    from mechsim.scenarios import runner
+    from mechsim.scenarios.sensitivity_map import MAPS
+    wall = time.perf_counter()
+    result = runner.execute(runner.plan(design))
+    pmap = MAPS[design.si["mechanism"]["type"]]
+    out = run_quantities(result, pmap.engage, pmap.release)
+    out["_wall_time_s"] = time.perf_counter() - wall
+    return out
+
+
+def run_quantities(result, engage: str, release: str) -> dict:
+    """The headline quantities a run reports itself: each peak's magnitude from summary.json `peaks` (the column
+    docs/sensitivity.md names), the index time (the last release and the engage before it) and the cycle time (the
+    last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
+    heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
+    failure, or None."""
+    from mechsim.scenarios.sensitivity_map import PEAKS, THERMAL_PEAKS
+    peaks = result.summary.get("peaks", {})
+    out = {q: (abs(peaks[c]["value"]) if c in peaks else None) for q, c in {**PEAKS, **THERMAL_PEAKS}.items()}
+    ev = result.events
+    kinds = ev["kind"].to_numpy() if ev is not None and len(ev) else np.array([])
+    t = ev["t_s"].to_numpy(float) if len(kinds) else np.array([])
+    engages, releases = t[kinds == engage], t[kinds == release]
+    out["index_time_s"] = None
+    if len(releases) and engage:
+        before = engages[engages < releases[-1]]
+        out["index_time_s"] = float(releases[-1] - before[-1]) if len(before) else None
+    out["cycle_time_s"] = float(engages[-1] - engages[-2]) if len(engages) >= 2 else None
+    out["_failure"] = result.failure.message() if result.failure is not None else None
+    return out
+
+
+def tightening(limit: "Limit", sized: float, run: float) -> float:
+    """How far a limit the design's own run breaks is moved inward before solving again: the excess of the run
+    over the limit (or over the sizing's own value, if that was inside the limit) and a margin of
+    2 FEASIBLE |limit| + EXCESS_MARGIN x excess. The re-solved design has its sizing quantity at the tightened limit
+    to FEASIBLE |limit| (its feasibility tolerance; the run is judged by the same, hence twice it), and its run
+    differs from that by the discrepancy of the first design, changed by the move between the designs; that move
+    is about the excess over the quantity's gradient, so a discrepancy that is smooth in the design changes by a
+    fraction of itself of the order excess/quantity (here < 1e-5): a tenth of the excess bounds it generously and
+    costs, by the shadow price, a tenth more of the objective's change."""
+    excess = max(run - limit.value, run - sized) if limit.sense == "<=" else max(limit.value - run, sized - run)
+    return excess + 2 * FEASIBLE * limit.scale + EXCESS_MARGIN * max(excess, 0.0)
+
+
+def verify(result: SizingResult, method: str, tolerance: float, max_iterations: int, progress, check,
+           max_resolves: int) -> SizingResult:
+    """Check the design on its own run: each limited quantity the run reports (`run_quantities`) against its
+    limit, within the feasibility tolerance FEASIBLE. A limit the run breaks is tightened (`tightening`) and the
+    sizing solved again from the design, at most `max_resolves` times; the checks go into summary.json
+    `verification`, the history (`solve`, `<quantity>_run`, `<quantity>_limit`) and the printed result. Raises
+    SizingFailed (no design.toml) when the run still breaks a limit, or fails."""
+    problem = result.problem
+    original = list(problem.limits)
+    stages, histories = [], []
+    for solve in range(max_resolves + 1):
+        got = check(result.design)
+        checks = []
+        for lim, orig in zip(problem.limits, original):
+            sized = result.summary["quantities_at_optimum"][lim.quantity]
+            run = got.get(lim.quantity)
+            entry = {"constraint": orig.text, "quantity": lim.quantity, "limit": orig.value,
+                     "limit_solved": lim.value, "sizing_value": sized, "run_value": run}
+            if run is None:
+                entry.update(checked=False, holds=None,
+                             why=got.get("_failure") or "the run does not report this quantity itself")
+            else:
+                margin = orig.margin(run)
+                entry.update(checked=True, margin_relative=margin, holds=margin >= -FEASIBLE,
+                             run_minus_sizing=run - sized)
+            checks.append(entry)
+        h = result.history.copy()
+        h.insert(1, "solve", solve)
+        for e in checks:
+            h[f"{e['quantity']}_limit"] = e["limit_solved"]
+            h[f"{e['quantity']}_run"] = np.nan
+            h.loc[h.index[-1], f"{e['quantity']}_run"] = np.nan if e["run_value"] is None else e["run_value"]
+        histories.append(h)
+        broken = [e for e in checks if e["holds"] is False]
+        failed_run = got.get("_failure")
+        stages.append({"solve": solve, "design": dict(result.values),
+                       "run_wall_time_s": got.get("_wall_time_s"), "limits": checks, "run_failure": failed_run})
+        if progress:
+            progress("checked on its own run: " + ("; ".join(
+                f"{e['quantity']} {e['run_value']:.10g}" + (" breaks" if e["holds"] is False else " holds")
+                for e in checks if e["checked"]) or "nothing it reports"))
+        if not broken and failed_run is None:
+            break
+        if solve == max_resolves or failed_run is not None:
+            what = (f"the design's own run failed ({failed_run})" if failed_run is not None else "; ".join(
+                f"the design's own run breaks {e['constraint']}: {e['quantity']} = {e['run_value']:.10g}, "
+                f"{abs(e['run_value'] - e['limit']):.3g} beyond it ({-e['margin_relative']:.3g} of the limit)"
+                for e in broken))
+            result.success = False
+            result.message = what + (f" (after {solve} tightened re-solves)" if solve else "")
+            _attach(result, stages, histories, original)
+            raise SizingFailed(result.message, result)
+        limits = []
+        for lim, e in zip(problem.limits, checks):
+            if e["holds"] is False:
+                by = tightening(lim, e["sizing_value"], e["run_value"])
+                lim = Limit(lim.quantity, lim.sense, lim.value - by if lim.sense == "<=" else lim.value + by)
+                e["tightened_to"] = lim.value
+            limits.append(lim)
+        problem = Problem(problem.base, problem.bounds, problem.objective, limits, problem.fixed)
+        start = dict(result.values)
+        slots = result.summary["slots"]
+        result = _solve(problem, method, tolerance, max_iterations, start, progress, slots)
+        result.problem = problem
+        if not result.success:
+            _attach(result, stages, histories + [result.history.assign(solve=solve + 1)], original)
+            raise SizingFailed(f"re-solved with the limits tightened to what the run breaks: {result.message}",
+                               result)
+    _attach(result, stages, histories, original)
+    return result
+
+
+def _attach(result: SizingResult, stages: list, histories: list, original: list) -> None:
+    """The verification stages into the summary and the history (all solves, one table)."""
+    last = stages[-1]
+    result.summary["verification"] = {
+        "on": "the design's own run (mechsim run design.toml): summary.json peaks, the events' index and cycle times",
+        "holds": all(e["holds"] is not False for e in last["limits"]) and last["run_failure"] is None,
+        "resolves": len(stages) - 1, "limits": last["limits"], "stages": stages,
+        "limits_as_given": [lim.text for lim in original]}
+    history = pd.concat(histories, ignore_index=True)
+    cols = ["iteration", "solve"] + [c for c in history.columns if c not in ("iteration", "solve")]
+    result.history = history[cols]
 
 
 def _with(scenario, overrides: list[str]):

@@ -143,9 +143,11 @@ def test_convergence_table_and_plot(sized):
     """One row per iteration with the design values in their units; the last row is the design, feasible."""
     out, s = sized
     h = pd.read_csv(out / "convergence.csv")
-    assert list(h.columns) == ["iteration", "mechanism.crank_radius_m", "drive.speed_rad_s",
+    assert list(h.columns) == ["iteration", "solve", "mechanism.crank_radius_m", "drive.speed_rad_s",
                                "objective_mechanism.crank_radius", "peak_contact_force_N", "index_time_s",
-                               "max_violation", "evaluations"]
+                               "max_violation", "evaluations", "peak_contact_force_N_limit", "peak_contact_force_N_run",
+                               "index_time_s_limit", "index_time_s_run"]
+    assert (h["solve"] == 0).all() and (h["peak_contact_force_N_limit"] == N_MAX).all()
     assert h["iteration"].tolist() == list(range(len(h)))
     assert h["mechanism.crank_radius_m"].iloc[-1] == pytest.approx(s["design"][0]["value"], rel=1e-12)
     assert h["max_violation"].iloc[0] > 0.05 and h["max_violation"].iloc[-1] <= 1e-8   # the start breaks a limit
@@ -224,3 +226,93 @@ def test_infeasible_limits_exit_3_with_the_history(scenario_file, tmp_path):
     s = json.loads((out / "summary.json").read_text())["sizing"]
     assert not s["success"] and s["max_violation_relative"] > 1
     assert (out / "convergence.csv").exists() and not (out / "design.toml").exists()
+
+
+# ------------------------------------------------------------------------------------------------ verification
+# `mechsim size` checks the written design on its own run (summary.json peaks, the events' index time) against the
+# limits as given; a limit the run breaks is tightened by the excess and a margin (sizing.py `tightening`) and the
+# sizing solved again (at most 3 times), else exit 3 without design.toml. Here the run is the closed form's (the
+# scenario's DAE with rtol 1e-10 for the sizing: they agree to ~1e-11), and a discrepancy is forced by adding to
+# what the run reports (sizing.size's `check`), so that the re-solved optimum has a closed form too.
+
+def test_written_design_is_checked_on_its_own_run(sized):
+    """The checks are in summary.json (`verification`), convergence.csv (the run's values on the design's row) and
+    the printout; the run reports the sizing's values to the feasibility tolerance (1e-8 of the limit)."""
+    out, s = sized
+    v = s["verification"]
+    assert v["holds"] and v["resolves"] == 0
+    checks = {e["quantity"]: e for e in v["limits"]}
+    assert set(checks) == {"peak_contact_force_N", "index_time_s"}
+    for q, limit in (("peak_contact_force_N", N_MAX), ("index_time_s", T_MAX)):
+        e = checks[q]
+        assert e["checked"] and e["holds"] and e["limit"] == limit
+        assert abs(e["run_value"] - e["sizing_value"]) <= 1e-8 * limit
+        assert e["run_value"] <= limit * (1 + 1e-8)
+    h = pd.read_csv(out / "convergence.csv")
+    assert h["peak_contact_force_N_run"].iloc[-1] == pytest.approx(checks["peak_contact_force_N"]["run_value"],
+                                                                    rel=1e-12)
+    assert h["peak_contact_force_N_run"].iloc[:-1].isna().all()
+
+
+def _offset_check(offset):
+    """The design's own run, with `offset(value)` added to the peak force it reports (a forced discrepancy)."""
+    from mechsim.scenarios.sizing import design_run
+
+    def check(design):
+        got = design_run(design)
+        got["peak_contact_force_N"] = offset(got["peak_contact_force_N"])
+        return got
+    return check
+
+
+def _size_direct(scenario_file, **kwargs):
+    import mechsim
+    from mechsim.scenarios.sizing import size
+    return size(mechsim.load(scenario_file), ["mechanism.crank_radius=30:120 mm", "drive.speed=4:10 rad/s"],
+                "mechanism.crank_radius", [f"peak_contact_force_N <= {N_MAX}", f"index_time_s <= {T_MAX}"],
+                **kwargs)
+
+
+def test_a_limit_the_run_breaks_is_tightened_and_solved_again(scenario_file):
+    """A run that reports the force 1e-3 N_MAX higher than the sizing breaks the limit by that much at the first
+    optimum; the limit is tightened to N' = N_MAX - (e + 2e-8 N_MAX + 0.1 e), e the excess, and the re-solved
+    optimum is the closed form at N': r' = r* N_MAX / N' (w* unchanged); its run, with the same offset, holds."""
+    from mechsim.scenarios.sizing import EXCESS_MARGIN, FEASIBLE
+    delta = 1e-3 * N_MAX
+    result = _size_direct(scenario_file, check=_offset_check(lambda q: q + delta))
+    _, w, r = closed_form()
+    v = result.summary["verification"]
+    assert v["holds"] and v["resolves"] == 1
+    first = {e["quantity"]: e for e in v["stages"][0]["limits"]}["peak_contact_force_N"]
+    excess = first["run_value"] - N_MAX
+    assert excess == pytest.approx(delta, rel=1e-6)            # the first optimum has the force at its limit
+    tightened = N_MAX - (excess + 2 * FEASIBLE * N_MAX + EXCESS_MARGIN * excess)
+    assert first["tightened_to"] == pytest.approx(tightened, rel=1e-14)
+    assert result.values["mechanism.crank_radius"] == pytest.approx(r * N_MAX / tightened, rel=1e-6)
+    assert result.values["drive.speed"] == pytest.approx(w, rel=1e-6)
+    final = {e["quantity"]: e for e in v["limits"]}["peak_contact_force_N"]
+    assert final["holds"] and final["run_value"] <= N_MAX and final["limit_solved"] == first["tightened_to"]
+    # margin left: the run is below the limit by the margin (0.1 e + 2e-8 N_MAX), to the solver's 1e-6
+    assert N_MAX - final["run_value"] == pytest.approx(EXCESS_MARGIN * excess + 2 * FEASIBLE * N_MAX, rel=1e-2)
+    assert result.summary["constraints"][0]["constraint"].startswith("peak_contact_force_N <= 7.99")
+    assert set(result.history["solve"]) == {0, 1}
+
+
+def test_a_limit_the_run_keeps_breaking_exits_3_without_a_design(scenario_file, tmp_path):
+    """A run that always reports 1e-3 over the force limit, whatever the design: after the allowed re-solves
+    (one here, to keep the test short) the sizing fails with one line naming the limit and the excess; saved, it
+    writes the convergence table and summary (verification: does not hold) and no design.toml."""
+    from mechsim.scenarios.sizing import SizingFailed
+    with pytest.raises(SizingFailed) as err:
+        _size_direct(scenario_file, check=_offset_check(lambda q: N_MAX * (1 + 1e-3)), max_resolves=1)
+    message = str(err.value)
+    assert "\n" not in message
+    assert message.startswith(f"the design's own run breaks peak_contact_force_N <= {N_MAX:g}")
+    assert "0.008 beyond it (0.001 of the limit)" in message and "after 1 tightened re-solves" in message
+    result = err.value.result
+    assert not result.success and not result.summary["verification"]["holds"]
+    assert result.summary["verification"]["resolves"] == 1
+    result.save(tmp_path / "out")
+    assert (tmp_path / "out" / "summary.json").exists() and not (tmp_path / "out" / "design.toml").exists()
+    h = pd.read_csv(tmp_path / "out" / "convergence.csv")
+    assert set(h["solve"]) == {0, 1}
