@@ -1,8 +1,8 @@
 """Cross-check of the seed's load case 1 sizing (docs/sensitivity.md, "A thermal sizing: the seed's load case 1"):
 plain runs on a grid of crank radius x stall torque around the optimum `mechsim size` found, each giving the
-periodic turn's peak contact temperature after one hour (the quantity the sizing limits, `cycle_temperatures` on
-the run's mechanics window) and the index time (the last complete index), so that a reader can see that no grid
-point with a smaller crank radius meets both limits.
+periodic turn's peak contact temperature after one hour (the quantity the sizing limits and the run reports,
+`cycle_temperatures` on the run's mechanics window) and the index time (the last complete index), so that a reader
+can see that no grid point with a smaller crank radius meets both limits.
 
     python -m mechsim.benchmarks.lc1_sizing_grid RADIUS_MM STALL_TORQUE_NM [--out docs/lc1_sizing_grid.csv]
 """
