@@ -296,6 +296,34 @@ def test_last_repetition_crossing_the_end_is_warned(cycle_table):
     assert need < 0.5 and f"{key} {need * 100:.2g}%" in notes[0], (need, notes[0])
 
 
+def test_shipped_lc1_design_is_a_kkt_point():
+    """The seed's load case 1 design as `mechsim size` wrote it (docs/lc1_sizing_design.toml, docs/sensitivity.md "A
+    thermal sizing"): minimise the crank radius r over (r, stall torque) subject to the peak contact temperature
+    after the hour <= 60 °C and the index time <= 0.3 s. At the optimum both limits are active (within the sizing's
+    activity threshold ACTIVE below and its feasibility tolerance FEASIBLE above), their gradients are independent
+    (two limits fix two values), and stationarity, grad r = -(mu_T grad T + mu_t grad t), holds with both
+    multipliers positive (Nocedal & Wright Theorem 12.1): with two active limits in two values the multipliers are
+    the solution of that 2x2 system, and their signs are the physics: a higher temperature or a longer index allowed
+    would each let the crank shrink. The gradients are the exact sensitivities at the design (the hour's window
+    only; the module's compiled pass is reused: same scenario, values and quantities as the cycle cases)."""
+    from pathlib import Path
+
+    from mechsim.scenarios.sizing import ACTIVE, FEASIBLE
+    design = mechsim.load(Path(__file__).resolve().parent.parent / "docs" / "lc1_sizing_design.toml")
+    table = sensitivity(design, CYCLE_WRT, OF + ["index_time_s"])
+    keys = ["mechanism.crank_radius", "drive.stall_torque"]
+    values, grads = {}, {}
+    for q, limit in (("peak_temp_contact_C", 60.0), ("index_time_s", 0.3)):
+        part = table[table["quantity"] == q].set_index("wrt")
+        values[q] = float(part["value"].iloc[0])
+        grads[q] = part.loc[keys, "derivative"].to_numpy(float)
+        assert limit * (1 - ACTIVE) <= values[q] <= limit * (1 + FEASIBLE), (q, values[q])
+    G = np.column_stack([grads["peak_temp_contact_C"], grads["index_time_s"]])        # per SI unit of r, T
+    assert np.linalg.cond(G * np.array([[0.05], [28.6]])) < 1e3                          # independent, scaled
+    mu = np.linalg.solve(G, -np.array([1.0, 0.0]))
+    assert mu[0] > 0 and mu[1] > 0, mu
+
+
 def test_cycle_at_prescribed_speed_is_refused():
     sc = mechsim.load("geneva-seed-lc1-mu015", set=["duration=60 s", "thermal.averaging=cycle"])
     with pytest.raises(ScenarioError) as err:
