@@ -638,7 +638,8 @@ def convergence_figure(result: SizingResult):
     s = result.summary
     fig = Figure(figsize=(8, 10), constrained_layout=True)
     ax1, ax2, ax3, ax4 = fig.subplots(4, 1, sharex=True, gridspec_kw={"height_ratios": [1, 1, 1, 0.8]})
-    it = h["iteration"].to_numpy()
+    it = np.arange(len(h))              # the iterations of every solve in order (a re-solve restarts its count)
+    starts = np.flatnonzero(np.diff(h["solve"].to_numpy()) > 0) + 1 if "solve" in h else []
     obj = f"objective_{result.objective}"
     ax1.plot(it, h[obj], "o-", color="k")
     unit = next((d["unit"] for d in s["design"] if d["key"] == result.objective), "")
@@ -662,5 +663,9 @@ def convergence_figure(result: SizingResult):
     ax4.semilogy(it, np.maximum(h["max_violation"].to_numpy(float), 1e-16), "o-", color="C3")
     ax4.axhline(FEASIBLE, color="k", lw=0.8, ls="--")
     ax4.set_ylabel("largest violation\n(relative to its limit)")
-    ax4.set_xlabel("iteration (values below 1e-16 drawn at 1e-16; dashed: feasible)")
+    for ax in (ax1, ax2, ax3, ax4):
+        for k in starts:
+            ax.axvline(k - 0.5, color="0.5", lw=0.8, ls=":")
+    ax4.set_xlabel("iteration (values below 1e-16 drawn at 1e-16; dashed: feasible"
+                   + ("; dotted: re-solve, tightened)" if len(starts) else ")"))
     return fig
