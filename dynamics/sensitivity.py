@@ -25,7 +25,8 @@ The mode sequence, event times and discrete updates come from a finished run (it
 project's own transition logic (`apply_transition`); this module adds the derivatives. Not covered (raises
 `SensitivityUnavailable`): runs that failed or stopped, and transitions that change a parameter not declared
 discrete (a continuous value recomputed at the event would need its own derivative) other than a prescribed
-drive's reference, which is re-based with the event time and differentiated here (`_rebased_drive`).
+drive's reference, which is re-based with the event time and differentiated here (`_rebased_drive`), and the
+parameters whose derivatives the seed gives for the new mode (`Seed.piece_dp`: the chain's path pieces).
 """
 from __future__ import annotations
 

@@ -134,14 +134,15 @@ def _chain_piece(x: dict, si: dict, mech, values: dict) -> dict:
     range s0, s1 (the loop's s0 plus whole cycles of its length), a line's start P and direction t, an arc's centre
     O, radius and start angle psi0, on a tuned arc the stop angle alpha = arg(O - Q) and the apex travel (where the
     dyad is stretched: psi - arg(O - Q) = 0 mod 2 pi, `ArcPiece.apex_travel`), else s_apex = s1 + length (also once
-    the apex is behind). The piece, its cycle and whether the apex is behind are read from the numbers (discrete)."""
+    the apex is behind). The piece (an int), its cycle and whether the apex is behind are read from the numbers
+    (discrete; they may be jax values, so that one compiled function serves every cycle of a piece)."""
     import jax
     import jax.numpy as jnp
     centres, radii, Q, _, _, geo = _chain_geometry(x, si)
     n, path = len(radii), mech.path
     k = int(values["seg"])
     Lc = path.length
-    cycle = int(round((values["s0"] - path.pieces[k].s0) / Lc))
+    cycle = jnp.round((values["s0"] - path.pieces[k].s0) / Lc)
     length = geo["s0"][-1]
     base = cycle * length
     out = {"s0": base + geo["s0"][k], "s1": base + geo["s0"][k + 1]}
@@ -158,13 +159,12 @@ def _chain_piece(x: dict, si: dict, mech, values: dict) -> dict:
         return out
     alpha = jnp.arctan2(O[1] - Q[1], O[0] - Q[0])
     out["alpha"] = alpha
-    if abs(values["s_apex"] - (values["s1"] + Lc)) <= 1e-9 * Lc:
-        return out                      # the apex is behind
     d = psi0 - alpha
     dpsi0 = d - 2 * jnp.pi * jnp.round(d / (2 * jnp.pi))
     sg = jax.lax.stop_gradient
     turns = jnp.round(((values["s_apex"] - sg(out["s0"])) / sg(r) + sg(dpsi0)) / (2 * jnp.pi))
-    out["s_apex"] = out["s0"] + r * (2 * jnp.pi * turns - dpsi0)
+    behind = jnp.abs(values["s_apex"] - (values["s1"] + Lc)) <= 1e-9 * Lc
+    out["s_apex"] = jnp.where(behind, out["s_apex"], out["s0"] + r * (2 * jnp.pi * turns - dpsi0))
     return out
 
 
@@ -379,12 +379,13 @@ def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
     x0 = {k: scenario_value(plan, k) for k in keys}
     params = _mapped(plan, pmap, keys)
     values = _reference_values(si, mech, drive, plan.thermal is not None)
-    mapped = params([x0[k] for k in keys])
+    # one compiled evaluation of the formulas and their Jacobian (op by op, jax would compile every operation)
+    mapped, jac = jax.jit(lambda xs: (params(xs), jax.jacfwd(params)(xs)))(np.array([x0[k] for k in keys]))
+    jac = [jac[name] for name in mapped]
     for name, v in mapped.items():
         if not np.isclose(float(v), values[name], rtol=1e-13, atol=0.0):
             raise RuntimeError(f"sensitivity map of '{name}' gives {float(v)!r}, the mechanism {values[name]!r}")
     names = list(model.parameter_names)
-    jac = jax.jacfwd(lambda xs: list(params(xs).values()))(np.array([x0[k] for k in keys]))
     scales = np.array([abs(scenario_value(plan, k)) or 1.0 for k in wrt])
     n = len(wrt)
     nq = len(model.coordinates)
@@ -421,36 +422,61 @@ def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
     return Seed(dp, dq0, dv0, pmap.discrete, dx0, piece_dp=piece_dp, hold=hold), scales, flash
 
 
-def _piece_derivatives(plan, pmap: ParameterMap, keys: list[str], x0: dict, wrt: list[str], scales):
-    """values -> {parameter: (n,) derivative per scaled value} of the parameters a transition sets for the mode whose
-    values are `values` (`ParameterMap.piece_parameters`), checked against those values (a piece the formulas
-    do not reproduce stops the computation)."""
+_PIECE_FUNCTIONS: dict = {}
+
+
+def _piece_function(plan, pmap: ParameterMap, x0: dict, cols: list[str]):
+    """values -> ({parameter: value}, {parameter: (len(cols),) derivative}) of the parameters a transition sets for
+    the mode whose values are `values` (`ParameterMap.piece_parameters`), in the values `cols`. One jitted function
+    gives every piece's (compiled once per plan and columns: the travel numbers that say a piece's cycle and apex
+    are its arguments)."""
     import jax
     si, mech = plan.scenario.si, plan.mechanism
-    cols = [k for k in wrt if k in keys]
+    key = (id(mech), tuple(cols), tuple(sorted(x0.items())))
+    hit = _PIECE_FUNCTIONS.get(key)
+    if hit is not None and hit[0] is mech:
+        return hit[1]
+    segments = sorted({int(v["seg"]) for v in pmap.pieces(mech)})
+    xw0 = np.array([x0[k] for k in cols], float)
 
-    def formulas(values):
-        def f(xw):
-            x = {**x0, **dict(zip(cols, xw))}
-            return pmap.piece_parameters(x, si, mech, values)
-        return f
+    def f(xw, num):
+        x = {**x0, **dict(zip(cols, xw))}
+        return [pmap.piece_parameters(x, si, mech, {**num, "seg": k}) for k in segments]
+
+    @jax.jit
+    def value_and_jacobian(xw, num):
+        return f(xw, num), jax.jacfwd(f)(xw, num)
+
+    def evaluate(values: dict):
+        i = segments.index(int(values["seg"]))
+        num = {name: float(values[name]) for name in ("s0", "s1", "s_apex")}
+        got, jac = value_and_jacobian(xw0, num)
+        return ({name: float(v) for name, v in got[i].items()},
+                {name: np.asarray(d, float).reshape(len(cols)) for name, d in jac[i].items()})
+    _PIECE_FUNCTIONS.clear()
+    _PIECE_FUNCTIONS[key] = (mech, evaluate)
+    return evaluate
+
+
+def _piece_derivatives(plan, pmap: ParameterMap, keys: list[str], x0: dict, wrt: list[str], scales):
+    """values -> {parameter: (n,) derivative per scaled value} of the parameters a transition sets
+    (`_piece_function`), checked against those values (a piece the formulas do not reproduce stops the
+    computation)."""
+    cols = [k for k in wrt if k in keys]
+    evaluate = _piece_function(plan, pmap, x0, cols)
+    size = plan.mechanism.path.length if hasattr(plan.mechanism, "path") else 1.0
 
     def piece_dp(values: dict) -> dict:
-        f = formulas(values)
-        xw = np.array([x0[k] for k in cols])
-        got = f(xw)
+        got, jac = evaluate(values)
+        out = {}
         for name, v in got.items():
             ref = values[name]
-            if not abs(float(v) - ref) <= 1e-12 * max(abs(ref), mech.path.length if hasattr(mech, "path") else 1.0):
-                raise RuntimeError(f"sensitivity map of the transition's '{name}' gives {float(v)!r}, the mechanism "
-                                   f"{ref!r}")
-        out = {name: np.zeros(len(wrt)) for name in got}
-        if cols:
-            jac = jax.jacfwd(lambda xs: [jax.numpy.asarray(v, float) for v in f(xs).values()])(xw)
-            for name, row in zip(got, jac):
-                for c, key in enumerate(cols):
-                    j = wrt.index(key)
-                    out[name][j] = float(np.asarray(row)[c]) * scales[j]
+            if not abs(v - ref) <= 1e-12 * max(abs(ref), size):
+                raise RuntimeError(f"sensitivity map of the transition's '{name}' gives {v!r}, the mechanism {ref!r}")
+            out[name] = np.zeros(len(wrt))
+            for c, key in enumerate(cols):
+                j = wrt.index(key)
+                out[name][j] = jac[name][c] * scales[j]
         return out
     return piece_dp
 
@@ -465,6 +491,7 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
     from mechsim.scenarios.loader import build_mechanism
     from mechsim.scenarios.runner import make_drive
     si, drive = plan.scenario.si, plan.drive
+    moved_pieces = {}
     for key in wrt:
         if key not in keys:
             continue
@@ -486,31 +513,31 @@ def _check_map(plan, wrt: list[str], keys: list[str], mapped: dict, jac, pmap: P
             if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
                 raise RuntimeError(f"sensitivity map: '{name}' moves by {fd:.6g} per unit of {key}, the map says "
                                    f"{exact:.6g} ({drive.kind} drive)")
-        _check_pieces(plan, key, keys, pmap, pieces, p, h)
+        moved_pieces[key] = (pieces, p, h)
+    _check_pieces(plan, keys, pmap, moved_pieces)
 
 
-def _check_pieces(plan, key: str, keys: list[str], pmap: ParameterMap, moved: list, p: float, h: float) -> None:
-    """The values transitions set (`ParameterMap.pieces`) checked like the parameters: the formulas'
-    derivative against the central difference of the mechanism rebuilt with the value moved (the same tolerance)."""
-    import jax
-    if not pmap.pieces:
+def _check_pieces(plan, keys: list[str], pmap: ParameterMap, moved: dict) -> None:
+    """The values transitions set (`ParameterMap.pieces`) checked like the parameters: the formulas' derivative
+    against the central difference of the mechanism rebuilt with each value moved (moved: key -> (the rebuilt
+    mechanisms' pieces at +h and -h, the value, h)), to the same tolerance."""
+    if not pmap.pieces or not moved:
         return
-    si, mech = plan.scenario.si, plan.mechanism
-    x0 = {k: scenario_value(plan, k) for k in keys}
-    for idx, values in enumerate(pmap.pieces(mech)):
-        def f(xk):
-            return pmap.piece_parameters({**x0, key: xk}, si, mech, values)
-        derivative = {name: float(d) for name, d in jax.jacfwd(
-            lambda xk: {n: jax.numpy.asarray(v, float) for n, v in f(xk).items()})(x0[key]).items()}
-        for name in values:
-            if name in pmap.discrete:
-                continue
-            fd = (moved[0][idx][name] - moved[1][idx][name]) / (2 * h)
-            exact = derivative.get(name, 0.0)
-            size = max(abs(values[name]), abs(exact) * max(abs(p), 1.0), 1e-300)
-            if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
-                raise RuntimeError(f"sensitivity map: the transition's '{name}' (piece {int(values.get('seg', idx))}) "
-                                   f"moves by {fd:.6g} per unit of {key}, the map says {exact:.6g}")
+    cols = list(moved)
+    evaluate = _piece_function(plan, pmap, {k: scenario_value(plan, k) for k in keys}, cols)
+    for idx, values in enumerate(pmap.pieces(plan.mechanism)):
+        _, jac = evaluate(values)
+        for c, key in enumerate(cols):
+            (plus, minus), p, h = moved[key]
+            for name in values:
+                if name in pmap.discrete:
+                    continue
+                fd = (plus[idx][name] - minus[idx][name]) / (2 * h)
+                exact = float(jac[name][c]) if name in jac else 0.0
+                size = max(abs(values[name]), abs(exact) * max(abs(p), 1.0), 1e-300)
+                if abs(fd - exact) * max(abs(p), h) > 1e-6 * size:
+                    raise RuntimeError(f"sensitivity map: the transition's '{name}' (piece {int(values['seg'])}) "
+                                       f"moves by {fd:.6g} per unit of {key}, the map says {exact:.6g}")
 
 
 def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
