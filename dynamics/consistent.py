@@ -92,12 +92,22 @@ def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: 
 
 
 def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, work: np.ndarray,
-                     ext: np.ndarray, p: tuple, restitution: float | None = None
+                     ext: np.ndarray, p: tuple, restitution: float | None = None, project: bool = True
                      ) -> tuple[np.ndarray, np.ndarray, Impact]:
-    """(y0, yp0) satisfying every residual row of the mode, and the impact record of the projection."""
-    q = project_positions(mf, t, q, p)
-    v, impact = project_velocities(mf, t, q, np.asarray(v, dtype=float), p,
-                                   0.0 if restitution is None else restitution)
+    """(y0, yp0) satisfying every residual row of the mode, and the impact record of the projection.
+
+    project=False (index-1 form only, no impact): q and v are kept as they are and the accelerations and
+    multipliers solve the mode's own v and constraint rows, Baumgarte terms included (`_rows_off_manifold`).
+    """
+    if project:
+        q = project_positions(mf, t, q, p)
+        v, impact = project_velocities(mf, t, q, np.asarray(v, dtype=float), p,
+                                       0.0 if restitution is None else restitution)
+    else:
+        q, v = np.array(q, dtype=float), np.array(v, dtype=float)
+        M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
+        energy = 0.5 * float(v @ M @ v)
+        impact = Impact(energy, energy)
     a, lam = accelerations(mf, t, q, v, ext, p)
     ix = mf.index
     y = np.zeros(mf.ny)
@@ -105,6 +115,8 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
     y[ix["q"]], y[ix["v"]], y[ix["lam"]] = q, v, lam
     y[ix["work"]], y[ix["ext"]] = work, ext
     yp[ix["q"]], yp[ix["v"]] = v, a
+    if not project:
+        _rows_off_manifold(mf, t, y, yp, p)
     # rows of work and extension states are linear in their own y': F = A yp_block + b
     block = np.r_[ix["work"].start:ix["ext"].stop]
     if len(block):
@@ -116,3 +128,28 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
         A = (J1 - J0)[np.ix_(block, block)]
         yp[block] = -np.linalg.solve(A, res[block])
     return y, yp, impact
+
+
+def _rows_off_manifold(mf: ModeFunctions, t: float, y: np.ndarray, yp: np.ndarray, p: tuple) -> None:
+    """Correct a and lam in place so that the v rows and the index-1 constraint rows
+    Phi'' + 2 alpha Phi' + beta^2 Phi = 0 (dynamics/formulation.py) hold at a state off Phi = 0.
+
+    Both row blocks are affine in (a, lam) (M a - Q0 - Ql lam + G^T lam; Phi'' is linear in a), so one Newton
+    step with the exact Jacobian, from the KKT solution without the Baumgarte terms, solves them to round-off.
+    """
+    ix = mf.index
+    if mf.m == 0:
+        return
+    if ix["mu"].stop != ix["mu"].start:
+        raise ValueError("a restart without projection is only defined for the index-1 form")
+    rows = np.r_[ix["v"], ix["lam"]]
+    res = np.zeros(mf.ny)
+    mf.residual(t, y, yp, res, p)
+    J1, J0 = np.zeros((mf.ny, mf.ny)), np.zeros((mf.ny, mf.ny))
+    mf.jacobian(t, y, yp, res, 1.0, J1, p)
+    mf.jacobian(t, y, yp, res, 0.0, J0, p)
+    A = np.hstack([(J1 - J0)[np.ix_(rows, np.r_[ix["v"]])], J0[np.ix_(rows, np.r_[ix["lam"]])]])
+    step = np.linalg.solve(A, res[rows])
+    nv = ix["v"].stop - ix["v"].start
+    yp[ix["v"]] -= step[:nv]
+    y[ix["lam"]] -= step[nv:]

@@ -127,7 +127,9 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
             q = project_positions(mf, t, q, p)
             v, rebound = project_velocities(mf, t, q, v, p, restitution)
             restitution = None
-        y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution)
+        keep = not restitution and same_constraints(model, mode, new_mode, t, q_before, p_before, q, p)
+        y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p, restitution,
+                                         project=not keep)
     except (ValueError, np.linalg.LinAlgError) as exc:
         out.failure = dict(time=t, mode=new_mode, reason=f"re-initialisation after '{guard}' failed: {exc}",
                            where=_where(model, q + offset), hint="the new mode may be singular here")
@@ -155,6 +157,29 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
     out.rows.append(row)
     out.y, out.yp = y, yp
     return out
+
+
+def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_old: np.ndarray, p_old: tuple,
+                     q_new: np.ndarray, p_new: tuple) -> bool:
+    """True for an index-1 restart into the same mode whose constraints are the same functions here (the same
+    Phi and G to round-off in the old and the re-based frame): a Geneva flank switch or slip reversal.
+
+    Such a restart is taken from the integrator's state without projection (`consistent_state(project=False)`):
+    the index-1 rows hold off Phi = 0 and their Baumgarte terms keep damping the drift in the mass metric,
+    while a minimum-norm projection here moved the Geneva's crank by about the drift (-2.4e-10 rad at rtol
+    1e-10), an error each engagement added (docs/benchmarks.md, 'Work-precision on geneva-motor'). The index-2
+    and index-3 forms have Phi = 0 as a row and are always projected.
+    """
+    mf = model.modes[new_mode]
+    if model.formulation != "index1" or new_mode != mode or mf.m == 0:
+        return False
+    phi_old = np.atleast_1d(np.asarray(mf.phi(t, q_old, p_old), dtype=float).ravel())
+    phi_new = np.atleast_1d(np.asarray(mf.phi(t, q_new, p_new), dtype=float).ravel())
+    G_old = np.atleast_2d(np.asarray(mf.G(t, q_old, p_old), dtype=float))
+    G_new = np.atleast_2d(np.asarray(mf.G(t, q_new, p_new), dtype=float))
+    scale = float(np.max(np.abs(G_old) @ np.maximum(np.abs(q_old), np.abs(q_new)))) + float(np.max(np.abs(G_old)))
+    tol = 1e-12 * max(scale, np.finfo(float).tiny)
+    return bool(np.all(np.abs(phi_new - phi_old) <= tol) and np.all(np.abs(G_new - G_old) <= tol))
 
 
 def guard_values(mf, t: float, y: np.ndarray, p: tuple) -> np.ndarray:
