@@ -139,3 +139,47 @@ def test_chain_geometry_matches_finite_differences():
     energy = float(got["value"].iloc[0])
     # the run's rtol 1e-10 on the event times: the closed form holds to ~1e-9
     assert float(got["derivative"].iloc[0]) == pytest.approx(-energy / r1 - torque * r3 / (r1 * l31), rel=1e-7)
+
+
+# -- a detuned design (coupler 2 mm longer than tuned: no exact dwell, no stop): nothing is tuned, so the crank,
+# the coupler, the detuning and every sprocket move freely; a line -> arc -> line passage in 4.5 s
+DETUNED = "chain-mech2-detuned"
+DETUNED_SETS = ["duration=4.5 s", 'mechanism.detuning="2 mm"']
+WRT_DETUNED = ["mechanism.crank_radius", "mechanism.coupler_length", "mechanism.detuning", "mechanism.sprockets[1][1]"]
+#: a tenth of the change that lets another row take over a peak (the table's warnings: 0.12 % of sprocket 2's y)
+H_DETUNED = {"mechanism.crank_radius": 5e-4, "mechanism.coupler_length": 5e-4, "mechanism.detuning": 5e-4,
+             "mechanism.sprockets[1][1]": 1e-4}
+
+
+def test_detuned_chain_geometry_matches_finite_differences():
+    """Crank, coupler, detuning and a sprocket's position against finite differences; the coupler's length and the
+    detuning enter only as their sum L + delta (ChainDwellParams.detuned), so their derivatives are equal."""
+    scenario = mechsim.load(DETUNED, set=DETUNED_SETS)
+    table = sensitivity(scenario, WRT_DETUNED)
+    fd_sets = DETUNED_SETS + ["solver.rtol=1e-12", "solver.atol=1e-14"]
+    df = mechsim.run(mechsim.load(DETUNED, set=fd_sets)).timeseries
+    peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
+    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
+
+    def at_rows(sets):
+        r = mechsim.run(mechsim.load(DETUNED, set=sets))
+        assert r.failure is None, r.failure.message()
+        return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
+    ref0 = at_rows(fd_sets)
+    worst = {}
+    for key in WRT_DETUNED:
+        part = table[table["wrt"] == key].set_index("quantity")
+        p = float(part["parameter"].iloc[0])
+        if "[" in key:
+            def setting(value):
+                return _list_setting(scenario.si, key, value)
+        else:
+            def setting(value):
+                return f'{key}="{value!r} m"'
+        fd = richardson_central(lambda value: at_rows(fd_sets + [setting(value)]), p, H_DETUNED[key])
+        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
+    print("detuned chain geometry: largest relative deviation from the finite differences:",
+          {q: f"{e:.1e}" for q, e in worst.items()})
+    by = table.set_index(["quantity", "wrt"])["derivative"]
+    for q in peaks:
+        assert by[q, "mechanism.detuning"] == pytest.approx(by[q, "mechanism.coupler_length"], rel=1e-12, abs=1e-300)
