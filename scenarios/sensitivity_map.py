@@ -41,8 +41,9 @@ class ParameterMap:
     jax-traceable formulas of the dict x (key -> value); each is checked against the mechanism's own
     `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
     parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
-    geometry that is not traced). list_keys, piece_parameters, pieces, refuse, hold_drive: below. engage/release: the event kinds that start and end an index (the cycle runs from
-    one `engage` to the next; empty for a mechanism that does not index). peaks: its peak quantities.
+    geometry that is not traced). list_keys, piece_parameters, pieces, refuse, hold_drive: below. engage/release:
+    the event kinds that start and end an index (the cycle runs from one `engage` to the next; empty for a
+    mechanism that does not index). peaks: its peak quantities.
     """
 
     keys: tuple[str, ...]
@@ -227,7 +228,8 @@ def _rolling_parameters(x: dict, si: dict, mech) -> dict:
     itself (then those are traced, or constants: the centres)."""
     m = si["mechanism"]
     circle = m.get("profile", "circle") == "circle"
-    out = {name: x[key] for key, name in {**_ROLLING_GEOMETRY, **(_ROLLING_CIRCLE if circle else _ROLLING_LINE)}.items()}
+    geometry = {**_ROLLING_GEOMETRY, **(_ROLLING_CIRCLE if circle else _ROLLING_LINE)}
+    out = {name: x[key] for key, name in geometry.items()}
     l2, l3, l4, r = out["l2"], out["l3"], out["l4"], out["r"]
     m2, m3 = x["mechanism.crank_mass"], x["mechanism.coupler_mass"]
     disc, arm = x["mechanism.disc_mass"], x["mechanism.arm_mass"]

@@ -111,7 +111,8 @@ def test_chain_geometry_matches_finite_differences():
     the rolling pair"), and the impacts with restitution. A closed form besides: at a constant drive torque T the
     energy from the end of sprocket 2's dwell to that of sprocket 3's is E = T (l23 + r3 w3) / r1 (the chain travel
     between the ends of their arcs over the driving radius); r1 turns the line 3->1 by dg = -dr1 / l31 (its angle
-    g = asin((r3 - r1) / Z31), docs/theory.md §K1.1) and with it the end of arc 3, so dE/dr1 = -E/r1 - T r3 / (r1 l31)."""
+    g = asin((r3 - r1) / Z31), docs/theory.md §K1.1) and with it the end of arc 3, so
+    dE/dr1 = -E/r1 - T r3 / (r1 l31)."""
     base = SETS + GEOMETRY
     scenario = mechsim.load(NAME, set=base + ["solver.rtol=1e-10", "solver.atol=1e-12"])
     table = sensitivity(scenario, WRT_GEOMETRY)
