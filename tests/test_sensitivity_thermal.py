@@ -18,7 +18,7 @@ from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.units import ScenarioError
 from mechsim.scenarios import runner
 from mechsim.scenarios.sensitivity import THERMAL_PEAKS, cycle_temperatures, cycle_window, sensitivity
-from test_sensitivity import _work_at
+from thermal_fd import assert_thermal_matches_fd
 
 THERMAL = ["thermal.model=lumped", "thermal.averaging=resolved"]
 SENS = ["solver.rtol=1e-10", "solver.atol=1e-12"]
@@ -50,49 +50,17 @@ def _run(name, sets):
     return r
 
 
-def quantities(result, rows: dict) -> dict:
-    """The thermal peaks at the given rows, and the heat of the last complete engagement (the friction work from
-    entry to exit, as tests/test_sensitivity.py reads it)."""
-    df, ev = result.timeseries, result.events
-    out = {q: float(df[THERMAL_PEAKS[q]].iloc[i]) for q, i in rows.items()}
-    entries = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)
-    last_exit = ev.loc[ev["kind"] == "exit", "t_s"].to_numpy(float)[-1]
-    out["heat_per_index_J"] = (_work_at(df, entries[entries < last_exit][-1], "friction")
-                               - _work_at(df, last_exit, "friction"))
-    return out
-
-
 @pytest.fixture(scope="module")
 def tables():
     return {name: sensitivity(mechsim.load(name, set=THERMAL + sets + SENS), wrt, OF)
             for name, (sets, wrt, _) in CASES.items()}
 
 
-def _literal(si_value, unit):
-    return f"{si_value!r} {unit}" if unit else repr(si_value)
-
-
 @pytest.mark.parametrize("name", CASES)
 def test_temperatures_match_finite_differences(tables, name):
     sets, wrt, checked = CASES[name]
-    table = tables[name]
-    nominal = _run(name, sets + FD)
-    df = nominal.timeseries
-    rows = {q: int(np.nanargmax(np.abs(df[c].to_numpy(float)))) for q, c in THERMAL_PEAKS.items()}
-    for q, i in rows.items():       # the sensitivity's peak is the run's (same row)
-        assert table.loc[table["quantity"] == q, "t_s"].iloc[0] == pytest.approx(float(df["t_s"].iloc[i]))
-    ref0 = quantities(nominal, rows)
-    worst = {}
-    for key in wrt[:checked]:
-        part = table[table["wrt"] == key].set_index("quantity")
-        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        fd = richardson_central(lambda value: quantities(_run(name, sets + FD + [f"{key}={_literal(value, unit)}"]),
-                                                         rows), p, H)
-        mine = {}
-        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, mine)
-        print(name, key, {q: f"{e:.1e}" for q, e in mine.items()})
-        worst.update({q: max(e, worst.get(q, 0.0)) for q, e in mine.items()})
-    print(name, "largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
+    assert_thermal_matches_fd(tables[name], lambda extra: _run(name, sets + FD + extra), wrt[:checked], H,
+                              ELASTICITY_FLOOR, name)
 
 
 def test_exact_identities(tables):

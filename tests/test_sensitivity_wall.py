@@ -9,20 +9,18 @@ coarseness. The values traced move every part of the wall model: the mesh depth 
 the conductivity, the density and the nominal speed (here initial.crank_speed), the track area with the crank
 radius and the thickness, the heat into the track with the friction and the load.
 
-Finite differences as tests/test_sensitivity_thermal.py: IDA at rtol 1e-12 (the reference is the more accurate
-side), relative steps 5e-4 and 2.5e-4, Richardson-extrapolated: truncation O(h^4) ~ 1e-13, round-off
-~ rtol/h = 2e-9, both far below the 1e-4 asserted. Each quantity is read at the sensitivity's own row (a peak
+Finite differences as tests/test_sensitivity_thermal.py (the same helper, tests/thermal_fd.py): IDA at rtol
+1e-12 (the reference is the more accurate side), relative steps 5e-4 and 2.5e-4, Richardson-extrapolated:
+truncation O(h^4) ~ 1e-13, round-off ~ rtol/h = 2e-9, both far below the 1e-4 asserted. Each quantity is read at the sensitivity's own row (a peak
 that moves to a neighbouring row within a step does not change which row is differentiated).
 """
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import mechsim
-from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.sensitivity import THERMAL_PEAKS, sensitivity
-from test_sensitivity import _work_at
+from thermal_fd import assert_thermal_matches_fd
 
 NAME = "geneva-motor"
 SETS = ["thermal.model=1d", "duration=0.7 s", "thermal.mesh_growth=3", "thermal.mesh_first_cell=1 mm"]
@@ -45,45 +43,14 @@ def _run(sets):
     return r
 
 
-def quantities(result, rows: dict) -> dict:
-    """The thermal peaks at the given rows, and the heat of the last complete engagement (the friction work from
-    entry to exit, as tests/test_sensitivity.py reads it)."""
-    df, ev = result.timeseries, result.events
-    out = {q: float(df[THERMAL_PEAKS[q]].iloc[i]) for q, i in rows.items()}
-    entries = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)
-    last_exit = ev.loc[ev["kind"] == "exit", "t_s"].to_numpy(float)[-1]
-    out["heat_per_index_J"] = (_work_at(df, entries[entries < last_exit][-1], "friction")
-                               - _work_at(df, last_exit, "friction"))
-    return out
-
-
 @pytest.fixture(scope="module")
 def table():
     return sensitivity(mechsim.load(NAME, set=SETS + SENS), WRT, OF)
 
 
-def _literal(si_value, unit):
-    return f"{si_value!r} {unit}" if unit else repr(si_value)
-
-
 def test_wall_temperatures_match_finite_differences(table):
-    nominal = _run(FD)
+    nominal = assert_thermal_matches_fd(table, lambda sets: _run(FD + sets), WRT[:CHECKED], H, ELASTICITY_FLOOR)
     assert nominal.summary["thermal"]["mesh"]["cells_per_track"] == 3
-    df = nominal.timeseries
-    rows = {q: int(np.nanargmax(np.abs(df[c].to_numpy(float)))) for q, c in THERMAL_PEAKS.items()}
-    for q, i in rows.items():       # the sensitivity's peak is the run's (same row)
-        assert table.loc[table["quantity"] == q, "t_s"].iloc[0] == pytest.approx(float(df["t_s"].iloc[i]))
-    ref0 = quantities(nominal, rows)
-    worst = {}
-    for key in WRT[:CHECKED]:
-        part = table[table["wrt"] == key].set_index("quantity")
-        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        fd = richardson_central(lambda value: quantities(_run(FD + [f"{key}={_literal(value, unit)}"]), rows), p, H)
-        mine = {}
-        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, mine)
-        print(key, {q: f"{e:.1e}" for q, e in mine.items()})
-        worst.update({q: max(e, worst.get(q, 0.0)) for q, e in mine.items()})
-    print("largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
 
 
 def test_exact_identities(table):
