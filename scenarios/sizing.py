@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.scenarios.units import ScenarioError
+from mechsim.scenarios.sweep.rows import key_path, lookup
 
 NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _BOUND = re.compile(rf"^\s*({NUMBER})\s*([^:]*?)\s*:\s*({NUMBER})\s*(.*?)\s*$")
@@ -97,9 +98,16 @@ def parse_bound(text: str, si: dict) -> Bound:
     if "=" not in text:
         raise ScenarioError("--vary", f"expected section.key=LOW:HIGH, got {text!r}")
     key, spec = (s.strip() for s in text.split("=", 1))
-    parts = key.split(".")
-    fields = sections_for(si["mechanism"]["type"]).get(parts[0], {}) if len(parts) == 2 else {}
-    spec_field = fields.get(parts[-1]) if len(parts) == 2 else None
+    try:
+        path = key_path(key)
+    except ValueError:
+        raise ScenarioError("--vary", f"unknown scenario key {key!r} for a {si['mechanism']['type']} scenario") from None
+    parts = [p for p in path if isinstance(p, str)]
+    index = path[len(parts):] if len(parts) == 2 and path[:2] == parts else None
+    fields = sections_for(si["mechanism"]["type"]).get(parts[0], {}) if index is not None else {}
+    spec_field = fields.get(parts[-1]) if index is not None else None
+    if spec_field is not None and (index or spec_field.kind in ("list", "points")):
+        spec_field = _list_entry(key, spec_field, index, si)
     if spec_field is None:
         raise ScenarioError("--vary", f"unknown scenario key {key!r} for a {si['mechanism']['type']} scenario")
     m = _BOUND.match(spec)
@@ -125,6 +133,49 @@ def parse_bound(text: str, si: dict) -> Bound:
     if not (math.isfinite(low) and math.isfinite(high)) or low >= high:
         raise ScenarioError(f"--vary {key}", f"LOW must be below HIGH, got {spec!r}")
     return Bound(key, low, high, unit)
+
+
+def _list_entry(key: str, spec_field, index: list, si: dict):
+    """A list entry's field ('mechanism.sprocket_radii[0]', 'mechanism.sprockets[1][0]': one index per nesting of
+    the list, as the loader's messages name them) as a quantity of the list's unit; ScenarioError where the key
+    names a whole list, an index the scenario's list does not have, or a list of non-numbers."""
+    from mechsim.scenarios.schema import Field
+    depth = 2 if spec_field.kind == "points" else 1
+    if len(index) != depth:
+        raise ScenarioError(f"--vary {key}", f"a list: name one entry, e.g. {key.split('[')[0]}{'[0]' * depth}")
+    node = lookup(si, key.split("[")[0])
+    for i in index:
+        if not isinstance(node, list) or not 0 <= i < len(node):
+            raise ScenarioError(f"--vary {key}", "no such entry in the scenario's list")
+        node = node[i]
+    if not spec_field.unit or isinstance(node, bool) or not isinstance(node, (int, float)):
+        raise ScenarioError(f"--vary {key}", "is not a numeric scenario value")
+    return Field("quantity", spec_field.unit)
+
+
+def set_list_entries(raw: dict, si: dict, entries: list[tuple[str, str]]) -> dict:
+    """raw with the list entries set (key as `parse_bound` takes it, value as TOML text, e.g. '0.05 m'): the
+    loader's --set names whole keys only, so the list is written whole, its other entries as the scenario gave
+    them (or, where the scenario leaves the list to its default, as resolved, in SI with the list's unit)."""
+    import copy
+
+    from mechsim.scenarios.loader import sections_for
+    out = copy.deepcopy(raw)
+    for key, text in entries:
+        section, name, *index = key_path(key)
+        table = out.setdefault(section, {})
+        if table.get(name) is None:
+            unit = sections_for(si["mechanism"]["type"])[section][name].unit
+            table[name] = _with_unit(copy.deepcopy(si[section][name]), unit)
+        node = table[name]
+        for i in index[:-1]:
+            node = node[i]
+        node[index[-1]] = text
+    return out
+
+
+def _with_unit(value, unit: str):
+    return [_with_unit(v, unit) for v in value] if isinstance(value, list) else f"{float(value)!r} {unit}"
 
 
 def parse_limit(text: str) -> Limit:
@@ -214,8 +265,10 @@ class Problem:
         from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, validate
         from mechsim.scenarios.sweep.spec import toml_literal
         overrides = list(self.fixed) + [f"{b.key}={toml_literal(f'{float(v)!r} {b.unit}' if b.unit else float(v))}"
-                                        for b, v in zip(self.bounds, x)]
+                                        for b, v in zip(self.bounds, x) if "[" not in b.key]
         raw = apply_overrides(self.base.raw, overrides)
+        raw = set_list_entries(raw, self.base.si, [(b.key, f"{float(v)!r} {b.unit}") for b, v in zip(self.bounds, x)
+                                                   if "[" in b.key])
         si = validate(raw)
         build_mechanism(si)
         return Scenario(si["name"], raw, si, self.base.source)
@@ -579,7 +632,6 @@ def _with(scenario, overrides: list[str]):
 def _solve(problem: Problem, method: str, tolerance: float, max_iterations: int, start, progress, slots):
     """One continuous optimisation: start at the scenario's values (clipped into the bounds) or `start`."""
     wall = time.perf_counter()
-    from mechsim.scenarios.sweep.rows import lookup
     x0 = []
     for b in problem.bounds:
         v = (start or {}).get(b.key, lookup(problem.base.si, b.key))

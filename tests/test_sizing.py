@@ -19,6 +19,9 @@ import pandas as pd
 import pytest
 from cli_helpers import invoke, one_line_error
 
+import mechsim
+from mechsim.scenarios.units import ScenarioError
+
 N_MAX, T_MAX, J2, SLOTS = 8.0, 0.3, 1.5626e-3, 4
 
 
@@ -316,3 +319,42 @@ def test_a_limit_the_run_keeps_breaking_exits_3_without_a_design(scenario_file, 
     assert (tmp_path / "out" / "summary.json").exists() and not (tmp_path / "out" / "design.toml").exists()
     h = pd.read_csv(tmp_path / "out" / "convergence.csv")
     assert set(h["solve"]) == {0, 1}
+
+
+# ------------------------------------------------------------------------------------------------ list entries
+@pytest.mark.parametrize("name, key, spec, change", [
+    ("chain-mech1-torque", "mechanism.sprocket_radii[0]", "2:4 cm", 2e-4),
+    ("chain-mech1-torque", "mechanism.sprockets[1][0]", "-50:50 cm", -3e-4),
+    ("rolling-a-speed", "mechanism.profile_centre[1]", "0.2:0.4 m", 0.05),
+])
+def test_list_entries_are_varied_and_written_into_the_design(tmp_path, name, key, spec, change):
+    """`--vary` takes a list entry as the loader's messages name it: its bound in the list's unit, the design
+    scenario with that entry set (the list's other entries as they were), design.toml that loads back to it, and
+    the sensitivity table's unit for it (scenarios/sweep/rows.py `field_unit`)."""
+    from mechsim.scenarios.output.writer import resolved_scenario_toml
+    from mechsim.scenarios.sizing import Problem, parse_bound
+    from mechsim.scenarios.sweep.rows import field_unit, lookup
+    base = mechsim.load(name)
+    bound = parse_bound(f"{key}={spec}", base.si)
+    assert (bound.key, bound.unit) == (key, "m") and field_unit(base.si, key) == "m"
+    value = lookup(base.si, key) + change
+    design = Problem(base, [bound], key, [], []).scenario_at([value])
+    assert lookup(design.si, key) == value
+    whole = key.split("[")[0]
+    before, after = np.array(lookup(base.si, whole), float), np.array(lookup(design.si, whole), float)
+    changed = np.argwhere(before != after)
+    assert [list(map(int, c)) for c in changed] == [[int(i) for i in key[len(whole):].strip("[]").split("][")]]
+    path = tmp_path / "design.toml"
+    path.write_text(resolved_scenario_toml(design.si))
+    assert lookup(mechsim.load(str(path)).si, key) == value
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("mechanism.sprocket_radii=2:4 cm", "name one entry"),
+    ("mechanism.sprocket_radii[3]=2:4 cm", "no such entry"),
+    ("mechanism.sprockets[1]=2:4 cm", "name one entry"),
+])
+def test_list_entry_requests_are_refused_in_one_line(text, fragment):
+    from mechsim.scenarios.sizing import parse_bound
+    with pytest.raises(ScenarioError, match=fragment):
+        parse_bound(text, mechsim.load("chain-mech1-kinematic").si)
