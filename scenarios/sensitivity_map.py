@@ -65,6 +65,10 @@ class ParameterMap:
     refuse: Callable | None = None
     #: the initial state assembles with the drive coordinate held (Mechanism.initial_state): its derivative too
     hold_drive: bool = False
+    #: (mech, angle, speed) -> (dq, dv): the initial guess's derivative in the drive's initial angle, per radian
+    #: (`initial_angle_seed`); None: the drive coordinate's unit vector and no velocity change, which is the whole
+    #: derivative with `hold_drive` (the hold completes the other coordinates by the implicit-function rule)
+    initial_angle: Callable | None = None
 
     @property
     def cycle(self) -> tuple[str, ...]:
@@ -81,6 +85,19 @@ def _geneva_parameters(x: dict, si: dict, mech) -> dict:
     return {"r": r, "c": r / jnp.sin(jnp.pi / n), "R": x["mechanism.pin_radius"],
             "J1": x["mechanism.crank_inertia"], "J2": x["mechanism.wheel_inertia"], "T_L": x["load.wheel_torque"],
             "mu": x["contact.friction"], "c1": x["mechanism.crank_damping"], "c2": x["mechanism.wheel_damping"]}
+
+
+def _geneva_initial_angle(mech, angle: float, speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """d(q0, v0)/d(crank angle) of `Geneva.initial_state`: in a dwell the wheel stays at its lock angle (dq = (1, 0),
+    dv = 0); engaged, the wheel angle is beta(alpha) and its speed G(alpha) w, so dq = (1, G) and dv = (0, w G')
+    (G = d beta / d alpha, the speed ratio, docs/theory.md §G1)."""
+    from mechsim.mechanisms.geneva.kinematics import speed_ratio, speed_ratio_derivative
+    g = mech.geometry
+    alpha = angle - 2 * np.pi * np.floor((angle + np.pi) / (2 * np.pi))
+    if -g.engagement_half_angle <= alpha < g.engagement_half_angle:
+        return (np.array([1.0, float(speed_ratio(g.ratio, alpha))]),
+                np.array([0.0, speed * float(speed_ratio_derivative(g.ratio, alpha))]))
+    return np.array([1.0, 0.0]), np.array([0.0, 0.0])
 
 
 def _chain_list_keys(si: dict) -> tuple[str, ...]:
@@ -220,12 +237,14 @@ _ROLLING_LINE = {"mechanism.line_point[0]": "Px", "mechanism.line_point[1]": "Py
 
 
 def _rolling_parameters(x: dict, si: dict, mech) -> dict:
-    """Rolling-pair four-bar (mechanisms/rolling/model.py `Bodies.uniform`): the geometry enters the model as itself
-    (the profile's R, O, gamma0 or line point and angle, the disc's r, the links l2, l3, l4, the arm's angle, the
-    pivot A0, the coupler point); slender crank and coupler rods (centre at mid-length, I = m l^2 / 12), the rolling
-    link a uniform disc (m r^2 / 2 about B0) welded to a slender arm (m l4^2 / 3 about B0), moved to the joint
-    centre of mass c4 = m_arm l4 / 2 / m4 (docs/theory.md §K3), unless the scenario gives the inertias and centres
-    itself (then those are traced, or constants: the centres)."""
+    """Rolling-pair four-bar (mechanisms/rolling/model.py `Bodies.uniform`, `from_config`): the geometry enters the
+    model as itself (the profile's R, O, gamma0 or line point and angle, the disc's r, the links l2, l3, l4, the arm's
+    angle, the pivot A0, the coupler point); slender crank and coupler rods (centre at mid-length, I = m l^2 / 12),
+    the rolling link a uniform disc (m r^2 / 2 about B0) welded to a slender arm (m l4^2 / 3 about B0), moved to the
+    joint centre of mass c4 = m_arm l4 / 2 / m4 (docs/theory.md §K3), unless the scenario gives the inertias and
+    centres itself (then those enter as themselves: crank_com c2, coupler_com c3, rolling_com c4; a given rolling_com
+    does not move the uniform I4, which keeps the uniform c4, as `from_config` does); the centre's direction from
+    the arm, rolling_com_angle, is d4."""
     m = si["mechanism"]
     circle = m.get("profile", "circle") == "circle"
     geometry = {**_ROLLING_GEOMETRY, **(_ROLLING_CIRCLE if circle else _ROLLING_LINE)}
@@ -234,24 +253,25 @@ def _rolling_parameters(x: dict, si: dict, mech) -> dict:
     m2, m3 = x["mechanism.crank_mass"], x["mechanism.coupler_mass"]
     disc, arm = x["mechanism.disc_mass"], x["mechanism.arm_mass"]
     m4 = disc + arm
-    c4 = arm * l4 / 2 / m4 if m["rolling_com"] is None else m["rolling_com"]
-    i4 = (disc * r**2 / 2 + arm * l4**2 / 3 - m4 * c4**2) if m["rolling_inertia"] is None else (
+    uniform_c4 = arm * l4 / 2 / m4
+    i4 = (disc * r**2 / 2 + arm * l4**2 / 3 - m4 * uniform_c4**2) if m["rolling_inertia"] is None else (
         x["mechanism.rolling_inertia"])
     out.update({"m2": m2, "I2": m2 * l2**2 / 12 if m["crank_inertia"] is None else x["mechanism.crank_inertia"],
                 "m3": m3, "I3": m3 * l3**2 / 12 if m["coupler_inertia"] is None else x["mechanism.coupler_inertia"],
                 "m4": m4, "I4": i4, "g": x["load.gravity"], "b2": x["load.crank_damping"],
-                "b4": x["load.rolling_damping"]})
-    if m["crank_com"] is None:
-        out["c2"] = l2 / 2
-    if m["coupler_com"] is None:
-        out["c3"] = l3 / 2
-    if m["rolling_com"] is None:
-        out["c4"] = c4
+                "b4": x["load.rolling_damping"], "d4": x["mechanism.rolling_com_angle"],
+                "c2": l2 / 2 if m["crank_com"] is None else x["mechanism.crank_com"],
+                "c3": l3 / 2 if m["coupler_com"] is None else x["mechanism.coupler_com"],
+                "c4": uniform_c4 if m["rolling_com"] is None else x["mechanism.rolling_com"]})
     return out
 
 
 def _rolling_refuse(plan, key: str) -> str | None:
-    """The other profile's values do not enter the model."""
+    """The other profile's values do not enter the model; the start's assembly choice is not a continuous value."""
+    if key == "mechanism.start_rolling_angle":
+        return ("it only chooses which assembly a crank-driven start takes (the one whose rolling angle is nearest "
+                "it): the start does not move with it (zero derivative) except where two assemblies are equally near, "
+                "where it jumps to the other branch")
     circle = plan.scenario.si["mechanism"].get("profile", "circle") == "circle"
     other = _ROLLING_LINE if circle else _ROLLING_CIRCLE
     if key in other:
@@ -267,7 +287,8 @@ MAPS = {
               "load.crank_damping", "load.rolling_damping", "mechanism.fixed_radius", "mechanism.disc_radius",
               "mechanism.contact_angle", "mechanism.line_angle", "mechanism.crank_length", "mechanism.coupler_length",
               "mechanism.arm_length", "mechanism.arm_angle", "mechanism.coupler_point_distance",
-              "mechanism.coupler_point_angle"),
+              "mechanism.coupler_point_angle", "mechanism.crank_com", "mechanism.coupler_com", "mechanism.rolling_com",
+              "mechanism.rolling_com_angle"),
         parameters=_rolling_parameters, speed_key="initial.drive_speed",
         discrete=frozenset({"dead_sign"}), engage="", release="", list_keys=_rolling_list_keys,
         refuse=_rolling_refuse, hold_drive=True,
@@ -288,7 +309,7 @@ MAPS = {
         keys=("mechanism.crank_radius", "mechanism.pin_radius", "mechanism.thickness", "mechanism.crank_inertia",
               "mechanism.wheel_inertia", "mechanism.crank_damping", "mechanism.wheel_damping", "load.wheel_torque",
               "contact.friction"),
-        parameters=_geneva_parameters, speed_key="initial.crank_speed",
+        parameters=_geneva_parameters, speed_key="initial.crank_speed", initial_angle=_geneva_initial_angle,
         discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit",
         sliding=True,
         peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_wheel_speed_rad_s")),
@@ -406,6 +427,12 @@ def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
                 raise ScenarioError(key, "the initial velocities of this mechanism are not linear in the initial "
                                     "speed here: not traced")
             dv0[:, j] = unit_v * scales[j]
+        if key == angle_key(mech):
+            dq, dv = initial_angle_seed(plan, pmap, key)
+            dq0[:, j], dv0[:, j] = dq * scales[j], dv * scales[j]
+            if drive.is_prescribed:
+                # the prescribed motion q = angle0 + speed (t - time0) starts at the initial angle
+                dp[names.index("drive_angle0"), j] = scales[j]
         if key == "thermal.ambient_temperature" and plan.thermal.setup.system is not None:
             # the bulk states start at the ambient (ThermalSetup.initial)
             dx0[:plan.thermal.setup.system.size, j] = scales[j]
@@ -422,6 +449,72 @@ def make_seed(plan, model, wrt: list[str], pmap: ParameterMap):
     _check_map(plan, wrt, keys, mapped, jac, pmap)
     hold = mech.drive_coordinate if pmap.hold_drive else None
     return Seed(dp, dq0, dv0, pmap.discrete, dx0, piece_dp=piece_dp, hold=hold), scales, flash
+
+
+#: the change of the initial angle within which the start must keep its mode (the default stated change of
+#: `mechsim sensitivity`, 1 %, of the angle, or 0.01 rad for a start at zero)
+INITIAL_CHANGE = 0.01
+
+
+def angle_key(mech) -> str:
+    """The scenario key of the drive coordinate's initial angle ('initial.crank_angle', 'initial.drive_angle')."""
+    return f"initial.{mech.initial_keys[0]}"
+
+
+def _start_mode(mech, angle: float, speed: float):
+    """The initial mode and its discrete values at this angle, or why there is no start."""
+    try:
+        init = mech.initial_state(angle, speed)
+    except ValueError as exc:
+        return f"no start ({exc})"
+    return init.mode, dict(init.updates)
+
+
+def initial_angle_seed(plan, pmap: ParameterMap, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(dq, dv) per radian of the initial angle: the derivative of the mechanism's initial guess
+    (`ParameterMap.initial_angle`; with `hold_drive` the drive coordinate's unit vector, the assembly's hold
+    completing the rest by the implicit-function rule on Phi(q) = 0 and G v + Phi_t = 0, dynamics/sensitivity.py
+    `_ModePieces.hold`; without it the guess is consistent and the projection passes its exact derivative through).
+
+    Refused (ScenarioError naming the key) where the start changes its mode or its discrete values (slot, flank,
+    slip direction, dyad side, path piece) within INITIAL_CHANGE of the angle: the initial state jumps there and the
+    derivative does not exist (or holds only for a smaller change). The guess's derivative is checked against central
+    differences of `initial_state` (the coordinates the hold does not recompute; a mismatch is a bug: RuntimeError)."""
+    mech, si, drive = plan.mechanism, plan.scenario.si, plan.drive
+    angle = float(si["initial"][mech.initial_keys[0]])
+    speed = drive.speed if drive.is_prescribed else float(si["initial"][mech.initial_keys[1]])
+    delta = INITIAL_CHANGE * (abs(angle) or 1.0)
+    try:
+        here = _start_mode(mech, angle, speed)
+        for side in (-delta, delta):
+            there = _start_mode(mech, angle + side, speed)
+            if there != here:
+                what = there if isinstance(there, str) else f"mode '{there[0]}' with {there[1]}"
+                raise ScenarioError(key, f"the start at {angle:.6g} rad lies within {delta:.3g} rad "
+                                    f"({INITIAL_CHANGE:.0%} of it) of a change of the initial mode (at "
+                                    f"{angle + side:.6g} rad: {what}; here mode '{here[0]}' with {here[1]}): the "
+                                    "initial state jumps there, so the derivative does not exist; move the start "
+                                    "away from the boundary")
+        nq = len(mech.coordinates)
+        if pmap.initial_angle is not None:
+            dq, dv = (np.asarray(a, float) for a in pmap.initial_angle(mech, angle, speed))
+            check = np.ones(nq, bool)
+        else:
+            dq, dv = np.zeros(nq), np.zeros(nq)
+            dq[mech.drive_coordinate] = 1.0
+            check = np.arange(nq) == mech.drive_coordinate
+        # central differences of the guess: truncation h^2 |q'''| / 6 ~ 1e-13, round-off eps |q| / h ~ 1e-10
+        h = 1e-6
+        plus, minus = mech.initial_state(angle + h, speed), mech.initial_state(angle - h, speed)
+        for name, exact, fd in (("q", dq, (np.asarray(plus.q, float) - np.asarray(minus.q, float)) / (2 * h)),
+                                ("v", dv, (np.asarray(plus.v, float) - np.asarray(minus.v, float)) / (2 * h))):
+            size = max(1.0, float(np.max(np.abs(fd))))
+            if not np.all(np.abs(exact - fd)[check] <= 1e-7 * size):
+                raise RuntimeError(f"sensitivity map: the initial {name} moves by {fd} per radian of {key}, the map "
+                                   f"says {exact}")
+    finally:
+        mech.initial_state(angle, speed)         # a mechanism that keeps its start's discrete state gets it back
+    return dq, dv
 
 
 _PIECE_FUNCTIONS: dict = {}
@@ -553,6 +646,7 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if plan.thermal is not None:
         check_thermal(plan, mtype)
     allowed = _traced_keys(plan, pmap) + ([] if plan.drive.is_prescribed else [pmap.speed_key])
+    allowed.append(angle_key(plan.mechanism))
     allowed = list(dict.fromkeys(allowed))
     if not wrt:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
