@@ -489,12 +489,15 @@ def initial_angle_seed(plan, pmap: ParameterMap, key: str) -> tuple[np.ndarray, 
         for side in (-delta, delta):
             there = _start_mode(mech, angle + side, speed)
             if there != here:
-                what = there if isinstance(there, str) else f"mode '{there[0]}' with {there[1]}"
-                raise ScenarioError(key, f"the start at {angle:.6g} rad lies within {delta:.3g} rad "
-                                    f"({INITIAL_CHANGE:.0%} of it) of a change of the initial mode (at "
-                                    f"{angle + side:.6g} rad: {what}; here mode '{here[0]}' with {here[1]}): the "
-                                    "initial state jumps there, so the derivative does not exist; move the start "
-                                    "away from the boundary")
+                if isinstance(there, str):
+                    what = there
+                else:
+                    moved = [k for k in sorted(set(here[1]) | set(there[1])) if here[1].get(k) != there[1].get(k)]
+                    what = f"mode '{there[0]}'" + (f", {', '.join(moved)} changed" if moved else "")
+                raise ScenarioError(key, f"the start at {angle:.6g} rad (mode '{here[0]}') lies within {delta:.3g} "
+                                    f"rad ({INITIAL_CHANGE:.0%}) of a change of the initial mode (at "
+                                    f"{angle + side:.6g} rad: {what}): the initial state jumps there, so the "
+                                    "derivative does not exist; move the start away from the boundary")
         nq = len(mech.coordinates)
         if pmap.initial_angle is not None:
             dq, dv = (np.asarray(a, float) for a in pmap.initial_angle(mech, angle, speed))
