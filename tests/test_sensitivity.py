@@ -180,12 +180,15 @@ def test_prescribed_speed_against_the_closed_form():
     cycle time 2 pi / w, none of them depending on the crank radius; the normal force N = (J2 a2 + T_L) / (x - mu
     sigma R) (docs/theory.md §G2) is linear in the load and the wheel inertia at a fixed row. Their derivatives,
     at the table's own rows (a fixed t: d alpha / dw = t), against the sensitivities of the DAE with the speed as a
-    constraint. The sensitivities carry ~1e-7 relative from their integration at rtol 1e-10 (see above): 1e-6."""
+    constraint. The start angle theta0 moves alpha by as much at every row (the drive's angle0 moves with it): the
+    wheel speed by w G'(alpha), the acceleration by w^2 G''(alpha) per radian, the index and cycle times not at all.
+    The sensitivities carry ~1e-7 relative from their integration at rtol 1e-10 (see above): 1e-6."""
     import mechsim.mechanisms.geneva.kinematics as gk
     w = np.pi                                         # mid-engagement (alpha = 0) falls on the row t = 1 s
     sets = ["thermal.model=none", "duration=2.8 s", f"drive.speed={w!r} rad/s", "solver.rtol=1e-10",
             "solver.atol=1e-12", "mechanism.wheel_damping=0 N*m*s/rad"]
-    wrt = ["drive.speed", "mechanism.crank_radius", "load.wheel_torque", "mechanism.wheel_inertia"]
+    wrt = ["drive.speed", "mechanism.crank_radius", "load.wheel_torque", "mechanism.wheel_inertia",
+           "initial.crank_angle"]
     sc = mechsim.load("geneva-lc1", set=sets)
     table = sensitivity(sc, wrt).set_index(["quantity", "wrt"])
     m, si = sc.si["mechanism"], sc.si
@@ -208,13 +211,17 @@ def test_prescribed_speed_against_the_closed_form():
     g, g1, g2 = (f(lam, al) for f in (gk.speed_ratio, gk.speed_ratio_derivative, gk.speed_ratio_second_derivative))
     check("peak_wheel_speed_rad_s", "drive.speed", g + w * g1 * t, abs(g))
     check("peak_wheel_speed_rad_s", "mechanism.crank_radius", 0.0, abs(g) * w / m["crank_radius"])
+    check("peak_wheel_speed_rad_s", "initial.crank_angle", w * g1, abs(g) * w)
     t, al = at("peak_wheel_accel_rad_s2")
     g1, g2 = gk.speed_ratio_derivative(lam, al), gk.speed_ratio_second_derivative(lam, al)
     check("peak_wheel_accel_rad_s2", "drive.speed", 2 * w * g1 + w**2 * g2 * t, abs(2 * w * g1))
     check("peak_wheel_accel_rad_s2", "mechanism.crank_radius", 0.0, abs(w**2 * g1) / m["crank_radius"])
+    check("peak_wheel_accel_rad_s2", "initial.crank_angle", w**2 * g2, abs(w**2 * g1))
     check("index_time_s", "drive.speed", -2 * a0 / w**2, 2 * a0 / w**2)
     check("cycle_time_s", "drive.speed", -2 * np.pi / w**2, 2 * np.pi / w**2)
     check("index_time_s", "mechanism.crank_radius", 0.0, 2 * a0 / w / m["crank_radius"])
+    check("index_time_s", "initial.crank_angle", 0.0, 2 * a0 / w)
+    check("cycle_time_s", "initial.crank_angle", 0.0, 2 * np.pi / w)
     # the normal force at its row: d/dT_L = 1 / (x - mu sigma R), d/dJ2 = a2 / (x - mu sigma R)
     t, al = at("peak_contact_force_N")
     a2 = w**2 * gk.speed_ratio_derivative(lam, al)
