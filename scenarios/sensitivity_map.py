@@ -655,6 +655,9 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
         raise ScenarioError("--wrt", f"name at least one scenario value; traced here: {', '.join(allowed)}")
     for key in wrt:
         why = pmap.refuse(plan, key) if pmap.refuse else None
+        if key == angle_key(plan.mechanism) and plan.thermal is not None and plan.thermal.averaging == "cycle":
+            why = ("with cycle averaging the periodic turn is measured from the start angle (thermal/cycle_exact.py "
+                   "`TurnLayout`), and that dependence is not differentiated; use thermal.averaging = 'resolved'")
         if why:
             raise ScenarioError(key, f"not traced on this design: {why}")
         if (key in pmap.keys or key in THERMAL_KEYS) and key not in THERMAL_MATERIAL_KEYS and (
