@@ -26,6 +26,7 @@ from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.sundials_c import sundials
 from mechsim.dynamics.user_cache import cache_dir
 from mechsim.scenarios.runner import execute, plan
+from recording import Recording
 
 pytestmark = pytest.mark.hybrid
 
@@ -36,22 +37,6 @@ CASES = {
     "rolling-b-components": ("rolling-b-components", {}),
     "geneva-lumped-thermal": ("geneva-seed-lc1-mu015", {"solver.method": "dae", "duration": "1.5 s"}),
 }
-
-
-class Recorder:
-    """Wraps a backend and keeps every request it integrates (the states the callbacks are checked at)."""
-
-    def __init__(self, inner):
-        self.inner, self.requests = inner, []
-        for key in ("name", "solver", "initial_step", "recoverable", "unavailable", "notes"):
-            setattr(self, key, getattr(inner, key))
-
-    def hint(self, code):
-        return self.inner.hint(code)
-
-    def integrate(self, request):
-        self.requests.append(request)
-        return self.inner.integrate(request)
 
 
 def run(name, sets, backend_name, wrap=None):
@@ -65,7 +50,7 @@ def run(name, sets, backend_name, wrap=None):
 @pytest.fixture(scope="module", params=list(CASES))
 def both(request):
     name, sets = CASES[request.param]
-    ida, settings, recorder = run(name, sets, "ida", Recorder)
+    ida, settings, recorder = run(name, sets, "ida", Recording)
     compiled, _, _ = run(name, sets, "ida-compiled")
     return request.param, ida, compiled, settings, recorder.requests
 

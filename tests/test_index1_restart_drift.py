@@ -21,6 +21,7 @@ from mechsim.benchmarks.peer_bench import CASE_A
 from mechsim.dynamics.backend import backend_for
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.settings import SolverSettings
+from recording import Recording
 
 pytestmark = pytest.mark.hybrid
 
@@ -30,24 +31,6 @@ RTOL = 1e-10
 @pytest.fixture(scope="module")
 def case_a():
     return make_problem(BenchConfig(overrides=CASE_A, duration=None))
-
-
-class Recording:
-    """A backend that keeps every request and segment of the wrapped one."""
-
-    def __init__(self, inner):
-        self.inner, self.requests, self.segments = inner, [], []
-        for key in ("name", "solver", "initial_step", "recoverable", "unavailable", "notes"):
-            setattr(self, key, getattr(inner, key))
-
-    def hint(self, code):
-        return self.inner.hint(code)
-
-    def integrate(self, request):
-        self.requests.append(request)
-        seg = self.inner.integrate(request)
-        self.segments.append(seg)
-        return seg
 
 
 def run(problem, formulation, rtol):
