@@ -25,8 +25,9 @@ import time
 import numpy as np
 import pandas as pd
 
-from mechsim.scenarios.sensitivity_cycle import (CYCLE_COLUMNS, cycle_bulk_samples, cycle_temperatures, cycle_window,
-                                                 event_crosses_turn_row, period_gradient, repetition_crosses_end,
+from mechsim.scenarios.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
+                                                 cycle_temperatures, cycle_window, event_crosses_turn_row,
+                                                 switch_correction, period_gradient, repetition_crosses_end,
                                                  turn_peak)
 from mechsim.scenarios.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
                                                scenario_value, traced_quantities)
@@ -119,6 +120,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     plan = runner.plan(scenario)
     notes = []
     cycle = plan.thermal is not None and plan.thermal.averaging == "cycle"
+    run_plan = plan            # the run's own plan: at a prescribed speed, its closed form reports the value
     if cycle:
         check_request(plan, list(wrt), list(of or []))
         plan = cycle_window(plan)
@@ -154,6 +156,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     turn = cycle_temperatures(plan, df) if cycle else None
     if cycle and turn is None:
         raise ScenarioError("thermal.averaging", "the mechanics window holds no full crank turn to average")
+    if turn is not None and run_plan.method == "closed-form":
+        turn = closed_form_turn(run_plan, turn)
 
     def peak_values(q):
         if turn is not None and q in THERMAL_PEAKS:       # the periodic turn's rows, at their last time in the run
@@ -201,8 +205,16 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             if turn is not None and q in THERMAL_PEAKS:
                 value, at = turn_peak(turn, column, first.t)        # the run's reported peak, and its time
                 results[q] = (value, g, at)
+                if q == "peak_temp_contact_C" and "traced_temp_contact_C" in turn and ext is not None:
+                    # the run's input jumps at the contact's switches, the traced one is linear between rows
+                    results[q] = (value, g + switch_correction(run_plan, turn, first.t, path.events), at)
+                    traced, _ = turn_peak(turn, "traced_temp_contact_C", first.t)
+                    warnings.append(f"{q}: the value is the closed-form run's; the derivative is that of the same "
+                                    "row with the turn's heat input linear between output rows (the DAE window, "
+                                    f"whose value differs by {traced - value:+.2g} K) plus what the events' motion "
+                                    "moves in the run's exact input (docs/sensitivity.md, \"Cycle averaging\")")
                 note = event_crosses_turn_row(q, wrt, relative, turn, path.events, change)
-                if note and q == "peak_temp_contact_C" and ext is not None:
+                if note and q == "peak_temp_contact_C" and ext is not None and "traced_temp_contact_C" not in turn:
                     warnings.append(note)
                 if q == "peak_temp_contact_C" and ext is not None:
                     note = repetition_crosses_end(q, wrt, relative, turn, first.t, period_gradient(turn, by_time),

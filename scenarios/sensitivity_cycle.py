@@ -70,9 +70,108 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
         base_pin, base_wheel = bulk[:, pin], bulk[:, wheel]
         contact_previous = share * previous[:, pin] + (1.0 - share) * previous[:, wheel] + flash - KELVIN
     return {"rows": inner, "t_s": t[inner] + layout.periods * (b - a), "period": float(b - a), "layout": layout,
+            "t_start": float(a),
             "duration": duration, "temp_flash_rise_K": flash, "bulk": bulk,
             "temp_contact_C": share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN,
             "temp_contact_previous_C": contact_previous}
+
+
+def closed_form_turn(plan, turn: dict) -> dict:
+    """At a prescribed speed the run is the closed form's (thermal/plan.py: the motion exact at any time, its
+    two-turn window, the network's input exact between the contact's switches), while the derivatives follow the
+    DAE with the speed as a constraint over that same window, the same output rows and turn, with the cycle bulk of
+    the input linear between rows (`cycle_temperatures`, thermal/cycle_exact.py). `turn` with its contact
+    temperatures (and their previous repetitions, and times) replaced by the closed-form run's own at the same rows
+    and repetitions: its window run, the same flash rise and Blok share columns, and its cycle bulk
+    (`ThermalPlan.cycle_bulk`, the run's `bulk_response`) at t_k + m_k P. So the table's value is the run's
+    reported peak; the traced ones stay as `traced_temp_contact_C` (they differ by the input's linear interpolation
+    between rows across the contact's switches: docs/sensitivity.md, "Cycle averaging")."""
+    from mechsim.scenarios import runner
+    from mechsim.thermal.contact_row import KELVIN
+    window = runner.execute(cycle_window(plan))
+    if window.failure is not None:
+        raise ValueError(f"the closed-form window failed: {window.failure.message()}")
+    df = window.timeseries
+    t = df["t_s"].to_numpy(float)
+    layout = turn["layout"]
+    rows_t = layout.t[turn["rows"]]
+    idx = np.clip(np.searchsorted(t, rows_t), 0, len(t) - 1)
+    step = float(plan.scenario.si["output_step"])
+    if not np.all(np.abs(t[idx] - rows_t) <= 1e-9 * step):
+        raise ValueError("the closed-form window's rows are not the DAE window's")
+    flash = df["temp_flash_rise_K"].to_numpy(float)[idx]
+    share = df["heat_share_pin"].to_numpy(float)[idx]
+    setup = plan.thermal.setup
+    out = dict(turn, traced_temp_contact_C=turn["temp_contact_C"], traced_t_s=turn["t_s"])
+    if setup.system is None:
+        return out
+    names = list(setup.system.state_names)
+    pin, wheel = names.index("temp_bulk_pin_K"), names.index("temp_bulk_wheel_K")
+    m = np.asarray(layout.periods)
+    _, out["inputs"], _ = plan.thermal._window_states(df)
+    out["share"] = share
+    times, bulk = plan.thermal.cycle_bulk(df, rows_t, m)
+    _, previous = plan.thermal.cycle_bulk(df, rows_t, m - 1)
+    out.update(t_s=times, temp_contact_C=share * bulk[:, pin] + (1.0 - share) * bulk[:, wheel] + flash - KELVIN,
+               temp_contact_previous_C=share * previous[:, pin] + (1.0 - share) * previous[:, wheel] + flash - KELVIN)
+    return out
+
+
+def switch_kernel(plan, turn: dict, t_row: float, t_e: float) -> np.ndarray:
+    """d(contact temperature of the turn's row at t_row, at its last repetition T = t_k + m_k P) / d(heat input
+    impulse at t_e), per network input (K/J): the ripple's response to delta(t - t_e) - 1/P (the ripple is the
+    response to the input less its period mean, thermal/cycle.py `bulk_response`). In modal coordinates
+    y = V^-1 C^-1 B e_j of A = -C^-1 K the periodic response is y (e^(x r)/(1 - e^x) + 1/x), x = lambda P,
+    r = ((t - t_e) mod P)/P; the ripple at T is that at T less e^(lambda T) times that at 0; the contact
+    temperature weighs the pin's and the wheel's bulk by the row's Blok share (docs/sensitivity.md, "Cycle
+    averaging")."""
+    from mechsim.thermal.cycle_exact import modes
+    system = plan.thermal.setup.system
+    C, K, B = np.asarray(system.capacity), np.asarray(system.dense_conductance()), np.asarray(system.input_matrix)
+    lam, V, Vinv = modes(C, K)
+    k = int(np.argmin(np.abs(turn["layout"].t[turn["rows"]] - t_row)))
+    T, P, share = float(turn["t_s"][k]), float(turn["period"]), float(turn["share"][k])
+    names = list(system.state_names)
+    weight = np.zeros(system.size)
+    weight[names.index("temp_bulk_pin_K")], weight[names.index("temp_bulk_wheel_K")] = share, 1.0 - share
+    x = lam * P
+
+    def periodic(t):
+        r = np.mod(t - t_e, P) / P
+        return (-np.expm1(x) + x * np.exp(x * r)) / (x * -np.expm1(x))
+    y = Vinv @ (B / C[:, None])
+    return weight @ (V @ ((periodic(T) - np.exp(lam * T) * periodic(0.0))[:, None] * y))
+
+
+def switch_correction(plan, turn: dict, t_row: float, events, delta: float = 1e-6) -> np.ndarray:
+    """The derivative the turn's input linear between rows leaves out, per scaled value, of the contact temperature
+    of the turn's row at t_row, where the run's input is exact (`closed_form_turn`), as the events of the turn move:
+    at an entry or exit the run's input jumps, at a slip reversal its slope does (|slip speed|), and the run
+    integrates it across the event where the interpolation spans the event's row interval [t_i, t_i + h] with the
+    rows' values. Moving the input by dt_e in time moves the run's integral over that interval by
+    (u(t_i) - u(t_i + h)) dt_e and the interpolation's by -(h/2)(u'(t_i) + u'(t_i + h)) dt_e, so the run's
+    bulk moves by `switch_kernel` D dt_e more, D = u(t_i) - u(t_i + h) + (h/2)(u'(t_i) + u'(t_i + h)) (a jump
+    du = u(t_e-) - u(t_e+) gives D = du, a kink of slopes -c, c at alpha = t_e - t_i gives D = c (2 alpha - h);
+    zero to O(h^3) where the input is smooth). The slopes are the run's input's one-sided differences (step
+    `delta`) away from the event. Left out: the change of the input's shape at a fixed distance from the event,
+    on the part of the interval the two integrate differently (docs/sensitivity.md, "Cycle averaging").
+    events: the traced path's (t, dt per scaled value)."""
+    layout = turn["layout"]
+    a, P = float(turn["t_start"]), float(turn["period"])
+    n_in = np.asarray(plan.thermal.setup.system.input_matrix).shape[1]
+
+    def u(t):
+        return np.asarray(turn["inputs"](np.asarray(t, float)))[:n_in]
+    out = 0.0
+    for e in events:
+        if not a < e.t < a + P:
+            continue
+        i = int(np.searchsorted(layout.t, e.t, side="right") - 1)
+        t0, t1 = float(layout.t[i]), float(layout.t[i + 1])
+        v = u([t0 - delta, t0, t1, t1 + delta])
+        D = v[:, 1] - v[:, 2] + 0.5 * (t1 - t0) * ((v[:, 1] - v[:, 0]) + (v[:, 3] - v[:, 2])) / delta
+        out = out + float(switch_kernel(plan, turn, t_row, e.t) @ D) * np.asarray(e.dt, float)
+    return np.asarray(out)
 
 
 def turn_peak(turn: dict, column: str, t_row: float) -> tuple[float, float]:

@@ -178,7 +178,3 @@ def check_thermal(plan, mtype: str) -> None:
     if th["flash"] != "jaeger":
         raise ScenarioError("thermal.flash", f"'{th['flash']}' (the seed's formula, for comparison only) is not "
                             "traced; use 'jaeger'")
-    if plan.thermal.averaging == "cycle" and plan.method == "closed-form":
-        raise ScenarioError("thermal.averaging", "cycle averaging at a prescribed speed is not traced (its closed form "
-                            "is not differentiated, and the DAE's mechanics window differs): set drive.type = 'motor' "
-                            "or 'torque', or thermal.averaging = 'resolved' (docs/sensitivity.md)")

@@ -295,10 +295,3 @@ def test_shipped_lc1_design_is_a_kkt_point():
     assert np.linalg.cond(G * x[:, None] / np.array([60.0, 0.3])[None, :]) < 1e4
     mu = np.linalg.solve(G, -np.array([1.0, 0.0]))
     assert mu[0] > 0 and mu[1] > 0, mu
-
-
-def test_cycle_at_prescribed_speed_is_refused():
-    sc = mechsim.load("geneva-seed-lc1-mu015", set=["duration=60 s", "thermal.averaging=cycle"])
-    with pytest.raises(ScenarioError) as err:
-        sensitivity(sc, ["load.wheel_torque"], OF)
-    assert err.value.field == "thermal.averaging"

@@ -97,16 +97,7 @@ class ThermalPlan:
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
             return df, events, extra, summary, warnings
-        states = None
-        inputs = breaks = None
-        ext = setup.extension
-        if ext is not None:
-            if self.method == "dae":
-                states = df[list(ext.names)].to_numpy(float)
-            else:
-                states, inputs, breaks = integrate_closed_form(
-                    ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
-                    df["t_s"].to_numpy(float), setup.initial, table=df)
+        states, inputs, breaks = self._window_states(df)
         window = None
         if self.averaging == "cycle" and not failed:
             window = self._cycle(df, events, states, inputs, breaks, summary, warnings, extra)
@@ -128,6 +119,51 @@ class ThermalPlan:
         summary["notes"] = list(setup.notes)
         warnings += self._validity(df, contact, summary)
         return df, events, extra, summary, warnings
+
+    def _window_states(self, df: pd.DataFrame):
+        """(states, input function, its breaks) of the thermal network over the mechanics table `df`: the DAE's
+        states (input function None), or with the closed form the network integrated exactly in its modes along
+        the closed-form motion (thermal/exact.py `integrate_closed_form`); (None, None, None) without states."""
+        setup, mech, ext = self.setup, self.mech, self.setup.extension
+        if ext is None:
+            return None, None, None
+        if self.method == "dae":
+            return df[list(ext.names)].to_numpy(float), None, None
+        return integrate_closed_form(ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
+                                     df["t_s"].to_numpy(float), setup.initial, table=df)
+
+    def cycle_bulk(self, df: pd.DataFrame, t_rows, repetitions) -> tuple[np.ndarray, np.ndarray]:
+        """(times, bulk states in K) of the run's cycle-averaged bulk at the window's rows t_rows repeated
+        `repetitions` periods later (t_k + m P, P the run's period: the times `continue_periodically` writes),
+        from its mechanics window `df` (as the runner hands it to `finish`; with the closed form also the
+        window's finished table): the same turn, cycle means, period input and `bulk_response` as `_cycle`,
+        evaluated at those times only. The design sensitivities read the run's own peak contact temperature this
+        way at a prescribed speed (docs/sensitivity.md, "Cycle averaging") without continuing the whole duration."""
+        states, inputs, breaks = self._window_states(df)
+        means = self._cycle_means(df, states)
+        if states is None or means is None:
+            raise ValueError("cycle_bulk needs bulk states and a full turn in the window")
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        times = np.asarray(t_rows, float) + np.asarray(repetitions) * means.period
+        return times, cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, times)[1]
+
+    def _cycle_means(self, df: pd.DataFrame, states):
+        """The cycle means of the last full turn of the window (thermal/cycle.py `cycle_means_from_energies`), or
+        None with fewer than one full turn."""
+        t = df["t_s"].to_numpy(float)
+        angle = df[next(c for c in df.columns if c.endswith("_angle_rad"))].to_numpy(float)
+        bounds = cyc.turn_boundaries(t, angle, angle[0])
+        if len(bounds) < 2:
+            return None
+        if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
+            contact = self.mech.contact_state(df)
+            e_gen = np.concatenate([[0.0], np.cumsum(0.5 * (contact["heat_rate"][1:] + contact["heat_rate"][:-1])
+                                                      * np.diff(t))])
+            return cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
+                                  float(np.diff(np.interp(bounds[-2:], t, e_gen))[0] / (bounds[-1] - bounds[-2])),
+                                  float("nan"), None)
+        n = self.setup.system.size
+        return cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
 
     @staticmethod
     def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -224,24 +260,14 @@ class ThermalPlan:
         whole duration, and the bulk states of the averaged solution (mean + periodic ripple) on every row.
         (table, events, states) or None when there is no full turn to average."""
         setup, mech = self.setup, self.mech
-        t = df["t_s"].to_numpy(float)
-        angle_col = next(c for c in df.columns if c.endswith("_angle_rad"))
-        angle = df[angle_col].to_numpy(float)
-        bounds = cyc.turn_boundaries(t, angle, angle[0])
-        if len(bounds) < 2:
+        means = self._cycle_means(df, states)
+        if means is None:
             warnings.append("thermal: fewer than one full crank turn in the mechanics window; shown resolved")
             return None
-        if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
-            n = None
-            contact = mech.contact_state(df)
-            e_gen = np.concatenate([[0.0], np.cumsum(0.5 * (contact["heat_rate"][1:] + contact["heat_rate"][:-1])
-                                                      * np.diff(t))])
-            means = cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
-                                   float(np.diff(np.interp(bounds[-2:], t, e_gen))[0] / (bounds[-1] - bounds[-2])),
-                                   float("nan"), None)
-        else:
-            n = setup.system.size
-            means = cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
+        t = df["t_s"].to_numpy(float)
+        angle = df[next(c for c in df.columns if c.endswith("_angle_rad"))].to_numpy(float)
+        bounds = cyc.turn_boundaries(t, angle, angle[0])
+        n = None if states is None else setup.system.size
         duration = float(self.si["duration"])
         full, full_events, t_sim = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
                                                              float(self.si["output_step"]))
