@@ -77,3 +77,7 @@ def assert_matches_finite_differences(part, ref0: dict, fd: dict, p: float, key:
         assert abs(e - e_fd) <= 1e-4 * abs(e_fd) + floor, (q, key, d, fd[q])
         if abs(e_fd) > 100 * floor:
             worst[q] = max(worst.get(q, 0.0), abs(d - fd[q]) / abs(fd[q]))
+
+
+# files that compile the same jax models run in one xdist worker (tests/worker_families.py)
+from worker_families import pytest_xdist_make_scheduler  # noqa: E402,F401
