@@ -9,12 +9,19 @@ process the second file's call compiled nothing (measured 2026-11-27 on the shar
 - the sensitivity pass of geneva-motor (tests/test_sensitivity.py, tests/test_sensitivity_initial.py) and of
   rolling-a-torque (tests/test_sensitivity_rolling.py, tests/test_sensitivity_initial.py): 7.3 s and 8.9 s of
   compilation each, 0.0 s for the second caller;
-- the diffrax (Tsit5) solve of the Geneva with a drive (geneva-motor and geneva-torque share it), used by
-  tests/test_compare_builtins.py, tests/test_diffrax_compare.py and tests/test_diffrax_backend.py: 5.7 s, 0.0 s.
+- the diffrax (Tsit5) solve of the Geneva with a drive (geneva-motor and geneva-torque share it, at any slot
+  count), used by tests/test_compare_builtins.py, tests/test_diffrax_compare.py, tests/test_diffrax_backend.py,
+  tests/test_solver_stats.py, tests/test_restart_perturbation.py and tests/test_stalls.py: 5.7-6.1 s, then 0.0 s;
+- the same with formulation = index1 (tests/test_robustness.py's diffrax cases, tests/test_stability.py's
+  Baumgarte case): 4.2 s, then the stability case 3.3 s in all (8.4 s alone within the hour: ~7 s compiling).
+
+The second pass of .ci/run (the hybrid-loop files) groups the same way: test_restart_perturbation, test_stalls and
+test_diffrax_compare there are one unit.
 
 Nothing else changes: every file still runs whole in one worker, in its own order, with its own module fixtures.
-A family is one work unit for the scheduler, so it should stay well below half of the suite's time (about 60
-and 90 s of the ~10 minutes of CPU here). Without pytest-xdist, or with another --dist, this does nothing.
+A family is one work unit for the scheduler, so it should stay well below half of the suite's time (the
+largest here, the diffrax Geneva, is an estimated 100-130 s from the idle durations, of ~10 minutes of CPU; xdist
+starts the units with the most tests first, and the families are among the first five). Without pytest-xdist, or with another --dist, this does nothing.
 """
 from __future__ import annotations
 
@@ -26,6 +33,10 @@ FAMILIES = {
     "tests/test_sensitivity_rolling.py": "tests/test_sensitivity.py",
     "tests/test_diffrax_compare.py": "tests/test_compare_builtins.py",
     "tests/test_diffrax_backend.py": "tests/test_compare_builtins.py",
+    "tests/test_solver_stats.py": "tests/test_compare_builtins.py",
+    "tests/test_restart_perturbation.py": "tests/test_compare_builtins.py",
+    "tests/test_stalls.py": "tests/test_compare_builtins.py",
+    "tests/test_stability.py": "tests/test_robustness.py",
 }
 
 
