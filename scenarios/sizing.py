@@ -13,12 +13,11 @@ value and quantity. Peak quantities are limited and minimised by their magnitude
 for either flank). The multipliers at the optimum follow from the KKT conditions on the active set (non-negative
 least squares on the gradients), reported as shadow prices: the change of the optimal objective per unit change
 of each active limit or bound (Nocedal & Wright, "Numerical Optimization", 2nd ed., Theorem 12.1 and eq. 12.34).
+
+The request is parsed in `sizing_spec.py`; the design's own run is read in `sizing_check.py`.
 """
 from __future__ import annotations
 
-import dataclasses
-import math
-import re
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -26,12 +25,11 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from mechsim.scenarios.sizing_check import design_run
+from mechsim.scenarios.sizing_spec import SLOTS, Bound, Limit, parse_bound, parse_limit, set_list_entries
+from mechsim.scenarios.sweep.rows import lookup
 from mechsim.scenarios.units import ScenarioError
-from mechsim.scenarios.sweep.rows import key_path, lookup
 
-NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
-_BOUND = re.compile(rf"^\s*({NUMBER})\s*([^:]*?)\s*:\s*({NUMBER})\s*(.*?)\s*$")
-_LIMIT = re.compile(rf"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(<=|>=)\s*({NUMBER})\s*$")
 #: the optimisers offered; SLSQP is the default (docs/sensitivity.md, "Sizing": measured against trust-constr)
 METHODS = ("slsqp", "trust-constr")
 #: a design's largest constraint violation, relative to the limit, that still counts as feasible
@@ -44,7 +42,6 @@ MAX_SLOT_CHOICES = 12
 MAX_RESOLVES = 3
 #: the part of the excess added to it when a limit is tightened (`tightening`)
 EXCESS_MARGIN = 0.1
-SLOTS = "mechanism.slots"
 
 
 class SizingFailed(RuntimeError):
@@ -53,141 +50,6 @@ class SizingFailed(RuntimeError):
     def __init__(self, message: str, result: "SizingResult | None" = None):
         super().__init__(message)
         self.result = result
-
-
-@dataclass(frozen=True)
-class Bound:
-    """One varied scenario value: its key, bounds in SI and SI unit ('' for a number without unit)."""
-
-    key: str
-    low: float
-    high: float
-    unit: str
-
-    @property
-    def column(self) -> str:
-        from mechsim.scenarios.sweep.rows import unit_suffix
-        return f"{self.key}_{unit_suffix(self.unit)}" if self.unit else self.key
-
-
-@dataclass(frozen=True)
-class Limit:
-    """A limit on a headline quantity: quantity <= value or quantity >= value (value in the quantity's unit)."""
-
-    quantity: str
-    sense: str
-    value: float
-
-    @property
-    def text(self) -> str:
-        return f"{self.quantity} {self.sense} {self.value:.12g}"
-
-    @property
-    def scale(self) -> float:
-        return abs(self.value) or 1.0
-
-    def margin(self, q: float) -> float:
-        """The scaled constraint, >= 0 when satisfied: (limit - q) / |limit| for <=, (q - limit) / |limit| for >=."""
-        return ((self.value - q) if self.sense == "<=" else (q - self.value)) / self.scale
-
-
-def parse_bound(text: str, si: dict) -> Bound:
-    """'section.key=LOW:HIGH unit' (or 'LOW unit:HIGH unit') -> Bound in SI. ScenarioError naming the problem."""
-    from mechsim.scenarios.loader import sections_for
-    from mechsim.scenarios.units import to_si
-    if "=" not in text:
-        raise ScenarioError("--vary", f"expected section.key=LOW:HIGH, got {text!r}")
-    key, spec = (s.strip() for s in text.split("=", 1))
-    try:
-        path = key_path(key)
-    except ValueError:
-        raise ScenarioError("--vary", f"unknown scenario key {key!r} for a {si['mechanism']['type']} scenario") from None
-    parts = [p for p in path if isinstance(p, str)]
-    index = path[len(parts):] if len(parts) == 2 and path[:2] == parts else None
-    fields = sections_for(si["mechanism"]["type"]).get(parts[0], {}) if index is not None else {}
-    spec_field = fields.get(parts[-1]) if index is not None else None
-    if spec_field is not None and (index or spec_field.kind in ("list", "points")):
-        spec_field = _list_entry(key, spec_field, index, si)
-    if spec_field is None:
-        raise ScenarioError("--vary", f"unknown scenario key {key!r} for a {si['mechanism']['type']} scenario")
-    m = _BOUND.match(spec)
-    if not m:
-        raise ScenarioError(f"--vary {key}", f"expected LOW:HIGH with an optional unit (e.g. 40:120 mm), got {spec!r}")
-    low_t, low_unit, high_t, high_unit = m.groups()
-    unit = spec_field.unit if spec_field.kind == "quantity" else ""
-    if key == SLOTS:
-        if low_unit or high_unit or not re.fullmatch(r"\d+", low_t) or not re.fullmatch(r"\d+", high_t):
-            raise ScenarioError(f"--vary {key}", f"the slot count takes whole numbers LOW:HIGH, got {spec!r}")
-        low, high = float(low_t), float(high_t)
-    elif unit:
-        low_unit = low_unit or high_unit
-        high_unit = high_unit or low_unit
-        low = to_si(key, f"{low_t} {low_unit}".strip(), unit)
-        high = to_si(key, f"{high_t} {high_unit}".strip(), unit)
-    elif spec_field.kind in ("float", "int"):
-        if low_unit or high_unit:
-            raise ScenarioError(f"--vary {key}", f"takes plain numbers (no unit), got {spec!r}")
-        low, high = float(low_t), float(high_t)
-    else:
-        raise ScenarioError(f"--vary {key}", "is not a numeric scenario value")
-    if not (math.isfinite(low) and math.isfinite(high)) or low >= high:
-        raise ScenarioError(f"--vary {key}", f"LOW must be below HIGH, got {spec!r}")
-    return Bound(key, low, high, unit)
-
-
-def _list_entry(key: str, spec_field, index: list, si: dict):
-    """A list entry's field ('mechanism.sprocket_radii[0]', 'mechanism.sprockets[1][0]': one index per nesting of
-    the list, as the loader's messages name them) as a quantity of the list's unit; ScenarioError where the key
-    names a whole list, an index the scenario's list does not have, or a list of non-numbers."""
-    from mechsim.scenarios.schema import Field
-    depth = 2 if spec_field.kind == "points" else 1
-    if len(index) != depth:
-        raise ScenarioError(f"--vary {key}", f"a list: name one entry, e.g. {key.split('[')[0]}{'[0]' * depth}")
-    node = lookup(si, key.split("[")[0])
-    for i in index:
-        if not isinstance(node, list) or not 0 <= i < len(node):
-            raise ScenarioError(f"--vary {key}", "no such entry in the scenario's list")
-        node = node[i]
-    if not spec_field.unit or isinstance(node, bool) or not isinstance(node, (int, float)):
-        raise ScenarioError(f"--vary {key}", "is not a numeric scenario value")
-    return Field("quantity", spec_field.unit)
-
-
-def set_list_entries(raw: dict, si: dict, entries: list[tuple[str, str]]) -> dict:
-    """raw with the list entries set (key as `parse_bound` takes it, value as TOML text, e.g. '0.05 m'): the
-    loader's --set names whole keys only, so the list is written whole, its other entries as the scenario gave
-    them (or, where the scenario leaves the list to its default, as resolved, in SI with the list's unit)."""
-    import copy
-
-    from mechsim.scenarios.loader import sections_for
-    out = copy.deepcopy(raw)
-    for key, text in entries:
-        section, name, *index = key_path(key)
-        table = out.setdefault(section, {})
-        if table.get(name) is None:
-            unit = sections_for(si["mechanism"]["type"])[section][name].unit
-            table[name] = _with_unit(copy.deepcopy(si[section][name]), unit)
-        node = table[name]
-        for i in index[:-1]:
-            node = node[i]
-        node[index[-1]] = text
-    return out
-
-
-def _with_unit(value, unit: str):
-    return [_with_unit(v, unit) for v in value] if isinstance(value, list) else f"{float(value)!r} {unit}"
-
-
-def parse_limit(text: str) -> Limit:
-    """'QUANTITY <= VALUE' (or >=) -> Limit; the value is in the quantity's own unit (its name's suffix)."""
-    m = _LIMIT.match(text)
-    if not m:
-        raise ScenarioError("--subject-to", f"expected \"QUANTITY <= VALUE\" or \"QUANTITY >= VALUE\" with VALUE a "
-                            f"number in the quantity's unit, got {text!r}")
-    value = float(m.group(3))
-    if not math.isfinite(value):
-        raise ScenarioError("--subject-to", f"the limit must be a finite number, got {text!r}")
-    return Limit(m.group(1), m.group(2), value)
 
 
 @dataclass
@@ -485,40 +347,6 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
                                              for n, why in failures]
         best.summary["slot_choices"] = best.choices
     return best
-
-
-def design_run(design) -> dict:
-    """The design's own run (as `mechsim run design.toml`): its quantities (`run_quantities`) and its wall time."""
-    from mechsim.scenarios import runner
-    from mechsim.scenarios.sensitivity_map import MAPS
-    wall = time.perf_counter()
-    result = runner.execute(runner.plan(design))
-    pmap = MAPS[design.si["mechanism"]["type"]]
-    out = run_quantities(result, pmap.engage, pmap.release)
-    out["_wall_time_s"] = time.perf_counter() - wall
-    return out
-
-
-def run_quantities(result, engage: str, release: str) -> dict:
-    """The headline quantities a run reports itself: each peak's magnitude from summary.json `peaks` (the column
-    docs/sensitivity.md names), the index time (the last release and the engage before it) and the cycle time (the
-    last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
-    heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
-    failure, or None."""
-    from mechsim.scenarios.sensitivity_map import PEAKS, THERMAL_PEAKS
-    peaks = result.summary.get("peaks", {})
-    out = {q: (abs(peaks[c]["value"]) if c in peaks else None) for q, c in {**PEAKS, **THERMAL_PEAKS}.items()}
-    ev = result.events
-    kinds = ev["kind"].to_numpy() if ev is not None and len(ev) else np.array([])
-    t = ev["t_s"].to_numpy(float) if len(kinds) else np.array([])
-    engages, releases = t[kinds == engage], t[kinds == release]
-    out["index_time_s"] = None
-    if len(releases) and engage:
-        before = engages[engages < releases[-1]]
-        out["index_time_s"] = float(releases[-1] - before[-1]) if len(before) else None
-    out["cycle_time_s"] = float(engages[-1] - engages[-2]) if len(engages) >= 2 else None
-    out["_failure"] = result.failure.message() if result.failure is not None else None
-    return out
 
 
 def tightening(limit: "Limit", sized: float, run: float) -> float:
