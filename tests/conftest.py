@@ -79,5 +79,51 @@ def assert_matches_finite_differences(part, ref0: dict, fd: dict, p: float, key:
             worst[q] = max(worst.get(q, 0.0), abs(d - fd[q]) / abs(fd[q]))
 
 
+
+def value_setting(si: dict, key: str, value: float, unit: str) -> str:
+    """--set of one value in SI (`unit`, '' for a plain number); a list entry ('mechanism.sprockets[1][0]') sets its
+    whole list with that entry replaced and the others as the scenario gives them (the loader sets lists whole)."""
+    def quoted(v):
+        return f'"{v!r} {unit}"' if unit else repr(v)
+    if "[" not in key:
+        return f"{key}={quoted(value)}"
+    name, *idx = key.split("[")
+    idx = [int(i.rstrip("]")) for i in idx]
+    entries = [list(e) if isinstance(e, list) else e for e in si["mechanism"][name.split(".")[1]]]
+    node = entries
+    for i in idx[:-1]:
+        node = node[i]
+    node[idx[-1]] = value
+
+    def text(e):
+        return "[" + ", ".join(text(x) for x in e) + "]" if isinstance(e, list) else quoted(e)
+    return f"{name}={text(entries)}"
+
+
+def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, steps: dict, si: dict,
+                                   value_rel: float, floor: float) -> dict:
+    """Every peak of the sensitivity `table` against Richardson central differences of `mechsim.run(name)` with
+    `fd_sets`, read at the nominal run's peak rows (the envelope rule: the derivative of the maximum is that of its
+    row), with the relative step steps[key] for each key of `wrt` (set in SI, the table's `wrt_unit`); returns the
+    largest relative deviation per quantity (`assert_matches_finite_differences`)."""
+    import mechsim
+    from mechsim.scenarios.sensitivity import PEAKS
+    df = mechsim.run(mechsim.load(name, set=fd_sets)).timeseries
+    peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
+    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
+
+    def at_rows(sets):
+        r = mechsim.run(mechsim.load(name, set=sets))
+        assert r.failure is None, r.failure.message()
+        return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
+    ref0 = at_rows(fd_sets)
+    worst: dict = {}
+    for key in wrt:
+        part = table[table["wrt"] == key].set_index("quantity")
+        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
+        fd = richardson_central(lambda value: at_rows(fd_sets + [value_setting(si, key, value, unit)]), p, steps[key])
+        assert_matches_finite_differences(part, ref0, fd, p, key, value_rel, floor, worst)
+    return worst
+
 # files that compile the same jax models run in one xdist worker (tests/worker_families.py)
 from worker_families import pytest_xdist_make_scheduler  # noqa: E402,F401

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import mechsim
-from conftest import assert_matches_finite_differences, richardson_central
+from conftest import (assert_matches_finite_differences, peaks_match_finite_differences, richardson_central,
+                      value_setting)
 from mechsim.scenarios.sensitivity import PEAKS, sensitivity
 
 NAME = "chain-mech1-torque"
@@ -89,23 +90,6 @@ H_GEOMETRY = {"mechanism.sprocket_radii[0]": 1e-5, "mechanism.sprockets[0][0]": 
               "mechanism.sprocket_inertias[1]": 1e-3}
 
 
-def _list_setting(si: dict, key: str, value: float) -> str:
-    """--set of the whole list with one entry replaced (the loader sets lists whole), in SI units."""
-    name, *idx = key.split("[")
-    field = name.split(".")[1]
-    idx = [int(i.rstrip("]")) for i in idx]
-    entries = [list(e) if isinstance(e, list) else e for e in si["mechanism"][field]]
-    node = entries
-    for i in idx[:-1]:
-        node = node[i]
-    node[idx[-1]] = value
-    unit = "kg*m^2" if field == "sprocket_inertias" else "m"
-
-    def text(e):
-        return "[" + ", ".join(text(x) for x in e) + "]" if isinstance(e, list) else f'"{e!r} {unit}"'
-    return f"{name}={text(entries)}"
-
-
 def test_chain_geometry_matches_finite_differences():
     """The path pieces' geometry traced through every transition (docs/sensitivity.md "Geometry of the chain and
     the rolling pair"), and the impacts with restitution. A closed form besides: at a constant drive torque T the
@@ -126,9 +110,11 @@ def test_chain_geometry_matches_finite_differences():
     worst = {}
     for key in WRT_GEOMETRY:
         part = table[table["wrt"] == key].set_index("quantity")
-        p = float(part["parameter"].iloc[0])
-        fd = richardson_central(lambda value: quantities(_run(base + FD[len(SETS):] + [_list_setting(si, key, value)]),
-                                                         rows), p, H_GEOMETRY[key])
+        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
+
+        def moved(value):
+            return quantities(_run(base + FD[len(SETS):] + [value_setting(si, key, value, unit)]), rows)
+        fd = richardson_central(moved, p, H_GEOMETRY[key])
         assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
     print("chain geometry: largest relative deviation from the finite differences:",
           {q: f"{e:.1e}" for q, e in worst.items()})
@@ -158,27 +144,9 @@ def test_detuned_chain_geometry_matches_finite_differences():
     scenario = mechsim.load(DETUNED, set=DETUNED_SETS)
     table = sensitivity(scenario, WRT_DETUNED)
     fd_sets = DETUNED_SETS + ["solver.rtol=1e-12", "solver.atol=1e-14"]
-    df = mechsim.run(mechsim.load(DETUNED, set=fd_sets)).timeseries
+    worst = peaks_match_finite_differences(DETUNED, table, WRT_DETUNED, fd_sets, H_DETUNED, scenario.si, 1e-5,
+                                           ELASTICITY_FLOOR)
     peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
-    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
-
-    def at_rows(sets):
-        r = mechsim.run(mechsim.load(DETUNED, set=sets))
-        assert r.failure is None, r.failure.message()
-        return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
-    ref0 = at_rows(fd_sets)
-    worst = {}
-    for key in WRT_DETUNED:
-        part = table[table["wrt"] == key].set_index("quantity")
-        p = float(part["parameter"].iloc[0])
-        if "[" in key:
-            def setting(value):
-                return _list_setting(scenario.si, key, value)
-        else:
-            def setting(value):
-                return f'{key}="{value!r} m"'
-        fd = richardson_central(lambda value: at_rows(fd_sets + [setting(value)]), p, H_DETUNED[key])
-        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
     print("detuned chain geometry: largest relative deviation from the finite differences:",
           {q: f"{e:.1e}" for q, e in worst.items()})
     by = table.set_index(["quantity", "wrt"])["derivative"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 import mechsim
-from conftest import assert_matches_finite_differences, richardson_central
+from conftest import peaks_match_finite_differences
 from mechsim.scenarios.sensitivity import PEAKS, sensitivity
 
 NAME = "rolling-a-torque"
@@ -29,36 +29,12 @@ H = {"mechanism.disc_radius": 3e-5, "mechanism.crank_length": 5e-5}
 ELASTICITY_FLOOR = 1e-6
 
 
-def _peaks(sets, rows):
-    r = mechsim.run(mechsim.load(NAME, set=sets))
-    assert r.failure is None, r.failure.message()
-    return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
-
-
-def _setting(key: str, value: float, unit: str) -> str:
-    """--set of a value; a list entry ('mechanism.profile_centre[1]') sets its whole list (SI, the scenario's other
-    entry kept)."""
-    if "[" not in key:
-        return f"{key}={value!r} {unit}"
-    name, index = key[:-1].split("[")
-    entries = list(mechsim.load(NAME).si["mechanism"][name.split(".")[1]])
-    entries[int(index)] = value
-    return f"{name}=[" + ", ".join(f'"{e!r} m"' for e in entries) + "]"
-
-
 def test_rolling_pair_matches_finite_differences():
     table = sensitivity(mechsim.load(NAME, set=SETS), WRT)        # the scenario's own rtol 1e-10
     assert set(table["quantity"]) == {"peak_contact_force_N", "peak_drive_torque_N_m", "peak_coupler_force_N",
                                       "peak_crank_accel_rad_s2", "peak_crank_speed_rad_s"}
-    df = mechsim.run(mechsim.load(NAME, set=FD)).timeseries
-    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in set(table["quantity"])}
-    ref0 = _peaks(FD, rows)
-    worst = {}
-    for key in WRT:
-        part = table[table["wrt"] == key].set_index("quantity")
-        p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        fd = richardson_central(lambda value: _peaks(FD + [_setting(key, value, unit)], rows), p, H.get(key, 1e-3))
-        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, worst)
+    worst = peaks_match_finite_differences(NAME, table, WRT, FD, {k: H.get(k, 1e-3) for k in WRT},
+                                           mechsim.load(NAME, set=SETS).si, 1e-7, ELASTICITY_FLOOR)
     print("rolling pair: largest relative deviation from the finite differences:",
           {q: f"{e:.1e}" for q, e in worst.items()})
 
@@ -80,30 +56,9 @@ def test_rolling_pair_geometry_through_dead_points():
     nominal = mechsim.run(mechsim.load(EVENTS, set=fd_sets))
     assert list(nominal.events["kind"]) == ["dead point", "dead point"]
     df = nominal.timeseries
-    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in set(table["quantity"])}
-    assert max(df["t_s"].iloc[i] for i in rows.values()) > nominal.events["t_s"].iloc[0]
-    si = mechsim.load(EVENTS).si
-
-    def at_rows(sets):
-        r = mechsim.run(mechsim.load(EVENTS, set=sets))
-        assert r.failure is None, r.failure.message()
-        return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
-    ref0 = at_rows(fd_sets)
-    worst = {}
-    for key in WRT_EVENTS:
-        part = table[table["wrt"] == key].set_index("quantity")
-        p = float(part["parameter"].iloc[0])
-        if "[" in key:
-            name, index = key[:-1].split("[")
-            entries = list(si["mechanism"][name.split(".")[1]])
-
-            def setting(value):
-                moved = [value if i == int(index) else e for i, e in enumerate(entries)]
-                return f"{name}=[" + ", ".join(f'"{e!r} m"' for e in moved) + "]"
-        else:
-            def setting(value):
-                return f'{key}="{value!r} m"'
-        fd = richardson_central(lambda value: at_rows(fd_sets + [setting(value)]), p, H_EVENTS[key])
-        assert_matches_finite_differences(part, ref0, fd, p, key, 1e-7, ELASTICITY_FLOOR, worst)
+    rows = [int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in set(table["quantity"])]
+    assert max(df["t_s"].iloc[i] for i in rows) > nominal.events["t_s"].iloc[0]
+    worst = peaks_match_finite_differences(EVENTS, table, WRT_EVENTS, fd_sets, H_EVENTS, mechsim.load(EVENTS).si,
+                                           1e-7, ELASTICITY_FLOOR)
     print("rolling pair through dead points: largest relative deviation from the finite differences:",
           {q: f"{e:.1e}" for q, e in worst.items()})
