@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from mechsim.dynamics.tables import TableColumns
+
 #: global error of a run in units of the local tolerance (see the module docstring)
 GLOBAL_FACTOR = 1000.0
 #: the closed form's energy bound in units of the trapezoidal rule's error estimate (measured 1.0-2.0 times it
@@ -51,17 +53,22 @@ class Violation:
                 f"{self.bound:.3g} from the solver tolerances; the rows from here on are not written")
 
 
-def _column(df: pd.DataFrame, name: str, names=None) -> np.ndarray | None:
-    return df[name].to_numpy(float) if name in (df.columns if names is None else names) else None
+def _columns(df) -> TableColumns:
+    """The table's columns, each read once (dynamics/tables.py TableColumns); a TableColumns passes through."""
+    return df if isinstance(df, TableColumns) else TableColumns(df)
 
 
-def _works(df: pd.DataFrame, names=None) -> list[str]:
-    return [c for c in (df.columns if names is None else names) if c.startswith("work_") and c.endswith("_J")]
+def _column(df: TableColumns, name: str, names=None) -> np.ndarray | None:
+    return np.asarray(df[name], dtype=float) if name in (df if names is None else names) else None
 
 
-def _matrix(df: pd.DataFrame, names: list[str]) -> np.ndarray:
+def _works(df: TableColumns, names=None) -> list[str]:
+    return [c for c in (df.names if names is None else names) if c.startswith("work_") and c.endswith("_J")]
+
+
+def _matrix(df: TableColumns, names: list[str]) -> np.ndarray:
     """The columns as one (rows, len(names)) array (a column at a time: a list selection copies the frame)."""
-    return np.stack([df[c].to_numpy(float) for c in names], axis=1)
+    return np.stack([np.asarray(df[c], dtype=float) for c in names], axis=1)
 
 
 def _friction(df, rtol, atol, power_col, label, names=None):
@@ -90,13 +97,15 @@ def _heat_generated(df, rtol, atol, names=None):
 def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=None,
                    works: np.ndarray | None = None) -> np.ndarray | None:
     """Per row: works (signed into the system) - change of kinetic energy - impact losses up to that row (J).
-    names: the columns to look at (default: all); works: their work columns as one array, if already read."""
+    names: the columns to look at (default: all); works: their work columns as one array, if already read.
+    df: a frame or its TableColumns."""
+    df = _columns(df)
     work_names = _works(df, names)
-    if not work_names or "kinetic_energy_J" not in (df.columns if names is None else names) or not len(df):
+    if not work_names or "kinetic_energy_J" not in (df if names is None else names) or not len(df.frame):
         return None
-    t = df["t_s"].to_numpy(float)
+    t = np.asarray(df["t_s"], dtype=float)
     w = _matrix(df, work_names) if works is None else works
-    ke = df["kinetic_energy_J"].to_numpy(float)
+    ke = np.asarray(df["kinetic_energy_J"], dtype=float)
     lost = np.zeros(len(t))
     if events is not None and len(events) and "energy_lost_J" in events:
         te = events["t_s"].to_numpy(float)
@@ -123,7 +132,7 @@ def _energy(df, events, rtol, atol, exact, names=None):
             panel[0], panel[-1] = panel[1], panel[-2]
         bound = QUADRATURE_FACTOR * np.concatenate([[0.0], np.cumsum(panel)]) + 1e-12 * np.max(np.abs(w), initial=1.0)
     else:
-        scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
+        scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df.frame["kinetic_energy_J"])))
         bound = np.full(len(w), GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale)))
     return "energy balance closure error (J)", np.abs(closure), bound
 
@@ -134,7 +143,8 @@ def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, 
     columns: check only the invariants these columns carry (default: every column)."""
     if df is None or not len(df):
         return None
-    names = None if columns is None else [c for c in columns if c in df.columns]
+    frame, df = df, TableColumns(df)
+    names = None if columns is None else [c for c in columns if c in df]
     checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names),
               _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names),
               _heat_generated(df, rtol, atol, names), _energy(df, events, rtol, atol, exact, names)]
@@ -151,5 +161,5 @@ def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, 
     if worst is None:
         return None
     i, label, value, bound = worst
-    mode = str(df["mode"].iloc[i]) if "mode" in (df.columns if names is None else names) else ""
-    return Violation(float(df["t_s"].iloc[i]), mode, label, value, bound)
+    mode = str(frame["mode"].iloc[i]) if "mode" in (df if names is None else names) else ""
+    return Violation(float(frame["t_s"].iloc[i]), mode, label, value, bound)

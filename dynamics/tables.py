@@ -1,6 +1,7 @@
 """Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -10,6 +11,35 @@ from mechsim.dynamics import kkt
 
 if TYPE_CHECKING:      # the tables read a finished Trajectory; importing the loop would load sympy for nothing
     from mechsim.dynamics.hybrid import Trajectory
+
+
+class TableColumns(Mapping):
+    """A result table's columns as numpy arrays, each read from the frame once (a pandas column read costs ~20 us
+    and a run's summary and checks read the same columns several times); `names` in the frame's order.
+    The arrays are the frame's own data (`Series.to_numpy`, no copy): use it while the frame is unchanged."""
+
+    def __init__(self, frame: pd.DataFrame):
+        self.frame = frame
+        self.names: list[str] = frame.columns.tolist()
+        self._known = set(self.names)
+        self._read: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        values = self._read.get(name)
+        if values is None:
+            if name not in self._known:
+                raise KeyError(name)
+            values = self._read[name] = self.frame[name].to_numpy()
+        return values
+
+    def __contains__(self, name) -> bool:
+        return name in self._known
+
+    def __iter__(self):
+        return iter(self.names)
+
+    def __len__(self) -> int:
+        return len(self.names)
 
 
 def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:

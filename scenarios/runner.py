@@ -17,7 +17,7 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.invariants import first_violation
 from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
-from mechsim.dynamics.tables import coordinate_columns, events_table, timeseries
+from mechsim.dynamics.tables import TableColumns, coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
 
 from mechsim.scenarios.console import group_warnings
@@ -92,14 +92,16 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     return df
 
 
-def peaks(df: pd.DataFrame, angle_column: str) -> dict:
-    """Peak |value| of each key column, with its time and drive angle (wrapped to (-180, 180] deg too)."""
+def peaks(df: pd.DataFrame, angle_column: str, cols: TableColumns | None = None) -> dict:
+    """Peak |value| of each key column, with its time and drive angle (wrapped to (-180, 180] deg too).
+    cols: the table's TableColumns, if at hand."""
     out = {}
     if not len(df):
         return out
-    t, angles = df["t_s"].to_numpy(float), df[angle_column].to_numpy(float)
+    cols = TableColumns(df) if cols is None else cols
+    t, angles = np.asarray(cols["t_s"], dtype=float), np.asarray(cols[angle_column], dtype=float)
     for col in PEAK_COLUMNS:
-        values = df[col].to_numpy(dtype=float) if col in df else None
+        values = np.asarray(cols[col], dtype=float) if col in cols else None
         if values is not None and not np.isnan(values).all():
             i = int(np.nanargmax(np.abs(values)))
             angle = float(angles[i])
@@ -109,20 +111,22 @@ def peaks(df: pd.DataFrame, angle_column: str) -> dict:
     return out
 
 
-def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None) -> dict:
+def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None) -> dict:
     """Drive work = d(kinetic energy) - (load + friction + damping work) + energy lost in impacts (events table;
-    all works signed into the system)."""
+    all works signed into the system). cols: the table's TableColumns, if at hand."""
     if "work_drive_J" not in df or len(df) < 2:
         return {}
+    cols = TableColumns(df) if cols is None else cols
+
     def change(column: str) -> float:
-        values = df[column].to_numpy(float)
+        values = np.asarray(cols[column], dtype=float)
         return float(values[-1] - values[0])
 
-    works = {c[5:-2]: change(c) for c in df.columns if c.startswith("work_") and c.endswith("_J")}
+    works = {c[5:-2]: change(c) for c in cols.names if c.startswith("work_") and c.endswith("_J")}
     dke = change("kinetic_energy_J")
     lost = 0.0
     if events is not None and "energy_lost_J" in events and len(events):
-        t = df["t_s"].to_numpy(float)
+        t = np.asarray(cols["t_s"], dtype=float)
         t0, t1 = float(t[0]), float(t[-1])
         inside = (events["t_s"] > t0) & (events["t_s"] <= t1)
         lost = float(events.loc[inside, "energy_lost_J"].fillna(0.0).sum())
@@ -244,6 +248,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
                 if c in df]
         df, events, failure = _checked(df, events, failure, settings, columns=heat)
     wall = time.perf_counter() - wall0 + the_plan.seconds
+    cols = TableColumns(df)
     summary = {
         "scenario": scenario.name,
         "mechanism": si["mechanism"]["type"],
@@ -255,8 +260,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             "rtol": settings.rtol, "atol": settings.atol,
         },
         "geometry": mech.describe(),
-        "peaks": peaks(df, angle_col),
-        "energy": energy_balance(df, events),
+        "peaks": peaks(df, angle_col, cols),
+        "energy": energy_balance(df, events, cols),
         "events": {str(k): int(v) for k, v in events["kind"].value_counts().items()} if len(events) else {},
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,

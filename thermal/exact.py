@@ -54,13 +54,28 @@ def input_function(ext: ThermalExtension, mech, columns_fn) -> Callable[[np.ndar
 
 def contact_code(cols: dict) -> np.ndarray:
     """One integer per row that changes wherever the heat input is not smooth: mode changes (jumps), and sign
-    changes of the slip (|u| kinks: slip reversal) and of the normal force (flank switch)."""
-    mode = np.asarray(cols["mode"]) == "engaged"
+    changes of the slip (|u| kinks: slip reversal) and of the normal force (flank switch). cols: result columns,
+    or a mechanism's `closed_form_contact` (a boolean `engaged` in place of `mode`)."""
+    mode = cols["engaged"] if "engaged" in cols else np.asarray(cols["mode"]) == "engaged"
     code = 9 * mode.astype(int)
     for k, name in ((3, "slip_speed_m_s"), (1, "contact_force_N")):
         if name in cols:
             code = code + k * (np.sign(np.asarray(cols[name], dtype=float)).astype(int) + 1)
     return code
+
+
+def contact_columns(mech, angle0: float, speed: float, columns_fn) -> Callable[[np.ndarray], dict]:
+    """What contact_code reads of the closed form at times t >= 0: the mechanism's `closed_form_contact` where it
+    has one (the same numbers, counted from t = 0 as closed_form_columns counts, without the other columns),
+    else columns_fn itself."""
+    own = getattr(mech, "closed_form_contact", None)
+    if own is None:
+        return columns_fn
+
+    def contact(t) -> dict:
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        return {k: np.asarray(v)[1:] for k, v in own(np.concatenate([[0.0], t]), angle0, speed).items()}
+    return contact
 
 
 def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int = SEARCH_LEVELS,
@@ -212,5 +227,5 @@ def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: flo
     t_out, if already computed (the run's table)."""
     columns = closed_form_columns(mech, angle0, speed)
     inputs = input_function(ext, mech, columns)
-    breaks = switch_times(columns, t_out, grid_columns=table)
+    breaks = switch_times(contact_columns(mech, angle0, speed, columns), t_out, grid_columns=table)
     return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks), inputs, breaks

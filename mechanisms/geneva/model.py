@@ -318,13 +318,10 @@ class Geneva(Mechanism):
         }
 
     # -- prescribed constant crank speed: no DAE needed ------------------------------------------------
-    def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
-        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
-
-        Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
-        (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
-        T_in = c1 w1 + N r cos(alpha + beta) + mu |N| sigma (r sin(alpha + beta) + flank R).
-        """
+    def _closed_form_contact(self, t: np.ndarray, angle0: float, speed: float) -> tuple:
+        """The closed form up to the contact (docs/theory.md §G1-2): (theta, kin, alpha, eng, beta, w2, x, sin_ab,
+        v_s, sigma, N, u, flank), N, u and flank zero out of contact. `closed_form` goes on from here; the switch
+        search (`closed_form_contact`) stops here."""
         g = self.geometry
         theta = angle0 + speed * (t - t[0])
         kin = gk.constant_speed_motion(g, theta, speed)
@@ -349,6 +346,26 @@ class Geneva(Mechanism):
         flank[swap], u[swap], sigma[swap], N[swap] = -1.0, u2[swap], sigma2[swap], N2[swap]
         N, u = np.where(eng, N, 0.0), np.where(eng, u, 0.0)
         flank = np.where(eng, flank, 0.0)
+        return theta, kin, alpha, eng, beta, w2, x, sin_ab, v_s, sigma, N, u, flank
+
+    def closed_form_contact(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
+        """What the thermal switch search reads of the closed form (thermal/exact.py `contact_code`): engaged,
+        slip and normal force, the same numbers as `closed_form`'s columns without computing the others."""
+        _, _, _, eng, _, _, _, _, _, _, N, u, _ = self._closed_form_contact(t, angle0, speed)
+        return {"engaged": eng, "slip_speed_m_s": u, "contact_force_N": N}
+
+    def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
+        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
+
+        Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
+        (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
+        T_in = c1 w1 + N r cos(alpha + beta) + mu |N| sigma (r sin(alpha + beta) + flank R).
+        """
+        g = self.geometry
+        theta, kin, alpha, eng, beta, w2, x, sin_ab, v_s, sigma, N, u, flank = self._closed_form_contact(t, angle0,
+                                                                                                      speed)
+        a2 = kin["wheel_accel"]
+        mu, R, r = self.friction, g.pin_radius, g.crank_radius
         fric = mu * np.abs(N) * sigma
         torque = (self.crank_damping * speed + N * r * np.cos(alpha + beta)
                   + fric * (r * sin_ab + flank * R))
