@@ -128,8 +128,13 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
     if events is not None and "energy_lost_J" in events and len(events):
         t = np.asarray(cols["t_s"], dtype=float)
         t0, t1 = float(t[0]), float(t[-1])
-        inside = (events["t_s"] > t0) & (events["t_s"] <= t1)
-        lost = float(events.loc[inside, "energy_lost_J"].fillna(0.0).sum())
+        te, el = events["t_s"].to_numpy(float), events["energy_lost_J"]
+        inside = (te > t0) & (te <= t1)
+        if el.dtype == np.float64:      # as pandas' fillna(0.0).sum() sums it (nanops.nansum: NaN -> 0, ndarray.sum)
+            picked = el.to_numpy()[inside]
+            lost = float(np.where(np.isnan(picked), 0.0, picked).sum())
+        else:
+            lost = float(el[inside].fillna(0.0).sum())
     closure = sum(works.values()) - dke - lost
     scale = max(abs(works.get("drive", 0.0)), 1e-300)
     return {"work_J": works, "kinetic_energy_change_J": dke, "impact_losses_J": lost, "closure_error_J": closure,

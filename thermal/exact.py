@@ -64,11 +64,13 @@ def contact_code(cols: dict) -> np.ndarray:
     return code
 
 
-def contact_columns(mech, angle0: float, speed: float, columns_fn) -> Callable[[np.ndarray], dict]:
-    """What contact_code reads of the closed form at times t >= 0: the mechanism's `closed_form_contact` where it
-    has one (the same numbers, counted from t = 0 as closed_form_columns counts, without the other columns),
-    else columns_fn itself."""
-    own = getattr(mech, "closed_form_contact", None)
+def contact_columns(mech, angle0: float, speed: float, columns_fn, part: str = "closed_form_contact"
+                    ) -> Callable[[np.ndarray], dict]:
+    """What contact_code (part = 'closed_form_contact') or the mechanism's contact_state (part =
+    'closed_form_heat') reads of the closed form at times t >= 0: the mechanism's own method `part` where it has
+    one (the same numbers, counted from t = 0 as closed_form_columns counts, without the other columns), else
+    columns_fn itself."""
+    own = getattr(mech, part, None)
     if own is None:
         return columns_fn
 
@@ -226,6 +228,6 @@ def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: flo
     and the contact switch times (for reuse by the cycle-averaged model). table: the closed form's columns at
     t_out, if already computed (the run's table)."""
     columns = closed_form_columns(mech, angle0, speed)
-    inputs = input_function(ext, mech, columns)
+    inputs = input_function(ext, mech, contact_columns(mech, angle0, speed, columns, "closed_form_heat"))
     breaks = switch_times(contact_columns(mech, angle0, speed, columns), t_out, grid_columns=table)
     return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks), inputs, breaks

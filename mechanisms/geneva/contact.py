@@ -21,12 +21,13 @@ def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
     """Contact quantities of each output row, equal to the engaged mode's `heat` expressions (model.py):
     normal force, slip, source speeds over the pin R(w1 + w2) and the wall v_s, heat rate (friction power), track
     (slot counter floor((theta + pi)/2 pi)), and the wall's sliding acceleration a_s = dv_s/dt =
-    (w1' v_s + w1 (w1 + w2) w2 x)/w1 (from r cos(alpha + beta) = w2 x/w1, docs/theory.md §G1)."""
+    (w1' v_s + w1 (w1 + w2) w2 x)/w1 (from r cos(alpha + beta) = w2 x/w1, docs/theory.md §G1).
+    table: result columns, or the closed form's `closed_form_heat` (a boolean `engaged` in place of `mode`)."""
     def col(name):
         return np.asarray(table[name], dtype=float)
 
     w1, w2, v_s = col("crank_speed_rad_s"), col("wheel_speed_rad_s"), col("pin_sliding_speed_m_s")
-    engaged = np.asarray(table["mode"]) == "engaged"
+    engaged = table["engaged"] if "engaged" in table else np.asarray(table["mode"]) == "engaged"
     with np.errstate(divide="ignore", invalid="ignore"):
         a_s = (col("crank_accel_rad_s2") * v_s + w1 * (w1 + w2) * w2 * col("pin_distance_m")) / w1
     return {

@@ -354,6 +354,17 @@ class Geneva(Mechanism):
         _, _, _, eng, _, _, _, _, _, _, N, u, _ = self._closed_form_contact(t, angle0, speed)
         return {"engaged": eng, "slip_speed_m_s": u, "contact_force_N": N}
 
+    def closed_form_heat(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
+        """The columns `contact_state` reads (contact.py `state`; a boolean `engaged` in place of `mode`), the
+        same numbers as `closed_form`'s without computing the others: the closed-form thermal path's heat input
+        at its quadrature nodes (thermal/exact.py)."""
+        _, _, _, _, _, _, _, _, _, sigma, N, u, _ = parts = self._closed_form_contact(t, angle0, speed)
+        theta, kin, eng, w2, x, v_s = parts[0], parts[1], parts[3], parts[5], parts[6], parts[8]
+        fric = self.friction * np.abs(N) * sigma
+        return {"engaged": eng, "crank_angle_rad": theta, "crank_speed_rad_s": np.full_like(theta, speed),
+                "crank_accel_rad_s2": np.zeros_like(theta), "wheel_speed_rad_s": w2, "contact_force_N": N,
+                "slip_speed_m_s": u, "pin_sliding_speed_m_s": v_s, "pin_distance_m": x, "friction_power_W": fric * u}
+
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
         """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
 
