@@ -14,6 +14,7 @@ for it. A case that does not verify (a truncated or edited file, a disk fault) i
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -31,6 +32,7 @@ from mechsim.scenarios.output.atomic import json_default as _json_default
 from mechsim.scenarios.units import ScenarioError
 
 
+@functools.lru_cache(maxsize=1)
 def _host_tag() -> str:
     return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 
@@ -60,10 +62,20 @@ def remove_stale_files(folder: Path) -> int:
     return removed
 
 
+def _temp_file(path: Path) -> tuple[int, str]:
+    """(fd, name) of a new temporary file next to path (its folder made when missing: tried first, as a sweep
+    writes its thousands of case files into folders that exist, and each file-system call costs here)."""
+    prefix = f".{path.name}.tmp-{os.getpid()}-{_host_tag()}-"
+    try:
+        return tempfile.mkstemp(prefix=prefix, dir=path.parent)
+    except FileNotFoundError:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return tempfile.mkstemp(prefix=prefix, dir=path.parent)
+
+
 def atomic_write(path: Path, write) -> None:
     """Call write(tmp_path), then rename tmp_path to path."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-{os.getpid()}-{_host_tag()}-", dir=path.parent)
+    fd, tmp = _temp_file(path)
     os.close(fd)
     try:
         write(Path(tmp))
@@ -74,7 +86,16 @@ def atomic_write(path: Path, write) -> None:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    atomic_write(path, lambda p: p.write_text(text))
+    """atomic_write of a text file, written through the temporary file's own descriptor (one open fewer; the same
+    bytes as Path.write_text: default encoding, no newline translation on POSIX)."""
+    fd, tmp = _temp_file(path)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def _checksum(record: dict) -> str:
