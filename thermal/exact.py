@@ -16,7 +16,6 @@ exactly, from the modal integral of T), so the heat balance closes to round-off 
 """
 from __future__ import annotations
 
-from itertools import accumulate
 from typing import Callable
 
 import numpy as np
@@ -206,12 +205,17 @@ class ModalNetwork:
             q_int = np.zeros(len(h)), np.zeros(len(h))
         y = np.asarray(y0, dtype=float)
         # the modal recurrence z_{k+1} = decay_k z_k + forcing_k is the only sequential part: per mode, over Python
-        # floats (the same IEEE operations as numpy's, ~4x faster than a loop of length-n array steps); the rest
-        # is whole-array work. cumsum adds in order, as the step-by-step sum did.
+        # floats (the same IEEE operations as numpy's, ~4x faster than a loop of length-n array steps; a plain loop
+        # ~1.6x faster than itertools.accumulate with a lambda); the rest is whole-array work. cumsum adds in
+        # order, as the step-by-step sum did.
         Z = np.empty((len(cuts), self.n))
-        for i, z0 in enumerate((self.Vinv @ y[:self.n]).tolist()):
-            Z[:, i] = list(accumulate(zip(decay[i].tolist(), forcing[i].tolist()),
-                                      lambda z, step: step[0] * z + step[1], initial=z0))
+        for i, z in enumerate((self.Vinv @ y[:self.n]).tolist()):
+            column = [z]
+            append = column.append
+            for d, f in zip(decay[i].tolist(), forcing[i].tolist()):
+                z = d * z + f
+                append(z)
+            Z[:, i] = column
         z_int = carry_int.T * Z[:-1] + forcing_int.T                                   # (K, n)
         conv = z_int @ self.loss_m - float(np.sum(self.s)) * h
         out = np.empty((len(cuts), self.n + 3))

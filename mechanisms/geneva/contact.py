@@ -45,12 +45,13 @@ def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
 def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     """Times at which a contact began (entry, flank switch): from the events table where it lists them, else
     from the crank angles of entry theta = 2 pi k - alpha0 and the sign changes of the normal force (a closed
-    form lists entries but no flank switches). A run that starts engaged gets the entry before t0 from its crank angle."""
+    form lists entries but no flank switches). A run that starts engaged gets the entry before t0 from its crank angle.
+    df: the table or its columns (dynamics/tables.py TableColumns)."""
     a0 = g.engagement_half_angle
-    t = df["t_s"].to_numpy(float)
-    theta = df["crank_angle_rad"].to_numpy(float)
-    w1 = df["crank_speed_rad_s"].to_numpy(float)
-    mode = df["mode"].to_numpy()
+    t = np.asarray(df["t_s"], dtype=float)
+    theta = np.asarray(df["crank_angle_rad"], dtype=float)
+    w1 = np.asarray(df["crank_speed_rad_s"], dtype=float)
+    mode = np.asarray(df["mode"])
     found: list[float] = []
     kinds = events["kind"].astype(str).to_numpy() if len(events) and "kind" in events else np.array([], str)
     times = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
@@ -61,7 +62,7 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
         inside = (entries >= theta[0]) & (entries <= theta[-1])
         found += np.interp(entries[inside], theta, t).tolist()
     if "flank switch" not in kinds:     # a closed form lists no flank switches: the normal force changes sign
-        N = df["contact_force_N"].to_numpy(float)
+        N = np.asarray(df["contact_force_N"], dtype=float)
         engaged = mode == "engaged"
         flip = np.flatnonzero(engaged[1:] & engaged[:-1] & (np.sign(N[1:]) * np.sign(N[:-1]) < 0))
         found += [t[i] - N[i] * (t[i + 1] - t[i]) / (N[i + 1] - N[i]) for i in flip]
