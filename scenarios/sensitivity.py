@@ -190,6 +190,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     sens_wall = time.perf_counter() - wall
 
     results: dict[str, tuple[float, np.ndarray]] = {}
+    traced_values: dict[str, float] = {}     # the traced pass's own value of each quantity
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
         if q in peak_columns:
@@ -200,8 +201,11 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 continue
             rows = peak_rows[q]
             first = by_time[float(df["t_s"].iloc[rows[0]])]
-            y, g = first.values[column], first.grads[column]
+            # the value is the run's own (what `mechsim run` reports and `mechsim size` checks its design against);
+            # the traced pass's value of the row differs from it by the two integrations' tolerances
+            y, g = float(df[column].iloc[rows[0]]), first.grads[column]
             results[q] = (y, g, first.t)
+            traced_values[q] = first.values[column]
             if turn is not None and q in THERMAL_PEAKS:
                 value, at = turn_peak(turn, column, first.t)        # the run's reported peak, and its time
                 results[q] = (value, g, at)
@@ -235,14 +239,19 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 warnings.append(f"{q}: the run has no complete {'index' if index else 'cycle'} "
                                 f"({pmap.engage} to {pmap.release if index else pmap.engage}); lengthen duration")
                 continue
-            results[q] = got
+            own = run_event_quantities(events, pmap.engage, pmap.release).get(q)
+            # event times: the run's own where its events table has them (the energy per cycle and the heat per
+            # index need work states at the events, which the run's tables do not hold: the traced pass's)
+            results[q] = got if own is None else (own,) + tuple(got[1:])
+            traced_values[q] = got[0]
     rows = []
     for q, (y, g, at) in results.items():
+        base = traced_values.get(q, y)       # the elasticity is the traced function's own, on its own value
         for j, key in enumerate(wrt):
             p = scenario_value(plan, key)
             deriv = float(g[j]) / scales[j]
             unit = field_unit(si, key)
-            elasticity = p / y * deriv if y != 0 else float("nan")
+            elasticity = p / base * deriv if base != 0 else float("nan")
             dp = change * abs(p) if p != 0 else float("nan")
             rows.append(dict(quantity=q, value=y, t_s=at, wrt=key, wrt_unit=unit, parameter=p, derivative=deriv,
                              elasticity=elasticity, parameter_change=dp, quantity_change=deriv * dp))
@@ -256,6 +265,22 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
               "sensitivity_per_run": (sens_wall - path.stats["compile_time_s"]) / run_wall if run_wall > 0 else None,
               "sensitivity_steps": path.stats["steps"], "values": len(wrt)})
     return table
+
+
+def run_event_quantities(events, engage: str, release: str) -> dict:
+    """The index time (the last release and the engage before it) and the cycle time (the last two engages) as a
+    run's own events table gives them (the numbers `mechsim run` reports; None where it has no such events): the
+    same selection as `_cycle_quantity` makes on the traced events."""
+    kinds = events["kind"].to_numpy() if events is not None and len(events) else np.array([])
+    t = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
+    engages, releases = t[kinds == engage], t[kinds == release]
+    out = {"index_time_s": None, "cycle_time_s": None}
+    if len(releases) and engage:
+        before = engages[engages < releases[-1]]
+        out["index_time_s"] = float(releases[-1] - before[-1]) if len(before) else None
+    if len(engages) >= 2:
+        out["cycle_time_s"] = float(engages[-1] - engages[-2])
+    return out
 
 
 def _cycle_quantity(q: str, events, pmap: ParameterMap, model):

@@ -349,7 +349,7 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
     return best
 
 
-def tightening(limit: "Limit", sized: float, run: float) -> float:
+def tightening(limit: "Limit", sized: float, run: float, tolerance: float) -> float:
     """How far a limit the design's own run breaks is moved inward before solving again: the excess of the run
     over the limit (or over the sizing's own value, if that was inside the limit) and a margin of
     2 FEASIBLE |limit| + EXCESS_MARGIN x excess. The re-solved design has its sizing quantity at the tightened limit
@@ -357,9 +357,11 @@ def tightening(limit: "Limit", sized: float, run: float) -> float:
     differs from that by the discrepancy of the first design, changed by the move between the designs; that move
     is about the excess over the quantity's gradient, so a discrepancy that is smooth in the design changes by a
     fraction of itself of the order excess/quantity (here < 1e-5): a tenth of the excess bounds it generously and
-    costs, by the shadow price, a tenth more of the objective's change."""
+    costs, by the shadow price, a tenth more of the objective's change. At least 10 x the optimiser's `tolerance`
+    (of the scaled constraint, |limit|): SLSQP counts a constraint violated by less than its tolerance as met, so
+    a smaller move leaves the re-solve at its start, where the feasibility check then fails."""
     excess = max(run - limit.value, run - sized) if limit.sense == "<=" else max(limit.value - run, sized - run)
-    return excess + 2 * FEASIBLE * limit.scale + EXCESS_MARGIN * max(excess, 0.0)
+    return max(excess + 2 * FEASIBLE * limit.scale + EXCESS_MARGIN * max(excess, 0.0), 10 * tolerance * limit.scale)
 
 
 def verify(result: SizingResult, method: str, tolerance: float, max_iterations: int, progress, check,
@@ -417,7 +419,7 @@ def verify(result: SizingResult, method: str, tolerance: float, max_iterations: 
         limits = []
         for lim, e in zip(problem.limits, checks):
             if e["holds"] is False:
-                by = tightening(lim, e["sizing_value"], e["run_value"])
+                by = tightening(lim, e["sizing_value"], e["run_value"], tolerance)
                 lim = Limit(lim.quantity, lim.sense, lim.value - by if lim.sense == "<=" else lim.value + by)
                 e["tightened_to"] = lim.value
             limits.append(lim)

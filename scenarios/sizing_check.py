@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
 
 
 def design_run(design) -> dict:
@@ -25,17 +24,10 @@ def run_quantities(result, engage: str, release: str) -> dict:
     last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
     heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
     failure, or None."""
+    from mechsim.scenarios.sensitivity import run_event_quantities
     from mechsim.scenarios.sensitivity_map import PEAKS, THERMAL_PEAKS
     peaks = result.summary.get("peaks", {})
     out = {q: (abs(peaks[c]["value"]) if c in peaks else None) for q, c in {**PEAKS, **THERMAL_PEAKS}.items()}
-    ev = result.events
-    kinds = ev["kind"].to_numpy() if ev is not None and len(ev) else np.array([])
-    t = ev["t_s"].to_numpy(float) if len(kinds) else np.array([])
-    engages, releases = t[kinds == engage], t[kinds == release]
-    out["index_time_s"] = None
-    if len(releases) and engage:
-        before = engages[engages < releases[-1]]
-        out["index_time_s"] = float(releases[-1] - before[-1]) if len(before) else None
-    out["cycle_time_s"] = float(engages[-1] - engages[-2]) if len(engages) >= 2 else None
+    out.update(run_event_quantities(result.events, engage, release))
     out["_failure"] = result.failure.message() if result.failure is not None else None
     return out
