@@ -9,7 +9,7 @@ with the measurements against trust-constr).
 
 The problem is solved in normalised values u = (x - low) / (high - low) in [0, 1], the objective divided by its
 size at the start and each limit written as (limit - q) / |limit| >= 0, so that one tolerance serves every
-value and quantity. Peak quantities are limited and minimised by their magnitude (a contact force limit holds
+value and quantity; the optimiser aims at FEASIBLE inside each limit, so that an active limit holds strictly. Peak quantities are limited and minimised by their magnitude (a contact force limit holds
 for either flank). The multipliers at the optimum follow from the KKT conditions on the active set (non-negative
 least squares on the gradients), reported as shadow prices: the change of the optimal objective per unit change
 of each active limit or bound (Nocedal & Wright, "Numerical Optimization", 2nd ed., Theorem 12.1 and eq. 12.34).
@@ -182,6 +182,12 @@ class Problem:
         ev = self.evaluate(u)
         return np.array([lim.margin(ev.values[lim.quantity]) for lim in self.limits])
 
+    def c_aimed(self, u) -> np.ndarray:
+        """The constraints the optimiser is given: each limit moved inward by the feasibility tolerance FEASIBLE, so
+        that an active limit ends inside the limit as given (its run then satisfies it strictly, not only within the
+        tolerance; the cost, by the shadow price, is FEASIBLE |limit| of the limit)."""
+        return self.c(u) - FEASIBLE
+
     def c_jac(self, u) -> np.ndarray:
         ev = self.evaluate(u)
         rows = [(-1.0 if lim.sense == "<=" else 1.0) * ev.grads[lim.quantity] * self.span / lim.scale
@@ -252,11 +258,11 @@ def _optimise(problem: Problem, u0: np.ndarray, method: str, tolerance: float, m
     from scipy import optimize
     problem.record(u0)
     if method == "slsqp":
-        cons = [{"type": "ineq", "fun": problem.c, "jac": problem.c_jac}] if problem.limits else []
+        cons = [{"type": "ineq", "fun": problem.c_aimed, "jac": problem.c_jac}] if problem.limits else []
         return optimize.minimize(problem.f, u0, jac=problem.f_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(u0),
                                  constraints=cons, callback=problem.record,
                                  options={"ftol": tolerance, "maxiter": max_iterations})
-    cons = [optimize.NonlinearConstraint(problem.c, 0.0, np.inf, jac=problem.c_jac)] if problem.limits else []
+    cons = [optimize.NonlinearConstraint(problem.c_aimed, 0.0, np.inf, jac=problem.c_jac)] if problem.limits else []
     return optimize.minimize(problem.f, u0, jac=problem.f_grad, method="trust-constr",
                              bounds=optimize.Bounds(np.zeros(len(u0)), np.ones(len(u0))), constraints=cons,
                              callback=lambda xk, state: problem.record(xk),
