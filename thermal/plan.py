@@ -19,7 +19,6 @@ import numpy as np
 import pandas as pd
 
 import mechsim.thermal.cycle as cyc
-from mechsim.dynamics.tables import TableColumns
 from mechsim.thermal.conduction1d import validity
 from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form
 from mechsim.thermal.flash import flash_temperature
@@ -108,9 +107,8 @@ class ThermalPlan:
             summary["averaging"] = "resolved"
             summary["averaging_why"] += ("; the run failed before a periodic cycle" if failed else
                                          "; no full crank turn to average") + ", so what ran is shown resolved"
-        cols = TableColumns(df)         # contact starts and state read the same columns: each read once
-        t_on_pin = self._time_since(np.asarray(cols["t_s"], dtype=float), mech.contact_starts(cols, events))
-        contact = mech.contact_state(cols)
+        t_on_pin = self._time_since(df["t_s"].to_numpy(float), mech.contact_starts(df, events))
+        contact = mech.contact_state(df)
         df = self._add_columns(df, contact, states, t_on_pin)
         if states is not None and window is None:
             summary["heat_balance"] = self._balance(states)
