@@ -116,6 +116,9 @@ class SweepStore:
         self.series = self.root / "timeseries"
         #: (key, why) of stored cases that failed verification and were removed, to be computed again
         self.discarded: list[tuple[str, str]] = []
+        #: key -> record of the cases this store wrote or verified (as read back from their files): checked
+        #: once, so the run's end counts and tabulates them without reading and checksumming each file again
+        self._sound: dict[str, dict] = {}
 
     def case_path(self, key: str) -> Path:
         return self.cases / f"{key}.json"
@@ -162,6 +165,10 @@ class SweepStore:
         for k in sorted(set(keys)):
             if not self.case_path(k).is_file():
                 continue
+            known = self._sound.get(k)
+            if known is not None and (not need_timeseries or "timeseries_sha256" in known):
+                done.add(k)
+                continue
             why = self.verify(k, need_timeseries)
             if why is None:
                 done.add(k)
@@ -188,6 +195,7 @@ class SweepStore:
                 return "no time series" if "timeseries_sha256" not in record else "time series missing"
             if _file_sha256(path) != record.get("timeseries_sha256"):
                 return "time series checksum mismatch"
+        self._sound[key] = record
         return None
 
     def write_case(self, record: dict, timeseries: pd.DataFrame | None = None) -> None:
@@ -197,11 +205,14 @@ class SweepStore:
         if timeseries is not None:
             atomic_write(self.series_path(key), lambda p: timeseries.to_parquet(p, index=False))
             record["timeseries_sha256"] = _file_sha256(self.series_path(key))
-        record["checksum"] = _checksum(record)
-        atomic_write_text(self.case_path(key), json.dumps(record))
+        checksum = _checksum(record)
+        atomic_write_text(self.case_path(key), json.dumps({**record, "checksum": checksum}))
+        self._sound[key] = record
 
     def read_case(self, key: str) -> dict:
-        return json.loads(self.case_path(key).read_text())
+        """The stored record (checksum left out for a case this store wrote or verified)."""
+        known = self._sound.get(key)
+        return known if known is not None else json.loads(self.case_path(key).read_text())
 
     def table(self, cases: list[tuple[int, str, dict]]) -> pd.DataFrame:
         """Rows of the finished cases among (index, key, parameter columns), in sweep order."""
@@ -210,7 +221,7 @@ class SweepStore:
             path = self.case_path(key)
             if not path.is_file():
                 continue
-            rec = json.loads(path.read_text())
+            rec = self.read_case(key)
             rows.append({"case": index, "case_id": key, **params, **rec["row"], "run_id": rec["run_id"]})
         return pd.DataFrame(rows)
 
