@@ -103,6 +103,14 @@ def _checksum(record: dict) -> str:
     return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()
 
 
+def _with_keys(text: str, tail: dict[str, str]) -> str:
+    """json.dumps of the object `text` encodes (a non-empty JSON object as json.dumps writes it) with the string
+    entries `tail` appended, without encoding the object again: json.dumps of what json.loads reads back from its
+    own output is that output (the same key order, floats by their shortest repr, NaN as NaN), so this equals
+    json.dumps({**json.loads(text), **tail}) (tests/test_sweep_store.py checks it on case records)."""
+    return text[:-1] + "".join(f", {json.dumps(k)}: {json.dumps(v)}" for k, v in tail.items()) + "}"
+
+
 def _file_sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -201,12 +209,14 @@ class SweepStore:
     def write_case(self, record: dict, timeseries: pd.DataFrame | None = None) -> None:
         """The time series first, then the case file (with checksums of both) that marks the case finished."""
         key = record["case_id"]
-        record = json.loads(json.dumps(record, default=_json_default))      # exactly what will be read back
+        text = json.dumps(record, default=_json_default)
+        record = json.loads(text)                                          # exactly what will be read back
+        tail = {}
         if timeseries is not None:
             atomic_write(self.series_path(key), lambda p: timeseries.to_parquet(p, index=False))
-            record["timeseries_sha256"] = _file_sha256(self.series_path(key))
-        checksum = _checksum(record)
-        atomic_write_text(self.case_path(key), json.dumps({**record, "checksum": checksum}))
+            record["timeseries_sha256"] = tail["timeseries_sha256"] = _file_sha256(self.series_path(key))
+        tail["checksum"] = _checksum(record)
+        atomic_write_text(self.case_path(key), _with_keys(text, tail))
         self._sound[key] = record
 
     def read_case(self, key: str) -> dict:
