@@ -140,10 +140,12 @@ def _energy(df, events, rtol, atol, exact, names=None):
 def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, atol: float,
                     exact: bool = False, columns: list[str] | None = None) -> Violation | None:
     """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature);
-    columns: check only the invariants these columns carry (default: every column)."""
-    if df is None or not len(df):
+    columns: check only the invariants these columns carry (default: every column). df: a frame or its
+    TableColumns."""
+    if df is None or not len(df if not isinstance(df, TableColumns) else df.frame):
         return None
-    frame, df = df, TableColumns(df)
+    df = _columns(df)
+    frame = df.frame
     names = None if columns is None else [c for c in columns if c in df]
     checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names),
               _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names),

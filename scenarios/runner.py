@@ -142,10 +142,11 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
 
 
 def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
-             exact: bool = False, columns: list[str] | None = None):
+             exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None):
     """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
-    becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept."""
-    v = first_violation(df, events, settings.rtol, settings.atol, exact, columns)
+    becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept.
+    cols: df's TableColumns, if at hand."""
+    v = first_violation(df if cols is None else cols, events, settings.rtol, settings.atol, exact, columns)
     if v is None or (failure is not None and failure.time <= v.time):
         return df, events, failure
     failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver",
@@ -243,17 +244,22 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),
                               code=f.get("code", FailureCode.INTEGRATOR_FAILED))
-    df, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form")
+    cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
+    checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols)
+    if checked is not df:
+        df, cols = checked, TableColumns(checked)
     thermal_summary, thermal_tables = None, {}
     if thermal is not None:
-        df, events, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(df, events,
-                                                                                     failed=failure is not None)
+        df, events, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(
+            df, events, failed=failure is not None, columns=cols)
         warnings += thermal_warnings
         heat = [c for c in ("t_s", "mode", "heat_rate_W", "heat_generated_J", "friction_force_N", "slip_speed_m_s")
                 if c in df]
-        df, events, failure = _checked(df, events, failure, settings, columns=heat)
+        cols = TableColumns(df)
+        checked, events, failure = _checked(df, events, failure, settings, columns=heat, cols=cols)
+        if checked is not df:
+            df, cols = checked, TableColumns(checked)
     wall = time.perf_counter() - wall0 + the_plan.seconds
-    cols = TableColumns(df)
     summary = {
         "scenario": scenario.name,
         "mechanism": si["mechanism"]["type"],

@@ -82,11 +82,13 @@ class ThermalPlan:
         return self.setup.initial if self.extension is not None else None
 
     # ---------------------------------------------------------------------------------------------- finish
-    def finish(self, df: pd.DataFrame, events: pd.DataFrame, failed: bool = False
+    def finish(self, df: pd.DataFrame, events: pd.DataFrame, failed: bool = False, columns=None
                ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, pd.DataFrame], dict, list[str]]:
         """(timeseries with thermal columns, events, extra tables, summary['thermal'], warnings). With cycle
         averaging the timeseries and events cover the whole duration (thermal/cycle.py: the periodic turn
-        continued after the simulated window)."""
+        continued after the simulated window). columns: df's columns as a mapping of the same arrays, each read
+        from the frame once (the runner's dynamics.tables.TableColumns), if at hand: the contact and the closed
+        form's switch search read them there instead of from the frame (a pandas column read costs ~11 us)."""
         setup, mech = self.setup, self.mech
         warnings = list(setup.warnings) + list(self.warnings)
         n_states = setup.system.size + 3 if setup.system else 0
@@ -97,18 +99,20 @@ class ThermalPlan:
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
             return df, events, extra, summary, warnings
-        states, inputs, breaks = self._window_states(df)
+        table = df if columns is None else columns
+        states, inputs, breaks = self._window_states(df, table)
         window = None
         if self.averaging == "cycle" and not failed:
             window = self._cycle(df, events, states, inputs, breaks, summary, warnings, extra)
         if window is not None:
             df, events, states = window
+            table = df
         elif self.averaging == "cycle":
             summary["averaging"] = "resolved"
             summary["averaging_why"] += ("; the run failed before a periodic cycle" if failed else
                                          "; no full crank turn to average") + ", so what ran is shown resolved"
-        t_on_pin = self._time_since(df["t_s"].to_numpy(float), mech.contact_starts(df, events))
-        contact = mech.contact_state(df)
+        t_on_pin = self._time_since(np.asarray(table["t_s"], dtype=float), mech.contact_starts(table, events))
+        contact = mech.contact_state(table)
         df = self._add_columns(df, contact, states, t_on_pin)
         if states is not None and window is None:
             summary["heat_balance"] = self._balance(states)
@@ -120,17 +124,19 @@ class ThermalPlan:
         warnings += self._validity(df, contact, summary)
         return df, events, extra, summary, warnings
 
-    def _window_states(self, df: pd.DataFrame):
+    def _window_states(self, df: pd.DataFrame, table=None):
         """(states, input function, its breaks) of the thermal network over the mechanics table `df`: the DAE's
         states (input function None), or with the closed form the network integrated exactly in its modes along
-        the closed-form motion (thermal/exact.py `integrate_closed_form`); (None, None, None) without states."""
+        the closed-form motion (thermal/exact.py `integrate_closed_form`); (None, None, None) without states.
+        table: df's columns as a mapping (see `finish`), if at hand."""
         setup, mech, ext = self.setup, self.mech, self.setup.extension
         if ext is None:
             return None, None, None
         if self.method == "dae":
             return df[list(ext.names)].to_numpy(float), None, None
+        table = df if table is None else table
         return integrate_closed_form(ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
-                                     df["t_s"].to_numpy(float), setup.initial, table=df)
+                                     np.asarray(table["t_s"], dtype=float), setup.initial, table=table)
 
     def cycle_bulk(self, df: pd.DataFrame, t_rows, repetitions) -> tuple[np.ndarray, np.ndarray]:
         """(times, bulk states in K) of the run's cycle-averaged bulk at the window's rows t_rows repeated

@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from mechsim.dynamics.tables import TableColumns
 from mechsim.scenarios.loader import Scenario, sections_for
 from mechsim.scenarios.schema import TOP
 
@@ -110,8 +111,9 @@ def cycle_figures(df: pd.DataFrame, angle_col: str | None) -> dict:
         out[f"{c[:-2]}_per_cycle_J"] = math.nan
     if angle_col is None or angle_col not in df or len(df) < 2:
         return out
-    t = df["t_s"].to_numpy(float)
-    theta = df[angle_col].to_numpy(float)
+    cols = TableColumns(df)                         # each column read once, from the frame's blocks
+    t = np.asarray(cols["t_s"], dtype=float)
+    theta = np.asarray(cols[angle_col], dtype=float)
     advance = theta - theta[0]
     sign = 1.0 if advance[-1] >= 0 else -1.0
     advance = sign * advance
@@ -130,7 +132,7 @@ def cycle_figures(df: pd.DataFrame, angle_col: str | None) -> dict:
     out["cycles"] = turns
     out["cycle_time_s"] = t1 - t0
     for c in work_cols:
-        w = df[c].to_numpy(float)
+        w = np.asarray(cols[c], dtype=float)
         out[f"{c[:-2]}_per_cycle_J"] = float(np.interp(t1, t, w) - np.interp(t0, t, w))
     return out
 
