@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import platform
 import time
+from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
@@ -141,6 +142,16 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
             "closure_error_relative": closure / scale}
 
 
+def event_counts(events: pd.DataFrame) -> dict[str, int]:
+    """Events by kind, as {str(kind): count} of events["kind"].value_counts(): most frequent first, ties in the
+    order of their first appearance (pandas orders the counts so: first appearance, then a stable sort), missing
+    kinds left out; counted over the column's Python values (a value_counts Series costs ~0.15 ms a run)."""
+    if not len(events):
+        return {}
+    counts = Counter(k for k in events["kind"].tolist() if k is not None and k == k)
+    return {str(k): int(n) for k, n in sorted(counts.items(), key=lambda kv: -kv[1])}
+
+
 def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
              exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None):
     """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
@@ -273,7 +284,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "geometry": mech.describe(),
         "peaks": peaks(df, angle_col, cols),
         "energy": energy_balance(df, events, cols),
-        "events": {str(k): int(v) for k, v in events["kind"].value_counts().items()} if len(events) else {},
+        "events": event_counts(events),
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
         "warnings": warnings,

@@ -34,3 +34,4 @@ def test_table_columns_with_repeated_names_read_through_the_frame():
     np.testing.assert_array_equal(cols["t_s"], df["t_s"].to_numpy())
     with pytest.raises(KeyError):
         cols["missing"]
+

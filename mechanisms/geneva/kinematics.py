@@ -128,7 +128,8 @@ def engaged_slot(geom: GenevaGeometry, crank_angle):
 
 
 def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float) -> dict[str, np.ndarray]:
-    """Wheel angle (unwrapped), speed and acceleration at constant crank speed (the jerk: speed_ratio_second_derivative).
+    """Wheel angle (unwrapped), speed and acceleration at constant crank speed (the jerk: speed_ratio_second_derivative),
+    and the pin distance x (`pin_distance`).
 
     crank_angle is the unwrapped crank angle theta (0 at the first mid-engagement). During a dwell the wheel
     rests at the nearest half-pitch: it has indexed once per engagement passed (docs/theory.md §G1-2).
@@ -137,14 +138,19 @@ def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float)
     lam, a0 = geom.ratio, geom.engagement_half_angle
     k, alpha = engaged_slot(geom, theta)
     engaged = np.abs(alpha) < a0
-    beta = np.where(engaged, wheel_angle(lam, alpha), np.sign(alpha) * np.pi / geom.slots)
+    # wheel_angle, speed_ratio, speed_ratio_derivative and pin_distance with cos(alpha), sin(alpha) and D computed
+    # once (the same expressions, so the same numbers as those functions give)
+    cos_a, sin_a = np.cos(alpha), np.sin(alpha)
+    d = 1.0 - 2.0 * lam * cos_a + lam * lam
+    beta = np.where(engaged, np.arctan2(lam * sin_a, 1.0 - lam * cos_a), np.sign(alpha) * np.pi / geom.slots)
     w = crank_speed
     return {
         "engaged": engaged,
         "alpha": alpha,
         "wheel_angle": k * geom.pitch + beta,
-        "wheel_speed": np.where(engaged, w * speed_ratio(lam, alpha), 0.0),
-        "wheel_accel": np.where(engaged, w * w * speed_ratio_derivative(lam, alpha), 0.0),
+        "wheel_speed": np.where(engaged, w * (lam * (cos_a - lam) / d), 0.0),
+        "wheel_accel": np.where(engaged, w * w * (-lam * (1 - lam * lam) * sin_a / d ** 2), 0.0),
+        "pin_distance": geom.centre_distance * np.sqrt(d),
     }
 
 

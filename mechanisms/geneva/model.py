@@ -329,7 +329,7 @@ class Geneva(Mechanism):
         beta = kin["wheel_angle"] - np.floor((theta + np.pi) / (2 * np.pi)) * g.pitch
         w2, a2 = kin["wheel_speed"], kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
-        x = gk.pin_distance(g, alpha)
+        x = kin["pin_distance"]
         sin_ab = np.sin(alpha + beta)
         v_s = np.where(eng, r * speed * sin_ab, 0.0)
         wheel_moment = self.wheel_inertia * a2 + self.wheel_damping * w2 + self.wheel_torque
