@@ -45,11 +45,19 @@ class TableColumns(Mapping):
         return len(self.names)
 
 
+#: pandas' internal column read (not public API: present in pandas 2 and 3); without it, the public path
+_COLUMN_ARRAY = getattr(pd.DataFrame, "_get_column_array", None)
+
+
 def column_values(frame: pd.DataFrame, i: int) -> np.ndarray:
     """frame.iloc[:, i].to_numpy() as Series.to_numpy gives it (a read-only view of a numpy column; an extension
     column, such as pandas' string dtype, through its own to_numpy with the same defaults), read from the frame's
-    block directly: ~0.6 us instead of ~11 us for building the Series first (pandas 3)."""
-    values = frame._get_column_array(i)
+    block directly: ~0.6 us instead of ~11 us for building the Series first (pandas 3). The block read is a
+    pandas internal: if a pandas version lacks it or it fails, the column is read through the public Series."""
+    try:
+        values = _COLUMN_ARRAY(frame, i)
+    except Exception:          # noqa: BLE001  (absent or changed internal: the public read below is the reference)
+        return frame.iloc[:, i].to_numpy()
     if isinstance(values, np.ndarray):
         view = values.view()
         view.flags.writeable = False

@@ -35,3 +35,14 @@ def test_table_columns_with_repeated_names_read_through_the_frame():
     with pytest.raises(KeyError):
         cols["missing"]
 
+
+
+def test_public_read_when_pandas_lacks_the_block_read(monkeypatch):
+    """A pandas without the internal block read (or one that changed it) gets the same arrays through the Series."""
+    import mechsim.dynamics.tables as tables
+    monkeypatch.setattr(tables, "_COLUMN_ARRAY", None)
+    df = _frame()
+    for name in df.columns:
+        got, expected = column_values(df, df.columns.get_loc(name)), df[name].to_numpy()
+        assert got.dtype == expected.dtype
+        assert [repr(x) for x in got] == [repr(x) for x in expected]
