@@ -57,10 +57,16 @@ def _internal_error(exc: Exception) -> str:
     return f"{type(exc).__name__}: {text.splitlines()[0] if text else 'no message'}"
 
 
-def _save_or_fail(result, target: Path, force: bool, doing: str) -> None:
-    """result.save(target): a refused folder is a user error (exit 2), an OSError one line with exit 4."""
+def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None) -> None:
+    """result.save(target): a refused folder is a user error (exit 2), an OSError one line with exit 4. worker: a
+    figure worker started before the run (scenarios/output/figure_worker.py) to draw the figures."""
     try:
-        result.save(target, force=force)
+        if worker is None:
+            result.save(target, force=force)
+        else:
+            from mechsim.scenarios.output.writer import write_result
+            plots = bool(result.scenario.get("output", {}).get("plots", True))
+            write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
@@ -129,7 +135,17 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", help="print only errors"),
 ) -> None:
     """Run a scenario and write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml and plots."""
+    from contextlib import nullcontext
+
     from mechsim.scenarios import api
+    from mechsim.scenarios.output.figure_worker import FigureWorker, plots_wanted
+    # the figure worker forks now, sharing what is imported (numpy, pandas): it imports matplotlib while this
+    # process loads the scenario and runs it (docs/benchmarks.md, "Cold start")
+    with (FigureWorker.start() if plots_wanted(scenario, set_) else None) or nullcontext() as worker:
+        _run(api, scenario, out_dir, set_, force, quiet, worker)
+
+
+def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bool, quiet: bool, worker) -> None:
     try:
         sc = api.load(scenario, set_)
         target = _output_folder(out_dir, sc.name, force)
@@ -155,7 +171,7 @@ def run(
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
         result.summary["solver_messages"] = native
         bar.update(task, description=f"{sc.name}: writing files")
-        _save_or_fail(result, target, force, f"{sc.name}: the results")
+        _save_or_fail(result, target, force, f"{sc.name}: the results", worker)
     _report_run(result, sc.name, target, quiet)
 
 

@@ -31,16 +31,27 @@ def resolved_scenario_toml(si: dict) -> str:
     return header + tomli_w.dumps(_toml_clean(resolved_raw(si)))
 
 
-def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None) -> Path:
+def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None,
+                 worker=None) -> Path:
     """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv),
-    the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically."""
+    the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically.
+    worker: a figure worker started before the run (scenarios/output/figure_worker.py, as `mechsim run` does),
+    which then draws the figures; it is stopped here if there are none to draw."""
     with atomic_folder(out_dir, force) as tmp:
-        makers = []
-        if plots and len(result.timeseries):
-            from mechsim.scenarios.output.figures import result_figure_makers
-            makers = result_figure_makers(result, mechanism)
-        from mechsim.scenarios.output.render import FigureWriter
-        with FigureWriter(makers, tmp) as figures:        # half the figures drawn meanwhile, in another process
+        want = plots and len(result.timeseries)
+        if want and worker is not None:
+            worker.draw(result, mechanism, tmp)           # every figure drawn meanwhile, in two other processes
+            figures = worker
+        else:
+            if worker is not None:
+                worker.close()
+            makers = []
+            if want:
+                from mechsim.scenarios.output.figures import result_figure_makers
+                makers = result_figure_makers(result, mechanism)
+            from mechsim.scenarios.output.render import FigureWriter
+            figures = FigureWriter(makers, tmp)           # half the figures drawn meanwhile, in another process
+        with figures:
             result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
             write_csv(result.timeseries, tmp / "timeseries.csv")
             write_csv(result.events, tmp / "events.csv")

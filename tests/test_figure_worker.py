@@ -1,0 +1,89 @@
+"""The figure worker `mechsim run` forks before anything heavy is imported (scenarios/output/figure_worker.py): the
+folder it fills must hold the same PNG files, byte for byte, as drawing them one by one with matplotlib's own
+`savefig`, without this process drawing (or importing matplotlib at all) when the workers succeed; whatever a worker
+fails to save is drawn here; a command that stops early leaves no worker behind."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from mechsim.scenarios.output.figure_worker import plots_wanted
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked on Linux only")
+
+# Run apart, in a fresh process: the test session may have loaded JAX (no fork then) and has loaded matplotlib.
+_SCRIPT = """
+import io, os, sys, tempfile
+from pathlib import Path
+from mechsim.scenarios.output.figure_worker import FigureWorker
+MODE = sys.argv[1]
+parent = os.getpid()
+if MODE != "clean":
+    from mechsim.scenarios.output import plots
+    save = plots.save
+    def failing(fig, path):
+        if MODE == "worker-fails" and os.getpid() != parent:
+            raise RuntimeError("no figures in any worker")
+        if MODE == "grandchild-fails" and os.getppid() != parent and os.getpid() != parent:
+            raise RuntimeError("no figures in the worker's own child")
+        return save(fig, path)
+    plots.save = failing
+worker = FigureWorker.start()
+assert worker is not None
+from mechsim.scenarios import api
+from mechsim.scenarios.output.writer import write_result
+result = api.run("geneva-lc1", set=["duration='1.5 s'", "output_step='5 ms'"])
+tmp = Path(tempfile.mkdtemp())
+with worker:
+    folder = write_result(result, tmp / "out", mechanism=result.mechanism, worker=worker)
+drew_here = "matplotlib" in sys.modules
+from mechsim.scenarios.output.figures import result_figures
+from mechsim.scenarios.output.plots import DPI
+def png(fig):
+    buf = io.BytesIO(); fig.savefig(buf, dpi=DPI, format="png"); return buf.getvalue()
+expected = {stem: png(fig) for stem, fig in result_figures(result, result.mechanism).items()}
+same = {p.stem: p.read_bytes() for p in folder.glob("*.png")} == expected
+print(drew_here, len(expected), same)
+"""
+
+
+def _run(mode):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    out = subprocess.run([sys.executable, "-c", _SCRIPT, mode], env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    drew_here, n, same = out.stdout.split()
+    return drew_here == "True", int(n), same == "True"
+
+
+def test_the_workers_draw_every_figure_and_this_process_none():
+    drew_here, n, same = _run("clean")
+    assert n >= 7 and same
+    assert not drew_here                 # this process never imported matplotlib: the workers drew all
+
+
+@pytest.mark.parametrize("mode", ["worker-fails", "grandchild-fails"])
+def test_what_a_worker_fails_to_save_is_drawn_here(mode):
+    drew_here, n, same = _run(mode)
+    assert n >= 7 and same
+    assert drew_here
+
+
+def test_plots_wanted_reads_the_scenario_and_overrides():
+    assert plots_wanted("geneva-lc1", [])
+    assert not plots_wanted("geneva-lc1", ["output.plots=false"])
+    assert not plots_wanted("no-such-scenario", [])              # the load reports it, with no worker started
+    assert not plots_wanted("geneva-lc1", ["not an override"])
+
+
+def test_a_command_that_stops_early_leaves_no_worker(tmp_path):
+    """An output folder that exists without --force: exit 2 after the worker was forked. capture_output reads the
+    pipes to their end, which only comes when every process holding them (the workers too) has exited."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "x").write_text("not mechsim's")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    out = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "geneva-lc1", "--out",
+                          str(tmp_path / "out")], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and out.stderr.startswith("error: ") and "Traceback" not in out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]          # no temporary folder left
