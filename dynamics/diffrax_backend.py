@@ -68,6 +68,9 @@ class DiffraxOptions:
         through the step loop and a too large one makes every step slower (geneva-motor, warm CPU time: 0.19 s
         with 32 rows, 0.05 s with 256, 0.19 s with 512; docs/diffrax.md).
     projection: project q and v onto the constraints at every restart (mode change or chunk boundary).
+    compiled_run: run the whole hybrid run as one compiled call (`dynamics/diffrax_run.py`) where the mechanism
+        has a transition table (`Mechanism.symbolic_transitions`), the solver is explicit and events are on;
+        False (or any of those missing): one compiled solve per segment, transitions in Python.
     """
 
     solver: str = "Tsit5"
@@ -85,6 +88,7 @@ class DiffraxOptions:
     event_atol: float = 1e-13
     n_save: int | None = None
     projection: bool = True
+    compiled_run: bool = True
 
     @property
     def implicit(self) -> bool:
@@ -151,16 +155,16 @@ def _stage_root_finder(o: DiffraxOptions):
     raise ValueError(f"unknown implicit root finder {o.newton!r}")
 
 
-def _solver(o: DiffraxOptions):
+def solver_for(o: DiffraxOptions):
     cls = getattr(diffrax, o.solver)
     return cls(root_finder=_stage_root_finder(o)) if o.implicit else cls()
 
 
-def _evaluations_per_step(o: DiffraxOptions) -> int | None:
+def evaluations_per_step(o: DiffraxOptions) -> int | None:
     """Vector-field evaluations per attempted step of an explicit Runge-Kutta method (None if implicit)."""
     if o.implicit:
         return None
-    tab = getattr(_solver(o), "tableau", None)
+    tab = getattr(solver_for(o), "tableau", None)
     if tab is None:
         return {"Euler": 1}.get(o.solver)
     stages = len(tab.c) + 1
@@ -220,7 +224,7 @@ def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
         return jnp.minimum(jnp.min(heading(t, y, args)), 1.0)
 
     event = diffrax.Event(cond, FirstCrossing(rtol=o.event_rtol, atol=o.event_atol), direction=False)
-    solver = _solver(o)
+    solver = solver_for(o)
 
     def solve(k, t0, t1, z0, p, enabled, ts, dt0, tol):
         # the step controller's (rtol, atol) are traced: one compilation serves every tolerance (compile_key)
@@ -290,12 +294,12 @@ def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]
     return entry, jmod, True
 
 
-def _z(mf: ModeFunctions, y: np.ndarray) -> np.ndarray:
+def mode_z(mf: ModeFunctions, y: np.ndarray) -> np.ndarray:
     ix = mf.index
     return np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
 
 
-def _ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.ndarray, lam: np.ndarray
+def ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.ndarray, lam: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
     """Rows (y, y') in the IDA layout of the mode: y = [q, v, lam, mu = 0, work, ext], y' = [v, a, 0, 0, ...]."""
     z, zp, a, lam = (np.atleast_2d(x) for x in (z, zp, a, lam))
@@ -348,13 +352,21 @@ class DiffraxBackend:
         self.settings = settings
         self.o = options or default_options(settings)
         self.solver = self.o.solver
-        self.per_step = _evaluations_per_step(self.o)
+        self.per_step = evaluations_per_step(self.o)
         self.unavailable = {"jacobian_evaluations": "not exposed by diffrax"}
         self.notes = {}
         if self.per_step:
             self.notes["residual_evaluations"] = "estimated: attempted steps x new stages per step + 3 per segment"
         else:
             self.unavailable["residual_evaluations"] = "not exposed by diffrax for implicit solvers"
+
+    def whole_run(self, mech: Mechanism, start, t0: float, t_end: float, progress=None) -> Trajectory | None:
+        """The run as compiled whole-run calls (`diffrax_run.simulate_run`), or None where that path does not
+        apply (no transition table, an implicit solver, events off, `options.compiled_run` False)."""
+        if not (self.o.compiled_run and not self.o.implicit and self.settings.events):
+            return None
+        from mechsim.dynamics.diffrax_run import simulate_run
+        return simulate_run(mech, start, self.settings, self.o, t0, t_end, progress)
 
     def hint(self, code: FailureCode) -> str:
         return ("raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver (Kvaerno5 if the "
@@ -379,7 +391,7 @@ class DiffraxBackend:
         enabled = np.zeros(jmod.ng_max, bool)
         enabled[:len(r.mf.guard_names)] = bool(self.settings.events)
         dt0 = r.first_step if r.first_step > 0 else DT0_FIRST
-        return segment_arguments(jmod.index(r.mode), r.t0, t1, _z(r.mf, r.y0), np.asarray(r.p), enabled, ts,
+        return segment_arguments(jmod.index(r.mode), r.t0, t1, mode_z(r.mf, r.y0), np.asarray(r.p), enabled, ts,
                                  dt0, (self.o.rtol, self.o.atol)), len(chunk)
 
     def segment(self, r: Request, jmod: JaxModel, out: dict, n_chunk: int) -> Segment:
@@ -395,9 +407,9 @@ class DiffraxBackend:
         next_step = max((t_seg - t) / max(int(out["accepted"]), 1), DT0_FLOOR * max(1.0, abs(t)))
         keep = np.arange(n_save) < n_chunk
         keep &= np.isfinite(out["ts"]) & (out["ts"] <= t_seg)
-        y_rows, yp_rows = _ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep], out["lam"][keep])
+        y_rows, yp_rows = ida_rows(mf, jmod.nq, out["z"][keep], out["zp"][keep], out["a"][keep], out["lam"][keep])
         t_rows = out["ts"][keep].copy()
-        y_end, yp_end = (row[0] for row in _ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
+        y_end, yp_end = (row[0] for row in ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
                                                      out["lam_end"]))
         seg = Segment(t_rows, y_rows, yp_rows, End.END, t_seg, y_end, yp_end, counts=counts, next_step=next_step)
         code = int(out["result"])

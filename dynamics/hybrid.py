@@ -113,6 +113,10 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
     `settings.backend` names, see `dynamics.backend.REGISTRY`)."""
     backend = backend if backend is not None else backend_for(settings.backend, settings)
     start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
+    whole_run = getattr(backend, "whole_run", None)     # a backend that can run everything in one compiled call
+    traj = whole_run(mech, start, t0, t_end, progress) if whole_run else None
+    if traj is not None:
+        return traj
     loop = hybrid_loop(mech, start, settings, backend, t0, t_end, progress)
     return drive_loop(loop, backend.integrate)
 

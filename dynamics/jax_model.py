@@ -43,7 +43,7 @@ _PRINTER_SETTINGS = {"fully_qualified_modules": False, "inline": True, "allow_un
                      "user_functions": {}}
 
 
-def _lambdify(args, exprs: list) -> Callable:
+def lambdify_jax(args, exprs: list) -> Callable:
     """sympy -> jax.numpy, one function returning a flat list of scalars (cse across all of them)."""
     return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True,
                        printer=_JaxPrinter(_PRINTER_SETTINGS))
@@ -197,8 +197,8 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
         name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu, ext_diagonal=diagonal,
         guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
         alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"),
-        _kkt_parts=_lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs),
-        _post=_lambdify([t, list(q), list(v), a_syms, list(lam), list(x), list(params)],
+        _kkt_parts=lambdify_jax([t, list(q), list(v), list(x), list(params)], kkt_exprs),
+        _post=lambdify_jax([t, list(q), list(v), a_syms, list(lam), list(x), list(params)],
                         powers + guards + ext_exprs),
     )
 

@@ -16,16 +16,49 @@ from __future__ import annotations
 import numpy as np
 
 
+#: traced (jax) systems up to this size are solved by unrolled elimination instead of LAPACK's getrf/getrs
+UNROLLED_MAX = 8
+
+
+def unrolled_solve(K, b, xp):
+    """x with K x = b for one small system (n <= UNROLLED_MAX): Gaussian elimination with partial pivoting,
+    unrolled into elementwise operations (Golub & Van Loan, Matrix Computations, Alg. 3.4.1). Traced by JAX it
+    fuses into the surrounding step instead of a LAPACK call per evaluation, which costs microseconds on a
+    3 x 3 system (the compiled diffrax run, docs/diffrax.md 'The compiled run')."""
+    n = K.shape[-1]
+    A = xp.concatenate([K, b[:, None]], axis=1)
+    rows = xp.arange(n)
+    for j in range(n):
+        piv = xp.argmax(xp.where(rows >= j, xp.abs(A[:, j]), -1.0))
+        swap = (rows == j)[:, None] * A[piv][None, :] + (rows == piv)[:, None] * A[j][None, :]
+        A = xp.where(((rows == j) | (rows == piv))[:, None], swap, A)
+        factor = xp.where(rows > j, A[:, j] / A[j, j], 0.0)
+        A = A - factor[:, None] * A[j][None, :]
+    x = [None] * n
+    for i in reversed(range(n)):
+        acc = A[i, n]
+        for j in range(i + 1, n):
+            acc = acc - A[i, j] * x[j]
+        x[i] = acc / A[i, i]
+    return xp.stack(x)
+
+
+def _linear_solve(K, b, xp):
+    if xp is not np and K.ndim == 2 and K.shape[-1] <= UNROLLED_MAX:
+        return unrolled_solve(K, b, xp)
+    return xp.linalg.solve(K, b[..., None])[..., 0]
+
+
 def solve(M, G, Ql, Q0, c, xp=np):
     """(a, lam) for one system or a stack of them (leading axes): M (..., nq, nq), G (..., m, nq),
     Ql (..., nq, m), Q0 (..., nq), c (..., m); xp is numpy or jax.numpy."""
     nq, m = M.shape[-1], G.shape[-2]
     if m == 0:
-        return xp.linalg.solve(M, Q0[..., None])[..., 0], xp.zeros(Q0.shape[:-1] + (0,))
+        return _linear_solve(M, Q0, xp), xp.zeros(Q0.shape[:-1] + (0,))
     top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
     bottom = xp.concatenate([G, xp.zeros(G.shape[:-1] + (m,))], axis=-1)
     K = xp.concatenate([top, bottom], axis=-2)
-    sol = xp.linalg.solve(K, xp.concatenate([Q0, c], axis=-1)[..., None])[..., 0]
+    sol = _linear_solve(K, xp.concatenate([Q0, c], axis=-1), xp)
     return sol[..., :nq], sol[..., nq:]
 
 

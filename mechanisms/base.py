@@ -165,6 +165,27 @@ class Transition:
 
 
 @dataclass(frozen=True)
+class SymbolicTransition:
+    """A transition written as expressions, so that a compiled hybrid loop can apply it without calling back
+    into Python (`Mechanism.symbolic_transitions`; dynamics/diffrax_run.py).
+
+    mode: the next mode, or None for a transition the compiled loop must not take itself (a stop, or anything
+        only `on_guard` can decide): the loop hands the state back to `on_guard` there.
+    updates: parameter name -> new value as an expression of the mechanism's symbols (q, v and the parameters,
+        all before the transition); parameters not named keep their values.
+    handoff: an expression that is > 0 where `on_guard` decides differently from `mode`/`updates` (e.g. a root
+        that is really a stall): the compiled loop hands the state back to `on_guard` there. None: never.
+    kind: the events-table label `on_guard` gives this transition.
+    Velocities stay (projected onto the new mode's constraints); impacts (restitution) are not expressible here.
+    """
+
+    mode: str | None
+    updates: Mapping[str, sp.Expr] = field(default_factory=dict)
+    handoff: sp.Expr | None = None
+    kind: str = "mode change"
+
+
+@dataclass(frozen=True)
 class InitialState:
     """Where a run starts: mode, parameter updates for that mode, and approximate q0, v0 (made consistent
     by `dynamics/`: q projected onto Phi = 0 keeping the drive coordinate, v onto the velocity constraints)."""
@@ -246,6 +267,12 @@ class Mechanism(ABC):
     def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
                  q: np.ndarray, v: np.ndarray) -> Transition:
         """The transition when `guard` of `mode` fires."""
+
+    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition] | None:
+        """Every (mode, guard) transition as expressions (`SymbolicTransition`), equal to `on_guard` wherever
+        their `handoff` is not positive; or None (the default) when the mechanism has none. With them the diffrax
+        backend runs a whole run as one compiled call (docs/diffrax.md, 'The compiled run')."""
+        return None
 
     def rebase(self, values: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]] | None:
         """A symmetry that keeps the integrated coordinates small, or None (the default: there is none).

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
@@ -264,6 +264,49 @@ class Geneva(Mechanism):
         if guard == "slip_reversal":
             return Transition("engaged", {"slide": -values["slide"]}, kind="slip reversal")
         raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
+
+    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition]:
+        """`on_guard` as expressions (for the compiled diffrax run, docs/diffrax.md 'The compiled run'): entry,
+        exit, flank switch and slip reversal with the same updates; stall and rest are stops, and a slip
+        reversal that `slip_stopped_by_crank` calls a stall is handed back to `on_guard` (its `handoff`)."""
+        import sympy as sp
+        s, P = self.symbols, self.symbols.p
+        theta, psi = s.q
+        w1, w2 = s.v
+        r, R, k, pitch = P("r"), P("R"), P("slot"), P("pitch")
+        flank, slide = P("flank"), P("slide")
+        lam = r / P("c")                          # the geometry's ratio r/c (on_guard reads it from the geometry)
+        alpha = theta - 2 * sp.pi * k
+
+        def sign_keep(u, keep):
+            """sign(u), `keep` where u == 0 (np.sign's 0 never becomes a flank or slide)."""
+            return sp.Piecewise((keep, sp.Eq(u, 0)), (sp.sign(u), True))
+
+        # entry: the wheel angle the pin meets, beta = atan2(lam sin a, 1 - lam cos a) (kinematics.wheel_angle)
+        beta_entry = sp.atan2(lam * sp.sin(alpha), 1 - lam * sp.cos(alpha))
+        u_entry = w1 * r * sp.sin(alpha + beta_entry) + R * w1
+        entry_slide = sp.Piecewise((1.0, u_entry >= 0), (-1.0, True))
+        beta = psi - k * pitch
+        u_switch = r * w1 * sp.sin(alpha + beta) + (-flank) * R * (w1 + w2)
+        # slip_stopped_by_crank: |s| > 1e-3 (r + R) and |theta'| < STOPPED_SPEED, i.e. the minimum of the two
+        # margins positive; s with the speed ratio G = lam (cos a - lam) / (1 - 2 lam cos a + lam^2)
+        G = lam * (sp.cos(alpha) - lam) / (1 - 2 * lam * sp.cos(alpha) + lam * lam)
+        s_kin = r * sp.sin(alpha + beta) + flank * R * (1 + G)
+        stopped = sp.Min(sp.Abs(s_kin) - 1e-3 * (r + R), self.STOPPED_SPEED - sp.Abs(w1))
+        table = {
+            ("dwell", "entry"): SymbolicTransition("engaged", {"flank": sp.Float(1.0), "slide": entry_slide},
+                                                   kind="entry"),
+            ("engaged", "exit"): SymbolicTransition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * pitch},
+                                                    kind="exit"),
+            ("engaged", "flank_switch"): SymbolicTransition(
+                "engaged", {"flank": -flank, "slide": sign_keep(u_switch, slide)}, kind="flank switch"),
+            ("engaged", "slip_reversal"): SymbolicTransition("engaged", {"slide": -slide}, handoff=stopped,
+                                                             kind="slip reversal"),
+        }
+        for mode in ("engaged", "dwell"):
+            table[(mode, "stall")] = SymbolicTransition(None, kind="stall")
+            table[(mode, "rest")] = SymbolicTransition(None, kind="rest")
+        return table
 
     def slip_stopped_by_crank(self, values: Mapping[str, float], q: np.ndarray, v: np.ndarray) -> bool:
         """True when an engaged slip reversal is the crank coming to rest, not the slip changing sign.

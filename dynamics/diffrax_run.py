@@ -1,0 +1,478 @@
+"""The whole hybrid run as ONE compiled call on diffrax's stepping pieces (docs/diffrax.md, 'The compiled run').
+
+One `lax.while_loop` takes steps with diffrax's explicit solver (`solver.step`, its error estimate judged by
+`PIDController.adapt_step_size`) in the active mode (a `lax.switch` on the mode number, `jax_model`). After each
+accepted step the mode's guards are evaluated at its end; a sign change in the direction of heading is located
+by bisection on the step's dense interpolant (to `event_rtol`/`event_atol`, the upper end of the bracket, as
+the segment backend's `FirstCrossing`). The guard that fired picks a branch of the transition table
+(`jax_transitions`): next mode and parameters, then the consistent re-initialisation of `dynamics/consistent.py`
+in jax (positions by Gauss-Newton onto Phi = 0, velocities by the kinetic-energy-metric projection; an index-1
+restart into the same mode with the same constraints keeps q and v, `transitions.same_constraints`). Output rows
+on the requested grid are interpolated into a preallocated buffer, events into another.
+
+The loop ends at t_end, at a failure (code), or where the table says the transition is `on_guard`'s (a stop,
+a hand-back condition, guards firing together, the event buffer full): the driver (`simulate_run`) then applies
+that one transition in Python (`transitions.apply_transition`, the same code as the segment loop) and calls the
+compiled run again from there. Events-table rows are written by `on_guard` itself from the recorded states, so
+kinds and messages are the segment loop's. rtol/atol are traced: one compilation per model structure, solver
+options and buffer sizes serves every tolerance.
+
+The compiled loop does not re-base the coordinates (`Mechanism.rebase`); the hand-backs do.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, replace
+from enum import IntEnum
+from typing import Callable
+
+import numpy as np
+
+from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics.jax_transitions import JaxTransitions, jax_transitions
+
+import diffrax  # noqa: E402
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+#: events one compiled call records before it hands back (and is called again)
+EVENTS_PER_CALL = 64
+#: Gauss-Newton iterations of the position projection (quadratic convergence from the integrator's drift)
+GN_ITERATIONS = 3
+#: bisection iterations at most when locating a guard crossing (2^-200 of a step: the width test ends it first)
+MAX_BISECTIONS = 200
+
+
+class Code(IntEnum):
+    RUNNING = 0
+    DONE = 1           # reached t_end
+    HAND_BACK = 2      # a guard fired whose transition is on_guard's (or several fired together)
+    ROWS_FULL = 4      # the output buffer is full: call again
+    MAX_STEPS = 5      # one segment took more than max_steps steps
+    NON_FINITE = 6     # the state or the step size is not finite / the step size underflowed
+    CHATTERING = 7     # a guard fired again at the instant of its own transition
+
+
+# -- constraints of mode k, padded to the largest mode ------------------------------------------------------
+def _constraint_parts(jmod: JaxModel):
+    m_max = jmod.m_max
+
+    def branch(jm):
+        def f(t, q, v, p):
+            M, G, phi, phi_dot = jm.constraint_parts(t, q, v, p)
+            pad = m_max - jm.m
+            return (M, jnp.concatenate([G, jnp.zeros((pad, jm.nq))]), jnp.concatenate([phi, jnp.zeros(pad)]),
+                    jnp.concatenate([phi_dot, jnp.zeros(pad)]), jnp.arange(m_max) >= jm.m)
+        return f
+
+    branches = [branch(jm) for jm in jmod.modes]
+
+    def parts(k, t, q, v, p):
+        """(M, G, Phi, Phi', padded-row mask) of mode k; padded rows are zero."""
+        if len(branches) == 1:
+            return branches[0](t, q, v, p)
+        return jax.lax.switch(k, branches, t, q, v, p)
+    return parts
+
+
+def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
+    """(q, v) made consistent in mode k (consistent.project_positions / project_velocities, restitution 0), or
+    kept as they are for an index-1 restart into the same mode with the same constraints here
+    (transitions.same_constraints: Phi and G equal to 1e-12 of their scale in the old and the new parameters)."""
+    M, G, phi, _, pad = parts(k, t, q, v, p)
+    _, G_old, phi_old, _, _ = parts(k_old, t, q, v, p_old)
+    eye_pad = jnp.diag(pad.astype(q.dtype))
+    scale = jnp.max(jnp.abs(G_old) @ jnp.abs(q)) + jnp.max(jnp.abs(G_old))
+    tol = 1e-12 * jnp.maximum(scale, jnp.finfo(q.dtype).tiny)
+    keep = ((k == k_old) & jnp.all(jnp.abs(phi - phi_old) <= tol) & jnp.all(jnp.abs(G - G_old) <= tol)
+            & jnp.any(~pad))
+    qp = q
+    for _ in range(GN_ITERATIONS):           # minimum-norm Gauss-Newton steps: q -= G^T (G G^T)^-1 Phi
+        _, G, phi, _, _ = parts(k, t, qp, v, p)
+        qp = qp - G.T @ jnp.linalg.solve(G @ G.T + eye_pad, phi)
+    M, G, _, phi_dot, _ = parts(k, t, qp, v, p)
+    Minv_Gt = jnp.linalg.solve(M, G.T)
+    vp = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt + eye_pad, phi_dot)
+    return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
+
+
+def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: int) -> Callable:
+    """run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps) -> dict of arrays; to be jitted.
+
+    ts: the output times (n_rows, padded after n_ts with t_end); tol = (rtol, atol); o: DiffraxOptions.
+    """
+    from mechsim.dynamics.diffrax_backend import solver_for
+    solver = solver_for(o)
+    term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
+    error_order = solver.error_order(term)
+    parts = _constraint_parts(jmod)
+    nq, nz, ngm = jmod.nq, jmod.nz, jmod.ng_max
+    directions = jnp.asarray([[jm.guard_directions[j] if j < jm.ng else 0 for j in range(ngm)]
+                              for jm in jmod.modes], dtype=jnp.float64)
+    stops = jnp.asarray(table.stops, dtype=bool)
+    real = jnp.asarray([[j < jm.ng for j in range(ngm)] for jm in jmod.modes], dtype=bool)
+
+    def reference(k, t, z, p):
+        """Per guard, the sign it is on at a segment's start; a guard at zero is referenced to where it is heading
+        (diffrax_backend.make_solve: roots at the initial point are not reported)."""
+        f0 = jmod.rates(k, t, z, p)
+        g0, gdot0 = jax.jvp(lambda tt, zz: jmod.guards(k, tt, zz, p), (t, z), (jnp.ones_like(t), f0))
+        at_zero = jnp.abs(g0) <= 1e-10 * jnp.maximum(1.0, jnp.abs(t)) * jnp.abs(gdot0)
+        ref = jnp.where(at_zero, jnp.where(gdot0 != 0, gdot0, 1.0), jnp.where(g0 != 0, g0, 1.0))
+        return jnp.where(real[k], jnp.sign(ref), 1.0)
+
+    def run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps):
+        controller = diffrax.PIDController(rtol=tol[0], atol=tol[1], pcoeff=o.pcoeff, icoeff=o.icoeff,
+                                           dcoeff=o.dcoeff)
+        args0 = (k0, p0)
+        _, cstate0 = controller.init(term, t0, t0 + dt0, z0, dt0, args0, None, error_order)
+        sstate0 = solver.init(term, t0, t0 + dt0, z0, args0)
+        f64, i32 = jnp.float64, jnp.int32
+        # the small state goes through the per-step conds; the buffers (rows, events) are only written at the
+        # top level of the loop body, where XLA updates them in place
+        small = dict(
+            hand=i32(-1), t=jnp.asarray(t0, f64), z=z0, k=jnp.asarray(k0, i32), p=p0, dt=jnp.asarray(dt0, f64),
+            ref=reference(k0, t0, z0, p0), seg_t0=jnp.asarray(t0, f64), seg_steps=i32(0), seg_acc=i32(0),
+            jump=jnp.bool_(True), sstate=sstate0, cstate=cstate0,
+            last_guard=i32(-1), last_t=jnp.asarray(-jnp.inf, f64),
+            fired=jnp.zeros(ngm, bool), code=i32(Code.RUNNING),
+            steps=i32(0), accepted=i32(0), rejected=i32(0), bisections=i32(0))
+        big = dict(i_out=i32(0), rows=jnp.zeros((n_rows, nz)), row_seg=jnp.zeros(n_rows, i32),
+                   n_ev=i32(0), ev_t=jnp.zeros(n_events), ev_guard=jnp.zeros(n_events, i32),
+                   ev_z=jnp.zeros((n_events, nz)), ev_k=jnp.zeros(n_events, i32),
+                   ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)))
+        c = jax.tree_util.tree_map(jnp.asarray, (small, big))  # python bools of diffrax's states as arrays
+
+        def write_rows(b, t_hi, interp):
+            """Rows at the output times up to t_hi from the step's interpolant, as long as the buffer holds."""
+            def cond(st):
+                i, _, _ = st
+                return (i < n_ts) & (i < n_rows) & (ts[jnp.minimum(i, n_rows - 1)] <= t_hi)
+
+            def body(st):
+                i, rows, seg = st
+                return i + 1, rows.at[i].set(interp.evaluate(ts[i])), seg.at[i].set(b["n_ev"])
+            i, rows, seg = jax.lax.while_loop(cond, body, (b["i_out"], b["rows"], b["row_seg"]))
+            return dict(b, i_out=i, rows=rows, row_seg=seg)
+
+        def new_segment(s, t, z, k, p, dt):
+            return dict(s, t=t, z=z, k=k, p=p, dt=dt, ref=reference(k, t, z, p), seg_t0=t, seg_steps=i32(0),
+                        seg_acc=i32(0), jump=jnp.bool_(True))
+
+        no_record = (jnp.bool_(False), jnp.zeros((), f64), i32(0), jnp.zeros(nz), i32(0), p0, jnp.zeros(nz))
+
+        def mode_step(kk: int):
+            """One step in mode number kk (a python int: the mode's functions are called directly, without a
+            switch per evaluation): (small state, (t, t_acc, t1, dense), event record)."""
+            jm = jmod.modes[kk]
+            pad = jnp.ones(ngm - jm.ng)
+            term_k = diffrax.ODETerm(lambda t, z, p: jm.rates(t, z, p))
+
+            def guards(t, z, p):
+                return jnp.concatenate([jm.guards(t, z, p), pad])
+
+            def locate(s, lo, hi, interp):
+                """Bisection for the first zero of min_j ref_j g_j on the step's interpolant in (lo, hi]: the
+                upper end of the final bracket (no iteration when lo == hi)."""
+                p, ref = s["p"], s["ref"]
+
+                def cond(st):
+                    lo, hi, n = st
+                    return (hi - lo > o.event_atol + o.event_rtol * jnp.abs(hi)) & (n < MAX_BISECTIONS)
+
+                def body(st):
+                    lo, hi, n = st
+                    mid = lo + 0.5 * (hi - lo)
+                    before = jnp.min(ref * guards(mid, interp.evaluate(mid), p)) > 0
+                    return jnp.where(before, mid, lo), jnp.where(before, hi, mid), n + 1
+                _, hi, n = jax.lax.while_loop(cond, body, (lo, hi, i32(0)))
+                return hi, n
+
+            def on_crossing(s, t_star, z_star, full):
+                """The guard that crossed at t_star: re-armed, applied from the table, or handed back."""
+                p, ref = s["p"], s["ref"]
+                h = ref * guards(t_star, z_star, p)
+                past = h <= 0
+                i = jnp.where(jnp.any(past), jnp.argmin(jnp.where(past, h, jnp.inf)), jnp.argmin(h)).astype(i32)
+                d = directions[kk]
+                against = (d != 0) & (ref == d)          # crossed against the guard's direction: re-arm, go on
+                fired = past & ~against & real[kk]
+                fired = fired.at[i].set(~against[i])
+                mean = (t_star - s["seg_t0"]) / jnp.maximum(s["seg_acc"], 1)
+                restart_dt = jnp.maximum(0.1 * mean, 1e-12 * jnp.maximum(1.0, jnp.abs(t_star)))
+
+                def rearm(s):
+                    return new_segment(s, t_star, z_star, s["k"], p, s["dt"]), no_record
+
+                def event(s):
+                    q, v = z_star[:nq], z_star[nq:2 * nq]
+                    k_new, p_new, back = table.apply(kk, i, q, v, p)
+                    chatter = ((i == s["last_guard"])
+                               & (t_star - s["last_t"] <= 1e-9 * jnp.maximum(1.0, jnp.abs(t_star))))
+                    q_new, v_new = _reinitialise(parts, s["k"], k_new, t_star, q, v, p, p_new)
+                    z_new = jnp.concatenate([q_new, v_new, z_star[2 * nq:]])
+                    # a stop guard of the new mode carried past zero by the restart (transitions.carried_stop)
+                    g_new = jmod.guards(k_new, t_star, z_new, p_new)
+                    d_new = directions[k_new]
+                    carried = jnp.any(stops[k_new] & real[k_new] & (d_new != 0) & (d_new * g_new > 0))
+                    code = jnp.where(chatter, Code.CHATTERING, jnp.where(
+                        back | (jnp.sum(fired) > 1) | carried | full, Code.HAND_BACK, Code.RUNNING)).astype(i32)
+                    stay = dict(s, t=t_star, z=z_star, code=code, fired=fired, hand=i)
+                    go = new_segment(dict(s, last_guard=i, last_t=t_star), t_star, z_new, k_new, p_new, restart_dt)
+                    ok = code == Code.RUNNING
+                    s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), go, stay)
+                    return s, (ok, t_star, i, z_star, k_new, p_new, z_new)
+
+                return jax.lax.cond(against[i], rearm, event, s)
+
+            def branch(s, t_end, full):
+                t, z, p = s["t"], s["z"], s["p"]
+                t1 = jnp.minimum(t + s["dt"], t_end)
+                z1, err, dense, sstate1, _ = solver.step(term_k, t, t1, z, p, s["sstate"], s["jump"])
+                keep, _, next_t1, _, cstate, _ = controller.adapt_step_size(t, t1, z, z1, p, err, error_order,
+                                                                             s["cstate"])
+                cstate = jax.tree_util.tree_map(jnp.asarray, cstate)
+                sstate1 = jax.tree_util.tree_map(jnp.asarray, sstate1)
+                finite = jnp.all(jnp.isfinite(z1))
+                keep = keep & finite
+                dt_next = jnp.where(finite, next_t1 - jnp.where(keep, t1, t), 0.5 * (t1 - t))
+                interp = solver.interpolation_cls(t0=t, t1=t1, **dense)
+                crossed = keep & jnp.any(s["ref"] * guards(t1, z1, p) <= 0)
+                t_star, n_bis = locate(s, t, jnp.where(crossed, t1, t), interp)
+                t_acc = jnp.where(crossed, t_star, jnp.where(keep, t1, t))
+                s = dict(s, steps=s["steps"] + 1, seg_steps=s["seg_steps"] + 1, cstate=cstate, dt=dt_next,
+                         bisections=s["bisections"] + n_bis, accepted=s["accepted"] + keep,
+                         rejected=s["rejected"] + ~keep, seg_acc=s["seg_acc"] + keep)
+
+                def smooth(s):
+                    moved = dict(s, t=t1, z=z1, sstate=sstate1, jump=jnp.bool_(False))
+                    return jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), moved, s), no_record
+
+                s, rec = jax.lax.cond(crossed, lambda s: on_crossing(s, t_star, interp.evaluate(t_star), full),
+                                      smooth, s)
+                return s, (t, t_acc, t1, dense), rec
+            return branch
+
+        branches = [mode_step(kk) for kk in range(len(jmod.modes))]
+
+        def step(c):
+            s, b = c
+            s, (t, t_acc, t1, dense), rec = jax.lax.switch(s["k"], branches, s, t_end, b["n_ev"] >= n_events)
+            # rows up to t_acc, in the segment that was running (before the event record below)
+            b = write_rows(b, t_acc, solver.interpolation_cls(t0=t, t1=t1, **dense))
+            do, te, ge, ze, ke, pe, za = rec
+            n = jnp.minimum(b["n_ev"], n_events - 1)
+
+            def put(buf, val):
+                return buf.at[n].set(jnp.where(do, val, buf[n]))
+            b = dict(b, n_ev=b["n_ev"] + do, ev_t=put(b["ev_t"], te), ev_guard=put(b["ev_guard"], ge),
+                     ev_z=put(b["ev_z"], ze), ev_k=put(b["ev_k"], ke), ev_p=put(b["ev_p"], pe),
+                     ev_after=put(b["ev_after"], za))
+            code = s["code"]
+            code = jnp.where((code == Code.RUNNING) & (s["t"] >= t_end - 1e-12), Code.DONE, code)
+            code = jnp.where((code == Code.RUNNING) & (b["i_out"] >= n_rows) & (n_ts > n_rows), Code.ROWS_FULL, code)
+            code = jnp.where((code == Code.RUNNING) & (s["seg_steps"] > max_steps), Code.MAX_STEPS, code)
+            bad = ~jnp.isfinite(s["dt"]) | (s["dt"] <= 1e-14 * jnp.maximum(1.0, jnp.abs(s["t"])))
+            code = jnp.where((code == Code.RUNNING) & bad, Code.NON_FINITE, code)
+            return dict(s, code=code.astype(i32)), b
+
+        s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, step, c)
+        c = dict(s, **b)
+        # rows in the IDA layout need z', a and lam: one vectorised evaluation in each row's mode and parameters
+        k_hist = jnp.concatenate([jnp.asarray(k0, i32)[None], c["ev_k"]])
+        p_hist = jnp.concatenate([p0[None, :], c["ev_p"]])
+        seg = c["row_seg"]
+        zp, acc, lam, _ = jax.vmap(jmod.evaluate)(k_hist[seg], ts, c["rows"], p_hist[seg])
+        zp_end, a_end, lam_end, g_end = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
+        keys = ("hand", "dt", "t", "z", "k", "p", "code", "fired", "i_out", "rows", "row_seg", "n_ev", "ev_t", "ev_guard", "ev_z",
+                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections")
+        return dict({key: c[key] for key in keys}, zp=zp, a=acc, lam=lam, zp_end=zp_end, a_end=a_end,
+                    lam_end=lam_end)
+
+    return run
+
+
+# -- compilation cache -------------------------------------------------------------------------------------
+@dataclass
+class CompiledRun:
+    fn: Callable
+    jmod: JaxModel
+    compile_time: float
+    compile_cpu_time: float
+    model: object
+    n_rows: int
+
+
+_CACHE: dict[tuple, CompiledRun] = {}
+
+
+def row_bucket(n: int) -> int:
+    """Output-buffer rows for n output times: the next power of two (at least 64, at most 2^16)."""
+    return int(min(max(64, 1 << max(int(n) - 1, 1).bit_length()), 1 << 16))
+
+
+def run_key(o):
+    """Options that shape the compiled run (tolerances and max_steps are traced)."""
+    return replace(o, rtol=0.0, atol=0.0, max_steps=0, n_save=None, projection=True)
+
+
+def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]:
+    """The compiled run of a model for n_rows output rows (None if the mechanism has no transition table);
+    True if compiled by this call."""
+    key = (id(model), run_key(o), n_rows, type(mech).__name__, mech.structure_key())
+    hit = _CACHE.get(key)
+    if hit is not None and hit.model is model:
+        return hit, False
+    wall, cpu = _time.perf_counter(), _time.process_time()
+    jmod = jax_model(model)
+    table = jax_transitions(mech, model, jmod)
+    if table is None:
+        return None, False
+    f64 = np.float64
+    example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+                            np.ones(n_rows), 1, 1e-3, (1e-6, 1e-8), 100)
+    fn = jax.jit(make_run(jmod, table, o, n_rows, EVENTS_PER_CALL)).lower(*example).compile()
+    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, n_rows)
+    del f64
+    _CACHE[key] = entry
+    return entry, True
+
+
+def run_arguments(k, t0, t_end, z0, p, ts, n_ts, dt0, tol, max_steps) -> tuple:
+    f64 = np.float64
+    return (np.int32(k), f64(t0), f64(t_end), np.asarray(z0, f64), np.asarray(p, f64), np.asarray(ts, f64),
+            np.int32(n_ts), f64(dt0), np.asarray(tol, f64), np.int32(max_steps))
+
+
+# -- the driver: compiled calls, and on_guard's transitions where the table hands back ------------------------
+def _failure(model, mode: str, t: float, q, code: Code, o) -> dict:
+    from mechsim.dynamics.result import FailureCode
+    where = {c: float(v) for c, v in zip(model.coordinates, q)}
+    if code == Code.MAX_STEPS:
+        from mechsim.dynamics.diffrax_backend import result_message
+        msg = result_message(int(diffrax.RESULTS.max_steps_reached._value))
+        return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: {msg} ({o.max_steps} in one mode "
+                    "segment)", code=FailureCode.MAX_STEPS, where=where,
+                    hint="raise solver.max_steps or loosen rtol; check for a singular configuration here")
+    return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: non-finite state or step size underflow",
+                code=FailureCode.NON_FINITE, where=where,
+                hint="check for a singular configuration here, or try another solver.diffrax_solver")
+
+
+def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=None):
+    """The run of `hybrid.simulate` as compiled whole-run calls: a `Trajectory` with the segment loop's pieces,
+    events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
+    transition table (the caller falls back to the segment loop)."""
+    from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z
+    from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, transition_failure_code
+    from mechsim.dynamics.result import FailureCode
+    from mechsim.dynamics.stats import new_stats
+    from mechsim.dynamics.transitions import apply_transition, chattering
+
+    model = start.model
+    n_rows = row_bucket(len(start.t_out))
+    entry, fresh = compiled_run(mech, model, o, n_rows)
+    if entry is None:
+        return None
+    jmod, names, nq = entry.jmod, list(model.parameter_names), jmod_nq(entry)
+    stats = new_stats("diffrax", o.solver, start.derive_time,
+                      unavailable={"jacobian_evaluations": "not exposed by diffrax"})
+    per_step = evaluations_per_step(o)
+    stats["notes"]["residual_evaluations"] = ("estimated: attempted steps x new stages per step + one per step "
+                                              "(guards) + one per bisection")
+    if fresh:
+        stats.update(compile_time_s=entry.compile_time, compile_cpu_time_s=entry.compile_cpu_time, compilations=1)
+    wall0 = _time.perf_counter()
+    mode, values, p, y, yp, offset = start.mode, dict(start.values), start.p, start.y, start.yp, start.offset
+    pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
+    events, warnings, failure, last = [], [], None, None
+    t, dt0, calls = t0, DT0_FIRST, 0
+    while True:
+        mf = model.modes[mode]
+        t_rem = start.t_out[start.t_out > t]
+        ts = np.full(n_rows, t_end)
+        ts[:min(len(t_rem), n_rows)] = t_rem[:n_rows]
+        out = jax.device_get(entry.fn(*run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, ts, len(t_rem),
+                                                      dt0, (o.rtol, o.atol), o.max_steps)))
+        calls += 1
+        n_ev, n_out = int(out["n_ev"]), int(out["i_out"])
+        stats["steps"] += int(out["steps"])
+        stats["accepted_steps"] += int(out["accepted"])
+        stats["rejected_steps"] += int(out["rejected"])
+        stats["residual_evaluations"] += (int(out["steps"]) * (per_step or 1) + int(out["accepted"])
+                                          + int(out["bisections"]))
+        stats["segments"] += n_ev + 1
+        modes = [mode] + [jmod.names[int(k)] for k in out["ev_k"][:n_ev]]
+        params = [p] + [tuple(float(x) for x in row) for row in out["ev_p"][:n_ev]]
+        seg = out["row_seg"][:n_out]
+        for s in range(n_ev + 1):
+            sel = np.flatnonzero(seg == s)
+            if sel.size:
+                mf_s = model.modes[modes[s]]
+                y_rows, yp_rows = ida_rows(mf_s, nq, out["rows"][sel], out["zp"][sel], out["a"][sel],
+                                            out["lam"][sel][:, :mf_s.m])
+                pieces.append(Piece(modes[s], params[s], ts[sel].copy(), y_rows, yp_rows, offset))
+        for e in range(n_ev):
+            mf_e, t_e = model.modes[modes[e]], float(out["ev_t"][e])
+            vals = {**values, **dict(zip(names, params[e]))}
+            z_b, z_a = out["ev_z"][e], out["ev_after"][e]
+            q, v = z_b[:nq], z_b[nq:2 * nq]
+            guard = mf_e.guard_names[int(out["ev_guard"][e])]
+            tr = mech.on_guard(modes[e], guard, vals, t_e, q, v)
+            M_b = np.atleast_2d(np.asarray(mf_e.mass(q, params[e]), float))
+            M_a = np.atleast_2d(np.asarray(model.modes[modes[e + 1]].mass(z_a[:nq], params[e + 1]), float))
+            v_a = z_a[nq:2 * nq]
+            events.append(dict(t_s=t_e, from_mode=modes[e], to_mode=modes[e + 1], kind=tr.kind, guard=guard,
+                               **{f"{c}_q": float(x) for c, x in zip(model.coordinates, q + offset)},
+                               kinetic_energy_before_J=0.5 * float(v @ M_b @ v),
+                               kinetic_energy_after_J=0.5 * float(v_a @ M_a @ v_a), message=tr.message or ""))
+            if tr.message:
+                warnings.append(f"t = {t_e:.6g} s: {tr.message}")
+            last = (guard, t_e)
+        stats["events"] += n_ev
+        stats["restarts"] += n_ev
+        mode, p = modes[-1], params[-1]
+        values.update(zip(names, p))
+        mf = model.modes[mode]
+        t = float(out["t"])
+        y, yp = (r[0] for r in ida_rows(mf, nq, out["z"], out["zp_end"], out["a_end"], out["lam_end"][:mf.m]))
+        dt0 = float(out["dt"])
+        if progress:
+            progress(t)
+        code = Code(int(out["code"]))
+        q = y[mf.index["q"]]
+        if code == Code.DONE:
+            break
+        if code == Code.ROWS_FULL:
+            continue
+        if code == Code.CHATTERING:
+            guard = mf.guard_names[int(out["hand"])]
+            failure = dict(chattering(model, mode, guard, t, q + offset, (guard, t)), code=FailureCode.CHATTERING)
+            break
+        if code != Code.HAND_BACK:
+            failure = _failure(model, mode, t, q + offset, code, o)
+            break
+        fired = [int(out["hand"])] + [int(j) for j in np.flatnonzero(out["fired"]) if j != int(out["hand"])]
+        guard = mf.guard_names[fired[0]]
+        failure = chattering(model, mode, guard, t, q + offset, last)
+        if failure:
+            failure = dict(failure, code=FailureCode.CHATTERING)
+            break
+        last = (guard, t)
+        stats["events"] += 1
+        tr_out = apply_transition(mech, model, parameter_tuple, mode, values, t, y, fired, offset)
+        events += tr_out.rows
+        warnings += tr_out.warnings
+        if tr_out.failure:
+            failure = dict(tr_out.failure, code=transition_failure_code(tr_out.failure))
+            break
+        mode, values, p, y, yp, offset = tr_out.mode, tr_out.values, tr_out.p, tr_out.y, tr_out.yp, tr_out.offset
+        stats["restarts"] += 1
+        dt0 = 0.1 * dt0
+    stats["notes"]["segments"] = f"mode segments, inside {calls} compiled whole-run call(s)"
+    stats["solve_time_s"] = _time.perf_counter() - wall0
+    return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+def jmod_nq(entry: CompiledRun) -> int:
+    return entry.jmod.nq
