@@ -366,7 +366,11 @@ class DiffraxBackend:
         if not (self.o.compiled_run and not self.o.implicit and self.settings.events):
             return None
         from mechsim.dynamics.diffrax_run import simulate_run
-        return simulate_run(mech, start, self.settings, self.o, t0, t_end, progress)
+        return simulate_run(mech, start, self.settings, self.o, t0, t_end, progress, call=self.call_compiled)
+
+    def call_compiled(self, fn, args) -> dict:
+        """One call of a compiled whole run, its outputs fetched to the host (a hook for timing it)."""
+        return jax.device_get(fn(*args))
 
     def hint(self, code: FailureCode) -> str:
         return ("raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver (Kvaerno5 if the "

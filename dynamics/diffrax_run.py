@@ -328,12 +328,10 @@ def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]
     table = jax_transitions(mech, model, jmod)
     if table is None:
         return None, False
-    f64 = np.float64
     example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                             np.ones(n_rows), 1, 1e-3, (1e-6, 1e-8), 100)
     fn = jax.jit(make_run(jmod, table, o, n_rows, EVENTS_PER_CALL)).lower(*example).compile()
     entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, n_rows)
-    del f64
     _CACHE[key] = entry
     return entry, True
 
@@ -359,10 +357,11 @@ def _failure(model, mode: str, t: float, q, code: Code, o) -> dict:
                 hint="check for a singular configuration here, or try another solver.diffrax_solver")
 
 
-def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=None):
+def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=None, call=None):
     """The run of `hybrid.simulate` as compiled whole-run calls: a `Trajectory` with the segment loop's pieces,
     events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
-    transition table (the caller falls back to the segment loop)."""
+    transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
+    fetches its outputs (default: jax.device_get(fn(*args)))."""
     from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z
     from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, transition_failure_code
     from mechsim.dynamics.result import FailureCode
@@ -374,7 +373,8 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     entry, fresh = compiled_run(mech, model, o, n_rows)
     if entry is None:
         return None
-    jmod, names, nq = entry.jmod, list(model.parameter_names), jmod_nq(entry)
+    jmod, names = entry.jmod, list(model.parameter_names)
+    nq = jmod.nq
     stats = new_stats("diffrax", o.solver, start.derive_time,
                       unavailable={"jacobian_evaluations": "not exposed by diffrax"})
     per_step = evaluations_per_step(o)
@@ -392,8 +392,9 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         t_rem = start.t_out[start.t_out > t]
         ts = np.full(n_rows, t_end)
         ts[:min(len(t_rem), n_rows)] = t_rem[:n_rows]
-        out = jax.device_get(entry.fn(*run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, ts, len(t_rem),
-                                                      dt0, (o.rtol, o.atol), o.max_steps)))
+        args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, ts, len(t_rem), dt0, (o.rtol, o.atol),
+                             o.max_steps)
+        out = call(entry.fn, args) if call else jax.device_get(entry.fn(*args))
         calls += 1
         n_ev, n_out = int(out["n_ev"]), int(out["i_out"])
         stats["steps"] += int(out["steps"])
@@ -473,6 +474,3 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     stats["solve_time_s"] = _time.perf_counter() - wall0
     return Trajectory(model, pieces, events, stats, failure, warnings)
 
-
-def jmod_nq(entry: CompiledRun) -> int:
-    return entry.jmod.nq
