@@ -1,7 +1,8 @@
-"""The figure worker `mechsim run` forks before anything heavy is imported (scenarios/output/figure_worker.py): the
-folder it fills must hold the same PNG files, byte for byte, as drawing them one by one with matplotlib's own
-`savefig`, without this process drawing (or importing matplotlib at all) when the workers succeed; whatever a worker
-fails to save is drawn here; a command that stops early leaves no worker behind."""
+"""The figure worker `mechsim run` forks before the run (scenarios/output/figure_worker.py): the folder it fills must
+hold the same images as drawing them one by one with matplotlib's own `savefig` (decoded pixels, mode, size and PNG
+metadata; tests/test_figure_writer.py), without this process drawing (or importing matplotlib at all) when the
+workers succeed; whatever a worker fails to save is drawn here; a command that stops early leaves no worker
+behind."""
 import os
 import subprocess
 import sys
@@ -40,10 +41,14 @@ with worker:
 drew_here = "matplotlib" in sys.modules
 from mechsim.scenarios.output.figures import result_figures
 from mechsim.scenarios.output.plots import DPI
+from PIL import Image
+def image(data):
+    with Image.open(io.BytesIO(data)) as im:
+        return im.mode, im.size, im.info, im.tobytes()
 def png(fig):
     buf = io.BytesIO(); fig.savefig(buf, dpi=DPI, format="png"); return buf.getvalue()
-expected = {stem: png(fig) for stem, fig in result_figures(result, result.mechanism).items()}
-same = {p.stem: p.read_bytes() for p in folder.glob("*.png")} == expected
+expected = {stem: image(png(fig)) for stem, fig in result_figures(result, result.mechanism).items()}
+same = {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
 print(drew_here, len(expected), same)
 """
 
