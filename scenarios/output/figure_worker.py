@@ -18,6 +18,7 @@ import pickle
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 
@@ -123,22 +124,35 @@ class FigureWorker:
                 continue
         return reports
 
-    def _reap(self) -> None:
-        if self.pid is not None:
-            try:
-                os.waitpid(self.pid, 0)
-            except ChildProcessError:
-                pass
+    def _reap(self, patience: float | None = None) -> None:
+        """Wait for the worker; with `patience` (s), kill it outright if it has not exited by then."""
+        if self.pid is None:
+            return
+        try:
+            if patience is not None:
+                deadline = time.monotonic() + patience
+                while os.waitpid(self.pid, os.WNOHANG) == (0, 0):
+                    if time.monotonic() > deadline:
+                        os.kill(self.pid, signal.SIGKILL)
+                        break
+                    time.sleep(0.005)
+                else:
+                    return
+            os.waitpid(self.pid, 0)
+        except ChildProcessError:
+            pass
+        finally:
             self.pid = None
 
     def close(self) -> None:
-        """Stop the worker (and with it its own child) if it still runs, and wait for it."""
+        """Stop the worker (and with it its own child) if it still runs, and wait for it (SIGTERM, which the worker
+        answers by stopping its child and exiting; SIGKILL if it has not exited within 5 s)."""
         if self.pid is not None:
             try:
                 os.kill(self.pid, signal.SIGTERM)
             except ProcessLookupError:
                 pass
-            self._reap()
+            self._reap(patience=5.0)
         for name in ("job_fd", "report_fd"):
             fd = getattr(self, name)
             if fd is not None:
