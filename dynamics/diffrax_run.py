@@ -37,17 +37,24 @@ import jax.numpy as jnp  # noqa: E402
 
 #: events one compiled call records before it hands back (and is called again)
 EVENTS_PER_CALL = 64
+#: accepted steps whose dense output one compiled call keeps (for its output rows) before it ends (and is called
+#: again)
+STEPS_PER_CALL = 4096
 #: Gauss-Newton iterations of the position projection (quadratic convergence from the integrator's drift)
 GN_ITERATIONS = 3
 #: bisection iterations at most when locating a guard crossing (2^-200 of a step: the width test ends it first)
 MAX_BISECTIONS = 200
 
 
+#: the event buffers of a compiled run (written only where a guard fired)
+EVENT_KEYS = ("n_ev", "ev_t", "ev_guard", "ev_z", "ev_k", "ev_p", "ev_after")
+
+
 class Code(IntEnum):
     RUNNING = 0
     DONE = 1           # reached t_end
     HAND_BACK = 2      # a guard fired whose transition is on_guard's (or several fired together)
-    ROWS_FULL = 4      # the output buffer is full: call again
+    ROWS_FULL = 4      # the output-row or the step buffer is full: call again
     MAX_STEPS = 5      # one segment took more than max_steps steps
     NON_FINITE = 6     # the state or the step size is not finite / the step size underflowed
     CHATTERING = 7     # a guard fired again at the instant of its own transition
@@ -96,10 +103,11 @@ def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
     return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
 
 
-def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: int) -> Callable:
-    """run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps) -> dict of arrays; to be jitted.
+def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: int, n_steps: int) -> Callable:
+    """run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps, seg_steps0) -> dict of arrays; to be jitted.
 
-    ts: the output times (n_rows, padded after n_ts with t_end); tol = (rtol, atol); o: DiffraxOptions.
+    ts: the output times (n_rows, padded after n_ts with t_end); tol = (rtol, atol); o: DiffraxOptions;
+    seg_steps0: steps already taken in the current mode segment by the previous call (its buffers were full).
     """
     from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
@@ -121,7 +129,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
         ref = jnp.where(at_zero, jnp.where(gdot0 != 0, gdot0, 1.0), jnp.where(g0 != 0, g0, 1.0))
         return jnp.where(real[k], jnp.sign(ref), 1.0)
 
-    def run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps):
+    def run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps, seg_steps0):
         controller = diffrax.PIDController(rtol=tol[0], atol=tol[1], pcoeff=o.pcoeff, icoeff=o.icoeff,
                                            dcoeff=o.dcoeff)
         args0 = (k0, p0)
@@ -132,28 +140,21 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
         # top level of the loop body, where XLA updates them in place
         small = dict(
             hand=i32(-1), t=jnp.asarray(t0, f64), z=z0, k=jnp.asarray(k0, i32), p=p0, dt=jnp.asarray(dt0, f64),
-            ref=reference(k0, t0, z0, p0), seg_t0=jnp.asarray(t0, f64), seg_steps=i32(0), seg_acc=i32(0),
+            ref=reference(k0, t0, z0, p0), seg_t0=jnp.asarray(t0, f64), seg_steps=seg_steps0, seg_acc=i32(0),
             jump=jnp.bool_(True), sstate=sstate0, cstate=cstate0,
             last_guard=i32(-1), last_t=jnp.asarray(-jnp.inf, f64),
             fired=jnp.zeros(ngm, bool), code=i32(Code.RUNNING),
             steps=i32(0), accepted=i32(0), rejected=i32(0), bisections=i32(0))
-        big = dict(i_out=i32(0), rows=jnp.zeros((n_rows, nz)), row_seg=jnp.zeros(n_rows, i32),
+        # the dense output of every accepted step (its interpolant's coefficients, the interval it is valid on and
+        # its segment number): output rows are interpolated from it after the loop, all at once
+        dense_struct = jax.eval_shape(lambda z: solver.step(term, t0, t0 + dt0, z, args0, sstate0, True)[2], z0)
+        big = dict(n_st=i32(0), st_t0=jnp.zeros(n_steps), st_t1=jnp.ones(n_steps), st_acc=jnp.full(n_steps, jnp.inf),
+                   st_seg=jnp.zeros(n_steps, i32),
+                   st_dense=jax.tree_util.tree_map(lambda x: jnp.zeros((n_steps,) + x.shape, x.dtype), dense_struct),
                    n_ev=i32(0), ev_t=jnp.zeros(n_events), ev_guard=jnp.zeros(n_events, i32),
                    ev_z=jnp.zeros((n_events, nz)), ev_k=jnp.zeros(n_events, i32),
                    ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)))
         c = jax.tree_util.tree_map(jnp.asarray, (small, big))  # python bools of diffrax's states as arrays
-
-        def write_rows(b, t_hi, interp):
-            """Rows at the output times up to t_hi from the step's interpolant, as long as the buffer holds."""
-            def cond(st):
-                i, _, _ = st
-                return (i < n_ts) & (i < n_rows) & (ts[jnp.minimum(i, n_rows - 1)] <= t_hi)
-
-            def body(st):
-                i, rows, seg = st
-                return i + 1, rows.at[i].set(interp.evaluate(ts[i])), seg.at[i].set(b["n_ev"])
-            i, rows, seg = jax.lax.while_loop(cond, body, (b["i_out"], b["rows"], b["row_seg"]))
-            return dict(b, i_out=i, rows=rows, row_seg=seg)
 
         def new_segment(s, t, z, k, p, dt):
             return dict(s, t=t, z=z, k=k, p=p, dt=dt, ref=reference(k, t, z, p), seg_t0=t, seg_steps=i32(0),
@@ -161,116 +162,114 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
 
         no_record = (jnp.bool_(False), jnp.zeros((), f64), i32(0), jnp.zeros(nz), i32(0), p0, jnp.zeros(nz))
 
-        def mode_step(kk: int):
-            """One step in mode number kk (a python int: the mode's functions are called directly, without a
-            switch per evaluation): (small state, (t, t_acc, t1, dense), event record)."""
-            jm = jmod.modes[kk]
-            pad = jnp.ones(ngm - jm.ng)
-            term_k = diffrax.ODETerm(lambda t, z, p: jm.rates(t, z, p))
+        def locate(s, lo, hi, interp):
+            """Bisection for the first zero of min_j ref_j g_j on the step's interpolant in (lo, hi]: the upper end
+            of the final bracket (diffrax_backend.FirstCrossing)."""
+            k, p, ref = s["k"], s["p"], s["ref"]
 
-            def guards(t, z, p):
-                return jnp.concatenate([jm.guards(t, z, p), pad])
+            def cond(st):
+                lo, hi, n = st
+                return (hi - lo > o.event_atol + o.event_rtol * jnp.abs(hi)) & (n < MAX_BISECTIONS)
 
-            def locate(s, lo, hi, interp):
-                """Bisection for the first zero of min_j ref_j g_j on the step's interpolant in (lo, hi]: the
-                upper end of the final bracket (no iteration when lo == hi)."""
-                p, ref = s["p"], s["ref"]
+            def body(st):
+                lo, hi, n = st
+                mid = lo + 0.5 * (hi - lo)
+                before = jnp.min(ref * jmod.guards(k, mid, interp.evaluate(mid), p)) > 0
+                return jnp.where(before, mid, lo), jnp.where(before, hi, mid), n + 1
+            _, hi, n = jax.lax.while_loop(cond, body, (lo, hi, i32(0)))
+            return hi, n
 
-                def cond(st):
-                    lo, hi, n = st
-                    return (hi - lo > o.event_atol + o.event_rtol * jnp.abs(hi)) & (n < MAX_BISECTIONS)
+        def on_crossing(s, t, t1, interp, full, ev):
+            """A guard crossed in the step (t, t1]: locate it, then re-arm it, apply the table's transition or hand
+            back. Returns (small state, the end of the step's valid interval t*, event record)."""
+            k, p, ref = s["k"], s["p"], s["ref"]
+            t_star, n_bis = locate(s, t, t1, interp)
+            z_star = interp.evaluate(t_star)
+            s = dict(s, bisections=s["bisections"] + n_bis)
+            h = ref * jmod.guards(k, t_star, z_star, p)
+            past = h <= 0
+            i = jnp.where(jnp.any(past), jnp.argmin(jnp.where(past, h, jnp.inf)), jnp.argmin(h)).astype(i32)
+            d = directions[k]
+            against = (d != 0) & (ref == d)          # crossed against the guard's direction: re-arm, go on
+            fired = past & ~against & real[k]
+            fired = fired.at[i].set(~against[i])
+            mean = (t_star - s["seg_t0"]) / jnp.maximum(s["seg_acc"], 1)
+            restart_dt = jnp.maximum(0.1 * mean, 1e-12 * jnp.maximum(1.0, jnp.abs(t_star)))
 
-                def body(st):
-                    lo, hi, n = st
-                    mid = lo + 0.5 * (hi - lo)
-                    before = jnp.min(ref * guards(mid, interp.evaluate(mid), p)) > 0
-                    return jnp.where(before, mid, lo), jnp.where(before, hi, mid), n + 1
-                _, hi, n = jax.lax.while_loop(cond, body, (lo, hi, i32(0)))
-                return hi, n
+            def rearm(s):
+                return new_segment(s, t_star, z_star, k, p, s["dt"]), no_record
 
-            def on_crossing(s, t_star, z_star, full):
-                """The guard that crossed at t_star: re-armed, applied from the table, or handed back."""
-                p, ref = s["p"], s["ref"]
-                h = ref * guards(t_star, z_star, p)
-                past = h <= 0
-                i = jnp.where(jnp.any(past), jnp.argmin(jnp.where(past, h, jnp.inf)), jnp.argmin(h)).astype(i32)
-                d = directions[kk]
-                against = (d != 0) & (ref == d)          # crossed against the guard's direction: re-arm, go on
-                fired = past & ~against & real[kk]
-                fired = fired.at[i].set(~against[i])
-                mean = (t_star - s["seg_t0"]) / jnp.maximum(s["seg_acc"], 1)
-                restart_dt = jnp.maximum(0.1 * mean, 1e-12 * jnp.maximum(1.0, jnp.abs(t_star)))
+            def event(s):
+                q, v = z_star[:nq], z_star[nq:2 * nq]
+                k_new, p_new, back = table.apply(k, i, q, v, p)
+                chatter = (i == s["last_guard"]) & (t_star - s["last_t"] <= 1e-9 * jnp.maximum(1.0, jnp.abs(t_star)))
+                q_new, v_new = _reinitialise(parts, k, k_new, t_star, q, v, p, p_new)
+                z_new = jnp.concatenate([q_new, v_new, z_star[2 * nq:]])
+                # a stop guard of the new mode carried past zero by the restart (transitions.carried_stop)
+                g_new = jmod.guards(k_new, t_star, z_new, p_new)
+                d_new = directions[k_new]
+                carried = jnp.any(stops[k_new] & real[k_new] & (d_new != 0) & (d_new * g_new > 0))
+                code = jnp.where(chatter, Code.CHATTERING, jnp.where(
+                    back | (jnp.sum(fired) > 1) | carried | full, Code.HAND_BACK, Code.RUNNING)).astype(i32)
+                stay = dict(s, t=t_star, z=z_star, code=code, fired=fired, hand=i)
+                go = new_segment(dict(s, last_guard=i, last_t=t_star), t_star, z_new, k_new, p_new, restart_dt)
+                ok = code == Code.RUNNING
+                s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), go, stay)
+                return s, (ok, t_star, i, z_star, k_new, p_new, z_new)
 
-                def rearm(s):
-                    return new_segment(s, t_star, z_star, s["k"], p, s["dt"]), no_record
-
-                def event(s):
-                    q, v = z_star[:nq], z_star[nq:2 * nq]
-                    k_new, p_new, back = table.apply(kk, i, q, v, p)
-                    chatter = ((i == s["last_guard"])
-                               & (t_star - s["last_t"] <= 1e-9 * jnp.maximum(1.0, jnp.abs(t_star))))
-                    q_new, v_new = _reinitialise(parts, s["k"], k_new, t_star, q, v, p, p_new)
-                    z_new = jnp.concatenate([q_new, v_new, z_star[2 * nq:]])
-                    # a stop guard of the new mode carried past zero by the restart (transitions.carried_stop)
-                    g_new = jmod.guards(k_new, t_star, z_new, p_new)
-                    d_new = directions[k_new]
-                    carried = jnp.any(stops[k_new] & real[k_new] & (d_new != 0) & (d_new * g_new > 0))
-                    code = jnp.where(chatter, Code.CHATTERING, jnp.where(
-                        back | (jnp.sum(fired) > 1) | carried | full, Code.HAND_BACK, Code.RUNNING)).astype(i32)
-                    stay = dict(s, t=t_star, z=z_star, code=code, fired=fired, hand=i)
-                    go = new_segment(dict(s, last_guard=i, last_t=t_star), t_star, z_new, k_new, p_new, restart_dt)
-                    ok = code == Code.RUNNING
-                    s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), go, stay)
-                    return s, (ok, t_star, i, z_star, k_new, p_new, z_new)
-
-                return jax.lax.cond(against[i], rearm, event, s)
-
-            def branch(s, t_end, full):
-                t, z, p = s["t"], s["z"], s["p"]
-                t1 = jnp.minimum(t + s["dt"], t_end)
-                z1, err, dense, sstate1, _ = solver.step(term_k, t, t1, z, p, s["sstate"], s["jump"])
-                keep, _, next_t1, _, cstate, _ = controller.adapt_step_size(t, t1, z, z1, p, err, error_order,
-                                                                             s["cstate"])
-                cstate = jax.tree_util.tree_map(jnp.asarray, cstate)
-                sstate1 = jax.tree_util.tree_map(jnp.asarray, sstate1)
-                finite = jnp.all(jnp.isfinite(z1))
-                keep = keep & finite
-                dt_next = jnp.where(finite, next_t1 - jnp.where(keep, t1, t), 0.5 * (t1 - t))
-                interp = solver.interpolation_cls(t0=t, t1=t1, **dense)
-                crossed = keep & jnp.any(s["ref"] * guards(t1, z1, p) <= 0)
-                t_star, n_bis = locate(s, t, jnp.where(crossed, t1, t), interp)
-                t_acc = jnp.where(crossed, t_star, jnp.where(keep, t1, t))
-                s = dict(s, steps=s["steps"] + 1, seg_steps=s["seg_steps"] + 1, cstate=cstate, dt=dt_next,
-                         bisections=s["bisections"] + n_bis, accepted=s["accepted"] + keep,
-                         rejected=s["rejected"] + ~keep, seg_acc=s["seg_acc"] + keep)
-
-                def smooth(s):
-                    moved = dict(s, t=t1, z=z1, sstate=sstate1, jump=jnp.bool_(False))
-                    return jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), moved, s), no_record
-
-                s, rec = jax.lax.cond(crossed, lambda s: on_crossing(s, t_star, interp.evaluate(t_star), full),
-                                      smooth, s)
-                return s, (t, t_acc, t1, dense), rec
-            return branch
-
-        branches = [mode_step(kk) for kk in range(len(jmod.modes))]
-
-        def step(c):
-            s, b = c
-            s, (t, t_acc, t1, dense), rec = jax.lax.switch(s["k"], branches, s, t_end, b["n_ev"] >= n_events)
-            # rows up to t_acc, in the segment that was running (before the event record below)
-            b = write_rows(b, t_acc, solver.interpolation_cls(t0=t, t1=t1, **dense))
-            do, te, ge, ze, ke, pe, za = rec
-            n = jnp.minimum(b["n_ev"], n_events - 1)
+            s, (do, te, ge, ze, ke, pe, za) = jax.lax.cond(against[i], rearm, event, s)
+            n = jnp.minimum(ev["n_ev"], n_events - 1)
 
             def put(buf, val):
                 return buf.at[n].set(jnp.where(do, val, buf[n]))
-            b = dict(b, n_ev=b["n_ev"] + do, ev_t=put(b["ev_t"], te), ev_guard=put(b["ev_guard"], ge),
-                     ev_z=put(b["ev_z"], ze), ev_k=put(b["ev_k"], ke), ev_p=put(b["ev_p"], pe),
-                     ev_after=put(b["ev_after"], za))
+            ev = dict(n_ev=ev["n_ev"] + do, ev_t=put(ev["ev_t"], te), ev_guard=put(ev["ev_guard"], ge),
+                      ev_z=put(ev["ev_z"], ze), ev_k=put(ev["ev_k"], ke), ev_p=put(ev["ev_p"], pe),
+                      ev_after=put(ev["ev_after"], za))
+            return s, t_star, ev
+
+        def step(c):
+            """One step in the current mode (the mode number is traced: each evaluation switches on it, which
+            costs no more than a direct call); a lax.cond only where a guard crossed."""
+            s, b = c
+            t, z, k, p = s["t"], s["z"], s["k"], s["p"]
+            t1 = jnp.minimum(t + s["dt"], t_end)
+            args = (k, p)
+            z1, err, dense, sstate1, _ = solver.step(term, t, t1, z, args, s["sstate"], s["jump"])
+            keep, _, next_t1, _, cstate, _ = controller.adapt_step_size(t, t1, z, z1, args, err, error_order,
+                                                                         s["cstate"])
+            cstate = jax.tree_util.tree_map(jnp.asarray, cstate)
+            sstate1 = jax.tree_util.tree_map(jnp.asarray, sstate1)
+            finite = jnp.all(jnp.isfinite(z1))
+            keep = keep & finite
+            dt_next = jnp.where(finite, next_t1 - jnp.where(keep, t1, t), 0.5 * (t1 - t))
+            interp = solver.interpolation_cls(t0=t, t1=t1, **dense)
+            crossed = keep & jnp.any(s["ref"] * jmod.guards(k, t1, z1, p) <= 0)
+            s = dict(s, steps=s["steps"] + 1, seg_steps=s["seg_steps"] + 1, cstate=cstate, dt=dt_next,
+                     accepted=s["accepted"] + keep, rejected=s["rejected"] + ~keep, seg_acc=s["seg_acc"] + keep)
+            moved = dict(s, t=t1, z=z1, sstate=sstate1, jump=jnp.bool_(False))
+            smooth = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), moved, s)
+            full = b["n_ev"] >= n_events
+            ev = {key: b[key] for key in EVENT_KEYS}
+            s, t_acc, ev = jax.lax.cond(crossed, lambda s: on_crossing(s, t, t1, interp, full, ev),
+                                        lambda s: (smooth, jnp.where(keep, t1, t), ev), s)
+            # the accepted step's dense output, valid on (t, t_acc], in the segment that was running (numbered
+            # before the event record below)
+            # (written to the first free slot whether or not the step was taken: a rejected step's record is
+            # overwritten by the next one, and its end time inf keeps the free slots sorted)
+            m = jnp.minimum(b["n_st"], n_steps - 1)
+            took = t_acc > t
+
+            def keep_step(buf, val):
+                return buf.at[m].set(val)
+            b = dict(b, n_st=b["n_st"] + took, st_t0=keep_step(b["st_t0"], t), st_t1=keep_step(b["st_t1"], t1),
+                     st_acc=keep_step(b["st_acc"], jnp.where(took, t_acc, jnp.inf)),
+                     st_seg=keep_step(b["st_seg"], b["n_ev"]),
+                     st_dense=jax.tree_util.tree_map(keep_step, b["st_dense"], dense))
+            b = dict(b, **ev)
             code = s["code"]
             code = jnp.where((code == Code.RUNNING) & (s["t"] >= t_end - 1e-12), Code.DONE, code)
-            code = jnp.where((code == Code.RUNNING) & (b["i_out"] >= n_rows) & (n_ts > n_rows), Code.ROWS_FULL, code)
+            full = (b["n_st"] >= n_steps) | ((n_ts > n_rows) & (s["t"] >= ts[n_rows - 1]))
+            code = jnp.where((code == Code.RUNNING) & full, Code.ROWS_FULL, code)
             code = jnp.where((code == Code.RUNNING) & (s["seg_steps"] > max_steps), Code.MAX_STEPS, code)
             bad = ~jnp.isfinite(s["dt"]) | (s["dt"] <= 1e-14 * jnp.maximum(1.0, jnp.abs(s["t"])))
             code = jnp.where((code == Code.RUNNING) & bad, Code.NON_FINITE, code)
@@ -278,13 +277,21 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
 
         s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, step, c)
         c = dict(s, **b)
+        # output rows: each from the dense output of the step whose interval holds it (steps are contiguous)
+        j = jnp.minimum(jnp.searchsorted(b["st_acc"], ts, side="left"), n_steps - 1)
+        dense_rows = jax.tree_util.tree_map(lambda x: x[j], b["st_dense"])
+
+        def interpolate(t0_, t1_, dense_, tt):
+            return solver.interpolation_cls(t0=t0_, t1=t1_, **dense_).evaluate(tt)
+        rows = jax.vmap(interpolate)(b["st_t0"][j], b["st_t1"][j], dense_rows, ts)
+        seg = b["st_seg"][j]
+        c.update(rows=rows, row_seg=seg, i_out=jnp.sum((jnp.arange(n_rows) < n_ts) & (ts <= s["t"])).astype(i32))
         # rows in the IDA layout need z', a and lam: one vectorised evaluation in each row's mode and parameters
         k_hist = jnp.concatenate([jnp.asarray(k0, i32)[None], c["ev_k"]])
         p_hist = jnp.concatenate([p0[None, :], c["ev_p"]])
-        seg = c["row_seg"]
-        zp, acc, lam, _ = jax.vmap(jmod.evaluate)(k_hist[seg], ts, c["rows"], p_hist[seg])
+        zp, acc, lam, _ = jax.vmap(jmod.evaluate)(k_hist[seg], ts, rows, p_hist[seg])
         zp_end, a_end, lam_end, g_end = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
-        keys = ("hand", "dt", "t", "z", "k", "p", "code", "fired", "i_out", "rows", "row_seg", "n_ev", "ev_t", "ev_guard", "ev_z",
+        keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "i_out", "rows", "row_seg", "n_ev", "ev_t", "ev_guard", "ev_z",
                 "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections")
         return dict({key: c[key] for key in keys}, zp=zp, a=acc, lam=lam, zp_end=zp_end, a_end=a_end,
                     lam_end=lam_end)
@@ -330,16 +337,16 @@ def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]
         return None, False
     example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                             np.ones(n_rows), 1, 1e-3, (1e-6, 1e-8), 100)
-    fn = jax.jit(make_run(jmod, table, o, n_rows, EVENTS_PER_CALL)).lower(*example).compile()
+    fn = jax.jit(make_run(jmod, table, o, n_rows, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
     entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, n_rows)
     _CACHE[key] = entry
     return entry, True
 
 
-def run_arguments(k, t0, t_end, z0, p, ts, n_ts, dt0, tol, max_steps) -> tuple:
+def run_arguments(k, t0, t_end, z0, p, ts, n_ts, dt0, tol, max_steps, seg_steps=0) -> tuple:
     f64 = np.float64
     return (np.int32(k), f64(t0), f64(t_end), np.asarray(z0, f64), np.asarray(p, f64), np.asarray(ts, f64),
-            np.int32(n_ts), f64(dt0), np.asarray(tol, f64), np.int32(max_steps))
+            np.int32(n_ts), f64(dt0), np.asarray(tol, f64), np.int32(max_steps), np.int32(seg_steps))
 
 
 # -- the driver: compiled calls, and on_guard's transitions where the table hands back ------------------------
@@ -386,14 +393,14 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     mode, values, p, y, yp, offset = start.mode, dict(start.values), start.p, start.y, start.yp, start.offset
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
     events, warnings, failure, last = [], [], None, None
-    t, dt0, calls = t0, DT0_FIRST, 0
+    t, dt0, calls, seg_steps = t0, DT0_FIRST, 0, 0
     while True:
         mf = model.modes[mode]
         t_rem = start.t_out[start.t_out > t]
         ts = np.full(n_rows, t_end)
         ts[:min(len(t_rem), n_rows)] = t_rem[:n_rows]
         args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, ts, len(t_rem), dt0, (o.rtol, o.atol),
-                             o.max_steps)
+                             o.max_steps, seg_steps)
         out = call(entry.fn, args) if call else jax.device_get(entry.fn(*args))
         calls += 1
         n_ev, n_out = int(out["n_ev"]), int(out["i_out"])
@@ -444,6 +451,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         q = y[mf.index["q"]]
         if code == Code.DONE:
             break
+        seg_steps = int(out["seg_steps"]) if code == Code.ROWS_FULL else 0
         if code == Code.ROWS_FULL:
             continue
         if code == Code.CHATTERING:
