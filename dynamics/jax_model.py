@@ -245,6 +245,10 @@ class JaxModel:
                     jnp.concatenate([g, jnp.ones(ng_max - jm.ng)]))
         return f
 
+    def evaluate_mode(self, k: int) -> Callable:
+        """evaluate(t, z, p) of mode number k (a python int), with the padding of `evaluate`."""
+        return self._branch(self.modes[k])
+
     def evaluate(self, k, t, z, p):
         """(z', a, lam padded to m_max, guards padded to ng_max) in mode number k."""
         if len(self.modes) == 1:
