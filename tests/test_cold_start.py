@@ -66,3 +66,21 @@ def test_a_closed_form_run_derives_nothing_and_loads_no_solver_stack(tmp_path):
     lines = fresh(code, tmp_path / "cache", tmp_path).split("\n")
     assert lines[0] == "[]"
     assert lines[1] == "closed-form 3001"
+
+
+def test_the_console_entry_leaves_without_teardown_but_runs_exit_handlers(tmp_path):
+    """`main()` ends with os._exit (no module-by-module teardown): the unit cache written by its atexit handler is
+    there, what the command printed reached the file, and the exit status is the command's."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p),
+           "MECHSIM_CACHE_DIR": str(tmp_path / "cache")}
+    log = tmp_path / "out.txt"
+    with log.open("w") as fh:
+        ok = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "geneva-lc1", "--set",
+                             "output.plots=false", "--out", str(tmp_path / "out")], env=env, stdout=fh,
+                            stderr=subprocess.PIPE, text=True, timeout=240)
+    assert ok.returncode == 0, ok.stderr
+    assert log.read_text().startswith("geneva-lc1: closed-form") and log.read_text().endswith("\n")
+    assert [json.loads(f.read_text()) for f in (tmp_path / "cache").glob("units-*.json")]
+    bad = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "no-such-scenario"], env=env,
+                         capture_output=True, text=True, timeout=240)
+    assert bad.returncode == 2 and bad.stderr.startswith("error: ") and bad.stdout == ""
