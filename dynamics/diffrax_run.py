@@ -150,9 +150,11 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
         # the dense output of every accepted step (its interpolant's coefficients, the interval it is valid on and
         # its segment number): output rows are interpolated from it after the loop, all at once
         dense_struct = jax.eval_shape(lambda z: solver.step(term, t0, t0 + dt0, z, args0, sstate0, True)[2], z0)
-        big = dict(n_st=i32(0), st_t0=jnp.zeros(n_steps), st_t1=jnp.ones(n_steps), st_acc=jnp.full(n_steps, jnp.inf),
-                   st_seg=jnp.zeros(n_steps, i32),
-                   st_dense=jax.tree_util.tree_map(lambda x: jnp.zeros((n_steps,) + x.shape, x.dtype), dense_struct),
+        # (one slot more than n_steps: the scratch slot a step not taken is written to once the buffer is full)
+        slots = n_steps + 1
+        big = dict(n_st=i32(0), st_t0=jnp.zeros(slots), st_t1=jnp.ones(slots), st_acc=jnp.full(slots, jnp.inf),
+                   st_seg=jnp.zeros(slots, i32),
+                   st_dense=jax.tree_util.tree_map(lambda x: jnp.zeros((slots,) + x.shape, x.dtype), dense_struct),
                    n_ev=i32(0), ev_t=jnp.zeros(n_events), ev_guard=jnp.zeros(n_events, i32),
                    ev_z=jnp.zeros((n_events, nz)), ev_k=jnp.zeros(n_events, i32),
                    ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)))
@@ -229,10 +231,35 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
                       ev_after=put(ev["ev_after"], za))
             return s, t_star, ev
 
+        def codes(s, b):
+            """The end of the call after a step or an event: t_end, a full buffer, too many steps, a bad step."""
+            code = s["code"]
+            code = jnp.where((code == Code.RUNNING) & (s["t"] >= t_end - 1e-12), Code.DONE, code)
+            full = (b["n_st"] >= n_steps) | ((n_ts > n_rows) & (s["t"] >= ts[n_rows - 1]))
+            code = jnp.where((code == Code.RUNNING) & full, Code.ROWS_FULL, code)
+            code = jnp.where((code == Code.RUNNING) & (s["seg_steps"] > max_steps), Code.MAX_STEPS, code)
+            bad = ~jnp.isfinite(s["dt"]) | (s["dt"] <= 1e-14 * jnp.maximum(1.0, jnp.abs(s["t"])))
+            code = jnp.where((code == Code.RUNNING) & bad, Code.NON_FINITE, code)
+            return dict(s, code=code.astype(i32))
+
+        def record_step(b, t, t1, t_acc, dense):
+            """The step's dense output, valid on (t, t_acc], in the segment now running, into the first free
+            slot; a step not taken (t_acc = t) is overwritten by the next one (its end time inf keeps the free
+            slots sorted)."""
+            m = jnp.minimum(b["n_st"], n_steps)
+            took = t_acc > t
+
+            def put(buf, val):
+                return buf.at[m].set(val)
+            return dict(b, n_st=b["n_st"] + took, st_t0=put(b["st_t0"], t), st_t1=put(b["st_t1"], t1),
+                        st_acc=put(b["st_acc"], jnp.where(took, t_acc, jnp.inf)), st_seg=put(b["st_seg"], b["n_ev"]),
+                        st_dense=jax.tree_util.tree_map(put, b["st_dense"], dense))
+
         def step(c):
-            """One step in the current mode (the mode number is traced: each evaluation switches on it, which
-            costs no more than a direct call); a lax.cond only where a guard crossed."""
-            s, b = c
+            """One step in the current mode, no branching: the mode number is traced and each evaluation switches
+            on it (which costs no more than a direct call). A step whose end is past a guard is not taken: the
+            inner loop ends and hands it to `segment_end`."""
+            s, b, x = c
             t, z, k, p = s["t"], s["z"], s["k"], s["p"]
             t1 = jnp.minimum(t + s["dt"], t_end)
             args = (k, p)
@@ -244,43 +271,35 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
             finite = jnp.all(jnp.isfinite(z1))
             keep = keep & finite
             dt_next = jnp.where(finite, next_t1 - jnp.where(keep, t1, t), 0.5 * (t1 - t))
-            interp = solver.interpolation_cls(t0=t, t1=t1, **dense)
             crossed = keep & jnp.any(s["ref"] * jmod.guards(k, t1, z1, p) <= 0)
             s = dict(s, steps=s["steps"] + 1, seg_steps=s["seg_steps"] + 1, cstate=cstate, dt=dt_next,
                      accepted=s["accepted"] + keep, rejected=s["rejected"] + ~keep, seg_acc=s["seg_acc"] + keep)
+            go = keep & ~crossed
             moved = dict(s, t=t1, z=z1, sstate=sstate1, jump=jnp.bool_(False))
-            smooth = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), moved, s)
+            s = jax.tree_util.tree_map(lambda a, b: jnp.where(go, a, b), moved, s)
+            b = record_step(b, t, t1, jnp.where(go, t1, t), dense)
+            return codes(s, b), b, dict(crossed=crossed, t=t, t1=t1, dense=dense)
+
+        def segment(c):
+            """Steps until a guard crossed (or the call ends), then the crossing: located, re-armed, applied from
+            the table or handed back. The only lax.cond is here, once per crossing."""
+            s, b = c
+            x0 = dict(crossed=jnp.bool_(False), t=s["t"], t1=s["t"],
+                      dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), dense_struct))
+            s, b, x = jax.lax.while_loop(lambda c: (c[0]["code"] == Code.RUNNING) & ~c[2]["crossed"], step, (s, b, x0))
+            interp = solver.interpolation_cls(t0=x["t"], t1=x["t1"], **x["dense"])
             full = b["n_ev"] >= n_events
             ev = {key: b[key] for key in EVENT_KEYS}
-            s, t_acc, ev = jax.lax.cond(crossed, lambda s: on_crossing(s, t, t1, interp, full, ev),
-                                        lambda s: (smooth, jnp.where(keep, t1, t), ev), s)
-            # the accepted step's dense output, valid on (t, t_acc], in the segment that was running (numbered
-            # before the event record below)
-            # (written to the first free slot whether or not the step was taken: a rejected step's record is
-            # overwritten by the next one, and its end time inf keeps the free slots sorted)
-            m = jnp.minimum(b["n_st"], n_steps - 1)
-            took = t_acc > t
+            s, t_acc, ev = jax.lax.cond(x["crossed"], lambda s: on_crossing(s, x["t"], x["t1"], interp, full, ev),
+                                        lambda s: (s, x["t"], ev), s)
+            # the crossing step up to t*, in the segment that was running (numbered before the event record)
+            b = record_step(b, x["t"], x["t1"], t_acc, x["dense"])
+            return codes(s, dict(b, **ev)), dict(b, **ev)
 
-            def keep_step(buf, val):
-                return buf.at[m].set(val)
-            b = dict(b, n_st=b["n_st"] + took, st_t0=keep_step(b["st_t0"], t), st_t1=keep_step(b["st_t1"], t1),
-                     st_acc=keep_step(b["st_acc"], jnp.where(took, t_acc, jnp.inf)),
-                     st_seg=keep_step(b["st_seg"], b["n_ev"]),
-                     st_dense=jax.tree_util.tree_map(keep_step, b["st_dense"], dense))
-            b = dict(b, **ev)
-            code = s["code"]
-            code = jnp.where((code == Code.RUNNING) & (s["t"] >= t_end - 1e-12), Code.DONE, code)
-            full = (b["n_st"] >= n_steps) | ((n_ts > n_rows) & (s["t"] >= ts[n_rows - 1]))
-            code = jnp.where((code == Code.RUNNING) & full, Code.ROWS_FULL, code)
-            code = jnp.where((code == Code.RUNNING) & (s["seg_steps"] > max_steps), Code.MAX_STEPS, code)
-            bad = ~jnp.isfinite(s["dt"]) | (s["dt"] <= 1e-14 * jnp.maximum(1.0, jnp.abs(s["t"])))
-            code = jnp.where((code == Code.RUNNING) & bad, Code.NON_FINITE, code)
-            return dict(s, code=code.astype(i32)), b
-
-        s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, step, c)
+        s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, segment, c)
         c = dict(s, **b)
         # output rows: each from the dense output of the step whose interval holds it (steps are contiguous)
-        j = jnp.minimum(jnp.searchsorted(b["st_acc"], ts, side="left"), n_steps - 1)
+        j = jnp.minimum(jnp.searchsorted(b["st_acc"], ts, side="left"), n_steps)
         dense_rows = jax.tree_util.tree_map(lambda x: x[j], b["st_dense"])
 
         def interpolate(t0_, t1_, dense_, tt):
@@ -357,7 +376,8 @@ def run_key(o):
 def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]:
     """The compiled run of a model for n_rows output rows (None if the mechanism has no transition table);
     True if compiled by this call."""
-    key = (id(model), run_key(o), n_rows, type(mech).__name__, mech.structure_key())
+    key = (id(model), run_key(o), n_rows, type(mech).__name__, mech.structure_key(), STEPS_PER_CALL,
+           EVENTS_PER_CALL)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, False

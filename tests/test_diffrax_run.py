@@ -7,7 +7,7 @@ import pytest
 
 from mechsim.benchmarks.bench import BenchConfig, make_problem, reference
 from mechsim.benchmarks.peer_bench import CASES
-from mechsim.dynamics import hybrid
+from mechsim.dynamics import diffrax_run, hybrid
 from mechsim.dynamics.diffrax_backend import DiffraxBackend, default_options
 from mechsim.dynamics.jax_model import jax_model
 from mechsim.dynamics.jax_transitions import jax_transitions
@@ -128,3 +128,24 @@ def test_rows_satisfy_the_mode_residuals(runs):
             res = np.zeros(mf.ny)
             mf.residual(t, y, yp, res, piece.params)
             assert np.max(np.abs(res)) < 1e-6, (piece.mode, t, res)
+
+
+def test_calls_resume_where_the_buffers_end(case_a, runs, monkeypatch):
+    """With buffers of 128 steps and 3 events the run takes many calls: full step buffers end a call between
+    steps, a full event buffer hands the transition to `apply_transition` in Python (which also re-bases the
+    coordinates). The result is the single call's to the integration error, with the same events."""
+    whole, _, _ = runs
+    monkeypatch.setattr(diffrax_run, "STEPS_PER_CALL", 128)
+    monkeypatch.setattr(diffrax_run, "EVENTS_PER_CALL", 3)
+    settings = _settings("diffrax")
+    split = _simulate(case_a, settings, DiffraxBackend(settings))
+    assert split.failure is None, split.failure
+    calls = int(split.stats["notes"]["segments"].split("inside ")[1].split()[0])
+    assert calls >= split.stats["accepted_steps"] // 128
+    e1, e2 = events_table(whole), events_table(split)
+    assert list(e1["kind"]) == list(e2["kind"])
+    np.testing.assert_allclose(e1["t_s"], e2["t_s"], atol=1e-6)
+    t1, a1 = _crank(case_a, whole)
+    t2, a2 = _crank(case_a, split)
+    np.testing.assert_array_equal(t1, t2)
+    assert np.max(np.abs(a1 - a2)) < 100 * RTOL
