@@ -90,7 +90,7 @@ class FigureWorker:
         if self.job is None:
             raise RuntimeError("FigureWorker.finish before draw")
         reports = self._reports()
-        self._reap()
+        self._reap(patience=5.0)       # at EOF the worker has exited: this returns at once (SIGKILL is a backstop)
         total = max((n for n, _ in reports), default=None)
         done = {i for _, saved in reports for i in saved}
         if total is not None and done >= set(range(total)):
