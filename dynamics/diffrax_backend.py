@@ -19,6 +19,7 @@ are the measured best.
 from __future__ import annotations
 
 import time as _time
+from functools import lru_cache
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -109,7 +110,8 @@ def default_options(settings: SolverSettings) -> DiffraxOptions:
     if name not in SOLVERS:
         raise ValueError(f"solver.diffrax_solver must be one of {', '.join(SOLVERS)}; got {name!r}")
     opts = DiffraxOptions(solver=name, rtol=settings.rtol, atol=settings.atol, max_steps=settings.max_steps,
-                          projection=getattr(settings, "diffrax_projection", True))
+                          projection=getattr(settings, "diffrax_projection", True),
+                          compiled_run=settings.diffrax_compiled_run)
     if opts.implicit:
         opts = replace(opts, **IMPLICIT_DEFAULTS)
     return opts
@@ -160,6 +162,7 @@ def solver_for(o: DiffraxOptions):
     return cls(root_finder=_stage_root_finder(o)) if o.implicit else cls()
 
 
+@lru_cache(maxsize=64)
 def evaluations_per_step(o: DiffraxOptions) -> int | None:
     """Vector-field evaluations per attempted step of an explicit Runge-Kutta method (None if implicit)."""
     if o.implicit:

@@ -464,13 +464,24 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         modes = [mode] + [jmod.names[int(k)] for k in out["ev_k"][:n_ev]]
         params = [p] + [tuple(float(x) for x in row) for row in out["ev_p"][:n_ev]]
         seg = out["row_seg"][:n_out]
-        for s in range(n_ev + 1):
-            sel = np.flatnonzero(seg == s)
-            if sel.size:
+        # rows are in segment order: one piece per segment, split where the segment number changes
+        cuts = np.flatnonzero(np.diff(seg)) + 1
+        layout = {(mf_.m, mf_.index["mu"].stop - mf_.index["mu"].start) for mf_ in model.modes.values()}
+        if len(layout) == 1 and n_out:       # every mode has the same IDA layout: convert all rows at once
+            mf0 = model.modes[mode]
+            y_all, yp_all = ida_rows(mf0, nq, out["rows"][:n_out], out["zp"][:n_out], out["a"][:n_out],
+                                     out["lam"][:n_out, :mf0.m])
+        for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, n_out]):
+            if hi <= lo:
+                continue
+            s = int(seg[lo])
+            if len(layout) == 1:
+                y_rows, yp_rows = y_all[lo:hi].copy(), yp_all[lo:hi].copy()
+            else:
                 mf_s = model.modes[modes[s]]
-                y_rows, yp_rows = ida_rows(mf_s, nq, out["rows"][sel], out["zp"][sel], out["a"][sel],
-                                            out["lam"][sel][:, :mf_s.m])
-                pieces.append(Piece(modes[s], params[s], ts[sel].copy(), y_rows, yp_rows, offset))
+                y_rows, yp_rows = ida_rows(mf_s, nq, out["rows"][lo:hi], out["zp"][lo:hi], out["a"][lo:hi],
+                                           out["lam"][lo:hi, :mf_s.m])
+            pieces.append(Piece(modes[s], params[s], ts[lo:hi].copy(), y_rows, yp_rows, offset))
         for e in range(n_ev):
             mf_e, t_e = model.modes[modes[e]], float(out["ev_t"][e])
             vals = {**values, **dict(zip(names, params[e]))}

@@ -37,6 +37,8 @@ class SolverSettings:
     events: bool = True
     diffrax_solver: str = "Tsit5"
     jacobian: str = "exact"
+    #: diffrax: the whole run as one compiled call where possible (docs/diffrax.md 'The compiled run')
+    diffrax_compiled_run: bool = True
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:

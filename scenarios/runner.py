@@ -38,7 +38,7 @@ def solver_settings(si: dict) -> SolverSettings:
                           rtol=s["rtol"], atol=s["atol"], multiplier_atol=s["multiplier_atol"],
                           baumgarte_alpha=s["baumgarte_alpha"], baumgarte_beta=s["baumgarte_beta"],
                           max_steps=s["max_steps"], events=s["events"], diffrax_solver=s["diffrax_solver"],
-                          jacobian=s["jacobian"])
+                          jacobian=s["jacobian"], diffrax_compiled_run=s["diffrax_compiled_run"])
 
 
 def make_drive(si: dict) -> Drive:

@@ -48,6 +48,9 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
                            why="ten million steps is hours of solver time and gigabytes of history"),
         "events": Field("bool", default=True),
         "diffrax_solver": Field("str", default="Tsit5"),
+        "diffrax_compiled_run": Field("bool", default=True, help=(
+            "diffrax, explicit solvers: the whole run as one compiled call where the mechanism has a transition "
+            "table (docs/diffrax.md 'The compiled run'); false: one compiled solve per segment, as `sweep --batch`")),
         "jacobian": Field("str", default="exact", choices=("exact", "fd"),
                           help="IDA Jacobian: exact (generated) or fd (finite differences, only when asked)"),
     },
