@@ -92,3 +92,35 @@ def test_a_command_that_stops_early_leaves_no_worker(tmp_path):
                           str(tmp_path / "out")], env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and out.stderr.startswith("error: ") and "Traceback" not in out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]          # no temporary folder left
+
+
+
+_INHERIT_SCRIPT = """
+import os, signal
+from mechsim.scenarios.output.figure_worker import FigureWorker
+worker = FigureWorker.start()
+assert worker is not None
+other = os.fork()                  # any other fork while the worker's job pipe is open (a second worker, a pool)
+if other == 0:
+    signal.pause()                 # holds whatever it inherited until it is killed
+    os._exit(0)
+try:
+    os.close(worker.job_fd)        # no job after all: the worker must read EOF although `other` lives on
+    _, status = os.waitpid(worker.pid, 0)
+    print("worker exit status:", status)
+    print("other alive:", os.waitpid(other, os.WNOHANG) == (0, 0))
+finally:
+    os.kill(other, signal.SIGKILL)
+    os.waitpid(other, 0)
+"""
+
+
+def test_another_fork_does_not_hold_the_workers_pipes():
+    """A child forked for any other purpose closes this process's ends of the worker's pipes (os.register_at_fork):
+    when this process closes the job pipe unused, the worker reads EOF and exits by itself (status 0) while that
+    other child still lives. Had the child kept the pipe's write end, the worker would block on its read for as
+    long as the child lives (here: until the subprocess is timed out, a failure)."""
+    out = subprocess.run([sys.executable, "-c", _INHERIT_SCRIPT], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "worker exit status: 0" in out.stdout
+    assert "other alive: True" in out.stdout

@@ -35,6 +35,31 @@ def plots_wanted(scenario: str, overrides: list[str]) -> bool:
     return isinstance(output, dict) and output.get("plots", True) is True
 
 
+#: this process's ends of every open worker's pipes: a child forked for any other purpose (another worker, the
+#: forked figure writer, a process pool) closes them at once, so a worker's job pipe reaches EOF and its report
+#: pipe closes when this process closes its own ends, whatever else has forked meanwhile
+_PARENT_FDS: set[int] = set()
+
+
+def _close_inherited() -> None:
+    for fd in list(_PARENT_FDS):
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _PARENT_FDS.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_inherited)
+
+
+def _close(fd: int) -> None:
+    """Close one of this process's pipe ends and forget it."""
+    _PARENT_FDS.discard(fd)
+    os.close(fd)
+
+
 class FigureWorker:
     """A forked process waiting to draw a result's figures into a folder (`start`, `draw`, `finish`).
 
@@ -66,6 +91,7 @@ class FigureWorker:
             finally:
                 os._exit(code)
         os.close(job_r), os.close(report_w)
+        _PARENT_FDS.update((job_w, report_r))
         return cls(pid, job_w, report_r)
 
     def draw(self, result, mechanism, folder: Path) -> None:
@@ -106,9 +132,10 @@ class FigureWorker:
         """Read the report pipe to its end (EOF: no worker holds it any more): (figures in all, figures saved) of
         each worker's line."""
         if self.job_fd is not None:
-            os.close(self.job_fd)
+            _close(self.job_fd)
             self.job_fd = None
         chunks = []
+        _PARENT_FDS.discard(self.report_fd)
         with os.fdopen(self.report_fd, "rb") as pipe:
             self.report_fd = None
             while chunk := pipe.read(4096):
@@ -156,7 +183,7 @@ class FigureWorker:
         for name in ("job_fd", "report_fd"):
             fd = getattr(self, name)
             if fd is not None:
-                os.close(fd)
+                _close(fd)
                 setattr(self, name, None)
         if self.sender is not None:
             self.sender.join()
@@ -185,7 +212,7 @@ def _send(fd: int, data: bytes) -> None:
     except OSError:                                   # the worker is gone: finish() draws its figures here
         pass
     finally:
-        os.close(fd)
+        _close(fd)
 
 
 _grandchild: int | None = None
