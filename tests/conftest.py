@@ -127,3 +127,12 @@ def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, s
 
 # files that compile the same jax models run in one xdist worker (tests/worker_families.py)
 from worker_families import pytest_xdist_make_scheduler  # noqa: E402,F401
+
+# one persistent jax compilation cache per session (tests/jax_cache.py), before any test imports jax
+import jax_cache  # noqa: E402
+
+jax_cache.share()
+
+
+def pytest_unconfigure(config):
+    jax_cache.remove()
