@@ -372,8 +372,9 @@ class DiffraxBackend:
         return simulate_run(mech, start, self.settings, self.o, t0, t_end, progress, call=self.call_compiled)
 
     def call_compiled(self, fn, args) -> dict:
-        """One call of a compiled whole run, its outputs fetched to the host (a hook for timing it)."""
-        return jax.device_get(fn(*args))
+        """One call of a compiled function of the whole run (the step loop or its rows), waited for: a hook for
+        timing it. Its outputs stay jax arrays (the step buffer goes on to the row function without a copy)."""
+        return jax.block_until_ready(fn(*args))
 
     def hint(self, code: FailureCode) -> str:
         return ("raise solver.max_steps, loosen rtol, or try another solver.diffrax_solver (Kvaerno5 if the "

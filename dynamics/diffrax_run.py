@@ -7,15 +7,17 @@ by bisection on the step's dense interpolant (to `event_rtol`/`event_atol`, the 
 the segment backend's `FirstCrossing`). The guard that fired picks a branch of the transition table
 (`jax_transitions`): next mode and parameters, then the consistent re-initialisation of `dynamics/consistent.py`
 in jax (positions by Gauss-Newton onto Phi = 0, velocities by the kinetic-energy-metric projection; an index-1
-restart into the same mode with the same constraints keeps q and v, `transitions.same_constraints`). Output rows
-on the requested grid are interpolated into a preallocated buffer, events into another.
+restart into the same mode with the same constraints keeps q and v, `transitions.same_constraints`). Every
+accepted step's dense output goes into a preallocated buffer, events into another; a second, small compiled
+function (`make_rows`) interpolates the output rows on the requested grid from the step buffer afterwards.
 
 The loop ends at t_end, at a failure (code), or where the table says the transition is `on_guard`'s (a stop,
 a hand-back condition, guards firing together, the event buffer full): the driver (`simulate_run`) then applies
 that one transition in Python (`transitions.apply_transition`, the same code as the segment loop) and calls the
 compiled run again from there. Events-table rows are written by `on_guard` itself from the recorded states, so
-kinds and messages are the segment loop's. rtol/atol are traced: one compilation per model structure, solver
-options and buffer sizes serves every tolerance.
+kinds and messages are the segment loop's. rtol/atol/max_steps are traced: one compilation of the step loop per
+model structure and solver options serves every tolerance and run length (the row function is compiled per
+output-buffer size, in about a second).
 
 The compiled loop does not re-base the coordinates (`Mechanism.rebase`); the hand-backs do.
 """
@@ -56,7 +58,7 @@ class Code(IntEnum):
     RUNNING = 0
     DONE = 1           # reached t_end
     HAND_BACK = 2      # a guard fired whose transition is on_guard's (or several fired together)
-    ROWS_FULL = 4      # the output-row or the step buffer is full: call again
+    STEPS_FULL = 4     # the step buffer is full: call again
     MAX_STEPS = 5      # one segment took more than max_steps steps
     NON_FINITE = 6     # the state or the step size is not finite / the step size underflowed
     CHATTERING = 7     # a guard fired again at the instant of its own transition
@@ -105,10 +107,10 @@ def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
     return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
 
 
-def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: int, n_steps: int) -> Callable:
-    """run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps, seg_steps0) -> dict of arrays; to be jitted.
+def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: int) -> Callable:
+    """run(k0, t0, t_end, z0, p0, dt0, tol, max_steps, seg_steps0) -> dict of arrays; to be jitted.
 
-    ts: the output times (n_rows, padded after n_ts with t_end); tol = (rtol, atol); o: DiffraxOptions;
+    tol = (rtol, atol); o: DiffraxOptions; the output rows come from the returned step buffer (`make_rows`);
     seg_steps0: steps already taken in the current mode segment by the previous call (its buffers were full).
     """
     from mechsim.dynamics.diffrax_backend import solver_for
@@ -131,7 +133,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
         ref = jnp.where(at_zero, jnp.where(gdot0 != 0, gdot0, 1.0), jnp.where(g0 != 0, g0, 1.0))
         return jnp.where(real[k], jnp.sign(ref), 1.0)
 
-    def run(k0, t0, t_end, z0, p0, ts, n_ts, dt0, tol, max_steps, seg_steps0):
+    def run(k0, t0, t_end, z0, p0, dt0, tol, max_steps, seg_steps0):
         controller = diffrax.PIDController(rtol=tol[0], atol=tol[1], pcoeff=o.pcoeff, icoeff=o.icoeff,
                                            dcoeff=o.dcoeff)
         args0 = (k0, p0)
@@ -235,8 +237,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
             """The end of the call after a step or an event: t_end, a full buffer, too many steps, a bad step."""
             code = s["code"]
             code = jnp.where((code == Code.RUNNING) & (s["t"] >= t_end - 1e-12), Code.DONE, code)
-            full = (b["n_st"] >= n_steps) | ((n_ts > n_rows) & (s["t"] >= ts[n_rows - 1]))
-            code = jnp.where((code == Code.RUNNING) & full, Code.ROWS_FULL, code)
+            code = jnp.where((code == Code.RUNNING) & (b["n_st"] >= n_steps), Code.STEPS_FULL, code)
             code = jnp.where((code == Code.RUNNING) & (s["seg_steps"] > max_steps), Code.MAX_STEPS, code)
             bad = ~jnp.isfinite(s["dt"]) | (s["dt"] <= 1e-14 * jnp.maximum(1.0, jnp.abs(s["t"])))
             code = jnp.where((code == Code.RUNNING) & bad, Code.NON_FINITE, code)
@@ -298,26 +299,36 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_rows: int, n_events: in
 
         s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, segment, c)
         c = dict(s, **b)
-        # output rows: each from the dense output of the step whose interval holds it (steps are contiguous)
-        j = jnp.minimum(jnp.searchsorted(b["st_acc"], ts, side="left"), n_steps)
-        dense_rows = jax.tree_util.tree_map(lambda x: x[j], b["st_dense"])
+        zp_end, a_end, lam_end, _ = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
+        keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "n_ev", "ev_t", "ev_guard", "ev_z",
+                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections", "n_st", "st_t0", "st_t1",
+                "st_acc", "st_seg", "st_dense")
+        return dict({key: c[key] for key in keys}, zp_end=zp_end, a_end=a_end, lam_end=lam_end)
+
+    return run
+
+
+def make_rows(jmod: JaxModel, o, n_steps: int) -> Callable:
+    """rows(st_t0, st_t1, st_acc, st_seg, st_dense, k_hist, p_hist, ts) -> dict of arrays; to be jitted (one
+    compilation per output-buffer size: the step loop's own does not depend on it).
+
+    Each output time is looked up among the stored steps (their valid intervals are contiguous and sorted) and
+    interpolated from that step's dense output; z', a and lam come from one evaluation in the row's own mode
+    and parameters (k_hist, p_hist: per segment number)."""
+    from mechsim.dynamics.diffrax_backend import solver_for
+    solver = solver_for(o)
+
+    def rows(st_t0, st_t1, st_acc, st_seg, st_dense, k_hist, p_hist, ts):
+        j = jnp.minimum(jnp.searchsorted(st_acc, ts, side="left"), n_steps)
+        dense_rows = jax.tree_util.tree_map(lambda x: x[j], st_dense)
 
         def interpolate(t0_, t1_, dense_, tt):
             return solver.interpolation_cls(t0=t0_, t1=t1_, **dense_).evaluate(tt)
-        rows = jax.vmap(interpolate)(b["st_t0"][j], b["st_t1"][j], dense_rows, ts)
-        seg = b["st_seg"][j]
-        c.update(rows=rows, row_seg=seg, i_out=jnp.sum((jnp.arange(n_rows) < n_ts) & (ts <= s["t"])).astype(i32))
-        # rows in the IDA layout need z', a and lam: one vectorised evaluation in each row's mode and parameters
-        k_hist = jnp.concatenate([jnp.asarray(k0, i32)[None], c["ev_k"]])
-        p_hist = jnp.concatenate([p0[None, :], c["ev_p"]])
-        zp, acc, lam, _ = evaluate_rows(jmod, k_hist[seg], ts, rows, p_hist[seg])
-        zp_end, a_end, lam_end, g_end = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
-        keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "i_out", "rows", "row_seg", "n_ev", "ev_t", "ev_guard", "ev_z",
-                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections")
-        return dict({key: c[key] for key in keys}, zp=zp, a=acc, lam=lam, zp_end=zp_end, a_end=a_end,
-                    lam_end=lam_end)
-
-    return run
+        z = jax.vmap(interpolate)(st_t0[j], st_t1[j], dense_rows, ts)
+        seg = st_seg[j]
+        zp, acc, lam, _ = evaluate_rows(jmod, k_hist[seg], ts, z, p_hist[seg])
+        return dict(rows=z, row_seg=seg, zp=zp, a=acc, lam=lam)
+    return rows
 
 
 # -- compilation cache -------------------------------------------------------------------------------------
@@ -328,7 +339,7 @@ class CompiledRun:
     compile_time: float
     compile_cpu_time: float
     model: object
-    n_rows: int
+    rows: dict          # output-buffer size -> the compiled row function
 
 
 _CACHE: dict[tuple, CompiledRun] = {}
@@ -373,11 +384,10 @@ def run_key(o):
     return replace(o, rtol=0.0, atol=0.0, max_steps=0, n_save=None, projection=True)
 
 
-def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]:
-    """The compiled run of a model for n_rows output rows (None if the mechanism has no transition table);
-    True if compiled by this call."""
-    key = (id(model), run_key(o), n_rows, type(mech).__name__, mech.structure_key(), STEPS_PER_CALL,
-           EVENTS_PER_CALL)
+def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
+    """The compiled run of a model (None if the mechanism has no transition table); True if compiled by this
+    call. One per model structure and options: the output-buffer size only shapes the row function."""
+    key = (id(model), run_key(o), type(mech).__name__, mech.structure_key(), STEPS_PER_CALL, EVENTS_PER_CALL)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, False
@@ -386,18 +396,30 @@ def compiled_run(mech, model, o, n_rows: int) -> tuple[CompiledRun | None, bool]
     table = jax_transitions(mech, model, jmod)
     if table is None:
         return None, False
-    example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                            np.ones(n_rows), 1, 1e-3, (1e-6, 1e-8), 100)
-    fn = jax.jit(make_run(jmod, table, o, n_rows, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
-    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, n_rows)
+    example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
+                            (1e-6, 1e-8), 100)
+    fn = jax.jit(make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
+    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {})
     _CACHE[key] = entry
     return entry, True
 
 
-def run_arguments(k, t0, t_end, z0, p, ts, n_ts, dt0, tol, max_steps, seg_steps=0) -> tuple:
+def compiled_rows(entry: CompiledRun, o, n_rows: int, example: tuple) -> tuple[Callable, float, float]:
+    """The row function of a compiled run for n_rows output times (compiled at first use with `example`'s
+    shapes); its compile (wall, CPU) time, zero when cached."""
+    hit = entry.rows.get(n_rows)
+    if hit is not None:
+        return hit, 0.0, 0.0
+    wall, cpu = _time.perf_counter(), _time.process_time()
+    fn = jax.jit(make_rows(entry.jmod, o, STEPS_PER_CALL)).lower(*example).compile()
+    entry.rows[n_rows] = fn
+    return fn, _time.perf_counter() - wall, _time.process_time() - cpu
+
+
+def run_arguments(k, t0, t_end, z0, p, dt0, tol, max_steps, seg_steps=0) -> tuple:
     f64 = np.float64
-    return (np.int32(k), f64(t0), f64(t_end), np.asarray(z0, f64), np.asarray(p, f64), np.asarray(ts, f64),
-            np.int32(n_ts), f64(dt0), np.asarray(tol, f64), np.int32(max_steps), np.int32(seg_steps))
+    return (np.int32(k), f64(t0), f64(t_end), np.asarray(z0, f64), np.asarray(p, f64), f64(dt0),
+            np.asarray(tol, f64), np.int32(max_steps), np.int32(seg_steps))
 
 
 # -- the driver: compiled calls, and on_guard's transitions where the table hands back ------------------------
@@ -427,10 +449,10 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     from mechsim.dynamics.transitions import apply_transition, chattering
 
     model = start.model
-    n_rows = row_bucket(len(start.t_out))
-    entry, fresh = compiled_run(mech, model, o, n_rows)
+    entry, fresh = compiled_run(mech, model, o)
     if entry is None:
         return None
+    n_rows = row_bucket(len(start.t_out))
     jmod, names = entry.jmod, list(model.parameter_names)
     nq = jmod.nq
     stats = new_stats("diffrax", o.solver, start.derive_time,
@@ -447,14 +469,34 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     t, dt0, calls, seg_steps = t0, DT0_FIRST, 0, 0
     while True:
         mf = model.modes[mode]
-        t_rem = start.t_out[start.t_out > t]
-        ts = np.full(n_rows, t_end)
-        ts[:min(len(t_rem), n_rows)] = t_rem[:n_rows]
-        args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, ts, len(t_rem), dt0, (o.rtol, o.atol),
-                             o.max_steps, seg_steps)
-        out = call(entry.fn, args) if call else jax.device_get(entry.fn(*args))
+        args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, dt0, (o.rtol, o.atol), o.max_steps,
+                             seg_steps)
+        res = call(entry.fn, args) if call else entry.fn(*args)
+        out = jax.device_get({key: res[key] for key in res if not key.startswith("st_")})
         calls += 1
-        n_ev, n_out = int(out["n_ev"]), int(out["i_out"])
+        # the call's output rows, from its step buffer (left where it is), in chunks of the row buffer
+        ts = start.t_out[(start.t_out > t) & (start.t_out <= float(out["t"]))]
+        n_ev, n_out = int(out["n_ev"]), len(ts)
+        k_hist = np.r_[jmod.index(mode), out["ev_k"]].astype(np.int32)
+        p_hist = np.vstack([np.asarray(p, float)[None, :], out["ev_p"]])
+        chunks = []
+        for lo in range(0, n_out, n_rows):
+            chunk = ts[lo:lo + n_rows]
+            ts_pad = np.full(n_rows, chunk[-1])
+            ts_pad[:len(chunk)] = chunk
+            row_args = (res["st_t0"], res["st_t1"], res["st_acc"], res["st_seg"], res["st_dense"], k_hist, p_hist,
+                        ts_pad)
+            rows_fn, c_wall, c_cpu = compiled_rows(entry, o, n_rows, row_args)
+            if c_wall:
+                stats["compile_time_s"] += c_wall
+                stats["compile_cpu_time_s"] += c_cpu
+                stats["compilations"] += 1
+            r = jax.device_get(call(rows_fn, row_args) if call else rows_fn(*row_args))
+            chunks.append({key: v[:len(chunk)] for key, v in r.items()})
+        if chunks:
+            out.update({key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]})
+        else:
+            out["row_seg"] = np.zeros(0, np.int32)
         stats["steps"] += int(out["steps"])
         stats["accepted_steps"] += int(out["accepted"])
         stats["rejected_steps"] += int(out["rejected"])
@@ -513,8 +555,8 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         q = y[mf.index["q"]]
         if code == Code.DONE:
             break
-        seg_steps = int(out["seg_steps"]) if code == Code.ROWS_FULL else 0
-        if code == Code.ROWS_FULL:
+        seg_steps = int(out["seg_steps"]) if code == Code.STEPS_FULL else 0
+        if code == Code.STEPS_FULL:
             continue
         if code == Code.CHATTERING:
             guard = mf.guard_names[int(out["hand"])]
