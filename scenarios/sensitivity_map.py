@@ -205,7 +205,13 @@ def compiled_once(lowered):
     every plan, and jax.jit caches by the function object: a sizing, which evaluates the same formulas at a new
     design each iteration (the design values are the program's arguments), compiled the same program every time
     (132 compiles, 56 s of tests/test_sizing.py's 71 s of compilation, measured 2026-11-27)."""
-    key = (lowered.as_text(), str(lowered.in_tree), str(lowered.out_tree))
+    text = lowered.as_text()
+    main = next(line for line in text.splitlines() if "func.func public @main(" in line)
+    if main.split("->")[0].count("%arg") != lowered.in_tree.num_leaves:
+        # constants hoisted into arguments (jax_use_simplified_jaxpr_constants) or arguments pruned: the text does
+        # not say all that the program computes with, so it is not shared
+        return lowered.compile()
+    key = (text, str(lowered.in_tree), str(lowered.out_tree))
     hit = _COMPILED.get(key)
     if hit is None:
         hit = _COMPILED[key] = lowered.compile()
