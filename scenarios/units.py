@@ -73,7 +73,8 @@ def _disk_cache():
 
     from mechsim.scenarios.diskcache import JsonCache
     try:
-        return JsonCache(f"units-pint-{metadata.version('pint')}")
+        # "units-2": conversions stored before bare numbers in strings were refused ("1e5" for an angle) are not read
+        return JsonCache(f"units-2-pint-{metadata.version('pint')}")
     except metadata.PackageNotFoundError:
         return None
 
@@ -103,7 +104,7 @@ def _to_si(field: str, value, unit: str) -> float:
     except Exception:
         raise ScenarioError(field, f"cannot read {value!r} as a quantity (number and unit, e.g. \"1 {unit}\")") \
             from None
-    if not isinstance(q, pint.Quantity):
+    if not isinstance(q, pint.Quantity) or q.unitless:    # pint reads a bare "1e5" as a dimensionless Quantity
         if unit:
             raise ScenarioError(field, f"needs a unit, e.g. \"{text} {unit}\"")
         q = ureg.Quantity(float(q), "")
