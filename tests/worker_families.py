@@ -18,10 +18,12 @@ process the second file's call compiled nothing (measured 2026-11-27 on the shar
 The second pass of .ci/run (the hybrid-loop files) groups the same way: test_restart_perturbation, test_stalls and
 test_diffrax_compare there are one unit.
 
-Nothing else changes: every file still runs whole in one worker, in its own order, with its own module fixtures.
+Nothing else changes: every file still runs whole in one worker, in its own order, with its own module fixtures;
+the units in `COST` start first, longest first.
 A family is one work unit for the scheduler, so it should stay well below half of the suite's time (the
-largest here, the diffrax Geneva, is an estimated 100-130 s from the idle durations, of ~10 minutes of CPU; xdist
-starts the units with the most tests first, and the families are among the first five). Without pytest-xdist, or with another --dist, this does nothing.
+largest here, the diffrax Geneva, took ~450 s of one worker of ~1700 s in all in a full run at load 3.3-3.7 on
+2026-11-27 23:00, after the compiled diffrax whole-run loop). Without pytest-xdist, or with another --dist, this does
+nothing.
 """
 from __future__ import annotations
 
@@ -40,6 +42,27 @@ FAMILIES = {
 }
 
 
+#: work units known to take long, seconds of one worker in a full run (2026-11-27 23:00, `-n 2 --dist loadfile` on
+#: the shared 2-core machine at load 3.3-3.7, families summed): started first, longest first. xdist orders the units
+#: by their number of tests, which put these few-test files at the end of the run (the sensitivity files: 3-13 tests
+#: each, a minute or two each), where one of them could keep a worker busy long after the other had finished.
+#: Units not listed follow in xdist's order. Only the order matters; the numbers need not be exact.
+COST = {
+    "tests/test_compare_builtins.py": 450,
+    "tests/test_sensitivity_chain.py": 147,
+    "tests/test_sensitivity.py": 123,
+    "tests/test_robustness.py": 117,
+    "tests/test_sensitivity_thermal.py": 116,
+    "tests/test_sensitivity_cycle_speed.py": 76,
+    "tests/test_sizing.py": 70,
+    "tests/test_ida_compiled.py": 66,
+    "tests/test_diffrax_run.py": 63,
+    "tests/test_sensitivity_wall.py": 59,
+    "tests/test_sweep_batch.py": 59,
+    "tests/test_seed_report.py": 56,
+}
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     if config.getvalue("dist") != "loadfile":
@@ -55,5 +78,12 @@ def pytest_xdist_make_scheduler(config, log):
         def _split_scope(self, nodeid: str) -> str:
             scope = super()._split_scope(nodeid)
             return FAMILIES.get(scope, scope)
+
+        def _assign_work_unit(self, node) -> None:
+            if not getattr(self, "_costly_first", False):     # once, before the first unit leaves the queue
+                self._costly_first = True
+                for scope in sorted((s for s in self.workqueue if s in COST), key=COST.get):
+                    self.workqueue.move_to_end(scope, last=False)
+            super()._assign_work_unit(node)
 
     return FamilyScheduling(config, log)
