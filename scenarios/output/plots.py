@@ -274,20 +274,17 @@ def figures(result: Result, mechanism=None) -> dict[str, Figure]:
 def save(fig: Figure, path: Path) -> Path:
     """Write one figure as PNG (Agg canvas, no pyplot state), drawn once: `savefig` draws a figure that has a
     layout engine twice (a draw without rendering for the layout, then the real one). Here the layout is executed
-    once at the PNG's dpi, the axes stay where it put them, and the canvas is drawn once (each axis's ticks worked
-    out once per layout state: scenarios/output/ticks.py) and encoded by scenarios/output/png.py: the same pixels
-    and metadata as `savefig`, about 15 % less CPU per figure for the single draw, as much again for the
-    encoding and a tenth for the ticks (docs/benchmarks.md, "Cold start")."""
+    once at the PNG's dpi, the axes stay where it put them, and the canvas is drawn once and encoded by
+    scenarios/output/png.py: the same pixels and metadata as `savefig`, about 15 % less CPU per figure for the
+    single draw and as much again for the encoding (docs/benchmarks.md, "Cold start")."""
     from mechsim.scenarios.output.png import write_png
-    from mechsim.scenarios.output.ticks import ticks_once
     canvas = FigureCanvasAgg(fig)
     engine = fig.get_layout_engine()
     fig.set_dpi(DPI)
-    with ticks_once():                 # each axis's ticks worked out once per layout state, not 6-7 times
-        if engine is not None and fig.axes:
-            engine.execute(fig)
-            fig.set_layout_engine("none")
-        canvas.draw()
+    if engine is not None and fig.axes:
+        engine.execute(fig)
+        fig.set_layout_engine("none")
+    canvas.draw()
     return write_png(canvas.buffer_rgba(), path, DPI)
 
 
