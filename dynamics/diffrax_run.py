@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from mechsim.dynamics import kkt
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
 from mechsim.dynamics.jax_transitions import JaxTransitions, jax_transitions
 
@@ -398,7 +399,8 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
         return None, False
     example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
                             (1e-6, 1e-8), 100)
-    fn = jax.jit(make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
+    with kkt.unrolled_solves():       # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
+        fn = jax.jit(make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
     entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {})
     _CACHE[key] = entry
     return entry, True
@@ -411,7 +413,8 @@ def compiled_rows(entry: CompiledRun, o, n_rows: int, example: tuple) -> tuple[C
     if hit is not None:
         return hit, 0.0, 0.0
     wall, cpu = _time.perf_counter(), _time.process_time()
-    fn = jax.jit(make_rows(entry.jmod, o, STEPS_PER_CALL)).lower(*example).compile()
+    with kkt.unrolled_solves():
+        fn = jax.jit(make_rows(entry.jmod, o, STEPS_PER_CALL)).lower(*example).compile()
     entry.rows[n_rows] = fn
     return fn, _time.perf_counter() - wall, _time.process_time() - cpu
 
