@@ -53,9 +53,7 @@ _UNROLLED = False
 def unrolled_solves():
     """Within the block, traced single systems up to UNROLLED_MAX are solved by `unrolled_solve` (the compiled
     diffrax run, where it was measured to pay: docs/diffrax.md 'The compiled run'). Everything else (the segment
-    loop, the sensitivity pass) keeps jax.numpy.linalg.solve: the sizing's shadow prices moved by 1e-5 relative
-    when the sensitivity pass took the unrolled solve (tests/test_sizing.py), a dependence on the solver's
-    rounding that is documented as open in docs/sensitivity.md."""
+    loop, the sensitivity pass) keeps jax.numpy.linalg.solve, as before the compiled run existed."""
     global _UNROLLED
     before, _UNROLLED = _UNROLLED, True
     try:
