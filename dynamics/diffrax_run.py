@@ -446,10 +446,10 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
     from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z
-    from mechsim.dynamics.hybrid import Piece, Trajectory, parameter_tuple, transition_failure_code
+    from mechsim.dynamics.hybrid import Piece, Trajectory, fire
     from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
-    from mechsim.dynamics.transitions import apply_transition, chattering
+    from mechsim.dynamics.transitions import chattering
 
     model = start.model
     entry, fresh = compiled_run(mech, model, o)
@@ -569,21 +569,13 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
             failure = _failure(model, mode, t, q + offset, code, o)
             break
         fired = [int(out["hand"])] + [int(j) for j in np.flatnonzero(out["fired"]) if j != int(out["hand"])]
-        guard = mf.guard_names[fired[0]]
-        failure = chattering(model, mode, guard, t, q + offset, last)
+        tr_out, failure, last = fire(mech, model, mode, values, t, y, q, fired, offset, last, stats)
+        if tr_out is not None:
+            events += tr_out.rows
+            warnings += tr_out.warnings
         if failure:
-            failure = dict(failure, code=FailureCode.CHATTERING)
-            break
-        last = (guard, t)
-        stats["events"] += 1
-        tr_out = apply_transition(mech, model, parameter_tuple, mode, values, t, y, fired, offset)
-        events += tr_out.rows
-        warnings += tr_out.warnings
-        if tr_out.failure:
-            failure = dict(tr_out.failure, code=transition_failure_code(tr_out.failure))
             break
         mode, values, p, y, yp, offset = tr_out.mode, tr_out.values, tr_out.p, tr_out.y, tr_out.yp, tr_out.offset
-        stats["restarts"] += 1
         dt0 = 0.1 * dt0
     stats["notes"]["segments"] = f"mode segments, inside {calls} compiled whole-run call(s)"
     stats["solve_time_s"] = _time.perf_counter() - wall0

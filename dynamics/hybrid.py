@@ -208,25 +208,36 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
             y, yp, first_step = seg.y_end, seg.yp_end, seg.next_step
             continue
         # a guard fired
-        guard = mf.guard_names[seg.fired[0]]
-        failure = chattering(model, mode, guard, t, q + offset, last)
+        out, failure, last = fire(mech, model, mode, values, t, seg.y_end, q, list(seg.fired), offset, last, stats)
+        if out is not None:
+            events += out.rows
+            warnings += out.warnings
         if failure:
-            failure = dict(failure, code=FailureCode.CHATTERING)
-            break
-        last = (guard, t)
-        stats["events"] += 1
-        out = apply_transition(mech, model, parameter_tuple, mode, values, t, seg.y_end, list(seg.fired), offset)
-        events += out.rows
-        warnings += out.warnings
-        if out.failure:
-            failure = dict(out.failure, code=transition_failure_code(out.failure))
             break
         mode, values, p, y, yp, offset = out.mode, out.values, out.p, out.y, out.yp, out.offset
         mf = model.modes[mode]
         first_step = RESTART_STEP_FACTOR * seg.next_step
-        stats["restarts"] += 1
     stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+def fire(mech: Mechanism, model: DerivedModel, mode: str, values: dict, t: float, y_end: np.ndarray, q: np.ndarray,
+         fired: list[int], offset: np.ndarray, last, stats: dict):
+    """The guards `fired` (the first the primary) at time t, for every loop (this one and the compiled diffrax
+    run's hand-backs): the chattering check, then the transition (`transitions.apply_transition`).
+
+    Returns (outcome or None, failure with its code or None, the new `last` (guard, time)); counts the event and,
+    after a successful re-initialisation, the restart in `stats`."""
+    guard = model.modes[mode].guard_names[fired[0]]
+    failure = chattering(model, mode, guard, t, q + offset, last)
+    if failure:
+        return None, dict(failure, code=FailureCode.CHATTERING), last
+    stats["events"] += 1
+    out = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, fired, offset)
+    if out.failure:
+        return out, dict(out.failure, code=transition_failure_code(out.failure)), (guard, t)
+    stats["restarts"] += 1
+    return out, None, (guard, t)
 
 
 def transition_failure_code(failure: dict) -> FailureCode:
