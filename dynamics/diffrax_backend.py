@@ -313,6 +313,15 @@ def ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.nd
     return y, yp
 
 
+def state_rows(mf: ModeFunctions, nq: int, z: np.ndarray) -> np.ndarray:
+    """Rows y in the IDA layout of the mode from states z = [q, v, work, ext], the multiplier columns (lam, mu)
+    NaN: the compiled whole run interpolates states only, and the read-outs solve the KKT system at every row
+    from (q, v) (`tables.kkt_rows`); `hybrid.Piece`."""
+    n = len(z)
+    n_alg = mf.index["mu"].stop - mf.index["lam"].start
+    return np.hstack([z[:, :2 * nq], np.full((n, n_alg), np.nan), z[:, 2 * nq:]])
+
+
 def result_message(code: int) -> str:
     """diffrax's words for a solve's result code, first line (diffrax keeps its message table private: read
     in this one place)."""

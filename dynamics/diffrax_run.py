@@ -8,8 +8,11 @@ the segment backend's `FirstCrossing`). The guard that fired picks a branch of t
 (`jax_transitions`): next mode and parameters, then the consistent re-initialisation of `dynamics/consistent.py`
 in jax (positions by Gauss-Newton onto Phi = 0, velocities by the kinetic-energy-metric projection; an index-1
 restart into the same mode with the same constraints keeps q and v, `transitions.same_constraints`). Every
-accepted step's dense output goes into a preallocated buffer, events into another; a second, small compiled
-function (`make_rows`) interpolates the output rows on the requested grid from the step buffer afterwards.
+accepted step's dense output goes into a preallocated buffer (one row per step: its interval, its segment and
+its interpolant's coefficients, written with one update), events into another; a second, small compiled function
+(`make_rows`) interpolates the output rows' states on the requested grid from the step buffer afterwards.
+Accelerations and multipliers are not evaluated on the rows: the read-outs solve the KKT system at every row
+from (q, v) anyway (`tables.kkt_rows`), so the pieces carry states only (`hybrid.Piece`).
 
 The loop ends at t_end, at a failure (code), or where the table says the transition is `on_guard`'s (a stop,
 a hand-back condition, guards firing together, the event buffer full): the driver (`simulate_run`) then applies
@@ -43,7 +46,7 @@ EVENTS_PER_CALL = 64
 #: accepted steps whose dense output one compiled call keeps (for its output rows) before it ends (and is called
 #: again)
 STEPS_PER_CALL = 4096
-#: output rows evaluated together in one mode (evaluate_rows); output buffers are a multiple of it
+#: output buffers are a multiple of this many rows
 ROW_BATCH = 256
 #: Gauss-Newton iterations of the position projection (quadratic convergence from the integrator's drift)
 GN_ITERATIONS = 3
@@ -53,6 +56,49 @@ MAX_BISECTIONS = 200
 
 #: the event buffers of a compiled run (written only where a guard fired)
 EVENT_KEYS = ("n_ev", "ev_t", "ev_guard", "ev_z", "ev_k", "ev_p", "ev_after")
+
+
+#: columns of a step record before the interpolant's coefficients: t0, t1, the end of the step's valid interval
+#: (inf for a free slot, so the taken steps stay sorted), the segment number
+ST_T0, ST_T1, ST_ACC, ST_SEG, ST_DENSE = range(5)
+
+
+class StepRecord:
+    """The dense output of one step as one float64 row (and back): a step writes its record with one update
+    of the buffer instead of one per field (about 1 us a step, measured on case A)."""
+
+    def __init__(self, dense_struct):
+        leaves, self.tree = jax.tree_util.tree_flatten(dense_struct)
+        if any(x.dtype != jnp.float64 for x in leaves):
+            raise TypeError("the solver's dense output must be float64")
+        self.shapes = [x.shape for x in leaves]
+        self.sizes = [int(np.prod(x.shape, dtype=int)) for x in leaves]
+        self.width = ST_DENSE + sum(self.sizes)
+
+    def pack(self, t0, t1, t_acc, seg, dense):
+        head = jnp.stack([t0, t1, t_acc, jnp.asarray(seg, jnp.float64)])
+        return jnp.concatenate([head] + [jnp.ravel(x) for x in jax.tree_util.tree_leaves(dense)])
+
+    def dense(self, row):
+        """The interpolant's coefficients of one record."""
+        out, at = [], ST_DENSE
+        for shape, size in zip(self.shapes, self.sizes):
+            out.append(jnp.reshape(row[at:at + size], shape))
+            at += size
+        return jax.tree_util.tree_unflatten(self.tree, out)
+
+
+def step_record(jmod: JaxModel, o, n_params: int) -> StepRecord:
+    """The step-record layout of the solver `o` names on this model's state (traced shapes only)."""
+    from mechsim.dynamics.diffrax_backend import solver_for
+    solver = solver_for(o)
+    term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
+
+    def dense(z):
+        args = (jnp.int32(0), jnp.zeros(n_params))
+        sstate = solver.init(term, 0.0, 1e-3, z, args)
+        return solver.step(term, 0.0, 1e-3, z, args, sstate, True)[2]
+    return StepRecord(jax.eval_shape(dense, jnp.zeros(jmod.nz)))
 
 
 class Code(IntEnum):
@@ -108,7 +154,8 @@ def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
     return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
 
 
-def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: int) -> Callable:
+def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: int, record: StepRecord
+             ) -> Callable:
     """run(k0, t0, t_end, z0, p0, dt0, tol, max_steps, seg_steps0) -> dict of arrays; to be jitted.
 
     tol = (rtol, atol); o: DiffraxOptions; the output rows come from the returned step buffer (`make_rows`);
@@ -150,18 +197,17 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             last_guard=i32(-1), last_t=jnp.asarray(-jnp.inf, f64),
             fired=jnp.zeros(ngm, bool), code=i32(Code.RUNNING),
             steps=i32(0), accepted=i32(0), rejected=i32(0), bisections=i32(0))
-        # the dense output of every accepted step (its interpolant's coefficients, the interval it is valid on and
-        # its segment number): output rows are interpolated from it after the loop, all at once
-        dense_struct = jax.eval_shape(lambda z: solver.step(term, t0, t0 + dt0, z, args0, sstate0, True)[2], z0)
+        # the record of every accepted step (`StepRecord`: the interval it is valid on, its segment number, its
+        # interpolant's coefficients): output rows are interpolated from it after the loop, all at once.
         # (one slot more than n_steps: the scratch slot a step not taken is written to once the buffer is full)
         slots = n_steps + 1
-        big = dict(n_st=i32(0), st_t0=jnp.zeros(slots), st_t1=jnp.ones(slots), st_acc=jnp.full(slots, jnp.inf),
-                   st_seg=jnp.zeros(slots, i32),
-                   st_dense=jax.tree_util.tree_map(lambda x: jnp.zeros((slots,) + x.shape, x.dtype), dense_struct),
+        big = dict(n_st=i32(0), st=jnp.zeros((slots, record.width)).at[:, ST_ACC].set(jnp.inf),
                    n_ev=i32(0), ev_t=jnp.zeros(n_events), ev_guard=jnp.zeros(n_events, i32),
                    ev_z=jnp.zeros((n_events, nz)), ev_k=jnp.zeros(n_events, i32),
                    ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)))
         c = jax.tree_util.tree_map(jnp.asarray, (small, big))  # python bools of diffrax's states as arrays
+        record_struct = jax.tree_util.tree_unflatten(record.tree, [jax.ShapeDtypeStruct(sh, jnp.float64)
+                                                                   for sh in record.shapes])
 
         def new_segment(s, t, z, k, p, dt):
             return dict(s, t=t, z=z, k=k, p=p, dt=dt, ref=reference(k, t, z, p), seg_t0=t, seg_steps=i32(0),
@@ -250,12 +296,8 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             slots sorted)."""
             m = jnp.minimum(b["n_st"], n_steps)
             took = t_acc > t
-
-            def put(buf, val):
-                return buf.at[m].set(val)
-            return dict(b, n_st=b["n_st"] + took, st_t0=put(b["st_t0"], t), st_t1=put(b["st_t1"], t1),
-                        st_acc=put(b["st_acc"], jnp.where(took, t_acc, jnp.inf)), st_seg=put(b["st_seg"], b["n_ev"]),
-                        st_dense=jax.tree_util.tree_map(put, b["st_dense"], dense))
+            row = record.pack(t, t1, jnp.where(took, t_acc, jnp.inf), b["n_ev"], dense)
+            return dict(b, n_st=b["n_st"] + took, st=b["st"].at[m].set(row))
 
         def step(c):
             """One step in the current mode, no branching: the mode number is traced and each evaluation switches
@@ -287,7 +329,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             the table or handed back. The only lax.cond is here, once per crossing."""
             s, b = c
             x0 = dict(crossed=jnp.bool_(False), t=s["t"], t1=s["t"],
-                      dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), dense_struct))
+                      dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), record_struct))
             s, b, x = jax.lax.while_loop(lambda c: (c[0]["code"] == Code.RUNNING) & ~c[2]["crossed"], step, (s, b, x0))
             interp = solver.interpolation_cls(t0=x["t"], t1=x["t1"], **x["dense"])
             full = b["n_ev"] >= n_events
@@ -302,33 +344,28 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
         c = dict(s, **b)
         zp_end, a_end, lam_end, _ = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
         keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "n_ev", "ev_t", "ev_guard", "ev_z",
-                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections", "n_st", "st_t0", "st_t1",
-                "st_acc", "st_seg", "st_dense")
+                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections", "n_st", "st")
         return dict({key: c[key] for key in keys}, zp_end=zp_end, a_end=a_end, lam_end=lam_end)
 
     return run
 
 
-def make_rows(jmod: JaxModel, o, n_steps: int) -> Callable:
-    """rows(st_t0, st_t1, st_acc, st_seg, st_dense, k_hist, p_hist, ts) -> dict of arrays; to be jitted (one
-    compilation per output-buffer size: the step loop's own does not depend on it).
+def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
+    """rows(st, ts) -> dict(rows=z, row_seg); to be jitted (one compilation per output-buffer size: the step
+    loop's own does not depend on it).
 
     Each output time is looked up among the stored steps (their valid intervals are contiguous and sorted) and
-    interpolated from that step's dense output; z', a and lam come from one evaluation in the row's own mode
-    and parameters (k_hist, p_hist: per segment number)."""
+    the state interpolated from that step's dense output; row_seg is the segment number it belongs to."""
     from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
 
-    def rows(st_t0, st_t1, st_acc, st_seg, st_dense, k_hist, p_hist, ts):
-        j = jnp.minimum(jnp.searchsorted(st_acc, ts, side="left"), n_steps)
-        dense_rows = jax.tree_util.tree_map(lambda x: x[j], st_dense)
+    def rows(st, ts):
+        j = jnp.minimum(jnp.searchsorted(st[:, ST_ACC], ts, side="left"), n_steps)
+        picked = st[j]
 
-        def interpolate(t0_, t1_, dense_, tt):
-            return solver.interpolation_cls(t0=t0_, t1=t1_, **dense_).evaluate(tt)
-        z = jax.vmap(interpolate)(st_t0[j], st_t1[j], dense_rows, ts)
-        seg = st_seg[j]
-        zp, acc, lam, _ = evaluate_rows(jmod, k_hist[seg], ts, z, p_hist[seg])
-        return dict(rows=z, row_seg=seg, zp=zp, a=acc, lam=lam)
+        def interpolate(row, tt):
+            return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(tt)
+        return dict(rows=jax.vmap(interpolate)(picked, ts), row_seg=picked[:, ST_SEG].astype(jnp.int32))
     return rows
 
 
@@ -341,6 +378,7 @@ class CompiledRun:
     compile_cpu_time: float
     model: object
     rows: dict          # output-buffer size -> the compiled row function
+    record: StepRecord
 
 
 _CACHE: dict[tuple, CompiledRun] = {}
@@ -352,32 +390,6 @@ def row_bucket(n: int) -> int:
     n = max(int(n), 1)
     grain = max(ROW_BATCH, 1 << max(n.bit_length() - 3, 0))
     return int(min(-(-n // grain) * grain, 1 << 16))
-
-
-def evaluate_rows(jmod: JaxModel, k, t, z, p):
-    """jmod.evaluate on every row (mode numbers k), each row in its own mode only: rows sorted by mode, then in
-    batches of ROW_BATCH, a batch of one mode evaluated in that mode alone (a vmapped switch would evaluate
-    every mode on every row: twice the work for two modes, and an evaluation costs about 0.3 us)."""
-    n_modes, n = len(jmod.modes), t.shape[0]
-    if n_modes == 1 or n % ROW_BATCH:
-        return jax.vmap(jmod.evaluate)(k, t, z, p)
-    order = jnp.argsort(k, stable=True)
-
-    def batches(x):
-        return x[order].reshape((n // ROW_BATCH, ROW_BATCH) + x.shape[1:])
-    one_mode = [jax.vmap(jmod.evaluate_mode(i)) for i in range(n_modes)]
-
-    def mixed(kb, tb, zb, pb):
-        return jax.vmap(jmod.evaluate)(kb, tb, zb, pb)
-
-    def batch(args):
-        kb, tb, zb, pb = args
-        which = jnp.where(jnp.all(kb == kb[0]), kb[0], n_modes)
-        branches = [lambda kb, tb, zb, pb, f=f: f(tb, zb, pb) for f in one_mode] + [mixed]
-        return jax.lax.switch(which, branches, kb, tb, zb, pb)
-    out = jax.lax.map(batch, (batches(k), batches(t), batches(z), batches(p)))
-    inverse = jnp.argsort(order)
-    return tuple(x.reshape((n,) + x.shape[2:])[inverse] for x in out)
 
 
 def run_key(o):
@@ -399,9 +411,10 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
         return None, False
     example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
                             (1e-6, 1e-8), 100)
+    record = step_record(jmod, o, len(model.parameter_names))
     with kkt.unrolled_solves():       # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
-        fn = jax.jit(make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL)).lower(*example).compile()
-    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {})
+        fn = jax.jit(make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)).lower(*example).compile()
+    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {}, record)
     _CACHE[key] = entry
     return entry, True
 
@@ -413,8 +426,7 @@ def compiled_rows(entry: CompiledRun, o, n_rows: int, example: tuple) -> tuple[C
     if hit is not None:
         return hit, 0.0, 0.0
     wall, cpu = _time.perf_counter(), _time.process_time()
-    with kkt.unrolled_solves():
-        fn = jax.jit(make_rows(entry.jmod, o, STEPS_PER_CALL)).lower(*example).compile()
+    fn = jax.jit(make_rows(o, STEPS_PER_CALL, entry.record)).lower(*example).compile()
     entry.rows[n_rows] = fn
     return fn, _time.perf_counter() - wall, _time.process_time() - cpu
 
@@ -445,7 +457,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
-    from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z
+    from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z, state_rows
     from mechsim.dynamics.hybrid import Piece, Trajectory, fire
     from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
@@ -475,20 +487,17 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, dt0, (o.rtol, o.atol), o.max_steps,
                              seg_steps)
         res = call(entry.fn, args) if call else entry.fn(*args)
-        out = jax.device_get({key: res[key] for key in res if not key.startswith("st_")})
+        out = jax.device_get({key: res[key] for key in res if key != "st"})
         calls += 1
         # the call's output rows, from its step buffer (left where it is), in chunks of the row buffer
         ts = start.t_out[(start.t_out > t) & (start.t_out <= float(out["t"]))]
         n_ev, n_out = int(out["n_ev"]), len(ts)
-        k_hist = np.r_[jmod.index(mode), out["ev_k"]].astype(np.int32)
-        p_hist = np.vstack([np.asarray(p, float)[None, :], out["ev_p"]])
         chunks = []
         for lo in range(0, n_out, n_rows):
             chunk = ts[lo:lo + n_rows]
             ts_pad = np.full(n_rows, chunk[-1])
             ts_pad[:len(chunk)] = chunk
-            row_args = (res["st_t0"], res["st_t1"], res["st_acc"], res["st_seg"], res["st_dense"], k_hist, p_hist,
-                        ts_pad)
+            row_args = (res["st"], ts_pad)
             rows_fn, c_wall, c_cpu = compiled_rows(entry, o, n_rows, row_args)
             if c_wall:
                 stats["compile_time_s"] += c_wall
@@ -511,22 +520,11 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         seg = out["row_seg"][:n_out]
         # rows are in segment order: one piece per segment, split where the segment number changes
         cuts = np.flatnonzero(np.diff(seg)) + 1
-        layout = {(mf_.m, mf_.index["mu"].stop - mf_.index["mu"].start) for mf_ in model.modes.values()}
-        if len(layout) == 1 and n_out:       # every mode has the same IDA layout: convert all rows at once
-            mf0 = model.modes[mode]
-            y_all, yp_all = ida_rows(mf0, nq, out["rows"][:n_out], out["zp"][:n_out], out["a"][:n_out],
-                                     out["lam"][:n_out, :mf0.m])
         for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, n_out]):
-            if hi <= lo:
-                continue
-            s = int(seg[lo])
-            if len(layout) == 1:
-                y_rows, yp_rows = y_all[lo:hi].copy(), yp_all[lo:hi].copy()
-            else:
-                mf_s = model.modes[modes[s]]
-                y_rows, yp_rows = ida_rows(mf_s, nq, out["rows"][lo:hi], out["zp"][lo:hi], out["a"][lo:hi],
-                                           out["lam"][lo:hi, :mf_s.m])
-            pieces.append(Piece(modes[s], params[s], ts[lo:hi].copy(), y_rows, yp_rows, offset))
+            if hi > lo:
+                s = int(seg[lo])
+                y_rows = state_rows(model.modes[modes[s]], nq, out["rows"][lo:hi])
+                pieces.append(Piece(modes[s], params[s], ts[lo:hi].copy(), y_rows, None, offset))
         for e in range(n_ev):
             mf_e, t_e = model.modes[modes[e]], float(out["ev_t"][e])
             vals = {**values, **dict(zip(names, params[e]))}

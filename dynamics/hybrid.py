@@ -26,13 +26,19 @@ from mechsim.dynamics.settings import SolverSettings
 
 @dataclass
 class Piece:
-    """Output rows of one segment with the mode and parameters that produced them."""
+    """Output rows of one segment with the mode and parameters that produced them.
+
+    y is in the mode's IDA layout (`dynamics.model`); read-outs use its states (q, v, work, ext) and solve the
+    KKT system for accelerations and forces at every row (`tables.kkt_rows`). The multiplier columns and yp are
+    the integrator's where it has them (IDA, the diffrax segment loop); the compiled diffrax run interpolates
+    states only: NaN multipliers, yp None.
+    """
 
     mode: str
     params: tuple
     t: np.ndarray
     y: np.ndarray
-    yp: np.ndarray
+    yp: np.ndarray | None
     offset: np.ndarray | None = None   # added to y's coordinates for output (re-based frame, see transitions.rebased)
 
     def coordinates(self, ix: slice) -> np.ndarray:
