@@ -101,8 +101,7 @@ def _trajectory_angle(traj, coordinate: int) -> tuple[np.ndarray, np.ndarray]:
     t = np.concatenate([p.t for p in traj.pieces])
     ix = traj.model.modes[traj.pieces[0].mode].index["q"]
     a = np.concatenate([p.coordinates(ix)[:, coordinate] for p in traj.pieces])
-    _, last = np.unique(t[::-1], return_index=True)
-    keep = len(t) - 1 - last
+    keep = np.r_[t[1:] != t[:-1], True]       # times are non-decreasing: the last row of each instant
     return t[keep], a[keep]
 
 

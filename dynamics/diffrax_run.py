@@ -55,7 +55,7 @@ MAX_BISECTIONS = 200
 
 
 #: the event buffers of a compiled run (written only where a guard fired)
-EVENT_KEYS = ("n_ev", "ev_t", "ev_guard", "ev_z", "ev_k", "ev_p", "ev_after")
+EVENT_KEYS = ("n_ev", "ev_t", "ev_guard", "ev_z", "ev_k", "ev_p", "ev_after", "ev_ke")
 
 
 #: columns of a step record before the interpolant's coefficients: t0, t1, the end of the step's valid interval
@@ -233,7 +233,8 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
         big = dict(n_st=i32(0), st=jnp.zeros((slots, record.width)).at[:, ST_ACC].set(jnp.inf),
                    n_ev=i32(0), ev_t=jnp.zeros(n_events), ev_guard=jnp.zeros(n_events, i32),
                    ev_z=jnp.zeros((n_events, nz)), ev_k=jnp.zeros(n_events, i32),
-                   ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)))
+                   ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)),
+                   ev_ke=jnp.zeros((n_events, 2)))
         c = jax.tree_util.tree_map(jnp.asarray, (small, big))  # python bools of diffrax's states as arrays
         record_struct = jax.tree_util.tree_unflatten(record.tree, [jax.ShapeDtypeStruct(sh, jnp.float64)
                                                                    for sh in record.shapes])
@@ -242,7 +243,8 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             return dict(s, t=t, z=z, k=k, p=p, dt=dt, ref=reference(k, t, z, p), seg_t0=t, seg_steps=i32(0),
                         seg_acc=i32(0), jump=jnp.bool_(True))
 
-        no_record = (jnp.bool_(False), jnp.zeros((), f64), i32(0), jnp.zeros(nz), i32(0), p0, jnp.zeros(nz))
+        no_record = (jnp.bool_(False), jnp.zeros((), f64), i32(0), jnp.zeros(nz), i32(0), p0, jnp.zeros(nz),
+                     jnp.zeros(2))
 
         def locate(s, lo, hi, interp):
             """Bisection for the first zero of min_j ref_j g_j on the step's interpolant in (lo, hi]: the upper end
@@ -297,16 +299,19 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
                 go = new_segment(dict(s, last_guard=i, last_t=t_star), t_star, z_new, k_new, p_new, restart_dt)
                 ok = code == Code.RUNNING
                 s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), go, stay)
-                return s, (ok, t_star, i, z_star, k_new, p_new, z_new)
+                # kinetic energies before and after, 1/2 v^T M v, for the events table
+                ke = jnp.stack([0.5 * v @ parts(k, t_star, q, v, p)[0] @ v,
+                                0.5 * v_new @ parts(k_new, t_star, q_new, v_new, p_new)[0] @ v_new])
+                return s, (ok, t_star, i, z_star, k_new, p_new, z_new, ke)
 
-            s, (do, te, ge, ze, ke, pe, za) = jax.lax.cond(against[i], rearm, event, s)
+            s, (do, te, ge, ze, ke, pe, za, en) = jax.lax.cond(against[i], rearm, event, s)
             n = jnp.minimum(ev["n_ev"], n_events - 1)
 
             def put(buf, val):
                 return buf.at[n].set(jnp.where(do, val, buf[n]))
             ev = dict(n_ev=ev["n_ev"] + do, ev_t=put(ev["ev_t"], te), ev_guard=put(ev["ev_guard"], ge),
                       ev_z=put(ev["ev_z"], ze), ev_k=put(ev["ev_k"], ke), ev_p=put(ev["ev_p"], pe),
-                      ev_after=put(ev["ev_after"], za))
+                      ev_after=put(ev["ev_after"], za), ev_ke=put(ev["ev_ke"], en))
             return s, t_star, ev
 
         def codes(s, b):
@@ -373,7 +378,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
         c = dict(s, **b)
         zp_end, a_end, lam_end, _ = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
         keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "n_ev", "ev_t", "ev_guard", "ev_z",
-                "ev_k", "ev_p", "ev_after", "steps", "accepted", "rejected", "bisections", "n_st", "st")
+                "ev_k", "ev_p", "ev_after", "ev_ke", "steps", "accepted", "rejected", "bisections", "n_st", "st")
         return dict({key: c[key] for key in keys}, zp_end=zp_end, a_end=a_end, lam_end=lam_end)
 
     return run
@@ -564,17 +569,14 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         for e in range(n_ev):
             mf_e, t_e = model.modes[modes[e]], float(out["ev_t"][e])
             vals = {**values, **dict(zip(names, params[e]))}
-            z_b, z_a = out["ev_z"][e], out["ev_after"][e]
+            z_b = out["ev_z"][e]
             q, v = z_b[:nq], z_b[nq:2 * nq]
             guard = mf_e.guard_names[int(out["ev_guard"][e])]
             tr = mech.on_guard(modes[e], guard, vals, t_e, q, v)
-            M_b = np.atleast_2d(np.asarray(mf_e.mass(q, params[e]), float))
-            M_a = np.atleast_2d(np.asarray(model.modes[modes[e + 1]].mass(z_a[:nq], params[e + 1]), float))
-            v_a = z_a[nq:2 * nq]
             events.append(dict(t_s=t_e, from_mode=modes[e], to_mode=modes[e + 1], kind=tr.kind, guard=guard,
                                **{f"{c}_q": float(x) for c, x in zip(model.coordinates, q + offset)},
-                               kinetic_energy_before_J=0.5 * float(v @ M_b @ v),
-                               kinetic_energy_after_J=0.5 * float(v_a @ M_a @ v_a), message=tr.message or ""))
+                               kinetic_energy_before_J=float(out["ev_ke"][e, 0]),
+                               kinetic_energy_after_J=float(out["ev_ke"][e, 1]), message=tr.message or ""))
             if tr.message:
                 warnings.append(f"t = {t_e:.6g} s: {tr.message}")
             last = (guard, t_e)
