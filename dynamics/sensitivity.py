@@ -176,8 +176,10 @@ def _padded(a, n: int) -> np.ndarray:
 _SOLVES: dict = {}
 
 
-def _segment_solve(jmod, model, n: int, rtol: float, atol: float, solver: str, max_steps: int):
-    key = (id(model), n, rtol, atol, solver, max_steps)
+def _segment_solve(jmod, model, n: int, solver: str, max_steps: int):
+    """(the compiled solve of z and S over one segment, seconds spent compiling it now: 0 when compiled before);
+    the tolerances are its arguments (rtol, atol last), so one compilation serves every tolerance of the model."""
+    key = (id(model), n, solver, max_steps)
     hit = _SOLVES.get(key)
     if hit is not None and hit[1] is model:
         return hit[0], False
@@ -193,10 +195,10 @@ def _segment_solve(jmod, model, n: int, rtol: float, atol: float, solver: str, m
         return zdot, Sdot
 
     term = diffrax.ODETerm(field_)
-    controller = diffrax.PIDController(rtol=rtol, atol=atol)
     method = getattr(diffrax, solver)()
 
-    def solve(k, t0, t1, z0, S0, p, P, ts):
+    def solve(k, t0, t1, z0, S0, p, P, ts, rtol, atol):
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
         saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
         sol = diffrax.diffeqsolve(term, method, t0, t1, None, (z0, S0), args=(k, p, P), saveat=saveat,
                                   stepsize_controller=controller, max_steps=max_steps, throw=False,
@@ -207,7 +209,7 @@ def _segment_solve(jmod, model, n: int, rtol: float, atol: float, solver: str, m
     wall = _time.perf_counter()
     nz, npar = jmod.nz, len(model.parameter_names)
     example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
-               np.ones(N_SAVE))
+               np.ones(N_SAVE), 1e-8, 1e-10)
     fn = jax.jit(solve).lower(*example).compile()
     _SOLVES[key] = (fn, model)
     return fn, _time.perf_counter() - wall
@@ -220,37 +222,49 @@ def _z(mf, y):
 
 class _Tools:
     """The jitted pieces of one model (jax dispatches the lambdified expressions op by op otherwise, which costs
-    seconds per call): the reset and the read-outs of each mode, the event rule of all modes."""
+    seconds per call): the event rule of all modes, and each mode's reset and read-outs, compiled when the path
+    first needs them (a run need not visit every mode: chain-mech1-torque for 12 s enters 3 of its 4), so a pass
+    compiles only what its own path uses and a later pass of the same model only what is new to it."""
 
     def __init__(self, mech, model, jmod, columns: tuple, n: int):
-        wall = _time.perf_counter()
-        self.model, self.jmod, self.columns, self.n = model, jmod, columns, n
-        self.pieces = {name: _ModePieces(mf, mech, jmod.modes[jmod.index(name)])
-                       for name, mf in model.modes.items()}
+        self.mech, self.model, self.jmod, self.columns, self.n = mech, model, jmod, columns, n
+        self._pieces: dict = {}
         nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
-        i32, f = np.int32(0), 0.0
         z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
-        # compiled ahead of time (the examples fix the shapes), so the compilation is counted apart from the solve
-        self.event = _event_fn(jmod).lower(i32, i32, f, z, S, p, P).compile()
-        self.reset = {name: self._reset_fn(name, pc).lower(f, z, np.zeros(nq), p, S, P, np.zeros(n)).compile()
-                      for name, pc in self.pieces.items()}
-        self.sample = {name: self._sample_fn(name, pc).lower(f, z, S, p, P, np.zeros(nq)).compile()
-                       for name, pc in self.pieces.items()}
-        self.compile_time = _time.perf_counter() - wall
-        self._initial: dict = {}
+        # the examples fix the shapes: each piece is compiled ahead of time, so its compilation is counted apart
+        # from the solve (the seconds `_compiled` returns)
+        self._examples = {"event": (np.int32(0), np.int32(0), 0.0, z, S, p, P),
+                          "reset": (0.0, z, np.zeros(nq), p, S, P, np.zeros(n)),
+                          "sample": (0.0, z, S, p, P, np.zeros(nq))}
+        self._compiled_fns: dict = {}
 
-    def initial(self, name: str, hold: int | None):
-        """The initial state's reset in mode `name` (compiled on first use; `hold`: `_reset_fn`)."""
-        if hold is None:
-            return self.reset[name], 0.0
-        if name not in self._initial:
-            wall = _time.perf_counter()
-            nz, nq, npar, n = self.jmod.nz, self.jmod.nq, len(self.model.parameter_names), self.n
-            z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
-            self._initial[name] = self._reset_fn(name, self.pieces[name], hold).lower(
-                0.0, z, np.zeros(nq), p, S, P, np.zeros(n)).compile()
-            return self._initial[name], _time.perf_counter() - wall
-        return self._initial[name], 0.0
+    def _compiled(self, key: tuple, make) -> tuple:
+        """(the compiled piece `key`, seconds spent compiling it now: 0 when compiled before); `make()` gives the
+        jitted function, key[0] names its example arguments."""
+        fn = self._compiled_fns.get(key)
+        if fn is not None:
+            return fn, 0.0
+        wall = _time.perf_counter()
+        fn = self._compiled_fns[key] = make().lower(*self._examples[key[0]]).compile()
+        return fn, _time.perf_counter() - wall
+
+    def piece(self, name: str) -> _ModePieces:
+        """Mode `name`'s projection and read-outs (lambdified on first use)."""
+        if name not in self._pieces:
+            self._pieces[name] = _ModePieces(self.model.modes[name], self.mech, self.jmod.modes[self.jmod.index(name)])
+        return self._pieces[name]
+
+    def event(self):
+        """The event rule of every mode (mode and guard are traced): `_event_fn`."""
+        return self._compiled(("event",), lambda: _event_fn(self.jmod))
+
+    def reset(self, name: str, hold: int | None = None):
+        """The re-initialisation in mode `name` (with `hold`: the initial state's, `_reset_fn`)."""
+        return self._compiled(("reset", name, hold), lambda: self._reset_fn(name, self.piece(name), hold))
+
+    def sample(self, name: str):
+        """The read-outs of mode `name` with their gradients (`_sample_fn`)."""
+        return self._compiled(("sample", name), lambda: self._sample_fn(name, self.piece(name)))
 
     def _reset_fn(self, name, pc, hold: int | None = None):
         """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name` at time t (the initial
@@ -301,14 +315,13 @@ class _Tools:
 _TOOLS: dict = {}
 
 
-def _tools(mech, model, jmod, columns: tuple, n: int) -> tuple[_Tools, float]:
-    """The model's jitted tools and the seconds spent compiling them now (0 when cached)."""
+def _tools(mech, model, jmod, columns: tuple, n: int) -> _Tools:
+    """The model's jitted tools (each piece compiled on its first use, `_Tools`)."""
     key = (id(model), columns, n)
     hit = _TOOLS.get(key)
     if hit is None or hit.model is not model:
         hit = _TOOLS[key] = _Tools(mech, model, jmod, columns, n)
-        return hit, hit.compile_time
-    return hit, 0.0
+    return hit
 
 
 def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sample_times, columns,
@@ -328,11 +341,17 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     columns = tuple(columns)
     n_used = seed.n
     n = COLUMNS * -(-n_used // COLUMNS)      # padded with zero columns: one compilation serves 1..COLUMNS values
-    tools, tools_s = _tools(mech, model, jmod, columns, n)
+    tools = _tools(mech, model, jmod, columns, n)
     nq, nz = jmod.nq, jmod.nz
     P = _padded(seed.dp, n)
-    stats = dict(segments=0, steps=0, compile_time_s=tools_s)
-    solve, compile_s = _segment_solve(jmod, model, n, settings.rtol, settings.atol, solver, settings.max_steps)
+    stats = dict(segments=0, steps=0, compile_time_s=0.0)
+
+    def compiled(piece):
+        """A tool of the pass (`_Tools`), its compilation (if this is its first use) counted in the statistics."""
+        fn, seconds = piece
+        stats["compile_time_s"] += seconds
+        return fn
+    solve, compile_s = _segment_solve(jmod, model, n, solver, settings.max_steps)
     stats["compile_time_s"] += compile_s
 
     # the initial state: the projection of the initial guess, differentiated (the guess is re-based by a constant)
@@ -347,8 +366,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     names = list(model.parameter_names)
     if seed.piece_dp is not None:
         P = _pieces_set(P, names, seed.piece_dp(values))
-    initial, initial_s = tools.initial(mode, seed.hold)
-    stats["compile_time_s"] += initial_s
+    initial = compiled(tools.reset(mode, seed.hold))
     z_init, S, _ = (np.asarray(x) for x in initial(t0, guess, offset, p, dguess, P, np.zeros(n)))
     _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
 
@@ -358,7 +376,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     rows = [e for e in events if e.get("kind") != "rebound absorbed"]
     t = t0
     for ts_j in samples_t[samples_t == t0]:
-        vals, grads = (np.asarray(x) for x in tools.sample[mode](t0, z, S, p, P, offset))
+        vals, grads = (np.asarray(x) for x in compiled(tools.sample(mode))(t0, z, S, p, P, offset))
         samples.append(Sample(t0, mode, dict(zip(columns, map(float, vals))), dict(zip(columns, grads[:, :n_used]))))
     for i in range(len(rows) + 1):
         t1 = float(rows[i]["t_s"]) if i < len(rows) else t_end
@@ -370,15 +388,16 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             stop = t1 if len(inside) <= N_SAVE else float(chunk[-1])
             ts = np.full(N_SAVE, stop)
             ts[:len(chunk)] = chunk
-            out = jax.device_get(solve(np.int32(k), float(t), float(stop), z, S, p, P, ts))
+            out = jax.device_get(solve(np.int32(k), float(t), float(stop), z, S, p, P, ts, float(settings.rtol),
+                                       float(settings.atol)))
             stats["segments"] += 1
             stats["steps"] += int(out["steps"])
             if int(out["result"]) != int(diffrax.RESULTS.successful._value):
                 raise SensitivityUnavailable(f"the sensitivity integration failed in mode '{mode}' after "
                                              f"t = {t:.6g} s: {result_message(out['result'])}")
+            sample = compiled(tools.sample(mode)) if len(chunk) else None
             for j, ts_j in enumerate(chunk):
-                vals, grads = (np.asarray(x) for x in tools.sample[mode](float(ts_j), out["z"][j], out["S"][j], p, P,
-                                                                         offset))
+                vals, grads = (np.asarray(x) for x in sample(float(ts_j), out["z"][j], out["S"][j], p, P, offset))
                 samples.append(Sample(float(ts_j), mode, dict(zip(columns, map(float, vals))),
                                       dict(zip(columns, grads[:, :n_used]))))
             t, z, S = float(stop), np.asarray(out["z1"]), np.asarray(out["S1"])
@@ -393,8 +412,9 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             raise SensitivityUnavailable(f"events table out of step: row at t = {t1:.6g} s leaves "
                                          f"'{row['from_mode']}', the path is in '{mode}'")
         j = list(mf.guard_names).index(row["guard"])
-        t, z, dtau, dz, gdot, a_end, lam_end = (np.asarray(x) for x in tools.event(np.int32(k), np.int32(j), float(t),
-                                                                                   z, S, p, P))
+        event = compiled(tools.event())
+        t, z, dtau, dz, gdot, a_end, lam_end = (np.asarray(x) for x in event(np.int32(k), np.int32(j), float(t),
+                                                                             z, S, p, P))
         t = float(t)
         if not (np.isfinite(gdot) and abs(gdot) > 0):
             raise SensitivityUnavailable(f"guard '{row['guard']}' reaches zero tangentially at t = {t:.6g} s "
@@ -425,7 +445,8 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
                                            dz[:, :n_used]))
         shift = np.asarray(res.offset, float) - offset
         new_mode, p_new = res.mode, np.asarray(res.p)
-        z_new, dz_new, f_new = (np.asarray(x) for x in tools.reset[new_mode](t, z, shift, p_new, dz, P, dtau))
+        reset = compiled(tools.reset(new_mode))
+        z_new, dz_new, f_new = (np.asarray(x) for x in reset(t, z, shift, p_new, dz, P, dtau))
         z_ref = _z(model.modes[new_mode], res.y)
         _check_restart(z_new, z_ref, f"the restart after '{row['kind']}' at t = {t:.6g} s")
         S = dz_new - np.outer(f_new, dtau)

@@ -273,18 +273,21 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     1e-9 K), as the row formulas must give the run's columns."""
     import jax.numpy as jnp
 
-    from mechsim.dynamics.sensitivity import SensitivityUnavailable
+    from mechsim.dynamics.sensitivity import COLUMNS, SensitivityUnavailable
     from mechsim.thermal.coupling import SHARE_PARAMETERS
     setup = plan.thermal.setup
     ext, sysm, layout = setup.extension, setup.system, turn["layout"]
     t = layout.t
-    n = seed.n
+    # tangents padded with zero columns to a multiple of COLUMNS, as the path's pass pads them: the compiled bulk
+    # (`_cycle_bulk_fn`) then serves any number of values up to that (its shapes include the tangents' number)
+    n_used = seed.n
+    n = COLUMNS * -(-n_used // COLUMNS)
     engaged = df["mode"].to_numpy() == "engaged"
     names = list(model.parameter_names)
     values = {**plan.mechanism.parameter_values(), **ext.parameter_values()}
 
     def parameter(name):
-        return values[name], seed.dp[names.index(name)]
+        return values[name], np.pad(seed.dp[names.index(name)], (0, n - n_used))
 
     def columns(cols, rows, contact=True):
         """The run's columns (primal) and the samples' gradients (tangent, rows x columns x n) at `rows`; with
@@ -294,7 +297,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
         for r, i in enumerate(rows):
             if engaged[i] or not contact:
                 x[r] = [float(df[c].iloc[i]) for c in cols]
-                dx[r] = [by_time[float(t[i])].grads[c] for c in cols]
+                dx[r, :, :n_used] = [by_time[float(t[i])].grads[c] for c in cols]
         return x, dx
 
     primal, tangent = {}, {}
@@ -327,7 +330,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     value, grads = fn(x, dx, data)
     if fresh:            # compiled on its first call (with a first evaluation of ~0.2 s): counted as compilation
         stats["compile_time_s"] += time.perf_counter() - wall
-    value, grads = np.asarray(value)[layout.pad:], np.asarray(grads)[:, layout.pad:]      # grads: (n, rows, states)
+    value, grads = np.asarray(value)[layout.pad:], np.asarray(grads)[:n_used, layout.pad:]   # (n, rows, states)
     if not np.all(np.abs(value - turn["bulk"]) <= 1e-9 * np.maximum(1.0, np.abs(turn["bulk"]))):
         raise SensitivityUnavailable("the traced cycle-averaged bulk is not the one the quantity is read from "
                                      f"(difference {np.max(np.abs(value - turn['bulk'])):.2e} K)")
