@@ -17,7 +17,10 @@ from typing import Callable
 
 import jax
 
+from mechsim.dynamics import user_cache
+
 jax.config.update("jax_enable_x64", True)
+user_cache.use_for_jax(jax)        # compiled programs reused across processes (dynamics/user_cache.py)
 
 import jax.numpy as jnp  # noqa: E402
 import sympy as sp  # noqa: E402

@@ -28,3 +28,23 @@ def code_fingerprint() -> str:
             h.update(path.relative_to(root).as_posix().encode())
             h.update(path.read_bytes())
     return h.hexdigest()
+
+
+def use_for_jax(jax) -> str | None:
+    """Keep JAX's compiled programs in <cache_dir>/jax across processes (JAX's persistent compilation cache),
+    unless a folder is chosen already (JAX_COMPILATION_CACHE_DIR, or `jax_compilation_cache_dir` set by the
+    caller), which is then kept. The folder in use, or None when JAX has no such option.
+
+    Why: the compiled diffrax run costs 8-11 s to compile in every new process; a later process loads it and
+    pays only the tracing, about half (case A, docs/diffrax.md 'Compilation'). JAX keys each program by the
+    lowered program, the compile options and the jax/jaxlib versions, so a loaded program is the one a fresh
+    compilation would give; a folder that cannot be written only costs the compilation (JAX warns)."""
+    try:
+        chosen = jax.config.jax_compilation_cache_dir
+    except AttributeError:
+        return None
+    if chosen:
+        return chosen
+    folder = str(cache_dir() / "jax")
+    jax.config.update("jax_compilation_cache_dir", folder)
+    return folder
