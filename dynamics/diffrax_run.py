@@ -104,25 +104,26 @@ def step_record(jmod: JaxModel, o, n_params: int) -> StepRecord:
 class Outputs:
     """The step loop's small outputs (everything but the step buffer) packed into one float64 and one int32
     vector in the compiled call, and unpacked on the host as views: two transfers instead of one per output
-    (28 of them cost about 0.4 ms a call, case A)."""
+    (28 of them cost about 0.4 ms a call, case A). The layout is read off the outputs while the call is traced
+    (`pack`), so the run is traced once."""
 
-    def __init__(self, shapes: dict):
-        keys = [k for k in shapes if k != "st"]
-        self.floats = [k for k in keys if jnp.issubdtype(shapes[k].dtype, jnp.floating)]
-        self.ints = [k for k in keys if k not in self.floats]
-        # (key, start, stop, shape, is bool) per group, computed once: unpacking is slicing only
-        self.layout = []
-        for group in (self.floats, self.ints):
-            pos, rows = 0, []
-            for k in group:
-                n = int(np.prod(shapes[k].shape, dtype=int))
-                rows.append((k, pos, pos + n, shapes[k].shape, shapes[k].dtype == jnp.bool_))
-                pos += n
-            self.layout.append(rows)
+    def __init__(self):
+        self.layout: list | None = None     # per group (floats, ints): (key, start, stop, shape, is bool)
 
     def pack(self, out: dict) -> dict:
-        return dict(st=out["st"], floats=jnp.concatenate([jnp.ravel(out[k]) for k in self.floats]),
-                    ints=jnp.concatenate([jnp.ravel(out[k]).astype(jnp.int32) for k in self.ints]))
+        keys = [k for k in out if k != "st"]
+        floats = [k for k in keys if jnp.issubdtype(out[k].dtype, jnp.floating)]
+        ints = [k for k in keys if k not in floats]
+        self.layout = []
+        for group in (floats, ints):
+            pos, rows = 0, []
+            for k in group:
+                n = int(np.prod(out[k].shape, dtype=int))
+                rows.append((k, pos, pos + n, tuple(out[k].shape), out[k].dtype == jnp.bool_))
+                pos += n
+            self.layout.append(rows)
+        return dict(st=out["st"], floats=jnp.concatenate([jnp.ravel(out[k]) for k in floats]),
+                    ints=jnp.concatenate([jnp.ravel(out[k]).astype(jnp.int32) for k in ints]))
 
     def unpack(self, floats: np.ndarray, ints: np.ndarray) -> dict:
         out = {}
@@ -243,8 +244,10 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
                                                                    for sh in record.shapes])
 
         def new_segment(s, t, z, k, p, dt):
-            return dict(s, t=t, z=z, k=k, p=p, dt=dt, ref=reference(k, t, z, p), seg_t0=t, seg_steps=i32(0),
-                        seg_acc=i32(0), jump=jnp.bool_(True))
+            """A segment starting at (t, z) in mode k; its reference signs are set by the caller (`on_crossing`
+            once after either branch: each trace of `reference` traces every mode's guards and their jvp)."""
+            return dict(s, t=t, z=z, k=k, p=p, dt=dt, seg_t0=t, seg_steps=i32(0), seg_acc=i32(0),
+                        jump=jnp.bool_(True))
 
         no_record = (jnp.bool_(False), jnp.zeros((), f64), i32(0), jnp.zeros(nz), i32(0), p0, jnp.zeros(nz),
                      jnp.zeros(2))
@@ -308,6 +311,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
                 return s, (ok, t_star, i, z_star, k_new, p_new, z_new, ke)
 
             s, (do, te, ge, ze, ke, pe, za, en) = jax.lax.cond(against[i], rearm, event, s)
+            s = dict(s, ref=jnp.where(s["code"] == Code.RUNNING, reference(s["k"], s["t"], s["z"], s["p"]), s["ref"]))
             n = jnp.minimum(ev["n_ev"], n_events - 1)
 
             def put(buf, val):
@@ -452,7 +456,7 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
     record = step_record(jmod, o, len(model.parameter_names))
     with kkt.unrolled_solves():       # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
         run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
-        outputs = Outputs(jax.eval_shape(run, *example))
+        outputs = Outputs()
         fn = jax.jit(lambda *a: outputs.pack(run(*a))).lower(*example).compile()
     entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {}, record,
                         outputs)
