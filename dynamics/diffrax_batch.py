@@ -18,7 +18,7 @@ equals `diffrax_backend.simulate` of that case (the same arithmetic per lane, up
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -52,7 +52,9 @@ last_batch: dict = {}
 def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched, JaxModel, bool]:
     """The vmapped segment solve for `lanes` lanes (AOT-compiled once per model structure, options and batch
     size); True if it was compiled by this call."""
-    key = (id(model), compile_key(o), lanes)
+    # the vmapped segment solve does not depend on compiled_run (which picks the single run's loop): a sweep with it
+    # on or off shares one compilation
+    key = (id(model), replace(compile_key(o), compiled_run=False), lanes)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, jax_model(model), False

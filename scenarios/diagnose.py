@@ -71,7 +71,9 @@ def fastest_mode(traj) -> tuple[float, float, list[str], bool] | None:
     y = piece.y[-1]
     z = np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
     p = np.asarray(piece.params, float)
-    J = np.asarray(jax.jacfwd(lambda zz: jm.rates(piece.t[-1], zz, p))(z))
+    # one compiled program (jit) instead of jax dispatching the lambdified rates op by op (a program each: ~100
+    # small compilations for the Geneva with a 1-D wall mesh)
+    J = np.asarray(jax.jit(jax.jacfwd(lambda zz, tt, pp: jm.rates(tt, zz, pp)))(z, float(piece.t[-1]), p))
     w, V = np.linalg.eig(J)
     k = int(np.argmax(np.abs(w)))
     nq = len(model.coordinates)
