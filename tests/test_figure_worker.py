@@ -39,17 +39,9 @@ tmp = Path(tempfile.mkdtemp())
 with worker:
     folder = write_result(result, tmp / "out", mechanism=result.mechanism, worker=worker)
 drew_here = "matplotlib" in sys.modules
-from mechsim.scenarios.output.figures import result_figures
-from mechsim.scenarios.output.plots import DPI
-from PIL import Image
-def image(data):
-    with Image.open(io.BytesIO(data)) as im:
-        return im.mode, im.size, im.info, im.tobytes()
-def png(fig):
-    buf = io.BytesIO(); fig.savefig(buf, dpi=DPI, format="png"); return buf.getvalue()
-expected = {stem: image(png(fig)) for stem, fig in result_figures(result, result.mechanism).items()}
-same = {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
-print(drew_here, len(expected), same)
+from figure_images import folder_shows_the_drawn_figures
+n, same = folder_shows_the_drawn_figures(result, folder)
+print(drew_here, n, same)
 """
 
 

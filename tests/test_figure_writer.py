@@ -81,15 +81,9 @@ split = (writer.child is not None, len(writer.mine), len(writer.theirs))
 writer.finish()
 result = api.run("geneva-lc1", set=["duration='1.5 s'", "output_step='5 ms'"])
 folder = result.save(tmp / "out")
-from PIL import Image
-def image(data):
-    with Image.open(io.BytesIO(data)) as im:
-        return im.mode, im.size, im.info, im.tobytes()
-def png(fig):
-    buf = io.BytesIO(); fig.savefig(buf, dpi=DPI, format="png"); return buf.getvalue()
-expected = {stem: image(png(fig)) for stem, fig in result_figures(result, result.mechanism).items()}
-same = {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
-print(*split, len(expected), same)
+from figure_images import folder_shows_the_drawn_figures
+n, same = folder_shows_the_drawn_figures(result, folder)
+print(*split, n, same)
 """
 
 

@@ -1,0 +1,22 @@
+"""Whether an output folder's PNGs show what drawing the result's figures in this process shows (decoded
+pixels, mode, size and PNG text chunks): used by the figure tests' subprocess scripts."""
+import io
+
+
+def folder_shows_the_drawn_figures(result, folder) -> tuple[int, bool]:
+    """(number of figures drawn here, whether the folder's PNGs decode to exactly those images)."""
+    from PIL import Image
+
+    from mechsim.scenarios.output.figures import result_figures
+    from mechsim.scenarios.output.plots import DPI
+
+    def image(data):
+        with Image.open(io.BytesIO(data)) as im:
+            return im.mode, im.size, im.info, im.tobytes()
+
+    def png(fig):
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=DPI, format="png")
+        return buf.getvalue()
+    expected = {stem: image(png(fig)) for stem, fig in result_figures(result, result.mechanism).items()}
+    return len(expected), {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
