@@ -69,7 +69,7 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     times = np.asarray(times, dtype=float)
     n = system.size
     u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
-    mean, _ = ModalNetwork(system).constant(ambient_temperatures(system), u_bar, times)
+    mean, _ = ModalNetwork(system).constant(ambient_temperatures(system), u_bar, times, energy=False)
     P = means.period
     s0 = (-means.t_start) % P                      # phase of t = 0 within the periodic turn
     # output rows a whole number of steps apart repeat the same few phases, up to the round-off of `t mod P`
