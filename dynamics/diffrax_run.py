@@ -553,8 +553,8 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
             chunks.append({key: np.asarray(v)[:len(chunk)] for key, v in r.items()})
         if chunks:
             out.update({key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]})
-        else:
-            out["row_seg"] = np.zeros(0, np.int32)
+        else:                   # no output time reached (a failure before the first one)
+            out["rows"], out["row_seg"] = np.zeros((0, jmod.nz)), np.zeros(0, np.int32)
         stats["steps"] += int(out["steps"])
         stats["accepted_steps"] += int(out["accepted"])
         stats["rejected_steps"] += int(out["rejected"])
