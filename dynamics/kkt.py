@@ -22,26 +22,38 @@ import numpy as np
 UNROLLED_MAX = 8
 
 
-def unrolled_solve(K, b, xp):
-    """x with K x = b for one small system (n <= UNROLLED_MAX): Gaussian elimination with partial pivoting,
-    unrolled into elementwise operations (Golub & Van Loan, Matrix Computations, Alg. 3.4.1). Traced by JAX it
-    fuses into the surrounding step instead of a LAPACK call per evaluation, which costs microseconds on a
-    3 x 3 system (the compiled diffrax run, docs/diffrax.md 'The compiled run')."""
+def unrolled_solve(K, b, xp, spd_block: int = 0):
+    """x with K x = b for one small system (n <= UNROLLED_MAX): Gaussian elimination, unrolled into elementwise
+    operations (Golub & Van Loan, Matrix Computations, Alg. 3.4.1). Traced by JAX it fuses into the
+    surrounding step instead of a LAPACK call per evaluation, which costs microseconds on a 3 x 3 system (the
+    compiled diffrax run, docs/diffrax.md 'The compiled run').
+
+    The first `spd_block` columns are eliminated in their natural order, without pivoting: K's leading block is
+    then symmetric positive definite (the mass matrix of a KKT system), whose LU factorisation needs no pivoting
+    for stability (Golub & Van Loan, Matrix Computations, 4th ed., §4.2), and what is left of the constraint
+    rows after it is their Schur complement -G M^-1 (G^T - Ql) (the range-space method, Nocedal & Wright,
+    Numerical Optimization, 2nd ed., §16.2). The remaining columns take partial pivoting; a column with one
+    candidate row needs no search. Without the pivot searches (argmax and row gathers, a chain of small kernels
+    on the CPU, measured) the compiled run's step loop is about 17 % cheaper on case A (one constraint: no
+    search at all); the pivots that remain are chosen by comparisons and `where`, as argmax would (first largest).
+    Works on jax.numpy and numpy scalars alike."""
     n = K.shape[-1]
-    A = xp.concatenate([K, b[:, None]], axis=1)
-    rows = xp.arange(n)
+    A = [[K[i, j] for j in range(n)] + [b[i]] for i in range(n)]      # scalars: every operation elementwise
     for j in range(n):
-        piv = xp.argmax(xp.where(rows >= j, xp.abs(A[:, j]), -1.0))
-        swap = (rows == j)[:, None] * A[piv][None, :] + (rows == piv)[:, None] * A[j][None, :]
-        A = xp.where(((rows == j) | (rows == piv))[:, None], swap, A)
-        factor = xp.where(rows > j, A[:, j] / A[j, j], 0.0)
-        A = A - factor[:, None] * A[j][None, :]
+        if spd_block <= j:
+            for r in range(j + 1, n):     # partial pivoting: the first largest |A[r][j]|, r >= j, to row j
+                take = xp.abs(A[r][j]) > xp.abs(A[j][j])
+                A[j], A[r] = ([xp.where(take, x, y) for x, y in zip(A[r], A[j])],
+                              [xp.where(take, y, x) for x, y in zip(A[r], A[j])])
+        for r in range(j + 1, n):
+            factor = A[r][j] / A[j][j]
+            A[r] = A[r][:j + 1] + [A[r][col] - factor * A[j][col] for col in range(j + 1, n + 1)]
     x = [None] * n
     for i in reversed(range(n)):
-        acc = A[i, n]
+        acc = A[i][n]
         for j in range(i + 1, n):
-            acc = acc - A[i, j] * x[j]
-        x[i] = acc / A[i, i]
+            acc = acc - A[i][j] * x[j]
+        x[i] = acc / A[i][i]
     return xp.stack(x)
 
 
@@ -62,9 +74,11 @@ def unrolled_solves():
         _UNROLLED = before
 
 
-def _linear_solve(K, b, xp):
+def _linear_solve(K, b, xp, spd_block: int = 0):
+    """K x = b; within `unrolled_solves`, traced single systems are solved unrolled (`unrolled_solve`, whose
+    leading spd_block columns are a symmetric positive definite block taken without pivoting)."""
     if _UNROLLED and xp is not np and K.ndim == 2 and K.shape[-1] <= UNROLLED_MAX:
-        return unrolled_solve(K, b, xp)
+        return unrolled_solve(K, b, xp, spd_block)
     return xp.linalg.solve(K, b[..., None])[..., 0]
 
 
@@ -73,11 +87,11 @@ def solve(M, G, Ql, Q0, c, xp=np):
     Ql (..., nq, m), Q0 (..., nq), c (..., m); xp is numpy or jax.numpy."""
     nq, m = M.shape[-1], G.shape[-2]
     if m == 0:
-        return _linear_solve(M, Q0, xp), xp.zeros(Q0.shape[:-1] + (0,))
+        return _linear_solve(M, Q0, xp, spd_block=nq), xp.zeros(Q0.shape[:-1] + (0,))
     top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
     bottom = xp.concatenate([G, xp.zeros(G.shape[:-1] + (m,))], axis=-1)
     K = xp.concatenate([top, bottom], axis=-2)
-    sol = _linear_solve(K, xp.concatenate([Q0, c], axis=-1), xp)
+    sol = _linear_solve(K, xp.concatenate([Q0, c], axis=-1), xp, spd_block=nq)   # M: mass matrix, SPD
     return sol[..., :nq], sol[..., nq:]
 
 
