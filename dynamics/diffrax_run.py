@@ -205,22 +205,6 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
     stops = jnp.asarray(table.stops, dtype=bool)
     real = jnp.asarray([[j < jm.ng for j in range(ngm)] for jm in jmod.modes], dtype=bool)
 
-    def stepper(i):
-        """One solver step in mode number i (static) and the mode's guards at its end: one switch on the mode
-        per step, around the whole step, instead of one per vector-field evaluation (4 % of the step loop on
-        case A, measured interleaved)."""
-        evaluate = jmod.evaluate_mode(i)
-        term_i = diffrax.ODETerm(lambda t, z, args: evaluate(t, z, args[1])[0])
-
-        def step_in_mode(t, t1, z, p, sstate, jump):
-            z1, err, dense, sstate1, _ = solver.step(term_i, t, t1, z, (i, p), sstate, jump)
-            return z1, err, dense, sstate1, evaluate(t1, z1, p)[3]
-        return step_in_mode
-    steppers = [stepper(i) for i in range(len(jmod.modes))]
-
-    def mode_step(k, *a):
-        return steppers[0](*a) if len(steppers) == 1 else jax.lax.switch(k, steppers, *a)
-
     def reference(k, t, z, p):
         """Per guard, the sign it is on at a segment's start; a guard at zero is referenced to where it is heading
         (diffrax_backend.make_solve: roots at the initial point are not reported)."""
@@ -357,13 +341,14 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             return dict(b, n_st=b["n_st"] + took, st=b["st"].at[m].set(row))
 
         def step(c):
-            """One step in the current mode (`mode_step`: one switch on the traced mode number around the step).
-            A step whose end is past a guard is not taken: the inner loop ends and hands it to `segment_end`."""
+            """One step in the current mode, no branching: the mode number is traced and each evaluation switches
+            on it (which costs no more than a direct call). A step whose end is past a guard is not taken: the
+            inner loop ends and hands it to `segment_end`."""
             s, b, x = c
             t, z, k, p = s["t"], s["z"], s["k"], s["p"]
             t1 = jnp.minimum(t + s["dt"], t_end)
             args = (k, p)
-            z1, err, dense, sstate1, g1 = mode_step(k, t, t1, z, p, s["sstate"], s["jump"])
+            z1, err, dense, sstate1, _ = solver.step(term, t, t1, z, args, s["sstate"], s["jump"])
             keep, _, next_t1, _, cstate, _ = controller.adapt_step_size(t, t1, z, z1, args, err, error_order,
                                                                          s["cstate"])
             cstate = jax.tree_util.tree_map(jnp.asarray, cstate)
@@ -371,7 +356,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             finite = jnp.all(jnp.isfinite(z1))
             keep = keep & finite
             dt_next = jnp.where(finite, next_t1 - jnp.where(keep, t1, t), 0.5 * (t1 - t))
-            crossed = keep & jnp.any(s["ref"] * g1 <= 0)
+            crossed = keep & jnp.any(s["ref"] * jmod.guards(k, t1, z1, p) <= 0)
             s = dict(s, steps=s["steps"] + 1, seg_steps=s["seg_steps"] + 1, cstate=cstate, dt=dt_next,
                      accepted=s["accepted"] + keep, rejected=s["rejected"] + ~keep, seg_acc=s["seg_acc"] + keep)
             go = keep & ~crossed
