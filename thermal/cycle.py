@@ -174,14 +174,17 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
         return df, events, float(t[-1])
     new = {}
     for col in df.columns:
-        values = df[col].to_numpy()
+        column = df[col]
         if col == "t_s":
             new[col] = new_t
         elif cumulative(col):
-            per_turn = float(np.diff(np.interp([t_start, t_start + period], t, values.astype(float)))[0])
-            new[col] = values.astype(float)[idx] + reps * per_turn
-        else:
-            new[col] = values[idx]
+            values = column.to_numpy().astype(float)
+            per_turn = float(np.diff(np.interp([t_start, t_start + period], t, values))[0])
+            new[col] = values[idx] + reps * per_turn
+        elif isinstance(column.dtype, np.dtype):
+            new[col] = column.to_numpy()[idx]
+        else:       # the mode's strings: taken as they are stored (an hour's rows as Python objects cost ~0.5 s)
+            new[col] = column.array.take(idx)
     table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
     return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim
 
