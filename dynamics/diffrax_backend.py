@@ -275,8 +275,10 @@ def segment_arguments(k, t0, t1, z0, p, enabled, ts, dt0, tol):
 
 
 def compile_key(o: DiffraxOptions) -> DiffraxOptions:
-    """The options that shape the compiled code: an explicit solver's tolerances are traced arguments, so every
-    tolerance shares one compilation; an implicit solver's stage root finder takes them as constants."""
+    """The options that shape the compiled segment solve: an explicit solver's tolerances are traced arguments,
+    so every tolerance shares one compilation; an implicit solver's stage root finder takes them as constants.
+    `compiled_run` only picks the driver (the segment solve is the same program either way)."""
+    o = replace(o, compiled_run=False)
     return o if o.implicit else replace(o, rtol=0.0, atol=0.0)
 
 

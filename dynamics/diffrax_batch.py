@@ -18,7 +18,7 @@ equals `diffrax_backend.simulate` of that case (the same arithmetic per lane, up
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -54,7 +54,7 @@ def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched
     size); True if it was compiled by this call."""
     # the vmapped segment solve does not depend on compiled_run (which picks the single run's loop): a sweep with it
     # on or off shares one compilation
-    key = (id(model), replace(compile_key(o), compiled_run=False), lanes)
+    key = (id(model), compile_key(o), lanes)
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, jax_model(model), False
