@@ -88,16 +88,17 @@ class StepRecord:
         return jax.tree_util.tree_unflatten(self.tree, out)
 
 
-def step_record(jmod: JaxModel, o, n_params: int) -> StepRecord:
-    """The step-record layout of the solver `o` names on this model's state (traced shapes only)."""
+def step_record(jmod: JaxModel, o) -> StepRecord:
+    """The step-record layout of the solver `o` names on this model's state (traced shapes only: the dense
+    output's structure depends on the solver and the state's shape, not on the vector field, so a trivial one
+    stands in for the model and tracing it costs nothing)."""
     from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
-    term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
+    term = diffrax.ODETerm(lambda t, z, args: -z)
 
     def dense(z):
-        args = (jnp.int32(0), jnp.zeros(n_params))
-        sstate = solver.init(term, 0.0, 1e-3, z, args)
-        return solver.step(term, 0.0, 1e-3, z, args, sstate, True)[2]
+        sstate = solver.init(term, 0.0, 1e-3, z, None)
+        return solver.step(term, 0.0, 1e-3, z, None, sstate, True)[2]
     return StepRecord(jax.eval_shape(dense, jnp.zeros(jmod.nz)))
 
 
@@ -453,7 +454,7 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
         return None, False
     example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
                             (1e-6, 1e-8), 100)
-    record = step_record(jmod, o, len(model.parameter_names))
+    record = step_record(jmod, o)
     with kkt.unrolled_solves():       # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
         run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
         outputs = Outputs()
