@@ -191,7 +191,13 @@ def test_valid_values_are_not_refused():
     """Every built-in scenario validates, and values at the edge of the ranges are accepted."""
     from mechsim.scenarios.loader import builtin_names, load
     for name in builtin_names():
-        load(name)
-    load("geneva-lc1", ["mechanism.slots=72", "contact.friction=2", "initial.crank_angle=-180 deg",
-                        "mechanism.wheel_inertia=1e-15 kg*m^2", "duration=10000 s", "output_step=1 ms",
-                        "solver.baumgarte_beta=1e6", "output.drawing_instants=24", "thermal.mesh_growth=10"])
+        assert load(name).si["duration"] > 0, name
+    si = load("geneva-lc1", ["mechanism.slots=72", "contact.friction=2", "initial.crank_angle=-180 deg",
+                             "mechanism.wheel_inertia=1e-15 kg*m^2", "duration=10000 s", "output_step=1 ms",
+                             "solver.baumgarte_beta=1e6", "output.drawing_instants=24",
+                             "thermal.mesh_growth=10"]).si
+    # accepted, and held in SI as given (the angle in radians)
+    assert (si["mechanism"]["slots"], si["contact"]["friction"], si["output"]["drawing_instants"]) == (72, 2.0, 24)
+    assert si["initial"]["crank_angle"] == pytest.approx(-math.pi, rel=1e-15)
+    assert (si["mechanism"]["wheel_inertia"], si["duration"], si["output_step"]) == (1e-15, 10000.0, 1e-3)
+    assert (si["solver"]["baumgarte_beta"], si["thermal"]["mesh_growth"]) == (1e6, 10.0)
