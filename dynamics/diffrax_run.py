@@ -68,6 +68,7 @@ class StepRecord:
     of the buffer instead of one per field (about 1 us a step, measured on case A)."""
 
     def __init__(self, dense_struct):
+        self.struct = dense_struct          # the dense output's shapes and dtypes (jax.ShapeDtypeStruct leaves)
         leaves, self.tree = jax.tree_util.tree_flatten(dense_struct)
         if any(x.dtype != jnp.float64 for x in leaves):
             raise TypeError("the solver's dense output must be float64")
@@ -241,8 +242,6 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
                    ev_p=jnp.zeros((n_events, p0.shape[0])), ev_after=jnp.zeros((n_events, nz)),
                    ev_ke=jnp.zeros((n_events, 2)))
         c = jax.tree_util.tree_map(jnp.asarray, (small, big))  # python bools of diffrax's states as arrays
-        record_struct = jax.tree_util.tree_unflatten(record.tree, [jax.ShapeDtypeStruct(sh, jnp.float64)
-                                                                   for sh in record.shapes])
 
         def new_segment(s, t, z, k, p, dt):
             """A segment starting at (t, z) in mode k; its reference signs are set by the caller (`on_crossing`
@@ -371,7 +370,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             the table or handed back. The only lax.cond is here, once per crossing."""
             s, b = c
             x0 = dict(crossed=jnp.bool_(False), t=s["t"], t1=s["t"],
-                      dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), record_struct))
+                      dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), record.struct))
             s, b, x = jax.lax.while_loop(lambda c: (c[0]["code"] == Code.RUNNING) & ~c[2]["crossed"], step, (s, b, x0))
             interp = solver.interpolation_cls(t0=x["t"], t1=x["t1"], **x["dense"])
             full = b["n_ev"] >= n_events
