@@ -33,6 +33,7 @@ import mechsim.dynamics.hybrid as hybrid
 from mechsim.dynamics.backend import End, Request, Segment
 from mechsim.dynamics.hybrid import Trajectory
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics import xla_options
 from mechsim.dynamics.model import ModeFunctions, StateExtension
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
@@ -368,7 +369,7 @@ class DiffraxBackend:
         self.solver = self.o.solver
         self.per_step = evaluations_per_step(self.o)
         self.unavailable = {"jacobian_evaluations": "not exposed by diffrax"}
-        self.notes = {}
+        self.notes = {"xla_loop_kernels": xla_options.loop_kernels()}   # dynamics/xla_options.py
         if self.per_step:
             self.notes["residual_evaluations"] = "estimated: attempted steps x new stages per step + 3 per segment"
         else:
