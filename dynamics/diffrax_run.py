@@ -395,18 +395,30 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     """rows(st, ts) -> dict(rows=z, row_seg); to be jitted (one compilation per output-buffer size: the step
     loop's own does not depend on it).
 
-    Each output time is looked up among the stored steps (their valid intervals are contiguous and sorted) and
-    the state interpolated from that step's dense output; row_seg is the segment number it belongs to."""
+    The output times (sorted; a padded tail repeats the last) and the stored steps' valid intervals (contiguous,
+    sorted, free slots at +inf) are walked together in one loop: each time's step is the first whose interval
+    ends at or after it (`searchsorted(..., side="left")`, capped at the scratch slot), and the state is that
+    step's dense output there; row_seg is the segment number it belongs to. One loop in one kernel
+    (dynamics/xla_options.py) costs about half of a vectorised `searchsorted` and gather (case A, 5120 rows:
+    0.6 -> 0.34 ms CPU, the same rows to the bit)."""
     from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
 
-    def rows(st, ts):
-        j = jnp.minimum(jnp.searchsorted(st[:, ST_ACC], ts, side="left"), n_steps)
-        picked = st[j]
+    def interpolate(row, t):
+        return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(t)
 
-        def interpolate(row, tt):
-            return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(tt)
-        return dict(rows=jax.vmap(interpolate)(picked, ts), row_seg=picked[:, ST_SEG].astype(jnp.int32))
+    def rows(st, ts):
+        ends = st[:, ST_ACC]
+
+        def one(i, c):
+            j, z, seg = c
+            t = ts[i]
+            j = jax.lax.while_loop(lambda j: (ends[j] < t) & (j < n_steps), lambda j: j + 1, j)
+            return j, z.at[i].set(interpolate(st[j], t)), seg.at[i].set(st[j, ST_SEG].astype(jnp.int32))
+        n = ts.shape[0]
+        z0 = jnp.zeros((n,) + jax.eval_shape(interpolate, st[0], ts[0]).shape)
+        _, z, seg = jax.lax.fori_loop(0, n, one, (jnp.int32(0), z0, jnp.zeros(n, jnp.int32)))
+        return dict(rows=z, row_seg=seg)
     return rows
 
 
