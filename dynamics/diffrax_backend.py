@@ -369,7 +369,7 @@ class DiffraxBackend:
         self.solver = self.o.solver
         self.per_step = evaluations_per_step(self.o)
         self.unavailable = {"jacobian_evaluations": "not exposed by diffrax"}
-        self.notes = {"xla_loop_kernels": xla_options.loop_kernels()}   # dynamics/xla_options.py
+        self.notes = {"xla_options": xla_options.state()}   # dynamics/xla_options.py
         if self.per_step:
             self.notes["residual_evaluations"] = "estimated: attempted steps x new stages per step + 3 per segment"
         else:

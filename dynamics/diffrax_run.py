@@ -531,7 +531,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     stats = new_stats("diffrax", o.solver, start.derive_time,
                       unavailable={"jacobian_evaluations": "not exposed by diffrax"})
     per_step = evaluations_per_step(o)
-    stats["notes"]["xla_loop_kernels"] = xla_options.loop_kernels()     # dynamics/xla_options.py
+    stats["notes"]["xla_options"] = xla_options.state()     # dynamics/xla_options.py
     stats["notes"]["residual_evaluations"] = ("estimated: attempted steps x new stages per step + one per step "
                                               "(guards) + one per bisection")
     if fresh:

@@ -19,7 +19,7 @@ import jax
 
 from mechsim.dynamics import user_cache, xla_options
 
-xla_options.request_loop_kernels()  # while loops as one CPU kernel each, before JAX starts (dynamics/xla_options.py)
+xla_options.request()  # XLA's CPU options, before JAX starts its backend (dynamics/xla_options.py)
 jax.config.update("jax_enable_x64", True)
 user_cache.use_for_jax(jax)        # compiled programs reused across processes (dynamics/user_cache.py)
 

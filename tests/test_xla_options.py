@@ -1,7 +1,8 @@
-"""dynamics/xla_options.py: mechsim asks XLA to compile while loops into one CPU kernel, before JAX starts its
-backend, keeps what the user set, and says when it came too late. Each case runs in a fresh interpreter (XLA reads
-XLA_FLAGS once per process). What the option buys is measured in docs/benchmarks.md, not here (no timed tests);
-that it leaves the results alone is what every diffrax test of the suite checks, all of them run with it on."""
+"""dynamics/xla_options.py: mechsim sets its two XLA options before JAX starts its backend, keeps what the user
+set, and says when it came too late. Each case runs in a fresh interpreter (XLA reads XLA_FLAGS once per
+process). What the options buy is measured in docs/benchmarks.md and docs/diffrax.md, not here (no timed tests);
+that they leave the results alone is what every diffrax test of the suite checks, all run with them on; the
+batched sweep that hung without the scheduler option is tests/test_sweep_batch.py."""
 from __future__ import annotations
 
 import json
@@ -10,9 +11,10 @@ import subprocess
 import sys
 import textwrap
 
-from mechsim.dynamics.xla_options import LOOP_BYTES, OPTION, with_loop_option
+from mechsim.dynamics.xla_options import LOOP_BYTES, LOOP_OPTION, SCHEDULER_FLAG, with_options
 
-ON = f"--xla_backend_extra_options={OPTION}={LOOP_BYTES}"
+LOOP = f"--xla_backend_extra_options={LOOP_OPTION}={LOOP_BYTES}"
+NO_SCHEDULER = f"{SCHEDULER_FLAG}=false"
 
 
 def run_fresh(code: str, xla_flags: str | None) -> dict:
@@ -29,28 +31,32 @@ IMPORT_MECHSIM = """
     import json, os
     import mechsim.dynamics.jax_model
     from mechsim.dynamics import xla_options
-    print(json.dumps({"state": xla_options.loop_kernels(), "flags": os.environ.get("XLA_FLAGS")}))
+    print(json.dumps({"state": xla_options.state(), "flags": os.environ.get("XLA_FLAGS")}))
 """
 
 
-def test_flags_merge_into_the_users_extra_options():
-    assert with_loop_option("") == ON
-    assert with_loop_option("--xla_dump_to=/tmp/d") == f"--xla_dump_to=/tmp/d {ON}"
-    merged = with_loop_option("--xla_cpu_enable_fast_math=false --xla_backend_extra_options=a=1,b=2")
-    assert merged == f"--xla_cpu_enable_fast_math=false --xla_backend_extra_options=a=1,b=2,{OPTION}={LOOP_BYTES}"
+def test_flags_merge_into_the_users_own():
+    assert with_options("") == f"{LOOP} {NO_SCHEDULER}"
+    assert with_options("--xla_dump_to=/tmp/d") == f"--xla_dump_to=/tmp/d {LOOP} {NO_SCHEDULER}"
+    merged = with_options("--xla_cpu_enable_fast_math=false --xla_backend_extra_options=a=1,b=2")
+    assert merged == (f"--xla_cpu_enable_fast_math=false --xla_backend_extra_options=a=1,b=2,{LOOP_OPTION}="
+                      f"{LOOP_BYTES} {NO_SCHEDULER}")
     assert merged.count("--xla_backend_extra_options") == 1
+    mine = f"--xla_backend_extra_options={LOOP_OPTION}=4096 {SCHEDULER_FLAG}=true"
+    assert with_options(mine) == mine
 
 
-def test_a_fresh_process_gets_the_option_before_jax_starts():
-    got = run_fresh(IMPORT_MECHSIM, None)
-    assert got == {"state": "on", "flags": ON}
+def test_a_fresh_process_gets_the_options_before_jax_starts():
+    assert run_fresh(IMPORT_MECHSIM, None) == {"state": "on", "flags": f"{LOOP} {NO_SCHEDULER}"}
     got = run_fresh(IMPORT_MECHSIM, "--xla_backend_extra_options=a=1")
-    assert got == {"state": "on", "flags": f"--xla_backend_extra_options=a=1,{OPTION}={LOOP_BYTES}"}
+    assert got == {"state": "on",
+                   "flags": f"--xla_backend_extra_options=a=1,{LOOP_OPTION}={LOOP_BYTES} {NO_SCHEDULER}"}
 
 
-def test_the_users_threshold_is_kept():
-    mine = f"--xla_backend_extra_options={OPTION}=4096"
-    assert run_fresh(IMPORT_MECHSIM, mine) == {"state": "as XLA_FLAGS sets it", "flags": mine}
+def test_the_users_values_are_kept():
+    mine = f"--xla_backend_extra_options={LOOP_OPTION}=4096"
+    got = run_fresh(IMPORT_MECHSIM, mine)
+    assert got == {"state": f"on ({LOOP_OPTION} as XLA_FLAGS set it)", "flags": f"{mine} {NO_SCHEDULER}"}
 
 
 def test_a_backend_started_first_is_reported_and_left_alone():
