@@ -189,6 +189,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--out", type=Path, default=DOCS)
     args = ap.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)     # before the minutes of measuring, not after
     parts = args.only.split(",")
     frames = []
     if "duration" in parts:
