@@ -295,7 +295,8 @@ def sweep(
     force: bool = typer.Option(False, "--force", help="replace an existing output folder, finished cases too"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress bar"),
     batch: bool = typer.Option(False, "--batch", help="diffrax DAE cases of one model structure: one vmapped "
-                               "solve (the rest on the pool; docs/sweeps.md, 'Batching')"),
+                               "solve (the rest on the pool; on the CPU the pool is faster: docs/sweeps.md, "
+                               "'Batching')"),
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
     from mechsim.scenarios.api import sweep as run_sweep
