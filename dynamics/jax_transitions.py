@@ -41,6 +41,7 @@ def _branch(k_next: int, index: list[int], updates: Callable | None, handoff: Ca
     idx = jnp.asarray(index, dtype=jnp.int32)
 
     def branch(q, v, p):
+        p = jnp.asarray(p)        # lax.switch over one branch calls it with the operands as given (numpy too)
         p_new = p
         if updates is not None:
             vals = jnp.stack([jnp.asarray(x, dtype=p.dtype) for x in updates(q, v, p)])

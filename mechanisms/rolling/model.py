@@ -39,7 +39,7 @@ import sympy as sp
 from scipy.optimize import brentq
 from sympy.simplify.fu import TR5, TR10i
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
 
 DRIVEN_LINKS = ("rolling", "crank")
@@ -510,6 +510,15 @@ class RollingPairFourBar(Mechanism):
         return Transition(mode, {"dead_sign": new}, kind="dead point", message=(
             f"dead point of the {link} input ({where}) at {at}: the {link} reverses "
             f"(its speed {speed:.3g} rad/s) and the motion goes on"))
+
+    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition]:
+        """`on_guard` as expressions (for the compiled diffrax run, docs/diffrax.md 'The compiled run'): under a
+        torque the dead point flips `dead_sign` and the motion goes on in the same mode; under a prescribed speed
+        it is a stop (handed back to `on_guard`, which says why)."""
+        if self.prescribed:
+            return {("rolling", "dead_point"): SymbolicTransition(None, kind="dead point")}
+        return {("rolling", "dead_point"): SymbolicTransition("rolling", {"dead_sign": -self.symbols.p("dead_sign")},
+                                                              kind="dead point")}
 
     # -- prescribed rolling-link speed: no DAE ----------------------------------------------------------
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
