@@ -66,12 +66,14 @@ def read_text(path: Path) -> str:
         raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror or exc}") from None
     if len(data) > MAX_FILE_BYTES:
         raise ScenarioError("scenario", f"{path} is over {MAX_FILE_BYTES:,} bytes; a scenario file is at most that")
+    if data[:4] in (b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff"):
+        raise ScenarioError("scenario", f"{path} is UTF-32 text; save it as UTF-8")
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise ScenarioError("scenario", f"{path} is UTF-16 text; save it as UTF-8")
     if b"\x00" in data:
         raise ScenarioError("scenario", f"{path} is a binary file (it holds NUL bytes), not a TOML scenario")
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")             # a byte-order mark, which some editors write, is dropped
     except UnicodeDecodeError as exc:
         raise ScenarioError("scenario", f"{path} is not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
                                         f"{exc.start}); save it as UTF-8") from None
@@ -109,8 +111,11 @@ def read_raw(name_or_path: str) -> tuple[dict, str]:
     """Parse a scenario file or built-in by name."""
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
+        if not path.exists():
             raise ScenarioError("scenario", f"file not found: {name_or_path}")
+        if not path.is_file():
+            what = "a folder" if path.is_dir() else "not a regular file (a pipe, device or socket)"
+            raise ScenarioError("scenario", f"{name_or_path} is {what}, not a scenario file")
         text, source = read_text(path), str(path)
     else:
         text, source = builtin_text(name_or_path), f"built-in:{name_or_path}"
@@ -133,9 +138,14 @@ def _override_value(text: str):
     """An override's value read as TOML when it can be, else the text (cached: a sweep repeats its values; the
     caller copies it, as a value may be a table or array)."""
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        value = None
+    if value is None or _depth(value) > MAX_DEPTH:
+        raise ScenarioError("--set", f"the value nests tables or arrays more than {MAX_DEPTH} deep")
+    return value
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:

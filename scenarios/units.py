@@ -5,11 +5,69 @@ import re
 from functools import lru_cache
 
 
-#: a quantity string: a number (or nan/inf, refused later with a clear message) and a unit expression; checked
-#: before pint sees it, so that pint never evaluates an arbitrary arithmetic expression ("9**9**9 s")
-QUANTITY_TEXT = re.compile(r"^[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|nan|inf|infinity)"
-                           r"(?:\s*(?:[^\W\d]|[\u00b0\u00b5])[\w\s*/^().\u00b7\u00b0\u00b5-]*)?$", re.IGNORECASE)
+#: the number at the start of a quantity string (nan/inf are read, then refused later with a clear message)
+NUMBER = re.compile(r"[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d{1,3})?|nan|infinity|inf)", re.IGNORECASE)
+#: tokens of a unit expression: a unit name (letters, with the degree and micro signs), an exponent, an operator
+UNIT_TOKEN = re.compile(r"\s*(?:(?P<name>[^\W\d_][^\W\d]*)|(?P<power>(?:\^|\*\*)\s*[-+]?\d+)|(?P<op>[*/\u00b7])"
+                        r"|(?P<open>\()|(?P<close>\)))")
 MAX_QUANTITY_TEXT = 64
+#: the largest |exponent| of a unit and the deepest parenthesis nesting a quantity may have
+MAX_EXPONENT = 4
+MAX_NESTING = 2
+QUANTITY_FORM = (f"a number and a unit expression (unit names joined by * or /, exponents ^k with |k| <= {MAX_EXPONENT}, "
+                 "no arithmetic)")
+
+
+def quantity_form_problem(text: str) -> str | None:
+    """None if `text` is a number followed by an optional unit expression of the safe grammar, else what is wrong.
+
+    The grammar (docs/limits.md): number [unit-expression], where a unit expression is unit names joined by `*`,
+    `/`, `\u00b7` or a space, each name or parenthesised group (at most two deep) followed by at most one exponent
+    `^k` or `**k` with an integer |k| <= 4. Numbers never appear inside the unit expression, so no arithmetic
+    between quantities ("75 mm - 74.9999999 mm") and no towers of exponents ("1 s**9**9**9") reach pint."""
+    m = NUMBER.match(text)
+    if not m:
+        return "it does not start with a number"
+    pos, depth, expect_unit, after_unit = m.end(), 0, True, False
+    rest = text[pos:].strip()
+    if not rest:
+        return None
+    while pos < len(text):
+        if not text[pos:].strip():
+            break
+        tok = UNIT_TOKEN.match(text, pos)
+        if not tok:
+            return f"unexpected {text[pos:].strip()[:12]!r}"
+        pos = tok.end()
+        if tok.group("name") or tok.group("open"):
+            if not expect_unit and not after_unit:
+                return "an operator is missing"
+            if tok.group("open"):
+                depth += 1
+                if depth > MAX_NESTING:
+                    return f"parentheses nested deeper than {MAX_NESTING}"
+                expect_unit, after_unit = True, False
+            else:
+                expect_unit, after_unit = False, True
+        elif tok.group("power"):
+            if not after_unit:
+                return "an exponent must follow a unit name or a parenthesis"
+            k = int(re.sub(r"[\^*\s]", "", tok.group("power")))
+            if abs(k) > MAX_EXPONENT:
+                return f"exponent {k} out of range (|k| <= {MAX_EXPONENT})"
+            after_unit = False
+        elif tok.group("op"):
+            if expect_unit:
+                return "an operator without a unit before it"
+            expect_unit, after_unit = True, False
+        else:                                   # close
+            if expect_unit or depth == 0:
+                return "unbalanced parentheses"
+            depth -= 1
+            expect_unit, after_unit = False, True
+    if expect_unit or depth:
+        return "the unit expression is incomplete"
+    return None
 
 
 class ScenarioError(ValueError):
@@ -73,8 +131,8 @@ def _disk_cache():
 
     from mechsim.scenarios.diskcache import JsonCache
     try:
-        # "units-2": conversions stored before bare numbers in strings were refused ("1e5" for an angle) are not read
-        return JsonCache(f"units-2-pint-{metadata.version('pint')}")
+        # "units-3": conversions stored before Hz was read as a rotation rate and angle exponents were checked
+        return JsonCache(f"units-3-pint-{metadata.version('pint')}")
     except metadata.PackageNotFoundError:
         return None
 
@@ -96,9 +154,12 @@ def _to_si(field: str, value, unit: str) -> float:
     if not isinstance(value, str):
         raise ScenarioError(field, f"expected a quantity such as \"1 {unit}\", got {type(value).__name__}")
     text = value.strip()
-    if len(text) > MAX_QUANTITY_TEXT or not QUANTITY_TEXT.match(text):
+    problem = (f"longer than {MAX_QUANTITY_TEXT} characters" if len(text) > MAX_QUANTITY_TEXT
+               else quantity_form_problem(text))
+    if problem:
         shown = repr(text if len(text) <= 40 else text[:40] + "...")
-        raise ScenarioError(field, f"cannot read {shown} as a quantity (a number and a unit, e.g. \"1 {unit}\")")
+        raise ScenarioError(field, f"cannot read {shown} as a quantity: {problem}; write {QUANTITY_FORM}, "
+                                   f"e.g. \"1 {unit}\"")
     try:
         q = _parse_quantity(text)
     except Exception:
@@ -111,7 +172,9 @@ def _to_si(field: str, value, unit: str) -> float:
     try:
         if unit == "K" or unit == "degC":
             return float(q.to("K").magnitude) if unit == "K" else float(q.to("degC").magnitude)
-        magnitude = q.to(unit).magnitude
+        magnitude = _angles_by_definition(field, value, q, unit).to(unit).magnitude
+    except ScenarioError:
+        raise
     except pint.DimensionalityError:
         raise ScenarioError(field, f"wrong unit in {value!r}: expected a quantity convertible to {unit}") from None
     except (ArithmeticError, ValueError, TypeError):
@@ -120,6 +183,30 @@ def _to_si(field: str, value, unit: str) -> float:
         return float(magnitude)
     except (TypeError, ValueError):
         raise ScenarioError(field, f"cannot read {value!r} as a number") from None
+
+
+def _radian_exponent(q) -> int:
+    """The power of the angle in a quantity's root units (pint keeps radian as a dimensionless base unit:
+    "300 rpm" -> rad/s, "5 Hz" -> 1/s)."""
+    return q.to_root_units()._units.get("radian", 0)
+
+
+def _angles_by_definition(field: str, value, q, unit: str):
+    """q with its angles read by their definitions before converting to `unit` (docs/limits.md, "Units"):
+    a frequency in Hz where a rotation rate is asked is one turn per second (so "5 Hz" is 10 pi rad/s, not 5);
+    a quantity with an explicit angle unit must carry the asked angle's power ("1 N*m*s/rad**2" is no damping);
+    a quantity with no angle unit at all takes radians implicitly ("2 N*m*s" for a damping in N*m*s/rad)."""
+    ureg = registry()
+    asked = _radian_exponent(ureg.Quantity(1.0, unit))
+    given = _radian_exponent(q)
+    if given == asked:
+        return q
+    if given == 0:
+        if asked == 1 and "hertz" in str(q.units):
+            return q.to("Hz") * ureg.Quantity(1.0, "turn")
+        return q
+    raise ScenarioError(field, f"wrong unit in {value!r}: expected a quantity convertible to {unit} "
+                               f"(its angle to the power {asked}, not {given})")
 
 
 def format_si(value: float, unit: str) -> str:

@@ -141,22 +141,20 @@ class SweepStore:
         """
         manifest = self.root / "sweep.json"
         runs: list[str] = []
-        ours = (self.root / MARKER).is_file() or manifest.is_file()
         if self.root.exists() and force:
-            if self.root.is_symlink() or not ours:
-                check_replaceable(self.root, force)          # refuses a folder mechsim did not write
+            check_replaceable(self.root, force)        # only a folder with mechsim's marker is ever removed
             shutil.rmtree(self.root)
         elif self.root.exists() and any(self.root.iterdir()):
-            if not manifest.is_file():
-                raise ScenarioError("--out", f"{self.root} exists and is not a sweep folder; pass --force to "
-                                             "replace it")
-            old = json.loads(manifest.read_text())
-            if sorted(old.get("case_ids", [])) != sorted(set(keys)):
-                common = len(set(old.get("case_ids", [])) & set(keys))
-                raise ScenarioError("--out", f"{self.root} holds a different sweep ({len(old.get('case_ids', []))} "
+            if not manifest.is_file() or not (self.root / MARKER).is_file():
+                raise ScenarioError("--out", f"{self.root} exists and is not a sweep folder mechsim wrote; choose "
+                                             "another --out")
+            old = self._read_manifest(manifest)
+            if set(old["case_ids"]) != set(keys):
+                common = len(set(old["case_ids"]) & set(keys))
+                raise ScenarioError("--out", f"{self.root} holds a different sweep ({len(set(old['case_ids']))} "
                                              f"cases, {common} in common with this one); pass --force to replace "
                                              "it or choose another --out")
-            runs = old.get("runs", [])
+            runs = old["runs"]
         self.cases.mkdir(parents=True, exist_ok=True)
         for folder in (self.root, self.cases, self.series):
             remove_stale_files(folder)
@@ -165,6 +163,21 @@ class SweepStore:
         atomic_write_text(manifest, json.dumps({"case_ids": keys, "runs": runs}, indent=1))
         atomic_write_text(self.root / "sweep.toml",
                           "# The sweep definition (valid input to `mechsim sweep`).\n" + tomli_w.dumps(definition))
+
+    @staticmethod
+    def _read_manifest(manifest: Path) -> dict:
+        """sweep.json as {"case_ids": [str], "runs": [str]}, or one line saying it is damaged and how to recover."""
+        try:
+            old = json.loads(manifest.read_bytes().decode("utf-8"))
+            if not (isinstance(old, dict) and all(isinstance(old.get(k, []), list) and
+                                                  all(isinstance(x, str) for x in old.get(k, []))
+                                                  for k in ("case_ids", "runs"))):
+                raise ValueError("not a sweep manifest")
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise ScenarioError("--out", f"{manifest} is damaged ({type(exc).__name__}: {str(exc)[:80]}); pass --force "
+                                         "to start the sweep again in this folder (its finished cases are lost) or "
+                                         "choose another --out") from None
+        return {"case_ids": old.get("case_ids", []), "runs": old.get("runs", [])}
 
     def finished(self, keys: list[str], need_timeseries: bool) -> set[str]:
         """Keys whose case file exists and verifies (and time series, when asked for); a stored case that does

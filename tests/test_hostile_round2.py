@@ -1,0 +1,100 @@
+"""Hostile input, round two: a sweep never deletes what mechsim did not write, quantities follow a safe grammar
+(no arithmetic, bounded exponents), units by their definitions, deep nesting and damaged sweep stores answered
+by one line, special files named as such."""
+import json
+import math
+import os
+
+import pytest
+from cli_helpers import invoke, one_line_error
+
+from mechsim.scenarios.units import ScenarioError, to_si
+
+
+def test_sweep_force_keeps_a_folder_mechsim_did_not_write(tmp_path):
+    out = tmp_path / "d"
+    out.mkdir()
+    (out / "sweep.json").write_text("{}")             # a sweep.json alone is no proof that mechsim wrote the folder
+    (out / "precious.txt").write_text("mine")
+    r = invoke("sweep", "geneva-lc1", "--vary", "contact.friction=0.1,0.2", "--out", out, "--force")
+    assert r.exit_code == 2
+    assert "marker" in one_line_error(r)
+    assert (out / "precious.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("text,why", [
+    ("1 s**9**9**9", "exponent"), ("1 s^9^9^9", "exponent"), ("1 s^5", "exponent"),
+    ("75 mm - 74.9999999 mm", "unexpected"), ("2 mm * 3", "unexpected"), ("1 (((m)))", "nested"),
+    ("1 m)", "parentheses"), ("1 m *", "incomplete"), ("1 * m", "operator"),
+])
+def test_quantities_follow_the_safe_grammar(text, why):
+    with pytest.raises(ScenarioError) as e:
+        to_si("duration", text, "s")
+    assert e.value.field == "duration" and why in e.value.problem and "no arithmetic" in e.value.problem
+
+
+def test_an_exponent_tower_is_refused_at_once_by_the_cli(tmp_path):
+    r = invoke("run", "geneva-lc1", "--set", "duration=1 s**9**9**9", "--out", tmp_path / "o")
+    assert r.exit_code == 2 and one_line_error(r).startswith("error: duration:")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("text,unit,si", [
+    ("0.02 kg*m^2", "kg*m^2", 0.02), ("1 W/(m^2*K)", "W/(m^2*K)", 1.0), ("3 m/s^2", "m/s^2", 3.0),
+    ("7 N·m", "N*m", 7.0), ("5 N m", "N*m", 5.0), ("1 kg*m**2", "kg*m^2", 1.0), ("-180 deg", "rad", -math.pi),
+])
+def test_the_grammar_keeps_every_unit_the_docs_use(text, unit, si):
+    assert to_si("f", text, unit) == pytest.approx(si, rel=1e-15)
+
+
+def test_hertz_is_a_rotation_rate_and_angle_powers_are_exact():
+    # 5 Hz is five turns a second where a rotation speed is asked (pint alone gives 5 rad/s, 2 pi off)
+    assert to_si("drive.speed", "5 Hz", "rad/s") == pytest.approx(10 * math.pi, rel=1e-15)
+    assert to_si("drive.speed", "300 rpm", "rad/s") == pytest.approx(10 * math.pi, rel=1e-15)
+    assert to_si("mechanism.crank_damping", "2 N*m*s", "N*m*s/rad") == 2.0       # radians implied
+    with pytest.raises(ScenarioError) as e:
+        to_si("mechanism.crank_damping", "1 N*m*s/rad**2", "N*m*s/rad")
+    assert "angle to the power -1, not -2" in e.value.problem
+
+
+def test_deep_nesting_in_set_is_one_line(tmp_path):
+    r = invoke("run", "geneva-lc1", "--set", "duration=" + "[" * 5000 + "]" * 5000, "--out", tmp_path / "o")
+    assert r.exit_code == 2 and "deep" in one_line_error(r)
+
+
+def test_a_damaged_sweep_store_is_one_line_naming_the_file(tmp_path):
+    out = tmp_path / "s"
+    args = ("sweep", "geneva-lc1", "--vary", "load.wheel_torque=5 N*m,7 N*m", "--set", "duration=0.2 s",
+            "--out", out)
+    assert invoke(*args).exit_code == 0
+    manifest = out / "sweep.json"
+    manifest.write_text(manifest.read_text()[:7])       # truncated
+    r = invoke(*args)
+    assert r.exit_code == 2
+    line = one_line_error(r)
+    assert "sweep.json is damaged" in line and "--force" in line
+    assert invoke(*args, "--force").exit_code == 0      # the way out the line names works
+    assert json.loads(manifest.read_text())["case_ids"]
+
+
+def test_a_sweep_with_a_repeated_value_resumes(tmp_path):
+    args = ("sweep", "geneva-lc1", "--vary", "load.wheel_torque=5 N*m, 5000 N*mm, 7 N*m", "--set", "duration=0.2 s",
+            "--out", tmp_path / "s")
+    assert invoke(*args).exit_code == 0
+    assert invoke(*args).exit_code == 0                 # the same sweep again: resumed, not "a different sweep"
+
+
+def test_special_files_and_encodings_are_named(tmp_path):
+    os.mkfifo(tmp_path / "pipe.toml")
+    (tmp_path / "dir.toml").mkdir()
+    for name, words in (("pipe.toml", "not a regular file"), ("dir.toml", "is a folder")):
+        r = invoke("run", tmp_path / name, "--out", tmp_path / "o")
+        assert r.exit_code == 2 and words in one_line_error(r)
+    text = invoke("show", "geneva-lc1").stdout
+    (tmp_path / "u32.toml").write_bytes(text.encode("utf-32"))
+    r = invoke("run", tmp_path / "u32.toml", "--out", tmp_path / "o")
+    assert r.exit_code == 2 and "UTF-32" in one_line_error(r)
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    r = invoke("run", tmp_path / "bom.toml", "--out", tmp_path / "o", "--quiet", "--set", "output.plots=false",
+               "--set", "duration=0.1 s")
+    assert r.exit_code == 0, r.output
