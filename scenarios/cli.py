@@ -47,6 +47,9 @@ USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
 
 
 def _fail(message: str, code: int = USER_ERROR) -> None:
+    if code == USER_ERROR:              # a refused command leaves no trace: not even the unit conversions it read
+        from mechsim.scenarios.units import forget_unsaved_conversions
+        forget_unsaved_conversions()
     err.print(f"error: {message}", markup=False, highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 
@@ -70,12 +73,13 @@ def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None) ->
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
-        _os_refused(exc, doing)
+        _os_refused(exc, doing, target)
 
 
-def _os_refused(exc: OSError, doing: str) -> None:
-    """One line for an OSError (permission, read-only, full disk, ...), exit 4."""
-    where = exc.filename if exc.filename is not None else "?"
+def _os_refused(exc: OSError, doing: str, target=None) -> None:
+    """One line for an OSError (permission, read-only, full disk, ...), exit 4; `target`: the folder being written,
+    named where the error does not name its file (a full disk while a writer flushes)."""
+    where = exc.filename if exc.filename is not None else f"writing {target}" if target is not None else "a write"
     _fail(f"{doing}: the operating system refused {where}: {exc.strerror or exc} (nothing half-written is left)",
           OS_REFUSED)
 
@@ -308,7 +312,7 @@ def sweep(
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
-        _os_refused(exc, "sweep")
+        _os_refused(exc, "sweep", out_dir)
     for key, why in table.attrs["recomputed"]:
         err.print(f"sweep: stored case {key} did not verify ({why}); it was computed again", markup=False,
                   highlight=False, soft_wrap=True)
@@ -436,7 +440,7 @@ def sensitivity(
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
-        _os_refused(exc, f"{sc.name}: the sensitivities")
+        _os_refused(exc, f"{sc.name}: the sensitivities", target)
     if quiet:
         return
     _print_sensitivity(table)
@@ -559,6 +563,9 @@ def _leave(code) -> None:
     start"). The exit handlers still run (atexit: the unit cache's flush, logging, temporary folders) and the
     standard streams are flushed (exit status 120 if that fails, as Python does), then os._exit. Where another
     Python thread is still alive (it would be cut off) or atexit has no way to run its handlers, sys.exit."""
+    if code == USER_ERROR:              # a refused command leaves no trace: not even the unit conversions it read
+        from mechsim.scenarios.units import forget_unsaved_conversions
+        forget_unsaved_conversions()
     import atexit
     import os
     import threading

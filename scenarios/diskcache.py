@@ -55,6 +55,12 @@ class JsonCache:
         self._data[key] = value
         self._new[key] = value
 
+    def discard_unsaved(self) -> None:
+        """Forget the entries not yet written (a refused command writes nothing, its cache entries included)."""
+        for key in self._new:
+            self._data.pop(key, None)
+        self._new = {}
+
     def flush(self) -> None:
         """Merge the new entries into the file (atomically); any OS error leaves the cache as it was."""
         if not self._new:

@@ -7,6 +7,8 @@ sizes (output rows) are bounded before anything runs. The limits and their reaso
 """
 from __future__ import annotations
 
+import os
+
 import math
 
 from mechsim.dynamics.settings import BACKENDS
@@ -91,6 +93,11 @@ UNIT_RANGES: dict[str, tuple[float, float, str]] = {
 #: at most this many output steps on the requested grid (duration / output_step): a fully resolved table of
 #: about 40 float64 columns is then about 3 GB (a cycle-averaged thermal run keeps only its mechanics window)
 MAX_OUTPUT_ROWS = 10_000_000
+#: bytes of memory a run needs per output row at its peak (tables, their copies while writing Parquet and CSV):
+#: measured 0.8-1.2 kB for the ~38 columns of a Geneva run, taken with a margin (docs/limits.md)
+BYTES_PER_ROW = 2048
+#: the share of the machine's physical memory one run may plan to use
+MEMORY_SHARE = 0.5
 #: at most this many entries in a list field (sprockets, points): no mechanism here has more than a few
 MAX_LIST = 64
 #: longest string value (names, descriptions, choices)
@@ -212,8 +219,22 @@ def check_derived(si: dict) -> None:
     rows = si["duration"] / si["output_step"]
     if rows > MAX_OUTPUT_ROWS:
         raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "
-                                           f"{rows:.3g} output steps; at most {MAX_OUTPUT_ROWS:,} (a table of about 3 "
-                                           "GB): raise output_step or shorten duration")
+                                           f"{rows:.3g} output steps; at most {MAX_OUTPUT_ROWS:,}: raise output_step "
+                                           "or shorten duration")
+    need, budget = rows * BYTES_PER_ROW, memory_budget()
+    if need > budget:
+        raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "
+                                           f"{rows:.3g} rows, about {need / 2**30:.1f} GiB of memory; this machine "
+                                           f"allows {budget / 2**30:.1f} GiB ({MEMORY_SHARE:.0%} of its memory): raise "
+                                           "output_step or shorten duration")
+
+
+def memory_budget() -> float:
+    """Bytes one run may plan to use: MEMORY_SHARE of the machine's physical memory (2 GiB where it is unknown)."""
+    try:
+        return MEMORY_SHARE * os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return 2.0 * 2**30
 
 
 def check_section(name: str, fields: dict[str, Field], data) -> dict:

@@ -137,6 +137,13 @@ def _disk_cache():
         return None
 
 
+def forget_unsaved_conversions() -> None:
+    """Drop the conversions this process has not yet written to the disk cache (called on a refused command)."""
+    cache = _disk_cache.cache_info().currsize and _disk_cache()
+    if cache:
+        cache.discard_unsaved()
+
+
 def _to_si(field: str, value, unit: str) -> float:
     import pint
     ureg = registry()

@@ -98,3 +98,33 @@ def test_special_files_and_encodings_are_named(tmp_path):
     r = invoke("run", tmp_path / "bom.toml", "--out", tmp_path / "o", "--quiet", "--set", "output.plots=false",
                "--set", "duration=0.1 s")
     assert r.exit_code == 0, r.output
+
+
+def test_a_degenerate_1d_mesh_is_refused_before_anything_is_allocated(tmp_path):
+    r = invoke("run", "geneva-lc1", "--set", "thermal.model=1d", "--set", "thermal.mesh_first_cell=1 nm",
+               "--set", "thermal.mesh_growth=1.0", "--out", tmp_path / "o")
+    assert r.exit_code == 2
+    line = one_line_error(r)
+    assert line.startswith("error: thermal.mesh_first_cell:") and "cells per track; at most" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_memory_is_estimated_and_bounded_before_any_work(tmp_path, monkeypatch):
+    from mechsim.scenarios import schema
+    monkeypatch.setattr(schema, "memory_budget", lambda: 2.0 * 2**30)      # a machine with 4 GiB
+    r = invoke("run", "geneva-lc1", "--set", "duration=3600 s", "--out", tmp_path / "o")   # 3.6 M rows of 1 ms
+    assert r.exit_code == 2
+    line = one_line_error(r)
+    assert line.startswith("error: output_step:") and "GiB of memory" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_refused_run_writes_no_unit_cache(tmp_path):
+    import subprocess
+    import sys
+    env = {**os.environ, "MECHSIM_CACHE_DIR": str(tmp_path / "cache")}
+    p = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "geneva-lc1", "--set",
+                        'mechanism.pin_radius="80 mm"',
+                        "--out", str(tmp_path / "o")], env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 2 and "pin_radius" in p.stderr
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").iterdir())

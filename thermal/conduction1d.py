@@ -69,15 +69,19 @@ def graded_mesh_cells(depth: float, n_cells: int, growth: float = GROWTH_DEFAULT
     return Mesh1D(np.asarray(faces, dtype=float))
 
 
+def mesh_cells(first_cell: float, growth: float, depth: float) -> float:
+    """How many cells a graded mesh of first cell <= `first_cell`, ratio `growth` and depth `depth` has (a float,
+    so that a degenerate request can be bounded before anything is allocated)."""
+    if growth == 1.0:
+        return math.ceil(depth / first_cell)
+    return math.ceil(math.log1p(depth * (growth - 1.0) / first_cell) / math.log(growth))
+
+
 def graded_mesh(first_cell: float, growth: float = GROWTH_DEFAULT, depth: float = 2e-3) -> Mesh1D:
     """Graded mesh with first cell <= `first_cell`, ratio `growth`, total depth `depth` (m)."""
     if first_cell <= 0 or first_cell > depth:
         raise ValueError("graded mesh needs 0 < first_cell <= depth")
-    if growth == 1.0:
-        n = math.ceil(depth / first_cell)
-    else:
-        n = math.ceil(math.log1p(depth * (growth - 1.0) / first_cell) / math.log(growth))
-    return graded_mesh_cells(depth, n, growth)
+    return graded_mesh_cells(depth, int(mesh_cells(first_cell, growth, depth)), growth)
 
 
 def mesh_settings(half_width_m: float, source_speed: float, diffusivity: float, t_end: float,

@@ -23,7 +23,7 @@ from typing import Protocol
 import numpy as np
 import scipy.sparse as sps
 
-from mechsim.thermal.conduction1d import Mesh1D, conduction_system, graded_mesh
+from mechsim.thermal.conduction1d import Mesh1D, conduction_system, graded_mesh, mesh_cells
 from mechsim.thermal.coupling import HeatInput, ShareModel, ThermalExtension
 from mechsim.thermal.hertz import effective_modulus
 from mechsim.thermal.linear import LinearThermalSystem
@@ -35,6 +35,9 @@ KELVIN = 273.15
 PIN_LENGTH_OVER_THICKNESS = 2.5
 #: default driver arm: length = the arm, width CRANK_WIDTH_OVER_PIN_RADIUS * R, thickness = contact length
 CRANK_WIDTH_OVER_PIN_RADIUS = 4.0
+#: at most this many cells in one track's 1-D mesh: every cell is a state of the DAE (the default mesh has a few
+#: dozen; each state adds to every step and to the compiled code's size), docs/limits.md
+MAX_MESH_CELLS = 400
 #: default first cell of the 1-D mesh: sqrt(chi t_engagement) / MESH_FIRST_CELL_DIVISOR
 MESH_FIRST_CELL_DIVISOR = 20.0
 #: default depth: MESH_DEPTH_PENETRATIONS periodic penetration depths sqrt(chi n T / pi) (n T = one driven turn)
@@ -198,6 +201,11 @@ def track_mesh(setup: ThermalSetup, driven: Body) -> Mesh1D:
     th["mesh_first_cell"], th["mesh_depth"] = first, depth
     if first > depth:
         raise ThermalSetupError("mesh_first_cell", f"{first!r} m exceeds the mesh depth {depth!r} m")
+    cells = mesh_cells(first, th["mesh_growth"], depth)
+    if cells > MAX_MESH_CELLS:
+        raise ThermalSetupError("mesh_first_cell", f"{first:.3g} m with mesh_growth {th['mesh_growth']:g} over a depth "
+                                                   f"of {depth:.3g} m needs {cells:.3g} cells per track; at most "
+                                                   f"{MAX_MESH_CELLS} (raise mesh_first_cell or mesh_growth)")
     mesh = graded_mesh(first, th["mesh_growth"], depth)
     setup.track_area = geo.contact_length * geo.track_length
     driven.volume -= geo.tracks * setup.track_area * depth
