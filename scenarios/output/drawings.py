@@ -40,10 +40,17 @@ def _arc(centre, radius, a0, a1, n=24) -> np.ndarray:
 
 # -- Geneva ------------------------------------------------------------------------------------------------
 def locking_radius(geometry) -> float:
-    """Radius of the locking disc on the crank as drawn: r - 2R, one pin diameter inside the pin circle, so
-    its arc clears the slots (a slot flank is r - R from the locking-arc centre). Not part of the model: the
-    lock is ideal (docs/theory.md §G2)."""
-    return geometry.crank_radius - 2 * geometry.pin_radius
+    """Radius of the locking disc on the crank as drawn: r - 2R, one pin diameter inside the pin circle, so its
+    arc clears the slots (a slot flank is r - R from the locking-arc centre). Where a large pin leaves r - 2R too
+    small to reach the wheel's rim (c - c cos(pi/n) from the arc centre), midway between that reach and r - R; where
+    no radius both reaches the rim and clears the flanks (many slots, a large pin), 0.9 (r - R), a disc that
+    stays clear of the wheel. Not part of the model: the lock is ideal (docs/theory.md §G2)."""
+    g = geometry
+    reach, clear = g.centre_distance - g.entry_pin_distance, g.crank_radius - g.pin_radius
+    radius = g.crank_radius - 2 * g.pin_radius
+    if radius > reach:
+        return radius
+    return 0.5 * (reach + clear) if reach < clear else 0.9 * clear
 
 
 def geneva_wheel_outline(geometry, samples: int = 24) -> np.ndarray:
@@ -51,13 +58,15 @@ def geneva_wheel_outline(geometry, samples: int = 24) -> np.ndarray:
 
     Outer radius c cos(pi/n) (where the pin enters, docs/theory.md §G1); each slot has width 2R (pin radius R)
     and a round bottom at c - r, the pin's deepest point; between slots a concave locking arc of the locking
-    disc's radius, centred where the crank centre sits during the dwell (distance c, mid-way between slots).
+    disc's radius, centred where the crank centre sits during the dwell (distance c, mid-way between slots), or
+    the plain rim where that disc does not reach it.
     """
     g = geometry
     n, c, r, R = g.slots, g.centre_distance, g.crank_radius, g.pin_radius
     Rw, Rl, pitch = g.entry_pin_distance, locking_radius(g), g.pitch
     half_tip = math.asin(R / Rw)                  # angle of a slot edge's outer end off the slot line
-    gamma = math.acos((Rw**2 + c**2 - Rl**2) / (2 * Rw * c))   # locking arc meets the rim at mid +- gamma
+    cos_gamma = (Rw**2 + c**2 - Rl**2) / (2 * Rw * c)
+    gamma = math.acos(cos_gamma) if cos_gamma < 1 else None   # locking arc meets the rim at mid +- gamma (if at all)
     s_out = math.sqrt(Rw**2 - R**2)
     pts = []
     for j in range(n):
@@ -70,6 +79,9 @@ def geneva_wheel_outline(geometry, samples: int = 24) -> np.ndarray:
         pts.append(bottom + R * nrm)
         pts.append(s_out * u + R * nrm)                        # leading edge, outer end
         mid = phi + pitch / 2
+        if gamma is None:                                      # the locking disc stays clear of the rim
+            pts.extend(_arc((0, 0), Rw, phi + half_tip, phi + pitch - half_tip, 12))
+            continue
         tip0, tip1 = phi + half_tip, mid - gamma
         if tip1 > tip0:
             pts.extend(_arc((0, 0), Rw, tip0, tip1, 6))

@@ -21,6 +21,7 @@ def result_figure_makers(result, mechanism=None) -> list:
     def cycles():
         fig = thermal_cycle_figure(result)
         return {THERMAL_CYCLES: fig} if fig is not None else {}
+    cycles.stem = THERMAL_CYCLES
     return figure_makers(result, mechanism) + [cycles]
 
 

@@ -251,7 +251,10 @@ def figure_makers(result: Result, mechanism=None) -> list:
     cycle = drive_cycle(mechanism) if mechanism is not None else None
 
     def one(stem, build, *args):
-        return lambda: {stem: fig} if (fig := build(*args)) is not None else {}
+        def make():
+            return {stem: fig} if (fig := build(*args)) is not None else {}
+        make.stem = stem            # names the figure in a warning if it cannot be drawn (render.save_or_skip)
+        return make
 
     makers = []
     for group in FIGURES:

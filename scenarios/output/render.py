@@ -4,7 +4,7 @@ Drawing the figures is most of what a `mechsim run` costs after the physics (doc
 and matplotlib draws them one by one on one core. On Linux a forked process (it shares this one's memory: the
 result, the imported modules, nothing to pickle) builds and saves every other figure while this one writes the
 tables and saves the rest. A child that fails leaves its figures to this process, so the folder is complete
-either way; on other platforms, inside a daemonic worker (a sweep's process pool) or once JAX is loaded (its
+either way (a figure that cannot be drawn here either is skipped with a one-line warning); on other platforms, inside a daemonic worker (a sweep's process pool) or once JAX is loaded (its
 threads make a fork unsafe), all are drawn here.
 """
 from __future__ import annotations
@@ -14,17 +14,35 @@ import sys
 from pathlib import Path
 
 
-def save_figures(makers, folder: Path) -> None:
-    """Build each figure (`makers`: functions returning {stem: Figure}) and save it as <stem>.png in folder."""
+def save_figures(makers, folder: Path, skip: bool = True) -> None:
+    """Build each figure (`makers`: functions returning {stem: Figure}) and save it as <stem>.png in folder. With
+    `skip`, a figure that cannot be drawn is skipped with a one-line warning on stderr (the run's data is written
+    all the same); without, the error propagates (a forked child: its parent draws the figure again and warns).
+    An OSError (a refused or full folder) is no drawing problem and always propagates."""
     from mechsim.scenarios.output.plots import save
     for make in makers:
-        for stem, fig in make().items():
-            save(fig, Path(folder) / f"{stem}.png")
+        name = getattr(make, "stem", None)
+        try:
+            for name, fig in make().items():
+                save(fig, Path(folder) / f"{name}.png")
+        except OSError:
+            raise
+        except Exception as exc:
+            if not skip:
+                raise
+            warn_skipped(f"figure {name + '.png' if name else 'of this run'}", exc)
+
+
+def warn_skipped(what: str, exc: Exception) -> None:
+    """The one-line warning on stderr for an output that could not be drawn and was skipped."""
+    text = str(exc).strip().splitlines()
+    print(f"warning: {what} skipped, it could not be drawn ({type(exc).__name__}: "
+          f"{text[0] if text else 'no message'})", file=sys.stderr, flush=True)
 
 
 def _child(makers, folder: Path) -> None:
     try:
-        save_figures(makers, folder)
+        save_figures(makers, folder, skip=False)
     except BaseException:          # the parent draws them again: no traceback from here
         sys.exit(1)
 

@@ -64,7 +64,14 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
         output = result.scenario.get("output", {})
         if output.get("animation") and len(result.timeseries):
             from mechsim.scenarios.output.animation import write_animation
-            write_animation(result, tmp, mechanism, output.get("animation_format", "gif"))
+            from mechsim.scenarios.output.render import warn_skipped
+            from mechsim.scenarios.units import ScenarioError
+            try:
+                write_animation(result, tmp, mechanism, output.get("animation_format", "gif"))
+            except (OSError, ScenarioError):
+                raise
+            except Exception as exc:       # the data is written all the same
+                warn_skipped("the animation", exc)
         from mechsim.scenarios.output.report_html import write_report
         write_report(result, tmp, scenario_toml)
     return out_dir
