@@ -39,10 +39,11 @@ class FailureCode(str, Enum):
     REINITIALISATION_FAILED = "reinitialisation_failed"   # no consistent state after a transition
     INVARIANT_VIOLATED = "invariant_violated"      # a physical invariant broke on an output row
     PHYSICAL_STOP = "physical_stop"                # stall, reversal, dead centre: the mechanism cannot go on
+    MODEL_INVALID = "model_invalid"                # a validity condition of the model failed (output.on_invalid)
 
     @property
     def kind(self) -> str:
-        return "physics" if self is FailureCode.PHYSICAL_STOP else "solver"
+        return "physics" if self in (FailureCode.PHYSICAL_STOP, FailureCode.MODEL_INVALID) else "solver"
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from importlib import import_module
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition, ValidityCondition
 
 
 class MechanismRegistry(Mapping):
@@ -44,4 +44,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'mechsim.mechanisms' has no attribute {name!r}")
 
 
-__all__ = ["Field", "Guard", "InitialState", "Mechanism", "Mode", "Transition", "Geneva", "MECHANISMS"]
+__all__ = ["Field", "Guard", "InitialState", "Mechanism", "Mode", "Transition", "ValidityCondition", "Geneva",
+           "MECHANISMS"]

@@ -109,6 +109,37 @@ class ContactGeometry:
 
 
 @dataclass(frozen=True)
+class ValidityCondition:
+    """A condition the model's idealisation needs, evaluated on every output row (docs/theory.md, "Validity").
+
+    `quantity(columns)` gives the monitored quantity per row from the table's columns (a mapping of name -> numpy
+    array; NaN where the condition does not apply, e.g. no contact); the condition holds while quantity <= bound
+    (`sense` "max") or quantity >= bound (`sense` "min"). `margin` is the signed distance to the bound, >= 0 where
+    valid; the worst row is the one of least margin. `needs` names the columns `quantity` reads (the condition is
+    not evaluated where the table lacks one); `unit` is the quantity's unit ("" if dimensionless); `source` where
+    the condition comes from (paper and equation, or docs section)."""
+
+    name: str
+    description: str
+    quantity: object            # Callable[[Mapping[str, np.ndarray]], np.ndarray]
+    bound: float
+    sense: str                  # "max": quantity <= bound; "min": quantity >= bound
+    unit: str
+    source: str
+    needs: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.sense not in ("max", "min"):
+            raise ValueError(f"ValidityCondition {self.name}: sense must be 'max' or 'min', got {self.sense!r}")
+
+    def margin(self, values: np.ndarray) -> np.ndarray:
+        """bound - quantity ("max") or quantity - bound ("min"): >= 0 where the condition holds, NaN where it does
+        not apply."""
+        values = np.asarray(values, dtype=float)
+        return self.bound - values if self.sense == "max" else values - self.bound
+
+
+@dataclass(frozen=True)
 class Symbols:
     """The symbols a mechanism's expressions are written in."""
 
@@ -305,6 +336,11 @@ class Mechanism(ABC):
         """Sorted times at which a contact began (the heat source switched on at a new place), including one
         before the table's first row when the run starts in contact."""
         raise NotImplementedError(f"{self.name} has no sliding contact")
+
+    def validity_conditions(self) -> tuple[ValidityCondition, ...]:
+        """The conditions this model's idealisation needs on every output row (unilateral contacts in compression,
+        friction demand within the friction available, distance from dead centres, ...); none by default."""
+        return ()
 
     def extra_outputs(self, timeseries, events) -> dict:
         """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""

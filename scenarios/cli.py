@@ -1,7 +1,8 @@
 """The `mechsim` command line: list, show and run scenarios.
 
 Exit codes: 0 success; 2 a user error (one line naming the field, no traceback); 3 a solver or physics
-failure (what ran is written, plus one line: when, where, why, hint); 4 the operating system refused a read or
+failure, or with output.on_invalid = "stop" the model leaving its validity (what ran is written, plus one line:
+when, where, why, hint); 4 the operating system refused a read or
 write (permission, read-only folder, full disk): one line, nothing half-written left (docs/limits.md).
 """
 from __future__ import annotations
@@ -183,10 +184,14 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
     """The run's console report: a summary line and one line per kind of warning (none with --quiet), the
     failure as an error line (exit 3)."""
     from mechsim.scenarios.console import group_line
+    from mechsim.scenarios.validity import violation_lines
     s = result.summary
     if not quiet:
         for group in s.get("warning_groups", []):
             err.print(group_line(group), markup=False, highlight=False, soft_wrap=True)
+        stopped = result.failure is not None and s.get("failure_code") == "model_invalid"
+        for line in [] if stopped else violation_lines(s.get("validity")):   # stopped: the failure line says it
+            err.print(line, markup=False, highlight=False, soft_wrap=True)
         if s.get("solver_messages"):
             err.print(f"note: {len(s['solver_messages'])} message(s) of the solver library captured, in "
                       "summary.json (solver_messages)", markup=False, highlight=False, soft_wrap=True)

@@ -32,14 +32,19 @@ def warning_kind(message: str) -> str:
     return _NUMBER.sub("#", head).strip()
 
 
+def warning_time(message: str) -> float | None:
+    """The time (s) a warning "t = <time> s: ..." carries, or None."""
+    m = _TIME.match(message)
+    return float(m.group(1)) if m else None
+
+
 def group_warnings(messages: list[str]) -> list[dict]:
     """One dict per kind, in order of first appearance: kind, count, first and last time (s, None if the
     warnings carry none) and the first message in full."""
     groups: dict[str, dict] = {}
     for message in messages:
         kind = warning_kind(message)
-        m = _TIME.match(message)
-        t = float(m.group(1)) if m else None
+        t = warning_time(message)
         g = groups.setdefault(kind, dict(kind=kind, count=0, first_t_s=t, last_t_s=t, first=message))
         g["count"] += 1
         if t is not None:

@@ -21,7 +21,8 @@ from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import TableColumns, coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
 
-from mechsim.scenarios.console import group_warnings
+from mechsim.scenarios import validity
+from mechsim.scenarios.console import group_warnings, warning_time
 from mechsim.scenarios.loader import Scenario, build_mechanism
 from mechsim.scenarios.units import ScenarioError
 
@@ -270,6 +271,14 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         checked, events, failure = _checked(df, events, failure, settings, columns=heat, cols=cols)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
+    conditions = validity.conditions(mech, thermal)       # the model's validity on every row (scenarios/validity.py)
+    valid = validity.evaluate(conditions, cols)
+    if si.get("output", {}).get("on_invalid", "warn") == "stop":
+        checked, events, failure = validity.stop(valid, df, events, failure)
+        if checked is not df:
+            df, cols = checked, TableColumns(checked)
+            valid = validity.evaluate(conditions, cols)
+            warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
     wall = time.perf_counter() - wall0 + the_plan.seconds
     summary = {
         "scenario": scenario.name,
@@ -285,6 +294,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "peaks": peaks(df, angle_col, cols),
         "energy": energy_balance(df, events, cols),
         "events": event_counts(events),
+        "validity": valid,
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
         "warnings": warnings,

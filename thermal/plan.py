@@ -25,6 +25,7 @@ from mechsim.thermal.flash import flash_temperature
 from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
 from mechsim.thermal.models import MODELS
 from mechsim.thermal.network import KELVIN, ContactSource, ThermalSetup, ThermalSetupError, prepare
+from mechsim.thermal.validity import conditions as validity_conditions
 
 __all__ = ["ThermalPlan", "ThermalSetupError", "plan"]
 
@@ -340,13 +341,15 @@ class ThermalPlan:
                 "basis": "cycle-mean heat over the whole duration (exact modal solution)"}
 
     # ---------------------------------------------------------------------------------------------- validity
+    def validity_conditions(self) -> list[dict]:
+        """The conditions this thermal model's formulas need on every row (thermal/validity.py), as data."""
+        return validity_conditions(self.setup.section, self.setup.geometry, self.setup.material)
+
     def _validity(self, df, contact, summary) -> list[str]:
+        """Warnings on the 1-D mesh and track (run-level checks; the per-row conditions are
+        `validity_conditions`)."""
         setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
         out = []
-        b = df["hertz_half_width_m"].to_numpy(float)
-        if len(b) and np.nanmax(b) > 0.1 * geo.contact_radius:
-            out.append(f"thermal: the Hertz half-width reaches {np.nanmax(b) / geo.contact_radius:.2f} R; the line-"
-                       "contact formulas need b << R (docs/theory.md §G3)")
         if setup.mesh is None:
             return out
         engaged = contact["engaged"]

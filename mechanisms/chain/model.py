@@ -39,12 +39,15 @@ import numpy as np
 import pandas as pd
 import sympy as sp
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition
+from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition, ValidityCondition
 from mechsim.mechanisms.chain.dwell import ChainDwellMechanism, ChainDwellParams
 
 APEX_LAWS = ("stop", "smooth", "detuned")
 _ROOT = {"leading": -1, "lagging": +1}
 _SYM_CACHE: dict = {}
+#: |sin(theta - phi)| below which the two-row loop closure of a line or arc mode counts as at a dead centre (the
+#: dyad stretched or folded): the same sine-like margin as the rolling pair's dead_point_margin default
+DEAD_CENTRE_MARGIN = 0.01
 
 
 def _e(angle):
@@ -432,6 +435,22 @@ class ChainDwell(Mechanism):
 
     def structure_key(self) -> tuple:
         return (type(self).__name__, 1)
+
+    def validity_conditions(self) -> tuple[ValidityCondition, ...]:
+        """Distance from the dead centres (docs/chain_dwell.md, "Validity"): on lines and arcs the loop closure
+        is regular only while the dyad is neither stretched nor folded, |sin(theta - phi)| >= DEAD_CENTRE_MARGIN;
+        near there the coupler force grows without bound. The dwell and swing modes carry their own regular rows
+        (not evaluated there)."""
+        def sine(c):
+            values = np.abs(np.sin(np.asarray(c["coupler_angle_rad"], dtype=float)
+                                   - np.asarray(c["crank_angle_rad"], dtype=float)))
+            modes = np.asarray(c["mode"], dtype=object)
+            return np.where((modes == "line") | (modes == "arc"), values, np.nan)
+        return (ValidityCondition(
+            "dead_centre_distance", f"|sin(theta - phi)| >= {DEAD_CENTRE_MARGIN:g} on the chain's lines and arcs: "
+            "away from the dead centres (dyad stretched or folded), where the loop closure is singular and the "
+            "coupler force grows without bound", sine, DEAD_CENTRE_MARGIN, "min", "",
+            "docs/theory.md §K1.5; docs/chain_dwell.md, 'Validity'", ("coupler_angle_rad", "crank_angle_rad", "mode")),)
 
     def describe(self) -> dict:
         k = self.kin

@@ -39,10 +39,14 @@ import sympy as sp
 from scipy.optimize import brentq
 from sympy.simplify.fu import TR5, TR10i
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition
+from mechsim.mechanisms.base import (Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition,
+                                     ValidityCondition)
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
 
 DRIVEN_LINKS = ("rolling", "crank")
+#: friction coefficient available at the rolling contact when the scenario gives none: dry steel on steel, static,
+#: at the low end of the handbook range (about 0.3-0.8), so that a design relying on more is flagged
+DEFAULT_FRICTION = 0.3
 
 
 @dataclass(frozen=True)
@@ -148,6 +152,12 @@ class RollingPairFourBar(Mechanism):
                                        why="each revolution is tabulated at hundreds of samples",
                                        help="curves: turns of B0 about O for an irrational R/r"),
         },
+        "contact": {
+            "friction": Field("float", default=DEFAULT_FRICTION, nonnegative=True, maximum=2.0,
+                              help="friction coefficient available at the rolling contact (static): rolling without "
+                                   "slip needs friction_demand <= this (validity only; the model does not slip)",
+                              why="Coulomb coefficients of engineering material pairs lie below about 1.5"),
+        },
         "load": {
             "gravity": Field("quantity", "m/s^2", default=0.0, nonnegative=True, help="acceleration of gravity, -y"),
             "crank_damping": Field("quantity", "N*m*s/rad", default=0.0, nonnegative=True),
@@ -176,6 +186,7 @@ class RollingPairFourBar(Mechanism):
         self.prescribed = prescribed
         self.dead_point_margin = dead_point_margin
         self.start_rolling_angle = start_rolling_angle
+        self.friction = DEFAULT_FRICTION
         self._dead_sign = 1.0
 
     @staticmethod
@@ -223,6 +234,7 @@ class RollingPairFourBar(Mechanism):
                    rolling_damping=load.get("rolling_damping", 0.0), prescribed=drive.get("type") == "speed",
                    dead_point_margin=m.get("dead_point_margin", 0.01),
                    start_rolling_angle=m.get("start_rolling_angle", 0.0))
+        mech.friction = config.get("contact", {}).get("friction", DEFAULT_FRICTION)
         initial = config.get("initial", {})
         angle0 = initial.get(cls.initial_keys[0], 0.0)
         if mech.prescribed and mech.driven_link == "rolling" and "duration" in config:
@@ -576,6 +588,33 @@ class RollingPairFourBar(Mechanism):
         dv = drive.parameter_values(angle0)
         return rolling_reduced.integrate(self, dv["drive_T0"], dv["drive_slope"], angle0, speed0,
                                          np.asarray(t_eval, float), rtol=rtol, atol=rtol)[0]
+
+    def validity_conditions(self) -> tuple[ValidityCondition, ...]:
+        """What the idealisation needs on every row (docs/rolling_pair.md, "Validity"): the disc only rests on the
+        profile, so the contact must press (the model holds it bilaterally); rolling without slip needs the
+        friction demand |F_t|/|N| within the friction available (contact.friction); and the driven link stays
+        off its dead points, |transmission| >= dead_point_margin (docs/theory.md §K4 point 4)."""
+        trans = "transmission_rolling" if self.driven_link == "rolling" else "transmission_crank"
+        where = ("the dyad stretched or folded, sin(theta3 - theta2) = 0" if self.driven_link == "rolling" else
+                 "the coupler line through the contact point, w . B'(phi) = 0")
+        return (
+            ValidityCondition(
+                "contact_in_compression", "the rolling contact presses (normal force >= 0): the disc only rests on "
+                "the profile, a pull would lift it off (the model holds the contact both ways)",
+                lambda c: np.asarray(c["contact_force_N"], dtype=float), 0.0, "min", "N",
+                "docs/rolling_pair.md, 'Forces read back' and 'Validity'", ("contact_force_N",)),
+            ValidityCondition(
+                "rolling_without_slip", f"friction demand |F_t|/|N| within the friction available, contact.friction "
+                f"= {self.friction:g}: rolling without slip needs it (the model does not slip)",
+                lambda c: np.asarray(c["friction_demand"], dtype=float), float(self.friction), "max", "",
+                "Coulomb's law of static friction; docs/rolling_pair.md, 'Validity'", ("friction_demand",)),
+            ValidityCondition(
+                "dead_point_distance", f"|{trans}| >= mechanism.dead_point_margin = {self.dead_point_margin:g}: "
+                f"away from the dead points ({where}), where the driven link's speed must vanish and the joint "
+                "forces grow without bound",
+                lambda c: np.abs(np.asarray(c[trans], dtype=float)), float(self.dead_point_margin), "min", "",
+                "docs/theory.md §K4 point 4; docs/rolling_pair.md, 'Validity'", (trans,)),
+        )
 
     def describe(self) -> dict:
         k = self.kin

@@ -46,6 +46,35 @@ def _images(pngs: dict[str, bytes]) -> str:
         f"<figcaption>{html.escape(s)}.png</figcaption></figure>" for s in stems)
 
 
+def _validity(section: dict | None) -> list[str]:
+    """The Validity section: each condition of the model, whether it held, the share of time violated, the worst
+    value and when; violations in red (scenarios/validity.py)."""
+    if section is None:
+        return []
+    if not section["conditions"]:
+        return ["<h2>Validity</h2>", "<p>this model declares no validity conditions for this run</p>"]
+    head = ('<p class="ok">every condition holds on every row</p>' if section["valid"] else
+            f'<p class="fail">the model leaves its validity: {html.escape(", ".join(section["violated"]))}</p>')
+    rows = []
+    for c in section["conditions"]:
+        unit = f" {c['unit']}" if c["unit"] else ""
+        if not c.get("evaluated"):
+            state, share, worst, when = f"not evaluated ({c.get('why', '')})", "", "", ""
+        else:
+            w = c.get("worst") or {}
+            state = "VIOLATED" if c["violated_rows"] else "holds"
+            share = f"{100 * c['violated_share']:.3g} %"
+            worst = f"{w['value']:.6g}{unit}" if w else "never applies"
+            when = f"{w['t_s']:.6g}" if w else ""
+        cells = [c["name"], state, f"{c['sense']} {c['bound']:g}{unit}", share, worst, when, c["description"],
+                 c["source"]]
+        style = ' class="fail"' if state == "VIOLATED" else ""
+        rows.append(f"<tr{style}>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in cells) + "</tr>")
+    header = "".join(f"<th>{h}</th>" for h in ("condition", "state", "must be", "time violated", "worst value",
+                                               "worst at t (s)", "what it means", "source"))
+    return ["<h2>Validity</h2>", head, f"<table><tr>{header}</tr>{''.join(rows)}</table>"]
+
+
 def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "") -> str:
     """The page as a string; `pngs` maps figure stems to PNG bytes."""
     s = result.summary
@@ -63,6 +92,7 @@ def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "")
         parts += ["<h2>Peaks</h2>", _table(["column", "value", "t (s)", "drive angle, wrapped (deg)"],
                                            [[c, p["value"], p["t_s"], p["drive_angle_wrapped_deg"]]
                                             for c, p in peaks.items()])]
+    parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
     if energy:
         rows = [[f"work: {k}", v] for k, v in energy.get("work_J", {}).items()]

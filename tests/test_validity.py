@@ -1,0 +1,131 @@
+"""Validity monitors (scenarios/validity.py, docs/theory.md "Validity"): the conditions each model declares, read
+on every output row. The rolling pair's reference runs leave theirs (the contact pulls, the friction demanded is
+far beyond any coefficient), the Geneva's stay valid; summary, console and report.html say so, and
+`output.on_invalid = "stop"` ends the run at the first violating row with exit 3, the table up to it written."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from cli_helpers import invoke
+
+from mechsim.scenarios.loader import load
+from mechsim.scenarios.runner import run
+
+NO_PLOTS = ["output.plots=false"]
+trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
+
+def _share(t, mask):
+    """Share of the run's time where mask holds, the indicator integrated by the trapezoidal rule on the rows."""
+    return float(trapezoid(mask.astype(float), t) / (t[-1] - t[0]))
+
+
+def _condition(summary, name):
+    return next(c for c in summary["validity"]["conditions"] if c["name"] == name)
+
+
+@pytest.fixture(scope="module")
+def rolling_a():
+    return run(load("rolling-a-torque", NO_PLOTS))
+
+
+def test_rolling_a_torque_pulls_on_its_contact_and_needs_impossible_friction(rolling_a):
+    df, s = rolling_a.timeseries, rolling_a.summary
+    t, N, demand = (df[c].to_numpy(float) for c in ("t_s", "contact_force_N", "friction_demand"))
+    assert not s["validity"]["valid"]
+    assert {"contact_in_compression", "rolling_without_slip"} <= set(s["validity"]["violated"])
+    tension = _condition(s, "contact_in_compression")
+    assert tension["violated_share"] == pytest.approx(_share(t, N < 0), rel=1e-12)
+    assert 0.4 < tension["violated_share"] < 0.5                   # the contact pulls on about 46 % of the run
+    assert tension["worst"]["value"] == N.min() < -200 and tension["worst"]["t_s"] == t[np.argmin(N)]
+    assert tension["first_violation_t_s"] == t[np.argmax(N < 0)]
+    slip = _condition(s, "rolling_without_slip")
+    assert slip["bound"] == 0.3                                      # contact.friction's default
+    np.testing.assert_allclose(demand, np.abs(df["traction_force_N"]) / np.abs(N), rtol=1e-12)
+    assert slip["worst"]["value"] == demand.max() > 200             # a friction coefficient above 200
+    assert slip["violated_share"] == pytest.approx(_share(t, demand > 0.3), rel=1e-12)
+
+
+def test_rolling_crank_torque_is_in_tension_throughout():
+    result = run(load("rolling-crank-torque", NO_PLOTS))
+    N = result.timeseries["contact_force_N"].to_numpy(float)
+    tension = _condition(result.summary, "contact_in_compression")
+    assert N.max() < 0 and tension["violated_share"] == 1.0
+    assert "rolling_without_slip" in result.summary["validity"]["violated"]
+
+
+def test_stop_keeps_the_run_up_to_its_first_violation():
+    """A Geneva pin of 0.05 mm: the Hertz band outgrows 0.1 R mid-engagement (b/R peaks at 0.113). With
+    on_invalid = 'stop' the run is the full run's table up to and including the first violating row, its
+    failure code model_invalid, its events and warnings those until then."""
+    base = NO_PLOTS + ["duration='1.5 s'", "mechanism.pin_radius='0.05 mm'"]
+    full = run(load("geneva-lc1", base))
+    assert full.summary["validity"]["violated"] == ["hertz_half_width"]
+    t_v = _condition(full.summary, "hertz_half_width")["first_violation_t_s"]
+    stopped = run(load("geneva-lc1", base + ["output.on_invalid='stop'"]))
+    assert stopped.failure.code.value == "model_invalid" and stopped.failure.time == t_v
+    assert stopped.summary["failure_code"] == "model_invalid" and stopped.failure.mode == "engaged"
+    expected = full.timeseries[full.timeseries["t_s"] <= t_v].reset_index(drop=True)
+    assert len(expected) > 100 and stopped.timeseries["t_s"].iloc[-1] == t_v
+    pd.testing.assert_frame_equal(stopped.timeseries, expected)
+    ratio = stopped.timeseries["hertz_half_width_m"].to_numpy(float) / 0.05e-3
+    assert ratio[-1] > 0.1 >= np.nanmax(ratio[:-1])
+    assert (stopped.events["t_s"] <= t_v).all() and len(stopped.events) == (full.events["t_s"] <= t_v).sum()
+
+
+def test_console_and_report_show_the_violations(tmp_path):
+    out = tmp_path / "run"
+    result = invoke("run", "rolling-a-torque", "--out", out, "--set", "output.plots=false")
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.stderr.splitlines() if "leaves its validity" in line]
+    assert [line.split(" violated ")[0] for line in lines] == [
+        "warning: the model leaves its validity: contact_in_compression",
+        "warning: the model leaves its validity: rolling_without_slip"]
+    assert "45.6 % of the time" in lines[0] and "worst 228.7 at t = 1.73 s" in lines[1]
+    page = (out / "report.html").read_text()
+    section = page[page.index("<h2>Validity</h2>"):page.index("<h2>Energy")]
+    for name in ("contact_in_compression", "rolling_without_slip"):
+        assert f"<td>{name}</td><td>VIOLATED</td>" in section
+    assert "<td>dead_point_distance</td><td>holds</td>" in section
+    assert json.loads((out / "summary.json").read_text())["validity"]["valid"] is False
+
+
+@pytest.mark.parametrize("name", ["rolling-a-torque", "rolling-crank-torque"])
+def test_on_invalid_stop_exits_3_with_the_results_written(tmp_path, name):
+    out = tmp_path / "run"
+    result = invoke("run", name, "--out", out, "--set", "output.plots=false", "--set", "output.on_invalid=stop")
+    assert result.exit_code == 3, result.output
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith("failed: stopped at t = 0 s") and "the model leaves its validity" in last
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failure_code"] == "model_invalid" and not summary["success"]
+    table = pd.read_parquet(out / "timeseries.parquet")
+    assert len(table) >= 1 and table["t_s"].iloc[-1] <= 0.0
+    assert (out / "report.html").exists() and (out / "events.csv").exists()
+
+
+def test_geneva_stays_valid_its_hertz_band_narrow_against_the_pin():
+    result = run(load("geneva-lc1", NO_PLOTS + ["duration='1.5 s'", "output.on_invalid='stop'"]))
+    assert result.success and result.summary["validity"] == {**result.summary["validity"], "valid": True,
+                                                              "violated": []}
+    band = _condition(result.summary, "hertz_half_width")
+    df, m = result.timeseries, result.scenario["mechanism"]
+    R, length, E_star = m["pin_radius"], m["thickness"], 113.74e9      # steel on steel (docs/theory.md §G3)
+    b = np.sqrt(4 * df["contact_force_N"].abs().to_numpy(float) * R / (np.pi * length * E_star))   # Hertz
+    assert band["worst"]["value"] == pytest.approx(b.max() / R, rel=1e-4) and band["worst"]["value"] < 0.1
+    assert band["violated_share"] == 0.0 and 0 < band["applies_share"] < 1      # evaluated in contact only
+
+
+def test_the_seed_flash_formula_is_checked_against_its_peclet_range():
+    """thermal.flash = 'seed-blok' (seed S(13)) holds for 0.1 < L < 5, L = b omega1 r/(2 chi) as the seed evaluates
+    it: load case 1 stays inside. At constant crank speed L grows as b, i.e. as sqrt(N): the seed's 0.583 at
+    93.33 N (docs/theory.md §G7 row 11, U = 0.4005 m/s) scales to the run's extremes of the contact force."""
+    result = run(load("geneva-lc1", NO_PLOTS + ["duration='1.5 s'", "thermal.flash='seed-blok'"]))
+    low, high = (_condition(result.summary, n) for n in ("flash_peclet_low", "flash_peclet_high"))
+    assert result.summary["validity"]["valid"]
+    N = result.timeseries["contact_force_N"].abs().to_numpy(float)
+    N = N[N > 0]
+    assert high["worst"]["value"] == pytest.approx(0.583 * np.sqrt(N.max() / 93.33), rel=1e-3)
+    assert low["worst"]["value"] == pytest.approx(0.583 * np.sqrt(N.min() / 93.33), rel=1e-3)
+    assert 0.1 < low["worst"]["value"] < high["worst"]["value"] < 5
