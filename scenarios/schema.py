@@ -142,6 +142,8 @@ def check_range(where: str, spec: Field, out: float, value) -> None:
             raise ScenarioError(where, f"must be at most {huge:g}{unit} in magnitude ({reason}), got {_shown(value)}")
         if spec.positive and out < tiny:
             raise ScenarioError(where, f"must be at least {tiny:g}{unit} ({reason}), got {_shown(value)}")
+        if spec.nonnegative and 0.0 < out < tiny:
+            raise ScenarioError(where, f"must be 0 or at least {tiny:g}{unit} ({reason}), got {_shown(value)}")
 
 
 def check_field(where: str, spec: Field, value):

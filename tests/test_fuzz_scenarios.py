@@ -187,9 +187,12 @@ def test_every_quantity_unit_has_a_physical_range():
         assert isinstance(registry().Quantity(1, unit), pint.Quantity)
 
 
-def test_valid_values_are_not_refused():
-    """Every built-in scenario validates, and values at the edge of the ranges are accepted."""
+def test_valid_values_are_not_refused(monkeypatch):
+    """Every built-in scenario validates, and values at the edge of the ranges are accepted (the memory estimate,
+    which depends on the machine, lifted: the row count's own limit is the edge here)."""
+    from mechsim.scenarios import schema
     from mechsim.scenarios.loader import builtin_names, load
+    monkeypatch.setattr(schema, "memory_budget", lambda: math.inf)
     for name in builtin_names():
         assert load(name).si["duration"] > 0, name
     si = load("geneva-lc1", ["mechanism.slots=72", "contact.friction=2", "initial.crank_angle=-180 deg",

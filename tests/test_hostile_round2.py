@@ -128,3 +128,11 @@ def test_a_refused_run_writes_no_unit_cache(tmp_path):
                         "--out", str(tmp_path / "o")], env=env, capture_output=True, text=True, timeout=300)
     assert p.returncode == 2 and "pin_radius" in p.stderr
     assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").iterdir())
+
+
+def test_a_denormal_where_zero_is_allowed_is_refused():
+    from mechsim.scenarios.loader import load
+    with pytest.raises(ScenarioError) as e:
+        load("chain-mech2-torque", ['mechanism.chain_mass="1e-320 kg"'])
+    assert e.value.field == "mechanism.chain_mass" and "0 or at least" in e.value.problem
+    assert load("chain-mech2-torque", ['mechanism.chain_mass="0 kg"']).si["mechanism"]["chain_mass"] == 0.0
