@@ -136,3 +136,55 @@ def test_a_denormal_where_zero_is_allowed_is_refused():
         load("chain-mech2-torque", ['mechanism.chain_mass="1e-320 kg"'])
     assert e.value.field == "mechanism.chain_mass" and "0 or at least" in e.value.problem
     assert load("chain-mech2-torque", ['mechanism.chain_mass="0 kg"']).si["mechanism"]["chain_mass"] == 0.0
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every process below `pid` (read from /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="reads the process tree from /proc")
+def test_pool_workers_die_with_a_killed_sweep(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+    p = subprocess.Popen([sys.executable, "-m", "mechsim.scenarios.cli", "sweep", "geneva-motor", "--vary",
+                          "load.wheel_torque=0:6:200 N*m", "--set", "duration=60 s", "--workers", "2", "--quiet",
+                          "--out", str(tmp_path / "s")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline, below = time.monotonic() + 180, set()
+        while time.monotonic() < deadline and len(below) < 3 and p.poll() is None:
+            time.sleep(0.2)
+            below = _descendants(p.pid)
+        assert len(below) >= 3                          # the fork server and its two workers, busy
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(c) for c in below):
+            time.sleep(0.2)
+        assert not [c for c in below if _alive(c)]
+    finally:
+        if p.poll() is None:
+            p.kill()

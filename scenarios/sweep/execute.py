@@ -14,6 +14,7 @@ import logging
 import os
 import signal
 import socket
+import threading
 import time
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -96,6 +97,8 @@ CHUNK_SECONDS = 0.15
 #: call to be sent, and an interruption drops at most this many calls' unfinished cases per worker)
 CHUNK_MAX = 32
 IN_FLIGHT_PER_WORKER = 2
+#: how often a pool worker checks that the sweep that started it is still alive (s)
+PARENT_POLL_S = 0.5
 
 
 class ChunkSizer:
@@ -120,9 +123,23 @@ class ChunkSizer:
         return max(1, min(CHUNK_MAX, by_time, share))
 
 
-def _ignore_sigint() -> None:
-    """Pool workers leave Ctrl-C to the main process, which stops the pool and keeps what finished."""
+def _worker_start(parent: int) -> None:
+    """A pool worker leaves Ctrl-C to the main process (which stops the pool and keeps what finished), and dies
+    with it: a watcher thread ends the worker once the process `parent` is gone (a kill -9 of the sweep runs no
+    clean-up, and the workers' own parent is the fork server, not the sweep)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def watch() -> None:
+        while True:
+            time.sleep(PARENT_POLL_S)
+            try:
+                os.kill(parent, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except OSError:
+                pass                    # alive, another user's: keep going
+
+    threading.Thread(target=watch, name="mechsim-parent-watch", daemon=True).start()
 
 
 class SerialRunner:
@@ -176,7 +193,7 @@ class PoolRunner:
         if not tasks:
             return
         ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=self.context,
-                                 initializer=_ignore_sigint)
+                                 initializer=_worker_start, initargs=(os.getpid(),))
         queue = deque(tasks)
         sizer = ChunkSizer(self.workers)
         pending: dict = {}              # future -> its chunk, at most IN_FLIGHT_PER_WORKER chunks a worker
