@@ -2,7 +2,7 @@
 
 - mechsim's IDA backend in each formulation (`ida-index1`, `ida-index2`, `ida-index3`);
 - mechsim's diffrax backend, explicit and implicit (`diffrax-Tsit5`, `diffrax-Dopri8`, `diffrax-Kvaerno5`),
-  when `dynamics.diffrax_backend` is importable;
+  when `dynamics.backends.diffrax_backend` is importable;
 - the peers a user would pick instead, on the same equations in the same process (for the Geneva only: they
   are written for its equations, `Method.mechanisms`; other mechanisms bench mechsim's methods alone): scipy `solve_ivp`
   (`scipy-Radau`, `scipy-BDF`, `scipy-LSODA`, `scipy-DOP853`) on the reduced-coordinate ODE of
@@ -167,7 +167,7 @@ class DiffraxMethod(Method):
                               baumgarte_beta=b, method="dae", diffrax_solver=self.solver, max_steps=self.max_steps)
 
     def _simulate(self, problem, rtol, atol):
-        from mechsim.dynamics.diffrax_backend import simulate
+        from mechsim.dynamics.hybrid import simulate
         return simulate(problem.mech, problem.drive, self.settings(problem, rtol, atol), problem.duration,
                         problem.dt_out, problem.angle0, problem.speed0, ext=problem.ext,
                         ext_initial=problem.ext_initial)
@@ -175,7 +175,7 @@ class DiffraxMethod(Method):
     def setup(self, problem, rtol, atol):
         wall = time.perf_counter()
         traj = self._simulate(problem, rtol, atol)        # compiles the per-mode solves at first use
-        from mechsim.dynamics.diffrax_backend import IMPLICIT
+        from mechsim.dynamics.backends.diffrax_common import IMPLICIT
         if self.solver in IMPLICIT:   # the stage root finder takes the tolerances as constants
             return traj, traj.stats.get("compile_time_s", 0.0) or (time.perf_counter() - wall), "per tolerance"
         # explicit solvers: the tolerances are traced arguments, one compilation per model structure

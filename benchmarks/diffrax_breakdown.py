@@ -1,5 +1,5 @@
 """Where mechsim diffrax's warm time goes on the benchmark's case A: the compiled calls alone against the whole run,
-for the compiled whole-run loop (`dynamics/diffrax_run.py`, the default) and the segment loop (one compiled solve
+for the compiled whole-run loop (`dynamics/backends/diffrax_run.py`, the default) and the segment loop (one compiled solve
 per segment) (docs/benchmarks.md, "diffrax: the compiled run, and what bounds it").
 
     python -m mechsim.benchmarks.diffrax_breakdown [--rounds 7]
@@ -21,7 +21,7 @@ from mechsim.benchmarks.peer_bench import CASES
 from dataclasses import replace
 
 from mechsim.dynamics import hybrid
-from mechsim.dynamics.diffrax_backend import DiffraxBackend, compiled_solve, default_options
+from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend, compiled_solve, default_options
 
 
 class TimedDiffrax(DiffraxBackend):

@@ -4,7 +4,7 @@ For the work-precision benchmark only. The SUNDIALS IDA memory pointer is the fi
 scikit-sundae's `_cy_ida.IDA` extension object (after the object header and Cython's vtable pointer), and
 `NEQ` follows eight pointers later; the pointer is used only when that `NEQ` equals the system size and
 IDA's residual count read through it equals the count scikit-sundae reports, otherwise the counters are
-reported as unavailable. `counting()` registers an observer in `dynamics.ida.SOLVE_OBSERVERS` that reads the
+reported as unavailable. `counting()` registers an observer in `dynamics.backends.ida.SOLVE_OBSERVERS` that reads the
 counters after each segment's solve, and removes it on exit.
 """
 from __future__ import annotations
@@ -58,9 +58,9 @@ def read(solver, neq: int, nfev: int) -> dict | None:
 
 @contextmanager
 def counting():
-    """Within the block, every IDA segment of `dynamics.ida` adds its counters to the yielded dict
+    """Within the block, every IDA segment of `dynamics.backends.ida` adds its counters to the yielded dict
     (values are NaN when they could not be read); through the module's documented SOLVE_OBSERVERS hook."""
-    from mechsim.dynamics.ida import SOLVE_OBSERVERS
+    from mechsim.dynamics.backends.ida import SOLVE_OBSERVERS
 
     totals = {name: 0.0 for name in COUNTERS}
 

@@ -15,7 +15,7 @@ import pandas as pd
 
 import mechsim
 from mechsim.scenarios import runner
-from mechsim.scenarios.sensitivity import cycle_temperatures, cycle_window
+from mechsim.scenarios.studies.sensitivity import cycle_temperatures, cycle_window
 
 NAME = "geneva-seed-lc1-mu015"
 #: the seed's load case 1 with the motor of geneva-motor's speed class (docs/sensitivity.md)
@@ -23,7 +23,7 @@ SETS = ["duration=1 h", "drive.type=motor", "drive.no_load_speed=8 rad/s", "ther
 RADIUS_FACTORS = (0.995, 0.999, 1.0, 1.001)
 TORQUE_FACTORS = (0.98, 0.99, 0.995, 1.0, 1.005, 1.01, 1.02)
 LIMIT_C, LIMIT_S = 60.0, 0.3
-#: a limit counts as met within this fraction of it (scenarios/sizing.py FEASIBLE)
+#: a limit counts as met within this fraction of it (scenarios/studies/sizing.py FEASIBLE)
 FEASIBLE = 1e-8
 
 

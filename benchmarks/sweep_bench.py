@@ -31,9 +31,9 @@ import numpy as np
 import pandas as pd
 
 from mechsim.scenarios.loader import sections_for
-from mechsim.scenarios.sweep.execute import DaskRunner, PoolRunner, SerialRunner
-from mechsim.scenarios.sweep.run import plan, run_sweep
-from mechsim.scenarios.sweep.spec import SweepSpec, parse_vary
+from mechsim.scenarios.studies.sweep.execute import DaskRunner, PoolRunner, SerialRunner
+from mechsim.scenarios.studies.sweep.run import plan, run_sweep
+from mechsim.scenarios.studies.sweep.spec import SweepSpec, parse_vary
 
 TARGET_S = 30.0
 COMPARE = ("peak_contact_force_N", "peak_drive_torque_N_m", "cycle_time_s", "work_drive_per_cycle_J",

@@ -6,23 +6,17 @@ mode from a consistent state (a `Request`) to the first guard crossing, the end 
 choosing, and returns a `Segment`. Every backend reports the same statistics keys (`dynamics/stats.py`); the
 counters of one segment travel in `Segment.counts`.
 
-A backend is a class with:
-
-- `name` (the `solver.backend` value), `solver` (a label for the summary), `unavailable` (statistics it cannot
-  report, with the reason), `notes` (how a reported number is obtained when it is not a plain count),
-  `initial_step` (first trial step of a run, 0 = the integrator's own estimate), `recoverable` (failure codes
-  after which the loop re-initialises and tries again);
-- `integrate(request) -> Segment`;
-- `hint(code) -> str`: what a user can change after a failure with that code.
-
-Adding a backend is one new module in `dynamics/` and its line in `REGISTRY`; the loop does not change.
+A backend is a subclass of `Backend` (below): what it must provide, and the optional capabilities with their
+defaults (a whole run in one call; naming a failure's cause). Adding a backend is one new module in
+`dynamics/backends/` and its line in `REGISTRY`; the loop does not change.
 """
 from __future__ import annotations
 
 import importlib
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, ClassVar
 
 import numpy as np
 
@@ -30,12 +24,13 @@ from mechsim.dynamics.result import FailureCode
 
 if TYPE_CHECKING:      # the contract is imported by the settings: no sympy model behind it
     from mechsim.dynamics.model import DerivedModel, ModeFunctions
+    from mechsim.dynamics.settings import SolverSettings
 
 #: solver.backend value -> "module:class" of its backend (imported on first use: diffrax pulls in JAX)
 REGISTRY = {
-    "ida": "mechsim.dynamics.ida:IdaBackend",
-    "ida-compiled": "mechsim.dynamics.ida_compiled:IdaCompiledBackend",
-    "diffrax": "mechsim.dynamics.diffrax_backend:DiffraxBackend",
+    "ida": "mechsim.dynamics.backends.ida:IdaBackend",
+    "ida-compiled": "mechsim.dynamics.backends.ida_compiled:IdaCompiledBackend",
+    "diffrax": "mechsim.dynamics.backends.diffrax_backend:DiffraxBackend",
 }
 
 
@@ -85,10 +80,54 @@ class Segment:
     next_step: float = 0.0               # a first step for the next segment (0: the integrator's estimate)
 
 
-def backend_for(name: str, settings, **options):
-    """The backend registered under `name`, built for these solver settings."""
+class Backend(ABC):
+    """What the hybrid loop needs of an integrator.
+
+    Required: `name` (the `solver.backend` value), `solver` (a label for the summary), `integrate(request) ->
+    Segment`, `hint(code) -> str` (what a user can change after a failure with that code).
+    Declared with defaults: `initial_step` (first trial step of a run, 0 = the integrator's own estimate),
+    `recoverable` (failure codes after which the loop re-initialises and tries again), `unavailable`
+    (statistics it cannot report, with the reason), `notes` (how a reported number is obtained when it is not
+    a plain count).
+    Optional capabilities:
+    - `whole_run(mech, start, t0, t_end, progress) -> Trajectory | None`: the whole run in one call (a compiled
+      loop of its own); None as an attribute when the backend has none, None as a result where it does not
+      apply to this run. The loop then runs segment by segment.
+    - `explain(traj, settings, t_end) -> dict | None`: the trajectory's failure with its cause named where the
+      integrator reports only a symptom (a class method: called with the settings, no backend built).
+    """
+
+    name: ClassVar[str]
+    solver: str
+    initial_step: ClassVar[float] = 0.0
+    recoverable: ClassVar[frozenset] = frozenset()
+    unavailable: dict = {}
+    notes: dict = {}
+    whole_run: Callable | None = None
+
+    @abstractmethod
+    def integrate(self, request: Request) -> Segment:
+        """One mode from the request's consistent state to the first guard crossing, its end time or a pause."""
+
+    @abstractmethod
+    def hint(self, code: FailureCode) -> str:
+        """What a user can change after a failure with this code."""
+
+    @classmethod
+    def explain(cls, traj, settings: SolverSettings, t_end: float) -> dict | None:
+        """The trajectory's failure dict, with its cause named where the backend can (default: as it is)."""
+        return traj.failure
+
+
+def backend_class(name: str) -> type[Backend]:
+    """The backend class registered under `name` (its module imported on first use)."""
     try:
         module, cls = REGISTRY[name].split(":")
     except KeyError:
         raise ValueError(f"solver.backend must be one of {', '.join(REGISTRY)}; got {name!r}") from None
-    return getattr(importlib.import_module(module), cls)(settings, **options)
+    return getattr(importlib.import_module(module), cls)
+
+
+def backend_for(name: str, settings, **options) -> Backend:
+    """The backend registered under `name`, built for these solver settings."""
+    return backend_class(name)(settings, **options)

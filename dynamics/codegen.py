@@ -57,7 +57,7 @@ def source_of(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, S
               outputs: Sequence[tuple[str, sp.Expr]], prologue: Sequence[str] = (), result: str | None = None,
               indexed: bool = True) -> str:
     """The source `emit` compiles. indexed=True unpacks each symbol by indexing (`a = y[0]`), the form numba
-    compiles (dynamics/compiled_model.py); False converts the array to a list once (fastest in CPython)."""
+    compiles (dynamics/backends/compiled_model.py); False converts the array to a list once (fastest in CPython)."""
     printer = _Printer({"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": False})
     exprs = [sp.sympify(e) for _, e in outputs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_x"), optimizations="basic")

@@ -119,8 +119,8 @@ def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: flo
     `settings.backend` names, see `dynamics.backend.REGISTRY`)."""
     backend = backend if backend is not None else backend_for(settings.backend, settings)
     start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, t0)
-    whole_run = getattr(backend, "whole_run", None)     # a backend that can run everything in one compiled call
-    traj = whole_run(mech, start, t0, t_end, progress) if whole_run else None
+    # a backend that can run everything in one compiled call (`Backend.whole_run`, None where it cannot)
+    traj = backend.whole_run(mech, start, t0, t_end, progress) if backend.whole_run is not None else None
     if traj is not None:
         return traj
     loop = hybrid_loop(mech, start, settings, backend, t0, t_end, progress)
@@ -152,7 +152,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     It owns guards and transitions (`apply_transition`), re-initialisation, recoveries from integrator failures
     (`recover`), events stepped over when root-finding is off (`stepped_over`), chattering, output pieces,
     statistics (same keys for every backend) and failures (a `FailureCode` each). Written as a generator so
-    that one loop also serves many lanes advanced together (`dynamics.diffrax_batch`).
+    that one loop also serves many lanes advanced together (`dynamics.backends.diffrax_batch`).
     """
     model, values, mode, t_out, mf, p, y, yp, offset = (start.model, start.values, start.mode, start.t_out,
                                                          start.mf, start.p, start.y, start.yp, start.offset)

@@ -8,7 +8,7 @@ first such row instead of writing it. Checked once per run on the finished table
   is larger than what the integrator resolves, so the bound is -|F_f| du with du = K (rtol max|u| + atol*1 m)
   (velocities carry atol in rad/s; the lever arm is taken as 1 m, above every mechanism's size);
 - heat generated >= 0: the heat rate as friction power, the generated heat not below its start by more than
-  K (rtol max|E_heat| + atol max(1, max|E_heat|)) (its integrator weight, dynamics/ida.atol_vector);
+  K (rtol max|E_heat| + atol max(1, max|E_heat|)) (its integrator weight, dynamics/backends/ida.atol_vector);
 - the energy balance closes on every row: work of drive, load, friction and damping (all signed into the
   system) = change of kinetic energy + energy lost in impacts up to that row. Integrated runs: within
   K (rtol S + atol max(1, S)), S = sum of the largest |work| of each kind + the largest kinetic energy (the

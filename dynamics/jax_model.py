@@ -17,9 +17,10 @@ from typing import Callable
 
 import jax
 
-from mechsim.dynamics import user_cache, xla_options
+from mechsim.dynamics import user_cache
+from mechsim.dynamics.backends import xla_options
 
-xla_options.request()  # XLA's CPU options, before JAX starts its backend (dynamics/xla_options.py)
+xla_options.request()  # XLA's CPU options, before JAX starts its backend (dynamics/backends/xla_options.py)
 jax.config.update("jax_enable_x64", True)
 user_cache.use_for_jax(jax)        # compiled programs reused across processes (dynamics/user_cache.py)
 

@@ -198,7 +198,7 @@ class Transition:
 @dataclass(frozen=True)
 class SymbolicTransition:
     """A transition written as expressions, so that a compiled hybrid loop can apply it without calling back
-    into Python (`Mechanism.symbolic_transitions`; dynamics/diffrax_run.py).
+    into Python (`Mechanism.symbolic_transitions`; dynamics/backends/diffrax_run.py).
 
     mode: the next mode, or None for a transition the compiled loop must not take itself (a stop, or anything
         only `on_guard` can decide): the loop hands the state back to `on_guard` there.

@@ -36,7 +36,7 @@ def _override_list(overrides: Overrides) -> list[str]:
     if isinstance(overrides, str):
         return [overrides]
     if isinstance(overrides, Mapping):
-        from mechsim.scenarios.sweep.spec import toml_literal
+        from mechsim.scenarios.keys import toml_literal
         return [f"{key}={toml_literal(value)}" for key, value in overrides.items()]
     return [str(o) for o in overrides]
 
@@ -118,7 +118,7 @@ def compare(scenario: Scenario | str | Path, set: Overrides = None, rtol: float 
     compare`): a DataFrame, one row per column (max |diff|, max relative, where, tolerance, passed);
     `.attrs["passed"]` says whether the backends agree, `.attrs` also holds row and event counts, the event-time
     difference, failures and each run's solver statistics."""
-    from mechsim.scenarios.compare import compare as compare_backends
+    from mechsim.scenarios.studies.compare import compare as compare_backends
     if not 0 < rtol < 1:
         raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     target = scenario if isinstance(scenario, Scenario) else str(scenario)
@@ -144,9 +144,9 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
     import pandas as pd
 
     from mechsim.scenarios.output.paths import default_folder as results_folder
-    from mechsim.scenarios.sweep.execute import make_runner
-    from mechsim.scenarios.sweep.run import check_runner_options, exit_code, plan, run_sweep
-    from mechsim.scenarios.sweep.spec import build_spec
+    from mechsim.scenarios.studies.sweep.execute import make_runner
+    from mechsim.scenarios.studies.sweep.run import check_runner_options, exit_code, plan, run_sweep
+    from mechsim.scenarios.studies.sweep.spec import build_spec
     check_runner_options(workers, dask_local, scheduler)
     if isinstance(vary, Mapping):
         vary = [f"{key}={spec}" for key, spec in vary.items()]
@@ -178,7 +178,7 @@ def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: s
     of: quantities (default: all), e.g. "peak_contact_force_N,index_time_s". Raises ScenarioError on a key or
     quantity that is not traced, and `SensitivityUnavailable` (a ValueError) where the derivative does not exist on
     this run (a grazing event, a transition that recomputes a traced value)."""
-    from mechsim.scenarios.sensitivity import sensitivity as sensitivity_table
+    from mechsim.scenarios.studies.sensitivity import sensitivity as sensitivity_table
     if not isinstance(scenario, Scenario):
         scenario = load(scenario, set)
     elif set:
@@ -203,9 +203,9 @@ def size(scenario: Scenario | str | Path, vary: str | Iterable[str] | Mapping[st
 
     vary: ["section.key=LOW:HIGH unit", ...] or {"section.key": "LOW:HIGH unit"}; `mechanism.slots=3:6` enumerates
     the slot counts. subject_to: ["peak_contact_force_N <= 500", ...]. Raises ScenarioError on a bad request and
-    `mechsim.scenarios.sizing.SizingFailed` (a RuntimeError, `.result` holding what ran) without a feasible
+    `mechsim.scenarios.studies.sizing.SizingFailed` (a RuntimeError, `.result` holding what ran) without a feasible
     optimum."""
-    from mechsim.scenarios.sizing import size as size_design
+    from mechsim.scenarios.studies.sizing import size as size_design
     if not isinstance(scenario, Scenario):
         scenario = load(scenario, set)
     elif set:

@@ -258,7 +258,7 @@ def _print_compare(table, fmt: str) -> None:
     (data only on stdout; notes and failures on stderr)."""
     from rich.table import Table
 
-    from mechsim.scenarios.compare import render
+    from mechsim.scenarios.studies.compare import render
     a = table.attrs
     sv = a["solver"]
     notes = [f"rows {a['rows']}, events {a['events']}, max event-time difference {a['event_time_max_diff_s']:.3g} s; "
@@ -309,7 +309,7 @@ def sweep(
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
     from mechsim.scenarios.api import sweep as run_sweep
-    from mechsim.scenarios.sweep.run import RichProgress
+    from mechsim.scenarios.studies.sweep.run import RichProgress
     try:
         with RichProgress(err.console, f"sweep {Path(target).stem}", disable=quiet) as bar:
             table = run_sweep(target, vary, set_, zip_, out_dir, workers, timeseries, plots, force, batch,
@@ -439,7 +439,7 @@ def sensitivity(
         _fail(f"sensitivity: {exc}", SOLVER_FAILURE)
     except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
         _fail(f"sensitivity: stopped on an internal error ({_internal_error(exc)})", SOLVER_FAILURE)
-    from mechsim.scenarios.sensitivity import write_sensitivity
+    from mechsim.scenarios.studies.sensitivity import write_sensitivity
     try:
         write_sensitivity(table, target, force=force)
     except ScenarioError as exc:
@@ -497,7 +497,7 @@ def size(
     design.toml (a scenario that runs), convergence.csv, convergence.png and summary.json."""
     from mechsim.scenarios import api
     from mechsim.scenarios.console import native_output
-    from mechsim.scenarios.sizing import SizingFailed
+    from mechsim.scenarios.studies.sizing import SizingFailed
     failed = None
     try:
         sc = api.load(scenario, set_)

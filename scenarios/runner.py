@@ -238,10 +238,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     else:
         speed0 = drive.speed if drive.is_prescribed else si["initial"][speed_key]
         if integrate is None:   # a caller (the batched sweep) may supply the backend call itself
-            if settings.backend == "diffrax":
-                from mechsim.dynamics.diffrax_backend import simulate as integrate
-            else:               # imported here: a closed-form run derives no DAE and need not load sympy
-                from mechsim.dynamics.hybrid import simulate as integrate
+            # imported here: a closed-form run derives no DAE and need not load sympy
+            from mechsim.dynamics.hybrid import simulate as integrate
         traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)
@@ -250,8 +248,9 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         stats = traj.stats
         warnings += traj.warnings
         if traj.failure:
-            from mechsim.scenarios.diagnose import explain
-            f = explain(traj, settings, si["duration"])     # names the cause where the backend gives a symptom
+            from mechsim.dynamics.backend import backend_class
+            # names the cause where the backend gives a symptom
+            f = backend_class(settings.backend).explain(traj, settings, si["duration"])
             where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),

@@ -107,7 +107,7 @@ def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, s
     row), with the relative step steps[key] for each key of `wrt` (set in SI, the table's `wrt_unit`); returns the
     largest relative deviation per quantity (`assert_matches_finite_differences`)."""
     import mechsim
-    from mechsim.scenarios.sensitivity import PEAKS
+    from mechsim.scenarios.studies.sensitivity import PEAKS
     df = mechsim.run(mechsim.load(name, set=fd_sets)).timeseries
     peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
     rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}

@@ -1,7 +1,8 @@
 """A backend wrapper for tests that look at what the hybrid loop asked the integrator (dynamics/backend.py)."""
+from mechsim.dynamics.backend import Backend
 
 
-class Recording:
+class Recording(Backend):
     """Wraps a backend and keeps every request it integrates and every segment it returns."""
 
     def __init__(self, inner):

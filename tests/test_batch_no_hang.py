@@ -1,4 +1,4 @@
-"""A batched sweep of 64 lanes returns (dynamics/xla_options.py, option 2).
+"""A batched sweep of 64 lanes returns (dynamics/backends/xla_options.py, option 2).
 
 With XLA's concurrency-optimised scheduler (its default), the vmapped segment solve of 64 geneva-lc1 lanes hung
 in about one call in five (the calling thread waiting for the program, every XLA worker waiting for work), from
@@ -20,8 +20,8 @@ SCRIPT = """
     import numpy as np
     from mechsim.scenarios.loader import build_mechanism, load
     from mechsim.scenarios.runner import make_drive, solver_settings
-    from mechsim.dynamics.diffrax_batch import last_batch, simulate_batch
-    from mechsim.dynamics import xla_options
+    from mechsim.dynamics.backends.diffrax_batch import last_batch, simulate_batch
+    from mechsim.dynamics.backends import xla_options
     calls = []
     for mu, torque in itertools.product(np.linspace(0.05, 0.3, 8), np.linspace(2, 12, 8)):
         si = load("geneva-lc1", ["solver.backend='diffrax'", "solver.method='dae'", f"contact.friction={mu}",

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-import mechsim.scenarios.compare as cmp
+import mechsim.scenarios.studies.compare as cmp
 from mechsim.scenarios.cli import app
 
 

@@ -5,7 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import mechsim.dynamics.diffrax_backend as dbk
+import mechsim.dynamics.backends.diffrax_backend as dbk
+from mechsim.dynamics.backends.diffrax_common import PatientVeryChord
+from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
@@ -23,7 +25,7 @@ SETTINGS = SolverSettings(backend="diffrax", rtol=1e-10, atol=1e-12)
 @pytest.fixture(scope="module")
 def prescribed(seed_geometry):
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15)
-    traj = dbk.simulate(mech, Drive("speed", speed=W1), SETTINGS, 2.5, 1e-3, -np.pi, W1)
+    traj = simulate(mech, Drive("speed", speed=W1), SETTINGS, 2.5, 1e-3, -np.pi, W1)
     return mech, traj, timeseries(traj, mech.angle_coordinates)
 
 
@@ -50,7 +52,8 @@ def test_rows_are_in_the_ida_layout(seed_geometry, prescribed):
     residual vanishes. (The compiled whole run's rows are states only: tests/test_diffrax_run.py.)"""
     mech, _, _ = prescribed
     options = replace(dbk.default_options(SETTINGS), compiled_run=False)
-    traj = dbk.simulate_with(options, mech, Drive("speed", speed=W1), SETTINGS, 1.0, 1e-3, -np.pi, W1)
+    traj = simulate(mech, Drive("speed", speed=W1), SETTINGS, 1.0, 1e-3, -np.pi, W1,
+                    backend=dbk.DiffraxBackend(SETTINGS, options))
     model = traj.model
     assert traj.failure is None, traj.failure
     for piece in traj.pieces[1:4]:
@@ -90,7 +93,7 @@ def test_failure_is_a_value(seed_geometry):
     had, with a failure dict (time, mode, reason, where, hint), and does not raise."""
     mech = Geneva(seed_geometry, J1, J2, wheel_torque=7.0, friction=0.15, crank_damping=0.002, wheel_damping=0.001)
     settings = replace(SETTINGS, baumgarte_alpha=1e6, baumgarte_beta=1e6)
-    traj = dbk.simulate(mech, Drive("motor", stall_torque=40.0, no_load_speed=8.0), settings, 1.0, 2e-3, -np.pi, W1)
+    traj = simulate(mech, Drive("motor", stall_torque=40.0, no_load_speed=8.0), settings, 1.0, 2e-3, -np.pi, W1)
     f = traj.failure
     assert f is not None
     assert set(f) >= {"time", "mode", "reason", "where", "hint"}
@@ -108,7 +111,7 @@ def test_implicit_solver_agrees_with_explicit(seed_geometry, prescribed):
     """Kvaerno5 (implicit) on the same prescribed-speed run: same events, wheel angle within 1e-7 rad."""
     mech, traj, df = prescribed
     settings = replace(SETTINGS, diffrax_solver="Kvaerno5", rtol=1e-9, atol=1e-11)
-    traj5 = dbk.simulate(mech, Drive("speed", speed=W1), settings, 0.8, 1e-3, -np.pi, W1)
+    traj5 = simulate(mech, Drive("speed", speed=W1), settings, 0.8, 1e-3, -np.pi, W1)
     assert traj5.failure is None, traj5.failure
     df5 = timeseries(traj5, mech.angle_coordinates)
     n = len(df5)
@@ -127,7 +130,7 @@ def test_implicit_solver_agrees_with_explicit(seed_geometry, prescribed):
 def test_patient_verychord_terminates_only_on_convergence_or_divergence(step, size, prev, done, ok):
     import optimistix as optx
     from types import SimpleNamespace
-    finder = dbk.PatientVeryChord(rtol=1e-8, atol=1e-10, kappa=0.1)
+    finder = PatientVeryChord(rtol=1e-8, atol=1e-10, kappa=0.1)
     state = SimpleNamespace(step=np.array(step), diffsize=np.array(size), diffsize_prev=np.array(prev),
                             result=optx.RESULTS.successful)
     terminate, result = finder.terminate(None, None, None, {}, state, frozenset())

@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mechsim.scenarios.cli import app
-from mechsim.scenarios.compare import column_table, compare, tolerance_for
+from mechsim.scenarios.studies.compare import column_table, compare, tolerance_for
 
 RTOL = 1e-10   # both backends; every test here shares one compiled diffrax solve per mode
 
@@ -84,7 +84,7 @@ def test_column_table_fails_beyond_tolerance():
 
 
 def test_cli_compare_exits_1_when_backends_disagree(monkeypatch):
-    import mechsim.scenarios.compare as cmp
+    import mechsim.scenarios.studies.compare as cmp
 
     def disagreeing(*args, **kwargs):
         table = pd.DataFrame([dict(column="wheel_angle_rad", max_abs_diff=1e-3, max_rel_diff=1e-3, t_s=0.5,

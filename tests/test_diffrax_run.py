@@ -1,4 +1,4 @@
-"""The compiled whole-run diffrax loop (dynamics/diffrax_run.py, issue 13 item 3): the Geneva's transition table
+"""The compiled whole-run diffrax loop (dynamics/backends/diffrax_run.py, issue 13 item 3): the Geneva's transition table
 against `on_guard`, and case A of the peer benchmark against the independent reference, the segment loop and IDA."""
 from dataclasses import replace
 
@@ -7,10 +7,11 @@ import pytest
 
 from mechsim.benchmarks.bench import BenchConfig, make_problem, reference
 from mechsim.benchmarks.peer_bench import CASES
-from mechsim.dynamics import diffrax_run, hybrid
-from mechsim.dynamics.diffrax_backend import DiffraxBackend, default_options, mode_z
+from mechsim.dynamics import hybrid
+from mechsim.dynamics.backends import diffrax_run
+from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend, default_options, mode_z
 from mechsim.dynamics.jax_model import jax_model
-from mechsim.dynamics.jax_transitions import jax_transitions
+from mechsim.dynamics.backends.jax_transitions import jax_transitions
 from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table

@@ -137,7 +137,7 @@ def test_resume_recomputes_corrupt_cases_and_says_so(tmp_path):
     edited.write_text(json.dumps(rec))
     ts = out / "timeseries" / (series_broken.stem + ".parquet")
     ts.write_bytes(ts.read_bytes()[:-100])
-    from mechsim.scenarios.sweep.store import _host_tag
+    from mechsim.scenarios.studies.sweep.store import _host_tag
     junk = out / "cases" / f".x.json.tmp-{_dead_pid()}-{_host_tag()}-abc"       # a temporary file of a killed sweep
     junk.write_text("{")
     r = invoke("sweep", *SWEEP, "--timeseries", "--out", out)

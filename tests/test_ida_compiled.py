@@ -1,4 +1,4 @@
-"""The compiled IDA backend (`solver.backend = "ida-compiled"`, dynamics/ida_compiled.py) runs the `ida`
+"""The compiled IDA backend (`solver.backend = "ida-compiled"`, dynamics/backends/ida_compiled.py) runs the `ida`
 backend's algorithm with native callbacks: its callbacks must equal the generated Python functions they are
 printed from, called by SUNDIALS through real N_Vectors and a real dense matrix (so the data offsets the
 callbacks read are exercised), and its runs must give the `ida` backend's events and results within the runs'
@@ -19,11 +19,11 @@ import pytest
 
 import mechsim
 from mechsim.dynamics.backend import backend_for
-from mechsim.dynamics.compiled_model import compiled_mode
+from mechsim.dynamics.backends.compiled_model import compiled_mode
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.invariants import GLOBAL_FACTOR
 from mechsim.dynamics.result import FailureCode
-from mechsim.dynamics.sundials_c import sundials
+from mechsim.dynamics.backends.sundials_c import sundials
 from mechsim.dynamics.user_cache import cache_dir
 from mechsim.scenarios.runner import execute, plan
 from recording import Recording
@@ -153,7 +153,7 @@ def test_a_new_process_loads_the_callbacks_from_the_cache():
     """Compiled once per machine: after this process has built (or loaded) a model's callbacks, a new process
     finds numba's cache in the same cache folder and compiles none of them again; with the derived model on disk
     too (dynamics/derivation_cache.py) it never imports sympy."""
-    code = ("import sys, mechsim; from mechsim.dynamics.compiled_model import loaded_modes;"
+    code = ("import sys, mechsim; from mechsim.dynamics.backends.compiled_model import loaded_modes;"
             "mechsim.run('geneva-motor', set={'solver.backend': 'ida-compiled', 'duration': '0.3 s'});"
             "print(all(cm.loaded_from_cache for cm in loaded_modes()), len(loaded_modes()), 'sympy' in sys.modules)")
     mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
@@ -166,8 +166,8 @@ def test_a_new_process_loads_the_callbacks_from_the_cache():
 def test_without_the_sundials_libraries_the_backend_says_so_in_one_line(monkeypatch):
     """An installation whose scikit-sundae ships no usable SUNDIALS libraries: a ValueError naming the backend,
     the reason and the way out (the CLI prints it as one line, exit 2), not a crash inside a run."""
-    from mechsim.dynamics import ida_compiled
-    from mechsim.dynamics.sundials_c import SundialsUnavailable
+    from mechsim.dynamics.backends import ida_compiled
+    from mechsim.dynamics.backends.sundials_c import SundialsUnavailable
 
     def missing():
         raise SundialsUnavailable("scikit-sundae's SUNDIALS library 'ida' was not found")

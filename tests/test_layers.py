@@ -123,8 +123,8 @@ def test_no_private_imports_or_monkeypatching(path):
 
 
 def test_the_private_import_check_catches_both_kinds():
-    probe = ("from mechsim.dynamics.ida import _hidden\nfrom ..dynamics import hybrid\n"
-             "import mechsim.dynamics.ida as ida\nida.IDA = None\nhybrid.MAX_STUCK += 1\n"
+    probe = ("from mechsim.dynamics.backends.ida import _hidden\nfrom ..dynamics import hybrid\n"
+             "import mechsim.dynamics.backends.ida as ida\nida.IDA = None\nhybrid.MAX_STUCK += 1\n"
              "from .runner import _own_package_private\n")
     problems = reaching_into_others(probe, ["mechsim", "scenarios", "probe"])
     assert len(problems) == 4, problems

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from mechsim.dynamics.backend import backend_for
+from mechsim.dynamics.backend import Backend, backend_for
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.invariants import GLOBAL_FACTOR
 from mechsim.scenarios.runner import execute, plan
@@ -23,7 +23,7 @@ from mechsim.scenarios.runner import execute, plan
 pytestmark = pytest.mark.hybrid
 
 
-class PerturbedRestarts:
+class PerturbedRestarts(Backend):
     """A backend that hands every restart state to `inner` moved by k ulps (k random in 1..max_ulps) with a
     random sign per component."""
 

@@ -1,5 +1,5 @@
 """The rolling-pair 4-bar on diffrax's compiled whole run (`RollingPairFourBar.symbolic_transitions`,
-dynamics/diffrax_run.py): its one transition - the dead point, where the driven link reverses under a torque and
+dynamics/backends/diffrax_run.py): its one transition - the dead point, where the driven link reverses under a torque and
 a prescribed speed must stop - as a table entry equal to `on_guard`, and the runs of tests/test_rolling_dynamics.py
 that meet dead points, in one compiled call, against the segment loop, the independent dead-point condition
 and energy."""
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from mechsim.dynamics import hybrid
-from mechsim.dynamics.diffrax_backend import DiffraxBackend, default_options
+from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend, default_options
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.jax_model import jax_model
-from mechsim.dynamics.jax_transitions import jax_transitions
+from mechsim.dynamics.backends.jax_transitions import jax_transitions
 from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries

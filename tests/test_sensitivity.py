@@ -1,4 +1,4 @@
-"""Design sensitivities (scenarios/sensitivity.py on dynamics/sensitivity.py) against central finite differences of
+"""Design sensitivities (scenarios/studies/sensitivity.py on dynamics/sensitivity.py) against central finite differences of
 the IDA path at a tight tolerance, Richardson-extrapolated (docs/sensitivity.md, 'How it is checked').
 
 The finite differences re-run the scenario (IDA, index-2, rtol 1e-12; the sensitivities run at 1e-10) with one value
@@ -19,7 +19,7 @@ import pytest
 
 import mechsim
 from conftest import assert_matches_finite_differences, richardson_central
-from mechsim.scenarios.sensitivity import PEAKS, sensitivity
+from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 BASE = ["duration=1.45 s", "solver.rtol=1e-10", "solver.atol=1e-12"]
 #: the finite differences run tighter than the sensitivities, so that they are the more accurate side
@@ -256,7 +256,7 @@ def test_a_map_out_of_step_with_the_mechanism_is_caught(monkeypatch):
     forgets the centre distance c = r / sin(pi/n) (it moves with the crank radius) is refused, not used."""
     import dataclasses
 
-    import mechsim.scenarios.sensitivity_map as sens
+    import mechsim.scenarios.studies.sensitivity_map as sens
     right = sens.MAPS["geneva"]
 
     def forgets_c(x, si, mech):

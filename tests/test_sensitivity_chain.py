@@ -15,7 +15,7 @@ import pytest
 import mechsim
 from conftest import (assert_matches_finite_differences, peaks_match_finite_differences, richardson_central,
                       value_setting)
-from mechsim.scenarios.sensitivity import PEAKS, sensitivity
+from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 NAME = "chain-mech1-torque"
 SETS = ["duration=12 s"]

@@ -16,8 +16,8 @@ import pytest
 import mechsim
 from conftest import richardson_central
 from mechsim.scenarios import runner
-from mechsim.scenarios.sensitivity import cycle_temperatures, cycle_window, sensitivity
-from mechsim.scenarios.sensitivity_cycle import closed_form_turn
+from mechsim.scenarios.studies.sensitivity import cycle_temperatures, cycle_window, sensitivity
+from mechsim.scenarios.studies.sensitivity_cycle import closed_form_turn
 
 NAME = "geneva-lc1"
 SETS = ["duration=60 s", "thermal.model=lumped", "thermal.averaging=cycle"]

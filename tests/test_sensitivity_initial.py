@@ -2,7 +2,7 @@
 differences of the IDA path, Richardson-extrapolated (the method of tests/test_sensitivity.py, docs/sensitivity.md
 'How it is checked').
 
-The initial angle moves the start (scenarios/sensitivity_map.py `initial_angle_seed`): on the Geneva from a dwell
+The initial angle moves the start (scenarios/studies/sensitivity_map.py `initial_angle_seed`): on the Geneva from a dwell
 (geneva-motor at -180 deg: the wheel stays locked, only the crank moves) and from inside an engagement (-20 deg: the
 wheel starts at beta(alpha) with speed G(alpha) w, both moving with the angle), on the rolling pair (rolling-a-torque,
 the rolling angle phi: the crank and coupler follow by the assembly's implicit-function rule). Steps: absolute, in
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from mechsim.scenarios.sensitivity import PEAKS, sensitivity
+from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 FD_SOLVER = ["solver.rtol=1e-12", "solver.atol=1e-14"]
 SENS_SOLVER = ["solver.rtol=1e-10", "solver.atol=1e-12"]

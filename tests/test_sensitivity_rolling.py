@@ -13,7 +13,7 @@ import numpy as np
 
 import mechsim
 from conftest import peaks_match_finite_differences
-from mechsim.scenarios.sensitivity import PEAKS, sensitivity
+from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 NAME = "rolling-a-torque"
 SETS = ["duration=1.5 s"]

@@ -17,7 +17,7 @@ import mechsim
 from conftest import assert_matches_finite_differences, richardson_central
 from mechsim.scenarios.units import ScenarioError
 from mechsim.scenarios import runner
-from mechsim.scenarios.sensitivity import THERMAL_PEAKS, cycle_temperatures, cycle_window, sensitivity
+from mechsim.scenarios.studies.sensitivity import THERMAL_PEAKS, cycle_temperatures, cycle_window, sensitivity
 from thermal_fd import assert_thermal_matches_fd
 
 THERMAL = ["thermal.model=lumped", "thermal.averaging=resolved"]
@@ -276,8 +276,8 @@ def test_shipped_lc1_design_is_a_kkt_point():
     only; the module's compiled pass is reused: same scenario, values and quantities as the cycle cases)."""
     from pathlib import Path
 
-    from mechsim.scenarios.sizing import ACTIVE, FEASIBLE
-    from mechsim.scenarios.sweep.rows import lookup
+    from mechsim.scenarios.studies.sizing import ACTIVE, FEASIBLE
+    from mechsim.scenarios.keys import lookup
     design = mechsim.load(Path(__file__).resolve().parent.parent / "docs" / "lc1_sizing_design.toml")
     table = sensitivity(design, CYCLE_WRT, OF + ["index_time_s"])
     keys = ["mechanism.crank_radius", "drive.stall_torque"]

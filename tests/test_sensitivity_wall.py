@@ -19,7 +19,7 @@ from __future__ import annotations
 import pytest
 
 import mechsim
-from mechsim.scenarios.sensitivity import THERMAL_PEAKS, sensitivity
+from mechsim.scenarios.studies.sensitivity import THERMAL_PEAKS, sensitivity
 from thermal_fd import assert_thermal_matches_fd
 
 NAME = "geneva-motor"

@@ -263,7 +263,7 @@ def test_written_design_is_checked_on_its_own_run(sized):
 
 def _offset_check(offset):
     """The design's own run, with `offset(value)` added to the peak force it reports (a forced discrepancy)."""
-    from mechsim.scenarios.sizing import design_run
+    from mechsim.scenarios.studies.sizing import design_run
 
     def check(design):
         got = design_run(design)
@@ -274,7 +274,7 @@ def _offset_check(offset):
 
 def _size_direct(scenario_file, **kwargs):
     import mechsim
-    from mechsim.scenarios.sizing import size
+    from mechsim.scenarios.studies.sizing import size
     return size(mechsim.load(scenario_file), ["mechanism.crank_radius=30:120 mm", "drive.speed=4:10 rad/s"],
                 "mechanism.crank_radius", [f"peak_contact_force_N <= {N_MAX}", f"index_time_s <= {T_MAX}"],
                 **kwargs)
@@ -284,7 +284,7 @@ def test_a_limit_the_run_breaks_is_tightened_and_solved_again(scenario_file):
     """A run that reports the force 1e-3 N_MAX higher than the sizing breaks the limit by that much at the first
     optimum; the limit is tightened to N' = N_MAX - (e + 2e-8 N_MAX + 0.1 e), e the excess, and the re-solved
     optimum is the closed form at N': r' = r* N_MAX / N' (w* unchanged); its run, with the same offset, holds."""
-    from mechsim.scenarios.sizing import EXCESS_MARGIN, FEASIBLE
+    from mechsim.scenarios.studies.sizing import EXCESS_MARGIN, FEASIBLE
     delta = 1e-3 * N_MAX
     result = _size_direct(scenario_file, check=_offset_check(lambda q: q + delta))
     _, w, r = closed_form()
@@ -312,7 +312,7 @@ def test_a_limit_the_run_keeps_breaking_exits_3_without_a_design(scenario_file, 
     """A run that always reports 1e-3 over the force limit, whatever the design: after the allowed re-solves
     (one here, to keep the test short) the sizing fails with one line naming the limit and the excess; saved, it
     writes the convergence table and summary (verification: does not hold) and no design.toml."""
-    from mechsim.scenarios.sizing import SizingFailed
+    from mechsim.scenarios.studies.sizing import SizingFailed
     with pytest.raises(SizingFailed) as err:
         _size_direct(scenario_file, check=_offset_check(lambda q: N_MAX * (1 + 1e-3)), max_resolves=1)
     message = str(err.value)
@@ -337,10 +337,10 @@ def test_a_limit_the_run_keeps_breaking_exits_3_without_a_design(scenario_file, 
 def test_list_entries_are_varied_and_written_into_the_design(tmp_path, name, key, spec, change):
     """`--vary` takes a list entry as the loader's messages name it: its bound in the list's unit, the design
     scenario with that entry set (the list's other entries as they were), design.toml that loads back to it, and
-    the sensitivity table's unit for it (scenarios/sweep/rows.py `field_unit`)."""
+    the sensitivity table's unit for it (scenarios/keys.py `field_unit`)."""
     from mechsim.scenarios.output.writer import resolved_scenario_toml
-    from mechsim.scenarios.sizing import Problem, parse_bound
-    from mechsim.scenarios.sweep.rows import field_unit, lookup
+    from mechsim.scenarios.studies.sizing import Problem, parse_bound
+    from mechsim.scenarios.keys import field_unit, lookup
     base = mechsim.load(name)
     bound = parse_bound(f"{key}={spec}", base.si)
     assert (bound.key, bound.unit) == (key, "m") and field_unit(base.si, key) == "m"
@@ -362,6 +362,6 @@ def test_list_entries_are_varied_and_written_into_the_design(tmp_path, name, key
     ("mechanism.sprockets[1]=2:4 cm", "name one entry"),
 ])
 def test_list_entry_requests_are_refused_in_one_line(text, fragment):
-    from mechsim.scenarios.sizing import parse_bound
+    from mechsim.scenarios.studies.sizing import parse_bound
     with pytest.raises(ScenarioError, match=fragment):
         parse_bound(text, mechsim.load("chain-mech1-kinematic").si)

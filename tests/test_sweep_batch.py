@@ -1,4 +1,4 @@
-"""Batched diffrax sweeps (dynamics.diffrax_batch, `mechsim sweep --batch`): every lane equals its own run.
+"""Batched diffrax sweeps (dynamics.backends.diffrax_batch, `mechsim sweep --batch`): every lane equals its own run.
 
 Three geneva-motor cases (friction x wheel torque) over 1.5 s, about two engagements each, with their slip
 reversals at case-dependent times (0.39 s to 0.45 s): a lock-step vmap would be wrong here. One batch
@@ -12,13 +12,14 @@ import pandas as pd
 import pytest
 
 from cli_helpers import invoke
-import mechsim.dynamics.diffrax_backend as diffrax_backend
-from mechsim.dynamics.diffrax_batch import last_batch, simulate_batch
+import mechsim.dynamics.backends.diffrax_backend as diffrax_backend
+from mechsim.dynamics.backends.diffrax_batch import last_batch, simulate_batch
+from mechsim.dynamics.hybrid import simulate
 from mechsim.scenarios.loader import build_mechanism, load
 from mechsim.scenarios.runner import make_drive, solver_settings
-from mechsim.scenarios.sweep.execute import CaseTask, SerialRunner, _batch_reason
-from mechsim.scenarios.sweep.run import run_sweep
-from mechsim.scenarios.sweep.spec import build_spec
+from mechsim.scenarios.studies.sweep.execute import CaseTask, SerialRunner, _batch_reason
+from mechsim.scenarios.studies.sweep.run import run_sweep
+from mechsim.scenarios.studies.sweep.spec import build_spec
 
 CASES = [(0.15, 7.0), (0.05, 2.0), (0.3, 12.0)]
 # the batch vmaps the segment loop; the serial sweep runs on it too (solver.diffrax_compiled_run = false), so that
@@ -51,7 +52,7 @@ def test_each_lane_equals_its_own_run():
         # the batch vmaps the segment loop: each lane equals its own run on that loop (the default single run
         # is the compiled whole-run loop, docs/diffrax.md, equal to it only to the integration error)
         segments = replace(diffrax_backend.default_options(call[2]), compiled_run=False)
-        ts = diffrax_backend.simulate_with(segments, *call)
+        ts = simulate(*call, backend=diffrax_backend.DiffraxBackend(call[2], segments))
         assert tb.failure is None and ts.failure is None
         (t_b, y_b), (t_s, y_s) = _rows(tb), _rows(ts)
         assert np.array_equal(t_b, t_s)

@@ -1,4 +1,4 @@
-"""The process pool sends cases in chunks (scenarios/sweep/execute.py, ChunkSizer): fewer pool calls for cheap cases,
+"""The process pool sends cases in chunks (scenarios/studies/sweep/execute.py, ChunkSizer): fewer pool calls for cheap cases,
 the same rows, every case delivered once, and an interruption keeps every case of a finished chunk.
 
 No timing is asserted: the chunk sizes are computed from given case times.
@@ -7,11 +7,11 @@ import json
 
 import pytest
 
-from mechsim.scenarios.sweep import execute
-from mechsim.scenarios.sweep.execute import (CHUNK_MAX, CHUNK_SECONDS, CaseTask, ChunkSizer, PoolRunner,
-                                             SerialRunner, SweepInterrupted)
-from mechsim.scenarios.sweep.run import plan
-from mechsim.scenarios.sweep.spec import build_spec
+from mechsim.scenarios.studies.sweep import execute
+from mechsim.scenarios.studies.sweep.execute import (CHUNK_MAX, CHUNK_SECONDS, CaseTask, ChunkSizer, PoolRunner,
+                                                     SerialRunner, SweepInterrupted)
+from mechsim.scenarios.studies.sweep.run import plan
+from mechsim.scenarios.studies.sweep.spec import build_spec
 
 TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "worker")
 

@@ -13,9 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 from mechsim.scenarios.cli import app
-from mechsim.scenarios.sweep.execute import DaskRunner, PoolRunner
-from mechsim.scenarios.sweep.run import run_sweep
-from mechsim.scenarios.sweep.spec import build_spec
+from mechsim.scenarios.studies.sweep.execute import DaskRunner, PoolRunner
+from mechsim.scenarios.studies.sweep.run import run_sweep
+from mechsim.scenarios.studies.sweep.spec import build_spec
 from cli_helpers import one_line_error
 
 # crank from -180 deg to the end of the first engagement (+45 deg) at 5.34 rad/s takes 0.735 s

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from mechsim.scenarios.sweep.spec import SweepSpec, build_spec, parse_vary, read_sweep_file
+from mechsim.scenarios.studies.sweep.spec import SweepSpec, build_spec, parse_vary, read_sweep_file
 from mechsim.scenarios.units import ScenarioError
 
 

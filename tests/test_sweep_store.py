@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.scenarios.output.atomic import json_default
-from mechsim.scenarios.sweep.store import SweepStore, _checksum
+from mechsim.scenarios.studies.sweep.store import SweepStore, _checksum
 
 
 def _record():

@@ -1,4 +1,4 @@
-"""dynamics/xla_options.py: mechsim sets its two XLA options before JAX starts its backend, keeps what the user
+"""dynamics/backends/xla_options.py: mechsim sets its two XLA options before JAX starts its backend, keeps what the user
 set, and says when it came too late. Each case runs in a fresh interpreter (XLA reads XLA_FLAGS once per
 process). What the options buy is measured in docs/benchmarks.md and docs/diffrax.md, not here (no timed tests);
 that they leave the results alone is what every diffrax test of the suite checks, all run with them on; the
@@ -11,7 +11,7 @@ import subprocess
 import sys
 import textwrap
 
-from mechsim.dynamics.xla_options import LOOP_BYTES, LOOP_OPTION, SCHEDULER_FLAG, with_options
+from mechsim.dynamics.backends.xla_options import LOOP_BYTES, LOOP_OPTION, SCHEDULER_FLAG, with_options
 
 LOOP = f"--xla_backend_extra_options={LOOP_OPTION}={LOOP_BYTES}"
 NO_SCHEDULER = f"{SCHEDULER_FLAG}=false"
@@ -30,7 +30,7 @@ def run_fresh(code: str, xla_flags: str | None) -> dict:
 IMPORT_MECHSIM = """
     import json, os
     import mechsim.dynamics.jax_model
-    from mechsim.dynamics import xla_options
+    from mechsim.dynamics.backends import xla_options
     print(json.dumps({"state": xla_options.state(), "flags": os.environ.get("XLA_FLAGS")}))
 """
 

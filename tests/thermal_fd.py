@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_matches_finite_differences, richardson_central
-from mechsim.scenarios.sensitivity import THERMAL_PEAKS
+from mechsim.scenarios.studies.sensitivity import THERMAL_PEAKS
 from test_sensitivity import _work_at
 
 

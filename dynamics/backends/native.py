@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
 
-from mechsim.dynamics.sundials_c import sundials
+from mechsim.dynamics.backends.sundials_c import sundials
 
 
 def _data_pointer(offset: int):

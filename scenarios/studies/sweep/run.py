@@ -14,10 +14,10 @@ from typing import Protocol
 
 from mechsim.scenarios.loader import Scenario, from_raw, read_raw
 from mechsim.scenarios.output.paths import default_folder
-from mechsim.scenarios.sweep.execute import CaseTask, Outcome, SweepInterrupted
-from mechsim.scenarios.sweep.rows import case_key, parameter_columns
-from mechsim.scenarios.sweep.spec import SweepSpec
-from mechsim.scenarios.sweep.store import SweepStore
+from mechsim.scenarios.studies.sweep.execute import CaseTask, Outcome, SweepInterrupted
+from mechsim.scenarios.studies.sweep.rows import case_key, parameter_columns
+from mechsim.scenarios.studies.sweep.spec import SweepSpec
+from mechsim.scenarios.studies.sweep.store import SweepStore
 from mechsim.scenarios.units import ScenarioError
 
 
@@ -186,7 +186,7 @@ def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool) -> None:
     if len(df):
         store.write_table(df)
     if plots and len(df):
-        from mechsim.scenarios.sweep.plots import write_plots
+        from mechsim.scenarios.studies.sweep.plots import write_plots
         write_plots(df, pl, store.root / "plots")
     failed = df.loc[~df["success"].astype(bool), ["case", "failure"]].to_dict("records") if len(df) else []
     store.write_summary({

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from mechsim.scenarios.sweep.rows import KEY_FIGURES
+from mechsim.scenarios.studies.sweep.rows import KEY_FIGURES
 
 MAX_LINES = 8
 

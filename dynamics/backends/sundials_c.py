@@ -2,7 +2,7 @@
 
 scikit-sundae's wheel carries SUNDIALS (IDA, the serial vector, the dense matrix and linear solver) as shared
 libraries; its Cython binding calls back into Python for every residual, Jacobian and root-function
-evaluation. `dynamics/ida_compiled.py` drives the same libraries directly, with compiled callbacks, so no model
+evaluation. `dynamics/backends/ida_compiled.py` drives the same libraries directly, with compiled callbacks, so no model
 call crosses into Python (docs/benchmarks.md, "Against the strongest peer").
 
 Every pointer is declared as a plain 64-bit integer (`c_size_t`): on the platforms SUNDIALS supports a pointer

@@ -19,22 +19,19 @@ are the measured best.
 from __future__ import annotations
 
 import time as _time
-from functools import lru_cache
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from mechsim.mechanisms.base import Mechanism
-
 from mechsim.dynamics.consistent import consistent_state
-from mechsim.dynamics.drives import Drive
-import mechsim.dynamics.hybrid as hybrid
-from mechsim.dynamics.backend import End, Request, Segment
-from mechsim.dynamics.hybrid import Trajectory
+from mechsim.dynamics.backend import Backend, End, Request, Segment
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
-from mechsim.dynamics import xla_options
-from mechsim.dynamics.model import ModeFunctions, StateExtension
+from mechsim.dynamics.backends import xla_options
+from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, DT0_FLOOR, DiffraxOptions, default_options,
+                                                      evaluations_per_step, ida_rows, mode_z, result_message,
+                                                      solver_for)
+from mechsim.dynamics.backends.diffrax_diagnose import explain
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 
@@ -45,136 +42,14 @@ import jax.numpy as jnp  # noqa: E402
 import jax.tree_util as jtu  # noqa: E402
 import optimistix as optx  # noqa: E402
 
-EXPLICIT = ("Tsit5", "Dopri5", "Dopri8", "Bosh3", "Heun", "Midpoint", "Ralston", "Euler")
-IMPLICIT = ("Kvaerno3", "Kvaerno4", "Kvaerno5", "ImplicitEuler")
-SOLVERS = EXPLICIT + IMPLICIT
+if TYPE_CHECKING:
+    from mechsim.mechanisms.base import Mechanism
+    from mechsim.dynamics.hybrid import Trajectory
+
 _ADJOINT = diffrax.ForwardMode()   # plain lax while loops: no reverse-mode machinery in the compiled solve
-#: first trial step (s) of a run; the step controller grows it by up to 10x per accepted step
-DT0_FIRST = 1e-5
-DT0_FLOOR = 1e-12
-
-
-@dataclass(frozen=True)
-class DiffraxOptions:
-    """Everything that shapes one compiled solve (hashable: part of the compilation cache key).
-
-    pcoeff/icoeff/dcoeff: PID step-size controller gains (diffrax.PIDController; I-only is 0/1/0).
-    newton: root finder of implicit stages: "verychord" (diffrax's default), "patient" (the same with its
-        termination test corrected, see PatientVeryChord), "chord" or "newton"
-        (optimistix, with their Cauchy termination on |f| < atol).
-    newton_tol: tolerance of that root finder as a multiple of the step controller's rtol/atol.
-    newton_kappa: the contraction criterion of the chord/Newton iterations.
-    event_rtol/event_atol: width (relative, absolute in s) to which the bisection brackets a guard crossing.
-    n_save: output rows per compiled call (padded); longer segments continue in chunks. None: 2048 state
-        values (256 rows of the Geneva's 8 states, at least 32 rows). diffrax's SaveAt(ts) carries its save buffer
-        through the step loop and a too large one makes every step slower (geneva-motor, warm CPU time: 0.19 s
-        with 32 rows, 0.05 s with 256, 0.19 s with 512; docs/diffrax.md).
-    projection: project q and v onto the constraints at every restart (mode change or chunk boundary).
-    compiled_run: run the whole hybrid run as one compiled call (`dynamics/diffrax_run.py`) where the mechanism
-        has a transition table (`Mechanism.symbolic_transitions`), the solver is explicit and events are on;
-        False (or any of those missing): one compiled solve per segment, transitions in Python.
-    """
-
-    solver: str = "Tsit5"
-    rtol: float = 1e-8
-    atol: float = 1e-10
-    max_steps: int = 20000
-    pcoeff: float = 0.0
-    icoeff: float = 1.0
-    dcoeff: float = 0.0
-    newton: str = "verychord"
-    newton_tol: float = 1.0
-    newton_kappa: float = 1e-2
-    newton_floor: float = 1e-3
-    event_rtol: float = 1e-14
-    event_atol: float = 1e-13
-    n_save: int | None = None
-    projection: bool = True
-    compiled_run: bool = True
-
-    @property
-    def implicit(self) -> bool:
-        return self.solver in IMPLICIT
-
-    def rows(self, nz: int) -> int:
-        """Output rows per compiled call for a state of nz values."""
-        return self.n_save if self.n_save else max(32, 2048 // max(nz, 1))
-
-
-#: Defaults for implicit solvers, picked by measurement (docs/diffrax.md).
-IMPLICIT_DEFAULTS = dict(newton="patient", newton_kappa=0.1)
-
-
-def default_options(settings: SolverSettings) -> DiffraxOptions:
-    """The options a scenario's solver settings imply (implicit solvers get the measured best defaults)."""
-    name = settings.diffrax_solver
-    if name not in SOLVERS:
-        raise ValueError(f"solver.diffrax_solver must be one of {', '.join(SOLVERS)}; got {name!r}")
-    opts = DiffraxOptions(solver=name, rtol=settings.rtol, atol=settings.atol, max_steps=settings.max_steps,
-                          projection=getattr(settings, "diffrax_projection", True),
-                          compiled_run=settings.diffrax_compiled_run)
-    if opts.implicit:
-        opts = replace(opts, **IMPLICIT_DEFAULTS)
-    return opts
 
 
 # -- one compiled segment solve ----------------------------------------------------------------------------
-class PatientVeryChord(diffrax.VeryChord):
-    """diffrax's VeryChord with a corrected termination test (the cause of diffrax 0.7.2's rejected steps).
-
-    In diffrax 0.7.2 `VeryChord.terminate` reports `nonlinear_divergence` whenever, from the second iteration on,
-    the iteration has not yet converged, even while it is contracting; optimistix stops at the first
-    non-successful result, so every stage that needs a third chord iteration fails, the step's error becomes
-    inf and the step is rejected (about half the steps, docs/diffrax.md). Here divergence means divergence:
-    the corrections grow (rate > 2) or are not finite. The iteration also stops when a correction is already
-    below `floor` tolerance units, where the rate of two round-off-sized corrections is noise.
-    """
-
-    floor: float = 1e-3
-
-    def terminate(self, fn, y, args, options, state, tags):
-        at_least_two = state.step >= 2
-        rate = state.diffsize / state.diffsize_prev
-        factor = state.diffsize * rate / (1 - rate)
-        tiny = (state.step >= 1) & (state.diffsize < self.floor)
-        converged = tiny | (at_least_two & (factor > 0) & (factor < self.kappa))
-        diverged = at_least_two & jnp.invert(tiny) & (jnp.invert(jnp.isfinite(rate)) | (rate > 2))
-        linsolve_fail = state.result != optx.RESULTS.successful
-        result = optx.RESULTS.where(diverged, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful)
-        result = optx.RESULTS.where(linsolve_fail, state.result, result)
-        return converged | diverged | linsolve_fail, result
-
-
-def _stage_root_finder(o: DiffraxOptions):
-    rtol, atol = o.newton_tol * o.rtol, o.newton_tol * o.atol
-    if o.newton == "verychord":
-        return diffrax.VeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa)
-    if o.newton == "patient":
-        return PatientVeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa, floor=o.newton_floor)
-    if o.newton == "chord":
-        return optx.Chord(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
-    if o.newton == "newton":
-        return optx.Newton(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
-    raise ValueError(f"unknown implicit root finder {o.newton!r}")
-
-
-def solver_for(o: DiffraxOptions):
-    cls = getattr(diffrax, o.solver)
-    return cls(root_finder=_stage_root_finder(o)) if o.implicit else cls()
-
-
-@lru_cache(maxsize=64)
-def evaluations_per_step(o: DiffraxOptions) -> int | None:
-    """Vector-field evaluations per attempted step of an explicit Runge-Kutta method (None if implicit)."""
-    if o.implicit:
-        return None
-    tab = getattr(solver_for(o), "tableau", None)
-    if tab is None:
-        return {"Euler": 1}.get(o.solver)
-    stages = len(tab.c) + 1
-    return stages - 1 if tab.fsal else stages
-
-
 class _State(eqx.Module):
     lower: jax.Array
     upper: jax.Array
@@ -300,61 +175,13 @@ def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]
     return entry, jmod, True
 
 
-def mode_z(mf: ModeFunctions, y: np.ndarray) -> np.ndarray:
-    ix = mf.index
-    return np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
-
-
-def ida_rows(mf: ModeFunctions, nq: int, z: np.ndarray, zp: np.ndarray, a: np.ndarray, lam: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (y, y') in the IDA layout of the mode: y = [q, v, lam, mu = 0, work, ext], y' = [v, a, 0, 0, ...]."""
-    z, zp, a, lam = (np.atleast_2d(x) for x in (z, zp, a, lam))
-    n = len(z)
-    n_mu = mf.index["mu"].stop - mf.index["mu"].start
-    y = np.hstack([z[:, :2 * nq], lam[:, :mf.m], np.zeros((n, n_mu)), z[:, 2 * nq:]])
-    yp = np.hstack([z[:, nq:2 * nq], a, np.zeros((n, mf.m + n_mu)), zp[:, 2 * nq:]])
-    return y, yp
-
-
-def state_rows(mf: ModeFunctions, nq: int, z: np.ndarray) -> np.ndarray:
-    """Rows y in the IDA layout of the mode from states z = [q, v, work, ext], the multiplier columns (lam, mu)
-    NaN: the compiled whole run interpolates states only, and the read-outs solve the KKT system at every row
-    from (q, v) (`tables.kkt_rows`); `hybrid.Piece`."""
-    n = len(z)
-    n_alg = mf.index["mu"].stop - mf.index["lam"].start
-    return np.hstack([z[:, :2 * nq], np.full((n, n_alg), np.nan), z[:, 2 * nq:]])
-
-
-def result_message(code: int) -> str:
-    """diffrax's words for a solve's result code, first line (diffrax keeps its message table private: read
-    in this one place)."""
-    return diffrax.RESULTS._index_to_message[int(code)].splitlines()[0]
-
-
 # -- the backend ----------------------------------------------------------------------------------------------
-def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
-             angle0: float, speed0: float, ext: StateExtension | None = None, ext_initial=None,
-             progress: Callable[[float], None] | None = None, t0: float = 0.0) -> Trajectory:
-    """`hybrid.simulate` on this backend with the options the settings imply."""
-    return hybrid.simulate(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, progress, t0,
-                           backend=DiffraxBackend(settings))
-
-
-def simulate_with(options: DiffraxOptions, mech: Mechanism, drive: Drive, settings: SolverSettings,
-                  t_end: float, dt_out: float, angle0: float, speed0: float, ext: StateExtension | None = None,
-                  ext_initial=None, progress: Callable[[float], None] | None = None,
-                  t0: float = 0.0) -> Trajectory:
-    """`simulate` with explicit diffrax options (step controller, implicit root finder, ...)."""
-    return hybrid.simulate(mech, drive, settings, t_end, dt_out, angle0, speed0, ext, ext_initial, progress, t0,
-                           backend=DiffraxBackend(settings, options))
-
-
-class DiffraxBackend:
+class DiffraxBackend(Backend):
     """diffrax on the mode's index-1 ODE (`jax_model`), one compiled `diffeqsolve` per segment, under the
     contract of `dynamics/backend.py`.
 
     `integrate` = `arguments` (the compiled solve's inputs) + the compiled call + `segment` (its outputs as a
-    `Segment`); `dynamics.diffrax_batch` uses the two halves around one vmapped call for many lanes.
+    `Segment`); `dynamics.backends.diffrax_batch` uses the two halves around one vmapped call for many lanes.
     A segment with more output times than one call holds (`DiffraxOptions.rows`) ends in a pause at the last
     row (restarted from the state projected onto the constraints when `options.projection`).
     """
@@ -369,7 +196,7 @@ class DiffraxBackend:
         self.solver = self.o.solver
         self.per_step = evaluations_per_step(self.o)
         self.unavailable = {"jacobian_evaluations": "not exposed by diffrax"}
-        self.notes = {"xla_options": xla_options.state()}   # dynamics/xla_options.py
+        self.notes = {"xla_options": xla_options.state()}   # dynamics/backends/xla_options.py
         if self.per_step:
             self.notes["residual_evaluations"] = "estimated: attempted steps x new stages per step + 3 per segment"
         else:
@@ -380,8 +207,14 @@ class DiffraxBackend:
         apply (no transition table, an implicit solver, events off, `options.compiled_run` False)."""
         if not (self.o.compiled_run and not self.o.implicit and self.settings.events):
             return None
-        from mechsim.dynamics.diffrax_run import simulate_run
+        from mechsim.dynamics.backends.diffrax_run import simulate_run
         return simulate_run(mech, start, self.settings, self.o, t0, t_end, progress, call=self.call_compiled)
+
+    @classmethod
+    def explain(cls, traj, settings: SolverSettings, t_end: float) -> dict | None:
+        """The failure with its cause named where an explicit solver only ran out of steps
+        (`diffrax_diagnose.explain`: stiffness)."""
+        return explain(traj, settings, t_end)
 
     def call_compiled(self, fn, args) -> dict:
         """One call of a compiled function of the whole run (the step loop or its rows), waited for: a hook for

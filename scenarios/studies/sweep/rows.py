@@ -5,7 +5,6 @@ unit appended (`load.wheel_torque_N_m`, `contact.friction`).
 """
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -14,59 +13,13 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.tables import TableColumns
-from mechsim.scenarios.loader import Scenario, sections_for
-from mechsim.scenarios.schema import TOP
+from mechsim.scenarios.keys import field_unit, lookup, unit_suffix
+from mechsim.scenarios.loader import Scenario
 
 #: figures plotted against each varied parameter (those present in the table)
 KEY_FIGURES = ("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_slip_speed_m_s",
                "peak_friction_power_W", "peak_temp_contact_C", "cycle_time_s", "work_drive_per_cycle_J",
                "work_friction_per_cycle_J", "case_wall_time_s")
-
-
-def unit_suffix(unit: str) -> str:
-    """'N*m' -> 'N_m', 'rad/s' -> 'rad_s', 'kg*m^2' -> 'kg_m2' (column-name form of an SI unit)."""
-    return unit.replace("*", "_").replace("/", "_").replace("^", "").replace(" ", "")
-
-
-def key_path(key: str) -> list:
-    """'mechanism.sprockets[1][0]' -> ['mechanism', 'sprockets', 1, 0]: a list entry as the loader's `--set` and its
-    messages name it."""
-    out: list = []
-    for part in key.split("."):
-        name, *idx = part.split("[")
-        out.append(name)
-        out += [int(i.rstrip("]")) for i in idx]
-    return out
-
-
-def field_unit(si: dict, key: str) -> str:
-    """The SI unit of a scenario key ('' for dimensionless, words, booleans); a list entry
-    ('mechanism.sprocket_radii[0]', 'mechanism.sprockets[1][0]') has its list's unit."""
-    return _field_unit(si["mechanism"]["type"], key)
-
-
-@functools.lru_cache(maxsize=1024)
-def _field_unit(mtype: str, key: str) -> str:
-    """(cached: the schema's units are fixed, and a sweep asks for every key of every case)"""
-    parts = [p for p in key_path(key) if isinstance(p, str)]
-    indexed = len(parts) < len(key_path(key))
-    if len(parts) == 1:
-        spec = TOP.get(parts[0])
-    else:
-        spec = sections_for(mtype).get(parts[0], {}).get(parts[1])
-    if spec is None:
-        return ""
-    if spec.kind == "quantity" or (indexed and spec.kind in ("list", "points")):
-        return spec.unit or ""
-    return ""
-
-
-def lookup(si: dict, key: str):
-    """The value at a scenario key, list entries included ('mechanism.sprocket_radii[0]')."""
-    node = si
-    for part in key_path(key):
-        node = node[part]
-    return node
 
 
 def parameter_columns(sc: Scenario, keys: list[str]) -> dict:

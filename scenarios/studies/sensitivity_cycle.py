@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS
+from mechsim.scenarios.studies.sensitivity_rows import CONTACT_COLUMNS
 
 
 #: (the cycle means) and the contact of every row of the turn (its heat input, the ripple)

@@ -14,11 +14,11 @@ from typing import Callable
 
 import numpy as np
 
-from mechsim.scenarios.sensitivity_mechanisms import (chain_list_keys, chain_parameters, chain_piece, chain_pieces,
-                                                      chain_refuse, geneva_initial_angle, geneva_parameters,
-                                                      rolling_list_keys, rolling_parameters, rolling_refuse)
-from mechsim.scenarios.sensitivity_thermal_map import (THERMAL_KEYS, THERMAL_MATERIAL_KEYS, check_thermal,
-                                                       thermal_parameters, thermal_values)
+from mechsim.scenarios.studies.sensitivity_mechanisms import (chain_list_keys, chain_parameters, chain_piece, chain_pieces,
+                                                              chain_refuse, geneva_initial_angle, geneva_parameters,
+                                                              rolling_list_keys, rolling_parameters, rolling_refuse)
+from mechsim.scenarios.studies.sensitivity_thermal_map import (THERMAL_KEYS, THERMAL_MATERIAL_KEYS, check_thermal,
+                                                               thermal_parameters, thermal_values)
 from mechsim.scenarios.units import ScenarioError
 
 

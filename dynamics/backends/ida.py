@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from sksundae.ida import IDA
 
-from mechsim.dynamics.backend import End, Request, Segment
+from mechsim.dynamics.backend import Backend, End, Request, Segment
 from mechsim.dynamics.model import ModeFunctions
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
@@ -33,7 +33,7 @@ def atol_vector(mf: ModeFunctions, settings: SolverSettings, scales: np.ndarray 
 IDA_TOO_MUCH_WORK = -1
 
 
-class IdaBackend:
+class IdaBackend(Backend):
     """SUNDIALS IDA (variable-order BDF) on the mode's residual F(t, y, y') = 0 with its exact Jacobian."""
 
     name = "ida"

@@ -25,13 +25,13 @@ import time
 import numpy as np
 import pandas as pd
 
-from mechsim.scenarios.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
-                                                 cycle_temperatures, cycle_window, event_crosses_turn_row,
-                                                 switch_correction, period_gradient, repetition_crosses_end,
-                                                 turn_peak)
-from mechsim.scenarios.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
-                                               scenario_value, traced_quantities)
-from mechsim.scenarios.sensitivity_rows import CONTACT_COLUMNS, row_state_columns, thermal_samples
+from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
+                                                         cycle_temperatures, cycle_window, event_crosses_turn_row,
+                                                         switch_correction, period_gradient, repetition_crosses_end,
+                                                         turn_peak)
+from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
+                                                       scenario_value, traced_quantities)
+from mechsim.scenarios.studies.sensitivity_rows import CONTACT_COLUMNS, row_state_columns, thermal_samples
 from mechsim.scenarios.units import ScenarioError
 
 #: a second peak within this relative distance of the first is reported (the maximum may switch between them)
@@ -114,7 +114,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     from mechsim.dynamics.hybrid import prepare
     from mechsim.dynamics.sensitivity import path_sensitivities
     from mechsim.scenarios import runner
-    from mechsim.scenarios.sweep.rows import field_unit
+    from mechsim.scenarios.keys import field_unit
     if not 0 < change < 1:
         raise ScenarioError("--change", f"must be a relative change in (0, 1), got {change}")
     plan = runner.plan(scenario)

@@ -7,7 +7,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from mechsim.scenarios.sweep.rows import key_path, lookup
+from mechsim.scenarios.keys import key_path, lookup
 from mechsim.scenarios.units import ScenarioError
 
 #: the slot count (an integer: enumerated, not optimised continuously)
@@ -28,7 +28,7 @@ class Bound:
 
     @property
     def column(self) -> str:
-        from mechsim.scenarios.sweep.rows import unit_suffix
+        from mechsim.scenarios.keys import unit_suffix
         return f"{self.key}_{unit_suffix(self.unit)}" if self.unit else self.key
 
 

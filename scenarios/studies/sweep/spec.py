@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mechsim.scenarios.keys import toml_literal
 from mechsim.scenarios.loader import parse_toml, read_text
 from mechsim.scenarios.units import ScenarioError
 
@@ -33,21 +34,6 @@ NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _ITEM = re.compile(rf"^\s*({NUMBER})\s*(.*?)\s*$")
 _RANGE = re.compile(rf"^\s*(log\s*:)?\s*({NUMBER})\s*:\s*({NUMBER})\s*:\s*([^\s:]+)\s*(.*?)\s*$")
 MODES = ("grid", "zip")
-
-
-def toml_literal(value) -> str:
-    """A value as the right-hand side of `--set key=value` (TOML: quantities and words quoted)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    return json.dumps(str(value))   # a JSON string is a valid TOML basic string
 
 
 def _number_text(x: float, integers: bool) -> str:

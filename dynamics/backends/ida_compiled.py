@@ -20,12 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mechsim.dynamics.backend import End, Request, Segment
-from mechsim.dynamics.ida import IdaBackend, atol_vector
+from mechsim.dynamics.backend import Backend, End, Request, Segment
+from mechsim.dynamics.backends.ida import IdaBackend, atol_vector
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
-from mechsim.dynamics.native import advance
-from mechsim.dynamics.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable, sundials
+from mechsim.dynamics.backends.native import advance
+from mechsim.dynamics.backends.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable, sundials
 from mechsim.dynamics.user_cache import cache_dir
 
 #: scikit-sundae's defaults, kept so both IDA backends run the same algorithm
@@ -50,7 +50,7 @@ class _Memory:
     keep: list = field(default_factory=list)
 
 
-class IdaCompiledBackend:
+class IdaCompiledBackend(Backend):
     """SUNDIALS IDA (variable-order BDF) on the mode's residual with its exact Jacobian, every call compiled."""
 
     name = "ida-compiled"
@@ -183,7 +183,7 @@ class IdaCompiledBackend:
     def _first_use(self, mf, counts: dict, n_params: int) -> _Memory:
         """The mode's IDA memory, built on the mode's compiled callbacks (compiled, or loaded from the cache, the
         first time in the process: the time goes into the compile counters)."""
-        from mechsim.dynamics.compiled_model import compiled_mode
+        from mechsim.dynamics.backends.compiled_model import compiled_mode
         started = _time.perf_counter(), _time.process_time()
         compiled, built = compiled_mode(mf, cache_dir() / "compiled")
         if built:

@@ -3,7 +3,7 @@
 A bounded, constrained optimisation over scenario values (`--vary section.key=LOW:HIGH`), minimising one headline
 quantity of the run or one of the varied values themselves, subject to limits on headline quantities
 (`--subject-to "QUANTITY <= VALUE"`). Every evaluation is one run and its forward sensitivities
-(`scenarios/sensitivity.py`, docs/sensitivity.md), so the optimiser gets the objective and the constraints with
+(`scenarios/studies/sensitivity.py`, docs/sensitivity.md), so the optimiser gets the objective and the constraints with
 their exact gradients from one solve. The optimiser is scipy's SLSQP (docs/sensitivity.md, "Sizing", says why,
 with the measurements against trust-constr).
 
@@ -25,9 +25,9 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from mechsim.scenarios.sizing_check import design_run
-from mechsim.scenarios.sizing_spec import SLOTS, Bound, Limit, parse_bound, parse_limit, set_list_entries
-from mechsim.scenarios.sweep.rows import lookup
+from mechsim.scenarios.studies.sizing_check import design_run
+from mechsim.scenarios.studies.sizing_spec import SLOTS, Bound, Limit, parse_bound, parse_limit, set_list_entries
+from mechsim.scenarios.keys import lookup
 from mechsim.scenarios.units import ScenarioError
 
 #: the optimisers offered; SLSQP is the default (docs/sensitivity.md, "Sizing": measured against trust-constr)
@@ -125,7 +125,7 @@ class Problem:
     def scenario_at(self, x):
         """The base scenario with the varied values set to x (SI), validated like any scenario."""
         from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, validate
-        from mechsim.scenarios.sweep.spec import toml_literal
+        from mechsim.scenarios.keys import toml_literal
         overrides = list(self.fixed) + [f"{b.key}={toml_literal(f'{float(v)!r} {b.unit}' if b.unit else float(v))}"
                                         for b, v in zip(self.bounds, x) if "[" not in b.key]
         raw = apply_overrides(self.base.raw, overrides)
@@ -136,7 +136,7 @@ class Problem:
         return Scenario(si["name"], raw, si, self.base.source)
 
     def evaluate(self, u) -> Evaluation:
-        from mechsim.scenarios.sensitivity import sensitivity
+        from mechsim.scenarios.studies.sensitivity import sensitivity
         x = self.x_of(u)
         key = tuple(x.tolist())
         if key in self.cache:
@@ -287,7 +287,7 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
     if tolerance is None:
         tolerance = min(max(10 * float(scenario.si["solver"]["rtol"]), 1e-12), 1e-4)
     from mechsim.scenarios import runner
-    from mechsim.scenarios.sensitivity import check_request
+    from mechsim.scenarios.studies.sensitivity import check_request
     if method not in METHODS:
         raise ScenarioError("--method", f"one of {', '.join(METHODS)}, got {method!r}")
     if not 0 < tolerance <= 1e-2:

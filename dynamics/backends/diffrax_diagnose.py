@@ -1,4 +1,5 @@
-"""Name the cause of a solver failure where the integrator reports only the symptom.
+"""The diffrax backend's `explain`: name the cause of a solver failure where the integrator reports only the
+symptom.
 
 An explicit Runge-Kutta method (diffrax Tsit5, Dopri5/8, ...) on a stiff problem does not blow up: its step
 controller keeps it stable by taking steps near c/|lambda_max| (c ~ 2-3.5, the extent of its stability region
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mechsim.dynamics.backends.diffrax_common import mode_z
 from mechsim.dynamics.result import FailureCode
 
 #: stability limit |h lambda| of explicit methods on the negative real axis (approximate; Hairer & Wanner II)
@@ -67,9 +69,7 @@ def fastest_mode(traj) -> tuple[float, float, list[str], bool] | None:
     model = traj.model
     mf = model.modes[piece.mode]
     jm = jax_mode(mf, model.parameter_names)
-    ix = mf.index
-    y = piece.y[-1]
-    z = np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
+    z = mode_z(mf, piece.y[-1])
     p = np.asarray(piece.params, float)
     # one compiled program (jit) instead of jax dispatching the lambdified rates op by op (a program each: ~100
     # small compilations for the Geneva with a 1-D wall mesh)

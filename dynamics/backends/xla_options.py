@@ -2,7 +2,7 @@
 
 1. **While loops as one kernel.** Since JAX 0.4.32 XLA's CPU runtime executes a program as a sequence of
    "thunks" (one per fused kernel, copy, conditional, loop), and a `lax.while_loop` runs its body thunk by thunk
-   on every iteration. A step of the compiled diffrax run (`dynamics/diffrax_run.py`) is a few hundred small
+   on every iteration. A step of the compiled diffrax run (`dynamics/backends/diffrax_run.py`) is a few hundred small
    kernels - seven KKT solves, the guards, the step-size controller - so the dispatch between them, not the
    arithmetic, was most of its ~4.5 us. XLA's small-while-loop pass compiles a loop whose state is below a byte
    threshold into ONE kernel instead; its default (about 1 kB) excludes every loop mechsim writes (the step
@@ -10,7 +10,7 @@
    `--xla_backend_extra_options`; not settable per compilation). Case A: the run call 3.2 -> 0.9 ms wall,
    3.8 -> 1.4 ms CPU, the crank angle the same to 3e-13 rad, the compilation no slower.
 2. **No concurrency-optimised scheduling** (`--xla_cpu_enable_concurrency_optimized_scheduler=false`). With it,
-   the vmapped segment solve of `sweep --batch` (`dynamics/diffrax_batch.py`, 64 lanes) hung in about one call in
+   the vmapped segment solve of `sweep --batch` (`dynamics/backends/diffrax_batch.py`, 64 lanes) hung in about one call in
    five, from the first call of a process to the fourth: the calling thread waits for the program's completion
    while every XLA worker thread waits for work (native stacks, gdb), with or without option 1, with
    async dispatch, multi-threaded Eigen, XNNPACK or equinox's host callbacks switched off. With this scheduler

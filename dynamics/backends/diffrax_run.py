@@ -33,9 +33,12 @@ from typing import Callable
 
 import numpy as np
 
-from mechsim.dynamics import kkt, xla_options
+from mechsim.dynamics import kkt
+from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
-from mechsim.dynamics.jax_transitions import JaxTransitions, jax_transitions
+from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
+                                                      result_message, solver_for, state_rows)
+from mechsim.dynamics.backends.jax_transitions import JaxTransitions, jax_transitions
 
 import diffrax  # noqa: E402
 import jax  # noqa: E402
@@ -93,7 +96,6 @@ def step_record(jmod: JaxModel, o) -> StepRecord:
     """The step-record layout of the solver `o` names on this model's state (traced shapes only: the dense
     output's structure depends on the solver and the state's shape, not on the vector field, so a trivial one
     stands in for the model and tracing it costs nothing)."""
-    from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
     term = diffrax.ODETerm(lambda t, z, args: -z)
 
@@ -196,7 +198,6 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
     tol = (rtol, atol); o: DiffraxOptions; the output rows come from the returned step buffer (`make_rows`);
     seg_steps0: steps already taken in the current mode segment by the previous call (its buffers were full).
     """
-    from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
     term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
     error_order = solver.error_order(term)
@@ -399,9 +400,8 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     sorted, free slots at +inf) are walked together in one loop: each time's step is the first whose interval
     ends at or after it (`searchsorted(..., side="left")`, capped at the scratch slot), and the state is that
     step's dense output there; row_seg is the segment number it belongs to. One loop in one kernel
-    (dynamics/xla_options.py) costs about half of a vectorised `searchsorted` and gather (case A, 5120 rows:
+    (dynamics/backends/xla_options.py) costs about half of a vectorised `searchsorted` and gather (case A, 5120 rows:
     0.6 -> 0.34 ms CPU, the same rows to the bit)."""
-    from mechsim.dynamics.diffrax_backend import solver_for
     solver = solver_for(o)
 
     def interpolate(row, t):
@@ -499,7 +499,6 @@ def _failure(model, mode: str, t: float, q, code: Code, o) -> dict:
     from mechsim.dynamics.result import FailureCode
     where = {c: float(v) for c, v in zip(model.coordinates, q)}
     if code == Code.MAX_STEPS:
-        from mechsim.dynamics.diffrax_backend import result_message
         msg = result_message(int(diffrax.RESULTS.max_steps_reached._value))
         return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: {msg} ({o.max_steps} in one mode "
                     "segment)", code=FailureCode.MAX_STEPS, where=where,
@@ -514,7 +513,6 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
-    from mechsim.dynamics.diffrax_backend import DT0_FIRST, evaluations_per_step, ida_rows, mode_z, state_rows
     from mechsim.dynamics.hybrid import Piece, Trajectory, fire
     from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
@@ -531,7 +529,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     stats = new_stats("diffrax", o.solver, start.derive_time,
                       unavailable={"jacobian_evaluations": "not exposed by diffrax"})
     per_step = evaluations_per_step(o)
-    stats["notes"]["xla_options"] = xla_options.state()     # dynamics/xla_options.py
+    stats["notes"]["xla_options"] = xla_options.state()     # dynamics/backends/xla_options.py
     stats["notes"]["residual_evaluations"] = ("estimated: attempted steps x new stages per step + one per step "
                                               "(guards) + one per bisection")
     if fresh:

@@ -9,7 +9,7 @@ import time
 def design_run(design) -> dict:
     """The design's own run (as `mechsim run design.toml`): its quantities (`run_quantities`) and its wall time."""
     from mechsim.scenarios import runner
-    from mechsim.scenarios.sensitivity_map import MAPS
+    from mechsim.scenarios.studies.sensitivity_map import MAPS
     wall = time.perf_counter()
     result = runner.execute(runner.plan(design))
     pmap = MAPS[design.si["mechanism"]["type"]]
@@ -24,8 +24,8 @@ def run_quantities(result, engage: str, release: str) -> dict:
     last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
     heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
     failure, or None."""
-    from mechsim.scenarios.sensitivity import run_event_quantities
-    from mechsim.scenarios.sensitivity_map import PEAKS, THERMAL_PEAKS
+    from mechsim.scenarios.studies.sensitivity import run_event_quantities
+    from mechsim.scenarios.studies.sensitivity_map import PEAKS, THERMAL_PEAKS
     peaks = result.summary.get("peaks", {})
     out = {q: (abs(peaks[c]["value"]) if c in peaks else None) for q, c in {**PEAKS, **THERMAL_PEAKS}.items()}
     out.update(run_event_quantities(result.events, engage, release))

@@ -13,7 +13,7 @@ lane's segment; lanes whose events fall far apart in time wait for each other. S
 
 Requirements: every case has the same derived model (same `derive` key: mechanism structure, formulation,
 drive kind, state extension) and the same diffrax options (solver, tolerances). The result of each lane
-equals `diffrax_backend.simulate` of that case (the same arithmetic per lane, up to vmap's reordering).
+equals `hybrid.simulate` of that case on the diffrax segment loop (the same arithmetic per lane, up to vmap's reordering).
 """
 from __future__ import annotations
 
@@ -25,8 +25,8 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism
 
-from mechsim.dynamics.diffrax_backend import (DiffraxBackend, DiffraxOptions, compile_key, make_solve,
-                                              segment_arguments)
+from mechsim.dynamics.backends.diffrax_backend import (DiffraxBackend, DiffraxOptions, compile_key, make_solve,
+                                                       segment_arguments)
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import Trajectory, hybrid_loop, prepare
 from mechsim.dynamics.jax_model import JaxModel, jax_model
@@ -75,7 +75,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
                    ext_initial_list: Sequence | None = None, options: DiffraxOptions | None = None,
                    t0: float = 0.0) -> list[Trajectory]:
     """Integrate every case (same derived model structure) with one vmapped solve per round; a Trajectory per
-    case, as `diffrax_backend.simulate` would return it.
+    case, as `hybrid.simulate` on the diffrax segment loop would return it.
 
     Statistics per lane are that lane's own (segments, steps, events); compile_time_s is the batch compilation
     divided by the number of lanes, and solve_time_s the batch's solve time divided likewise (the lanes share

@@ -62,7 +62,7 @@ def _drive_angle_column(si: dict) -> str | None:
 def run_case(task: CaseTask, integrate=None) -> Outcome:
     """Run one case; any failure (solver, physics, exception) becomes a row with success = False and its reason."""
     from mechsim.scenarios.runner import run
-    from mechsim.scenarios.sweep.rows import cycle_figures, summary_row
+    from mechsim.scenarios.studies.sweep.rows import cycle_figures, summary_row
     wall0, cpu0 = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     ts = None
@@ -161,7 +161,7 @@ class SerialRunner:
 
 #: imported once by the pool's fork server, before it forks the workers: each worker then starts with them
 #: loaded (~1 s of imports, pandas the most, instead of once per worker; DAE-only modules load on first use)
-WORKER_PRELOAD = ("mechsim.scenarios.sweep.execute", "mechsim.scenarios.sweep.rows", "mechsim.scenarios.runner",
+WORKER_PRELOAD = ("mechsim.scenarios.studies.sweep.execute", "mechsim.scenarios.studies.sweep.rows", "mechsim.scenarios.runner",
                   "mechsim.thermal.plan")
 
 
@@ -361,7 +361,7 @@ def _batch_reason(task: CaseTask) -> str | None:
 
 class BatchRunner:
     """diffrax DAE cases grouped by derived model structure (the `derive` key), diffrax options and output step;
-    each group of two or more runs as one vmapped hybrid integration (dynamics.diffrax_batch) in this process,
+    each group of two or more runs as one vmapped hybrid integration (dynamics.backends.diffrax_batch) in this process,
     then each case's tables and summary are built as `run_case` builds them. Everything else (closed-form cases,
     the IDA backend, a structure with a single case, a group whose batch raised) goes to the fallback runner;
     `batching_note` says what ran how and why.
@@ -435,7 +435,7 @@ class BatchRunner:
     @staticmethod
     def _capture(task: CaseTask):
         """((group key), call) for a case: the arguments scenarios.runner passes to the diffrax backend."""
-        from mechsim.dynamics.diffrax_backend import default_options
+        from mechsim.dynamics.backends.diffrax_backend import default_options
         from mechsim.dynamics.model import derive
 
         def capture(*args, **kwargs):
@@ -457,7 +457,7 @@ class BatchRunner:
 
     @staticmethod
     def _run_group(members, on_result) -> None:
-        from mechsim.dynamics.diffrax_batch import simulate_batch
+        from mechsim.dynamics.backends.diffrax_batch import simulate_batch
         calls = [c for _, c in members]
         wall0, cpu0 = time.perf_counter(), time.process_time()
         trajs = simulate_batch([c["mech"] for c in calls], [c["drive"] for c in calls], calls[0]["settings"],
