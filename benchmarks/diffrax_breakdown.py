@@ -1,6 +1,6 @@
 """Where mechsim diffrax's warm time goes on the benchmark's case A: the compiled calls alone against the whole run,
-for the compiled whole-run loop (`dynamics/backends/diffrax_run.py`, the default) and the segment loop (one compiled solve
-per segment) (docs/benchmarks.md, "diffrax: the compiled run, and what bounds it").
+for the compiled whole-run loop (`dynamics/backends/diffrax_run.py`, the default) and the segment loop (one compiled
+solve per segment) (docs/benchmarks.md, "diffrax: the compiled run, and what bounds it").
 
     python -m mechsim.benchmarks.diffrax_breakdown [--rounds 7]
 

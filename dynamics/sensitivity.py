@@ -63,7 +63,7 @@ class Seed:
         other parameter raises (a prescribed drive's re-based reference excepted: `_rebased_drive`) unless piece_dp
         gives its derivative.
     piece_dp: values -> {parameter: (n,) derivative} of the parameters a transition sets for the mode with those
-        values (the chain's path pieces: scenarios/studies/sensitivity_mechanisms.py `chain_piece`); applied at the start
+        values (the chain's path pieces: mechanisms/chain/sensitivity.py `chain_piece`); applied at the start
         and after every transition. None: transitions set only discrete parameters.
     hold: the coordinate the initial state holds while the others assemble (Mechanism.initial_state: the drive's),
         so that the initial guess's derivative is completed on the constraints with that coordinate's derivative

@@ -14,6 +14,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from functools import cached_property
+from importlib import import_module
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -227,6 +228,24 @@ class InitialState:
     v: np.ndarray
 
 
+@dataclass(frozen=True)
+class DriveCycle:
+    """One cycle of the driven member (`Mechanism.drive_cycle`): its angle column, the angle of one cycle (None: the
+    motion has no period), where a cycle starts, and the x label of the figures against it."""
+
+    column: str
+    period: float | None
+    start: float
+    label: str
+
+
+def load(ref: str):
+    """The object a "module:name" reference names, its module imported now (drawings and study hooks are named
+    this way so that matplotlib and jax are imported only where they are used)."""
+    module, name = ref.split(":")
+    return getattr(import_module(module), name)
+
+
 class Mechanism(ABC):
     """A mechanism: the symbolic model (shared by all its scenarios) plus one scenario's numbers.
 
@@ -250,6 +269,17 @@ class Mechanism(ABC):
     initial_keys: tuple[str, str] = ("crank_angle", "crank_speed")
     #: default thermal model and whether the mechanism has a sliding contact at all
     has_sliding_contact: bool = False
+    #: the result columns whose peaks (largest |value|, with time and drive angle) the run's summary reports
+    peak_columns: tuple[str, ...] = ()
+    #: "module:Class" of the mechanism's drawing (matplotlib artists, `mechanisms/drawing.py`), imported only when
+    #: a figure or an animation is drawn; None: it has none
+    drawing: str | None = None
+    #: "module:NAME" of the mechanism's `ParameterMap` (mechanisms/parameter_map.py: its parameters as jax formulas
+    #: of its scenario values, for the design sensitivities and the sizing), imported when asked for; None: none
+    sensitivity_map: str | None = None
+    #: whole-number scenario keys a sizing enumerates (each value one design to size) rather than varies
+    #: continuously, e.g. the Geneva's slot count
+    enumerated_keys: tuple[str, ...] = ()
 
     @cached_property
     def symbols(self) -> Symbols:
@@ -341,6 +371,24 @@ class Mechanism(ABC):
         """The conditions this model's idealisation needs on every output row (unilateral contacts in compression,
         friction demand within the friction available, distance from dead centres, ...); none by default."""
         return ()
+
+    @classmethod
+    def drawing_class(cls) -> type | None:
+        """The class of the mechanism's drawing (`drawing`, imported now), or None."""
+        return load(cls.drawing) if cls.drawing else None
+
+    @classmethod
+    def parameter_map(cls):
+        """The mechanism's `ParameterMap` (`sensitivity_map`, imported now), or None: sensitivities not traced."""
+        return load(cls.sensitivity_map) if cls.sensitivity_map else None
+
+    def drive_cycle(self) -> DriveCycle | None:
+        """One cycle of the driven member, for the figures against its angle; None (the default): none."""
+        return None
+
+    def extra_figures(self, timeseries, tables: dict) -> dict:
+        """The mechanism's own figures of a run (file stem -> matplotlib Figure; default: none)."""
+        return {}
 
     def extra_outputs(self, timeseries, events) -> dict:
         """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""

@@ -26,10 +26,6 @@ from mechsim.scenarios.console import group_warnings, warning_time
 from mechsim.scenarios.loader import Scenario, build_mechanism
 from mechsim.scenarios.units import ScenarioError
 
-PEAK_COLUMNS = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2",
-                "slip_speed_m_s", "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2",
-                "coupler_force_N", "heat_rate_W", "temp_flash_rise_K", "temp_contact_C",
-                "temp_bulk_pin_C", "temp_bulk_wheel_C")
 VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
 
 
@@ -94,15 +90,15 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     return df
 
 
-def peaks(df: pd.DataFrame, angle_column: str, cols: TableColumns | None = None) -> dict:
-    """Peak |value| of each key column, with its time and drive angle (wrapped to (-180, 180] deg too).
-    cols: the table's TableColumns, if at hand."""
+def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None) -> dict:
+    """Peak |value| of each of `columns` in the table (the mechanism's `peak_columns`, then the thermal model's),
+    with its time and drive angle (wrapped to (-180, 180] deg too). cols: the table's TableColumns, if at hand."""
     out = {}
     if not len(df):
         return out
     cols = TableColumns(df) if cols is None else cols
     t, angles = np.asarray(cols["t_s"], dtype=float), np.asarray(cols[angle_column], dtype=float)
-    for col in PEAK_COLUMNS:
+    for col in columns:
         values = np.asarray(cols[col], dtype=float) if col in cols else None
         if values is not None and not np.isnan(values).all():
             i = int(np.nanargmax(np.abs(values)))
@@ -290,7 +286,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             "rtol": settings.rtol, "atol": settings.atol,
         },
         "geometry": mech.describe(),
-        "peaks": peaks(df, angle_col, cols),
+        "peaks": peaks(df, angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()), cols),
         "energy": energy_balance(df, events, cols),
         "events": event_counts(events),
         "validity": valid,

@@ -9,7 +9,7 @@ from PIL import Image
 
 from mechsim.scenarios.loader import build_mechanism, load
 from mechsim.scenarios.output.animation import Animator, frame_rows
-from mechsim.scenarios.output.drawings import TEMPERATURE_MAP
+from mechsim.mechanisms.drawing import TEMPERATURE_MAP
 from mechsim.scenarios.runner import run
 
 

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-import mechsim.scenarios.output.chain_plots as chain_plots
+import mechsim.mechanisms.chain.plots as chain_plots
 from mechsim.mechanisms.chain.dwell import MECH1, MECH2, ChainDwellMechanism, dwell_table, kinematic_history, kinematics_table
 
 UNIT = re.compile(r"^[A-Za-z0-9_]+_(s|rad|rad_s|rad_s2|m|m_s)$")

@@ -1,5 +1,6 @@
-"""The compiled whole-run diffrax loop (dynamics/backends/diffrax_run.py, issue 13 item 3): the Geneva's transition table
-against `on_guard`, and case A of the peer benchmark against the independent reference, the segment loop and IDA."""
+"""The compiled whole-run diffrax loop (dynamics/backends/diffrax_run.py, issue 13 item 3): the Geneva's transition
+table against `on_guard`, and case A of the peer benchmark against the independent reference, the segment loop and
+IDA."""
 from dataclasses import replace
 
 import numpy as np

@@ -9,10 +9,10 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
+import mechsim.mechanisms.geneva.drawing as geneva_drawing
+from mechsim.mechanisms.geneva.drawing import geneva_wheel_outline, locking_disc_outline, locking_radius
 from mechsim.scenarios.loader import build_mechanism, load
-from mechsim.scenarios.output import drawings
-from mechsim.scenarios.output.drawings import geneva_wheel_outline, locking_disc_outline, locking_radius
-from mechsim.scenarios.output.plots import drawing_figure, drive_cycle
+from mechsim.scenarios.output.plots import drawing_figure
 from mechsim.scenarios.output.writer import write_result
 from mechsim.scenarios.runner import run
 
@@ -57,7 +57,7 @@ def test_every_accepted_geneva_geometry_draws(geometry):
     result = run(sc)
     assert result.success and len(result.timeseries)
     mech = build_mechanism(sc.si)
-    fig = drawing_figure(result.timeseries, mech, 2, drive_cycle(mech))
+    fig = drawing_figure(result.timeseries, mech, 2, mech.drive_cycle())
     assert fig is not None and len(fig.axes) == 2
     fig.set_size_inches(4, 2)
     fig.set_dpi(30)
@@ -69,9 +69,10 @@ def test_a_figure_that_cannot_be_drawn_is_skipped_with_one_warning_and_the_data_
     sc = load("geneva-lc1", SHORT)
     result = run(sc)
 
-    def broken(*args, **kwargs):
-        raise ValueError("math domain error")
-    monkeypatch.setitem(drawings.DRAWINGS, "Geneva", broken)
+    class Broken(geneva_drawing.GenevaDrawing):
+        def __init__(self, *args, **kwargs):
+            raise ValueError("math domain error")
+    monkeypatch.setattr(geneva_drawing, "GenevaDrawing", Broken)   # the Geneva names its drawing by this path
     out = write_result(result, tmp_path / "run", plots=True, mechanism=build_mechanism(sc.si))
     err = capfd.readouterr().err
     lines = [line for line in err.splitlines() if line.startswith("warning:")]

@@ -8,7 +8,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from mechsim.scenarios.loader import build_mechanism, load
-from mechsim.scenarios.output.drawings import geneva_wheel_outline, locking_disc_outline, locking_radius
+from mechsim.mechanisms.geneva.drawing import geneva_wheel_outline, locking_disc_outline, locking_radius
 from mechsim.scenarios.output.plots import figures
 from mechsim.scenarios.runner import run
 

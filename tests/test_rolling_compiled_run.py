@@ -1,6 +1,6 @@
 """The rolling-pair 4-bar on diffrax's compiled whole run (`RollingPairFourBar.symbolic_transitions`,
-dynamics/backends/diffrax_run.py): its one transition - the dead point, where the driven link reverses under a torque and
-a prescribed speed must stop - as a table entry equal to `on_guard`, and the runs of tests/test_rolling_dynamics.py
+dynamics/backends/diffrax_run.py): its one transition - the dead point, where the driven link reverses under a torque
+and a prescribed speed must stop - as a table entry equal to `on_guard`, and the runs of tests/test_rolling_dynamics.py
 that meet dead points, in one compiled call, against the segment loop, the independent dead-point condition
 and energy."""
 from dataclasses import replace

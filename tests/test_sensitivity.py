@@ -1,5 +1,5 @@
-"""Design sensitivities (scenarios/studies/sensitivity.py on dynamics/sensitivity.py) against central finite differences of
-the IDA path at a tight tolerance, Richardson-extrapolated (docs/sensitivity.md, 'How it is checked').
+"""Design sensitivities (scenarios/studies/sensitivity.py on dynamics/sensitivity.py) against central finite
+differences of the IDA path at a tight tolerance, Richardson-extrapolated (docs/sensitivity.md, 'How it is checked').
 
 The finite differences re-run the scenario (IDA, index-2, rtol 1e-12; the sensitivities run at 1e-10) with one value
 moved by +-h and +-h/2 (relative) and read each quantity the way the sensitivity defines it: a peak at the nominal
@@ -256,13 +256,13 @@ def test_a_map_out_of_step_with_the_mechanism_is_caught(monkeypatch):
     forgets the centre distance c = r / sin(pi/n) (it moves with the crank radius) is refused, not used."""
     import dataclasses
 
-    import mechsim.scenarios.studies.sensitivity_map as sens
-    right = sens.MAPS["geneva"]
+    import mechsim.mechanisms.geneva.sensitivity as geneva_map
+    right = geneva_map.MAP
 
     def forgets_c(x, si, mech):
         out = right.parameters(x, si, mech)
         out.pop("c")
         return out
-    monkeypatch.setitem(sens.MAPS, "geneva", dataclasses.replace(right, parameters=forgets_c))
+    monkeypatch.setattr(geneva_map, "MAP", dataclasses.replace(right, parameters=forgets_c))
     with pytest.raises(RuntimeError, match="'c' moves by"):
         sensitivity(mechsim.load("geneva-motor", set=["duration=0.2 s"]), ["mechanism.crank_radius"])

@@ -2,10 +2,11 @@
 differences of the IDA path, Richardson-extrapolated (the method of tests/test_sensitivity.py, docs/sensitivity.md
 'How it is checked').
 
-The initial angle moves the start (scenarios/studies/sensitivity_map.py `initial_angle_seed`): on the Geneva from a dwell
-(geneva-motor at -180 deg: the wheel stays locked, only the crank moves) and from inside an engagement (-20 deg: the
-wheel starts at beta(alpha) with speed G(alpha) w, both moving with the angle), on the rolling pair (rolling-a-torque,
-the rolling angle phi: the crank and coupler follow by the assembly's implicit-function rule). Steps: absolute, in
+The initial angle moves the start (scenarios/studies/sensitivity_map.py `initial_angle_seed`): on the Geneva from a
+dwell (geneva-motor at -180 deg: the wheel stays locked, only the crank moves) and from inside an engagement (-20 deg:
+the wheel starts at beta(alpha) with speed G(alpha) w, both moving with the angle), on the rolling pair
+(rolling-a-torque, the rolling angle phi: the crank and coupler follow by the assembly's implicit-function rule). Steps:
+absolute, in
 radians (a start at 0 rad has no relative step), a tenth of the change at which another output row takes over a peak
 (the tables' warnings, below); at rtol 1e-12 the differences' noise is ~ rtol / h <= 1e-7 relative, and Richardson's
 truncation ~ h^4 is far below. Each derivative must agree to 1e-4 relative, or to 1e-6 of the quantity per radian

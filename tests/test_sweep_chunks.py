@@ -1,5 +1,5 @@
-"""The process pool sends cases in chunks (scenarios/studies/sweep/execute.py, ChunkSizer): fewer pool calls for cheap cases,
-the same rows, every case delivered once, and an interruption keeps every case of a finished chunk.
+"""The process pool sends cases in chunks (scenarios/studies/sweep/execute.py, ChunkSizer): fewer pool calls for
+cheap cases, the same rows, every case delivered once, and an interruption keeps every case of a finished chunk.
 
 No timing is asserted: the chunk sizes are computed from given case times.
 """

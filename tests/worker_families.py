@@ -1,10 +1,10 @@
 """Files that compile the same jax models run in one xdist worker (`--dist loadfile`, as .ci/run).
 
-mechsim keeps each compiled model for the life of a process, keyed by the model's structure (the diffrax segment
-solve: dynamics/backends/diffrax_backend.py `compiled_solve`; the sensitivity pass: dynamics/sensitivity.py `_tools`), so a
-second file that needs a model another file compiled pays nothing for it if it runs in the same worker, and the
-whole compilation again if loadfile sends it to the other one. The families below were checked to share: in one
-process the second file's call compiled nothing (measured 2026-11-27 on the shared machine):
+mechsim keeps each compiled model for the life of a process, keyed by the model's structure (the diffrax segment solve:
+dynamics/backends/diffrax_backend.py `compiled_solve`; the sensitivity pass: dynamics/sensitivity.py `_tools`), so a
+second file that needs a model another file compiled pays nothing for it if it runs in the same worker, and the whole
+compilation again if loadfile sends it to the other one. The families below were checked to share: in one process the
+second file's call compiled nothing (measured 2026-11-27 on the shared machine):
 
 - the sensitivity pass of geneva-motor (tests/test_sensitivity.py, tests/test_sensitivity_initial.py) and of
   rolling-a-torque (tests/test_sensitivity_rolling.py, tests/test_sensitivity_initial.py): 7.3 s and 8.9 s of

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
@@ -62,6 +63,10 @@ def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
 @dataclass
 class ThermalPlan:
     """What the runner needs before and after the mechanics for one scenario's thermal model."""
+
+    #: the thermal columns whose peaks the summary reports (after the mechanism's `peak_columns`)
+    PEAK_COLUMNS: ClassVar[tuple[str, ...]] = ("heat_rate_W", "temp_flash_rise_K", "temp_contact_C",
+                                               "temp_bulk_pin_C", "temp_bulk_wheel_C")
 
     setup: ThermalSetup
     si: dict

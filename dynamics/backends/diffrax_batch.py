@@ -13,7 +13,8 @@ lane's segment; lanes whose events fall far apart in time wait for each other. S
 
 Requirements: every case has the same derived model (same `derive` key: mechanism structure, formulation,
 drive kind, state extension) and the same diffrax options (solver, tolerances). The result of each lane
-equals `hybrid.simulate` of that case on the diffrax segment loop (the same arithmetic per lane, up to vmap's reordering).
+equals `hybrid.simulate` of that case on the diffrax segment loop (the same arithmetic per lane, up to vmap's
+reordering).
 """
 from __future__ import annotations
 

@@ -10,8 +10,8 @@
    `--xla_backend_extra_options`; not settable per compilation). Case A: the run call 3.2 -> 0.9 ms wall,
    3.8 -> 1.4 ms CPU, the crank angle the same to 3e-13 rad, the compilation no slower.
 2. **No concurrency-optimised scheduling** (`--xla_cpu_enable_concurrency_optimized_scheduler=false`). With it,
-   the vmapped segment solve of `sweep --batch` (`dynamics/backends/diffrax_batch.py`, 64 lanes) hung in about one call in
-   five, from the first call of a process to the fourth: the calling thread waits for the program's completion
+   the vmapped segment solve of `sweep --batch` (`dynamics/backends/diffrax_batch.py`, 64 lanes) hung in about one
+   call in five, from the first call of a process to the fourth: the calling thread waits for the program's completion
    while every XLA worker thread waits for work (native stacks, gdb), with or without option 1, with
    async dispatch, multi-threaded Eigen, XNNPACK or equinox's host callbacks switched off. With this scheduler
    off, 52 calls in five processes all returned, in the same time.

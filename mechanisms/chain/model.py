@@ -39,7 +39,8 @@ import numpy as np
 import pandas as pd
 import sympy as sp
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, Transition, ValidityCondition
+from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, Transition,
+                                     ValidityCondition)
 from mechsim.mechanisms.chain.dwell import ChainDwellMechanism, ChainDwellParams
 
 APEX_LAWS = ("stop", "smooth", "detuned")
@@ -64,6 +65,9 @@ class ChainDwell(Mechanism):
     angle_coordinates = (0, 1, 2)
     initial_keys = ("drive_angle", "drive_speed")
     has_sliding_contact = False
+    peak_columns = ("drive_torque_N_m", "crank_speed_rad_s", "crank_accel_rad_s2", "coupler_force_N")
+    drawing = "mechsim.mechanisms.chain.drawing:ChainDrawing"
+    sensitivity_map = "mechsim.mechanisms.chain.sensitivity:MAP"
     parameter_names = (
         "Qx", "Qy", "R", "L", "r1", "J1", "JQ", "m3", "c3", "J3", "T_L", "c1", "c2",
         # discrete (mode) parameters: piece index, cumulative travel range, line/arc data, tuned-arc data
@@ -451,6 +455,16 @@ class ChainDwell(Mechanism):
             "away from the dead centres (dyad stretched or folded), where the loop closure is singular and the "
             "coupler force grows without bound", sine, DEAD_CENTRE_MARGIN, "min", "",
             "docs/theory.md §K1.5; docs/chain_dwell.md, 'Validity'", ("coupler_angle_rad", "crank_angle_rad", "mode")),)
+
+    def drive_cycle(self) -> DriveCycle:
+        """A chain circuit of the driving sprocket (El-Shakery eq. 31)."""
+        return DriveCycle("drive_angle_rad", self.kin.cycle_angle, 0.0,
+                          "drive sprocket angle within the chain circuit (deg)")
+
+    def extra_figures(self, timeseries, tables: dict) -> dict:
+        """El-Shakery's kinematics figures (`mechanisms/chain/plots.py` `extra_figures`)."""
+        from mechsim.mechanisms.chain.plots import extra_figures
+        return extra_figures(self, timeseries, tables)
 
     def describe(self) -> dict:
         k = self.kin

@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
-from mechsim.mechanisms.base import Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition
+from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition,
+                                     Transition)
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
@@ -57,6 +58,11 @@ class Geneva(Mechanism):
     STOPPED_SPEED = 1e-3   # rad/s
 
     has_sliding_contact = True
+    peak_columns = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2", "slip_speed_m_s",
+                    "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2")
+    drawing = "mechsim.mechanisms.geneva.drawing:GenevaDrawing"
+    sensitivity_map = "mechsim.mechanisms.geneva.sensitivity:MAP"
+    enumerated_keys = ("mechanism.slots",)
     schema = {
         "mechanism": {
             "slots": Field("int", required=True, minimum=3, maximum=72, help="number of slots n (>= 3)",
@@ -349,6 +355,11 @@ class Geneva(Mechanism):
 
     def contact_starts(self, table, events) -> np.ndarray:
         return geneva_contact.starts(self.geometry, table, events)
+
+    def drive_cycle(self) -> DriveCycle:
+        """A crank turn from mid-dwell (0 = mid-engagement, docs/theory.md §G1)."""
+        return DriveCycle("crank_angle_rad", 2 * np.pi, -np.pi,
+                          "crank angle within its turn (deg; 0 = mid-engagement)")
 
     def describe(self) -> dict:
         g = self.geometry

@@ -39,8 +39,8 @@ import sympy as sp
 from scipy.optimize import brentq
 from sympy.simplify.fu import TR5, TR10i
 
-from mechsim.mechanisms.base import (Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition, Transition,
-                                     ValidityCondition)
+from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition,
+                                     Transition, ValidityCondition)
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
 
 DRIVEN_LINKS = ("rolling", "crank")
@@ -102,6 +102,9 @@ class RollingPairFourBar(Mechanism):
     )
     initial_keys = ("drive_angle", "drive_speed")
     has_sliding_contact = False   # pure rolling: no slip, no friction heat
+    peak_columns = ("contact_force_N", "drive_torque_N_m", "crank_speed_rad_s", "crank_accel_rad_s2", "coupler_force_N")
+    drawing = "mechsim.mechanisms.rolling.drawing:RollingDrawing"
+    sensitivity_map = "mechsim.mechanisms.rolling.sensitivity:MAP"
 
     schema = {
         "mechanism": {
@@ -615,6 +618,19 @@ class RollingPairFourBar(Mechanism):
                 lambda c: np.abs(np.asarray(c[trans], dtype=float)), float(self.dead_point_margin), "min", "",
                 "docs/theory.md §K4 point 4; docs/rolling_pair.md, 'Validity'", (trans,)),
         )
+
+    def drive_cycle(self) -> DriveCycle:
+        """A crank turn if the crank is driven; else the trochoid's period (docs/theory.md §K2) when it closes,
+        or no period (the rolling link's angle over the run, one line)."""
+        if self.driven_link != "rolling":
+            return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi, "crank angle within its turn (deg)")
+        try:
+            (a, b), periodic = rolling_span(self.kin)
+        except ValueError:
+            periodic = False
+        if periodic:
+            return DriveCycle("rolling_angle_rad", b - a, a, "rolling link angle within the trochoid period (deg)")
+        return DriveCycle("rolling_angle_rad", None, 0.0, "rolling link angle (deg; the motion has no period)")
 
     def describe(self) -> dict:
         k = self.kin

@@ -19,7 +19,8 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from mechsim.dynamics.result import Result
-from mechsim.scenarios.output.drawings import DRAWINGS, FORCE_COLUMNS, TEMPERATURE_MAP, drawing_for
+from mechsim.mechanisms.drawing import TEMPERATURE_MAP
+from mechsim.scenarios.output.drawings import drawing_for
 
 FRAMES, FPS, DPI = 200, 20, 80
 FORMATS = ("gif", "mp4")
@@ -46,10 +47,11 @@ class Animator:
         df = self.df = result.timeseries
         if not len(df):
             raise ValueError("nothing to animate: the run has no output rows")
-        if type(mech).__name__ not in DRAWINGS:
+        drawing_class = mech.drawing_class()
+        if drawing_class is None:
             raise ValueError(f"no drawing for a {type(mech).__name__} mechanism")
         self.rows = frame_rows(df, frames)
-        force_col = FORCE_COLUMNS[type(mech).__name__]
+        force_col = drawing_class.force_column
         thermal = "temp_contact_C" in df and df["temp_contact_C"].notna().any()
         traces = [(force_col, "force (N)", 1.0)] + ([("temp_contact_C", "contact temperature (°C)", 1.0)]
                                                    if thermal else [])
@@ -75,8 +77,7 @@ class Animator:
                 ax.set_xlabel("time (s)")
         self.clock = self.ax.text(0.02, 0.98, "", transform=self.ax.transAxes, va="top", fontsize=10,
                                   bbox=dict(fc="white", ec="none", alpha=0.8))
-        fig.suptitle(f"{result.summary.get('scenario', '')}: arrow = "
-                     + ("coupler force" if force_col == "coupler_force_N" else "normal contact force"))
+        fig.suptitle(f"{result.summary.get('scenario', '')}: arrow = {drawing_class.force_label}")
         self.canvas = FigureCanvasAgg(fig)
 
     def _moving(self) -> list:

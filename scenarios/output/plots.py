@@ -8,7 +8,6 @@ names the quantity and the unit), legends sit outside the data to the right.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mechsim.dynamics.result import Result
+from mechsim.mechanisms.base import DriveCycle
 
 DEG = 180.0 / math.pi
 DPI = 110
@@ -39,43 +39,6 @@ FIGURES = {
 PER_CYCLE = ("motion", "forces", "thermal")
 NAMES = {"rolling": "rolling link"}
 WORDS = {"accel": "acceleration"}
-
-
-@dataclass(frozen=True)
-class DriveCycle:
-    """The driven member's angle column, the angle of one cycle of the mechanism, where a cycle starts, and the
-    x label of the versus-angle figures."""
-
-    column: str
-    period: float | None
-    start: float
-    label: str
-
-
-def drive_cycle(mech) -> DriveCycle | None:
-    """One cycle of the driven member: a crank turn from mid-dwell for the Geneva (0 = mid-engagement,
-    docs/theory.md §G1), a chain circuit for the chain dwell mechanism (El-Shakery eq. 31), the trochoid's
-    period for the rolling pair (docs/theory.md §K2) when it closes (a turn of the crank if the crank is
-    driven), else no period (period None: the angle over the run, one line); None for other mechanisms."""
-    kind = type(mech).__name__
-    if kind == "Geneva":
-        return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi,
-                          "crank angle within its turn (deg; 0 = mid-engagement)")
-    if kind == "ChainDwell":
-        return DriveCycle("drive_angle_rad", mech.kin.cycle_angle, 0.0,
-                          "drive sprocket angle within the chain circuit (deg)")
-    if kind == "RollingPairFourBar":
-        if mech.driven_link != "rolling":
-            return DriveCycle("crank_angle_rad", 2 * math.pi, -math.pi, "crank angle within its turn (deg)")
-        from mechsim.mechanisms.rolling.pair import rolling_span
-        try:
-            (a, b), periodic = rolling_span(mech.kin)
-        except ValueError:
-            periodic = False
-        if periodic:
-            return DriveCycle("rolling_angle_rad", b - a, a, "rolling link angle within the trochoid period (deg)")
-        return DriveCycle("rolling_angle_rad", None, 0.0, "rolling link angle (deg; the motion has no period)")
-    return None
 
 
 UNITS = ("_rad_s2", "_rad_s", "_rad", "_N_m", "_N", "_m_s", "_W", "_C", "_K", "_J", "_Pa")
@@ -199,14 +162,15 @@ def _cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: 
 def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | None) -> Figure | None:
     """The mechanism at `instants` over the last complete cycle of the run (over the run if no cycle): evenly over
     the contact and once in the contact-free part (`_instants`)."""
-    from mechsim.scenarios.output.drawings import DRAWINGS, FORCE_COLUMNS, drawing_for
-    if mech is None or type(mech).__name__ not in DRAWINGS or not instants or not len(df):
+    from mechsim.scenarios.output.drawings import drawing_for
+    drawing_class = mech.drawing_class() if mech is not None else None
+    if drawing_class is None or not instants or not len(df):
         return None
     if cycle is not None and cycle.period and cycle.column in df:
         k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)
         complete = [c for c in np.unique(k) if np.ptp(within[k == c]) >= 0.98 * cycle.period]
         last = np.flatnonzero(k == (complete[-1] if complete else k[-1]))
-        idx = _instants(df.iloc[last], instants, FORCE_COLUMNS.get(type(mech).__name__)) + last[0]
+        idx = _instants(df.iloc[last], instants, drawing_class.force_column) + last[0]
     else:
         idx = list(np.linspace(0, len(df) - 1, instants).astype(int))
     fig = Figure(figsize=(3.6 * instants, 3.9), layout="constrained")
@@ -217,8 +181,7 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
         drawing.update(row)
         where = f", {cycle.column.split('_')[0]} {math.degrees(float(row[cycle.column])):.0f}°" if cycle else ""
         ax.set_title(f"t = {row['t_s']:.3f} s{where}", fontsize=9)
-    fig.suptitle("mechanism (mm); arrow: " + ("coupler force" if type(mech).__name__ == "ChainDwell"
-                                               else "normal contact force") + ", scaled to the run's peak")
+    fig.suptitle(f"mechanism (mm); arrow: {drawing_class.force_label}, scaled to the run's peak")
     return fig
 
 
@@ -248,7 +211,7 @@ def figure_makers(result: Result, mechanism=None) -> list:
     if not len(df):
         return []
     name = result.summary.get("scenario", "")
-    cycle = drive_cycle(mechanism) if mechanism is not None else None
+    cycle = mechanism.drive_cycle() if mechanism is not None else None
 
     def one(stem, build, *args):
         def make():
@@ -263,9 +226,8 @@ def figure_makers(result: Result, mechanism=None) -> list:
             makers.append(one(f"{group}_vs_angle", angle_figure, df, group, f"{name}: {group}", cycle))
     instants = result.scenario.get("output", {}).get("drawing_instants", 4)
     makers.append(one("mechanism", drawing_figure, df, mechanism, instants, cycle))
-    if type(mechanism).__name__ == "ChainDwell":
-        from mechsim.scenarios.output.chain_plots import extra_figures
-        makers.append(lambda: extra_figures(mechanism, df, result.extra_tables))
+    if mechanism is not None:
+        makers.append(lambda: mechanism.extra_figures(df, result.extra_tables))
     return makers
 
 

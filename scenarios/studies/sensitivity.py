@@ -29,9 +29,9 @@ from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_f
                                                          cycle_temperatures, cycle_window, event_crosses_turn_row,
                                                          switch_correction, period_gradient, repetition_crosses_end,
                                                          turn_peak)
-from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request, make_seed,
-                                                       scenario_value, traced_quantities)
-from mechsim.scenarios.studies.sensitivity_rows import CONTACT_COLUMNS, row_state_columns, thermal_samples
+from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request,
+                                                       make_seed, scenario_value, traced_quantities)
+from mechsim.scenarios.studies.sensitivity_rows import row_state_columns, thermal_samples
 from mechsim.scenarios.units import ScenarioError
 
 #: a second peak within this relative distance of the first is reported (the maximum may switch between them)
@@ -174,7 +174,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if thermal_times:
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
         # averagings share one compiled set of read-outs
-        columns |= set(CONTACT_COLUMNS) | row_state_columns(model.extension_names)
+        columns |= set(pmap.contact_columns) | row_state_columns(model.extension_names)
         columns |= set(CYCLE_COLUMNS) if ext is not None else set()
     if turn is not None and thermal_times and ext is not None:
         # the cycle-averaged bulk depends on every row of the turn (its input) and on the rows at its ends

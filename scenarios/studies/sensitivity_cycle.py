@@ -8,14 +8,11 @@ import time
 import numpy as np
 import pandas as pd
 
-from mechsim.scenarios.studies.sensitivity_rows import CONTACT_COLUMNS
 
-
-#: (the cycle means) and the contact of every row of the turn (its heat input, the ripple)
-CYCLE_COLUMNS = CONTACT_COLUMNS + ("crank_angle_rad", "heat_generated_J", "heat_pin_J", "friction_power_W")
-#: the contact columns of the network's heat input (thermal/coupling.py `heat_inputs`)
-_INPUT_COLUMNS = ("contact_force_N", "crank_speed_rad_s", "wheel_speed_rad_s", "pin_sliding_speed_m_s",
-                  "friction_power_W")
+#: the columns of the cycle-averaged bulk besides the mechanism's contact columns (`ParameterMap.contact_columns`,
+#: the contact of every row of the turn: its heat input, the ripple): the drive angle and the energies at the turn's
+#: ends (the cycle means), the heat rate of every row
+CYCLE_COLUMNS = ("crank_angle_rad", "heat_generated_J", "heat_pin_J", "friction_power_W")
 
 
 def cycle_window(plan):
@@ -231,24 +228,25 @@ def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], turn: d
 _CYCLE_FNS: dict = {}
 
 
-def _cycle_bulk_fn(ext, distribution: str):
+def _cycle_bulk_fn(ext, distribution: str, pmap):
     """(x, data) -> (bulk, its jvp along the columns of dx) of the cycle-averaged bulk as a function of the traced
     values x (thermal/cycle_exact.py `turn_bulk`, the heat input of each row by thermal/coupling.py `heat_inputs`),
-    jitted once per network and distribution (the turn's rows are padded, so a new design needs no new one)."""
+    jitted once per network, distribution and contact row (the turn's rows are padded, so a new design needs no
+    new one). The columns are the mechanism's contact columns and the heat rate (`_input_columns`)."""
     import jax
     import jax.numpy as jnp
 
     from mechsim.thermal.coupling import heat_inputs
     from mechsim.thermal.cycle_exact import turn_bulk
     B = np.asarray(ext.system.input_matrix)
-    key = (ext.structure_key(), B.tobytes())
+    key = (ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
+    nc = len(pmap.contact_columns)
     fn = _CYCLE_FNS.get(key)
     if fn is not None:
         return fn, False
 
     def inputs(x, cols, engaged):
-        contact = {"normal_force": cols[:, 0], "heat_rate": cols[:, 4],
-                   "source_speed_driver": x["R"] * (cols[:, 1] + cols[:, 2]), "source_speed_driven": cols[:, 3]}
+        contact = {**pmap.contact_row([cols[:, i] for i in range(nc)], x["R"], jnp), "heat_rate": cols[:, nc]}
         u, _, _ = heat_inputs(contact, x.__getitem__, ext.inputs, distribution, jnp)
         return jnp.where(engaged[:, None], jnp.stack(u, axis=1), 0.0)
 
@@ -305,8 +303,10 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     for key, col in (("angle", "crank_angle_rad"), ("gen", "heat_generated_J"), ("pin", "heat_pin_J")):
         x, dx = columns([col], edges, contact=False)
         primal[key], tangent[key] = x[:, 0], dx[:, 0]
-    primal["cols_edges"], tangent["cols_edges"] = columns(_INPUT_COLUMNS, edges)
-    primal["cols_inner"], tangent["cols_inner"] = columns(_INPUT_COLUMNS, layout.padded)
+    pmap = plan.mechanism.parameter_map()
+    inputs = pmap.contact_columns + ("friction_power_W",)
+    primal["cols_edges"], tangent["cols_edges"] = columns(inputs, edges)
+    primal["cols_inner"], tangent["cols_inner"] = columns(inputs, layout.padded)
     for name in SHARE_PARAMETERS + ("R",):
         primal[name], tangent[name] = parameter(name)
     size = sysm.size
@@ -325,7 +325,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     data = {**layout.data(), "engaged_edges": engaged[edges], "engaged_inner": engaged[layout.padded]}
     x = {k: jnp.asarray(v, jnp.float64) for k, v in primal.items()}
     dx = {k: jnp.moveaxis(jnp.asarray(v, jnp.float64), -1, 0) for k, v in tangent.items()}
-    fn, fresh = _cycle_bulk_fn(ext, setup.section["distribution"])
+    fn, fresh = _cycle_bulk_fn(ext, setup.section["distribution"], pmap)
     wall = time.perf_counter()
     value, grads = fn(x, dx, data)
     if fresh:            # compiled on its first call (with a first evaluation of ~0.2 s): counted as compilation

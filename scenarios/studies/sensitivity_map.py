@@ -1,22 +1,18 @@
 """How scenario values enter a mechanism's model, for the design sensitivities (docs/sensitivity.md).
 
-The headline quantities' names, the traced scenario keys of each mechanism type (`MAPS`: a `ParameterMap` each,
-its parameters as jax formulas of the values, from `sensitivity_mechanisms.py`), the drive's and the thermal
-model's, the seed of the forward sensitivities (`make_seed`), the check of the map against the mechanism rebuilt
-with each value moved, and the check of a request (`check_request`: which values and quantities are traced on a
-plan).
+The headline quantities' names; the traced scenario keys of the mechanism (its `ParameterMap`,
+`Mechanism.parameter_map`: its parameters as jax formulas of the values, in mechanisms/<name>/sensitivity.py), the
+drive's and the thermal model's (`sensitivity_thermal_map.py`); the seed of the forward sensitivities
+(`make_seed`), the check of the map against the mechanism rebuilt with each value moved, and the check of a request
+(`check_request`: which values and quantities are traced on a plan).
 """
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from mechsim.scenarios.studies.sensitivity_mechanisms import (chain_list_keys, chain_parameters, chain_piece, chain_pieces,
-                                                              chain_refuse, geneva_initial_angle, geneva_parameters,
-                                                              rolling_list_keys, rolling_parameters, rolling_refuse)
+from mechsim.mechanisms.parameter_map import ParameterMap
 from mechsim.scenarios.studies.sensitivity_thermal_map import (THERMAL_KEYS, THERMAL_MATERIAL_KEYS, check_thermal,
                                                                thermal_parameters, thermal_values)
 from mechsim.scenarios.units import ScenarioError
@@ -38,84 +34,14 @@ CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
 #: the frictional heat of the last complete index: minus the friction work (a work state) from engage to release
 HEAT = "heat_per_index_J"
 QUANTITIES = tuple(PEAKS) + tuple(THERMAL_PEAKS) + CYCLE + (HEAT,)
-@dataclass(frozen=True)
-class ParameterMap:
-    """How the scenario values of one mechanism type enter the model.
-
-    keys: the supported scenario keys (SI). parameters(x, si, mech): the model parameters they set, as
-    jax-traceable formulas of the dict x (key -> value); each is checked against the mechanism's own
-    `parameter_values()`. speed_key: the initial-speed key (the initial velocities are linear in it). discrete:
-    parameters that transitions may change, whose values do not depend on any of `keys` (integers, signs, or
-    geometry that is not traced). list_keys, piece_parameters, pieces, refuse, hold_drive: below. engage/release:
-    the event kinds that start and end an index (the cycle runs from one `engage` to the next; empty for a
-    mechanism that does not index). peaks: its peak quantities.
-    """
-
-    keys: tuple[str, ...]
-    parameters: Callable
-    speed_key: str
-    discrete: frozenset
-    engage: str
-    release: str
-    peaks: tuple[str, ...] = tuple(PEAKS)
-    sliding: bool = False
-    #: (si) -> the keys of list entries traced in this scenario ('mechanism.sprocket_radii[0]', ...)
-    list_keys: Callable | None = None
-    #: (x, si, mech, values) -> the parameters a transition sets for the mode whose values are `values` (a piece of
-    #: the chain's path), as jax formulas of x like `parameters`; None: transitions change only `discrete` ones
-    piece_parameters: Callable | None = None
-    #: (mech) -> every such set of values the mechanism's transitions can set (checked like `parameters`)
-    pieces: Callable | None = None
-    #: (plan, key) -> why the key cannot be traced on this plan (a tuned design's geometry), or None
-    refuse: Callable | None = None
-    #: the initial state assembles with the drive coordinate held (Mechanism.initial_state): its derivative too
-    hold_drive: bool = False
-    #: (mech, angle, speed) -> (dq, dv): the initial guess's derivative in the drive's initial angle, per radian
-    #: (`initial_angle_seed`); None: the drive coordinate's unit vector and no velocity change, which is the whole
-    #: derivative with `hold_drive` (the hold completes the other coordinates by the implicit-function rule)
-    initial_angle: Callable | None = None
-
-    @property
-    def cycle(self) -> tuple[str, ...]:
-        """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not); the
-        heat per index where it has a sliding contact."""
-        return (CYCLE + ((HEAT,) if self.sliding else ())) if self.engage else ()
 
 
-MAPS = {
-    "rolling_pair": ParameterMap(
-        keys=("mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass", "mechanism.coupler_inertia",
-              "mechanism.disc_mass", "mechanism.arm_mass", "mechanism.rolling_inertia", "load.gravity",
-              "load.crank_damping", "load.rolling_damping", "mechanism.fixed_radius", "mechanism.disc_radius",
-              "mechanism.contact_angle", "mechanism.line_angle", "mechanism.crank_length", "mechanism.coupler_length",
-              "mechanism.arm_length", "mechanism.arm_angle", "mechanism.coupler_point_distance",
-              "mechanism.coupler_point_angle", "mechanism.crank_com", "mechanism.coupler_com", "mechanism.rolling_com",
-              "mechanism.rolling_com_angle"),
-        parameters=rolling_parameters, speed_key="initial.drive_speed",
-        discrete=frozenset({"dead_sign"}), engage="", release="", list_keys=rolling_list_keys,
-        refuse=rolling_refuse, hold_drive=True,
-        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2",
-               "peak_crank_speed_rad_s")),
-    "chain_dwell": ParameterMap(
-        keys=("mechanism.chain_mass", "mechanism.crank_mass", "mechanism.crank_inertia", "mechanism.coupler_mass",
-              "mechanism.coupler_inertia", "mechanism.drive_damping", "mechanism.crank_damping", "load.crank_torque",
-              "mechanism.crank_radius", "mechanism.coupler_length", "mechanism.detuning"),
-        parameters=chain_parameters, speed_key="initial.drive_speed",
-        # the piece index and the dyad's branch; the pieces' geometry is traced (`chain_piece`)
-        discrete=frozenset({"seg", "sigma"}),
-        list_keys=chain_list_keys, piece_parameters=chain_piece, pieces=chain_pieces, refuse=chain_refuse,
-        hold_drive=True,
-        engage="dwell end", release="stop impact",
-        peaks=("peak_drive_torque_N_m", "peak_coupler_force_N", "peak_crank_accel_rad_s2", "peak_crank_speed_rad_s")),
-    "geneva": ParameterMap(
-        keys=("mechanism.crank_radius", "mechanism.pin_radius", "mechanism.thickness", "mechanism.crank_inertia",
-              "mechanism.wheel_inertia", "mechanism.crank_damping", "mechanism.wheel_damping", "load.wheel_torque",
-              "contact.friction"),
-        parameters=geneva_parameters, speed_key="initial.crank_speed", initial_angle=geneva_initial_angle,
-        discrete=frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}), engage="entry", release="exit",
-        sliding=True,
-        peaks=("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_wheel_speed_rad_s")),
-}
+def cycle_quantities(pmap: ParameterMap) -> tuple[str, ...]:
+    """The event-based quantities, where the mechanism indexes (a continuously turning linkage does not); the heat
+    per index where it has a sliding contact."""
+    return (CYCLE + ((HEAT,) if pmap.sliding else ())) if pmap.engage else ()
+
+
 DRIVE_KEYS = {"torque": ("drive.torque",), "motor": ("drive.stall_torque", "drive.no_load_speed"),
               "speed": ("drive.speed",)}
 
@@ -184,7 +110,7 @@ def _mapped(plan, pmap: ParameterMap, keys: list[str]):
         x = dict(zip(keys, xs))
         out = {**pmap.parameters(x, si, mech), **_drive_parameters(x, drive.kind)}
         if plan.thermal is not None:
-            out.update(thermal_parameters(x, si, plan.thermal.setup, pmap.speed_key, drive.kind))
+            out.update(thermal_parameters(x, si, plan.thermal.setup, pmap, drive.kind))
         return {k: jnp.asarray(v, jnp.float64) for k, v in out.items()}
     return params
 
@@ -475,11 +401,11 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     on this plan (ScenarioError naming the first that is not; `mechsim size` checks its requests with it too)."""
     si = plan.scenario.si
     mtype = si["mechanism"]["type"]
-    pmap = MAPS.get(mtype)
+    pmap = plan.mechanism.parameter_map()
     if pmap is None:
         raise ScenarioError("mechanism.type", f"sensitivities are not traced for '{mtype}' (docs/sensitivity.md)")
     if plan.thermal is not None:
-        check_thermal(plan, mtype)
+        check_thermal(plan, pmap, mtype)
     allowed = _traced_keys(plan, pmap) + ([] if plan.drive.is_prescribed else [pmap.speed_key])
     allowed.append(angle_key(plan.mechanism))
     allowed = list(dict.fromkeys(allowed))
@@ -518,4 +444,4 @@ def _lookup_or_none(si: dict, key: str):
 
 def traced_quantities(plan, pmap: ParameterMap) -> tuple[str, ...]:
     thermal = tuple(THERMAL_PEAKS) if plan.thermal is not None else ()
-    return pmap.peaks + thermal + pmap.cycle
+    return pmap.peaks + thermal + cycle_quantities(pmap)

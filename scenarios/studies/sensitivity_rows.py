@@ -1,6 +1,7 @@
-"""The contact temperature of a Geneva output row as a traced function (docs/sensitivity.md, "Temperatures"):
-the row's contact state, bulk temperatures, time since the contact began and the flash formulas' inputs pushed
-through thermal/contact_row.py by their exact Jacobian, checked against the run's own columns."""
+"""The contact temperature of an output row as a traced function (docs/sensitivity.md, "Temperatures"): the
+row's contact state (the mechanism's `ParameterMap.contact_row` of its `contact_columns`), bulk temperatures, time
+since the contact began and the flash formulas' inputs pushed through thermal/contact_row.py by their exact
+Jacobian, checked against the run's own columns."""
 from __future__ import annotations
 
 import time
@@ -9,11 +10,6 @@ import numpy as np
 import pandas as pd
 
 
-#: the columns the contact temperature of a Geneva row is made of (mechanisms/geneva/contact.py `state`)
-CONTACT_COLUMNS = ("crank_speed_rad_s", "wheel_speed_rad_s", "crank_accel_rad_s2", "pin_sliding_speed_m_s",
-                   "pin_distance_m", "contact_force_N", "slip_speed_m_s")
-#: the events at which a contact begins (the pin's transient floor counts from there; mechanisms/geneva/contact.py)
-CONTACT_STARTS = ("entry", "flank switch")
 FLASH_INPUTS = ("flash_mu", "flash_R", "flash_l", "flash_Estar", "flash_k", "flash_chi")
 #: the 1-D wall-track model's extra inputs of the wall surface (sensitivity_thermal_map.py): the first cell's
 #: width, the track area, the share's reference time; then the share's floor half-width b0 (a constant)
@@ -26,23 +22,23 @@ def row_state_columns(names) -> set[str]:
     return {c for c in names if c.startswith("temp_bulk_") or (c.startswith("temp_wall_") and c.endswith("_0_K"))}
 
 
-def _geneva_row_temperatures(u, distribution: str, xp=np, wall: bool = False):
-    """(flash rise K, contact temperature degC[, wall surface K]) of one Geneva row from u = [CONTACT_COLUMNS,
-    base_pin, base_wheel, t_on_pin, FLASH_INPUTS] (+ [WALL_INPUTS, b0] with `wall`): the contact state of
-    mechanisms/geneva/contact.py `state` (source speeds R (w1 + w2) over the pin and v_s over the wall,
-    a_s = (w1' v_s + w1 (w1 + w2) w2 x)/w1, docs/theory.md §G1, §G4.6) with the pin radius traced, then
+def _row_temperatures(u, pmap, distribution: str, xp=np, wall: bool = False):
+    """(flash rise K, contact temperature degC[, wall surface K]) of one row from u = [contact columns, base_pin,
+    base_wheel, t_on_pin, FLASH_INPUTS] (+ [WALL_INPUTS, b0] with `wall`): the mechanism's contact state of the row
+    (`ParameterMap.contact_row` of its `contact_columns`) with the contact radius traced, then
     thermal/contact_row.py `contact_temperature` (docs/theory.md §G3-§G4.6). With `wall` (thermal.model = "1d")
     base_wheel is the surface cell T_0 of the track in contact and the wheel's base temperature is the track's
     surface, T_0 + q dz_0/(2k) with q = (1 - gamma) Q / A the heat into the track per area (thermal/plan.py
     `_wall_surface`; gamma the DAE's smooth share, thermal/coupling.py `heat_share_pin`, docs/thermal.md
     "Coupling"; Q = mu |N| |u_slip|, docs/theory.md §G4.1)."""
     from mechsim.thermal.contact_row import KELVIN, contact_temperature
-    w1, w2, a1, v_s, x, N, slip, base_pin, base_wheel, t_on, mu, R, length, estar, k, chi = (u[i] for i in range(16))
-    contact = {"normal_force": N, "slip_speed": slip, "source_speed_driver": R * (w1 + w2),
-               "source_speed_driven": v_s, "sliding_accel": (a1 * v_s + w1 * (w1 + w2) * w2 * x) / w1}
+    nc = len(pmap.contact_columns)
+    base_pin, base_wheel, t_on, mu, R, length, estar, k, chi = (u[i] for i in range(nc, nc + 9))
+    contact = pmap.contact_row([u[i] for i in range(nc)], R, xp)
+    N, slip = contact["normal_force"], contact["slip_speed"]
     if wall:
         from mechsim.thermal.coupling import heat_share_pin
-        dz0, area, t_ref, b0 = (u[i] for i in range(16, 20))
+        dz0, area, t_ref, b0 = (u[i] for i in range(nc + 9, nc + 13))
         P = {"th_R": R, "th_l": length, "th_Estar": estar, "th_b0": b0, "th_k_pin": k, "th_k_wheel": k,
              "th_chi_pin": chi, "th_chi_wheel": chi, "th_t_ref": t_ref}
         gamma = heat_share_pin(contact, P.__getitem__, distribution, xp)
@@ -56,20 +52,21 @@ def _geneva_row_temperatures(u, distribution: str, xp=np, wall: bool = False):
 _ROW_JACOBIANS: dict = {}
 
 
-def _row_jacobian(distribution: str, wall: bool = False):
-    """(u -> (values, Jacobian) of `_geneva_row_temperatures`, seconds spent compiling it now): compiled ahead of
-    time once per process, distribution and model (bulk/ambient base or the 1-D wall's surface)."""
+def _row_jacobian(pmap, distribution: str, wall: bool = False):
+    """(u -> (values, Jacobian) of `_row_temperatures`, seconds spent compiling it now): compiled ahead of time once
+    per process, mechanism's contact row, distribution and model (bulk/ambient base or the 1-D wall's surface)."""
     import jax
     import jax.numpy as jnp
-    fn = _ROW_JACOBIANS.get((distribution, wall))
+    key = (pmap.contact_row, pmap.contact_columns, distribution, wall)
+    fn = _ROW_JACOBIANS.get(key)
     if fn is not None:
         return fn, 0.0
     wall_time = time.perf_counter()
 
     def f(u):
-        return _geneva_row_temperatures(u, distribution, jnp, wall)
-    size = 20 if wall else 16
-    fn = _ROW_JACOBIANS[(distribution, wall)] = jax.jit(lambda u: (f(u), jax.jacfwd(f)(u))).lower(
+        return _row_temperatures(u, pmap, distribution, jnp, wall)
+    size = len(pmap.contact_columns) + (13 if wall else 9)
+    fn = _ROW_JACOBIANS[key] = jax.jit(lambda u: (f(u), jax.jacfwd(f)(u))).lower(
         np.ones(size)).compile()
     return fn, time.perf_counter() - wall_time
 
@@ -85,8 +82,9 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
     setup = plan.thermal.setup
     distribution = setup.section["distribution"]
     wall = setup.mesh is not None
-    starts = [e for e in path.events if e.kind in CONTACT_STARTS]
-    fn, path.stats["row_compile_time_s"] = _row_jacobian(distribution, wall)
+    pmap = plan.mechanism.parameter_map()
+    starts = [e for e in path.events if e.kind in pmap.contact_starts]
+    fn, path.stats["row_compile_time_s"] = _row_jacobian(pmap, distribution, wall)
     path.stats["compile_time_s"] += path.stats["row_compile_time_s"]
     t_all = df["t_s"].to_numpy(float)
     for s in samples:
@@ -105,10 +103,10 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
             base = [setup.temp_ambient] * 2
             dbase = [flash["flash_T_amb"]] * 2
         extra = WALL_INPUTS if wall else ()
-        u = np.array([s.values[c] for c in CONTACT_COLUMNS] + base + [s.t - start.t]
+        u = np.array([s.values[c] for c in pmap.contact_columns] + base + [s.t - start.t]
                      + [_flash_value(setup, plan, name) for name in FLASH_INPUTS + extra]
                      + ([setup.extension.share.b0] if wall else []))
-        du = np.vstack([s.grads[c] for c in CONTACT_COLUMNS] + dbase + [-start.dt]
+        du = np.vstack([s.grads[c] for c in pmap.contact_columns] + dbase + [-start.dt]
                        + [flash[name] for name in FLASH_INPUTS + extra] + ([np.zeros(len(dbase[0]))] if wall else []))
         _check_row_formula(plan, df, events, row, distribution)
         if wall:
@@ -151,9 +149,10 @@ def _check_wall_surface(plan, df: pd.DataFrame, row: int, u: np.ndarray, distrib
     contact = plan.mechanism.contact_state(df.iloc[[row]])
     inputs, _, _ = setup.extension.inputs_numeric(contact)
     states = np.zeros((1, setup.system.size + 3))
-    states[0, setup.mesh_states[_track(plan, df, row)][0]] = u[8]
+    pmap = plan.mechanism.parameter_map()
+    states[0, setup.mesh_states[_track(plan, df, row)][0]] = u[len(pmap.contact_columns) + 1]   # the wheel's base
     theirs = float(plan.thermal._wall_surface(states, inputs, contact["track"])[0])
-    mine = float(_geneva_row_temperatures(u, distribution, np, wall=True)[2])
+    mine = float(_row_temperatures(u, pmap, distribution, np, wall=True)[2])
     if not abs(mine - theirs) <= 1e-9 * max(1.0, abs(theirs)):
         raise SensitivityUnavailable(f"the traced wall surface gives {mine!r} K at t = {float(df['t_s'].iloc[row]):.6g} "
                                      f"s, the run's finish {theirs!r} K: not the run's 1-D wall model")
@@ -174,9 +173,10 @@ def _check_row_formula(plan, df: pd.DataFrame, events: pd.DataFrame, row: int, d
         base = [float(r["temp_bulk_pin_C"]) + 273.15, float(r[wheel]) + 273.15]
     else:
         base = [setup.temp_ambient] * 2
-    u = np.array([float(r[c]) for c in CONTACT_COLUMNS] + base + [t - start]
+    pmap = plan.mechanism.parameter_map()
+    u = np.array([float(r[c]) for c in pmap.contact_columns] + base + [t - start]
                  + [_flash_value(setup, plan, name) for name in FLASH_INPUTS])
-    mine = _geneva_row_temperatures(u, distribution, np)
+    mine = _row_temperatures(u, pmap, distribution, np)
     theirs = np.array([float(r["temp_flash_rise_K"]), float(r["temp_contact_C"])])
     if not np.all(np.abs(mine - theirs) <= 1e-9 * np.maximum(1.0, np.abs(theirs))):
         raise SensitivityUnavailable(f"the traced thermal formulas give {mine} at t = {t:.6g} s, the run "

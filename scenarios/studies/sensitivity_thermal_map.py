@@ -22,22 +22,24 @@ THERMAL_KEYS = THERMAL_MATERIAL_KEYS + (
     "thermal.wheel_radius", "thermal.wheel_thickness")
 
 
-def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str) -> dict:
-    """The thermal model's values as formulas of the scenario values (Geneva), checked against the run's own
-    (`thermal_values`): the flash formulas' inputs `flash_*` (friction, contact radius R = pin radius and length
-    l = thickness, E* = E/(2 (1 - nu^2)) of two equal bodies (docs/theory.md §G3), k, chi = k/(rho c_p), ambient)
-    and, with bulk states, the DAE network's `th_*` (thermal/network.py `bulk_bodies`, `assemble`;
-    docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set), crank bar
-    r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of radius c cos(pi/n)
-    and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the share's
-    t_ref = 2 alpha0 / (nominal speed) (thermal/network.py `nominal_speed`). With the 1-D wall-track model
+def thermal_parameters(x: dict, si: dict, setup, pmap, drive_kind: str) -> dict:
+    """The thermal model's values as formulas of the scenario values, checked against the run's own
+    (`thermal_values`), from the mechanism's traced contact geometry (`ParameterMap.contact_geometry`: contact
+    radius R, length l, the driver's arm r, the tracks, the driven body's radius, the contact angle): the flash
+    formulas' inputs `flash_*` (friction, R, l, E* = E/(2 (1 - nu^2)) of two equal bodies (docs/theory.md §G3), k,
+    chi = k/(rho c_p), ambient) and, with bulk states, the DAE network's `th_*` (thermal/network.py `bulk_bodies`,
+    `assemble`; docs/theory.md §G5): pin V = pi R^2 l_pin, A = 2 pi R l_pin + pi R^2 (l_pin = 2.5 l unless set),
+    crank bar r x 4R x l (unless set), conductance G = k pi R^2/(l_pin/2) (unless set), wheel disc of the driven
+    radius and thickness l (unless set); C = rho c_p V, K = diag(h A) + G coupling, s = h A T_amb, loss = h A; the
+    share's t_ref = contact angle / (nominal speed) (thermal/network.py `nominal_speed`). With the 1-D wall-track model
     (thermal.model = "1d") also the meshes' C, K and far-face conductances and the driven body's volume less the
     meshes' (`_wall_track`, `_add_wall_network`), and the wall surface's inputs `flash_dz0`, `flash_track_area`,
     `flash_t_ref`; the network's loss K^T 1 is the column sums of K in the run's order (zero at a mesh cell)."""
     import jax.numpy as jnp
     th = si["thermal"]
-    n = si["mechanism"]["slots"]
-    r, R, l = x["mechanism.crank_radius"], x["mechanism.pin_radius"], x["mechanism.thickness"]
+    speed_key = pmap.speed_key
+    geo = pmap.contact_geometry(x, si)
+    r, R, l = geo["driver_arm"], geo["contact_radius"], geo["contact_length"]
     k, rho_c = x["thermal.conductivity"], x["thermal.density"] * x["thermal.specific_heat"]
     E, nu = x["thermal.E"], x["thermal.nu"]
     estar = E / (2.0 * (1.0 - nu**2))
@@ -63,16 +65,16 @@ def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str
     bodies = {"pin": (jnp.pi * R**2 * l_pin, 2 * jnp.pi * R * l_pin + jnp.pi * R**2, x["thermal.convection_pin"]),
               "crank": (given("crank_volume", r * width * l),
                         given("crank_area", 2 * r * width + 2 * (r + width) * l), x["thermal.convection_pin"])}
-    radius_w = given("wheel_radius", r / jnp.sin(jnp.pi / n) * jnp.cos(jnp.pi / n))
+    radius_w = given("wheel_radius", geo["driven_radius"])
     thick_w = given("wheel_thickness", l)
     bodies["wheel"] = (jnp.pi * radius_w**2 * thick_w, 2 * jnp.pi * radius_w**2 + 2 * jnp.pi * radius_w * thick_w,
                        x["thermal.convection_wheel"])
     names = [b.name for b in setup.bodies]
     G = given("pin_crank_conductance", k * jnp.pi * R**2 / (0.5 * l_pin))
-    wall = _wall_track(x, si, setup, r, l, k, rho_c, w_nom) if setup.mesh is not None else None
+    wall = _wall_track(si, setup, geo, k, rho_c, w_nom) if setup.mesh is not None else None
     if wall is not None:                # the driven body loses the track meshes' volume (network.track_mesh)
         V, A, h = bodies["wheel"]
-        bodies["wheel"] = (V - n * wall["area"] * wall["depth"], A, h)
+        bodies["wheel"] = (V - geo["tracks"] * wall["area"] * wall["depth"], A, h)
     K = {}
     for i, name in enumerate(names):
         V, A, h = bodies[name]
@@ -88,7 +90,7 @@ def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str
     for j in range(len(names)):
         out[f"th_loss_{j}"] = sum((K[(i, jj)] for (i, jj) in sorted(K) if jj == j), 0.0)
     out.update({f"th_K_{i}_{j}": v for (i, j), v in K.items()})
-    t_ref = 2 * (jnp.pi / 2 - jnp.pi / n) / w_nom
+    t_ref = geo["contact_angle"] / w_nom
     out.update({"th_R": R, "th_l": l, "th_Estar": estar, "th_k_pin": k, "th_k_wheel": k, "th_chi_pin": chi,
                 "th_chi_wheel": chi, "th_t_ref": t_ref})
     if wall is not None:                # the wall surface's inputs for the contact temperature (sensitivity_rows)
@@ -96,16 +98,16 @@ def thermal_parameters(x: dict, si: dict, setup, speed_key: str, drive_kind: str
     return out
 
 
-def _wall_track(x: dict, si: dict, setup, r, l, k, rho_c, w_nom) -> dict:
-    """The 1-D wall-track mesh of a Geneva slot wall as formulas of the scenario values (thermal/network.py
-    `track_mesh`, thermal/conduction1d.py `graded_mesh_cells`; docs/theory.md §G6), with the run's cell count and
-    growth held (a discretisation choice, integer): faces z_i = H (g^i - 1)/(g^n - 1), the depth
-    H = 3 sqrt(chi n_slots P/pi) (P = 2 pi / nominal speed) unless the scenario sets it, so every face moves with
-    chi and the nominal speed exactly as the rebuilt mesh does (its first cell only picks n); the track area
-    A = l (c cos(pi/n) - (c - r)), c = r/sin(pi/n) (mechanisms/geneva/contact.py `contact_geometry`)."""
+def _wall_track(si: dict, setup, geo: dict, k, rho_c, w_nom) -> dict:
+    """The 1-D wall-track mesh of a track (a Geneva's slot wall) as formulas of the scenario values
+    (thermal/network.py `track_mesh`, thermal/conduction1d.py `graded_mesh_cells`; docs/theory.md §G6), with the
+    run's cell count and growth held (a discretisation choice, integer): faces z_i = H (g^i - 1)/(g^n - 1), the
+    depth H = 3 sqrt(chi n_tracks P/pi) (P = 2 pi / nominal speed) unless the scenario sets it, so every face moves
+    with chi and the nominal speed exactly as the rebuilt mesh does (its first cell only picks n); the track area
+    A = l x track length (`ParameterMap.contact_geometry`)."""
     import jax.numpy as jnp
     from mechsim.thermal.network import MESH_DEPTH_PENETRATIONS
-    th, n = si["thermal"], si["mechanism"]["slots"]
+    th, n = si["thermal"], geo["tracks"]
     chi = k / rho_c
     period = 2 * jnp.pi / w_nom
     depth = (float(th["mesh_depth"]) if th.get("mesh_depth") is not None
@@ -113,9 +115,8 @@ def _wall_track(x: dict, si: dict, setup, r, l, k, rho_c, w_nom) -> dict:
     cells, growth = setup.mesh.n_cells, float(setup.section["mesh_growth"])
     i = np.arange(cells + 1)
     faces = depth * i / cells if growth == 1.0 else depth * (growth**i - 1.0) / (growth**cells - 1.0)
-    c = r / jnp.sin(jnp.pi / n)
     return {"depth": depth, "widths": jnp.diff(faces), "centres": 0.5 * (faces[1:] + faces[:-1]),
-            "area": l * (c * jnp.cos(jnp.pi / n) - (c - r)), "k": k, "rho_c": rho_c}
+            "area": geo["contact_length"] * geo["track_length"], "k": k, "rho_c": rho_c}
 
 
 def _add_wall_network(out: dict, K: dict, wall: dict, setup) -> None:
@@ -167,11 +168,12 @@ def thermal_values(si: dict, mech) -> dict:
     return out
 
 
-def check_thermal(plan, mtype: str) -> None:
+def check_thermal(plan, pmap, mtype: str) -> None:
     """The thermal models and options whose temperatures are traced; one line naming the refused one otherwise."""
     th = plan.scenario.si["thermal"]
-    if mtype != "geneva":
-        raise ScenarioError("thermal.model", f"thermal sensitivities are traced for the Geneva only, not '{mtype}'")
+    if pmap.contact_geometry is None or pmap.contact_row is None:
+        raise ScenarioError("thermal.model", f"thermal sensitivities are not traced for '{mtype}' (its sensitivity "
+                            "map has no contact geometry)")
     if th["model"] not in THERMAL_TRACED:
         raise ScenarioError("thermal.model", f"'{th['model']}' is not traced (its network is not in the sensitivity "
                             "map); traced: " + ", ".join(THERMAL_TRACED) + " (docs/sensitivity.md)")

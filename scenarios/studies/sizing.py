@@ -25,9 +25,10 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from mechsim.mechanisms import MECHANISMS
+from mechsim.scenarios.keys import lookup
 from mechsim.scenarios.studies.sizing_check import design_run
 from mechsim.scenarios.studies.sizing_spec import SLOTS, Bound, Limit, parse_bound, parse_limit, set_list_entries
-from mechsim.scenarios.keys import lookup
 from mechsim.scenarios.units import ScenarioError
 
 #: the optimisers offered; SLSQP is the default (docs/sensitivity.md, "Sizing": measured against trust-constr)
@@ -311,8 +312,9 @@ def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None 
         if high - low + 1 > MAX_SLOT_CHOICES:
             raise ScenarioError(f"--vary {SLOTS}", f"at most {MAX_SLOT_CHOICES} slot counts are enumerated, "
                                 f"got {low}:{high}")
-        if scenario.si["mechanism"]["type"] != "geneva":
-            raise ScenarioError("--vary", f"{SLOTS} exists only for a Geneva")
+        mtype = scenario.si["mechanism"]["type"]
+        if SLOTS not in MECHANISMS[mtype].enumerated_keys:
+            raise ScenarioError("--vary", f"{SLOTS} is not enumerated for a '{mtype}' mechanism")
     if not continuous:
         raise ScenarioError("--vary", "name at least one continuous value besides the slot count")
     wall = time.perf_counter()

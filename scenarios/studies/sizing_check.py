@@ -9,10 +9,10 @@ import time
 def design_run(design) -> dict:
     """The design's own run (as `mechsim run design.toml`): its quantities (`run_quantities`) and its wall time."""
     from mechsim.scenarios import runner
-    from mechsim.scenarios.studies.sensitivity_map import MAPS
     wall = time.perf_counter()
-    result = runner.execute(runner.plan(design))
-    pmap = MAPS[design.si["mechanism"]["type"]]
+    plan = runner.plan(design)
+    result = runner.execute(plan)
+    pmap = plan.mechanism.parameter_map()
     out = run_quantities(result, pmap.engage, pmap.release)
     out["_wall_time_s"] = time.perf_counter() - wall
     return out

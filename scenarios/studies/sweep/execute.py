@@ -161,8 +161,8 @@ class SerialRunner:
 
 #: imported once by the pool's fork server, before it forks the workers: each worker then starts with them
 #: loaded (~1 s of imports, pandas the most, instead of once per worker; DAE-only modules load on first use)
-WORKER_PRELOAD = ("mechsim.scenarios.studies.sweep.execute", "mechsim.scenarios.studies.sweep.rows", "mechsim.scenarios.runner",
-                  "mechsim.thermal.plan")
+WORKER_PRELOAD = ("mechsim.scenarios.studies.sweep.execute", "mechsim.scenarios.studies.sweep.rows",
+                  "mechsim.scenarios.runner", "mechsim.thermal.plan")
 
 
 def _start_fork_server():

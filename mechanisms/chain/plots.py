@@ -178,7 +178,7 @@ def plot_mechanism(mechanism, table: pd.DataFrame, path, drive_angles=None, n_po
     return _save(fig, path)
 
 
-# -- the mechanism's own figures (collected by scenarios.output.plots.figures) ---------------------------------
+# -- the mechanism's own figures (`ChainDwell.extra_figures`, collected by scenarios/output/plots.py) -----------
 def extra_figures(mech, timeseries, tables: dict) -> dict[str, Figure]:
     """El-Shakery Figs. 3-8 style: crank and coupler displacement, velocity, acceleration versus the
     driving angle (dwells shaded), and the crank's three in one figure."""
