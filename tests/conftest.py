@@ -1,5 +1,7 @@
 """Shared fixtures: the seed geometry (docs/theory.md §G0) and helpers to build scenarios in memory."""
 import copy
+import os
+import secrets
 import tomllib
 
 import numpy as np
@@ -7,6 +9,17 @@ import pytest
 
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 from mechsim.scenarios.loader import builtin_text
+
+
+def pytest_configure(config):
+    """One fuzz seed for the whole run (the xdist workers inherit it), new each run unless MECHSIM_FUZZ_SEED is
+    set (tests/test_fuzz_scenarios.py)."""
+    os.environ.setdefault("MECHSIM_FUZZ_SEED", str(secrets.randbelow(2**32)))
+
+
+def pytest_terminal_summary(terminalreporter):
+    seed = os.environ["MECHSIM_FUZZ_SEED"]
+    terminalreporter.write_line(f"scenario fuzzing: seed {seed} (MECHSIM_FUZZ_SEED={seed} repeats this run's cases)")
 
 
 @pytest.fixture(scope="session")
