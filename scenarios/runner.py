@@ -3,6 +3,7 @@ thermal model once, and choose the cheapest method that answers the scenario), t
 tabulate, summarise). `run` is both."""
 from __future__ import annotations
 
+import dataclasses
 import platform
 import time
 from collections import Counter
@@ -211,21 +212,17 @@ def run(scenario: Scenario, progress: Callable[[float], None] | None = None,
     return execute(plan(scenario), progress, integrate)
 
 
-def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
-            integrate: Callable | None = None) -> Result:
-    """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
-    scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
-    method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
+def _mechanics(the_plan: Plan, duration: float, progress, integrate):
+    """(table, events, solver stats, warnings, failure) of the mechanics integrated over `duration`."""
+    scenario, mech, drive, settings, thermal = (the_plan.scenario, the_plan.mechanism, the_plan.drive,
+                                                the_plan.settings, the_plan.thermal)
     si = scenario.si
-    wall0 = time.perf_counter()
-    run_si = si if thermal is None else {**si, "duration": thermal.mechanics_duration}
+    run_si = {**si, "duration": duration}
     angle_key, speed_key = mech.initial_keys
-    angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
-                                   mech.drive_coordinate in mech.angle_coordinates)[0]
     failure = None
     warnings: list[str] = []
     stats: dict = {}
-    if method == "closed-form":
+    if the_plan.method == "closed-form":
         df = _closed_form_table(mech, run_si, drive)
         rows = df.attrs.pop("events", [])
         events = pd.DataFrame(rows) if rows else pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
@@ -251,6 +248,41 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),
                               code=f.get("code", FailureCode.INTEGRATOR_FAILED))
+    return df, events, stats, warnings, failure
+
+
+def _settled(the_plan: Plan, progress, integrate):
+    """(plan, mechanics) where the plan's thermal window is the one its cycle averaging settles on: the mechanics
+    integrated over the thermal plan's window, and again over a longer one while its crank turns are not yet
+    periodic (thermal/plan.py `ThermalPlan.extend`, which may also resolve the whole run)."""
+    thermal = the_plan.thermal
+    duration = the_plan.scenario.si["duration"] if thermal is None else thermal.mechanics_duration
+    mechanics = _mechanics(the_plan, duration, progress, integrate)
+    while thermal is not None and mechanics[4] is None:
+        longer = thermal.extend(mechanics[0])
+        if longer is None:
+            break
+        thermal = longer
+        the_plan = dataclasses.replace(the_plan, thermal=thermal)
+        mechanics = _mechanics(the_plan, thermal.mechanics_duration, progress, integrate)
+    return the_plan, mechanics
+
+
+def settled(the_plan: Plan) -> Plan:
+    """The plan with the thermal window its run settles on (`_settled`; integrates the mechanics windows)."""
+    return _settled(the_plan, None, None)[0]
+
+
+def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
+            integrate: Callable | None = None) -> Result:
+    """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
+    wall0 = time.perf_counter()
+    the_plan, (df, events, stats, warnings, failure) = _settled(the_plan, progress, integrate)
+    scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
+    method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
+    si = scenario.si
+    angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
+                                   mech.drive_coordinate in mech.angle_coordinates)[0]
     cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols)
     if checked is not df:

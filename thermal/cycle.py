@@ -1,18 +1,19 @@
 """Cycle-averaged bulk temperatures for long runs (docs/theory.md §G5: tau >> cycle, so the mean heat drives the bulk).
 
-The mechanics runs until it is periodic (a few crank turns); the last full turn gives the cycle-mean heat Q_bar
-and the heat-weighted pin share gamma_bar (exact, from the integrated bookkeeping energies). The network is
-linear and time-invariant, so with the input taken periodic from t = 0 its response splits exactly into
-- the response to the constant mean input, from ambient: exact, as `thermal.integrate_mean_heat` (tested
-  equal), evaluated in the network's modes so that an hour costs what a second does, and
-- the ripple, the response to the zero-mean remainder u(t) - u_bar from zero: T~(t) = T~_p(t) - e^{At} T~_p(0),
-  where T~_p is the periodic solution, found from one period's zero-state response Z by
-  (I - e^{AP}) T~_p(0) = Z(P).
+The mechanics runs, resolved, until its crank turns repeat (`turn_periodicity`: the turn-to-turn change of the
+period, the heat per turn and the crank speed over the turn, and how fast it decays); the last full turn [a, a + P)
+gives the cycle-mean heat Q_bar and the heat-weighted pin share gamma_bar (exact, from the integrated bookkeeping
+energies). From a on the input is that turn repeated, and the network is linear and time-invariant, so its response
+from the resolved states T(a) splits exactly into
+- the periodic ripple T~_p, the periodic response to the zero-mean remainder u(t) - u_bar, found from one period's
+  zero-state response Z by (I - e^{AP}) T~_p(0) = Z(P), and
+- the mean curve, the response to the constant mean input from T(a) - T~_p(0), exact in the network's modes
+  (`ModalNetwork.constant`), so that an hour costs what a second does.
 Fast nodes (the pin, tau ~ 5 s) keep their in-cycle swing this way; slow ones (crank, wheel) are the mean curve.
 """
 from __future__ import annotations
 
-import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -21,7 +22,6 @@ import pandas as pd
 
 from mechsim.thermal.exact import ModalNetwork
 from mechsim.thermal.linear import LinearThermalSystem
-from mechsim.thermal.lumped import ambient_temperatures
 
 #: rows of the bulk history table over the whole duration
 HISTORY_ROWS = 1001
@@ -39,13 +39,15 @@ def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarr
 
 @dataclass
 class CycleMeans:
-    """Mean heat, heat-weighted pin share and the period of the last full turn; periodicity against the one before."""
+    """Mean heat, heat-weighted pin share and the period of the last full turn; periodicity against the one before;
+    start: the network's states at t_start (the resolved run's, from which the continuation starts)."""
 
     t_start: float
     period: float
     heat_mean: float
     share_mean: float
     periodicity: float | None     # |Q_bar(last) - Q_bar(previous)| / Q_bar(last), None with one turn only
+    start: np.ndarray | None = None
 
 
 def cycle_means_from_energies(t: np.ndarray, bounds: np.ndarray, e_gen: np.ndarray, e_pin: np.ndarray) -> CycleMeans:
@@ -63,35 +65,107 @@ def cycle_means_from_energies(t: np.ndarray, bounds: np.ndarray, e_gen: np.ndarr
     return CycleMeans(float(a), float(b - a), float(energy / (b - a)), float(share), periodicity)
 
 
+#: a turn-to-turn change below this is taken as converged whatever its trend (round-off; callers raise it to the
+#: integrator's scatter)
+CHANGE_FLOOR = 1e-7
+
+
+@dataclass
+class Periodicity:
+    """How periodic the crank turns of a window are. turns: full turns from the start angle; change: the largest
+    relative turn-to-turn change of the last full turn against the one before (its period, its heat and the mean
+    square of the crank speed over it; None with one turn); changes: that change for every pair of
+    consecutive turns; rate: the decay of the change per turn, the geometric mean over the last (up to) three changes
+    (None with fewer than three turns); error: the last turn's estimated relative distance from the periodic limit, the sum of the changes
+    still to come if they keep decaying by `rate`, change * max(1, rate/(1 - rate)) (inf where they do not decay);
+    ends: the turns' start and end times (the window's start first)."""
+
+    turns: int
+    change: float | None
+    changes: np.ndarray
+    rate: float | None
+    error: float
+    ends: np.ndarray
+
+    def turns_needed(self, tolerance: float) -> int | None:
+        """Full turns after which `error` is expected to be within `tolerance` (the changes decaying by `rate`),
+        None where that cannot be told (fewer than three turns, no decay)."""
+        if self.error <= tolerance:
+            return self.turns
+        if self.rate is None or not 0 < self.rate < 1 or not self.change:
+            return None
+        factor = max(1.0, self.rate / (1.0 - self.rate))
+        more = math.log(tolerance / (self.change * factor)) / math.log(self.rate)
+        return self.turns + max(1, int(math.ceil(more)))
+
+
+def turn_periodicity(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, energy: np.ndarray,
+                     floor: float = CHANGE_FLOOR) -> Periodicity:
+    """Periodicity of the window's crank turns (turns from the start angle, `turn_boundaries`); energy: the heat
+    generated up to each row (J); floor: a change at or below it counts as converged whatever its trend (the
+    integrator's own scatter). Each turn is compared by integrals over it (the trapezoidal rule on the rows, the
+    running integrals linear between rows at the turn's ends): a sample of the speed at fixed angles would carry the
+    interpolation error of the kinks at the contact's mode changes (~1e-3 of the speed at 1 ms rows), which the
+    integrals average out."""
+    ends = np.concatenate([[t[0]], turn_boundaries(t, angle, angle[0])])
+    n = len(ends) - 1
+    if n < 2:
+        return Periodicity(n, None, np.array([]), None, math.inf, ends)
+    periods = np.diff(ends)
+    heat = np.diff(np.interp(ends, t, energy))
+    square = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] ** 2 + speed[:-1] ** 2) * np.diff(t))])
+    mean_square = np.diff(np.interp(ends, t, square)) / periods
+
+    def relative(x):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(np.abs(x[1:]) > 0, np.abs(np.diff(x)) / np.abs(x[1:]), 0.0)
+    changes = np.maximum.reduce([relative(periods), relative(heat), relative(mean_square)])
+    change = float(changes[-1])
+    rate = None
+    if n >= 3 and changes[-min(n - 1, 3)] > 0:       # the decay per turn over the last (up to) three changes
+        k = min(n - 1, 3)
+        rate = float((changes[-1] / changes[-k]) ** (1.0 / (k - 1)))
+    if change <= floor:
+        error = change
+    elif rate is not None and rate < 1:
+        error = change * max(1.0, rate / (1.0 - rate))
+    else:
+        error = math.inf
+    return Periodicity(n, change, changes, rate, error, ends)
+
+
 def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Callable[[np.ndarray], np.ndarray],
                   phase_breaks: list[float], times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(mean response, mean + ripple) of the network states at `times` (s from the start, from ambient)."""
+    """(mean curve, mean curve + ripple) of the network states at `times` (s from the run's start, >= t_start):
+    continued from the states means.start at means.t_start with the turn's input u_of_phase (phase 0 = t_start)
+    repeated every period (module docstring)."""
     times = np.asarray(times, dtype=float)
     n = system.size
     u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
-    mean, _ = ModalNetwork(system).constant(ambient_temperatures(system), u_bar, times, energy=False)
     P = means.period
-    s0 = (-means.t_start) % P                      # phase of t = 0 within the periodic turn
+    since = np.maximum(times - means.t_start, 0.0)
     # output rows a whole number of steps apart repeat the same few phases, up to the round-off of `t mod P`
     # (and of P itself); phases are snapped to PHASE_RESOLUTION * P so that an hour of rows integrates the
     # period once over those few phases, not over a million that differ in their last digits (the ripple then
     # moves by at most PHASE_RESOLUTION * P * |dT/dt|: ~1e-9 K at the seed's rates)
-    phase = np.round((times % P) / (PHASE_RESOLUTION * P)) * (PHASE_RESOLUTION * P)
+    phase = np.round((since % P) / (PHASE_RESOLUTION * P)) * (PHASE_RESOLUTION * P)
     phase = np.minimum(phase, P)
     tau = np.unique(np.concatenate([[0.0, P], phase]))
-    breaks = sorted({(b - s0) % P for b in list(phase_breaks) + [0.0]} - {0.0})
+    breaks = sorted({b for b in phase_breaks if 0.0 < b < P})
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
-    u_own = _period_mean(u_of_phase, P, sorted(set(phase_breaks) | {0.0}))
+    u_own = _period_mean(u_of_phase, P, breaks)
 
     def ripple_input(x):
-        return np.asarray(u_of_phase((s0 + np.asarray(x)) % P), dtype=float) - u_own[:, None]
+        return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
     Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
     start = homogeneous.resolvent_periodic(Z[-1], P)
     periodic = homogeneous.exp(tau, start) + Z
-    ripple = periodic[np.searchsorted(tau, phase)] - homogeneous.exp(times, start)
+    ripple = periodic[np.searchsorted(tau, phase)]
+    T0 = np.asarray(means.start, dtype=float) - periodic[0]
+    mean, _ = ModalNetwork(system).constant(T0, u_bar, since, energy=False)
     return mean, mean + ripple
 
 
@@ -107,17 +181,33 @@ def _period_mean(u_of_phase, period: float, breaks: list[float], nodes: int = 8,
 
 
 def history_table(system: LinearThermalSystem, means: CycleMeans, u_of_phase, phase_breaks, duration: float,
-                  kelvin: float) -> pd.DataFrame:
-    """Bulk temperatures over the whole run (mean + ripple and mean only), HISTORY_ROWS rows."""
+                  kelvin: float, window: tuple[np.ndarray, np.ndarray], t_sim: float) -> pd.DataFrame:
+    """Bulk temperatures over the whole run, HISTORY_ROWS rows: up to t_sim the resolved window's (window = (its
+    times, its network states), linear between rows), after it the continuation (mean curve + ripple, and the mean
+    curve alone; NaN in the resolved part)."""
     times = np.linspace(0.0, duration, HISTORY_ROWS)
-    mean, full = bulk_response(system, means, u_of_phase, phase_breaks, times)
-    out = {"t_s": times, "heat_generated_J": means.heat_mean * times}
+    later = times > t_sim
+    t_w, states = window
+    full = np.column_stack([np.interp(times, t_w, states[:, j]) for j in range(system.size)])
+    mean = np.full_like(full, np.nan)
+    if later.any():
+        mean[later], full[later] = bulk_response(system, means, u_of_phase, phase_breaks, times[later])
+    out = {"t_s": times, "heat_generated_J": _heat_generated(times, window, means, t_sim)}
     for j, name in enumerate(system.state_names):
         if name.startswith("temp_bulk_"):
             base = name[:-2]
             out[f"{base}_C"] = full[:, j] - kelvin
             out[f"{base}_mean_C"] = mean[:, j] - kelvin
     return pd.DataFrame(out)
+
+
+def _heat_generated(times, window, means, t_sim) -> np.ndarray:
+    """The heat generated up to each time: the window's (its bookkeeping state E_gen) up to t_sim, then the cycle
+    mean's rate."""
+    t_w, states = window
+    n = states.shape[1] - 3
+    at_end = float(np.interp(t_sim, t_w, states[:, n]))
+    return np.where(times <= t_sim, np.interp(times, t_w, states[:, n]), at_end + means.heat_mean * (times - t_sim))
 
 
 def output_times(duration: float, step: float) -> np.ndarray:
@@ -134,59 +224,74 @@ def cumulative(column: str) -> bool:
 
 def last_repetitions(t_rows: np.ndarray, period: float, duration: float) -> np.ndarray:
     """m_k = floor((duration - t_k)/P): how many whole periods after the periodic turn's row t_k its last repetition
-    t_k + m_k P in the run lies (t_k + m_k P <= duration, to 1e-12 of a period). One rule for the run's continuation
-    (`continue_periodically`) and the sensitivities' rows (thermal/cycle_exact.py `TurnLayout`)."""
+    t_k + m_k P in the run lies (t_k + m_k P <= duration, to 1e-12 of a period): the times at which the design
+    sensitivities read the turn's rows (thermal/cycle_exact.py `TurnLayout`)."""
     return np.floor((duration - np.asarray(t_rows, dtype=float)) / period + 1e-12).astype(np.int64)
 
 
 def turn_rows(t: np.ndarray, t_start: float, period: float) -> np.ndarray:
-    """Indices of the rows strictly inside the periodic turn (t_start, t_start + period): the rows it repeats."""
+    """Indices of the rows strictly inside the periodic turn (t_start, t_start + period)."""
     return np.flatnonzero((t > t_start) & (t < t_start + period))
 
 
 def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
-                          step: float) -> tuple[pd.DataFrame, pd.DataFrame, float]:
-    """The whole run: the simulated rows on the output grid up to the last simulated one, then the periodic turn's
-    own rows t_k (t_start < t_k < t_start + period) repeated at t_k + m P (m = 1, 2, ..., up to
-    `last_repetitions`), the rows after the simulated window (the mechanics is periodic there: cycle averaging
-    checks it). No interpolation in phase: a continued row is a simulated row, so the largest of the run's rows is
-    the largest of the turn's rows at their last repetition (docs/thermal.md, "Cycle averaging"); those rows are a
-    row step apart within a turn and (t_k,first + P - t_k,last) across its ends, not on multiples of `step`.
-    Cumulative columns advance by their increase over one turn per period. Events of the turn repeat the same way
-    (`message` says so). Returns (table, events, the last simulated time)."""
+                          step: float) -> tuple[pd.DataFrame, pd.DataFrame, float, np.ndarray]:
+    """The whole run on the output grid (`output_times`: k step, and the end time): the simulated rows on it up to
+    the last simulated one, t_sim, then the periodic turn [t_start, t_start + period) interpolated at the phase
+    (t - t_start) mod period of every later grid time (the mechanics is periodic there: cycle averaging checks it),
+    linear between the window's rows, and across an event (a mode change, where columns jump or kink) from the two
+    rows on the phase's side of it (`_event_sides`). Cumulative columns advance by their increase over one turn per
+    period; a discrete column (the mode) is that of the row on the phase's side. Events of the turn repeat every period (`message` says so). Returns (table, events, t_sim, the
+    indices into df of the simulated rows kept)."""
     t = df["t_s"].to_numpy(float)
     grid = output_times(duration, step)
-    on_grid = np.isin(np.round(t / step, 6), np.round(grid / step, 6))
-    simulated = df[on_grid]
-    t_sim = float(simulated["t_s"].iloc[-1])
-    own = turn_rows(t, t_start, period)
-    own = own[on_grid[own]]
-    if not len(own):
-        return df, events, float(t[-1])
-    last = last_repetitions(t[own], period, duration)
-    m = np.arange(1, max(int(last.max()), 0) + 1)
-    reps = (m[:, None] * np.ones((1, len(own)), dtype=np.int64)).ravel()      # period-major: times ascend
-    idx = np.tile(own, len(m))
-    new_t = t[idx] + reps * period
-    keep = (reps <= np.tile(last, len(m))) & (new_t > t_sim + 1e-9 * step)
-    idx, reps, new_t = idx[keep], reps[keep], new_t[keep]
+    kept = np.flatnonzero(np.isin(np.round(t / step, 6), np.round(grid / step, 6)))
+    simulated = df.iloc[kept]
+    t_sim = float(t[kept[-1]])
+    new_t = grid[grid > t_sim + 1e-9 * step]
     if not len(new_t):
-        return df, events, float(t[-1])
+        return simulated.reset_index(drop=True), events, t_sim, kept
+    m = np.floor((new_t - t_start) / period + 1e-12)
+    at = np.clip(t_start + (new_t - t_start - m * period), t_start, t_start + period)
+    lo, hi, side = _event_sides(t, at, None if events is None or not len(events) else events["t_s"].to_numpy(float))
+    weight = (at - t[lo]) / (t[hi] - t[lo])
     new = {}
     for col in df.columns:
         column = df[col]
         if col == "t_s":
             new[col] = new_t
-        elif cumulative(col):
+        elif isinstance(column.dtype, np.dtype) and column.dtype.kind in "fc":
             values = column.to_numpy().astype(float)
-            per_turn = float(np.diff(np.interp([t_start, t_start + period], t, values))[0])
-            new[col] = values[idx] + reps * per_turn
+            new[col] = values[lo] + weight * (values[hi] - values[lo])
+            if cumulative(col):
+                per_turn = float(np.diff(np.interp([t_start, t_start + period], t, values))[0])
+                new[col] = new[col] + m * per_turn
         elif isinstance(column.dtype, np.dtype):
-            new[col] = column.to_numpy()[idx]
+            new[col] = column.to_numpy()[side]
         else:       # the mode's strings: taken as they are stored (an hour's rows as Python objects cost ~0.5 s)
-            new[col] = column.array.take(idx)
+            new[col] = column.array.take(side)
     table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
-    return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim
+    return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim, kept
+
+
+def _event_sides(t: np.ndarray, at: np.ndarray, t_events: np.ndarray | None):
+    """(lo, hi, side): the rows to interpolate the times `at` between (linear, extrapolating where `at` is outside
+    [t_lo, t_hi]) and the row whose discrete values hold there. Between rows with no event: the rows around; where an
+    event lies between them, the two rows on the same side of the event as `at` (a one-sided limit: the columns jump
+    or kink at events, and the rows straddling one would smear it)."""
+    j = np.clip(np.searchsorted(t, at, side="right") - 1, 0, len(t) - 2)
+    lo, hi, side = j.copy(), j + 1, np.where(at - t[j] <= t[j + 1] - at, j, j + 1)
+    if t_events is None or not len(t_events) or len(t) < 4:
+        return lo, hi, side
+    te = np.sort(t_events)
+    k = np.clip(np.searchsorted(te, t[j], side="right"), 0, len(te) - 1)
+    crossed = (te[k] > t[j]) & (te[k] < t[j + 1])
+    before = crossed & (at < te[k]) & (j >= 1)
+    after = crossed & (at >= te[k]) & (j + 2 < len(t))
+    lo[before], hi[before] = j[before] - 1, j[before]
+    lo[after], hi[after] = j[after] + 1, j[after] + 2
+    side = np.where(crossed, np.where(at < te[k], j, j + 1), side)
+    return lo, hi, side
 
 
 def _repeat_events(df, events, t_start, period, t_sim, duration) -> pd.DataFrame:

@@ -3,12 +3,13 @@
 
 The model is thermal/cycle.py's (docs/theory.md §G5): the last full crank turn [a, b) of the mechanics (its ends
 where the drive angle passes angle0 + 2 pi m, linearly interpolated between output rows, `turn_boundaries`) gives
-the cycle-mean heat Q = dE_gen/P and pin share gamma = dE_pin/dE_gen (`cycle_means_from_energies`); the linear
-network C T' = -K T + s + B u then responds with
-- the mean response from ambient to the constant input u_bar = [gamma Q, (1 - gamma) Q], exact in the network's
-  modes (`ModalNetwork.constant`), and
-- the ripple T_p(t) - e^{At} T_p(0), T_p the periodic response to the zero-mean remainder u(t) - mean(u) of the
-  turn's input u (the rows' network inputs, linearly interpolated between output rows, `ThermalPlan._period_input`).
+the cycle-mean heat Q = dE_gen/P and pin share gamma = dE_pin/dE_gen (`cycle_means_from_energies`); from the
+resolved states T(a) (linear between the rows around a) the linear network C T' = -K T + s + B u, its input the
+turn repeated, is T = M + T_p with
+- T_p the periodic response to the zero-mean remainder u(t) - mean(u) of the turn's input u (the rows' network
+  inputs, linearly interpolated between output rows, `ThermalPlan._period_input`), and
+- M the mean curve, the response to the constant input u_bar = [gamma Q, (1 - gamma) Q] from T(a) - T_p(a), exact
+  in the network's modes (`ModalNetwork.constant`).
 
 Here the ripple is exact for that piecewise-linear input: over an interval of length h with end values g0, g1
 (modal coordinates, eigenvalue lambda, x = lambda h) the zero-state response is
@@ -22,7 +23,6 @@ so that the periodic turn's peak is the run's (docs/sensitivity.md, "Cycle avera
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,12 +74,10 @@ def periodic_response(lam, sigma, g, period, xp=np):
     return xp.exp(lam[None, :] * sigma[:, None]) * z0[None, :] + Z
 
 
-def mean_response(lam, V, Vinv, capacity, conductance, source, input_matrix, u_bar, times, xp=np):
-    """Network states (rows = times) from ambient under the constant input u_bar: z = e^{lambda t} z0 +
-    t phi1(lambda t) g (thermal/exact.py `ModalNetwork.constant`), the ambient per body s / (K 1)
-    (thermal/lumped.py `ambient_temperatures`)."""
-    ambient = source / xp.sum(conductance, axis=1)
-    z0 = Vinv @ ambient
+def mean_response(lam, V, Vinv, capacity, source, input_matrix, u_bar, start, times, xp=np):
+    """Network states (rows = times, from 0) from the states `start` at time 0 under the constant input u_bar:
+    z = e^{lambda t} z0 + t phi1(lambda t) g (thermal/exact.py `ModalNetwork.constant`)."""
+    z0 = Vinv @ start
     g = Vinv @ ((source + input_matrix @ u_bar) / capacity)
     lt = lam[None, :] * times[:, None]
     return (xp.exp(lt) * z0[None, :] + times[:, None] * phi1(lt, xp) * g[None, :]) @ V.T
@@ -101,8 +99,7 @@ class TurnLayout:
     derivative). t: the rows' times; ia, ib: the rows just before the turn's ends a, b (a, b in [t[i], t[i+1]));
     inner: the rows strictly inside (a, b); targets: the drive angles at a and b (angle0 + 2 pi m); periods: m_k
     per inner row, the whole periods to its last repetition t_k + m_k P <= duration in the run (thermal/cycle.py
-    `last_repetitions`; the rows near the turn's end may have one less); zero_turns: k with t = 0 at phase kP - a;
-    zero_node: the node j (nodes [0, t_inner - a, P]) with node_j <= kP - a < node_j+1."""
+    `last_repetitions`; the rows near the turn's end may have one less)."""
 
     t: np.ndarray
     ia: int
@@ -110,8 +107,6 @@ class TurnLayout:
     inner: np.ndarray
     targets: tuple[float, float]
     periods: np.ndarray
-    zero_turns: int
-    zero_node: int
 
     @property
     def rows(self) -> np.ndarray:
@@ -136,10 +131,9 @@ class TurnLayout:
 
     def data(self) -> dict:
         """The layout as arrays (what `turn_bulk` needs besides the traced values)."""
-        node = self.zero_node + (self.pad if self.zero_node > 0 else 0)
         periods = np.concatenate([np.full(self.pad, self.periods[0]), self.periods]).astype(float)
         return {"t_edges": self.t[self.edges], "t_inner": self.t[self.padded], "targets": np.asarray(self.targets),
-                "periods": periods, "zero_turns": float(self.zero_turns), "zero_node": node}
+                "periods": periods}
 
     @classmethod
     def of(cls, t: np.ndarray, angle: np.ndarray, duration: float) -> "TurnLayout | None":
@@ -156,10 +150,7 @@ class TurnLayout:
         P = b - a
         inner = turn_rows(t, a, P)
         periods = last_repetitions(t[inner], P, duration)
-        zero_turns = int(math.ceil(a / P))
-        nodes = np.concatenate([[0.0], t[inner] - a, [P]])
-        zero_node = int(np.clip(np.searchsorted(nodes, zero_turns * P - a, side="right") - 1, 0, len(nodes) - 2))
-        return cls(t, ia, ib, inner, targets, periods, zero_turns, zero_node)
+        return cls(t, ia, ib, inner, targets, periods)
 
 
 def turn_ends(t_edges, targets, angle_edges) -> tuple:
@@ -181,13 +172,12 @@ def turn_means(t_edges, targets, angle_edges, gen_edges, pin_edges) -> dict:
     return {"t_start": a, "period": b - a, "heat_mean": energy / (b - a), "share_mean": (Pn[1] - Pn[0]) / energy}
 
 
-def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, network: dict, xp=np):
+def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, network: dict, start_edges, xp=np):
     """Network states (rows = the padded inner rows, `TurnLayout.padded`) of the cycle-averaged solution at their
-    last repetitions t_k + m_k P (data["periods"]),
-    and the turn's
-    means. data: `TurnLayout.data()`; *_edges: values at the rows around the turn's ends; u_edges (4 x m),
-    u_inner (padded rows x m): the rows' network inputs; network: capacity C, conductance K (dense), source s,
-    input_matrix B."""
+    last repetitions t_k + m_k P (data["periods"]), and the turn's means. data: `TurnLayout.data()`; *_edges: values
+    at the rows around the turn's ends (start_edges: the network states there, of which the first two rows give
+    T(a)); u_edges (4 x m), u_inner (padded rows x m): the rows' network inputs; network: capacity C, conductance K
+    (dense), source s, input_matrix B."""
     t_edges, t_inner = data["t_edges"], data["t_inner"]
     means = turn_means(t_edges, data["targets"], angle_edges, gen_edges, pin_edges)
     a, P = means["t_start"], means["period"]
@@ -195,6 +185,7 @@ def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, n
     u_bar = xp.stack([gamma * Q, (1.0 - gamma) * Q])
     u_a = _linear(a, t_edges[0], t_edges[1], u_edges[0], u_edges[1])
     u_b = _linear(a + P, t_edges[2], t_edges[3], u_edges[2], u_edges[3])
+    T_a = _linear(a, t_edges[0], t_edges[1], start_edges[0], start_edges[1])
     sigma = xp.concatenate([xp.zeros(1), t_inner - a, xp.reshape(P, (1,))])
     U = xp.concatenate([u_a[None, :], u_inner, u_b[None, :]], axis=0)
     C, K, s, B = network["capacity"], network["conductance"], network["source"], network["input_matrix"]
@@ -203,15 +194,6 @@ def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, n
     mean_u = xp.sum(0.5 * h[:, None] * (U[1:] + U[:-1]), axis=0) / P       # exact for the piecewise-linear input
     g = (U - mean_u[None, :]) @ (Vinv @ (B / C[:, None])).T
     Tp = periodic_response(lam, sigma, g, P, xp)
-    # the periodic response at t = 0 (phase kP - a, inside node j's interval): node j's value carried over the
-    # part of the interval, with the input linear through it
-    j = data["zero_node"]
-    part = data["zero_turns"] * P - a - sigma[j]
-    g_zero = g[j] + (g[j + 1] - g[j]) * (part / h[j])
-    x = lam * part
-    p2 = phi2(x, xp)
-    T_zero = xp.exp(x) * Tp[j] + part * ((phi1(x, xp) - p2) * g[j] + p2 * g_zero)
-    times = t_inner + data["periods"] * P
-    mean = mean_response(lam, V, Vinv, C, K, s, B, u_bar, times, xp)
-    ripple = (Tp[1:-1] - xp.exp(lam[None, :] * times[:, None]) * T_zero[None, :]) @ V.T
-    return mean + ripple, means
+    since = t_inner + data["periods"] * P - a
+    mean = mean_response(lam, V, Vinv, C, s, B, u_bar, T_a - V @ Tp[0], since, xp)
+    return mean + Tp[1:-1] @ V.T, means

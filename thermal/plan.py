@@ -12,6 +12,7 @@ the ambient (flash). No contact (dwell): NaN.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -32,11 +33,20 @@ __all__ = ["ThermalPlan", "ThermalSetupError", "plan"]
 
 #: averaging = 'auto' picks the cycle-averaged bulk from this many nominal cycles on
 AUTO_CYCLES = 50
-#: crank turns the mechanics runs in cycle mode: closed form (periodic at once), DAE (settling first)
+#: nominal periods of the first mechanics window in cycle mode: closed form (periodic at once), DAE (settling first);
+#: a DAE window grows until its crank turns are periodic (`ThermalPlan.extend`)
 CYCLE_TURNS_CLOSED_FORM = 2
 CYCLE_TURNS_DAE = 6
-#: warn when the last two turns' mean heat differ by more than this (mechanics not yet periodic)
+#: the turns are periodic when the last one's estimated distance from the periodic motion (thermal/cycle.py
+#: `turn_periodicity`) is within this (relative: it bounds the error of the cycle-mean heat, and so of the rise after
+#: the window, by as much)
 PERIODICITY_TOLERANCE = 1e-3
+#: turn-to-turn changes up to this many times the solver's rtol count as its scatter, not as a trend
+SCATTER = 100
+#: the mechanics window may grow to this share of the duration; a motion not periodic by then is resolved whole
+WINDOW_SHARE = 0.5
+#: windows tried at most before resolving the whole run
+WINDOW_TRIES = 5
 
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
@@ -47,6 +57,18 @@ def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str])
         kept = kept.assign(**present)
     fresh = {k: v for k, v in new.items() if k not in kept.columns}
     return pd.concat([kept, pd.DataFrame(fresh, index=kept.index)], axis=1) if fresh else kept
+
+
+def _angle_column(df: pd.DataFrame) -> str:
+    """The drive angle's column (the first angle column: the runner tabulates the drive coordinate first)."""
+    return next(c for c in df.columns if c.endswith("_angle_rad"))
+
+
+def _window_record(duration: float, per) -> dict:
+    """One tried mechanics window and its periodicity, for the summary."""
+    return {"mechanics_duration_s": float(duration), "turns": int(per.turns),
+            "turn_to_turn_change": None if per.change is None else float(per.change),
+            "decay_per_turn": None if per.rate is None else float(per.rate), "error_estimate": float(per.error)}
 
 
 def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
@@ -77,6 +99,7 @@ class ThermalPlan:
     averaging_why: str
     mechanics_duration: float
     warnings: list[str] = field(default_factory=list)
+    tried: tuple = ()          # the earlier mechanics windows of cycle mode, each with its periodicity (`extend`)
 
     @property
     def extension(self):
@@ -102,6 +125,10 @@ class ThermalPlan:
         summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method, n_states, backend),
                    "flash": setup.section["flash"], "distribution": setup.section["distribution"],
                    "averaging": self.averaging, "averaging_why": self.averaging_why}
+        if self.tried and self.averaging == "resolved":        # cycle averaging fell back (`extend`)
+            summary["windows_tried"] = list(self.tried)
+            summary["averaging_note"] = "thermal: resolved, not cycle-averaged:" + self.averaging_why[
+                self.averaging_why.index("; but") + len("; but"):]
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
             return df, events, extra, summary, warnings
@@ -160,22 +187,79 @@ class ThermalPlan:
         return times, cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, times)[1]
 
     def _cycle_means(self, df: pd.DataFrame, states):
-        """The cycle means of the last full turn of the window (thermal/cycle.py `cycle_means_from_energies`), or
-        None with fewer than one full turn."""
+        """The cycle means of the last full turn of the window (thermal/cycle.py `cycle_means_from_energies`) with
+        the network's states at its start (linear between rows), or None with fewer than one full turn."""
         t = df["t_s"].to_numpy(float)
-        angle = df[next(c for c in df.columns if c.endswith("_angle_rad"))].to_numpy(float)
+        angle = df[_angle_column(df)].to_numpy(float)
         bounds = cyc.turn_boundaries(t, angle, angle[0])
         if len(bounds) < 2:
             return None
         if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
-            contact = self.mech.contact_state(df)
-            e_gen = np.concatenate([[0.0], np.cumsum(0.5 * (contact["heat_rate"][1:] + contact["heat_rate"][:-1])
-                                                      * np.diff(t))])
+            e_gen = self._heat_generated(df, t)
             return cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
                                   float(np.diff(np.interp(bounds[-2:], t, e_gen))[0] / (bounds[-1] - bounds[-2])),
                                   float("nan"), None)
         n = self.setup.system.size
-        return cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
+        means = cyc.cycle_means_from_energies(t, bounds, states[:, n], states[:, n + 1])
+        means.start = np.array([np.interp(means.t_start, t, states[:, j]) for j in range(n)])
+        return means
+
+    def _heat_generated(self, df: pd.DataFrame, t: np.ndarray) -> np.ndarray:
+        """The heat generated up to each row from the contact's heat rate (trapezoidal), where no state keeps it."""
+        q = self.mech.contact_state(df)["heat_rate"]
+        return np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * np.diff(t))])
+
+    def periodicity(self, df: pd.DataFrame, states=None) -> cyc.Periodicity:
+        """How periodic the crank turns of the mechanics window `df` are (thermal/cycle.py `turn_periodicity`)."""
+        if states is None:
+            states = self._window_states(df)[0]
+        t = df["t_s"].to_numpy(float)
+        column = _angle_column(df)
+        angle = df[column].to_numpy(float)
+        speed_column = column[:-len("_angle_rad")] + "_speed_rad_s"
+        speed = df[speed_column].to_numpy(float) if speed_column in df else np.gradient(angle, t)
+        energy = self._heat_generated(df, t) if states is None else states[:, self.setup.system.size]
+        rtol = float(self.si.get("solver", {}).get("rtol", 0.0))
+        return cyc.turn_periodicity(t, angle, speed, energy, max(cyc.CHANGE_FLOOR, SCATTER * rtol))
+
+    def extend(self, df: pd.DataFrame) -> "ThermalPlan | None":
+        """None where the mechanics window `df` serves cycle averaging (its turns periodic to PERIODICITY_TOLERANCE,
+        or not averaging); otherwise the plan of the next try: a longer window, as long as the measured decay of
+        the turn-to-turn change says is needed (twice as long where it cannot say yet), or, where that is beyond
+        WINDOW_SHARE of the duration (or WINDOW_TRIES windows were tried), the whole run resolved, saying why."""
+        if self.averaging != "cycle":
+            return None
+        per = self.periodicity(df)
+        tolerance = PERIODICITY_TOLERANCE
+        if per.error <= tolerance:
+            return None
+        duration, step = float(self.si["duration"]), float(self.si["output_step"])
+        period = float(per.ends[-1] - per.ends[-2]) if per.turns else self.setup.period
+        needed = per.turns_needed(tolerance)
+        if needed is None:
+            window = 2.0 * self.mechanics_duration
+        else:       # the turns still needed, one more for the partial turn at the window's end, 5 % margin
+            window = float(per.ends[-1]) + 1.05 * (needed - per.turns + 1) * period + 2 * step
+        window = max(window, self.mechanics_duration + 2 * period)
+        tried = self.tried + (_window_record(self.mechanics_duration, per),)
+        allotted = WINDOW_SHARE * duration
+        if window <= allotted and len(tried) < WINDOW_TRIES:
+            return dataclasses.replace(self, mechanics_duration=window, tried=tried)
+        state = (f"after {per.turns} crank turns ({self.mechanics_duration:.4g} s) the turns still change by "
+                 f"{per.change:.2g} from one to the next" if per.change is not None else
+                 f"only {per.turns} full crank turn(s) in {self.mechanics_duration:.4g} s")
+        if per.rate is not None and per.change is not None and per.change > cyc.CHANGE_FLOOR:
+            state += (f", decaying by {per.rate:.3g} per turn" if per.rate < 1 else
+                      f", not decaying ({per.rate:.3g} per turn)")
+        outlook = (f"about {needed} turns ({window:.4g} s) would be needed" if needed is not None else
+                   "its trend does not yet tell when they will repeat")
+        why = (f"; but the mechanics is not periodic within the turns allotted (up to {WINDOW_SHARE:g} of the "
+               f"duration, {allotted:.4g} s): {state} (tolerance {tolerance:g}), {outlook}; so the whole run is "
+               "resolved")
+        return dataclasses.replace(self, averaging="resolved", averaging_why=self.averaging_why + why,
+                                   mechanics_duration=duration, tried=tried,
+                                   warnings=self.warnings + ["thermal: cycle averaging fell back to the resolved run:"
+                                                             + why[len("; but"):]])
 
     @staticmethod
     def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -268,52 +352,69 @@ class ThermalPlan:
 
     # ---------------------------------------------------------------------------------------------- cycle mode
     def _cycle(self, df, events, states, inputs, breaks, summary, warnings, extra):
-        """Cycle averaging: the cycle means of the last full turn, the mechanics continued periodically over the
-        whole duration, and the bulk states of the averaged solution (mean + periodic ripple) on every row.
-        (table, events, states) or None when there is no full turn to average."""
+        """Cycle averaging: the window resolved up to its last row on the output grid, then the last full turn
+        continued periodically on the output grid up to the duration, with the bulk states of the averaged
+        solution (mean + periodic ripple) from the window's states at the turn's start. (table, events, states)
+        or None when there is no full turn to average."""
         setup, mech = self.setup, self.mech
         means = self._cycle_means(df, states)
         if means is None:
             warnings.append("thermal: fewer than one full crank turn in the mechanics window; shown resolved")
             return None
-        t = df["t_s"].to_numpy(float)
-        angle = df[next(c for c in df.columns if c.endswith("_angle_rad"))].to_numpy(float)
-        bounds = cyc.turn_boundaries(t, angle, angle[0])
+        per = self.periodicity(df, states)
         n = None if states is None else setup.system.size
-        duration = float(self.si["duration"])
-        full, full_events, t_sim = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
-                                                             float(self.si["output_step"]))
+        duration, step = float(self.si["duration"]), float(self.si["output_step"])
+        full, full_events, t_sim, kept = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
+                                                                   step)
+        times = full["t_s"].to_numpy(float)
+        later = times > t_sim
         if self.method == "closed-form":     # the closed form is exact at any time: its own values there
             columns = closed_form_columns(mech, self.si["initial"][mech.initial_keys[0]], self.speed)
-            later = full["t_s"].to_numpy(float) > t_sim
-            exact = columns(full["t_s"].to_numpy(float)[later])
+            exact = columns(times[later])
             for col, values in exact.items():
                 if col in full and col != "t_s":
                     full.loc[later, col] = values
         info = {"period_s": means.period, "mean_heat_rate_W": means.heat_mean,
                 "mean_heat_share_pin": None if states is None else means.share_mean,
-                "turns_simulated": int(len(bounds)), "mechanics_simulated_until_s": t_sim,
-                "rows_continued_periodically": int((full["t_s"] > t_sim).sum()),
-                "continuation": ("rows after mechanics_simulated_until_s repeat the last simulated turn's own "
-                                 "rows t_k at t_k + m P (m = 1, 2, ...; not on multiples of output_step)"
-                                 + ("; the closed form gives the mechanics exactly at those times"
-                                    if self.method == "closed-form" else "")
-                                 + "; bulk temperatures on every row come from the cycle-averaged solution"),
+                "turns_simulated": int(per.turns), "mechanics_simulated_until_s": t_sim,
+                "periodic_turn_s": [means.t_start, means.t_start + means.period],
+                "rows_continued_periodically": int(later.sum()),
+                "continuation": ("rows up to mechanics_simulated_until_s are the resolved run's; later rows are on "
+                                 "the output grid, the last full turn (periodic_turn_s) at their phase "
+                                 + ("given exactly by the closed form" if self.method == "closed-form" else
+                                    "interpolated linearly between its rows")
+                                 + ", with the bulk temperatures of the cycle-averaged solution continued from the "
+                                 "resolved states at the turn's start"),
+                "periodicity": {"turn_to_turn_change": per.change, "decay_per_turn": per.rate,
+                                "turn_changes": [float(x) for x in per.changes],
+                                "error_estimate": per.error, "tolerance": PERIODICITY_TOLERANCE},
+                "averaging_error_estimate": per.error,
+                "windows_tried": list(self.tried) + [_window_record(self.mechanics_duration, per)],
                 "periodicity_of_mean_heat": means.periodicity}
-        if means.periodicity is not None and means.periodicity > PERIODICITY_TOLERANCE:
-            warnings.append(f"thermal: the mechanics is not yet periodic after {len(bounds)} crank turns (mean heat "
-                            f"changed by {means.periodicity:.2e} between the last two); the cycle means may be off")
+        summary["averaging_why"] += (f"; the mechanics ran {per.turns} crank turns until periodic (resolved up to "
+                                     f"{t_sim:.6g} s; the last turn's change from the one before "
+                                     + (f"{per.change:.2g}" if per.change is not None else "not measured (one turn)")
+                                     + ")")
+        summary["averaging_note"] = (f"thermal: cycle-averaged after {per.turns} crank turns resolved (0 to "
+                                     f"{t_sim:.4g} s); estimated averaging error {per.error:.1g} of the temperature "
+                                     "rise (the last turn's distance from the periodic motion)")
+        if per.error > PERIODICITY_TOLERANCE:
+            warnings.append(f"thermal: the mechanics is not yet periodic after {per.turns} crank turns (estimated "
+                            f"distance of the last turn from the periodic motion {per.error:.2g} > "
+                            f"{PERIODICITY_TOLERANCE:g}); the cycle means may be off by as much")
         summary["cycle"] = info
         if states is None:
             return full, full_events, None
         u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
-        times = full["t_s"].to_numpy(float)
-        _, bulk = cyc.bulk_response(setup.system, means, u_of_phase, phase_breaks, times)
-        full_states = np.full((len(full), n + 3), np.nan)      # per-row energies: see the history table
-        full_states[:, :n] = bulk
+        full_states = np.full((len(full), n + 3), np.nan)      # per-row energies after t_sim: see the history table
+        full_states[:len(kept)] = states[kept]
+        if later.any():
+            full_states[later, :n] = cyc.bulk_response(setup.system, means, u_of_phase, phase_breaks,
+                                                       times[later])[1]
+        t_window = df["t_s"].to_numpy(float)
         extra["thermal_history"] = cyc.history_table(setup.system, means, u_of_phase, phase_breaks, duration,
-                                                     KELVIN)
-        summary["heat_balance"] = self._mean_balance(means, duration)
+                                                     KELVIN, (t_window, states), t_sim)
+        summary["heat_balance"] = self._mean_balance(means, duration, t_window, states)
         full = full.drop(columns=[c for c in setup.extension.names if c in full])
         return full, full_events, full_states
 
@@ -330,20 +431,28 @@ class ThermalPlan:
         rows = [float(x) - a for x in t[(t > a) & (t < a + P)]]
         return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), rows
 
-    def _mean_balance(self, means, duration) -> dict:
-        """Heat balance of the mean model at the end of the run (exact: modal solution, convected integral)."""
+    def _mean_balance(self, means, duration, t_window, states) -> dict:
+        """Heat balance at the end of the run: the window's bookkeeping states up to the periodic turn's start a
+        (linear between rows), then the cycle-mean heat from the states there (exact modal solution, convected
+        integral)."""
         setup = self.setup
         n = setup.system.size
+        a = means.t_start
+        at_a = np.array([np.interp(a, t_window, states[:, j]) for j in range(n + 3)])
         u = np.array([means.share_mean * means.heat_mean, (1 - means.share_mean) * means.heat_mean])
-        T0 = setup.initial[:n]
-        T, convected = ModalNetwork(setup.system, setup.extension.loss).constant(T0, u, [duration])
-        generated = means.heat_mean * duration
+        T0 = states[0, :n]
+        T, convected = ModalNetwork(setup.system, setup.extension.loss).constant(at_a[:n], u, [duration - a])
+        generated = at_a[n] - states[0, n] + means.heat_mean * (duration - a)
         stored = float(setup.system.capacity @ (T[0] - T0))
-        closure = generated - stored - float(convected[0])
-        return {"generated_J": float(generated), "stored_J": stored, "convected_J": float(convected[0]),
-                "into_pin_J": float(means.share_mean * generated), "closure_error_J": float(closure),
+        convected = at_a[n + 2] - states[0, n + 2] + float(convected[0])
+        closure = generated - stored - convected
+        return {"generated_J": float(generated), "stored_J": stored, "convected_J": float(convected),
+                "into_pin_J": float(at_a[n + 1] - states[0, n + 1] + means.share_mean * means.heat_mean
+                                    * (duration - a)),
+                "closure_error_J": float(closure),
                 "closure_error_relative": float(closure / generated) if generated > 0 else 0.0,
-                "basis": "cycle-mean heat over the whole duration (exact modal solution)"}
+                "basis": "the resolved window's bookkeeping up to the periodic turn's start, then the cycle-mean "
+                         "heat from the states there (exact modal solution)"}
 
     # ---------------------------------------------------------------------------------------------- validity
     def validity_conditions(self) -> list[dict]:
@@ -405,18 +514,20 @@ def plan(si: dict, mech: ContactSource, drive, method: str) -> ThermalPlan | Non
         averaging, why = "resolved", f"auto: model = '{model}' resolves every cycle (it follows each engagement)"
     elif cycles >= AUTO_CYCLES:
         head = f"auto: duration {duration:.6g} s = {cycles:.0f} cycles of {setup.period:.4g} s (>= {AUTO_CYCLES})"
+        until = (f"the mechanics runs, resolved, until its crank turns repeat (to {PERIODICITY_TOLERANCE:g}, within "
+                 f"{WINDOW_SHARE:g} of the duration; else the whole run is resolved)")
         if setup.system is None:
-            tail = (f"; the flash model has no memory, so the mechanics runs {turns} turns until periodic and the last "
-                    "turn, moved to the end of the run, stands for every cycle")
+            tail = (f"; the flash model has no memory, so {until} and its last turn, continued to the end of the "
+                    "run, stands for every later cycle")
         else:
-            tail = ("; the bulk time constants are >> one cycle (docs/theory.md §G5), so the mechanics runs "
-                    f"{turns} turns until periodic and the cycle-mean heat drives the bulk exactly (plus its "
-                    "periodic ripple)")
+            tail = (f"; the bulk time constants are >> one cycle (docs/theory.md §G5), so {until} and the cycle-mean "
+                    "heat drives the bulk exactly from there (plus its periodic ripple)")
         averaging, why = "cycle", head + tail
     else:
         averaging, why = "resolved", f"auto: duration is {cycles:.3g} cycles (< {AUTO_CYCLES}), every cycle is resolved"
     if averaging == "cycle" and window >= duration:
-        averaging, why = "resolved", why + f"; but the duration is within the {turns}-turn mechanics window, so resolved"
+        averaging, why = "resolved", why + (f"; but the duration is within the first mechanics window ({turns} nominal "
+                                          "cycles), so resolved")
     speed = float(drive.speed) if drive.is_prescribed else setup.nominal_speed
     return ThermalPlan(setup=setup, si=si, mech=mech, method=method, speed=speed, averaging=averaging,
                        averaging_why=why, mechanics_duration=window if averaging == "cycle" else duration)

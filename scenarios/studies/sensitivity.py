@@ -123,6 +123,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     run_plan = plan            # the run's own plan: at a prescribed speed, its closed form reports the value
     if cycle:
         check_request(plan, list(wrt), list(of or []))
+        run_plan = plan = runner.settled(plan)      # the window the run settles on, or the run resolved whole
+        cycle = plan.thermal.averaging == "cycle"
+    if cycle:
         plan = cycle_window(plan)
     if plan.method == "closed-form":
         # the closed form is not differentiated: the same motion as a DAE with the speed as a constraint (and the
@@ -175,7 +178,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
         # averagings share one compiled set of read-outs
         columns |= set(pmap.contact_columns) | row_state_columns(model.extension_names)
-        columns |= set(CYCLE_COLUMNS) if ext is not None else set()
+        columns |= set(CYCLE_COLUMNS) | set(ext.system.state_names) if ext is not None else set()
     if turn is not None and thermal_times and ext is not None:
         # the cycle-averaged bulk depends on every row of the turn (its input) and on the rows at its ends
         sample_times = sorted(set(sample_times) | {float(x) for x in df["t_s"].to_numpy(float)[turn["layout"].rows]})

@@ -17,8 +17,8 @@ CYCLE_COLUMNS = ("crank_angle_rad", "heat_generated_J", "heat_pin_J", "friction_
 
 def cycle_window(plan):
     """The plan of a cycle-averaged scenario's mechanics window, resolved: the very run that cycle averaging
-    averages (the runner integrates `plan.mechanics_duration`), with the DAE's bulk and bookkeeping states on every
-    row and no periodic continuation."""
+    averages (the runner integrates `plan.mechanics_duration`; `plan` as scenarios/runner.py `settled` gives it),
+    with the DAE's bulk and bookkeeping states on every row and no periodic continuation."""
     return dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, averaging="resolved"))
 
 
@@ -60,7 +60,8 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
         def at(periods):
             return turn_bulk({**data, "periods": periods}, angle[edges], df["heat_generated_J"].to_numpy(float)[edges],
                              df["heat_pin_J"].to_numpy(float)[edges], u[edges], u[layout.padded],
-                             _network(setup.system))[0][layout.pad:]
+                             _network(setup.system), start)[0][layout.pad:]
+        start = df[list(setup.system.state_names)].to_numpy(float)[edges]
         bulk, previous = at(data["periods"]), at(data["periods"] - 1.0)
         names = list(setup.system.state_names)
         pin, wheel = names.index("temp_bulk_pin_K"), names.index("temp_bulk_wheel_K")
@@ -254,7 +255,7 @@ def _cycle_bulk_fn(ext, distribution: str, pmap):
         network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
                    "input_matrix": jnp.asarray(B)}
         return turn_bulk(data, x["angle"], x["gen"], x["pin"], inputs(x, x["cols_edges"], data["engaged_edges"]),
-                         inputs(x, x["cols_inner"], data["engaged_inner"]), network, jnp)[0]
+                         inputs(x, x["cols_inner"], data["engaged_inner"]), network, x["start"], jnp)[0]
 
     def both(x, dx, data):
         return bulk(x, data), jax.vmap(lambda d: jax.jvp(lambda y: bulk(y, data), (x,), (d,))[1])(dx)
@@ -266,8 +267,8 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
                         stats: dict) -> None:
     """Replace the bulk temperatures (values, gradients) of the samples at the turn's rows by the cycle-averaged
     ones: thermal/cycle_exact.py `turn_bulk` evaluated in jax on the run's rows and pushed forward (jvp) along the
-    traced columns of every row of the turn (the drive angle and the energies at its ends, the contact that makes
-    the heat input) and the network's and heat share's parameters. The jax evaluation must give the numpy one (to
+    traced columns of every row of the turn (the drive angle, the energies and the network's states at its ends,
+    the contact that makes the heat input) and the network's and heat share's parameters. The jax evaluation must give the numpy one (to
     1e-9 K), as the row formulas must give the run's columns."""
     import jax.numpy as jnp
 
@@ -305,6 +306,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
         primal[key], tangent[key] = x[:, 0], dx[:, 0]
     pmap = plan.mechanism.parameter_map()
     inputs = pmap.contact_columns + ("friction_power_W",)
+    primal["start"], tangent["start"] = columns(list(sysm.state_names), edges, contact=False)
     primal["cols_edges"], tangent["cols_edges"] = columns(inputs, edges)
     primal["cols_inner"], tangent["cols_inner"] = columns(inputs, layout.padded)
     for name in SHARE_PARAMETERS + ("R",):
