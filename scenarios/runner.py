@@ -74,7 +74,8 @@ def choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSetti
 
 
 def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
-    t = np.arange(0.0, si["duration"] + 0.5 * si["output_step"], si["output_step"])
+    from mechsim.thermal.cycle import output_times
+    t = output_times(si["duration"], si["output_step"])      # as the DAE's rows: k step, and the end itself
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
     powers = cols.pop("powers")
