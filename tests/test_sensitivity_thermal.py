@@ -10,6 +10,8 @@ friction 0.15 for 0.5 s (constant torque with crank damping, running up: two eng
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -152,9 +154,18 @@ def cycle_table():
     return sensitivity(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS), CYCLE_WRT, OF)
 
 
+_WINDOW: list = []
+
+
 def _cycle_window(sets):
-    """The plan and its mechanics window's run (the run cycle averaging averages), and the turn's temperatures."""
+    """The plan and its mechanics window's run (the run cycle averaging averages), and the turn's temperatures. The
+    window is the one the sensitivity's run settles on (runner.settled), the same for every design compared: its
+    length is a discrete choice, not differentiated."""
     plan = runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + sets))
+    if not _WINDOW:
+        _WINDOW.append(runner.settled(runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS)))
+                       .thermal.mechanics_duration)
+    plan = dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, mechanics_duration=_WINDOW[0]))
     result = runner.execute(cycle_window(plan))
     assert result.failure is None
     return plan, result, cycle_temperatures(plan, result.timeseries)
@@ -209,6 +220,8 @@ def test_closed_form_cycle_bulk_is_the_runs():
     means = cyc.cycle_means_from_energies(t, bounds, df["heat_generated_J"].to_numpy(float),
                                           df["heat_pin_J"].to_numpy(float))
     setup = plan.thermal.setup
+    means.start = np.array([np.interp(means.t_start, t, df[name[:-2] + "_C"].to_numpy(float)) + 273.15
+                            for name in setup.system.state_names])
     u = setup.extension.inputs_numeric(plan.mechanism.contact_state(df))[0]
     a, P = means.t_start, means.period
     rows = [float(x) - a for x in t[(t > a) & (t < a + P)]]
@@ -221,17 +234,21 @@ def test_closed_form_cycle_bulk_is_the_runs():
 
 
 def test_cycle_peak_is_the_runs_reported_peak(cycle_table):
-    """The run continues the periodic turn by its own rows at t_k + m P (thermal/cycle.py `continue_periodically`)
-    and the sensitivity reads each row at its last repetition t_k + m_k P (`cycle_temperatures`), with the same flash
-    rise and share and the same cycle-averaged bulk (the run's by quadrature cut at every row, the table's in closed
-    form: equal to 5e-11 K, `test_closed_form_cycle_bulk_is_the_runs`): so the run's reported peak contact temperature
-    and its time are the table's value and t_s, to that agreement (1e-9 K) and to the round-off of t_k + m P."""
+    """After its resolved window the run's rows are on the output grid, the periodic turn at the phase of each grid
+    time (thermal/cycle.py `continue_periodically`), with the cycle-averaged bulk there; the sensitivity reads the
+    turn's own rows at their last repetitions t_k + m_k P with the same bulk (to 5e-11 K,
+    `test_closed_form_cycle_bulk_is_the_runs`). Both sample the same periodic contact temperature in the run's last
+    turn, at phases up to one output step apart: they agree to its change over a step there."""
     run = mechsim.run(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS))
     assert run.failure is None
     peak = run.summary["peaks"]["temp_contact_C"]
     row = cycle_table[cycle_table["quantity"] == "peak_temp_contact_C"].iloc[0]
-    assert peak["value"] == pytest.approx(row["value"], rel=0, abs=1e-9)
-    assert peak["t_s"] == pytest.approx(row["t_s"], rel=0, abs=1e-9)
+    ts = run.timeseries
+    t, temp = ts["t_s"].to_numpy(), ts["temp_contact_C"].to_numpy()
+    step = run.scenario["output_step"]
+    near = np.abs(t - row["t_s"]) <= 2 * step
+    assert abs(peak["t_s"] - row["t_s"]) <= step
+    assert abs(peak["value"] - row["value"]) <= np.nanmax(np.abs(np.diff(temp[near])))
     assert peak["t_s"] > 60.0 - run.summary["thermal"]["cycle"]["period_s"]       # in the last turn of the run
 
 

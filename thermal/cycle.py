@@ -66,7 +66,7 @@ def cycle_means_from_energies(t: np.ndarray, bounds: np.ndarray, e_gen: np.ndarr
 
 
 #: a turn-to-turn change below this is taken as converged whatever its trend (round-off; callers raise it to the
-#: integrator's scatter)
+#: scatter of their rows)
 CHANGE_FLOOR = 1e-7
 
 

@@ -41,8 +41,10 @@ CYCLE_TURNS_DAE = 6
 #: `turn_periodicity`) is within this (relative: it bounds the error of the cycle-mean heat, and so of the rise after
 #: the window, by as much)
 PERIODICITY_TOLERANCE = 1e-3
-#: turn-to-turn changes up to this many times the solver's rtol count as its scatter, not as a trend
-SCATTER = 100
+#: turn-to-turn changes up to this share of the tolerance count as scatter, not as a trend: the integrals over a turn
+#: scatter by ~1e-6 at 1 ms rows (the contact's kinks fall differently between rows from turn to turn), and even a
+#: trend as slow as 0.99 per turn adds no more than the tolerance after such a change
+SCATTER = 1e-2
 #: the mechanics window may grow to this share of the duration; a motion not periodic by then is resolved whole
 WINDOW_SHARE = 0.5
 #: windows tried at most before resolving the whole run
@@ -100,6 +102,7 @@ class ThermalPlan:
     mechanics_duration: float
     warnings: list[str] = field(default_factory=list)
     tried: tuple = ()          # the earlier mechanics windows of cycle mode, each with its periodicity (`extend`)
+    fallback: str = ""         # why cycle averaging fell back to the resolved run (`extend`)
 
     @property
     def extension(self):
@@ -125,10 +128,9 @@ class ThermalPlan:
         summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method, n_states, backend),
                    "flash": setup.section["flash"], "distribution": setup.section["distribution"],
                    "averaging": self.averaging, "averaging_why": self.averaging_why}
-        if self.tried and self.averaging == "resolved":        # cycle averaging fell back (`extend`)
+        if self.fallback and self.averaging == "resolved":        # cycle averaging fell back (`extend`)
             summary["windows_tried"] = list(self.tried)
-            summary["averaging_note"] = "thermal: resolved, not cycle-averaged:" + self.averaging_why[
-                self.averaging_why.index("; but") + len("; but"):]
+            summary["averaging_note"] = "thermal: resolved, not cycle-averaged: " + self.fallback
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
             return df, events, extra, summary, warnings
@@ -219,8 +221,7 @@ class ThermalPlan:
         speed_column = column[:-len("_angle_rad")] + "_speed_rad_s"
         speed = df[speed_column].to_numpy(float) if speed_column in df else np.gradient(angle, t)
         energy = self._heat_generated(df, t) if states is None else states[:, self.setup.system.size]
-        rtol = float(self.si.get("solver", {}).get("rtol", 0.0))
-        return cyc.turn_periodicity(t, angle, speed, energy, max(cyc.CHANGE_FLOOR, SCATTER * rtol))
+        return cyc.turn_periodicity(t, angle, speed, energy, SCATTER * PERIODICITY_TOLERANCE)
 
     def extend(self, df: pd.DataFrame) -> "ThermalPlan | None":
         """None where the mechanics window `df` serves cycle averaging (its turns periodic to PERIODICITY_TOLERANCE,
@@ -248,18 +249,17 @@ class ThermalPlan:
         state = (f"after {per.turns} crank turns ({self.mechanics_duration:.4g} s) the turns still change by "
                  f"{per.change:.2g} from one to the next" if per.change is not None else
                  f"only {per.turns} full crank turn(s) in {self.mechanics_duration:.4g} s")
-        if per.rate is not None and per.change is not None and per.change > cyc.CHANGE_FLOOR:
+        if per.rate is not None and per.change is not None and per.change > SCATTER * tolerance:
             state += (f", decaying by {per.rate:.3g} per turn" if per.rate < 1 else
                       f", not decaying ({per.rate:.3g} per turn)")
         outlook = (f"about {needed} turns ({window:.4g} s) would be needed" if needed is not None else
                    "its trend does not yet tell when they will repeat")
-        why = (f"; but the mechanics is not periodic within the turns allotted (up to {WINDOW_SHARE:g} of the "
-               f"duration, {allotted:.4g} s): {state} (tolerance {tolerance:g}), {outlook}; so the whole run is "
-               "resolved")
-        return dataclasses.replace(self, averaging="resolved", averaging_why=self.averaging_why + why,
-                                   mechanics_duration=duration, tried=tried,
-                                   warnings=self.warnings + ["thermal: cycle averaging fell back to the resolved run:"
-                                                             + why[len("; but"):]])
+        why = (f"the mechanics is not periodic within the turns allotted (up to {WINDOW_SHARE:g} of the duration, "
+               f"{allotted:.4g} s): {state} (tolerance {tolerance:g}), {outlook}; so the whole run is resolved")
+        return dataclasses.replace(self, averaging="resolved", averaging_why=self.averaging_why + "; but " + why,
+                                   mechanics_duration=duration, tried=tried, fallback=why,
+                                   warnings=self.warnings + ["thermal: cycle averaging fell back to the resolved run: "
+                                                             + why])
 
     @staticmethod
     def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:

@@ -61,7 +61,10 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
             return turn_bulk({**data, "periods": periods}, angle[edges], df["heat_generated_J"].to_numpy(float)[edges],
                              df["heat_pin_J"].to_numpy(float)[edges], u[edges], u[layout.padded],
                              _network(setup.system), start)[0][layout.pad:]
-        start = df[list(setup.system.state_names)].to_numpy(float)[edges]
+        # the network's states around the turn's start (the table keeps the bulk ones as temp_bulk_<body>_C; the
+        # 1-D mesh, whose cells it drops, is not cycle-averaged)
+        start = np.column_stack([df[name[:-2] + "_C"].to_numpy(float)[edges] + KELVIN
+                                 for name in setup.system.state_names])
         bulk, previous = at(data["periods"]), at(data["periods"] - 1.0)
         names = list(setup.system.state_names)
         pin, wheel = names.index("temp_bulk_pin_K"), names.index("temp_bulk_wheel_K")
@@ -273,6 +276,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     import jax.numpy as jnp
 
     from mechsim.dynamics.sensitivity import COLUMNS, SensitivityUnavailable
+    from mechsim.thermal.contact_row import KELVIN
     from mechsim.thermal.coupling import SHARE_PARAMETERS
     setup = plan.thermal.setup
     ext, sysm, layout = setup.extension, setup.system, turn["layout"]
@@ -306,7 +310,12 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
         primal[key], tangent[key] = x[:, 0], dx[:, 0]
     pmap = plan.mechanism.parameter_map()
     inputs = pmap.contact_columns + ("friction_power_W",)
-    primal["start"], tangent["start"] = columns(list(sysm.state_names), edges, contact=False)
+    # the network's states at the turn's ends (the table keeps them as temp_bulk_<body>_C, the path by their names)
+    primal["start"] = np.column_stack([df[name[:-2] + "_C"].to_numpy(float)[edges] + KELVIN
+                                       for name in sysm.state_names])
+    tangent["start"] = np.zeros(primal["start"].shape + (n,))
+    for r, i in enumerate(edges):
+        tangent["start"][r, :, :n_used] = [by_time[float(t[i])].grads[name] for name in sysm.state_names]
     primal["cols_edges"], tangent["cols_edges"] = columns(inputs, edges)
     primal["cols_inner"], tangent["cols_inner"] = columns(inputs, layout.padded)
     for name in SHARE_PARAMETERS + ("R",):
