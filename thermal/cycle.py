@@ -27,6 +27,11 @@ from mechsim.thermal.linear import LinearThermalSystem
 HISTORY_ROWS = 1001
 #: phases within the period are resolved to this fraction of it (bulk_response)
 PHASE_RESOLUTION = 1e-10
+#: with more distinct phases than HERMITE_ABOVE times (HERMITE_NODES + the input's breaks), as output rows on a grid
+#: incommensurate with the period give over a long run, the ripple is interpolated between HERMITE_NODES uniform
+#: phases and the breaks (`_ripple_hermite`) instead of integrated to every phase
+HERMITE_NODES = 4096
+HERMITE_ABOVE = 4
 
 
 def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarray:
@@ -160,13 +165,40 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
         return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
-    Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
-    start = homogeneous.resolvent_periodic(Z[-1], P)
-    periodic = homogeneous.exp(tau, start) + Z
-    ripple = periodic[np.searchsorted(tau, phase)]
-    T0 = np.asarray(means.start, dtype=float) - periodic[0]
+    if len(tau) > HERMITE_ABOVE * (HERMITE_NODES + len(breaks)):
+        ripple, periodic0 = _ripple_hermite(homogeneous, ripple_input, P, breaks, phase)
+    else:
+        Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
+        start = homogeneous.resolvent_periodic(Z[-1], P)
+        periodic = homogeneous.exp(tau, start) + Z
+        ripple, periodic0 = periodic[np.searchsorted(tau, phase)], periodic[0]
+    T0 = np.asarray(means.start, dtype=float) - periodic0
     mean, _ = ModalNetwork(system).constant(T0, u_bar, since, energy=False)
     return mean, mean + ripple
+
+
+def _ripple_hermite(homogeneous: ModalNetwork, ripple_input, period: float, breaks: list[float], phase: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(the periodic ripple at the phases, at phase 0) from its exact values at HERMITE_NODES uniform phases and the
+    input's breaks, cubic Hermite between them with its exact slopes z' = lambda z + B_m (u - u_bar) in the modes
+    (one-sided at the nodes: the input may jump at a break). Between breaks the ripple is smooth, so the error is
+    h^4 max|d^4z/dt^4| / 384 with h = P / HERMITE_NODES."""
+    nodes = np.unique(np.concatenate([[0.0, period], breaks, np.linspace(0.0, period, HERMITE_NODES + 1)]))
+    n, m = homogeneous.n, homogeneous.Bm.shape[1]
+    Z = homogeneous.integrate(ripple_input, nodes, np.zeros(n + 3), breaks)[:, :n]
+    values = homogeneous.exp(nodes, homogeneous.resolvent_periodic(Z[-1], period)) + Z
+    z = values @ homogeneous.Vinv.T
+    eps = 1e-12 * period
+    lam, Bm = homogeneous.lam[None, :], homogeneous.Bm
+    slope_lo = lam * z[:-1] + np.asarray(ripple_input(nodes[:-1] + eps))[:m].T @ Bm.T
+    slope_hi = lam * z[1:] + np.asarray(ripple_input(nodes[1:] - eps))[:m].T @ Bm.T
+    k = np.clip(np.searchsorted(nodes, phase, side="right") - 1, 0, len(nodes) - 2)
+    h = (nodes[k + 1] - nodes[k])[:, None]
+    x = ((phase - nodes[k]) / h[:, 0])[:, None]
+    x2, x3 = x * x, x * x * x
+    out = ((2 * x3 - 3 * x2 + 1) * z[k] + (x3 - 2 * x2 + x) * h * slope_lo[k] + (3 * x2 - 2 * x3) * z[k + 1]
+           + (x3 - x2) * h * slope_hi[k])
+    return out @ homogeneous.V.T, values[0]
 
 
 def _period_mean(u_of_phase, period: float, breaks: list[float], nodes: int = 8, pieces: int = 64) -> np.ndarray:
