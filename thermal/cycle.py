@@ -78,12 +78,13 @@ CHANGE_FLOOR = 1e-7
 @dataclass
 class Periodicity:
     """How periodic the crank turns of a window are. turns: full turns from the start angle; change: the largest
-    relative turn-to-turn change of the last full turn against the one before (its period, its heat and the mean
-    square of the crank speed over it; None with one turn); changes: that change for every pair of
+    relative turn-to-turn change of the last full turn against the one before (its period, its heat and the crank
+    speed at its start, relative to the turn's mean speed; None with one turn); changes: that change for every pair of
     consecutive turns; rate: the decay of the change per turn, the geometric mean over the last (up to) three changes
     (None with fewer than three turns); error: the last turn's estimated relative distance from the periodic limit, the sum of the changes
     still to come if they keep decaying by `rate`, change * max(1, rate/(1 - rate)) (inf where they do not decay);
-    ends: the turns' start and end times (the window's start first)."""
+    ends: the turns' start and end times (the window's start first); period_error: the same distance for the
+    period alone (<= error): the continued turns drift in phase by about that times the time continued."""
 
     turns: int
     change: float | None
@@ -91,6 +92,7 @@ class Periodicity:
     rate: float | None
     error: float
     ends: np.ndarray
+    period_error: float = math.inf
 
     def turns_needed(self, tolerance: float) -> int | None:
         """Full turns after which `error` is expected to be within `tolerance` (the changes decaying by `rate`),
@@ -105,38 +107,67 @@ class Periodicity:
 
 
 def turn_periodicity(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, energy: np.ndarray,
-                     floor: float = CHANGE_FLOOR) -> Periodicity:
-    """Periodicity of the window's crank turns (turns from the start angle, `turn_boundaries`); energy: the heat
-    generated up to each row (J); floor: a change at or below it counts as converged whatever its trend (the
-    integrator's own scatter). Each turn is compared by integrals over it (the trapezoidal rule on the rows, the
-    running integrals linear between rows at the turn's ends): a sample of the speed at fixed angles would carry the
-    interpolation error of the kinks at the contact's mode changes (~1e-3 of the speed at 1 ms rows), which the
-    integrals average out."""
-    ends = np.concatenate([[t[0]], turn_boundaries(t, angle, angle[0])])
-    n = len(ends) - 1
-    if n < 2:
-        return Periodicity(n, None, np.array([]), None, math.inf, ends)
-    periods = np.diff(ends)
-    heat = np.diff(np.interp(ends, t, energy))
-    square = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] ** 2 + speed[:-1] ** 2) * np.diff(t))])
-    mean_square = np.diff(np.interp(ends, t, square)) / periods
+                     floor: float = CHANGE_FLOOR, accel: np.ndarray | None = None,
+                     power: np.ndarray | None = None) -> Periodicity:
+    """Periodicity of the window's crank turns (turns from the start angle); energy: the heat generated up to each
+    row (J); floor: a change at or below it counts as converged whatever its trend. Each turn is compared by its
+    period, its heat and the crank speed at its start, all read where the crank passes the start angle: cubic
+    Hermite between the rows around that instant, with the rows' derivatives (the speed for the angle, `accel` for
+    the speed, `power` for the energy; linear where not given), so that coarse rows still measure them to
+    O(h^4). (A sample of the speed at other angles would meet the contact's kinks between rows, ~1e-3 of the
+    speed at 1 ms.)"""
+    targets = angle[0] + 2 * np.pi * np.arange(1, int(np.floor((angle[-1] - angle[0]) / (2 * np.pi) + 1e-12)) + 1)
+    if len(t) < 2 or not np.all(np.diff(angle) > 0) or len(targets) < 2:
+        ends = np.concatenate([[t[0]], turn_boundaries(t, angle, angle[0])])
+        return Periodicity(len(ends) - 1, None, np.array([]), None, math.inf, ends, math.inf)
+    j = np.clip(np.searchsorted(angle, targets, side="right") - 1, 0, len(t) - 2)
+    h = t[j + 1] - t[j]
+    x = np.clip((targets - angle[j]) / (angle[j + 1] - angle[j]), 0.0, 1.0)
+    for _ in range(4):                                     # Newton on the Hermite cubic of the angle
+        value, slope = _hermite(x, angle[j], angle[j + 1], h * speed[j], h * speed[j + 1])
+        x = np.clip(x - (value - targets) / np.where(slope > 0, slope, 1.0), 0.0, 1.0)
 
-    def relative(x):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(np.abs(x[1:]) > 0, np.abs(np.diff(x)) / np.abs(x[1:]), 0.0)
-    changes = np.maximum.reduce([relative(periods), relative(heat), relative(mean_square)])
+    def at(y, dy):
+        if dy is None:
+            return y[j] + x * (y[j + 1] - y[j])
+        return _hermite(x, y[j], y[j + 1], h * dy[j], h * dy[j + 1])[0]
+    ends = np.concatenate([[t[0]], t[j] + x * h])
+    n = len(ends) - 1
+    periods = np.diff(ends)
+    heat = np.diff(np.concatenate([[energy[0]], at(energy, power)]))
+    start_speed = np.concatenate([[speed[0]], at(speed, accel)])[:-1]
+
+    def relative(v, scale):
+        return np.abs(np.diff(v)) / np.where(scale[1:] > 0, scale[1:], 1.0)
+    changes = np.maximum.reduce([relative(periods, periods), relative(heat, np.abs(heat)),
+                                 relative(start_speed, 2 * np.pi / periods)])
+    change, rate, error = _distance(changes, floor)
+    period_error = _distance(relative(periods, periods), floor)[2]
+    return Periodicity(n, change, changes, rate, error, ends, min(period_error, error))
+
+
+def _distance(changes: np.ndarray, floor: float) -> tuple[float, float | None, float]:
+    """(last change, its decay per turn, the estimated distance from the limit) of a sequence of turn-to-turn
+    changes (`Periodicity`)."""
+    n = len(changes)
     change = float(changes[-1])
     rate = None
-    if n >= 3 and changes[-min(n - 1, 3)] > 0:       # the decay per turn over the last (up to) three changes
-        k = min(n - 1, 3)
+    if n >= 2 and changes[-min(n, 3)] > 0:       # the decay per turn over the last (up to) three changes
+        k = min(n, 3)
         rate = float((changes[-1] / changes[-k]) ** (1.0 / (k - 1)))
     if change <= floor:
-        error = change
-    elif rate is not None and rate < 1:
-        error = change * max(1.0, rate / (1.0 - rate))
-    else:
-        error = math.inf
-    return Periodicity(n, change, changes, rate, error, ends)
+        return change, rate, change
+    if rate is not None and rate < 1:
+        return change, rate, change * max(1.0, rate / (1.0 - rate))
+    return change, rate, math.inf
+
+
+def _hermite(x, y0, y1, d0, d1):
+    """(value, d/dx) of the cubic Hermite on [0, 1] with end values y0, y1 and end slopes d0, d1 (per unit x)."""
+    x2, x3 = x * x, x * x * x
+    value = (2 * x3 - 3 * x2 + 1) * y0 + (x3 - 2 * x2 + x) * d0 + (3 * x2 - 2 * x3) * y1 + (x3 - x2) * d1
+    slope = (6 * x2 - 6 * x) * y0 + (3 * x2 - 4 * x + 1) * d0 + (6 * x - 6 * x2) * y1 + (3 * x2 - 2 * x) * d1
+    return value, slope
 
 
 def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Callable[[np.ndarray], np.ndarray],

@@ -41,9 +41,11 @@ CYCLE_TURNS_DAE = 6
 #: `turn_periodicity`) is within this (relative: it bounds the error of the cycle-mean heat, and so of the rise after
 #: the window, by as much)
 PERIODICITY_TOLERANCE = 1e-3
-#: turn-to-turn changes up to this share of the tolerance count as scatter, not as a trend: the integrals over a turn
-#: scatter by ~1e-6 at 1 ms rows (the contact's kinks fall differently between rows from turn to turn), and even a
-#: trend as slow as 0.99 per turn adds no more than the tolerance after such a change
+#: the averaging error on a row relative to the rise (`ThermalPlan.averaging_error`) a window must promise: half of
+#: the 1 % docs/thermal.md states, the estimate being first order
+AVERAGING_TOLERANCE = 5e-3
+#: turn-to-turn changes up to this share of the tolerance count as scatter, not as a trend (the rows' interpolation
+#: and the solver's tolerance): even a trend as slow as 0.99 per turn adds no more than the tolerance after one
 SCATTER = 1e-2
 #: the mechanics window may grow to this share of the duration; a motion not periodic by then is resolved whole
 WINDOW_SHARE = 0.5
@@ -66,11 +68,12 @@ def _angle_column(df: pd.DataFrame) -> str:
     return next(c for c in df.columns if c.endswith("_angle_rad"))
 
 
-def _window_record(duration: float, per) -> dict:
-    """One tried mechanics window and its periodicity, for the summary."""
+def _window_record(duration: float, per, estimate: float) -> dict:
+    """One tried mechanics window, its periodicity and the averaging error it would give, for the summary."""
     return {"mechanics_duration_s": float(duration), "turns": int(per.turns),
             "turn_to_turn_change": None if per.change is None else float(per.change),
-            "decay_per_turn": None if per.rate is None else float(per.rate), "error_estimate": float(per.error)}
+            "decay_per_turn": None if per.rate is None else float(per.rate), "error_estimate": float(per.error),
+            "averaging_error_estimate": float(estimate)}
 
 
 def _thermal_why(model: str, method: str, n_states: int, backend: str) -> str:
@@ -221,7 +224,36 @@ class ThermalPlan:
         speed_column = column[:-len("_angle_rad")] + "_speed_rad_s"
         speed = df[speed_column].to_numpy(float) if speed_column in df else np.gradient(angle, t)
         energy = self._heat_generated(df, t) if states is None else states[:, self.setup.system.size]
-        return cyc.turn_periodicity(t, angle, speed, energy, SCATTER * PERIODICITY_TOLERANCE)
+        accel_column = column[:-len("_angle_rad")] + "_accel_rad_s2"
+        accel = df[accel_column].to_numpy(float) if accel_column in df else None
+        power = np.asarray(self.mech.contact_state(df)["heat_rate"], dtype=float)
+        return cyc.turn_periodicity(t, angle, speed, energy, SCATTER * PERIODICITY_TOLERANCE, accel, power)
+
+    def averaging_error(self, df: pd.DataFrame, states, per: cyc.Periodicity) -> float:
+        """The cycle averaging's estimated error on a row, relative to the bulk body's rise over the run (the largest
+        over the bodies): the level, the continued turn's heat off by per.error, so per.error times the rise after
+        the turn's start (the mean curve's), plus the phase drift of the in-cycle swing, the time continued times
+        per.period_error, times the body's largest rate of change over the turn. Without bulk states per.error."""
+        if states is None or not math.isfinite(per.error):
+            return per.error
+        means = self._cycle_means(df, states)
+        if means is None:
+            return math.inf
+        system, n = self.setup.system, self.setup.system.size
+        duration = float(self.si["duration"])
+        u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
+        T_end = ModalNetwork(system).constant(means.start, u_bar, [max(duration - means.t_start, 0.0)],
+                                              energy=False)[0][0]
+        t = df["t_s"].to_numpy(float)
+        turn = (t >= means.t_start) & (t <= means.t_start + means.period)
+        slope = np.max(np.abs(np.gradient(states[:, :n], t, axis=0)[turn]), axis=0)
+        drift = max(duration - means.t_start - means.period, 0.0) * per.period_error
+        worst = 0.0
+        for j, name in enumerate(system.state_names):
+            rise = abs(T_end[j] - states[0, j])
+            if name.startswith("temp_bulk_") and rise > 0:
+                worst = max(worst, (per.error * abs(T_end[j] - means.start[j]) + drift * slope[j]) / rise)
+        return float(worst)
 
     def extend(self, df: pd.DataFrame) -> "ThermalPlan | None":
         """None where the mechanics window `df` serves cycle averaging (its turns periodic to PERIODICITY_TOLERANCE,
@@ -230,10 +262,15 @@ class ThermalPlan:
         WINDOW_SHARE of the duration (or WINDOW_TRIES windows were tried), the whole run resolved, saying why."""
         if self.averaging != "cycle":
             return None
-        per = self.periodicity(df)
-        tolerance = PERIODICITY_TOLERANCE
-        if per.error <= tolerance:
+        states = self._window_states(df)[0]
+        per = self.periodicity(df, states)
+        estimate = self.averaging_error(df, states, per)
+        if per.error <= PERIODICITY_TOLERANCE and estimate <= AVERAGING_TOLERANCE:
             return None
+        # the estimate scales with per.error (level and drift alike): the distance that brings it within tolerance
+        tolerance = PERIODICITY_TOLERANCE
+        if math.isfinite(estimate) and estimate > AVERAGING_TOLERANCE:
+            tolerance = min(tolerance, per.error * AVERAGING_TOLERANCE / estimate)
         duration, step = float(self.si["duration"]), float(self.si["output_step"])
         period = float(per.ends[-1] - per.ends[-2]) if per.turns else self.setup.period
         needed = per.turns_needed(tolerance)
@@ -242,7 +279,7 @@ class ThermalPlan:
         else:       # the turns still needed, one more for the partial turn at the window's end, 5 % margin
             window = float(per.ends[-1]) + 1.05 * (needed - per.turns + 1) * period + 2 * step
         window = max(window, self.mechanics_duration + 2 * period)
-        tried = self.tried + (_window_record(self.mechanics_duration, per),)
+        tried = self.tried + (_window_record(self.mechanics_duration, per, estimate),)
         allotted = WINDOW_SHARE * duration
         if window <= allotted and len(tried) < WINDOW_TRIES:
             return dataclasses.replace(self, mechanics_duration=window, tried=tried)
@@ -255,7 +292,8 @@ class ThermalPlan:
         outlook = (f"about {needed} turns ({window:.4g} s) would be needed" if needed is not None else
                    "its trend does not yet tell when they will repeat")
         why = (f"the mechanics is not periodic within the turns allotted (up to {WINDOW_SHARE:g} of the duration, "
-               f"{allotted:.4g} s): {state} (tolerance {tolerance:g}), {outlook}; so the whole run is resolved")
+               f"{allotted:.4g} s): {state} (averaging error {estimate:.2g} of the rise, tolerance "
+               f"{AVERAGING_TOLERANCE:g}), {outlook}; so the whole run is resolved")
         return dataclasses.replace(self, averaging="resolved", averaging_why=self.averaging_why + "; but " + why,
                                    mechanics_duration=duration, tried=tried, fallback=why,
                                    warnings=self.warnings + ["thermal: cycle averaging fell back to the resolved run: "
@@ -362,6 +400,7 @@ class ThermalPlan:
             warnings.append("thermal: fewer than one full crank turn in the mechanics window; shown resolved")
             return None
         per = self.periodicity(df, states)
+        estimate = self.averaging_error(df, states, per)
         n = None if states is None else setup.system.size
         duration, step = float(self.si["duration"]), float(self.si["output_step"])
         full, full_events, t_sim, kept = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
@@ -387,21 +426,23 @@ class ThermalPlan:
                                  "resolved states at the turn's start"),
                 "periodicity": {"turn_to_turn_change": per.change, "decay_per_turn": per.rate,
                                 "turn_changes": [float(x) for x in per.changes],
-                                "error_estimate": per.error, "tolerance": PERIODICITY_TOLERANCE},
-                "averaging_error_estimate": per.error,
-                "windows_tried": list(self.tried) + [_window_record(self.mechanics_duration, per)],
+                                "error_estimate": per.error, "period_error_estimate": per.period_error,
+                                "tolerance": PERIODICITY_TOLERANCE},
+                "averaging_error_estimate": estimate, "averaging_tolerance": AVERAGING_TOLERANCE,
+                "windows_tried": list(self.tried) + [_window_record(self.mechanics_duration, per, estimate)],
                 "periodicity_of_mean_heat": means.periodicity}
         summary["averaging_why"] += (f"; the mechanics ran {per.turns} crank turns until periodic (resolved up to "
                                      f"{t_sim:.6g} s; the last turn's change from the one before "
                                      + (f"{per.change:.2g}" if per.change is not None else "not measured (one turn)")
                                      + ")")
         summary["averaging_note"] = (f"thermal: cycle-averaged after {per.turns} crank turns resolved (0 to "
-                                     f"{t_sim:.4g} s); estimated averaging error {per.error:.1g} of the temperature "
-                                     "rise (the last turn's distance from the periodic motion)")
-        if per.error > PERIODICITY_TOLERANCE:
+                                     f"{t_sim:.4g} s); estimated averaging error {estimate:.1g} of the temperature "
+                                     "rise (the last turn's distance from the periodic motion, and the phase drift "
+                                     "it gives the in-cycle swing)")
+        if per.error > PERIODICITY_TOLERANCE or estimate > AVERAGING_TOLERANCE:
             warnings.append(f"thermal: the mechanics is not yet periodic after {per.turns} crank turns (estimated "
-                            f"distance of the last turn from the periodic motion {per.error:.2g} > "
-                            f"{PERIODICITY_TOLERANCE:g}); the cycle means may be off by as much")
+                            f"distance of the last turn from the periodic motion {per.error:.2g}, averaging error "
+                            f"{estimate:.2g} of the rise)")
         summary["cycle"] = info
         if states is None:
             return full, full_events, None
