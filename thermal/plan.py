@@ -233,18 +233,26 @@ class ThermalPlan:
         """The cycle averaging's estimated error on a row, relative to the bulk body's rise over the run (the largest
         over the bodies): the level, the continued turn's heat off by per.error, so per.error times the rise after
         the turn's start (the mean curve's), plus the phase drift of the in-cycle swing, the time continued times
-        per.period_error, times the body's largest rate of change over the turn. Without bulk states per.error."""
+        per.period_error, times the body's largest rate of change over the turn, plus how far the continuation
+        misses the resolved states over the turn itself, twice (its input linear between rows where the resolved
+        run's is not: that error repeats in the swing and stays in the mean curve's start, but does not grow).
+        Without bulk states per.error."""
         if states is None or not math.isfinite(per.error):
             return per.error
         means = self._cycle_means(df, states)
         if means is None:
             return math.inf
+        _, inputs, breaks = self._window_states(df)
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        t = df["t_s"].to_numpy(float)
+        own = (t > means.t_start) & (t <= means.t_start + means.period)
+        again = cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, t[own])[1]
+        miss = np.max(np.abs(again - states[own, :again.shape[1]]), axis=0)
         system, n = self.setup.system, self.setup.system.size
         duration = float(self.si["duration"])
         u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
         T_end = ModalNetwork(system).constant(means.start, u_bar, [max(duration - means.t_start, 0.0)],
                                               energy=False)[0][0]
-        t = df["t_s"].to_numpy(float)
         turn = (t >= means.t_start) & (t <= means.t_start + means.period)
         slope = np.max(np.abs(np.gradient(states[:, :n], t, axis=0)[turn]), axis=0)
         drift = max(duration - means.t_start - means.period, 0.0) * per.period_error
@@ -252,7 +260,7 @@ class ThermalPlan:
         for j, name in enumerate(system.state_names):
             rise = abs(T_end[j] - states[0, j])
             if name.startswith("temp_bulk_") and rise > 0:
-                worst = max(worst, (per.error * abs(T_end[j] - means.start[j]) + drift * slope[j]) / rise)
+                worst = max(worst, (per.error * abs(T_end[j] - means.start[j]) + drift * slope[j] + 2 * miss[j]) / rise)
         return float(worst)
 
     def extend(self, df: pd.DataFrame) -> "ThermalPlan | None":
