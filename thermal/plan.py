@@ -445,8 +445,8 @@ class ThermalPlan:
                                      + ")")
         summary["averaging_note"] = (f"thermal: cycle-averaged after {per.turns} crank turns resolved (0 to "
                                      f"{t_sim:.4g} s); estimated averaging error {estimate:.1g} of the temperature "
-                                     "rise (the last turn's distance from the periodic motion, and the phase drift "
-                                     "it gives the in-cycle swing)")
+                                     "rise (the turns' distance from periodic, the phase drift it gives the in-cycle "
+                                     "swing, the turn's own reproduction)")
         if per.error > PERIODICITY_TOLERANCE or estimate > AVERAGING_TOLERANCE:
             warnings.append(f"thermal: the mechanics is not yet periodic after {per.turns} crank turns (estimated "
                             f"distance of the last turn from the periodic motion {per.error:.2g}, averaging error "
