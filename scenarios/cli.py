@@ -192,7 +192,7 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
         stopped = result.failure is not None and s.get("failure_code") == "model_invalid"
         for line in [] if stopped else violation_lines(s.get("validity")):   # stopped: the failure line says it
             err.print(line, markup=False, highlight=False, soft_wrap=True)
-        if (s.get("thermal") or {}).get("averaging_note"):     # cycle averaging: its error, or why it fell back
+        if (s.get("thermal") or {}).get("averaging_note"):     # cycle averaging: its estimated error
             err.print(s["thermal"]["averaging_note"], markup=False, highlight=False, soft_wrap=True)
         if s.get("solver_messages"):
             err.print(f"note: {len(s['solver_messages'])} message(s) of the solver library captured, in "

@@ -52,7 +52,8 @@ def test_the_start_up_is_simulated_and_the_rest_is_the_periodic_turn(motor_120s)
     clear = np.array([not np.any((te > t[i]) & (te < t[i + 1])) for i in j])
     for col in ("crank_speed_rad_s", "contact_force_N", "friction_power_W"):
         expected = np.interp(phase_t, t[sim], ts[col].to_numpy()[sim])
-        np.testing.assert_allclose(ts[col].to_numpy()[later][clear], expected[clear], rtol=1e-12, atol=1e-12, err_msg=col)
+        np.testing.assert_allclose(ts[col].to_numpy()[later][clear], expected[clear], rtol=1e-12, atol=1e-12,
+                                   err_msg=col)
     theta = ts["crank_angle_rad"].to_numpy()
     i = np.flatnonzero(t > t_sim)[0]
     advance = np.interp(t[-1] - P, t, theta)

@@ -79,12 +79,13 @@ CHANGE_FLOOR = 1e-7
 class Periodicity:
     """How periodic the crank turns of a window are. turns: full turns from the start angle; change: the largest
     relative turn-to-turn change of the last full turn against the one before (its period, its heat and the crank
-    speed at its start, relative to the turn's mean speed; None with one turn); changes: that change for every pair of
-    consecutive turns; rate: the decay of the change per turn, the geometric mean over the last (up to) three changes
-    (None with fewer than three turns); error: the last turn's estimated relative distance from the periodic limit, the sum of the changes
-    still to come if they keep decaying by `rate`, change * max(1, rate/(1 - rate)) (inf where they do not decay);
-    ends: the turns' start and end times (the window's start first); period_error: the same distance for the
-    period alone (<= error): the continued turns drift in phase by about that times the time continued."""
+    speed at its start, relative to the turn's mean speed; None with one turn); changes: that change for every pair
+    of consecutive turns; rate: the decay of the change per turn, the geometric mean over the last (up to) three
+    changes (None with fewer than three turns); error: the last turn's estimated relative distance from the periodic
+    limit, the sum of the changes still to come if they keep decaying by `rate`, change * max(1, rate/(1 - rate))
+    (inf where they do not decay); ends: the turns' start and end times (the window's start first); period_error:
+    the same distance for the period alone (<= error): the continued turns drift in phase by about that times the
+    time continued."""
 
     turns: int
     change: float | None
@@ -299,13 +300,13 @@ def turn_rows(t: np.ndarray, t_start: float, period: float) -> np.ndarray:
 
 def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
                           step: float) -> tuple[pd.DataFrame, pd.DataFrame, float, np.ndarray]:
-    """The whole run on the output grid (`output_times`: k step, and the end time): the simulated rows on it up to
-    the last simulated one, t_sim, then the periodic turn [t_start, t_start + period) interpolated at the phase
-    (t - t_start) mod period of every later grid time (the mechanics is periodic there: cycle averaging checks it),
+    """The whole run on the output grid (`output_times`: k step, and the end time): the simulated rows on it up to the
+    last simulated one, t_sim, then the periodic turn [t_start, t_start + period) interpolated at the phase (t -
+    t_start) mod period of every later grid time (the mechanics is periodic there: cycle averaging checks it),
     linear between the window's rows, and across an event (a mode change, where columns jump or kink) from the two
     rows on the phase's side of it (`_event_sides`). Cumulative columns advance by their increase over one turn per
-    period; a discrete column (the mode) is that of the row on the phase's side. Events of the turn repeat every period (`message` says so). Returns (table, events, t_sim, the
-    indices into df of the simulated rows kept)."""
+    period; a discrete column (the mode) is that of the row on the phase's side. Events of the turn repeat every
+    period (`message` says so). Returns (table, events, t_sim, the indices into df of the simulated rows kept)."""
     t = df["t_s"].to_numpy(float)
     grid = output_times(duration, step)
     kept = np.flatnonzero(np.isin(np.round(t / step, 6), np.round(grid / step, 6)))

@@ -131,9 +131,8 @@ class ThermalPlan:
         summary = {"model": setup.model, "why": _thermal_why(setup.model, self.method, n_states, backend),
                    "flash": setup.section["flash"], "distribution": setup.section["distribution"],
                    "averaging": self.averaging, "averaging_why": self.averaging_why}
-        if self.fallback and self.averaging == "resolved":        # cycle averaging fell back (`extend`)
+        if self.fallback and self.averaging == "resolved":        # cycle averaging fell back (`extend`: its warning)
             summary["windows_tried"] = list(self.tried)
-            summary["averaging_note"] = "thermal: resolved, not cycle-averaged: " + self.fallback
         extra: dict[str, pd.DataFrame] = {}
         if df.empty:
             return df, events, extra, summary, warnings

@@ -268,11 +268,11 @@ def _cycle_bulk_fn(ext, distribution: str, pmap):
 
 def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, model, samples: list,
                         stats: dict) -> None:
-    """Replace the bulk temperatures (values, gradients) of the samples at the turn's rows by the cycle-averaged
-    ones: thermal/cycle_exact.py `turn_bulk` evaluated in jax on the run's rows and pushed forward (jvp) along the
-    traced columns of every row of the turn (the drive angle, the energies and the network's states at its ends,
-    the contact that makes the heat input) and the network's and heat share's parameters. The jax evaluation must give the numpy one (to
-    1e-9 K), as the row formulas must give the run's columns."""
+    """Replace the bulk temperatures (values, gradients) of the samples at the turn's rows by the cycle-averaged ones:
+    thermal/cycle_exact.py `turn_bulk` evaluated in jax on the run's rows and pushed forward (jvp) along the traced
+    columns of every row of the turn (the drive angle, the energies and the network's states at its ends, the contact
+    that makes the heat input) and the network's and heat share's parameters. The jax evaluation must give the numpy one
+    (to 1e-9 K), as the row formulas must give the run's columns."""
     import jax.numpy as jnp
 
     from mechsim.dynamics.sensitivity import COLUMNS, SensitivityUnavailable
