@@ -8,12 +8,16 @@ write (permission, read-only folder, full disk): one line, nothing half-written 
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import List, Optional
 
 import typer
 
 from mechsim.scenarios.units import ScenarioError
+
+#: when this command started (the console reports the whole command's wall time, what the user waited)
+STARTED = time.perf_counter()
 
 # Cold start (docs/benchmarks.md, "Cold start"): this module imports only typer; rich, the scientific stack and
 # the solvers load inside the commands that use them, and help is click's plain text (typer's rich help alone
@@ -204,8 +208,22 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
     if not quiet:
         solver = s["solver"]
         out.print(f"{name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
-                  f"{len(result.events)} events, wall {solver['wall_time_s']:.3f} s -> {target}",
-                  markup=False, highlight=False, soft_wrap=True)
+                  f"{len(result.events)} events -> {target}", markup=False, highlight=False, soft_wrap=True)
+        plots = bool(result.scenario.get("output", {}).get("plots", True))
+        out.print(time_line(solver, time.perf_counter() - STARTED, plots), markup=False, highlight=False,
+                  soft_wrap=True)
+
+
+def time_line(solver: dict, total: float, plots: bool = True) -> str:
+    """Where the command's wall time went: the solve (and compilation) within the run, the tables and summary,
+    and the rest (start-up, files and figures), so a user sees what waiting on figures costs."""
+    run, solve = solver["wall_time_s"], solver.get("solve_time_s") or 0.0
+    compile_ = solver.get("compile_time_s") or 0.0
+    parts = [f"solve {solve:.2f} s"] + ([f"compile {compile_:.2f} s"] if compile_ else []) + [
+        f"tables and summary {max(run - solve - compile_, 0.0):.2f} s",
+        f"start-up, files and figures {max(total - run, 0.0):.2f} s"]
+    tip = "; `--set output.plots=false` skips the figures" if plots and total - run > run else ""
+    return f"time: {total:.2f} s in all ({', '.join(parts)}){tip}"
 
 
 @app.command()

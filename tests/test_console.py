@@ -50,4 +50,16 @@ def test_quiet_run_prints_nothing_and_loud_run_one_line_per_kind(tmp_path):
     assert r.exit_code == 0, r.output
     lines = r.stderr.strip().splitlines()
     assert len(lines) == len(s["warning_groups"]) and all(line.startswith("warning: ") for line in lines)
-    assert len(r.stdout.strip().splitlines()) == 1 and "rows" in r.stdout
+    summary_line, time_line = r.stdout.strip().splitlines()
+    assert "rows" in summary_line and time_line.startswith("time: ")
+
+
+def test_the_time_line_splits_the_whole_command():
+    from mechsim.scenarios.cli import time_line
+    solver = {"wall_time_s": 2.0, "solve_time_s": 0.5, "compile_time_s": 0.25}
+    line = time_line(solver, 10.0)
+    # 10 s in all = 0.5 solve + 0.25 compile + 1.25 tables and summary + 8 of the rest
+    assert line.startswith("time: 10.00 s in all (solve 0.50 s, compile 0.25 s, tables and summary 1.25 s, "
+                           "start-up, files and figures 8.00 s)")
+    assert "output.plots=false" in line and "output.plots=false" not in time_line(solver, 10.0, plots=False)
+    assert "compile" not in time_line({"wall_time_s": 1.0, "solve_time_s": 0.5}, 1.5)
