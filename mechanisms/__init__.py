@@ -33,6 +33,7 @@ class MechanismRegistry(Mapping):
 #: scenario `mechanism.type` -> model class
 MECHANISMS = MechanismRegistry({
     "geneva": "mechsim.mechanisms.geneva.model:Geneva",
+    "internal_geneva": "mechsim.mechanisms.internal_geneva.model:InternalGeneva",
     "chain_dwell": "mechsim.mechanisms.chain.model:ChainDwell",
     "rolling_pair": "mechsim.mechanisms.rolling.model:RollingPairFourBar",
 })

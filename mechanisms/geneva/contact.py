@@ -11,29 +11,31 @@ from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 
 def geometry(g: GenevaGeometry) -> ContactGeometry:
     """Pin radius and wheel thickness make the line contact; the wall track spans the pin distances of one
-    engagement (entry to nearest approach); one contact lasts 2 alpha0 of crank angle (docs/theory.md §G1)."""
+    engagement (entry to the deepest point); one contact lasts 2 alpha0 of crank angle (docs/theory.md §G1)."""
     return ContactGeometry(contact_radius=g.pin_radius, contact_length=g.thickness, driver_arm=g.crank_radius,
-                           tracks=g.slots, track_length=g.entry_pin_distance - g.min_pin_distance,
-                           driven_radius=g.entry_pin_distance, contact_angle=2 * g.engagement_half_angle)
+                           tracks=g.slots, track_length=abs(g.entry_pin_distance - g.deepest_pin_distance),
+                           driven_radius=g.wheel_radius, contact_angle=2 * g.engagement_half_angle)
 
 
 def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
     """Contact quantities of each output row, equal to the engaged mode's `heat` expressions (model.py):
-    normal force, slip, source speeds over the pin R(w1 + w2) and the wall v_s, heat rate (friction power), track
-    (slot counter floor((theta + pi)/2 pi)), and the wall's sliding acceleration a_s = dv_s/dt =
-    (w1' v_s + w1 (w1 + w2) w2 x)/w1 (from r cos(alpha + beta) = w2 x/w1, docs/theory.md §G1).
+    normal force, slip, source speeds over the pin R w_rel (w_rel = w2 - crank_sense w1, the wheel's turning
+    against the pin; w1 + w2 external) and over the wall v_s, heat rate (friction power), track (slot counter
+    floor((theta + pi)/2 pi)), and the wall's sliding acceleration a_s = dv_s/dt = (w1' v_s + w1 w_rel w2 x)/w1
+    (from the normal force's arm x G = x w2/w1, `GenevaGeometry.pin_in_slot`; docs/theory.md §G1).
     table: result columns, or the closed form's `closed_form_heat` (a boolean `engaged` in place of `mode`)."""
     def col(name):
         return np.asarray(table[name], dtype=float)
 
     w1, w2, v_s = col("crank_speed_rad_s"), col("wheel_speed_rad_s"), col("pin_sliding_speed_m_s")
+    w_rel = w2 - g.crank_sense * w1
     engaged = table["engaged"] if "engaged" in table else np.asarray(table["mode"]) == "engaged"
     with np.errstate(divide="ignore", invalid="ignore"):
-        a_s = (col("crank_accel_rad_s2") * v_s + w1 * (w1 + w2) * w2 * col("pin_distance_m")) / w1
+        a_s = (col("crank_accel_rad_s2") * v_s + w1 * w_rel * w2 * col("pin_distance_m")) / w1
     return {
         "normal_force": col("contact_force_N"),
         "slip_speed": col("slip_speed_m_s"),
-        "source_speed_driver": np.where(engaged, g.pin_radius * (w1 + w2), 0.0),
+        "source_speed_driver": np.where(engaged, g.pin_radius * w_rel, 0.0),
         "source_speed_driven": v_s,
         "heat_rate": col("friction_power_W"),
         "track": np.floor((col("crank_angle_rad") + np.pi) / (2 * np.pi)),

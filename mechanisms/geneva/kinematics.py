@@ -8,6 +8,7 @@ Sclater & Chironis 2001 and with the seed's S(3a), S(3b), S(7) up to the sign S(
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -17,7 +18,13 @@ class GenevaGeometry:
     """External Geneva geometry from crank radius r, slot count n and pin radius R (SI).
 
     Tangential (shock-free) entry fixes the centre distance c = r / sin(pi/n) (docs/theory.md §G1 table, row λ, c).
+    The pin-in-slot formulas (`wheel_motion`, `pin_position`, `pin_in_slot`) and `crank_sense` are the one place
+    where the external drive differs from the internal one (mechanisms/internal_geneva/), which overrides them.
     """
+
+    #: the crank's sense of turning against the wheel's indexing sense: an external wheel turns against its crank
+    #: (-1); the pin turns against the wheel at w2 - crank_sense w1 (docs/theory.md §G1 'Pin spin')
+    crank_sense: ClassVar[int] = -1
 
     crank_radius: float
     slots: int
@@ -26,14 +33,14 @@ class GenevaGeometry:
 
     def __post_init__(self) -> None:
         if self.slots < 3:
-            raise ValueError(f"slots must be >= 3 for an external Geneva drive, got {self.slots}")
+            raise ValueError(f"slots must be >= 3 for a Geneva drive, got {self.slots}")
         for name in ("crank_radius", "pin_radius", "thickness"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         if self.pin_radius >= self.min_pin_distance:
             raise ValueError(
                 f"pin_radius {self.pin_radius} m must be smaller than the closest pin-to-wheel-centre distance "
-                f"c - r = {self.min_pin_distance} m")
+                f"{self.min_pin_distance} m")
         if self.pin_radius >= self.max_pin_radius:
             raise ValueError(
                 f"pin_radius {self.pin_radius:g} m is too large for crank_radius {self.crank_radius:g} m and "
@@ -71,6 +78,16 @@ class GenevaGeometry:
         return self.centre_distance - self.crank_radius
 
     @property
+    def deepest_pin_distance(self) -> float:
+        """The pin's distance from the wheel centre at mid-engagement, c - r (pin deepest in the slot)."""
+        return self.centre_distance - self.crank_radius
+
+    @property
+    def wheel_radius(self) -> float:
+        """About the wheel's outer radius: the slot mouths, c cos(pi/n), lie on the rim."""
+        return self.entry_pin_distance
+
+    @property
     def entry_pin_distance(self) -> float:
         """x_entry = c cos(pi/n)."""
         return self.centre_distance * np.cos(np.pi / self.slots)
@@ -79,6 +96,29 @@ class GenevaGeometry:
     def dwell_fraction(self) -> float:
         """(n + 2) / (2 n) of a crank turn (docs/theory.md §G1)."""
         return (self.slots + 2) / (2 * self.slots)
+
+    @staticmethod
+    def wheel_motion(lam, alpha, lib=np):
+        """(beta, G, G', x/c) while engaged: `wheel_angle`, `speed_ratio`, `speed_ratio_derivative` and the pin
+        distance over c, sqrt(D) (docs/theory.md §G1); lib: numpy (vectorised) or sympy."""
+        cos_a, sin_a = lib.cos(alpha), lib.sin(alpha)
+        d = 1 - 2 * lam * cos_a + lam * lam
+        return (lib.atan2(lam * sin_a, 1 - lam * cos_a), lam * (cos_a - lam) / d,
+                -lam * (1 - lam * lam) * sin_a / d ** 2, lib.sqrt(d))
+
+    @staticmethod
+    def pin_position(r, c, alpha, lib=np):
+        """The pin centre P = (c - r cos alpha, r sin alpha) in the wheel-centre frame (docs/theory.md §G1)."""
+        return c - r * lib.cos(alpha), r * lib.sin(alpha)
+
+    @staticmethod
+    def pin_in_slot(r, c, alpha, beta, lib=np):
+        """The pin centre against the slot at angle beta, (Phi, x, s, a): its lateral offset, its distance along the
+        slot, its sliding speed along the slot per unit crank speed (v_s = theta' s) and the arm of the normal
+        force about the crank axis (a = x G, by virtual work); docs/theory.md §G1."""
+        return (r * lib.sin(alpha) * lib.cos(beta) - (c - r * lib.cos(alpha)) * lib.sin(beta),
+                r * lib.sin(alpha) * lib.sin(beta) + (c - r * lib.cos(alpha)) * lib.cos(beta),
+                r * lib.sin(alpha + beta), r * lib.cos(alpha + beta))
 
 
 def _d(lam: float, alpha):
@@ -135,22 +175,18 @@ def constant_speed_motion(geom: GenevaGeometry, crank_angle, crank_speed: float)
     rests at the nearest half-pitch: it has indexed once per engagement passed (docs/theory.md §G1-2).
     """
     theta = np.asarray(crank_angle, dtype=float)
-    lam, a0 = geom.ratio, geom.engagement_half_angle
+    a0 = geom.engagement_half_angle
     k, alpha = engaged_slot(geom, theta)
     engaged = np.abs(alpha) < a0
-    # wheel_angle, speed_ratio, speed_ratio_derivative and pin_distance with cos(alpha), sin(alpha) and D computed
-    # once (the same expressions, so the same numbers as those functions give)
-    cos_a, sin_a = np.cos(alpha), np.sin(alpha)
-    d = 1.0 - 2.0 * lam * cos_a + lam * lam
-    beta = np.where(engaged, np.arctan2(lam * sin_a, 1.0 - lam * cos_a), np.sign(alpha) * np.pi / geom.slots)
+    beta, G, Gp, xc = geom.wheel_motion(geom.ratio, alpha)
     w = crank_speed
     return {
         "engaged": engaged,
         "alpha": alpha,
-        "wheel_angle": k * geom.pitch + beta,
-        "wheel_speed": np.where(engaged, w * (lam * (cos_a - lam) / d), 0.0),
-        "wheel_accel": np.where(engaged, w * w * (-lam * (1 - lam * lam) * sin_a / d ** 2), 0.0),
-        "pin_distance": geom.centre_distance * np.sqrt(d),
+        "wheel_angle": k * geom.pitch + np.where(engaged, beta, np.sign(alpha) * np.pi / geom.slots),
+        "wheel_speed": np.where(engaged, w * G, 0.0),
+        "wheel_accel": np.where(engaged, w * w * Gp, 0.0),
+        "pin_distance": geom.centre_distance * xc,
     }
 
 

@@ -24,7 +24,7 @@ from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mec
                                      Transition)
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
-from mechsim.mechanisms.geneva.kinematics import GenevaGeometry, speed_ratio, wheel_angle
+from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 
 if TYPE_CHECKING:                      # the symbolic model imports sympy when it is built (a closed form needs none)
     import sympy as sp
@@ -63,6 +63,9 @@ class Geneva(Mechanism):
     drawing = "mechsim.mechanisms.geneva.drawing:GenevaDrawing"
     sensitivity_map = "mechsim.mechanisms.geneva.sensitivity:MAP"
     enumerated_keys = ("mechanism.slots",)
+    #: the geometry `from_config` builds: it carries every formula in which the pin meets the slot
+    #: (`GenevaGeometry.wheel_motion`, `pin_in_slot`, `crank_sense`); the internal Geneva swaps it
+    geometry_class = GenevaGeometry
     schema = {
         "mechanism": {
             "slots": Field("int", required=True, minimum=3, maximum=72, help="number of slots n (>= 3)",
@@ -94,7 +97,7 @@ class Geneva(Mechanism):
     @classmethod
     def from_config(cls, config: dict[str, dict]) -> "Geneva":
         m, load, contact = config["mechanism"], config.get("load", {}), config.get("contact", {})
-        geometry = GenevaGeometry(m["crank_radius"], int(m["slots"]), m["pin_radius"], m["thickness"])
+        geometry = cls.geometry_class(m["crank_radius"], int(m["slots"]), m["pin_radius"], m["thickness"])
         return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
                    contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0))
 
@@ -129,12 +132,12 @@ class Geneva(Mechanism):
         c1, c2, T_L = P("c1"), P("c2"), P("T_L")
         k, flank, slide = P("slot"), P("flank"), P("slide")
 
+        g = self.geometry
         alpha = theta - 2 * sp.pi * k
         beta = psi - k * P("pitch")
-        phi_engaged = r * sp.sin(alpha) * sp.cos(beta) - (c - r * sp.cos(alpha)) * sp.sin(beta)
-        x = r * sp.sin(alpha) * sp.sin(beta) + (c - r * sp.cos(alpha)) * sp.cos(beta)  # along-slot pin distance
-        v_s = r * w1 * sp.sin(alpha + beta)                     # pin-centre sliding speed along the slot
-        spin = R * (w1 + w2)                                    # pin surface speed relative to the wheel
+        phi_engaged, x, s_slide, _ = g.pin_in_slot(r, c, alpha, beta, sp)   # x: along-slot pin distance
+        v_s = w1 * s_slide                                      # pin-centre sliding speed along the slot
+        spin = R * (w2 - g.crank_sense * w1)                    # pin surface speed relative to the wheel
         u = v_s + flank * spin                                  # slip on the contact flank
         normal = lam                                            # N, signed (> 0: driving flank)
         fric_mag = mu * flank * lam                             # mu |N| with |N| = flank * N in this mode
@@ -183,8 +186,8 @@ class Geneva(Mechanism):
             powers={"load": zero, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts={
                 "contact_force_N": zero, "friction_force_N": zero, "slip_speed_m_s": zero,
-                "pin_sliding_speed_m_s": zero, "pin_distance_m": sp.sqrt(
-                    (c - r * sp.cos(alpha)) ** 2 + (r * sp.sin(alpha)) ** 2),
+                "pin_sliding_speed_m_s": zero,
+                "pin_distance_m": sp.sqrt(sum(p**2 for p in g.pin_position(r, c, alpha, sp))),
                 "friction_power_W": zero, "flank": zero, "lock_force_N": lam,
             },
             heat={"normal_force": zero, "slip_speed": zero, "source_speed_driver": zero, "source_speed_driven": zero,
@@ -210,10 +213,10 @@ class Geneva(Mechanism):
         alpha = angle - 2 * np.pi * k
         a0 = g.engagement_half_angle
         if -a0 <= alpha < a0:
-            lam = g.ratio
-            beta = float(wheel_angle(lam, alpha))
-            w2 = float(speed_ratio(lam, alpha)) * speed
-            u = (speed * g.crank_radius * np.sin(alpha + beta) + g.pin_radius * (speed + w2))
+            beta, G = (float(f) for f in g.wheel_motion(g.ratio, alpha)[:2])
+            w2 = G * speed
+            u = (speed * g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
+                 + g.pin_radius * (w2 - g.crank_sense * speed))
             slide = 1.0 if u >= 0 else -1.0
             return InitialState("engaged", {"slot": k, "flank": 1.0, "slide": slide},
                                 np.array([angle, k * g.pitch + beta]), np.array([speed, w2]))
@@ -247,21 +250,22 @@ class Geneva(Mechanism):
                 f"crank stalled: it crept to rest at crank angle {np.degrees(q[0]):.4f} deg ({mode}), speed "
                 f"{v[0]:.2e} rad/s with speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} "
                 "rad/s; it settles where the drive's torque at zero speed balances the load"), kind="rest")
-        if guard == "entry":
-            lam = g.ratio
+        if guard == "entry":         # the wheel is at rest: the slip is theta' (s - crank_sense R)
             alpha = q[0] - 2 * np.pi * k
-            beta = float(wheel_angle(lam, alpha))
-            u = v[0] * g.crank_radius * np.sin(alpha + beta) + g.pin_radius * v[0]
+            beta = float(g.wheel_motion(g.ratio, alpha)[0])
+            u = v[0] * (g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
+                        - g.crank_sense * g.pin_radius)
             return Transition("engaged", {"flank": 1.0, "slide": 1.0 if u >= 0 else -1.0}, kind="entry")
         if guard == "exit":
             return Transition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * g.pitch}, kind="exit")
         if guard == "flank_switch":
             new = -values["flank"]
-            # the slip u = v_s + flank R (w1 + w2) changes with the flank (the pin's spin term changes sign), so
+            # the slip u = v_s + flank R (w2 - crank_sense w1) changes with the flank (the spin term changes sign), so
             # the friction direction is re-chosen from it: keeping the old one can leave friction pointing along
             # the slip, and the slip-reversal guard (falling only) would never fire from there
             alpha, beta = q[0] - 2 * np.pi * k, q[1] - k * g.pitch
-            u = g.crank_radius * v[0] * np.sin(alpha + beta) + new * g.pin_radius * (v[0] + v[1])
+            u = (v[0] * g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
+                 + new * g.pin_radius * (v[1] - g.crank_sense * v[0]))
             slide = values["slide"] if u == 0 else float(np.sign(u))
             return Transition("engaged", {"flank": new, "slide": slide}, kind="flank switch", message=(
                 f"normal force changed sign at crank angle {np.degrees(q[0] - 2 * np.pi * k):.2f} deg "
@@ -279,25 +283,28 @@ class Geneva(Mechanism):
         s, P = self.symbols, self.symbols.p
         theta, psi = s.q
         w1, w2 = s.v
-        r, R, k, pitch = P("r"), P("R"), P("slot"), P("pitch")
+        r, c, R, k, pitch = P("r"), P("c"), P("R"), P("slot"), P("pitch")
         flank, slide = P("flank"), P("slide")
-        lam = r / P("c")                          # the geometry's ratio r/c (on_guard reads it from the geometry)
+        g = self.geometry
+        e = g.crank_sense
+        lam = r / c                               # the geometry's ratio r/c (on_guard reads it from the geometry)
         alpha = theta - 2 * sp.pi * k
 
         def sign_keep(u, keep):
             """sign(u), `keep` where u == 0 (np.sign's 0 never becomes a flank or slide)."""
             return sp.Piecewise((keep, sp.Eq(u, 0)), (sp.sign(u), True))
 
-        # entry: the wheel angle the pin meets, beta = atan2(lam sin a, 1 - lam cos a) (kinematics.wheel_angle)
-        beta_entry = sp.atan2(lam * sp.sin(alpha), 1 - lam * sp.cos(alpha))
-        u_entry = w1 * r * sp.sin(alpha + beta_entry) + R * w1
+        # entry: the wheel angle the pin meets (GenevaGeometry.wheel_motion), the wheel at rest
+        beta_entry = g.wheel_motion(lam, alpha, sp)[0]
+        u_entry = w1 * (g.pin_in_slot(r, c, alpha, beta_entry, sp)[2] - e * R)
         entry_slide = sp.Piecewise((1.0, u_entry >= 0), (-1.0, True))
         beta = psi - k * pitch
-        u_switch = r * w1 * sp.sin(alpha + beta) + (-flank) * R * (w1 + w2)
+        s_slide = g.pin_in_slot(r, c, alpha, beta, sp)[2]
+        u_switch = w1 * s_slide + (-flank) * R * (w2 - e * w1)
         # slip_stopped_by_crank: |s| > 1e-3 (r + R) and |theta'| < STOPPED_SPEED, i.e. the minimum of the two
-        # margins positive; s with the speed ratio G = lam (cos a - lam) / (1 - 2 lam cos a + lam^2)
-        G = lam * (sp.cos(alpha) - lam) / (1 - 2 * lam * sp.cos(alpha) + lam * lam)
-        s_kin = r * sp.sin(alpha + beta) + flank * R * (1 + G)
+        # margins positive; s with the speed ratio G (GenevaGeometry.wheel_motion)
+        G = g.wheel_motion(lam, alpha, sp)[1]
+        s_kin = s_slide + flank * R * (G - e)
         stopped = sp.Min(sp.Abs(s_kin) - 1e-3 * (r + R), self.STOPPED_SPEED - sp.Abs(w1))
         table = {
             ("dwell", "entry"): SymbolicTransition("engaged", {"flank": sp.Float(1.0), "slide": entry_slide},
@@ -317,8 +324,9 @@ class Geneva(Mechanism):
     def slip_stopped_by_crank(self, values: Mapping[str, float], q: np.ndarray, v: np.ndarray) -> bool:
         """True when an engaged slip reversal is the crank coming to rest, not the slip changing sign.
 
-        Engaged, the slip is u = theta' s(alpha) with s = r sin(alpha + beta) + flank R (1 + G(alpha)) (the
-        wheel follows w2 = G theta', docs/theory.md §G1-2), so u = 0 either where the kinematic factor s
+        Engaged, the slip is u = theta' s(alpha) with s = s_slide + flank R (G(alpha) - crank_sense), s_slide =
+        v_s / theta' (`GenevaGeometry.pin_in_slot`; r sin(alpha + beta) + flank R (1 + G) for the external drive;
+        the wheel follows w2 = G theta', docs/theory.md §G1-2), so u = 0 either where the kinematic factor s
         vanishes (a slip reversal, at a fixed crank angle) or where theta' does (a stall). The two roots
         coincide exactly, and the integrator may locate either first; the guard's position decides: s away
         from zero (more than 1e-3 (r + R); at a true reversal |s| is the position error of the root) with the
@@ -332,8 +340,8 @@ class Geneva(Mechanism):
         k = values["slot"]
         alpha = q[0] - 2 * np.pi * k
         beta = q[1] - k * g.pitch
-        s = (g.crank_radius * np.sin(alpha + beta)
-             + values["flank"] * g.pin_radius * (1.0 + float(speed_ratio(g.ratio, alpha))))
+        s = (g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
+             + values["flank"] * g.pin_radius * (float(g.wheel_motion(g.ratio, alpha)[1]) - g.crank_sense))
         return abs(s) > 1e-3 * (g.crank_radius + g.pin_radius) and abs(v[0]) < self.STOPPED_SPEED
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
@@ -373,8 +381,8 @@ class Geneva(Mechanism):
 
     # -- prescribed constant crank speed: no DAE needed ------------------------------------------------
     def _closed_form_contact(self, t: np.ndarray, angle0: float, speed: float) -> tuple:
-        """The closed form up to the contact (docs/theory.md §G1-2): (theta, kin, alpha, eng, beta, w2, x, sin_ab,
-        v_s, sigma, N, u, flank), N, u and flank zero out of contact. `closed_form` goes on from here; the switch
+        """The closed form up to the contact (docs/theory.md §G1-2): (theta, kin, alpha, eng, beta, w2, x, s_slide,
+        v_s, sigma, N, u, flank), N, u and flank zero out of contact; s_slide = v_s / theta' (`pin_in_slot`). `closed_form` goes on from here; the switch
         search (`closed_form_contact`) stops here."""
         g = self.geometry
         theta = angle0 + speed * (t - t[0])
@@ -384,12 +392,12 @@ class Geneva(Mechanism):
         w2, a2 = kin["wheel_speed"], kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
         x = kin["pin_distance"]
-        sin_ab = np.sin(alpha + beta)
-        v_s = np.where(eng, r * speed * sin_ab, 0.0)
+        s_slide = g.pin_in_slot(r, g.centre_distance, alpha, beta)[2]
+        v_s = np.where(eng, speed * s_slide, 0.0)
         wheel_moment = self.wheel_inertia * a2 + self.wheel_damping * w2 + self.wheel_torque
 
         def balance(flank):
-            u = v_s + flank * R * (speed + w2)
+            u = v_s + flank * R * (w2 - g.crank_sense * speed)
             sigma = np.where(u >= 0, 1.0, -1.0)
             return u, sigma, wheel_moment / (x - mu * sigma * R)
 
@@ -400,7 +408,7 @@ class Geneva(Mechanism):
         flank[swap], u[swap], sigma[swap], N[swap] = -1.0, u2[swap], sigma2[swap], N2[swap]
         N, u = np.where(eng, N, 0.0), np.where(eng, u, 0.0)
         flank = np.where(eng, flank, 0.0)
-        return theta, kin, alpha, eng, beta, w2, x, sin_ab, v_s, sigma, N, u, flank
+        return theta, kin, alpha, eng, beta, w2, x, s_slide, v_s, sigma, N, u, flank
 
     def closed_form_contact(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
         """What the thermal switch search reads of the closed form (thermal/exact.py `contact_code`): engaged,
@@ -424,16 +432,18 @@ class Geneva(Mechanism):
 
         Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
         (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
-        T_in = c1 w1 + N r cos(alpha + beta) + mu |N| sigma (r sin(alpha + beta) + flank R).
+        T_in = c1 w1 + N a + mu |N| sigma du/dw1 with the normal force's arm a and du/dw1 = s_slide - crank_sense
+        flank R (`GenevaGeometry.pin_in_slot`; a = r cos(alpha + beta), s_slide = r sin(alpha + beta) external).
         """
         g = self.geometry
-        theta, kin, alpha, eng, beta, w2, x, sin_ab, v_s, sigma, N, u, flank = self._closed_form_contact(t, angle0,
-                                                                                                      speed)
+        theta, kin, alpha, eng, beta, w2, x, s_slide, v_s, sigma, N, u, flank = self._closed_form_contact(
+            t, angle0, speed)
         a2 = kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
         fric = mu * np.abs(N) * sigma
-        torque = (self.crank_damping * speed + N * r * np.cos(alpha + beta)
-                  + fric * (r * sin_ab + flank * R))
+        arm = g.pin_in_slot(r, g.centre_distance, alpha, beta)[3]
+        torque = (self.crank_damping * speed + N * arm
+                  + fric * (s_slide - g.crank_sense * flank * R))
         torque = np.where(eng, torque, self.crank_damping * speed)
         return {
             "mode": MODE_NAMES[eng.astype(np.intp)],

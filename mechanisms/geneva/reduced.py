@@ -2,32 +2,29 @@
 
 Engaged (docs/theory.md §G2, friction included, driving flank): the wheel's moment balance gives
     N = (J2 (G theta'' + G' theta'^2) + c2 G theta' + T_L) / (x - sigma mu R)
-and the crank's, with the normal-force arm x G = r cos(alpha + beta) and the friction arm
-s = r sin(alpha + beta) + R (sliding plus pin spin),
+and the crank's, with the normal-force arm x G (= r cos(alpha + beta) for the external drive) and the friction
+arm s = du/dtheta' = s_slide - crank_sense R (sliding plus pin spin; r sin(alpha + beta) + R external),
     J1 theta'' = T_in - c1 theta' - N (x G + sigma mu s),
 which is docs/theory.md (Part G)'s (J1 + J2 G (G + kappa_f)) theta'' + J2 G' (G + kappa_f) theta'^2 = T_in - T_L (G + kappa_f)
 with damping added. Dwell: J1 theta'' = T_in - c1 theta'. T_in = T0 - slope theta'.
-Integrated with scipy's DOP853, restarting at every engagement boundary and slip reversal.
+Integrated with scipy's DOP853, restarting at every engagement boundary and slip reversal. The geometry's
+formulas (`GenevaGeometry.wheel_motion`, `pin_in_slot`) make it the reference of the internal Geneva too.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.model import Geneva
 
 
 def _engaged_terms(m: Geneva, alpha: float, omega: float):
     g = m.geometry
-    lam = g.ratio
-    G = gk.speed_ratio(lam, alpha)
-    Gp = gk.speed_ratio_derivative(lam, alpha)
-    beta = gk.wheel_angle(lam, alpha)
-    x = gk.pin_distance(g, alpha)
-    arm = g.crank_radius * np.sin(alpha + beta) + g.pin_radius
-    u = omega * (g.crank_radius * np.sin(alpha + beta) + g.pin_radius * (1 + G))
-    return G, Gp, x, arm, u
+    beta, G, Gp, xc = g.wheel_motion(g.ratio, alpha)
+    s_slide = g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
+    arm = s_slide - g.crank_sense * g.pin_radius
+    u = omega * (s_slide + g.pin_radius * (G - g.crank_sense))
+    return G, Gp, g.centre_distance * xc, arm, u
 
 
 def acceleration(m: Geneva, theta: float, omega: float, drive_T0: float, drive_slope: float,
