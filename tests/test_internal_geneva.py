@@ -112,3 +112,117 @@ def test_geometry_refuses_a_pin_that_does_not_fit():
         InternalGenevaGeometry(crank_radius=0.05, slots=6, pin_radius=0.05, thickness=0.004)
     with pytest.raises(ValueError, match="slots"):
         InternalGenevaGeometry(crank_radius=0.05, slots=2, pin_radius=0.002, thickness=0.004)
+
+
+# -- the hybrid DAE ------------------------------------------------------------------------------------------------
+def test_registered_as_internal_geneva():
+    assert MECHANISMS["internal_geneva"] is InternalGeneva
+    mech = InternalGeneva.from_config({"mechanism": dict(slots=6, crank_radius=0.05, pin_radius=0.004, thickness=0.004,
+                                                         crank_inertia=J1, wheel_inertia=J2)})
+    assert isinstance(mech.geometry, InternalGenevaGeometry) and mech.structure_key() != ("Geneva",)
+
+
+@pytest.mark.parametrize("backend", ["ida", "ida-compiled"])
+def test_prescribed_speed_dae_matches_closed_form(geometry, backend):
+    """The DAE with the crank speed as a rheonomic constraint against the closed form over two turns: wheel angle,
+    speed and acceleration and the normal force (wheel's moment balance with friction) to 1e-6 of their peaks; entry
+    and exit at the closed form's crank angles 2 pi k -+ (pi/2 + pi/n), so the engagement lasts (pi + 2 pi/n)/w."""
+    mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.15)
+    traj, df = run(mech, Drive("speed", speed=W1), 2 * 2 * np.pi / W1, backend=backend)
+    t = df["t_s"].to_numpy()
+    cf = mech.closed_form(t, -np.pi, W1)
+    for col in ("wheel_angle_rad", "wheel_speed_rad_s", "wheel_accel_rad_s2", "contact_force_N", "slip_speed_m_s",
+                "drive_torque_N_m"):          # rtol 1e-10: measured 3e-11 to 1.5e-10 of the peaks
+        assert np.max(np.abs(df[col].to_numpy() - cf[col])) <= 1e-8 * np.max(np.abs(cf[col])), col
+    assert list(df["mode"]) == list(cf["mode"])
+    ev = events_table(traj)
+    ev = ev[ev["kind"].isin(["entry", "exit"])]          # the DAE lists its slip reversals too
+    expected = mech.closed_form_events(t, -np.pi, W1)
+    assert list(ev["kind"]) == [e["kind"] for e in expected] == ["entry", "exit", "entry", "exit"]
+    np.testing.assert_allclose(ev["t_s"], [e["t_s"] for e in expected], atol=1e-9)
+    assert ev["t_s"].iloc[1] - ev["t_s"].iloc[0] == pytest.approx((np.pi + 2 * np.pi / 6) / W1, abs=1e-9)
+    # one index per turn, in the crank's sense
+    assert df["wheel_angle_rad"].iloc[-1] - df["wheel_angle_rad"].iloc[0] == pytest.approx(2 * 2 * np.pi / 6,
+                                                                                             rel=1e-9)
+
+
+def test_torque_drive_matches_the_reduced_reference(geometry):
+    """Constant crank torque with pin-slot friction and damping: theta(t) of the DAE (index 1, rtol 1e-11) equals the
+    independent one-coordinate equation on DOP853 (mechanisms/geneva/reduced.py with the internal geometry) to 1e-8 rad
+    over 4 turns and more (about 30 rad at rtol 1e-11: measured 4e-10), through entries, exits and slip reversals."""
+    mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.1, crank_damping=0.5)
+    traj, df = run(mech, Drive("torque", torque=6.0), 3.0, "index1", rtol=1e-11, atol=1e-13)
+    kinds = set(events_table(traj)["kind"])
+    assert {"entry", "exit", "slip reversal"} <= kinds and "flank switch" not in kinds   # the reference's flank
+    t = df["t_s"].to_numpy()
+    theta, omega = reduced.integrate(mech, 6.0, 0.0, -np.pi, W1, t)
+    assert (theta[-1] - theta[0]) / (2 * np.pi) >= 4
+    assert np.max(np.abs(df["crank_angle_rad"].to_numpy() - theta)) <= 1e-8
+    assert np.max(np.abs(df["crank_speed_rad_s"].to_numpy() - omega)) <= 1e-8 * np.max(np.abs(omega))
+    np.testing.assert_allclose(mech.reference_solution(Drive("torque", torque=6.0), t[:50], -np.pi, W1), theta[:50],
+                               atol=1e-9)
+
+
+def test_motor_with_friction_energy_closes(geometry):
+    """Drive work = dKE - load, friction and damping work to 1e-7 of the drive work (rtol 1e-9; measured 1e-9) over
+    4 turns and more; the drive work equals the quadrature of torque x speed; constraint residual <= 1e-9 m."""
+    from scipy.integrate import trapezoid
+    mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.15, crank_damping=0.002, wheel_damping=0.001)
+    _, df = run(mech, Drive("motor", stall_torque=40.0, no_load_speed=8.0), 4.0, rtol=1e-9, atol=1e-11)
+    assert (df["crank_angle_rad"].iloc[-1] - df["crank_angle_rad"].iloc[0]) / (2 * np.pi) >= 4
+    works = {c: df[c].iloc[-1] for c in df.columns if c.startswith("work_")}
+    dke = df["kinetic_energy_J"].iloc[-1] - df["kinetic_energy_J"].iloc[0]
+    closure = sum(works.values()) - dke
+    assert abs(closure) <= 1e-7 * works["work_drive_J"]
+    assert works["work_friction_J"] < 0 and works["work_load_J"] < 0
+    quad = trapezoid(df["drive_torque_N_m"] * df["crank_speed_rad_s"], df["t_s"])
+    assert quad == pytest.approx(works["work_drive_J"], rel=1e-4)
+    assert df["constraint_residual_m"].abs().max() <= 1e-9
+
+
+# -- the scenario pipeline: both integrators, every thermal model ------------------------------------------------
+def test_ida_and_diffrax_agree():
+    """`mechsim compare` on the motor scenario with friction (entries, slip reversals, exits over 2.5 s): the same
+    event sequence, event times within 1e-8 s, every compared column within its tolerance (angles 1e-7 relative,
+    speeds and forces 1e-6 / 1e-5) at rtol 1e-10."""
+    from mechsim.scenarios import api
+    table = api.compare("internal-geneva-motor", ["duration=2.5 s", "output_step=2 ms"],
+                        rtol=1e-10)
+    assert table.attrs["failures"] == {} and table.attrs["passed"]
+    assert table.attrs["same_event_sequence"] and table.attrs["events"]["ida"] >= 9
+    assert table.attrs["event_time_max_diff_s"] < 1e-8
+    rows = table.set_index("column")
+    for col in ("crank_angle_rad", "wheel_angle_rad", "crank_speed_rad_s", "wheel_speed_rad_s", "contact_force_N",
+                "slip_speed_m_s"):
+        assert rows.loc[col, "passed"], (col, rows.loc[col].to_dict())
+
+
+@pytest.mark.parametrize("thermal", ["none", "flash", "lumped", "1d"])
+@pytest.mark.parametrize("scenario", ["internal-geneva-speed", "internal-geneva-motor"])
+def test_every_thermal_model_and_its_heat_balance(scenario, thermal):
+    """The built-in scenarios (closed form at a prescribed speed; the DAE under a motor) with each thermal model:
+    they succeed; the heat generated is the friction work of the mechanics, and generated = stored + convected to
+    1e-6 of it where bulk temperatures are integrated (lumped, 1d); the flash rise is positive while sliding."""
+    from mechsim.scenarios import api
+    r = api.run(scenario, ["duration=1.5 s", f"thermal.model={thermal}"])
+    assert r.success, r.failure
+    df = r.timeseries
+    if thermal == "none":
+        assert "temp_contact_C" not in df and "thermal" not in r.summary
+        return
+    assert r.summary["thermal"]["model"] == thermal
+    sliding = (df["mode"] == "engaged") & (df["slip_speed_m_s"].abs() > 1e-3)
+    assert (df.loc[sliding, "temp_flash_rise_K"] > 0).all()
+    if thermal in ("lumped", "1d"):
+        hb = r.summary["thermal"]["heat_balance"]
+        assert abs(hb["closure_error_relative"]) <= 1e-6, hb
+        assert hb["generated_J"] > 0 and hb["stored_J"] > 0.9 * hb["generated_J"]
+        if scenario == "internal-geneva-motor":       # the friction work: a state integrated with the mechanics
+            assert hb["generated_J"] == pytest.approx(-df["work_friction_J"].iloc[-1], rel=1e-6)
+        else:             # the closed form's friction power integrated adaptively (the table's trapezoid is 4e-4 off)
+            from scipy.integrate import quad
+
+            def power(t):
+                return float(r.mechanism.closed_form_heat(np.array([0.0, t]), -np.pi, W1)["friction_power_W"][1])
+            exact = quad(power, 0.0, 1.5, points=list(r.events["t_s"]), limit=500, epsabs=0.0, epsrel=1e-10)[0]
+            assert hb["generated_J"] == pytest.approx(exact, rel=1e-6)
