@@ -226,3 +226,56 @@ def test_every_thermal_model_and_its_heat_balance(scenario, thermal):
                 return float(r.mechanism.closed_form_heat(np.array([0.0, t]), -np.pi, W1)["friction_power_W"][1])
             exact = quad(power, 0.0, 1.5, points=list(r.events["t_s"]), limit=500, epsabs=0.0, epsrel=1e-10)[0]
             assert hb["generated_J"] == pytest.approx(exact, rel=1e-6)
+
+
+def test_sensitivities_match_finite_differences(geometry):
+    """Forward trajectory sensitivities (dynamics/sensitivity.py) of crank angle, wheel speed and normal force at three
+    instants of a motor run with friction (entry, slip reversal, exit, entry on the way) with respect to the wheel
+    inertia, load torque, friction and crank radius (r with c = r / sin(pi/n)): elasticities (p/y) dy/dp equal
+    Richardson-extrapolated central differences (steps 1e-3 and 5e-4 relative; integrator noise rtol |y| / (p h),
+    about 1e-7 in elasticity) to 1e-4."""
+    from mechsim.dynamics.hybrid import prepare
+    from mechsim.dynamics.sensitivity import Seed, path_sensitivities
+    drive = Drive("motor", stall_torque=40.0, no_load_speed=8.0)
+    settings = SolverSettings(formulation="index2", rtol=1e-10, atol=1e-12)
+    t_end, dt, times = 1.2, 1e-3, (0.3, 0.6, 1.0)
+    columns = ("crank_angle_rad", "wheel_speed_rad_s", "contact_force_N")
+    nominal = {"r": 0.05, "J2": J2, "T_L": 7.0, "mu": 0.15}
+
+    def make(r, J2, T_L, mu):
+        g = InternalGenevaGeometry(crank_radius=r, slots=6, pin_radius=0.004, thickness=0.004)
+        return InternalGeneva(g, J1, J2, wheel_torque=T_L, friction=mu, crank_damping=0.002, wheel_damping=0.001)
+
+    def values(**changed):
+        mech = make(**{**nominal, **changed})
+        traj = simulate(mech, drive, settings, t_end, dt, -np.pi, W1)
+        assert traj.failure is None
+        df = timeseries(traj, mech.angle_coordinates)
+        rows = [int(round(t / dt)) for t in times]
+        return {(c, t): float(df[c].iloc[i]) for c in columns for t, i in zip(times, rows)}, traj, mech
+
+    base, traj, mech = values()
+    ev = events_table(traj)
+    assert list(ev["kind"]) == ["entry", "slip reversal", "exit", "entry"]
+    names = list(prepare(mech, drive, settings, t_end, dt, -np.pi, W1).model.parameter_names)
+    wrt = {"J2": {"J2": 1.0}, "T_L": {"T_L": 1.0}, "mu": {"mu": 1.0}, "r": {"r": 1.0, "c": 1 / np.sin(np.pi / 6)}}
+    dp = np.zeros((len(names), len(wrt)))
+    for j, parts in enumerate(wrt.values()):
+        for name, d in parts.items():
+            dp[names.index(name), j] = d
+    zero = np.zeros((2, len(wrt)))         # the start (mid-dwell) depends on none of them
+    seed = Seed(dp, zero, zero, frozenset({"slot", "lock_angle", "flank", "slide", "slot_base"}))
+    path = path_sensitivities(mech, drive, settings, ev.to_dict("records"), seed, list(times), columns, t_end, dt,
+                              -np.pi, W1)
+    samples = {round(s.t, 9): s for s in path.samples}
+    for j, key in enumerate(wrt):
+        p, h = nominal[key], 1e-3
+        diffs = []
+        for step in (h, h / 2):
+            plus, minus = values(**{key: p * (1 + step)})[0], values(**{key: p * (1 - step)})[0]
+            diffs.append({q: (plus[q] - minus[q]) / (2 * p * step) for q in plus})
+        for (col, t), y in base.items():
+            fd = (4 * diffs[1][(col, t)] - diffs[0][(col, t)]) / 3
+            sample = samples[round(t, 9)]
+            assert sample.values[col] == pytest.approx(y, rel=1e-8, abs=1e-9)
+            assert abs(sample.grads[col][j] - fd) * p / abs(y) <= 1e-4, (key, col, t, sample.grads[col][j], fd)
