@@ -232,8 +232,8 @@ def test_sensitivities_match_finite_differences(geometry):
     """Forward trajectory sensitivities (dynamics/sensitivity.py) of crank angle, wheel speed and normal force at three
     instants of a motor run with friction (entry, slip reversal, exit, entry on the way) with respect to the wheel
     inertia, load torque, friction and crank radius (r with c = r / sin(pi/n)): elasticities (p/y) dy/dp equal
-    Richardson-extrapolated central differences (steps 1e-3 and 5e-4 relative; integrator noise rtol |y| / (p h),
-    about 1e-7 in elasticity) to 1e-4."""
+    Richardson-extrapolated central differences (steps 1e-3 and 5e-4 relative, so the differences' integrator noise
+    rtol |y| / (p h) stays near 1e-7 in elasticity; measured below 1e-6) to 1e-4."""
     from mechsim.dynamics.hybrid import prepare
     from mechsim.dynamics.sensitivity import Seed, path_sensitivities
     drive = Drive("motor", stall_torque=40.0, no_load_speed=8.0)
