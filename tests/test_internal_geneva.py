@@ -122,13 +122,12 @@ def test_registered_as_internal_geneva():
     assert isinstance(mech.geometry, InternalGenevaGeometry) and mech.structure_key() != ("Geneva",)
 
 
-@pytest.mark.parametrize("backend", ["ida", "ida-compiled"])
-def test_prescribed_speed_dae_matches_closed_form(geometry, backend):
+def test_prescribed_speed_dae_matches_closed_form(geometry):
     """The DAE with the crank speed as a rheonomic constraint against the closed form over two turns: wheel angle,
     speed and acceleration and the normal force (wheel's moment balance with friction) to 1e-6 of their peaks; entry
     and exit at the closed form's crank angles 2 pi k -+ (pi/2 + pi/n), so the engagement lasts (pi + 2 pi/n)/w."""
     mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.15)
-    traj, df = run(mech, Drive("speed", speed=W1), 2 * 2 * np.pi / W1, backend=backend)
+    traj, df = run(mech, Drive("speed", speed=W1), 2 * 2 * np.pi / W1)
     t = df["t_s"].to_numpy()
     cf = mech.closed_form(t, -np.pi, W1)
     for col in ("wheel_angle_rad", "wheel_speed_rad_s", "wheel_accel_rad_s2", "contact_force_N", "slip_speed_m_s",
@@ -146,12 +145,13 @@ def test_prescribed_speed_dae_matches_closed_form(geometry, backend):
                                                                                              rel=1e-9)
 
 
-def test_torque_drive_matches_the_reduced_reference(geometry):
+@pytest.mark.parametrize("backend", ["ida", "ida-compiled"])
+def test_torque_drive_matches_the_reduced_reference(geometry, backend):
     """Constant crank torque with pin-slot friction and damping: theta(t) of the DAE (index 1, rtol 1e-11) equals the
     independent one-coordinate equation on DOP853 (mechanisms/geneva/reduced.py with the internal geometry) to 1e-8 rad
     over 4 turns and more (about 30 rad at rtol 1e-11: measured 4e-10), through entries, exits and slip reversals."""
     mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.1, crank_damping=0.5)
-    traj, df = run(mech, Drive("torque", torque=6.0), 3.0, "index1", rtol=1e-11, atol=1e-13)
+    traj, df = run(mech, Drive("torque", torque=6.0), 3.0, "index1", rtol=1e-11, atol=1e-13, backend=backend)
     kinds = set(events_table(traj)["kind"])
     assert {"entry", "exit", "slip reversal"} <= kinds and "flank switch" not in kinds   # the reference's flank
     t = df["t_s"].to_numpy()
