@@ -18,6 +18,9 @@ class InternalGeneva(Geneva):
 
     name = "internal_geneva"
     geometry_class = InternalGenevaGeometry
+    #: the external wheel's drawing and sensitivity map do not fit this one: none until its own are wired
+    drawing = None
+    sensitivity_map = None
 
     def describe(self) -> dict:
         g = self.geometry
