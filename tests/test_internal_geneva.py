@@ -122,10 +122,13 @@ def test_registered_as_internal_geneva():
     assert isinstance(mech.geometry, InternalGenevaGeometry) and mech.structure_key() != ("Geneva",)
 
 
-def test_prescribed_speed_dae_matches_closed_form(geometry):
+@pytest.mark.parametrize("n", [3, 6, 8])
+def test_prescribed_speed_dae_matches_closed_form(n):
     """The DAE with the crank speed as a rheonomic constraint against the closed form over two turns: wheel angle,
-    speed and acceleration and the normal force (wheel's moment balance with friction) to 1e-6 of their peaks; entry
-    and exit at the closed form's crank angles 2 pi k -+ (pi/2 + pi/n), so the engagement lasts (pi + 2 pi/n)/w."""
+    speed and acceleration, normal force (wheel's moment balance with friction), slip and drive torque to 1e-8 of
+    their peaks; entry and exit at the closed form's crank angles 2 pi k -+ (pi/2 + pi/n), so the engagement lasts
+    (pi + 2 pi/n)/w; one index 2 pi/n per turn, in the crank's sense."""
+    geometry = InternalGenevaGeometry(crank_radius=0.05, slots=n, pin_radius=0.004, thickness=0.004)
     mech = InternalGeneva(geometry, J1, J2, wheel_torque=7.0, friction=0.15)
     traj, df = run(mech, Drive("speed", speed=W1), 2 * 2 * np.pi / W1)
     t = df["t_s"].to_numpy()
@@ -139,9 +142,8 @@ def test_prescribed_speed_dae_matches_closed_form(geometry):
     expected = mech.closed_form_events(t, -np.pi, W1)
     assert list(ev["kind"]) == [e["kind"] for e in expected] == ["entry", "exit", "entry", "exit"]
     np.testing.assert_allclose(ev["t_s"], [e["t_s"] for e in expected], atol=1e-9)
-    assert ev["t_s"].iloc[1] - ev["t_s"].iloc[0] == pytest.approx((np.pi + 2 * np.pi / 6) / W1, abs=1e-9)
-    # one index per turn, in the crank's sense
-    assert df["wheel_angle_rad"].iloc[-1] - df["wheel_angle_rad"].iloc[0] == pytest.approx(2 * 2 * np.pi / 6,
+    assert ev["t_s"].iloc[1] - ev["t_s"].iloc[0] == pytest.approx((np.pi + 2 * np.pi / n) / W1, abs=1e-9)
+    assert df["wheel_angle_rad"].iloc[-1] - df["wheel_angle_rad"].iloc[0] == pytest.approx(2 * 2 * np.pi / n,
                                                                                              rel=1e-9)
 
 
