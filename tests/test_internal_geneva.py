@@ -281,3 +281,49 @@ def test_sensitivities_match_finite_differences(geometry):
             sample = samples[round(t, 9)]
             assert sample.values[col] == pytest.approx(y, rel=1e-8, abs=1e-9)
             assert abs(sample.grads[col][j] - fd) * p / abs(y) <= 1e-4, (key, col, t, sample.grads[col][j], fd)
+
+
+# -- the drawing ---------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [3, 6, 12])
+def test_the_drawn_wheel_leaves_the_pin_its_path(n):
+    """Over a whole crank turn at constant speed (closed-form wheel angle) the pin, drawn at 0.98 R (the round slot
+    bottom is a polygon inside its circle), stays in the ring's free space: the slot mouths lie on the entry circle
+    c cos(pi/n) and the slot bottoms at the pin's deepest point c + r."""
+    from matplotlib.path import Path
+    from mechsim.mechanisms.internal_geneva.drawing import wheel_inner_outline
+    g = InternalGenevaGeometry(crank_radius=0.05, slots=n, pin_radius=0.004, thickness=0.004)
+    free = Path(wheel_inner_outline(g, samples=65))
+    theta = np.linspace(-np.pi, np.pi, 721)
+    psi = constant_speed_motion(g, theta, 1.0)["wheel_angle"]
+    ring = 0.98 * g.pin_radius * np.exp(1j * np.linspace(0, 2 * np.pi, 48, endpoint=False))
+    for th, ps in zip(theta, psi):
+        pin = (g.centre_distance + g.crank_radius * np.exp(1j * th) + ring) * np.exp(-1j * ps)   # in the wheel frame
+        assert free.contains_points(np.column_stack([pin.real, pin.imag])).all(), np.degrees(th)
+
+
+def test_its_own_drawing_and_sensitivity_map():
+    """The internal wheel is drawn with its own drawing, and its design sensitivities use its own map (the external
+    Geneva's keys and parameters, its own start, contact geometry and contact state), not the external one's."""
+    from mechsim.mechanisms.geneva.model import Geneva
+    from mechsim.mechanisms.internal_geneva.drawing import InternalGenevaDrawing
+    from mechsim.mechanisms.internal_geneva.sensitivity import MAP
+    assert InternalGeneva.drawing_class() is InternalGenevaDrawing
+    assert InternalGeneva.parameter_map() is MAP and MAP is not Geneva.parameter_map()
+    assert MAP.keys == Geneva.parameter_map().keys
+
+
+def test_design_sensitivities_match_finite_differences():
+    """`mechsim sensitivity` on the motor scenario: the peaks' elasticities with respect to the load torque, the
+    friction and the crank radius equal Richardson central differences of whole runs (step 5e-4, rtol 1e-12) to
+    1e-4, through the internal Geneva's own parameter map."""
+    import mechsim
+    from conftest import peaks_match_finite_differences
+    from mechsim.scenarios.studies.sensitivity import sensitivity
+    base = ["duration=1.45 s", "thermal.model=none", "solver.rtol=1e-10", "solver.atol=1e-12"]
+    fd = ["duration=1.45 s", "thermal.model=none", "solver.rtol=1e-12", "solver.atol=1e-14"]
+    wrt = ["load.wheel_torque", "contact.friction", "mechanism.crank_radius"]
+    scenario = mechsim.load("internal-geneva-motor", set=base)
+    table = sensitivity(scenario, wrt, ["peak_contact_force_N", "peak_wheel_speed_rad_s", "peak_wheel_accel_rad_s2"])
+    worst = peaks_match_finite_differences("internal-geneva-motor", table, wrt, fd, dict.fromkeys(wrt, 5e-4),
+                                           scenario.si, value_rel=1e-7, floor=1e-6)
+    assert worst, worst

@@ -18,9 +18,8 @@ class InternalGeneva(Geneva):
 
     name = "internal_geneva"
     geometry_class = InternalGenevaGeometry
-    #: the external wheel's drawing and sensitivity map do not fit this one: none until its own are wired
-    drawing = None
-    sensitivity_map = None
+    drawing = "mechsim.mechanisms.internal_geneva.drawing:InternalGenevaDrawing"
+    sensitivity_map = "mechsim.mechanisms.internal_geneva.sensitivity:MAP"
 
     def describe(self) -> dict:
         g = self.geometry
