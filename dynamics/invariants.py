@@ -18,7 +18,8 @@ first such row instead of writing it. Checked once per run on the finished table
 
 K = 1000 (GLOBAL_FACTOR): integrators control the local error per step to rtol; the global error of a run is a
 modest multiple of it (measured: at most 18 rtol S over the built-ins and 0 violations over the robustness grid,
-docs/stability.md). A violation is far outside it: the missed stall of issue 17 made -19.4 W.
+docs/stability.md). A violation is far outside it: a missed stall makes a power balance miss by watts, not
+round-off.
 """
 from __future__ import annotations
 

@@ -400,8 +400,8 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     sorted, free slots at +inf) are walked together in one loop: each time's step is the first whose interval
     ends at or after it (`searchsorted(..., side="left")`, capped at the scratch slot), and the state is that
     step's dense output there; row_seg is the segment number it belongs to. One loop in one kernel
-    (dynamics/backends/xla_options.py) costs about half of a vectorised `searchsorted` and gather (case A, 5120 rows:
-    0.6 -> 0.34 ms CPU, the same rows to the bit)."""
+    (dynamics/backends/xla_options.py) costs about half of a vectorised `searchsorted` and gather, with the same
+    rows to the bit (docs/benchmarks.md)."""
     solver = solver_for(o)
 
     def interpolate(row, t):

@@ -4,11 +4,11 @@
    "thunks" (one per fused kernel, copy, conditional, loop), and a `lax.while_loop` runs its body thunk by thunk
    on every iteration. A step of the compiled diffrax run (`dynamics/backends/diffrax_run.py`) is a few hundred small
    kernels - seven KKT solves, the guards, the step-size controller - so the dispatch between them, not the
-   arithmetic, was most of its ~4.5 us. XLA's small-while-loop pass compiles a loop whose state is below a byte
+   arithmetic, was most of a step's time. XLA's small-while-loop pass compiles a loop whose state is below a byte
    threshold into ONE kernel instead; its default (about 1 kB) excludes every loop mechsim writes (the step
    buffer alone is megabytes), so mechsim raises it (`xla_cpu_small_while_loop_byte_threshold`, an entry of
-   `--xla_backend_extra_options`; not settable per compilation). Case A: the run call 3.2 -> 0.9 ms wall,
-   3.8 -> 1.4 ms CPU, the crank angle the same to 3e-13 rad, the compilation no slower.
+   `--xla_backend_extra_options`; not settable per compilation). The run call of case A is several times faster,
+   the crank angle the same to round-off (docs/benchmarks.md).
 2. **No concurrency-optimised scheduling** (`--xla_cpu_enable_concurrency_optimized_scheduler=false`). With it,
    the vmapped segment solve of `sweep --batch` (`dynamics/backends/diffrax_batch.py`, 64 lanes) hung in about one
    call in five, from the first call of a process to the fourth: the calling thread waits for the program's completion
