@@ -15,7 +15,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from functools import cached_property
 from importlib import import_module
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
 
@@ -197,24 +197,42 @@ class Transition:
 
 
 @dataclass(frozen=True)
-class SymbolicTransition:
-    """A transition written as expressions, so that a compiled hybrid loop can apply it without calling back
-    into Python (`Mechanism.symbolic_transitions`; dynamics/backends/diffrax_run.py).
+class TransitionRule:
+    """One row of a mechanism's transition table (`Mechanism.transitions`), written once: the Python hybrid loop
+    evaluates it with numpy (`Mechanism.on_guard`), the compiled diffrax run traces the same functions in JAX
+    (dynamics/backends/jax_transitions.py). Its functions take (q, v, p, xp): the state at the guard's root, the
+    parameters before the transition (p["slot"]: a dict of numbers, or the traced parameter vector by name)
+    and the array namespace (numpy or jax.numpy); they read nothing else, so one compiled run serves every
+    scenario of a model structure, and they branch with xp.where, never with Python's `if`.
 
-    mode: the next mode, or None for a transition the compiled loop must not take itself (a stop, or anything
-        only `on_guard` can decide): the loop hands the state back to `on_guard` there.
-    updates: parameter name -> new value as an expression of the mechanism's symbols (q, v and the parameters,
-        all before the transition); parameters not named keep their values.
-    handoff: an expression that is > 0 where `on_guard` decides differently from `mode`/`updates` (e.g. a root
-        that is really a stall): the compiled loop hands the state back to `on_guard` there. None: never.
-    kind: the events-table label `on_guard` gives this transition.
-    Velocities stay (projected onto the new mode's constraints); impacts (restitution) are not expressible here.
+    mode: the next mode; None stays in the mode the guard fired in (the only choice with `stop`).
+    updates: (q, v, p, xp) -> {parameter name: new value}; parameters not named keep their values.
+    kind: the events-table label.
+    when: (q, v, p, xp) -> a number; the rule applies where it is > 0 (None: everywhere). A guard's rules are
+        tried in order and the first that applies is taken, so the last one has no `when`.
+    restitution: None = velocities stay (projected onto the new mode's constraints, which removes only
+        round-off); e in [0, 1] = an impact (`Transition`). Applied by the Python loop only: the compiled run
+        hands such a rule back to it.
+    stop, message, hint: templates (`str.format`) of the reason to stop here (the rule is then a stop: the run
+        ends, handed back to the Python loop by the compiled run), of a note for the events table, and of what
+        the user can do about a stop. Placeholders: `mode` (the mode the guard fired in) and the keys of
+        `fields(q, v, p)` (numpy; numbers or words).
     """
 
-    mode: str | None
-    updates: Mapping[str, sp.Expr] = field(default_factory=dict)
-    handoff: sp.Expr | None = None
+    mode: str | None = None
+    updates: Callable | None = None
     kind: str = "mode change"
+    when: Callable | None = None
+    restitution: float | None = None
+    stop: str | None = None
+    message: str | None = None
+    hint: str | None = None
+    fields: Callable | None = None
+
+    @property
+    def python_only(self) -> bool:
+        """True for a rule the compiled run hands back to the Python loop: a stop or an impact."""
+        return self.stop is not None or self.restitution is not None
 
 
 @dataclass(frozen=True)
@@ -324,16 +342,45 @@ class Mechanism(ABC):
     def initial_state(self, angle: float, speed: float) -> InitialState:
         """The mode and approximate state at the start, from the drive coordinate's angle and speed."""
 
-    @abstractmethod
+    def transitions(self) -> dict[tuple[str, str], TransitionRule | tuple[TransitionRule, ...]] | None:
+        """Every (mode, guard) pair's transition: one `TransitionRule`, or several tried in order (the first
+        whose `when` holds is taken). The one description of the mechanism's transitions: `on_guard` evaluates
+        it with numpy for the Python hybrid loop, and with it the diffrax backend runs a whole run as one
+        compiled call (docs/diffrax.md, 'The compiled run'). None (the default): the mechanism writes `on_guard`
+        itself instead, and runs on the segment loop."""
+        return None
+
+    def transition_rules(self) -> dict[tuple[str, str], tuple[TransitionRule, ...]] | None:
+        """`transitions()` with every entry as a tuple of rules."""
+        table = self.transitions()
+        if table is None:
+            return None
+        return {key: (entry,) if isinstance(entry, TransitionRule) else tuple(entry) for key, entry in table.items()}
+
     def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
                  q: np.ndarray, v: np.ndarray) -> Transition:
-        """The transition when `guard` of `mode` fires."""
+        """The transition when `guard` of `mode` fires at state (q, v) with parameter values `values`: the first
+        rule of the table (`transitions`) that applies there, evaluated with numpy, its templates filled in. A
+        mechanism without a table overrides this."""
+        table = self.transition_rules()
+        if table is None:
+            raise NotImplementedError(f"{self.name} has neither a transition table nor on_guard")
+        rules = table.get((mode, guard))
+        if rules is None:
+            raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
+        q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+        for rule in rules:
+            if rule.when is not None and not float(rule.when(q, v, values, np)) > 0:
+                continue
+            updates = {} if rule.updates is None else {
+                name: float(x) for name, x in rule.updates(q, v, values, np).items()}
+            fields = dict(rule.fields(q, v, values) if rule.fields is not None else {}, mode=mode)
 
-    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition] | None:
-        """Every (mode, guard) transition as expressions (`SymbolicTransition`), equal to `on_guard` wherever
-        their `handoff` is not positive; or None (the default) when the mechanism has none. With them the diffrax
-        backend runs a whole run as one compiled call (docs/diffrax.md, 'The compiled run')."""
-        return None
+            def fill(template):
+                return None if template is None else template.format(**fields)
+            return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
+                              kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint))
+        raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def rebase(self, values: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]] | None:
         """A symmetry that keeps the integrated coordinates small, or None (the default: there is none).

@@ -1,6 +1,6 @@
-"""The compiled whole-run diffrax loop (dynamics/backends/diffrax_run.py, issue 13 item 3): the Geneva's transition
-table against `on_guard`, and case A of the peer benchmark against the independent reference, the segment loop and
-IDA."""
+"""The compiled whole-run diffrax loop (dynamics/backends/diffrax_run.py, issue 13 item 3): case A of the peer benchmark
+against the independent reference, the segment loop and IDA (its transition table against the Python loop's
+evaluation: tests/test_transition_table.py)."""
 from dataclasses import replace
 
 import numpy as np
@@ -12,8 +12,6 @@ from mechsim.dynamics import hybrid
 from mechsim.dynamics.backends import diffrax_run
 from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend, default_options, mode_z
 from mechsim.dynamics.jax_model import jax_model
-from mechsim.dynamics.backends.jax_transitions import jax_transitions
-from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table
 
@@ -49,42 +47,6 @@ def _crank(problem, traj):
     t = np.concatenate([p.t for p in traj.pieces])
     ix = traj.model.modes[traj.pieces[0].mode].index["q"]
     return t, np.concatenate([p.coordinates(ix)[:, problem.mech.drive_coordinate] for p in traj.pieces])
-
-
-def test_transition_table_equals_on_guard(case_a):
-    """Every table entry gives on_guard's next mode and the exact same parameter updates on random states; a
-    hand-back (stop) exactly where on_guard stops."""
-    mech = case_a.mech
-    model = derive(mech, "index1", case_a.drive.is_prescribed, None)
-    jmod = jax_model(model)
-    table = jax_transitions(mech, model, jmod)
-    names = list(model.parameter_names)
-    base = dict(mech.parameter_values())
-    base.update(case_a.drive.parameter_values(case_a.angle0, 0.0), baumgarte_alpha=1.0, baumgarte_beta=1.0)
-    rng = np.random.default_rng(13)
-    checked = {}
-    for _ in range(400):
-        kk = int(rng.integers(len(jmod.modes)))
-        jm = jmod.modes[kk]
-        j = int(rng.integers(jm.ng))
-        values = dict(base, slot=float(rng.integers(-3, 4)), flank=float(rng.choice([-1.0, 1.0])),
-                      slide=float(rng.choice([-1.0, 1.0])), lock_angle=float(rng.normal()))
-        q = rng.normal(size=2) * 3.0
-        # speeds from working level down to rest level, so that slip reversals at a stopped crank come up
-        v = rng.normal(size=2) * 10.0 ** rng.uniform(-5, 1)
-        p = np.array([values[n] for n in names])
-        tr = mech.on_guard(jm.name, jm.guard_names[j], values, 0.0, q, v)
-        k_new, p_new, back = (np.asarray(x) for x in table.apply(kk, j, q, v, p))
-        if tr.stop:
-            assert back, (jm.name, jm.guard_names[j], q, v)
-        else:
-            assert not back and jmod.names[int(k_new)] == tr.mode, (jm.name, jm.guard_names[j])
-            expected = dict(values, **tr.updates)
-            np.testing.assert_array_equal(p_new, [expected[n] for n in names])
-        checked[(jm.name, jm.guard_names[j], bool(tr.stop))] = True
-    assert ("engaged", "slip_reversal", True) in checked and ("engaged", "slip_reversal", False) in checked
-    assert {(m, g) for m, g, _ in checked} >= {("dwell", "entry"), ("engaged", "exit"), ("engaged", "flank_switch"),
-                                               ("engaged", "stall"), ("dwell", "rest")}
 
 
 def test_one_compiled_call_tracks_the_reference(case_a, runs):

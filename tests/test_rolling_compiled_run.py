@@ -1,8 +1,8 @@
-"""The rolling-pair 4-bar on diffrax's compiled whole run (`RollingPairFourBar.symbolic_transitions`,
-dynamics/backends/diffrax_run.py): its one transition - the dead point, where the driven link reverses under a torque
-and a prescribed speed must stop - as a table entry equal to `on_guard`, and the runs of tests/test_rolling_dynamics.py
-that meet dead points, in one compiled call, against the segment loop, the independent dead-point condition
-and energy."""
+"""The rolling-pair 4-bar on diffrax's compiled whole run (`RollingPairFourBar.transitions`,
+dynamics/backends/diffrax_run.py): its one transition is the dead point, where the driven link reverses under a torque and
+a prescribed speed must stop (the table's two evaluations agree: tests/test_transition_table.py); the runs of
+tests/test_rolling_dynamics.py that meet dead points, in one compiled call, against the segment loop, the
+independent dead-point condition and energy."""
 from dataclasses import replace
 
 import numpy as np
@@ -11,9 +11,6 @@ import pytest
 from mechsim.dynamics import hybrid
 from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend, default_options
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.jax_model import jax_model
-from mechsim.dynamics.backends.jax_transitions import jax_transitions
-from mechsim.dynamics.model import derive
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.tables import events_table, timeseries
 from mechsim.mechanisms.rolling.model import Bodies, RollingPairFourBar
@@ -38,31 +35,6 @@ def both(mech, drive, t_end, angle0, speed0=0.0):
                                backend=DiffraxBackend(settings, opts))
         out.append((traj, timeseries(traj, mech.angle_coordinates)))
     return out
-
-
-@pytest.mark.parametrize("prescribed", [False, True])
-def test_table_equals_on_guard(prescribed):
-    """On random states: under a torque the entry flips dead_sign and stays in the mode, exactly as on_guard;
-    under a prescribed speed it hands back (on_guard stops)."""
-    mech = mechanism(driven_link="crank", prescribed=prescribed)
-    drive = Drive("speed", speed=1.0) if prescribed else Drive("torque", torque=5.0)
-    model = derive(mech, "index1", drive.is_prescribed, None)
-    jmod = jax_model(model)
-    table = jax_transitions(mech, model, jmod)
-    names = list(model.parameter_names)
-    base = dict(mech.parameter_values())
-    base.update(drive.parameter_values(0.0, 0.0), baumgarte_alpha=1.0, baumgarte_beta=1.0)
-    rng = np.random.default_rng(4)
-    for _ in range(50):
-        values = dict(base, dead_sign=float(rng.choice([-1.0, 1.0])))
-        q, v = rng.normal(size=3) * 2.0, rng.normal(size=3)
-        p = np.array([values[n] for n in names])
-        tr = mech.on_guard("rolling", "dead_point", values, 0.0, q, v)
-        k_new, p_new, back = (np.asarray(x) for x in table.apply(0, 0, q, v, p))
-        assert bool(back) == bool(tr.stop) == prescribed
-        if not prescribed:
-            assert jmod.names[int(k_new)] == tr.mode == "rolling"
-            np.testing.assert_array_equal(p_new, [dict(values, **tr.updates)[n] for n in names])
 
 
 def _crank_dead_point(mech, q):

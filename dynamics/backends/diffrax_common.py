@@ -42,7 +42,7 @@ class DiffraxOptions:
         with 32 rows, 0.05 s with 256, 0.19 s with 512; docs/diffrax.md).
     projection: project q and v onto the constraints at every restart (mode change or chunk boundary).
     compiled_run: run the whole hybrid run as one compiled call (`dynamics/backends/diffrax_run.py`) where the mechanism
-        has a transition table (`Mechanism.symbolic_transitions`), the solver is explicit and events are on;
+        has a transition table (`Mechanism.transitions`), the solver is explicit and events are on;
         False (or any of those missing): one compiled solve per segment, transitions in Python.
     """
 

@@ -14,11 +14,11 @@ its interpolant's coefficients, written with one update), events into another; a
 Accelerations and multipliers are not evaluated on the rows: the read-outs solve the KKT system at every row
 from (q, v) anyway (`tables.kkt_rows`), so the pieces carry states only (`hybrid.Piece`).
 
-The loop ends at t_end, at a failure (code), or where the table says the transition is `on_guard`'s (a stop,
-a hand-back condition, guards firing together, the event buffer full): the driver (`simulate_run`) then applies
-that one transition in Python (`transitions.apply_transition`, the same code as the segment loop) and calls the
-compiled run again from there. Events-table rows are written by `on_guard` itself from the recorded states, so
-kinds and messages are the segment loop's. rtol/atol/max_steps are traced: one compilation of the step loop per
+The loop ends at t_end, at a failure (code), or where the table says the transition is the Python loop's (a
+stop or an impact, guards firing together, the event buffer full): the driver (`simulate_run`) then applies that
+one transition in Python (`transitions.apply_transition`, the same code as the segment loop) and calls the
+compiled run again from there. Events-table rows are written by `on_guard` (the same table evaluated with numpy)
+from the recorded states, so kinds and messages are the segment loop's. rtol/atol/max_steps are traced: one compilation of the step loop per
 model structure and solver options serves every tolerance and run length (the row function is compiled per
 output-buffer size, in about a second).
 
@@ -141,7 +141,7 @@ class Outputs:
 class Code(IntEnum):
     RUNNING = 0
     DONE = 1           # reached t_end
-    HAND_BACK = 2      # a guard fired whose transition is on_guard's (or several fired together)
+    HAND_BACK = 2      # a guard fired whose transition is the Python loop's (or several fired together)
     STEPS_FULL = 4     # the step buffer is full: call again
     MAX_STEPS = 5      # one segment took more than max_steps steps
     NON_FINITE = 6     # the state or the step size is not finite / the step size underflowed
@@ -494,7 +494,7 @@ def run_arguments(k, t0, t_end, z0, p, dt0, tol, max_steps, seg_steps=0) -> tupl
             np.asarray(tol, f64), np.int32(max_steps), np.int32(seg_steps))
 
 
-# -- the driver: compiled calls, and on_guard's transitions where the table hands back ------------------------
+# -- the driver: compiled calls, and the Python loop's transitions where the table hands back ----------------
 def _failure(model, mode: str, t: float, q, code: Code, o) -> dict:
     from mechsim.dynamics.result import FailureCode
     where = {c: float(v) for c, v in zip(model.coordinates, q)}

@@ -16,12 +16,12 @@ unit); the load torque is then carried by the lock and locking friction is negle
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
-from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition,
-                                     Transition)
+from mechsim.mechanisms.base import DriveCycle, Field, Guard, InitialState, Mechanism, Mode, TransitionRule
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
@@ -52,7 +52,7 @@ class Geneva(Mechanism):
     #: equilibrium that never reaches theta' = 0) is stopped once theta' + REST_TIME |theta''| < REST_SPEED
     REST_SPEED = 1e-5   # rad/s
     REST_TIME = 1.0     # s
-    #: a slip-reversal root with the crank slower than this is the crank stopping (see slip_stopped_by_crank):
+    #: a slip-reversal root with the crank slower than this is the crank stopping (see `transitions`):
     #: at a true stall the root's speed is at the integrator's error level (atol, 1e-6 rad/s and below), at a
     #: true reversal the crank turns at working speed (1-100 rad/s)
     STOPPED_SPEED = 1e-3   # rad/s
@@ -237,112 +237,80 @@ class Geneva(Mechanism):
         return np.array([2 * np.pi * k, k * pitch]), {
             "slot": 0.0, "lock_angle": values["lock_angle"] - k * pitch, "slot_base": values["slot_base"] + k}
 
-    def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
-                 q: np.ndarray, v: np.ndarray) -> Transition:
-        g = self.geometry
-        k = values["slot"]
-        if guard == "stall" or (guard == "slip_reversal" and self.slip_stopped_by_crank(values, q, v)):
-            return Transition(mode, stop=(
-                f"crank stalled: its speed fell to zero at crank angle {np.degrees(q[0]):.2f} deg "
-                f"({mode}); the drive cannot carry the load past this point"), kind="stall")
-        if guard == "rest":
-            return Transition(mode, stop=(
-                f"crank stalled: it crept to rest at crank angle {np.degrees(q[0]):.4f} deg ({mode}), speed "
-                f"{v[0]:.2e} rad/s with speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} "
-                "rad/s; it settles where the drive's torque at zero speed balances the load"), kind="rest")
-        if guard == "entry":         # the wheel is at rest: the slip is theta' (s - crank_sense R)
-            alpha = q[0] - 2 * np.pi * k
-            beta = float(g.wheel_motion(g.ratio, alpha)[0])
-            u = v[0] * (g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
-                        - g.crank_sense * g.pin_radius)
-            return Transition("engaged", {"flank": 1.0, "slide": 1.0 if u >= 0 else -1.0}, kind="entry")
-        if guard == "exit":
-            return Transition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * g.pitch}, kind="exit")
-        if guard == "flank_switch":
-            new = -values["flank"]
-            # the slip u = v_s + flank R (w2 - crank_sense w1) changes with the flank (the spin term changes sign), so
-            # the friction direction is re-chosen from it: keeping the old one can leave friction pointing along
-            # the slip, and the slip-reversal guard (falling only) would never fire from there
-            alpha, beta = q[0] - 2 * np.pi * k, q[1] - k * g.pitch
-            u = (v[0] * g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
-                 + new * g.pin_radius * (v[1] - g.crank_sense * v[0]))
-            slide = values["slide"] if u == 0 else float(np.sign(u))
-            return Transition("engaged", {"flank": new, "slide": slide}, kind="flank switch", message=(
-                f"normal force changed sign at crank angle {np.degrees(q[0] - 2 * np.pi * k):.2f} deg "
-                f"(local): the pin crossed to the {'driving' if new > 0 else 'trailing'} flank "
-                "(with slot clearance this is a backlash impact)"))
-        if guard == "slip_reversal":
-            return Transition("engaged", {"slide": -values["slide"]}, kind="slip reversal")
-        raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
-
-    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition]:
-        """`on_guard` as expressions (for the compiled diffrax run, docs/diffrax.md 'The compiled run'): entry,
-        exit, flank switch and slip reversal with the same updates; stall and rest are stops, and a slip
-        reversal that `slip_stopped_by_crank` calls a stall is handed back to `on_guard` (its `handoff`)."""
-        import sympy as sp
-        s, P = self.symbols, self.symbols.p
-        theta, psi = s.q
-        w1, w2 = s.v
-        r, c, R, k, pitch = P("r"), P("c"), P("R"), P("slot"), P("pitch")
-        flank, slide = P("flank"), P("slide")
-        g = self.geometry
-        e = g.crank_sense
-        lam = r / c                               # the geometry's ratio r/c (on_guard reads it from the geometry)
-        alpha = theta - 2 * sp.pi * k
-
-        def sign_keep(u, keep):
-            """sign(u), `keep` where u == 0 (np.sign's 0 never becomes a flank or slide)."""
-            return sp.Piecewise((keep, sp.Eq(u, 0)), (sp.sign(u), True))
-
-        # entry: the wheel angle the pin meets (GenevaGeometry.wheel_motion), the wheel at rest
-        beta_entry = g.wheel_motion(lam, alpha, sp)[0]
-        u_entry = w1 * (g.pin_in_slot(r, c, alpha, beta_entry, sp)[2] - e * R)
-        entry_slide = sp.Piecewise((1.0, u_entry >= 0), (-1.0, True))
-        beta = psi - k * pitch
-        s_slide = g.pin_in_slot(r, c, alpha, beta, sp)[2]
-        u_switch = w1 * s_slide + (-flank) * R * (w2 - e * w1)
-        # slip_stopped_by_crank: |s| > 1e-3 (r + R) and |theta'| < STOPPED_SPEED, i.e. the minimum of the two
-        # margins positive; s with the speed ratio G (GenevaGeometry.wheel_motion)
-        G = g.wheel_motion(lam, alpha, sp)[1]
-        s_kin = s_slide + flank * R * (G - e)
-        stopped = sp.Min(sp.Abs(s_kin) - 1e-3 * (r + R), self.STOPPED_SPEED - sp.Abs(w1))
+    def transitions(self) -> dict[tuple[str, str], TransitionRule | tuple[TransitionRule, ...]]:
+        """Entry (flank 1, friction along the slip the pin meets), exit (next slot, the wheel locked half a pitch
+        on), flank switch (friction re-chosen from the new flank's slip) and slip reversal; stall and rest are
+        stops, and so is a slip reversal at a crank coming to rest (`_crank_stopped`)."""
+        stall = TransitionRule(kind="stall", fields=lambda q, v, p: {"angle": np.degrees(q[0])}, stop=(
+            "crank stalled: its speed fell to zero at crank angle {angle:.2f} deg ({mode}); the drive cannot "
+            "carry the load past this point"))
+        rest = TransitionRule(kind="rest", fields=lambda q, v, p: {"angle": np.degrees(q[0]), "speed": v[0]}, stop=(
+            "crank stalled: it crept to rest at crank angle {angle:.4f} deg ({mode}), speed {speed:.2e} rad/s with "
+            f"speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} rad/s; it settles where the "
+            "drive's torque at zero speed balances the load"))
         table = {
-            ("dwell", "entry"): SymbolicTransition("engaged", {"flank": sp.Float(1.0), "slide": entry_slide},
-                                                   kind="entry"),
-            ("engaged", "exit"): SymbolicTransition("dwell", {"slot": k + 1, "lock_angle": (k + 0.5) * pitch},
-                                                    kind="exit"),
-            ("engaged", "flank_switch"): SymbolicTransition(
-                "engaged", {"flank": -flank, "slide": sign_keep(u_switch, slide)}, kind="flank switch"),
-            ("engaged", "slip_reversal"): SymbolicTransition("engaged", {"slide": -slide}, handoff=stopped,
-                                                             kind="slip reversal"),
+            ("dwell", "entry"): TransitionRule("engaged", self._entry, kind="entry"),
+            ("engaged", "exit"): TransitionRule("dwell", lambda q, v, p, xp: {
+                "slot": p["slot"] + 1, "lock_angle": (p["slot"] + 0.5) * p["pitch"]}, kind="exit"),
+            ("engaged", "flank_switch"): TransitionRule(
+                "engaged", self._flank_switch, kind="flank switch", fields=lambda q, v, p: {
+                    "angle": np.degrees(q[0] - 2 * np.pi * p["slot"]),
+                    "side": "driving" if p["flank"] < 0 else "trailing"}, message=(
+                    "normal force changed sign at crank angle {angle:.2f} deg (local): the pin crossed to the "
+                    "{side} flank (with slot clearance this is a backlash impact)")),
+            ("engaged", "slip_reversal"): (
+                replace(stall, when=self._crank_stopped),
+                TransitionRule("engaged", lambda q, v, p, xp: {"slide": -p["slide"]}, kind="slip reversal")),
         }
         for mode in ("engaged", "dwell"):
-            table[(mode, "stall")] = SymbolicTransition(None, kind="stall")
-            table[(mode, "rest")] = SymbolicTransition(None, kind="rest")
+            table[(mode, "stall")] = stall
+            table[(mode, "rest")] = rest
         return table
 
-    def slip_stopped_by_crank(self, values: Mapping[str, float], q: np.ndarray, v: np.ndarray) -> bool:
-        """True when an engaged slip reversal is the crank coming to rest, not the slip changing sign.
+    # the rules' state functions, (q, v, p, xp) for numpy and jax.numpy alike (`TransitionRule`): the geometry
+    # gives the structure (its pin-in-slot formulas and crank_sense), p the numbers, so the internal Geneva's
+    # transitions are its own
+    def _entry(self, q, v, p, xp):
+        """Flank 1; friction along the slip the pin meets. The wheel is at rest, so the slip is theta' (s -
+        crank_sense R) with the pin's sliding speed per unit crank speed s at the wheel angle beta the pin meets
+        (`GenevaGeometry.wheel_motion`, `pin_in_slot`; docs/theory.md §G1 'Pin spin')."""
+        g = self.geometry
+        alpha = _local(q, p)[0]
+        beta = g.wheel_motion(p["r"] / p["c"], alpha, xp)[0]
+        u = v[0] * (g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] - g.crank_sense * p["R"])
+        return {"flank": 1.0, "slide": xp.where(u >= 0, 1.0, -1.0)}
+
+    def _flank_switch(self, q, v, p, xp):
+        """The other flank. The slip u = v_s + flank R (w2 - crank_sense w1) changes with the flank (the pin's spin
+        term changes sign), so the friction direction is re-chosen from it (kept where u = 0): keeping the old one
+        can leave friction pointing along the slip, and the slip-reversal guard (falling only) would never fire
+        from there."""
+        g = self.geometry
+        alpha, beta = _local(q, p)
+        new = -p["flank"]
+        u = (v[0] * g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2]
+             + new * p["R"] * (v[1] - g.crank_sense * v[0]))
+        return {"flank": new, "slide": xp.where(u == 0, p["slide"], xp.sign(u))}
+
+    def _crank_stopped(self, q, v, p, xp):
+        """> 0 where an engaged slip reversal is the crank coming to rest, not the slip changing sign.
 
         Engaged, the slip is u = theta' s(alpha) with s = s_slide + flank R (G(alpha) - crank_sense), s_slide =
         v_s / theta' (`GenevaGeometry.pin_in_slot`; r sin(alpha + beta) + flank R (1 + G) for the external drive;
-        the wheel follows w2 = G theta', docs/theory.md §G1-2), so u = 0 either where the kinematic factor s
-        vanishes (a slip reversal, at a fixed crank angle) or where theta' does (a stall). The two roots
-        coincide exactly, and the integrator may locate either first; the guard's position decides: s away
-        from zero (more than 1e-3 (r + R); at a true reversal |s| is the position error of the root) with the
+        the wheel follows w2 = G theta', `wheel_motion`, docs/theory.md §G1-2), so u = 0 either where the
+        kinematic factor s vanishes (a slip reversal, at a fixed crank angle) or where theta' does (a stall). The
+        two roots coincide exactly, and the integrator may locate either first; the guard's position decides: s
+        away from zero (more than 1e-3 (r + R); at a true reversal |s| is the position error of the root) with the
         crank's speed itself at rest level (below STOPPED_SPEED) means the crank stopped. A stall must win: after
         a slip reversal at rest the model that runs on (the crank turning backwards against a forward friction)
         no longer holds. The speed test matters at loose tolerances, where the root's position error exceeds
-        1e-3 (r + R): IDA index1 at rtol 1e-4 located a true reversal with |s| = 1.4e-3 (r + R) at 37 rad/s,
-        and without it the run stopped with a stall that never happened (docs/stability.md).
+        1e-3 (r + R) (docs/stability.md). Both margins positive: their minimum.
         """
         g = self.geometry
-        k = values["slot"]
-        alpha = q[0] - 2 * np.pi * k
-        beta = q[1] - k * g.pitch
-        s = (g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
-             + values["flank"] * g.pin_radius * (float(g.wheel_motion(g.ratio, alpha)[1]) - g.crank_sense))
-        return abs(s) > 1e-3 * (g.crank_radius + g.pin_radius) and abs(v[0]) < self.STOPPED_SPEED
+        alpha, beta = _local(q, p)
+        G = g.wheel_motion(p["r"] / p["c"], alpha, xp)[1]
+        s = g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] + p["flank"] * p["R"] * (G - g.crank_sense)
+        return xp.minimum(xp.abs(s) - 1e-3 * (p["r"] + p["R"]), self.STOPPED_SPEED - xp.abs(v[0]))
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
         """Crank angle from the reduced-coordinate equation (`geneva_reduced`, docs/theory.md §G2) on DOP853;
@@ -481,3 +449,9 @@ class Geneva(Mechanism):
                                      kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message="",
                                      energy_lost_J=0.0))
         return sorted(rows, key=lambda row: row["t_s"])
+
+
+# -- the transitions' local angles, (q, p) for numpy and jax.numpy alike (`TransitionRule`) ------------------
+def _local(q, p):
+    """The local crank and wheel angles (alpha, beta) of the current slot."""
+    return q[0] - 2 * np.pi * p["slot"], q[1] - p["slot"] * p["pitch"]

@@ -39,8 +39,8 @@ import sympy as sp
 from scipy.optimize import brentq
 from sympy.simplify.fu import TR5, TR10i
 
-from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, SymbolicTransition,
-                                     Transition, ValidityCondition)
+from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, TransitionRule,
+                                     ValidityCondition)
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
 
 DRIVEN_LINKS = ("rolling", "crank")
@@ -500,40 +500,30 @@ class RollingPairFourBar(Mechanism):
         raise ValueError(f"drive.speed: the dyad does not close over phi in [{phi0:.6g}, {phi1:.6g}] rad")
 
     # -- transitions --------------------------------------------------------------------------------------
-    def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
-                 q: np.ndarray, v: np.ndarray) -> Transition:
-        if guard != "dead_point":
-            raise KeyError(f"unknown guard {guard!r} in mode {mode!r}")
-        th2, th3, phi = (float(x) for x in q)
-        if self.driven_link == "rolling":
-            where = ("stretched" if math.cos(th3 - th2) > 0 else "folded") + " dyad (sin(theta3 - theta2) = 0)"
-        else:
-            where = ("coupler line through the contact point, the rolling link's instantaneous centre "
-                     "(w . B' = 0)")
-        at = f"crank angle {th2:.6g} rad, rolling angle {phi:.6g} rad"
+    def transitions(self) -> dict[tuple[str, str], TransitionRule]:
+        """The dead point: under a torque it flips `dead_sign` and the motion goes on in the same mode, the driven
+        link reversing; under a prescribed speed it is a stop."""
         link = "rolling link" if self.driven_link == "rolling" else "crank"
-        if self.prescribed:
-            return Transition(mode, kind="dead point", stop=(
-                f"the prescribed {link} speed cannot be kept past the dead point ahead: {where}, "
-                f"|transmission| fell to {values['dead_margin']:g} at {at}; the drive torque grows without bound "
-                f"there (drive it with a torque to let the {link} reverse)"),
-                hint=f"use drive.type = 'torque' or 'motor' so the {link} can reverse at the dead point, or "
-                     "keep the prescribed motion inside the closure interval")
-        new = -values["dead_sign"]
-        speed = float(v[self.drive_coordinate])
-        link = "rolling link" if self.driven_link == "rolling" else "crank"
-        return Transition(mode, {"dead_sign": new}, kind="dead point", message=(
-            f"dead point of the {link} input ({where}) at {at}: the {link} reverses "
-            f"(its speed {speed:.3g} rad/s) and the motion goes on"))
+        k = self.drive_coordinate
 
-    def symbolic_transitions(self) -> dict[tuple[str, str], SymbolicTransition]:
-        """`on_guard` as expressions (for the compiled diffrax run, docs/diffrax.md 'The compiled run'): under a
-        torque the dead point flips `dead_sign` and the motion goes on in the same mode; under a prescribed speed
-        it is a stop (handed back to `on_guard`, which says why)."""
+        def fields(q, v, p):
+            if self.driven_link == "rolling":
+                where = ("stretched" if math.cos(q[1] - q[0]) > 0 else "folded") + " dyad (sin(theta3 - theta2) = 0)"
+            else:
+                where = "coupler line through the contact point, the rolling link's instantaneous centre (w . B' = 0)"
+            return dict(link=link, where=where, th2=q[0], phi=q[2], speed=v[k], margin=p["dead_margin"])
+        at = "crank angle {th2:.6g} rad, rolling angle {phi:.6g} rad"
         if self.prescribed:
-            return {("rolling", "dead_point"): SymbolicTransition(None, kind="dead point")}
-        return {("rolling", "dead_point"): SymbolicTransition("rolling", {"dead_sign": -self.symbols.p("dead_sign")},
-                                                              kind="dead point")}
+            return {("rolling", "dead_point"): TransitionRule(kind="dead point", fields=fields, stop=(
+                "the prescribed {link} speed cannot be kept past the dead point ahead: {where}, |transmission| fell "
+                "to {margin:g} at " + at + "; the drive torque grows without bound there (drive it with a torque to "
+                "let the {link} reverse)"),
+                hint="use drive.type = 'torque' or 'motor' so the {link} can reverse at the dead point, or keep the "
+                     "prescribed motion inside the closure interval")}
+        return {("rolling", "dead_point"): TransitionRule(
+            "rolling", lambda q, v, p, xp: {"dead_sign": -p["dead_sign"]}, kind="dead point", fields=fields,
+            message=("dead point of the {link} input ({where}) at " + at + ": the {link} reverses (its speed "
+                     "{speed:.3g} rad/s) and the motion goes on"))}
 
     # -- prescribed rolling-link speed: no DAE ----------------------------------------------------------
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
