@@ -24,56 +24,93 @@ class Impact:
     energy_after: float
 
 
-def project_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_iter: int = 30) -> np.ndarray:
-    """Newton iteration with minimum-norm steps onto Phi(t, q) = 0, carried to round-off in Phi's own units.
+def _min_norm(G, r, xp, pad):
+    """x of least norm with G x = r. numpy: least squares (a rank-deficient G too); traced: G^T (G G^T)^-1 r,
+    with ones on the diagonal of the zero rows that pad G to a fixed size (`pad`, a boolean mask, or None)."""
+    if xp is np:
+        return np.linalg.lstsq(G, r, rcond=None)[0]
+    K = G @ G.T
+    if pad is not None:
+        K = K + xp.diag(pad.astype(G.dtype))
+    return G.T @ xp.linalg.solve(K, r)
 
-    At least one step is always taken and the iteration goes on while it reduces max|Phi| (it stops when a step
-    no longer halves it: round-off reached). No tolerance scaled by |q| decides to skip the step: unwrapped
-    angles grow with every turn, and a residual accepted relative to them (1.75e-12 m at 175 rad) is enough
-    for IDA's index-2 first step to fail at a restart (docs/stability.md, 'Restarts').
+
+def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, until_roundoff: bool = False):
+    """(q, v) made consistent with a mode's constraints, for numpy and JAX alike (`xp`): every path's
+    re-initialisation (`consistent_state`; the compiled diffrax run, dynamics/diffrax_run.py; the sensitivity
+    pass, dynamics/sensitivity.py).
+
+    Positions: minimum-norm Gauss-Newton steps q -= G^+ Phi onto Phi = 0. Velocities: Newton's impact law in the
+    kinetic-energy metric, v+ = v - M^-1 G^T (G M^-1 G^T)^-1 (1 + e) (G v + Phi_t), which for e = 0 is the
+    projection onto the velocity constraints (a plastic impact; consistent velocities are unchanged).
+
+    parts(q, v) -> (M, G, Phi, G v + Phi_t, pad) of the mode at (q, v); pad: None, or a mask of zero rows that
+    pad the constraints to a fixed count (traced, every mode's arrays one size).
+    steps: the Gauss-Newton steps (traced: exactly this many; one step from a consistent point has the converged
+    projection's derivative there, the terms it drops carry a factor Phi). until_roundoff (numpy): at most
+    `steps`, at least one, going on while a step at least halves max|Phi| (round-off in Phi's own units; no
+    tolerance scaled by |q| skips a step: unwrapped angles grow with every turn, and a residual accepted relative
+    to them (1.75e-12 m at 175 rad) is enough for IDA's index-2 first step to fail at a restart, docs/stability.md
+    'Restarts'); ValueError when max|Phi| is still above 1e-9 then.
     """
+    if until_roundoff:
+        _, G, phi, _, pad = parts(q, v)
+        best = float(np.max(np.abs(phi)))
+        for _ in range(steps):
+            if best == 0.0:
+                break
+            trial = q - _min_norm(G, phi, xp, pad)
+            _, G_trial, phi_trial, _, _ = parts(trial, v)
+            r = float(np.max(np.abs(phi_trial)))
+            if not r < best:
+                break
+            q, G, phi, previous, best = trial, G_trial, phi_trial, best, r
+            if r > 0.5 * previous:
+                break
+        if not best <= 1e-9:
+            raise ValueError(f"constraint residual {best:.3e} after projection")
+    else:
+        for _ in range(steps):
+            _, G, phi, _, pad = parts(q, v)
+            q = q - _min_norm(G, phi, xp, pad)
+    M, G, _, rel, pad = parts(q, v)
+    Minv_Gt = xp.linalg.solve(M, G.T)
+    K = G @ Minv_Gt
+    if pad is not None:
+        K = K + xp.diag(pad.astype(K.dtype))
+    return q, v - Minv_Gt @ xp.linalg.solve(K, (1.0 + restitution) * rel)
+
+
+def _parts(mf: ModeFunctions, t: float, p: tuple):
+    """`reinitialise`'s parts(q, v) of a mode's numpy functions."""
+    def parts(q, v):
+        return (np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float)),
+                np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float)),
+                np.atleast_1d(np.asarray(mf.phi(t, q, p), dtype=float).ravel()),
+                np.atleast_1d(np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel()), None)
+    return parts
+
+
+def project_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_iter: int = 30) -> np.ndarray:
+    """q projected onto Phi(t, q) = 0 to round-off (`reinitialise`, until_roundoff)."""
     q = np.array(q, dtype=float)
     if mf.m == 0:
         return q
-
-    def constraint(x):
-        return np.atleast_1d(np.asarray(mf.phi(t, x, p), dtype=float).ravel())
-
-    phi = constraint(q)
-    best = float(np.max(np.abs(phi)))
-    for _ in range(max_iter):
-        if best == 0.0:
-            break
-        G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
-        trial = q - np.linalg.lstsq(G, phi, rcond=None)[0]
-        phi_trial = constraint(trial)
-        r = float(np.max(np.abs(phi_trial)))
-        if not r < best:
-            break
-        q, phi, previous, best = trial, phi_trial, best, r
-        if r > 0.5 * previous:
-            break
-    if not best <= 1e-9:
-        raise ValueError(f"mode {mf.name!r} cannot assemble: constraint residual {best:.3e} after projection")
-    return q
+    try:
+        return reinitialise(_parts(mf, t, p), q, np.zeros_like(q), steps=max_iter, until_roundoff=True)[0]
+    except ValueError as exc:
+        raise ValueError(f"mode {mf.name!r} cannot assemble: {exc}") from None
 
 
 def project_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, p: tuple,
                        restitution: float = 0.0) -> tuple[np.ndarray, Impact]:
-    """v+ = v- - M^-1 G^T (G M^-1 G^T)^-1 [(G v- + Phi_t) (1 + e)]: Newton's impact law with coefficient e.
-
-    For e = 0 this is the kinetic-energy-metric projection onto G v + Phi_t = 0 (a perfectly plastic
-    impact); velocities already consistent are unchanged.
-    """
+    """Newton's impact law with coefficient e at positions q (`reinitialise` without position steps) and the
+    kinetic energy before and after."""
     M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
     e_before = 0.5 * float(v @ M @ v)
     if mf.m == 0:
         return v, Impact(e_before, e_before)
-    G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
-    rel = np.atleast_1d(np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel())
-    Minv_Gt = np.linalg.solve(M, G.T)
-    impulse = np.linalg.solve(G @ Minv_Gt, (1.0 + restitution) * rel)
-    v_new = v - Minv_Gt @ impulse
+    _, v_new = reinitialise(_parts(mf, t, p), q, v, steps=0, restitution=restitution)
     return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new))
 
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
 from mechsim.dynamics.backends.diffrax_common import result_message
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
@@ -133,17 +134,13 @@ class _ModePieces:
         self._readouts = _jax_fn([t, q, v, a_mech, lam, x, params], s["readout_exprs"])
 
     def project(self, t, q, v, p):
-        """One minimum-norm Newton step onto Phi = 0, then the kinetic-energy-metric velocity projection onto
-        G v + Phi_t = 0 (dynamics/consistent.py). At a point with Phi = 0 the step's derivative is the exact
-        derivative of the converged projection (the terms it drops carry a factor Phi)."""
+        """The re-initialisation of every path (`consistent.reinitialise`) with one minimum-norm Newton step onto
+        Phi = 0: at a point with Phi = 0 the step's derivative is the exact derivative of the converged projection
+        (the terms it drops carry a factor Phi)."""
         if not self.m:
             return q, v
-        _, G, phi, _ = self.jmode.constraint_parts(t, q, v, p)
-        q = q - G.T @ jnp.linalg.solve(G @ G.T, phi)
-        M, G, _, rel = self.jmode.constraint_parts(t, q, v, p)
-        Minv_Gt = jnp.linalg.solve(M, G.T)
-        v = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt, rel)
-        return q, v
+        return reinitialise(lambda qq, vv: self.jmode.constraint_parts(t, qq, vv, p) + (None,), q, v, xp=jnp,
+                            steps=1)
 
     def hold(self, t, q, v, p, i: int):
         """One Newton step on Phi = 0 and on G v + Phi_t = 0 in every coordinate but i (held, as the mechanism's

@@ -35,6 +35,7 @@ import numpy as np
 
 from mechsim.dynamics import kkt
 from mechsim.dynamics.backends import xla_options
+from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
                                                       result_message, solver_for, state_rows)
@@ -171,23 +172,16 @@ def _constraint_parts(jmod: JaxModel):
 
 
 def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
-    """(q, v) made consistent in mode k (consistent.project_positions / project_velocities, restitution 0), or
-    kept as they are for an index-1 restart into the same mode with the same constraints here
+    """(q, v) made consistent in mode k (`consistent.reinitialise`, GN_ITERATIONS position steps, restitution 0),
+    or kept as they are for an index-1 restart into the same mode with the same constraints here
     (transitions.same_constraints: Phi and G equal to 1e-12 of their scale in the old and the new parameters)."""
-    M, G, phi, _, pad = parts(k, t, q, v, p)
+    _, G, phi, _, pad = parts(k, t, q, v, p)
     _, G_old, phi_old, _, _ = parts(k_old, t, q, v, p_old)
-    eye_pad = jnp.diag(pad.astype(q.dtype))
     scale = jnp.max(jnp.abs(G_old) @ jnp.abs(q)) + jnp.max(jnp.abs(G_old))
     tol = 1e-12 * jnp.maximum(scale, jnp.finfo(q.dtype).tiny)
     keep = ((k == k_old) & jnp.all(jnp.abs(phi - phi_old) <= tol) & jnp.all(jnp.abs(G - G_old) <= tol)
             & jnp.any(~pad))
-    qp = q
-    for _ in range(GN_ITERATIONS):           # minimum-norm Gauss-Newton steps: q -= G^T (G G^T)^-1 Phi
-        _, G, phi, _, _ = parts(k, t, qp, v, p)
-        qp = qp - G.T @ jnp.linalg.solve(G @ G.T + eye_pad, phi)
-    M, G, _, phi_dot, _ = parts(k, t, qp, v, p)
-    Minv_Gt = jnp.linalg.solve(M, G.T)
-    vp = v - Minv_Gt @ jnp.linalg.solve(G @ Minv_Gt + eye_pad, phi_dot)
+    qp, vp = reinitialise(lambda qq, vv: parts(k, t, qq, vv, p), q, v, xp=jnp, steps=GN_ITERATIONS)
     return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
 
 
