@@ -4,7 +4,9 @@ A mechanism is written once, in sympy: generalized coordinates q, mass matrix M(
 holonomic constraints Phi(t, q) = 0, the applied generalized forces Q(t, q, v, lam) (linear in the
 multipliers lam, which is how Coulomb friction on a constraint force enters), guard functions that end
 the mode, and named read-outs (contact force, slip speed, ...). Everything the solvers need (constraint
-Jacobian, acceleration right-hand side, residual Jacobians) is derived from this in `dynamics/`.
+Jacobian, acceleration right-hand side, residual Jacobians) is derived from this in `dynamics/`. What happens
+when a guard fires is a table of `TransitionRule`s (`Mechanism.transitions`), functions of the state that
+numpy and JAX both evaluate.
 
 Physical and discrete (mode) parameters are sympy symbols too, so that one derivation serves every
 scenario of a mechanism; their values travel in a dict keyed by symbol name.
