@@ -1,9 +1,14 @@
-"""Generate plain-Python scalar functions from sympy expressions (for the IDA hot path).
+"""The one way from sympy expressions to callables, by target.
 
-docs/architecture.md measured one `jax.jit` call from Python at ~11 us against ~3 us for plain scalar Python, so the
-residual, Jacobian and event functions IDA calls thousands of times are emitted as straight-line Python with
-common subexpressions eliminated (sympy.cse) and `math` functions, then compiled once with `exec`.
-The generated source is kept on the function (`__source__`) for inspection.
+- "python": straight-line scalar Python for the IDA hot path (`emit`). docs/architecture.md measured one `jax.jit`
+  call from Python at ~11 us against ~3 us for plain scalar Python, so the residual, Jacobian and event functions
+  IDA calls thousands of times are emitted with common subexpressions eliminated (sympy.cse) and `math`
+  functions, then compiled once with `exec`; the generated source is kept on the function (`__source__`).
+- "numba": the same source with each symbol unpacked by indexing (`source_of`), the form numba compiles
+  (dynamics/backends/compiled_model.py).
+- "numpy" and "jax": one function of array arguments returning the expressions (`lambdify`, sympy.lambdify with
+  cse): numpy for the consistent initialisation, the KKT pieces and the read-outs (dynamics/model.py), jax.numpy
+  for the diffrax backend and the sensitivity pass (dynamics/jax_model.py, dynamics/sensitivity.py).
 """
 from __future__ import annotations
 
@@ -11,6 +16,7 @@ import math
 from typing import Sequence
 
 import sympy as sp
+from sympy.printing.numpy import JaxPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 
@@ -45,7 +51,7 @@ def emit(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequen
     outputs: (target, expression), the target being e.g. "out[3]" or "JJ[1, 2]".
     prologue: extra source lines run first (e.g. "JJ.fill(0.0)"). result: the expression returned.
     """
-    source = source_of(name, signature, unpack, outputs, prologue, result, indexed=False)
+    source = source_of(name, signature, unpack, outputs, prologue, result, target="python")
     namespace = dict(_GLOBALS)
     exec(compile(source, f"<mechsim-generated {name}>", "exec"), namespace)
     fn = namespace[name]
@@ -55,9 +61,12 @@ def emit(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequen
 
 def source_of(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, Sequence[sp.Symbol]]],
               outputs: Sequence[tuple[str, sp.Expr]], prologue: Sequence[str] = (), result: str | None = None,
-              indexed: bool = True) -> str:
-    """The source `emit` compiles. indexed=True unpacks each symbol by indexing (`a = y[0]`), the form numba
-    compiles (dynamics/backends/compiled_model.py); False converts the array to a list once (fastest in CPython)."""
+              target: str = "numba") -> str:
+    """The source `emit` compiles. "numba" unpacks each symbol by indexing (`a = y[0]`), the form numba
+    compiles (dynamics/backends/compiled_model.py); "python" converts the array to a list once (fastest in CPython)."""
+    if target not in ("python", "numba"):
+        raise ValueError(f"source_of: target must be 'python' or 'numba', got {target!r}")
+    indexed = target == "numba"
     printer = _Printer({"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": False})
     exprs = [sp.sympify(e) for _, e in outputs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_x"), optimizations="basic")
@@ -77,3 +86,33 @@ def source_of(name: str, signature: Sequence[str], unpack: Sequence[tuple[str, S
     if result:
         lines.append(f"    return {result}")
     return "\n".join(lines) + "\n"
+
+
+class _JaxPrinter(JaxPrinter):
+    """sympy's jax printer, plus functions that carry their own code printer (opaque functions print their
+    explicit expression through `_numpycode`/`_pythoncode`, thermal/coupling.py `opaque_function`)."""
+
+    def _print_Function(self, expr):
+        for method in ("_jaxcode", "_numpycode", "_pythoncode"):
+            own = getattr(expr, method, None)
+            if own is not None:
+                return own(self)
+        return super()._print_Function(expr)
+
+
+_JAX_SETTINGS = {"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": True,
+                 "user_functions": {}}
+
+
+def lambdify(args, exprs, target: str):
+    """sympy -> one function of `args` (symbols or lists of symbols) returning `exprs` (an expression, a list of
+    them, or a Matrix, as sympy.lambdify), common subexpressions eliminated across all of them.
+
+    target "numpy": numpy arrays (a Matrix comes back as an array); "jax": jax.numpy, a list comes back as a flat
+    list of scalars (traceable)."""
+    if target == "numpy":
+        return sp.lambdify(args, exprs, modules="numpy", cse=True)
+    if target == "jax":
+        return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True,
+                           printer=_JaxPrinter(_JAX_SETTINGS))
+    raise ValueError(f"lambdify: target must be 'numpy' or 'jax', got {target!r}")

@@ -37,7 +37,7 @@ def _min_norm(G, r, xp, pad):
 
 def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, until_roundoff: bool = False):
     """(q, v) made consistent with a mode's constraints, for numpy and JAX alike (`xp`): every path's
-    re-initialisation (`consistent_state`; the compiled diffrax run, dynamics/diffrax_run.py; the sensitivity
+    re-initialisation (`consistent_state`; the compiled diffrax run, dynamics/backends/diffrax_run.py; the sensitivity
     pass, dynamics/sensitivity.py).
 
     Positions: minimum-norm Gauss-Newton steps q -= G^+ Phi onto Phi = 0. Velocities: Newton's impact law in the

@@ -2,7 +2,7 @@
 start").
 
 What is stored is what the solvers call: the source of every generated function (the plain-Python residual,
-Jacobian and guards of `codegen.emit`, and the numpy functions `sympy.lambdify` printed), with the numpy names
+Jacobian and guards of `codegen.emit`, and the numpy functions of `codegen.lambdify`), with the numpy names
 each lambdified function reads, and the mode's layout. Loading executes the same source in the same namespace, so
 a loaded model computes bit for bit what a fresh derivation computes. The sympy expressions themselves
 (`ModeFunctions.symbolic`, which the diffrax backend, the compiled IDA callbacks and the sensitivities build on)

@@ -26,32 +26,10 @@ user_cache.use_for_jax(jax)        # compiled programs reused across processes (
 
 import jax.numpy as jnp  # noqa: E402
 import sympy as sp  # noqa: E402
-from sympy.printing.numpy import JaxPrinter  # noqa: E402
 
 from mechsim.dynamics import kkt  # noqa: E402
+from mechsim.dynamics.codegen import lambdify  # noqa: E402
 from mechsim.dynamics.model import ModeFunctions  # noqa: E402
-
-
-class _JaxPrinter(JaxPrinter):
-    """sympy's jax printer, plus functions that carry their own code printer (the opaque functions of
-    dynamics/thermal_coupling.py print their explicit expression through `_numpycode`/`_pythoncode`)."""
-
-    def _print_Function(self, expr):
-        for method in ("_jaxcode", "_numpycode", "_pythoncode"):
-            own = getattr(expr, method, None)
-            if own is not None:
-                return own(self)
-        return super()._print_Function(expr)
-
-
-_PRINTER_SETTINGS = {"fully_qualified_modules": False, "inline": True, "allow_unknown_functions": True,
-                     "user_functions": {}}
-
-
-def lambdify_jax(args, exprs: list) -> Callable:
-    """sympy -> jax.numpy, one function returning a flat list of scalars (cse across all of them)."""
-    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True,
-                       printer=_JaxPrinter(_PRINTER_SETTINGS))
 
 
 def _stack(values, shape) -> jnp.ndarray:
@@ -202,9 +180,9 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
         name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu, ext_diagonal=diagonal,
         guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
         alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"),
-        _kkt_parts=lambdify_jax([t, list(q), list(v), list(x), list(params)], kkt_exprs),
-        _post=lambdify_jax([t, list(q), list(v), a_syms, list(lam), list(x), list(params)],
-                        powers + guards + ext_exprs),
+        _kkt_parts=lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs, "jax"),
+        _post=lambdify([t, list(q), list(v), a_syms, list(lam), list(x), list(params)], powers + guards + ext_exprs,
+                       "jax"),
     )
 
 

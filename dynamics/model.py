@@ -3,7 +3,7 @@
 For each mode this builds the residual F(t, y, y') of the chosen formulation with its exact Jacobian
 dF/dy + cj dF/dy' (sympy), the guard functions, the pieces of the KKT system used to initialise
 consistently, and vectorised read-outs. The hot-path functions (residual, Jacobian, guards) are emitted as
-plain Python (see codegen); the rest use sympy.lambdify over numpy.
+plain Python, the rest are numpy functions (both from dynamics/codegen.py).
 
 State layout in a mode with m constraints (including a prescribed-speed drive constraint):
     y = [q (nq), v (nq), lam (m), mu (m, index2 only), work (nw), extra states (ne, e.g. temperatures)]
@@ -102,7 +102,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                 ext: StateExtension | None, params: tuple[sp.Symbol, ...], P) -> ModeFunctions:
     import sympy as sp
 
-    from mechsim.dynamics.codegen import emit
+    from mechsim.dynamics.codegen import emit, lambdify
     from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
     s = mech.symbols
     t, q, v, a = s.t, list(s.q), list(s.v), list(s.a)
@@ -175,7 +175,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                   [(f"out[{i}]", g) for i, g in enumerate(guards)])
 
     def lamb(args, expr):
-        return sp.lambdify(args, expr, modules="numpy", cse=True)
+        return lambdify(args, expr, "numpy")
 
     lam_zero = {li: 0 for li in lam}
     fmat = force

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mechsim.dynamics.codegen import lambdify
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
 from mechsim.dynamics.backends.diffrax_common import result_message
@@ -44,7 +45,6 @@ from mechsim.dynamics.transitions import apply_transition
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import sympy as sp  # noqa: E402
 
 
 class SensitivityUnavailable(ValueError):
@@ -117,10 +117,6 @@ class PathSensitivity:
 
 
 # -- jax pieces built from the model's sympy description -----------------------------------------------------
-def _jax_fn(args, exprs):
-    return sp.lambdify(args, [sp.sympify(e) for e in exprs], modules="jax", cse=True)
-
-
 class _ModePieces:
     """One mode's projection onto its constraints (from the mode's `JaxMode.constraint_parts`) and its read-outs,
     as jax functions."""
@@ -131,7 +127,7 @@ class _ModePieces:
         self.jmode, self.m = jmode, len(lam)
         a_mech = list(mech.symbols.a)
         self.readout_names = list(mf.readout_names)
-        self._readouts = _jax_fn([t, q, v, a_mech, lam, x, params], s["readout_exprs"])
+        self._readouts = lambdify([t, q, v, a_mech, lam, x, params], s["readout_exprs"], "jax")
 
     def project(self, t, q, v, p):
         """The re-initialisation of every path (`consistent.reinitialise`) with one minimum-norm Newton step onto
