@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mechsim.dynamics.consistent import project_positions, project_velocities, reinitialise
-from mechsim.dynamics.diffrax_run import GN_ITERATIONS, _constraint_parts
+from mechsim.dynamics.backends.diffrax_run import GN_ITERATIONS, padded_constraint_parts
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import parameter_tuple
 from mechsim.dynamics.jax_model import jax_model
@@ -53,7 +53,7 @@ def test_numpy_and_jax_paths_agree_on_a_consistent_state(make_mech):
     v_np, impact = project_velocities(mf, 0.0, q_np, v0, p)
     k = jmod.index(init.mode)
     jm = jmod.modes[k]
-    parts = _constraint_parts(jmod)
+    parts = padded_constraint_parts(jmod)
     pj = jnp.asarray(p)
     padded = reinitialise(lambda q, v: parts(k, 0.0, q, v, pj), jnp.asarray(q0), jnp.asarray(v0), xp=jnp,
                           steps=GN_ITERATIONS)

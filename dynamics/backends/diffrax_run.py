@@ -150,7 +150,7 @@ class Code(IntEnum):
 
 
 # -- constraints of mode k, padded to the largest mode ------------------------------------------------------
-def _constraint_parts(jmod: JaxModel):
+def padded_constraint_parts(jmod: JaxModel):
     m_max = jmod.m_max
 
     def branch(jm):
@@ -195,7 +195,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
     solver = solver_for(o)
     term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
     error_order = solver.error_order(term)
-    parts = _constraint_parts(jmod)
+    parts = padded_constraint_parts(jmod)
     nq, nz, ngm = jmod.nq, jmod.nz, jmod.ng_max
     directions = jnp.asarray([[jm.guard_directions[j] if j < jm.ng else 0 for j in range(ngm)]
                               for jm in jmod.modes], dtype=jnp.float64)
