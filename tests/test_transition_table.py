@@ -1,8 +1,10 @@
 """Each mechanism's transitions are written once (`Mechanism.transitions`) and evaluated twice: with numpy by the
 Python hybrid loop (`Mechanism.on_guard`) and traced in JAX by the compiled diffrax run
-(dynamics/backends/jax_transitions.py). On random states, for every (mode, guard) of the Geneva and the rolling-pair 4-bar
-(both drive links, torque and prescribed speed), the two give the same next mode and the same parameter vector
-to the bit, and the compiled run hands the state back exactly where the numeric evaluation stops."""
+(dynamics/backends/jax_transitions.py). On random states, for every (mode, guard) of the external and internal Geneva
+and the rolling-pair 4-bar (both drive links, torque and prescribed speed), the two give the same next mode and the
+same parameter vector to the bit, and the compiled run hands the state back exactly where the numeric evaluation
+stops. The Geneva drives' friction directions chosen at entry and flank switch, and the stall test at a slip
+reversal, agree with the slip of each drive's own engaged mode (its geometry's pin-in-slot formulas)."""
 import jax
 import numpy as np
 import pytest
@@ -13,6 +15,8 @@ from mechsim.dynamics.backends.jax_transitions import jax_transitions
 from mechsim.dynamics.model import derive
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 from mechsim.mechanisms.geneva.model import Geneva
+from mechsim.mechanisms.internal_geneva.kinematics import InternalGenevaGeometry
+from mechsim.mechanisms.internal_geneva.model import InternalGeneva
 from mechsim.mechanisms.rolling.model import Bodies, RollingPairFourBar
 from mechsim.mechanisms.rolling.sets import make
 
@@ -20,6 +24,11 @@ from mechsim.mechanisms.rolling.sets import make
 def _geneva():
     """The seed geometry with friction (flank switches and slip reversals re-choose the friction direction)."""
     return Geneva(GenevaGeometry(0.075, 4, 0.004, 0.004), 0.02, 1.5626e-3, wheel_torque=7.0, friction=0.15)
+
+
+def _internal_geneva():
+    """The built-in internal wheel (n = 6, r = 50 mm, R = 4 mm) with friction."""
+    return InternalGeneva(InternalGenevaGeometry(0.05, 6, 0.004, 0.004), 0.02, 0.02, wheel_torque=3.0, friction=0.15)
 
 
 def _rolling(**kw):
@@ -40,6 +49,7 @@ def _rolling_state(rng, values):
 
 CASES = {
     "geneva-torque": (_geneva, Drive("torque", torque=6.0), _geneva_state),
+    "internal-geneva-torque": (_internal_geneva, Drive("torque", torque=6.0), _geneva_state),
     "rolling-crank-torque": (lambda: _rolling(driven_link="crank"), Drive("torque", torque=5.0), _rolling_state),
     "rolling-crank-speed": (lambda: _rolling(driven_link="crank", prescribed=True), Drive("speed", speed=1.0),
                             _rolling_state),
@@ -80,7 +90,7 @@ def test_numeric_and_compiled_evaluation_agree(case):
             np.testing.assert_array_equal(p_new, [dict(values, **tr.updates)[n] for n in names])
         seen.add(key + (bool(tr.stop),))
     assert {s[:2] for s in seen} == set(mech.transition_rules())
-    if case.startswith("geneva"):      # the slip reversal is a stop at a crank coming to rest, else a reversal
+    if "geneva" in case:      # the slip reversal is a stop at a crank coming to rest, else a reversal
         assert {("engaged", "slip_reversal", True), ("engaged", "slip_reversal", False)} <= seen
     else:
         assert {s[2] for s in seen} == {mech.prescribed}
@@ -105,3 +115,42 @@ def test_messages_are_the_templates_filled_from_the_state():
                           "angle 0.5 rad, rolling angle 1 rad: the rolling link reverses (its speed -0.25 rad/s) and "
                           "the motion goes on")
     assert tr.updates == {"dead_sign": -rolling.parameter_values()["dead_sign"]}
+
+
+@pytest.mark.parametrize("make_mech", [_geneva, _internal_geneva], ids=["geneva", "internal_geneva"])
+def test_geneva_friction_direction_follows_the_modes_slip(make_mech):
+    """The table's slip formulas are the engaged mode's: at entry (wheel at rest at the angle the pin meets, flank
+    1) the new slide is the sign of the mode's slip readout; at a flank switch it is the sign of the slip on the new
+    flank; a slip reversal is a stall exactly where the slip per unit crank speed, s = u / theta' with the wheel
+    following at G theta', is away from zero (> 1e-3 (r + R)) and the crank at rest level. For the internal drive
+    the pin's spin is R (w2 - w1) and s = -r sin(alpha - beta) + flank R (G - 1) (docs/internal_geneva.md): the
+    external formulas would choose the wrong direction there."""
+    import sympy as sp
+    mech = make_mech()
+    g, s = mech.geometry, mech.symbols
+    slip = sp.lambdify((s.q, s.v, [s.p(n) for n in mech.parameter_names]),
+                       mech.modes()["engaged"].readouts["slip_speed_m_s"], "numpy")
+    base = dict(mech.parameter_values())
+    rng = np.random.default_rng(7)
+    a0, R, r = g.engagement_half_angle, g.pin_radius, g.crank_radius
+    stops = set()
+    for _ in range(200):
+        k = float(rng.integers(-2, 3))
+        alpha = rng.uniform(-a0, a0)
+        values = dict(base, slot=k, flank=float(rng.choice([-1.0, 1.0])), slide=float(rng.choice([-1.0, 1.0])))
+        beta, G = (float(x) for x in g.wheel_motion(g.ratio, alpha)[:2])
+        q = np.array([2 * np.pi * k + alpha, k * g.pitch + beta])
+        w1 = float(rng.choice([-1.0, 1.0])) * 10.0 ** rng.uniform(-5, 1)
+
+        def u(v, **change):
+            return slip(q, v, [dict(values, **change)[n] for n in mech.parameter_names])
+        entry = mech.on_guard("dwell", "entry", values, 0.0, q, np.array([w1, 0.0]))
+        assert entry.updates["slide"] == (1.0 if u(np.array([w1, 0.0]), flank=1.0) >= 0 else -1.0)
+        v = np.array([w1, rng.normal() * 3.0])
+        switch = mech.on_guard("engaged", "flank_switch", values, 0.0, q, v)
+        assert switch.updates["slide"] == np.sign(u(v, flank=-values["flank"]))
+        s_kin = u(np.array([1.0, G]))
+        stalled = mech.on_guard("engaged", "slip_reversal", values, 0.0, q, np.array([w1, G * w1])).stop is not None
+        assert stalled == (abs(s_kin) > 1e-3 * (r + R) and abs(w1) < mech.STOPPED_SPEED)
+        stops.add(stalled)
+    assert stops == {True, False}
