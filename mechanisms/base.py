@@ -204,7 +204,8 @@ class TransitionRule:
     evaluates it with numpy (`Mechanism.on_guard`), the compiled diffrax run traces the same functions in JAX
     (dynamics/backends/jax_transitions.py). Its functions take (q, v, p, xp): the state at the guard's root, the
     parameters before the transition (p["slot"]: a dict of numbers, or the traced parameter vector by name)
-    and the array namespace (numpy or jax.numpy); they read nothing else, so one compiled run serves every
+    and the array namespace (numpy or jax.numpy); of the mechanism they read its structure only (which formulas,
+    e.g. a method reading the Geneva's geometry class), never its numbers, so one compiled run serves every
     scenario of a model structure, and they branch with xp.where, never with Python's `if`.
 
     mode: the next mode; None stays in the mode the guard fired in (the only choice with `stop`).

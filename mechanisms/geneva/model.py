@@ -52,7 +52,7 @@ class Geneva(Mechanism):
     #: equilibrium that never reaches theta' = 0) is stopped once theta' + REST_TIME |theta''| < REST_SPEED
     REST_SPEED = 1e-5   # rad/s
     REST_TIME = 1.0     # s
-    #: a slip-reversal root with the crank slower than this is the crank stopping (see `transitions`):
+    #: a slip-reversal root with the crank slower than this is the crank stopping (see `_crank_stopped`):
     #: at a true stall the root's speed is at the integrator's error level (atol, 1e-6 rad/s and below), at a
     #: true reversal the crank turns at working speed (1-100 rad/s)
     STOPPED_SPEED = 1e-3   # rad/s
