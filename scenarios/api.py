@@ -5,7 +5,9 @@
     r = mechsim.run(sc)
     r.timeseries, r.events, r.summary["peaks"]
     figs = r.plot()                 # {name: matplotlib Figure}, the CLI's figures
+    fig = r.plot("contact_force_N") # chosen columns against time (x="angle": per drive cycle)
     r.save("results/motor")         # the CLI's output folder, written atomically
+    r = mechsim.open("results/motor")   # and read back
 
 `mechsim sweep`, `mechsim compare`, `mechsim sensitivity` and `mechsim size` are `sweep(...)`, `compare(...)`,
 `sensitivity(...)` and `size(...)`. The command line is a thin layer over
@@ -21,24 +23,13 @@ from typing import Callable, Iterable, Mapping
 from mechsim.dynamics.result import Result as RunResult
 from mechsim.scenarios.loader import Scenario, builtin_names
 from mechsim.scenarios.loader import load as _load_scenario
+from mechsim.scenarios.loader import override_strings as _override_list
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "run", "sensitivity", "size", "sweep"]
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "open", "run", "sensitivity", "size",
+           "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
-
-
-def _override_list(overrides: Overrides) -> list[str]:
-    """`set=` as the CLI's --set strings: a list of "section.key=value", or a dict {"section.key": value}
-    whose values are written as TOML ("75 mm" stays a quantity string, 3 a number, True a boolean)."""
-    if overrides is None:
-        return []
-    if isinstance(overrides, str):
-        return [overrides]
-    if isinstance(overrides, Mapping):
-        from mechsim.scenarios.keys import toml_literal
-        return [f"{key}={toml_literal(value)}" for key, value in overrides.items()]
-    return [str(o) for o in overrides]
 
 
 def builtins() -> list[str]:
@@ -69,29 +60,128 @@ class Result(RunResult):
         return (f"<mechsim.Result {self.summary.get('scenario', '?')}: {self.timeseries.shape[0]} rows x "
                 f"{self.timeseries.shape[1]} columns, {len(self.events)} events, {state}>")
 
-    def plot(self, which: str | Iterable[str] | None = None) -> dict:
-        """The figures the CLI writes, as matplotlib Figures keyed by name (the PNG's name without .png).
+    def __getitem__(self, column: str):
+        """A column of the timeseries (a pandas Series, SI), e.g. r["contact_force_N"]."""
+        self._check_columns([column])
+        return self.timeseries[column]
 
-        which: one name or several (e.g. "motion_vs_time"); None for all. Display one in a notebook by
-        leaving it as a cell's value; save with fig.savefig(path)."""
-        from mechsim.scenarios.output.figures import result_figures
-        figs = result_figures(self, self.mechanism)
-        if which is None:
-            return figs
-        wanted = [which] if isinstance(which, str) else list(which)
-        unknown = [w for w in wanted if w not in figs]
+    def _check_columns(self, columns: list[str]) -> None:
+        unknown = [c for c in columns if c not in self.timeseries.columns]
         if unknown:
-            raise KeyError(f"no figure named {', '.join(unknown)}; this result has: {', '.join(figs)}")
-        return {w: figs[w] for w in wanted}
+            raise KeyError(f"no column {', '.join(map(repr, unknown))} in this result; its columns: "
+                           f"{', '.join(self.timeseries.columns)}")
+
+    def plot(self, which: str | Iterable[str] | None = None, x: str = "time"):
+        """Figures of the run.
+
+        which None: the figures the CLI writes, as matplotlib Figures keyed by name (the PNG's name without .png).
+        which a column or a list of columns (e.g. "contact_force_N", ["crank_speed_rad_s", "wheel_speed_rad_s"]):
+        one Figure of them against time, a panel per unit; x="angle" against the drive angle within its cycle, a
+        line per cycle, as the CLI's *_vs_angle figures. which a figure name or names (e.g. "motion_vs_time"):
+        those of the CLI's figures, keyed by name. Display a figure in a notebook by leaving it as a cell's value;
+        save with fig.savefig(path). A name that is neither a column nor a figure raises KeyError listing both."""
+        from mechsim.scenarios.output.figures import result_figures
+        if which is None:
+            return result_figures(self, self.mechanism)
+        wanted = [which] if isinstance(which, str) else list(which)
+        if x not in ("time", "angle"):
+            raise ValueError(f"plot(x={x!r}): x is \"time\" or \"angle\"")
+        if wanted and all(w in self.timeseries.columns for w in wanted):
+            return self._columns_figure(wanted, x)
+        if not any(w in self.timeseries.columns for w in wanted):
+            figs = result_figures(self, self.mechanism)
+            if wanted and all(w in figs for w in wanted):
+                return {w: figs[w] for w in wanted}
+            names = f"; or one of its figures: {', '.join(figs)}"
+        else:
+            names = ""
+        unknown = [w for w in wanted if w not in self.timeseries.columns]
+        raise KeyError(f"no column {', '.join(map(repr, unknown)) or '(none given)'} in this result; its columns: "
+                       f"{', '.join(self.timeseries.columns)}{names}")
+
+    def _columns_figure(self, columns: list[str], x: str):
+        import pandas as pd
+
+        from mechsim.scenarios.output.plots import angle_figure, column_panels, time_figure
+        df = self.timeseries
+        bad = [c for c in columns if not pd.api.types.is_numeric_dtype(df[c])]
+        if bad:
+            raise ValueError(f"column {', '.join(map(repr, bad))} is not numeric; plot takes numeric columns")
+        title = f"{self.summary.get('scenario', '')}: {', '.join(columns)}"
+        rows = column_panels(df, columns)
+        if x == "time":
+            return time_figure(df, "", title, rows=rows)
+        mechanism = self.mechanism
+        if mechanism is None and self.scenario:
+            from mechsim.scenarios.loader import build_mechanism
+            mechanism = build_mechanism(self.scenario)
+        cycle = mechanism.drive_cycle() if mechanism is not None else None
+        if cycle is None or cycle.column not in df:
+            raise ValueError("plot(x=\"angle\"): this run has no drive cycle to fold over; use x=\"time\"")
+        return angle_figure(df, "", title, cycle, rows=rows)
 
     def save(self, folder: str | Path, force: bool = False, plots: bool | None = None) -> Path:
         """Write the CLI's output folder (timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, extra
-        tables and PNG figures) atomically: all or nothing, an existing folder replaced only with force=True.
-        plots: None follows the scenario's output.plots."""
+        tables and PNG figures) atomically: all or nothing. An existing folder raises FileExistsError unless
+        force=True, and force replaces only a folder mechsim wrote. plots: None follows the scenario's output.plots."""
+        from mechsim.scenarios.output.atomic import check_replaceable
         from mechsim.scenarios.output.writer import write_result
+        folder = Path(folder)
+        if folder.exists() or folder.is_symlink():
+            if not force:
+                raise FileExistsError(f"{folder} exists; save(..., force=True) replaces it")
+            try:
+                check_replaceable(folder, force)
+            except ScenarioError:
+                raise FileExistsError(f"{folder} exists and was not written by mechsim (a file, a link, or a "
+                                      "folder without its marker): force=True will not replace it") from None
         if plots is None:
             plots = bool(self.scenario.get("output", {}).get("plots", True))
-        return write_result(self, Path(folder), force=force, plots=plots, mechanism=self.mechanism)
+        return write_result(self, folder, force=force, plots=plots, mechanism=self.mechanism)
+
+
+def open(folder: str | Path) -> Result:  # noqa: A001 (mechsim.open reads a result folder)
+    """The Result of a saved result folder (`mechsim run --out`, `Result.save`): timeseries, events, summary,
+    scenario (resolved, SI), extra tables and failure, with its mechanism rebuilt from the scenario. The CSV
+    tables come back with the numbers as written (whole numbers as integers). A folder that is not a mechsim
+    result raises FileNotFoundError (absent) or ValueError saying what it lacks."""
+    import json
+
+    import pandas as pd
+
+    from mechsim.dynamics.result import Failure, FailureCode
+    from mechsim.scenarios.loader import build_mechanism, from_raw, parse_toml, read_text
+    from mechsim.scenarios.output.atomic import MARKER
+    from mechsim.scenarios.output.csv import read_csv
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder} is not a folder" if folder.exists() else f"{folder} does not exist")
+    needed = ["summary.json", "scenario.toml", "events.csv"]
+    missing = [n for n in needed if not (folder / n).is_file()]
+    if not ((folder / "timeseries.parquet").is_file() or (folder / "timeseries.csv").is_file()):
+        missing.insert(0, "timeseries.parquet")
+    if missing or not (folder / MARKER).is_file():
+        lacks = ", ".join(missing + ([] if (folder / MARKER).is_file() else [MARKER]))
+        raise ValueError(f"{folder} is not a mechsim result folder (it has no {lacks}); "
+                         "mechsim.open reads what `mechsim run --out` or Result.save wrote")
+    parquet = folder / "timeseries.parquet"
+    timeseries = pd.read_parquet(parquet) if parquet.is_file() else read_csv(folder / "timeseries.csv")
+    events = read_csv(folder / "events.csv")
+    summary = json.loads((folder / "summary.json").read_text())
+    toml = folder / "scenario.toml"
+    scenario = from_raw(parse_toml(read_text(toml), str(toml)), str(toml)).si
+    extra = {p.stem: read_csv(p) for p in sorted(folder.glob("*.csv"))
+             if p.stem not in ("timeseries", "events")}
+    failure = None
+    if summary.get("failure"):
+        import re
+        m = re.match(r"stopped at t = (\S+) s in mode '([^']*)': (.*?)(?: \(hint: (.*)\))?$", summary["failure"], re.S)
+        code = FailureCode(summary["failure_code"]) if summary.get("failure_code") else FailureCode.INTEGRATOR_FAILED
+        failure = (Failure(float(m.group(1)), m.group(2), m.group(3), m.group(4) or "", code.kind, code) if m else
+                   Failure(float(timeseries["t_s"].iloc[-1]) if len(timeseries) else 0.0, "?", summary["failure"],
+                           kind=code.kind, code=code))
+    return Result(timeseries=timeseries, events=events, summary=summary, scenario=scenario, failure=failure,
+                  extra_tables=extra, mechanism=build_mechanism(scenario))
 
 
 def run(scenario: Scenario | str | Path, set: Overrides = None,  # noqa: A002

@@ -6,10 +6,8 @@ Shared by the faces and the studies (sweep columns, sizing bounds, sensitivity c
 from __future__ import annotations
 
 import functools
-import json
-import math
 
-from mechsim.scenarios.loader import sections_for
+from mechsim.scenarios.loader import sections_for, toml_literal  # noqa: F401 (re-exported)
 from mechsim.scenarios.schema import TOP
 
 
@@ -57,18 +55,3 @@ def lookup(si: dict, key: str):
     for part in key_path(key):
         node = node[part]
     return node
-
-
-def toml_literal(value) -> str:
-    """A value as the right-hand side of `--set key=value` (TOML: quantities and words quoted)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    return json.dumps(str(value))   # a JSON string is a valid TOML basic string

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import copy
 import functools
+import json
+import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass
@@ -28,7 +31,10 @@ MAX_DEPTH = 8
 
 @dataclass
 class Scenario:
-    """A validated scenario: `raw` as written (after overrides), `si` the resolved values in SI."""
+    """A validated scenario: `raw` as written (after overrides), `si` the resolved values in SI.
+
+    `sc["mechanism.crank_radius"]` is a resolved value (SI float; "duration" for a top-level key),
+    `sc.set(...)` a new validated scenario with overrides applied, `sc.to_toml()` the scenario as written."""
 
     name: str
     raw: dict
@@ -38,6 +44,69 @@ class Scenario:
     @property
     def mechanism_type(self) -> str:
         return self.si["mechanism"]["type"]
+
+    def __getitem__(self, key: str):
+        """The resolved value of "section.key" (or a top-level key): SI, as the run uses it (a float in the
+        field's SI unit for a quantity, defaults filled in). KeyError naming the known keys otherwise."""
+        node = self.si
+        for part in key.split("."):
+            if not isinstance(node, dict) or part not in node:
+                section = key.split(".")[0]
+                known = (sorted(f"{section}.{k}" for k in self.si[section]) if isinstance(self.si.get(section), dict)
+                         else sorted(k for k in self.si))
+                raise KeyError(f"{key!r} is not a key of this scenario; known: {', '.join(known)}")
+            node = node[part]
+        return node
+
+    def set(self, overrides) -> "Scenario":
+        """A new validated Scenario: this one's values as written with `overrides` applied (["section.key=value",
+        ...] as `--set`, or {"section.key": value}). Raises ScenarioError naming the field on a bad value."""
+        return from_raw(self.raw, self.source, override_strings(overrides))
+
+    def to_toml(self) -> str:
+        """The scenario as written (units as the user gave them, overrides applied) as TOML text; `load` reads it
+        back to the same values."""
+        import tomli_w
+        return f"# {self.name} (from {self.source})\n" + tomli_w.dumps(self.raw)
+
+    def __repr__(self) -> str:
+        lines = [f"<mechsim.Scenario {self.name!r}: {self.mechanism_type}, from {self.source}"]
+        top = ", ".join(f"{k} = {v}" for k, v in self.raw.items() if not isinstance(v, dict) and k != "description")
+        if top:
+            lines.append(f"  {top}")
+        for section, values in self.raw.items():
+            if isinstance(values, dict):
+                text = f"  [{section}] " + ", ".join(f"{k} = {v}" for k, v in values.items())
+                lines.append(text if len(text) <= 110 else text[:108] + " …")
+        return "\n".join(lines) + ">"
+
+
+def toml_literal(value) -> str:
+    """A value as the right-hand side of `--set key=value` (TOML: quantities and words quoted)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    return json.dumps(str(value))   # a JSON string is a valid TOML basic string
+
+
+def override_strings(overrides) -> list[str]:
+    """Overrides as the CLI's --set strings: a list of "section.key=value" (or one such string), or a dict
+    {"section.key": value} whose values are written as TOML ("75 mm" stays a quantity string, 3 a number)."""
+    from collections.abc import Mapping
+    if overrides is None:
+        return []
+    if isinstance(overrides, str):
+        return [overrides]
+    if isinstance(overrides, Mapping):
+        return [f"{key}={toml_literal(value)}" for key, value in overrides.items()]
+    return [str(o) for o in overrides]
 
 
 def builtin_names() -> list[str]:
@@ -107,10 +176,20 @@ def parse_toml(text: str, source: str) -> dict:
     return raw
 
 
-def read_raw(name_or_path: str) -> tuple[dict, str]:
-    """Parse a scenario file or built-in by name."""
+def _is_path(name_or_path: str) -> bool:
+    """Whether a scenario argument names a file: a .toml name, a name with a folder separator ("./name" forces a
+    path), or an existing file; otherwise a built-in name wins over a folder of the same name (an output folder
+    `mechsim run NAME --out NAME` wrote), and anything else that exists is a path (refused below if a folder)."""
     path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
+    if path.suffix == ".toml" or "/" in name_or_path or os.sep in name_or_path or path.is_file():
+        return True
+    return path.exists() and name_or_path not in builtin_names()
+
+
+def read_raw(name_or_path: str) -> tuple[dict, str]:
+    """Parse a scenario file or built-in by name (`_is_path` says which)."""
+    path = Path(name_or_path)
+    if _is_path(name_or_path):
         if not path.exists():
             raise ScenarioError("scenario", f"file not found: {name_or_path}")
         if not path.is_file():

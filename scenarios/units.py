@@ -144,6 +144,18 @@ def forget_unsaved_conversions() -> None:
         cache.discard_unsaved()
 
 
+#: the unit a scenario usually writes a field of this SI unit in (the built-in scenarios write lengths in mm, the
+#: ambient temperature in degC): a bare number's hint uses it, as "75 m" would be 1000x what "75" usually means
+USUAL_UNITS = {"m": "mm", "m^2": "mm^2", "m^3": "mm^3", "Pa": "GPa", "K": "degC"}
+
+
+def unit_hint(number: str, unit: str) -> str:
+    """`e.g. ...` for a bare number in a field of SI `unit`: written in the field's usual unit."""
+    if unit == "rad":
+        return f"e.g. \"{number} deg\" or \"{number} rad\""
+    return f"e.g. \"{number} {USUAL_UNITS.get(unit, unit)}\""
+
+
 def _to_si(field: str, value, unit: str) -> float:
     import pint
     ureg = registry()
@@ -156,8 +168,7 @@ def _to_si(field: str, value, unit: str) -> float:
             except OverflowError:
                 raise ScenarioError(field, "number too large for a float (at most about 1.8e308)") from None
         shown = f"{value:.6g}" if isinstance(value, float) or abs(value) < 10**15 else "1"
-        example = f"\"{shown} deg\" or \"{shown} rad\"" if unit == "rad" else f"\"{shown} {unit}\""
-        raise ScenarioError(field, f"needs a unit, e.g. {example}")
+        raise ScenarioError(field, f"needs a unit, {unit_hint(shown, unit)}")
     if not isinstance(value, str):
         raise ScenarioError(field, f"expected a quantity such as \"1 {unit}\", got {type(value).__name__}")
     text = value.strip()
@@ -174,7 +185,7 @@ def _to_si(field: str, value, unit: str) -> float:
             from None
     if not isinstance(q, pint.Quantity) or q.unitless:    # pint reads a bare "1e5" as a dimensionless Quantity
         if unit:
-            raise ScenarioError(field, f"needs a unit, e.g. \"{text} {unit}\"")
+            raise ScenarioError(field, f"needs a unit, {unit_hint(text, unit)}")
         q = ureg.Quantity(float(q), "")
     try:
         if unit == "K" or unit == "degC":

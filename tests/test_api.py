@@ -81,7 +81,7 @@ def test_save_writes_what_the_cli_writes(lc1, saved, tmp_path):
     pd.testing.assert_frame_equal(a, b)
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (saved, tmp_path / "cli"))
     assert sa["peaks"] == sb["peaks"]
-    with pytest.raises(mechsim.ScenarioError):          # never over an existing folder without force
+    with pytest.raises(FileExistsError):                # never over an existing folder without force
         lc1.save(saved)
 
 
@@ -112,6 +112,8 @@ def test_the_notebook_tour_runs(tmp_path):
     written = {p.name for p in (tmp_path / "tour" / "geneva-lc1").iterdir()}
     assert {"timeseries.parquet", "events.csv", "summary.json", "scenario.toml", "mechanism.png"} <= written
     assert np.isfinite(float(out.stdout.split("heat balance closes to")[1].split()[0]))
+    assert "to_toml round-trips: True" in out.stdout and "same timeseries: True" in out.stdout
+    assert (tmp_path / "tour" / "contact_force.png").stat().st_size > 0
 
 
 def test_a_thermal_model_is_one_module_and_its_registry_line(monkeypatch):

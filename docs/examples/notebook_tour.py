@@ -17,7 +17,19 @@ import mechsim
 
 print(mechsim.__version__, "| built-in scenarios:", ", ".join(mechsim.builtins()[:4]), "...")
 sc = mechsim.load("geneva-lc1", set={"duration": "1.2 s", "thermal.model": "lumped"})
-print(sc.name, "-", sc.mechanism_type, "- crank speed", sc.si["drive"]["speed"], "rad/s")
+print(sc.name, "-", sc.mechanism_type, "- crank speed", sc["drive.speed"], "rad/s")  # resolved values are SI
+
+# %% [markdown]
+# A scenario is edited by `set` (a new, validated scenario; the original is unchanged) and written by `to_toml`,
+# which `mechsim.load` reads back to the same values.
+
+# %%
+wide = sc.set({"mechanism.crank_radius": "80 mm"})
+print("crank radius", sc["mechanism.crank_radius"], "->", wide["mechanism.crank_radius"], "m")
+scratch = Path(tempfile.mkdtemp())
+(scratch / "wide.toml").write_text(wide.to_toml())
+print("to_toml round-trips:", mechsim.load(scratch / "wide.toml").si == wide.si)
+print(sc)
 
 # %% [markdown]
 # ## Run and look at the tables
@@ -53,6 +65,18 @@ print("figures:", ", ".join(figures))
 folder = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp()) / "tour"
 r.save(folder / "geneva-lc1", force=True)
 print("written:", ", ".join(sorted(p.name for p in (folder / "geneva-lc1").iterdir())))
+
+# %% [markdown]
+# Any column, or several, against time or folded over the crank's turn (a line per cycle); `r[column]` is the
+# column itself. A saved folder reads back into a Result with `mechsim.open`.
+
+# %%
+force = r.plot("contact_force_N")
+speeds = r.plot(["crank_speed_rad_s", "wheel_speed_rad_s"], x="angle")
+force.savefig(folder / "contact_force.png")
+print("peak of the sampled contact force", round(r["contact_force_N"].max(), 1), "N")
+again = mechsim.open(folder / "geneva-lc1")
+print(again, "| same timeseries:", again.timeseries.equals(r.timeseries))
 
 # %% [markdown]
 # ## A small sweep

@@ -84,9 +84,25 @@ def _legend(ax) -> None:
                   borderaxespad=0.0)
 
 
-def time_figure(df: pd.DataFrame, figure: str, title: str) -> Figure | None:
-    """One panel per unit against time."""
-    rows = panels(df, figure)
+def column_panels(df: pd.DataFrame, columns: list[str]) -> list[dict]:
+    """Panels (as `panels` makes them) of chosen columns: each column with the quantity, unit and scale of the
+    first FIGURES entry it matches (angles in degrees, pressures in MPa), else its own unit suffix; a panel per
+    unit, in the order the columns come."""
+    out: dict[tuple[str, str], dict] = {}
+    for col in columns:
+        spec = next(((q, u, s) for specs in FIGURES.values() for suffix, q, u, s in specs if _hit(col, suffix)), None)
+        if spec is None:
+            suffix = next((u for u in UNITS if col.endswith(u)), "")
+            spec = (_label(col), suffix[1:].replace("_", "/") or "–", 1.0)
+        quantity, unit, scale = spec
+        panel = out.setdefault((quantity, unit), dict(quantity=quantity, unit=unit, scale=scale, lines=[]))
+        panel["lines"].append((col, _label(col)))
+    return list(out.values())
+
+
+def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None) -> Figure | None:
+    """One panel per unit against time (the panels of `figure`, or `rows` as `column_panels` makes them)."""
+    rows = panels(df, figure) if rows is None else rows
     if not rows:
         return None
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.8), layout="constrained")
@@ -113,10 +129,12 @@ def cycle_index(angle: np.ndarray, cycle: DriveCycle) -> tuple[np.ndarray, np.nd
     return k, angle - cycle.start - k * cycle.period
 
 
-def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle) -> Figure | None:
+def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
+                 rows: list[dict] | None = None) -> Figure | None:
     """One panel per unit against the driven member's angle within its cycle, a line per cycle (later cycles
-    darker). Angles of the other members are shown as their change since the cycle started."""
-    rows = panels(df, figure, exclude=(cycle.column,))
+    darker). Angles of the other members are shown as their change since the cycle started. The panels of
+    `figure`, or `rows` as `column_panels` makes them."""
+    rows = panels(df, figure, exclude=(cycle.column,)) if rows is None else rows
     if not rows or cycle.column not in df:
         return None
     k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)

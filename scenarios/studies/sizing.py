@@ -82,6 +82,16 @@ class SizingResult:
     choices: list = field(default_factory=list)
     problem: object = None
 
+    def __repr__(self) -> str:
+        state = "optimum" if self.success else f"not converged: {self.message}"
+        lines = [f"<mechsim SizingResult {self.summary.get('scenario', '?')}: minimise {self.objective} = "
+                 f"{self.objective_value:.6g} ({state}; {len(self.history)} iterations)"]
+        units = {d["key"]: d.get("unit", "") for d in self.summary.get("design", [])}
+        lines += [f"  {key} = {value:.6g} {units.get(key, '')}".rstrip() for key, value in self.values.items()]
+        lines += [f"  {c['constraint']}: {c['value']:.6g}{' (active)' if c.get('active') else ''}"
+                  for c in self.constraints]
+        return "\n".join(lines) + ">"
+
     def design_toml(self) -> str:
         from mechsim.scenarios.output.writer import resolved_scenario_toml
         return resolved_scenario_toml(self.design.si)

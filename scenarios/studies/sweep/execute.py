@@ -14,12 +14,15 @@ import logging
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
+from multiprocessing.context import ForkServerContext, ForkServerProcess
 from typing import Callable, Iterable
 
 import pandas as pd
@@ -176,6 +179,69 @@ def _start_fork_server():
     return context
 
 
+def _inside_main_guard(path: str, line: int) -> bool:
+    """Whether `line` of the script at `path` lies in a top-level `if __name__ == "__main__":` block."""
+    import ast
+    try:
+        with open(path, "rb") as fh:
+            tree = ast.parse(fh.read())
+    except (OSError, SyntaxError, ValueError):
+        return False
+    for node in tree.body:
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Compare) and len(node.test.comparators) == 1:
+            sides = {ast.dump(node.test.left), ast.dump(node.test.comparators[0])}
+            if sides == {ast.dump(ast.Name("__name__", ast.Load())), ast.dump(ast.Constant("__main__"))} \
+                    and node.lineno <= line <= (node.end_lineno or node.lineno):
+                return True
+    return False
+
+
+def main_reimport_unsafe() -> bool:
+    """Whether a pool worker that imports the main script again (what forkserver and spawn workers do, to find
+    what the script defines) would run this sweep again: the call comes from the script's top level (directly or
+    through functions) outside an `if __name__ == "__main__":` block. In a notebook or an interactive session, or
+    after the script's top level has run, nothing is re-run."""
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if main is None or path is None:
+        return False
+    frame = sys._getframe()
+    while frame is not None:
+        if frame.f_globals is vars(main) and frame.f_code.co_name == "<module>":
+            return not _inside_main_guard(path, frame.f_lineno)
+        frame = frame.f_back
+    return False
+
+
+@contextmanager
+def _main_not_reimported():
+    """While a worker is started: the main module named "__main__" in its spec, which multiprocessing's child
+    preparation takes as "nothing to import" (a sweep's worker needs only mechsim's modules)."""
+    from importlib.machinery import ModuleSpec
+    main = sys.modules["__main__"]
+    saved = vars(main).get("__spec__")
+    main.__spec__ = ModuleSpec("__main__", None)
+    try:
+        yield
+    finally:
+        main.__spec__ = saved
+
+
+class ScriptFreeProcess(ForkServerProcess):
+    """A forkserver process that does not import the main script (`_main_not_reimported`)."""
+
+    def start(self) -> None:
+        with _main_not_reimported():
+            super().start()
+
+
+class ScriptFreeContext(ForkServerContext):
+    """The forkserver context whose workers skip the main script: a sweep called at a script's top level without
+    an `if __name__ == "__main__":` guard runs once, not again in every worker (which would stop the pool)."""
+
+    Process = ScriptFreeProcess
+
+
 class PoolRunner:
     """A local concurrent.futures.ProcessPoolExecutor (forkserver processes, so no fork of a threaded parent;
     the fork server starts with the runner and imports WORKER_PRELOAD first)."""
@@ -192,7 +258,8 @@ class PoolRunner:
     def run(self, tasks: list[CaseTask], on_result: Callable[[Outcome], None]) -> None:
         if not tasks:
             return
-        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=self.context,
+        context = ScriptFreeContext() if main_reimport_unsafe() else self.context
+        ex = ProcessPoolExecutor(max_workers=min(self.workers, max(len(tasks), 1)), mp_context=context,
                                  initializer=_worker_start, initargs=(os.getpid(),))
         queue = deque(tasks)
         sizer = ChunkSizer(self.workers)
