@@ -139,8 +139,10 @@ def test_sweep_with_workers_in_a_script_without_a_main_guard(tmp_path):
 def test_guard_detection_reads_the_script(tmp_path):
     from mechsim.scenarios.studies.sweep.execute import _inside_main_guard
     script = tmp_path / "s.py"
-    script.write_text("import x\nx.sweep()\nif __name__ == '__main__':\n    x.sweep()\n")
-    assert not _inside_main_guard(str(script), 2) and _inside_main_guard(str(script), 4)
+    script.write_text("import x\nx.sweep()\nif __name__ == '__main__':\n    x.sweep()\n"
+                      "if '__main__' == __name__:\n    x.sweep()\nelse:\n    x.sweep()\n"
+                      "if __name__ != '__main__':\n    x.sweep()\n")
+    assert [_inside_main_guard(str(script), line) for line in (2, 4, 6, 8, 10)] == [False, True, True, False, False]
 
 
 def test_a_builtin_name_wins_over_a_folder_of_that_name(tmp_path, monkeypatch):

@@ -188,10 +188,12 @@ def _inside_main_guard(path: str, line: int) -> bool:
     except (OSError, SyntaxError, ValueError):
         return False
     for node in tree.body:
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Compare) and len(node.test.comparators) == 1:
-            sides = {ast.dump(node.test.left), ast.dump(node.test.comparators[0])}
-            if sides == {ast.dump(ast.Name("__name__", ast.Load())), ast.dump(ast.Constant("__main__"))} \
-                    and node.lineno <= line <= (node.end_lineno or node.lineno):
+        test = node.test if isinstance(node, ast.If) else None
+        if isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq):
+            sides = (test.left, test.comparators[0])
+            named = any(isinstance(side, ast.Name) and side.id == "__name__" for side in sides)
+            main = any(isinstance(side, ast.Constant) and side.value == "__main__" for side in sides)
+            if named and main and node.lineno <= line <= (node.body[-1].end_lineno or node.lineno):  # not its else
                 return True
     return False
 
