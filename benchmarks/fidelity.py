@@ -62,7 +62,7 @@ def thermal_levels(scenario: str) -> pd.DataFrame:
     for model in THERMAL_MODELS:
         result, walls = _timed(scenario, [f"thermal.model={model}"])
         th = result.summary.get("thermal") or {}
-        peak = result.summary["peaks"].get("temp_contact_C", {}).get("value", np.nan)
+        peak = result.summary["peaks"].get("temp_contact_C", {}).get("max", {}).get("value", np.nan)
         rows.append(dict(scenario=scenario, thermal=model, method=result.summary["model"]["method"],
                          thermal_states=th.get("states", 0), cold_s=walls[0], warm_s=walls[1],
                          peak_contact_temp_C=peak, success=result.success))

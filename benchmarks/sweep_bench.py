@@ -36,8 +36,8 @@ from mechsim.scenarios.studies.sweep.run import plan, run_sweep
 from mechsim.scenarios.studies.sweep.spec import SweepSpec, parse_vary
 
 TARGET_S = 30.0
-COMPARE = ("peak_contact_force_N", "peak_drive_torque_N_m", "cycle_time_s", "work_drive_per_cycle_J",
-           "peak_temp_contact_C")
+COMPARE = ("peak_max_contact_force_N", "peak_max_drive_torque_N_m", "cycle_time_s", "work_drive_per_cycle_J",
+           "peak_max_temp_contact_C")
 
 
 def build(per_axis: int, method: str, thermal: str, backend: str):

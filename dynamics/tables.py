@@ -114,35 +114,39 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
     return kkt.solve(M, G, Ql, Q0, -gamma)
 
 
-def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:
-    """One row per output instant, read-outs evaluated with the mode and parameters of that instant."""
-    model = traj.model
-    frames = []
-    for piece in traj.pieces:
-        mf = model.modes[piece.mode]
-        ix = mf.index
-        t, y = piece.t, piece.y
-        q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
-        q_out = piece.coordinates(ix["q"])       # unwrapped: q is in the mode's re-based frame
-        a, lam = kkt_rows(mf, t, q, v, x, piece.params)
-        cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
-        for i, name in enumerate(model.coordinates):
-            pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
-            cols[pos], cols[spd], cols[acc] = q_out[:, i], v[:, i], a[:, i]
-        values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.params)
-        for name, val in zip(mf.readout_names, values):
-            cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
-        cols["kinetic_energy_J"] = _kinetic_energy(mf.mass, q, v, piece.params)
-        for j, name in enumerate(model.work_names):
-            cols[f"work_{name}_J"] = y[:, ix["work"]][:, j]
+def piece_columns(model, piece, angle_coordinates: tuple[int, ...], residual: bool = True) -> dict[str, np.ndarray]:
+    """The table's columns over one piece's rows, read-outs evaluated with the piece's mode and parameters
+    (residual=False: without constraint_residual_m, a Python loop over the rows)."""
+    mf = model.modes[piece.mode]
+    ix = mf.index
+    t, y = piece.t, piece.y
+    q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
+    q_out = piece.coordinates(ix["q"])       # unwrapped: q is in the mode's re-based frame
+    a, lam = kkt_rows(mf, t, q, v, x, piece.params)
+    cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
+    for i, name in enumerate(model.coordinates):
+        pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
+        cols[pos], cols[spd], cols[acc] = q_out[:, i], v[:, i], a[:, i]
+    values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.params)
+    for name, val in zip(mf.readout_names, values):
+        cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
+    cols["kinetic_energy_J"] = _kinetic_energy(mf.mass, q, v, piece.params)
+    for j, name in enumerate(model.work_names):
+        cols[f"work_{name}_J"] = y[:, ix["work"]][:, j]
+    if residual:
         phi = np.asarray([np.ravel(mf.phi(ti, qi, piece.params)) for ti, qi in zip(t, q)]) if mf.m else \
             np.zeros((len(t), 1))
         n_mech = mf.m - (1 if model.prescribed else 0)
         cols["constraint_residual_m"] = np.max(np.abs(phi[:, :max(n_mech, 1)]), axis=1) if n_mech else \
             np.zeros(len(t))
-        for j, name in enumerate(model.extension_names):
-            cols[name] = x[:, j]
-        frames.append(pd.DataFrame(cols))
+    for j, name in enumerate(model.extension_names):
+        cols[name] = x[:, j]
+    return cols
+
+
+def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:
+    """One row per output instant, read-outs evaluated with the mode and parameters of that instant."""
+    frames = [pd.DataFrame(piece_columns(traj.model, piece, angle_coordinates)) for piece in traj.pieces]
     df = pd.concat(frames, ignore_index=True)
     return df.drop_duplicates(subset="t_s", keep="last").reset_index(drop=True)
 

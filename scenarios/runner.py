@@ -25,6 +25,7 @@ from mechsim.mechanisms.base import Mechanism
 from mechsim.scenarios import validity
 from mechsim.scenarios.console import group_warnings, warning_time
 from mechsim.scenarios.loader import Scenario, build_mechanism
+from mechsim.scenarios.peaks import Source as PeakSource, singular_warnings
 from mechsim.scenarios.units import ScenarioError
 
 VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
@@ -92,23 +93,17 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     return df
 
 
-def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None) -> dict:
-    """Peak |value| of each of `columns` in the table (the mechanism's `peak_columns`, then the thermal model's),
-    with its time and drive angle (wrapped to (-180, 180] deg too). cols: the table's TableColumns, if at hand."""
-    out = {}
-    if not len(df):
-        return out
+def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None,
+          events: pd.DataFrame | None = None, source=None, speed_column: str | None = None
+          ) -> tuple[dict, dict | None]:
+    """(peaks, periodic regime or None): maximum, minimum and largest magnitude of each of `columns` in the table
+    (the mechanism's `peak_columns`, then the thermal model's) with their instants and drive angles, located in
+    continuous time where `source` (scenarios/peaks.py Source) is given, else the output rows'; the periodic
+    regime's, with the start-up's beside them, where the run reaches one (docs/theory.md §K5). cols: the table's
+    TableColumns, if at hand."""
+    from mechsim.scenarios.peaks import located_peaks
     cols = TableColumns(df) if cols is None else cols
-    t, angles = np.asarray(cols["t_s"], dtype=float), np.asarray(cols[angle_column], dtype=float)
-    for col in columns:
-        values = np.asarray(cols[col], dtype=float) if col in cols else None
-        if values is not None and not np.isnan(values).all():
-            i = int(np.nanargmax(np.abs(values)))
-            angle = float(angles[i])
-            out[col] = {"value": float(values[i]), "t_s": float(t[i]),
-                        "drive_angle_rad": angle,
-                        "drive_angle_wrapped_deg": float(np.degrees((angle + np.pi) % (2 * np.pi) - np.pi))}
-    return out
+    return located_peaks(df, angle_column, columns, events, cols, source, speed_column)
 
 
 def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None) -> dict:
@@ -223,6 +218,7 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
     failure = None
     warnings: list[str] = []
     stats: dict = {}
+    traj = None
     if the_plan.method == "closed-form":
         df = _closed_form_table(mech, run_si, drive)
         rows = df.attrs.pop("events", [])
@@ -249,7 +245,7 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
             failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),
                               code=f.get("code", FailureCode.INTEGRATOR_FAILED))
-    return df, events, stats, warnings, failure
+    return df, events, stats, warnings, failure, traj
 
 
 def _settled(the_plan: Plan, progress, integrate):
@@ -278,12 +274,13 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             integrate: Callable | None = None) -> Result:
     """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
     wall0 = time.perf_counter()
-    the_plan, (df, events, stats, warnings, failure) = _settled(the_plan, progress, integrate)
+    the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
     si = scenario.si
-    angle_col = coordinate_columns(mech.coordinates[mech.drive_coordinate],
-                                   mech.drive_coordinate in mech.angle_coordinates)[0]
+    angle_col, speed_col, _ = coordinate_columns(mech.coordinates[mech.drive_coordinate],
+                                                 mech.drive_coordinate in mech.angle_coordinates)
+    source = PeakSource(method, traj, mech, drive, settings, si, frozenset(df.columns))
     cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols)
     if checked is not df:
@@ -307,6 +304,9 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             df, cols = checked, TableColumns(checked)
             valid = validity.evaluate(conditions, cols)
             warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
+    peak_summary, regime = peaks(df, angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()), cols,
+                                 events, source if failure is None else None, speed_col)
+    warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     summary = {
         "scenario": scenario.name,
@@ -319,7 +319,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             "rtol": settings.rtol, "atol": settings.atol,
         },
         "geometry": mech.describe(),
-        "peaks": peaks(df, angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()), cols),
+        "peaks": peak_summary,
+        "regime": regime,
         "energy": energy_balance(df, events, cols),
         "events": event_counts(events),
         "validity": valid,

@@ -113,22 +113,29 @@ def value_setting(si: dict, key: str, value: float, unit: str) -> str:
     return f"{name}={text(entries)}"
 
 
+def located_peak(result, column: str, side: str | None = None) -> float:
+    """The run's located peak of `column` as `mechsim sensitivity` reports it: the extremum of larger magnitude
+    (summary.json peaks, `abs_max`), signed (docs/theory.md §K5); side 'max' or 'min' picks one (where the two are
+    equal in magnitude, a symmetric motion, the larger may be either from one run to the next)."""
+    entry = result.summary["peaks"][column]
+    return float(entry[side or entry["abs_max"]["side"]]["value"])
+
+
 def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, steps: dict, si: dict,
                                    value_rel: float, floor: float) -> dict:
     """Every peak of the sensitivity `table` against Richardson central differences of `mechsim.run(name)` with
-    `fd_sets`, read at the nominal run's peak rows (the envelope rule: the derivative of the maximum is that of its
-    row), with the relative step steps[key] for each key of `wrt` (set in SI, the table's `wrt_unit`); returns the
+    `fd_sets`: differences of the runs' located peaks (`located_peak`), with the relative step steps[key] for each key of `wrt` (set in SI, the table's `wrt_unit`); returns the
     largest relative deviation per quantity (`assert_matches_finite_differences`)."""
     import mechsim
     from mechsim.scenarios.studies.sensitivity import PEAKS
-    df = mechsim.run(mechsim.load(name, set=fd_sets)).timeseries
     peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
-    rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
+    # the side the table differentiates (its value's sign), so that a tie of max and -min reads the same side
+    sides = {q: "max" if table.loc[table["quantity"] == q, "value"].iloc[0] >= 0 else "min" for q in peaks}
 
     def at_rows(sets):
         r = mechsim.run(mechsim.load(name, set=sets))
         assert r.failure is None, r.failure.message()
-        return {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
+        return {q: located_peak(r, PEAKS[q], sides[q]) for q in peaks}
     ref0 = at_rows(fd_sets)
     worst: dict = {}
     for key in wrt:

@@ -95,7 +95,7 @@ def test_sweep_returns_the_table():
     table = mechsim.sweep("geneva-lc1", vary={"load.wheel_torque": "0,7 N*m"}, set=SHORT)
     assert list(table["load.wheel_torque_N_m"]) == [0.0, 7.0] and table["success"].all()
     # a heavier load needs more contact force at the same prescribed speed
-    assert table["peak_contact_force_N"].iloc[1] > table["peak_contact_force_N"].iloc[0]
+    assert table["peak_max_contact_force_N"].iloc[1] > table["peak_max_contact_force_N"].iloc[0]
 
 
 def test_acceptance_command_from_an_unrelated_folder(tmp_path):

@@ -38,7 +38,7 @@ def test_run_writes_every_output(tmp_path):
     assert set(required) <= set(df.columns)
     pd.testing.assert_frame_equal(df, pd.read_csv(out / "timeseries.csv"), check_dtype=False)
     summary = json.loads((out / "summary.json").read_text())
-    peak = summary["peaks"]["contact_force_N"]
+    peak = summary["peaks"]["contact_force_N"]["max"]
     # N = T_L / (x_min - mu R) at mid-engagement plus inertia: docs/theory.md §G2 (225.3 N without friction)
     assert 225 < peak["value"] < 235 and abs(peak["drive_angle_wrapped_deg"]) < 10
     assert summary["model"]["method"] == "dae" and summary["solver"]["residual_evaluations"] > 0

@@ -50,8 +50,11 @@ def test_quiet_run_prints_nothing_and_loud_run_one_line_per_kind(tmp_path):
     assert r.exit_code == 0, r.output
     lines = r.stderr.strip().splitlines()
     assert len(lines) == len(s["warning_groups"]) and all(line.startswith("warning: ") for line in lines)
-    summary_line, time_line = r.stdout.strip().splitlines()
-    assert "rows" in summary_line and time_line.startswith("time: ")
+    # the run's line, its located peaks and, as it settles, its periodic regime (docs/theory.md §K5), the time line
+    out = r.stdout.strip().splitlines()
+    assert "rows" in out[0] and out[1].startswith("peaks, min .. max: contact_force_N")
+    assert out[-1].startswith("time: ")
+    assert len(out) == 3 or (len(out) == 4 and out[2].startswith("periodic from t = "))
 
 
 def test_the_time_line_splits_the_whole_command():

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 import mechsim
+from conftest import located_peak
 from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 FD_SOLVER = ["solver.rtol=1e-12", "solver.atol=1e-14"]
@@ -40,7 +41,7 @@ def _read(name: str, sets: list[str], rows: dict, index: bool, r=None) -> dict:
     run here)."""
     r = r if r is not None else mechsim.run(mechsim.load(name, set=sets))
     assert r.failure is None, r.failure.message()
-    out = {q: float(r.timeseries[PEAKS[q]].iloc[i]) for q, i in rows.items()}
+    out = {q: located_peak(r, PEAKS[q]) for q in rows}
     if index:
         ev = r.events
         entries = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)

@@ -50,18 +50,19 @@ def test_grid_table_a_row_per_case_with_physics(local):
     assert list(df["case"]) == [0, 1, 2, 3] and df["success"].all()
     assert list(df["contact.friction"]) == [0.1, 0.1, 0.3, 0.3]
     assert list(df["load.wheel_torque_N_m"]) == [5.0, 9.0, 5.0, 9.0]
-    for col in ("peak_contact_force_N", "peak_contact_force_N_at_t_s", "peak_contact_force_N_at_drive_angle_deg",
+    for col in ("peak_max_contact_force_N", "peak_max_contact_force_N_at_t_s",
+                "peak_max_contact_force_N_at_drive_angle_deg", "peak_min_drive_torque_N_m",
                 "work_drive_J", "solver_residual_evaluations", "case_wall_time_s", "failure"):
         assert col in df
     np.testing.assert_allclose(df["work_load_J"], -df["load.wheel_torque_N_m"] * np.pi / 2, rtol=1e-6)
     np.testing.assert_allclose(df["work_drive_J"] + df["work_load_J"] + df["work_friction_J"], 0.0, atol=1e-5)
     # friction work grows with mu at equal load; the peak normal force sits near mid-engagement
     assert (df["work_friction_J"].iloc[2:].to_numpy() < df["work_friction_J"].iloc[:2].to_numpy()).all()
-    assert (df["peak_contact_force_N_at_drive_angle_deg"].abs() < 15).all()
+    assert (df["peak_max_contact_force_N_at_drive_angle_deg"].abs() < 15).all()
     assert len(list((out / "cases").glob("*.json"))) == 4
     plots = {p.name for p in (out / "plots").iterdir()}
     assert {"vs_contact.friction.png", "vs_load.wheel_torque_N_m.png", "heatmap_success.png",
-            "heatmap_peak_contact_force_N.png"} <= plots
+            "heatmap_peak_max_contact_force_N.png"} <= plots
     summary = json.loads((out / "sweep_summary.json").read_text())
     assert summary["complete"] and summary["cases"] == 4 and "not applicable" in summary["batching"]
 

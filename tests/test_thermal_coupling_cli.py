@@ -57,7 +57,7 @@ def test_thermal_run_writes_columns_balance_and_history(tmp_path):
     assert abs(th["heat_balance"]["closure_error_relative"]) < 1e-9
     for col in ("temp_contact_C", "temp_flash_rise_K", "heat_rate_W", "temp_bulk_pin_C", "temp_bulk_wheel_C"):
         assert col in summary["peaks"]
-        assert -180 <= summary["peaks"][col]["drive_angle_wrapped_deg"] <= 180
+        assert -180 <= summary["peaks"][col]["max"]["drive_angle_wrapped_deg"] <= 180
     df = pd.read_parquet(out / "timeseries.parquet")
     # the whole history, not the last turn: the continued rows are on the output grid, the last at the end
     # (docs/thermal.md, "Cycle averaging")

@@ -50,7 +50,7 @@ n = sc.si["mechanism"]["slots"]
 turns = (ts["crank_angle_rad"].iloc[-1] - ts["crank_angle_rad"].iloc[0]) / (2 * np.pi)
 indexed = (ts["wheel_angle_rad"].iloc[-1] - ts["wheel_angle_rad"].iloc[0]) / (2 * np.pi / n)
 print(f"{turns:.3f} crank turns, {indexed:.3f} wheel indexes")
-peak = r.summary["peaks"]["contact_force_N"]
+peak = r.summary["peaks"]["contact_force_N"]["max"]   # located in continuous time
 print(f"peak contact force {peak['value']:.1f} N at t = {peak['t_s']:.3f} s")
 print("heat balance closes to", r.summary["thermal"]["heat_balance"]["closure_error_relative"])
 
@@ -84,4 +84,4 @@ print(again, "| same timeseries:", again.timeseries.equals(r.timeseries))
 
 # %%
 table = mechsim.sweep("geneva-lc1", vary={"drive.speed": "2,3,4 rad/s"}, set={"duration": "2 s"})
-print(table[["drive.speed_rad_s", "success", "peak_contact_force_N"]])
+print(table[["drive.speed_rad_s", "success", "peak_max_contact_force_N"]])

@@ -89,9 +89,20 @@ def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "")
                        if isinstance(v, (int, float, str))])]
     peaks = s.get("peaks", {})
     if peaks:
-        parts += ["<h2>Peaks</h2>", _table(["column", "value", "t (s)", "drive angle, wrapped (deg)"],
-                                           [[c, p["value"], p["t_s"], p["drive_angle_wrapped_deg"]]
-                                            for c, p in peaks.items()])]
+        regime = s.get("regime")
+        if regime:
+            parts += ["<h2>Peaks</h2>", f"<p>periodic from t = {regime['from_t_s']:.6g} s after "
+                      f"{regime['startup_turns']} start-up turn(s), period {regime['period_s']:.6g} s: max and min "
+                      "are the periodic regime's, the start-up's are listed beside them</p>"]
+        else:
+            parts += ["<h2>Peaks</h2>"]
+        rows = []
+        for c, p in peaks.items():
+            picks = [(side, p[side]) for side in ("max", "min")]
+            picks += [(f"start-up {side}", x) for side, x in p.get("startup", {}).items()]
+            rows += [[c, side, "unbounded" if x["value"] is None else x["value"], x["t_s"],
+                      x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
+        parts += [_table(["column", "", "value", "t (s)", "drive angle, wrapped (deg)", "at", "how"], rows)]
     parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
     if energy:

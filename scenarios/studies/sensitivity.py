@@ -7,11 +7,14 @@ formulas the mechanism evaluates, checked against the mechanism at the scenario'
 the table, the tornado chart and the summary entry (docs/sensitivity.md).
 
 Quantities (the run's reported numbers, so that a finite difference of `mechsim run` checks them):
-- peaks: the largest |value| over the output rows, as summary.json's `peaks` (signed value). The output times are
-  fixed, so its derivative is the row's derivative at the arg-max row (the envelope rule of a maximum over a fixed
-  set). A warning names the change of a value at which another row becomes the maximum (a neighbouring row, or
-  the same peak of another cycle, within PEAK_MARGIN), or at which an event next to the row reaches it, where that
-  change is smaller than the stated one: there the maximum has a kink.
+- peaks: the mechanical ones located in continuous time, summary.json's `peaks.<column>.abs_max` (signed value):
+  dF/dt = 0 at an interior extremum t*, so the derivative is dF/dp at the fixed instant t* (the envelope rule),
+  plus F' dtau/dp at an event's one-sided limit (`_located_derivative`, docs/theory.md §K5); one that grows without
+  bound has none (a warning). The thermal ones are computed after the run from the rows: the largest |value| over
+  the output rows, whose derivative is the arg-max row's (the envelope rule of a maximum over a fixed set). A warning
+  names the change of a value at which another row becomes the maximum (a neighbouring row, or the same peak of
+  another cycle, within PEAK_MARGIN), or at which an event next to the row or instant reaches it, where that change
+  is smaller than the stated one: there the maximum has a kink.
 - index_time_s: the last complete engagement (entry to exit); cycle_time_s: between the last two entries (one
   drive revolution); energy_per_cycle_J: the drive's work over that cycle; heat_per_index_J: the frictional heat
   of the last complete engagement (minus the friction work over it). Event times are differentiated by the
@@ -53,6 +56,52 @@ def _peak_rows(values: np.ndarray) -> list[int]:
     inner[i] = False
     rows += [int(j) for j in np.flatnonzero(inner) if y[j] >= (1 - PEAK_MARGIN) * y[i]]
     return rows
+
+
+#: a one-sided limit at an event is differentiated from samples this far and twice as far inside its interval
+EVENT_OFFSET_S = 1e-6
+
+
+def _located(peaks: dict, column: str) -> dict | None:
+    """The run's located extremum of largest magnitude of `column` (summary.json peaks, `abs_max`) with the sample
+    times its derivative needs (t*, or at an event two instants inside the interval of the limit), or None where
+    the column was not located (a column computed after the run: its output rows are differentiated)."""
+    entry = peaks.get(column)
+    if not entry or not entry.get("how", "").startswith("located"):
+        return None
+    side = entry["abs_max"]["side"]
+    e = dict(entry[side])
+    other = entry["min" if side == "max" else "max"]["value"]
+    e["other_magnitude"] = abs(other) if other is not None else None
+    t = e["t_s"]
+    if e.get("unbounded"):
+        e["samples"] = []
+    elif e.get("limit") is None or e["at"].startswith(("start", "end")):   # interior, or the run's fixed ends
+        e["samples"] = [t]
+    else:
+        step = EVENT_OFFSET_S if e["limit"] == "after" else -EVENT_OFFSET_S
+        e["samples"] = [t + step, t + 2 * step]
+    return e
+
+
+def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[float, np.ndarray, float]:
+    """(value, gradient, the traced pass's value) of a located extremum F* = F(t*, p) (docs/sensitivity.md,
+    "Peaks"). Interior: dF/dt = 0 at t*, so dF*/dp is the gradient of F at the fixed instant t* (the envelope rule).
+    At an event tau (the one-sided limit there): dF*/dp = dF/dp + F'(tau) dtau/dp, with F' from the two samples
+    inside the interval and dtau/dp the event time's derivative (its implicit-function rule)."""
+    first = by_time[e["samples"][0]]
+    g = np.asarray(first.grads[column], dtype=float)
+    traced = first.values[column]
+    if len(e["samples"]) == 2:
+        second = by_time[e["samples"][1]]
+        h = e["samples"][0] - e["samples"][1]
+        slope = (first.values[column] - second.values[column]) / h
+        traced = first.values[column] + slope * (e["t_s"] - e["samples"][0])
+        ev = min(events, key=lambda x: abs(x.t - e["t_s"]), default=None)
+        if ev is None or abs(ev.t - e["t_s"]) > EVENT_OFFSET_S:
+            raise ValueError(f"no traced event at t = {e['t_s']:.9g} s for the limit of {column}")
+        g = g + slope * np.asarray(ev.dt, dtype=float)
+    return float(e["value"]), g, float(traced)
 
 
 def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int], by_time: dict, column: str,
@@ -168,12 +217,14 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             y[turn["rows"]] = turn[THERMAL_PEAKS[q]]
             return y
         return df[peak_columns[q]].to_numpy(float)
+    located = {q: e for q in of if q in PEAKS and (e := _located(result.summary.get("peaks", {}), PEAKS[q]))}
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
-                 and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
-    sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows})
+                 and q not in located and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
+    sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows}
+                          | {t for e in located.values() for t in e["samples"]})
     thermal_times = sorted({float(df["t_s"].iloc[i]) for q, rows in peak_rows.items() if q in THERMAL_PEAKS
                             for i in rows})
-    columns = {PEAKS[q] for q in peak_rows if q in PEAKS} | {"work_drive_J"}
+    columns = {PEAKS[q] for q in [*peak_rows, *located] if q in PEAKS} | {"work_drive_J"}
     if thermal_times:
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
         # averagings share one compiled set of read-outs
@@ -196,7 +247,24 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     traced_values: dict[str, float] = {}     # the traced pass's own value of each quantity
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
-        if q in peak_columns:
+        if q in located and located[q].get("unbounded"):
+            warnings.append(f"{q}: {PEAKS[q]} grows without bound toward an event (t = {located[q]['t_s']:.6g} s; "
+                            "summary.json peaks): no peak, so no derivative")
+        elif q in located:
+            y, g, traced = _located_derivative(located[q], PEAKS[q], by_time, path.events)
+            other = located[q]["other_magnitude"]
+            if other is not None and abs(abs(y) - other) <= change * abs(y):
+                warnings.append(f"{q}: the maximum and minimum of {PEAKS[q]} are equal in magnitude to "
+                                f"{abs(abs(y) - other) / abs(y):.2g} (relative): the one of larger magnitude may "
+                                f"change within the stated change; the derivative is the "
+                                f"{'maximum' if y >= 0 else 'minimum'}'s")
+            results[q] = (y, g, located[q]["t_s"])
+            traced_values[q] = traced
+            if located[q].get("limit") is None:
+                note = _event_crosses_row(q, wrt, relative, located[q]["t_s"], path.events, change)
+                if note:
+                    warnings.append(note)
+        elif q in peak_columns:
             column = peak_columns[q]
             if q not in peak_rows:
                 warnings.append(f"{q}: this run has no column {column}" if column not in df else

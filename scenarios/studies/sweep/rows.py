@@ -17,8 +17,10 @@ from mechsim.scenarios.keys import field_unit, lookup, unit_suffix
 from mechsim.scenarios.loader import Scenario
 
 #: figures plotted against each varied parameter (those present in the table)
-KEY_FIGURES = ("peak_contact_force_N", "peak_drive_torque_N_m", "peak_wheel_accel_rad_s2", "peak_slip_speed_m_s",
-               "peak_friction_power_W", "peak_temp_contact_C", "cycle_time_s", "work_drive_per_cycle_J",
+KEY_FIGURES = ("peak_max_contact_force_N", "peak_max_drive_torque_N_m", "peak_min_drive_torque_N_m",
+               "peak_max_wheel_accel_rad_s2", "peak_min_wheel_accel_rad_s2", "peak_max_slip_speed_m_s",
+               "peak_min_slip_speed_m_s", "peak_max_friction_power_W", "peak_max_temp_contact_C", "cycle_time_s",
+               "work_drive_per_cycle_J",
                "work_friction_per_cycle_J", "case_wall_time_s")
 
 
@@ -101,9 +103,10 @@ def summary_row(summary: dict) -> dict:
     for k in ("drive", "method", "backend", "formulation", "thermal"):
         row[f"model_{k}"] = model.get(k)
     for col, pk in summary.get("peaks", {}).items():
-        row[f"peak_{col}"] = pk["value"]
-        row[f"peak_{col}_at_t_s"] = pk["t_s"]
-        row[f"peak_{col}_at_drive_angle_deg"] = pk["drive_angle_wrapped_deg"]
+        for side in ("max", "min"):        # the located maximum and minimum (summary.json peaks), signed
+            row[f"peak_{side}_{col}"] = pk[side]["value"]
+            row[f"peak_{side}_{col}_at_t_s"] = pk[side]["t_s"]
+            row[f"peak_{side}_{col}_at_drive_angle_deg"] = pk[side]["drive_angle_wrapped_deg"]
     energy = summary.get("energy") or {}
     for name, w in (energy.get("work_J") or {}).items():
         row[f"work_{name}_J"] = w

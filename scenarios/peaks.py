@@ -1,0 +1,409 @@
+"""The summary's `peaks`: the maximum and minimum of each key column of the continuous solution, located between
+output rows (`dynamics/extrema.py`), with its instant and drive angle (docs/theory.md §K5).
+
+Which columns are located and how is part of every entry (`how`): a DAE run's mechanical columns by re-integrating
+the mode from the nearest output row, a closed-form run's by the closed form; columns the thermal model adds after
+the run are the output rows' extremes and say so. Where a run settles into a periodic regime (crank turn to turn)
+the entries are the regime's, the start-up's beside them; a column that grows without bound toward an event has
+no value there, and its events, growth, impulse and energy lost are listed instead (`singular`).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from mechsim.dynamics.extrema import Extremum, Interval, TrajectoryReader, intervals_of, locate
+
+HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
+HOW_CLOSED = "located: the closed form evaluated between output rows"
+HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
+
+
+@dataclass
+class Source:
+    """What the locating needs of a finished run: the method, the DAE's trajectory (None for the closed form), the
+    mechanism and drive, the settings, the scenario's SI values and the columns the table had before any
+    post-processing (only those can be read between rows)."""
+
+    method: str
+    traj: object
+    mech: object
+    drive: object
+    settings: object
+    si: dict
+    columns: frozenset
+
+
+def _wrapped_deg(angle: float) -> float:
+    return float(np.degrees((angle + np.pi) % (2 * np.pi) - np.pi))
+
+
+def _entry(value: float, t: float, angle: float, at: str, row_value: float | None = None,
+           limit: str | None = None) -> dict:
+    out = {"value": float(value), "t_s": float(t), "drive_angle_rad": float(angle),
+           "drive_angle_wrapped_deg": _wrapped_deg(angle), "at": at}
+    if limit:
+        out["limit"] = limit
+    if row_value is not None:
+        out["best_row_value"] = float(row_value)
+    return out
+
+
+def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table: dict, check: list[str]):
+    """Every closed-form column at any instants, at an interval's ends 1e-12 s inside (the one-sided limits). The
+    closed form is evaluated on the table's own instants up to there with the new ones among them: it counts the
+    angle from the run's first instant, and a mechanism's branch may follow the motion's history (the chain's
+    apex law)."""
+    mech, speed = source.mech, source.drive.speed
+
+    def read(iv: Interval, position: int, times: np.ndarray) -> dict:
+        eps = 1e-12 * max(1.0, abs(iv.hi))
+        inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
+        frame = _evaluate(inner, t_rows[(t_rows >= iv.lo) | (t_rows == t_rows[0])], iv.hi)
+        if frame is None:             # the interval's rows alone did not reproduce the table: the whole history
+            frame = _evaluate(inner, t_rows, iv.hi)
+        frame["t_s"] = times
+        return frame
+
+    def _evaluate(inner: np.ndarray, history: np.ndarray, hi: float) -> dict | None:
+        before = history[history < inner.min()]
+        after = history[(history > inner.max()) & (history <= hi)]
+        at = np.r_[before, inner, after]
+        cols = mech.closed_form(at, angle0, speed)
+        cols.pop("powers", None)
+        cols.pop("events", None)
+        n, k = len(at), len(before)
+        frame = {name: np.broadcast_to(np.asarray(v), (n,))[k:k + len(inner)] for name, v in cols.items()
+                 if np.ndim(v) == 0 or len(np.ravel(v)) == n}
+        if len(history) < len(t_rows):       # a shortened history must give the table's own rows
+            i = np.searchsorted(t_rows, at[:k])
+            for name in check:
+                got, own = np.asarray(cols[name], float)[:k], table[name][i]
+                if not np.allclose(got, own, rtol=1e-9, atol=1e-12, equal_nan=True):
+                    return None
+        return frame
+    return read
+
+
+def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
+    if events is None or not len(events):
+        return []
+    kinds = events["kind"].astype(str).tolist() if "kind" in events else ["event"] * len(events)
+    return sorted((float(t), f"event '{k}' at t = {float(t):.9g} s") for t, k in zip(events["t_s"].to_numpy(float),
+                                                                                   kinds))
+
+
+#: consecutive crank turns agree to this (their durations, and the drive speed at their starts, relative) where the
+#: motion counts as periodic
+PERIODIC_RTOL = 1e-3
+
+
+def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict | None:
+    """Where a run reaches a periodic regime: the first turn of the drive (from the run's first angle) from which
+    every turn lasts as long as the last turn and starts at the same drive speed, to PERIODIC_RTOL (against the last
+    turn, so that a slow drift is not taken for periodic); at least two such turns. None without (a prescribed or
+    accelerating drive, a stall, fewer than three turns)."""
+    from mechsim.thermal.cycle import turn_boundaries
+    bounds = turn_boundaries(t, angle, float(angle[0]))
+    if len(bounds) < 3:
+        return None
+    b = np.r_[t[0], bounds]
+    periods = np.diff(b)
+    w = np.interp(b, t, speed)
+    scale = max(float(np.max(np.abs(speed))), 1e-300)
+    same = ((np.abs(periods - periods[-1]) <= PERIODIC_RTOL * periods[-1])
+            & (np.abs(w[:-1] - w[-2]) <= PERIODIC_RTOL * scale))          # each turn against the last
+    k = len(same)
+    while k > 0 and same[k - 1]:
+        k -= 1
+    if len(same) - k < 3:
+        return None
+    return {"from_t_s": float(b[k]), "startup_turns": int(k), "periodic_turns": int(len(periods) - k),
+            "period_s": float(periods[-1]), "last_turn": (float(b[-2]), float(b[-1])),
+            "criterion": (f"every drive turn from here equal to the last in duration and in starting drive speed to "
+                          f"{PERIODIC_RTOL:g} (relative)"),
+            "turn_spread": float(np.max(np.abs(periods[k:] - periods[-1])) / periods[-1])}
+
+
+def _intervals(t: np.ndarray, events, lo: float, hi: float, kinds: tuple[str, str], read) -> list[Interval]:
+    """The smooth intervals of [lo, hi] with the reader's anchors (a DAE run: each row's piece and row)."""
+    intervals = intervals_of(t, _breaks(events), lo, hi, *kinds)
+    if isinstance(read, TrajectoryReader):
+        anchors = read.anchors(t)
+        for iv in intervals:
+            keep = [r for r in iv.rows if anchors[r] is not None]
+            iv.rows, iv.anchors = np.asarray(keep, dtype=int), [anchors[r] for r in keep]
+    return intervals
+
+
+def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float, events, read) -> dict:
+    """The mean of each column over the turn [a, b]: the trapezoidal rule on each smooth interval's rows with the
+    one-sided limits read at its ends (so that a jump at an event costs nothing: the error is O(h^2 F'') of the
+    output step h); {} where an interval holds no row to read from."""
+    intervals = _intervals(t, events, a, b, ("turn start", "turn end"), read)
+    total = {c: 0.0 for c in values}
+    for iv in intervals:
+        if not len(iv.rows):
+            return {}
+        first = read(iv, 0, np.array([iv.lo]))
+        last = read(iv, len(iv.rows) - 1, np.array([iv.hi]))
+        tt = np.r_[iv.lo, t[iv.rows], iv.hi]
+        for c, f in values.items():
+            ff = np.r_[np.asarray(first[c], float)[0], f[iv.rows], np.asarray(last[c], float)[0]]
+            total[c] += float(np.sum(0.5 * (ff[1:] + ff[:-1]) * np.diff(tt)))
+    return {c: v / (b - a) for c, v in total.items()}
+
+
+def _turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
+    """The mean of a column over [a, b] by the trapezoidal rule on the rows (the ends interpolated)."""
+    inside = (t > a) & (t < b)
+    tt = np.r_[a, t[inside], b]
+    ff = np.r_[np.interp(a, t, f), f[inside], np.interp(b, t, f)]
+    return float(np.trapezoid(ff, tt) / (b - a)) if hasattr(np, "trapezoid") else float(np.trapz(ff, tt) / (b - a))
+
+
+def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.DataFrame, cols,
+                  source: Source | None, speed_column: str | None = None) -> tuple[dict, dict | None]:
+    """({column: {max, min, abs_max, how[, startup, periodic, singular]}}, the periodic regime or None) for each of
+    peak_columns in the table (see the module docstring). Where the run reaches a periodic regime, max and min are
+    the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5)."""
+    out: dict = {}
+    if not len(df):
+        return out, None
+    t = np.asarray(cols["t_s"], dtype=float)
+    angles = np.asarray(cols[angle_column], dtype=float)
+    present = [c for c in peak_columns if c in cols and not np.isnan(np.asarray(cols[c], float)).all()]
+    how = HOW_ROWS
+    read, coordinates, readable, n = None, (), [], len(t)
+    regime = None
+    windows = [(float(t[0]), float(t[-1]), "run")]
+    kinds = {"run": ("start", "end")}
+    if source is not None and len(t) > 1:
+        readable = [c for c in present if c in source.columns]
+        # a cycle-averaged run's table continues past the simulated window: locate inside the window
+        t_end = float(t[-1]) if source.traj is None else float(source.traj.pieces[-1].t[-1])
+        n = int(np.searchsorted(t, t_end, side="right"))
+        if source.method == "closed-form":
+            angle0 = source.si["initial"][source.mech.initial_keys[0]]
+            check = [c for c in readable if c in cols]
+            read, how = _closed_form_reader(source, angle0, t[:n], {c: np.asarray(cols[c], float)[:n]
+                                                                   for c in check}, check), HOW_CLOSED
+        else:
+            read, how = TrajectoryReader(source.traj, source.mech.angle_coordinates, source.settings), HOW_DAE
+            model = source.traj.model
+            coordinates = tuple(f"{c}_N_m_s" if i in source.mech.angle_coordinates else f"{c}_N_s"
+                                for i, c in enumerate(model.coordinates))
+            if speed_column in cols and not source.drive.is_prescribed:
+                regime = periodic_regime(t[:n], angles[:n], np.asarray(cols[speed_column], float)[:n])
+        windows = [(float(t[0]), t_end, "run")]
+        if regime is not None and regime["startup_turns"] > 0:
+            windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
+    kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
+             "startup": ("start", "end of the start-up")}
+    h = float(np.median(np.diff(t[:n]))) if n > 1 else 0.0
+    means = {}
+    if regime is not None and read is not None:
+        means = _turn_means(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, *regime["last_turn"],
+                            events, read)
+    for lo, hi, label in windows:
+        located, intervals = {}, []
+        if read is not None and readable:
+            intervals = _intervals(t[:n], events, lo, hi, kinds[label], read)
+            located = locate(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, intervals, read)
+        # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
+        # run's table continues the simulated window periodically)
+        inside = (np.ones(len(t), bool) if label == "run" else t >= lo if label == "periodic"
+                  else (t >= lo) & (t <= hi))
+        for c in present:
+            f = np.asarray(cols[c], dtype=float)
+            entry = _column_entry(c, f, t, angles, inside, angle_column, located.get(c, {}), how, intervals, read, h,
+                                  events, coordinates)
+            if label == "startup":
+                out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
+                if "singular" in entry:
+                    out[c].setdefault("singular", []).extend(entry["singular"])
+            else:
+                if label == "periodic":
+                    a, b = regime["last_turn"]
+                    entry["periodic"] = {"mean": means.get(c, _turn_mean(t[:n], f[:n], a, b)),
+                                         "mean_over": [a, b]}
+                out[c] = entry
+    return out, regime
+
+
+def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates) -> dict:
+    """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window)."""
+    entry: dict = {}
+    rows = np.flatnonzero(inside & np.isfinite(f))
+    for name, pick in (("max", np.argmax), ("min", np.argmin)):
+        e = got.get(name)
+        if e is not None:
+            # a constant stretch's row carries the peak columns only: its angle is the table's at that row
+            angle = float(e.row[angle_column]) if angle_column in e.row else float(np.interp(e.t, t, angles))
+            entry[name] = _entry(e.value, e.t, angle, e.where, e.sampled, e.limit)
+        elif len(rows):
+            i = int(rows[pick(f[rows])])
+            entry[name] = _entry(f[i], t[i], angles[i], "output row")
+        else:
+            entry[name] = _entry(np.nan, np.nan, np.nan, "no rows")
+    side = "max" if abs(entry["max"]["value"]) >= abs(entry["min"]["value"]) else "min"
+    entry["abs_max"] = dict(entry[side], value=abs(entry[side]["value"]), side=side)
+    entry["how"] = how if got else HOW_ROWS
+    for name, sense in (("max", 1.0), ("min", -1.0)):
+        e = got.get(name)
+        # an extremum in the bracket next to an event: does the column grow without bound toward it?
+        edge = None if e is None else e.limit if e.limit is not None else e.edge
+        if edge is None or read is None or e.where.startswith(("start", "end")):
+            continue
+        found = singular_approaches(c, f, edge, sense, intervals, read, h, events, coordinates, e.interval)
+        if found:
+            entry[name] = dict(entry[name], value=None, unbounded=True, t_s=found[0]["t_s"],
+                               at=f"grows without bound toward the event at t = {found[0]['t_s']:.9g} s",
+                               growth_exponent=found[0]["growth_exponent"])
+            entry[name].pop("best_row_value", None)
+            entry["abs_max"] = dict(entry[name], side=name)
+            entry.setdefault("singular", []).extend(dict(x, extremum=name) for x in found)
+    return entry
+
+
+#: the columns the console's peaks line names, where the run has them
+CONSOLE_COLUMNS = ("contact_force_N", "coupler_force_N", "drive_torque_N_m", "temp_contact_C")
+
+
+def console_lines(summary: dict) -> list[str]:
+    """The console's peaks: the headline line, and where the run reaches a periodic regime, when and how many
+    start-up turns (the headline is the periodic regime's; the start-up's is beside it in summary.json)."""
+    out = []
+    line = console_line(summary.get("peaks", {}))
+    regime = summary.get("regime")
+    if regime:
+        out.append(f"periodic from t = {regime['from_t_s']:.6g} s after {regime['startup_turns']} start-up turn(s) "
+                   f"(period {regime['period_s']:.6g} s, turns equal to {regime['turn_spread']:.1g}); the peaks are "
+                   "the periodic regime's, the start-up's are beside them in summary.json")
+    return ([line] if line else []) + out
+
+
+def console_line(peaks: dict) -> str | None:
+    """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
+    instant, and whether they are located or the rows' (the full entries are in summary.json)."""
+    parts = []
+    for col in CONSOLE_COLUMNS:
+        e = peaks.get(col)
+        if not e:
+            continue
+        hi, lo = e["max"], e["min"]
+        tag = "" if e["how"].startswith("located") else " (rows)"
+
+        def shown(x):
+            return "unbounded" if x["value"] is None else f"{x['value']:.5g}"
+        start = e.get("startup", {}).get("max")
+        beside = f", start-up max {shown(start)}" if start else ""
+        parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{beside}){tag}")
+    return "peaks, min .. max: " + "; ".join(parts) if parts else None
+
+
+#: decades of distance below the first (the output step, or half the interval) at which the growth toward an event
+#: is read
+SINGULAR_DECADES = 4
+#: growth exponent -dlog|F|/dlog(distance), in every decade, above which an approach counts as unbounded (a
+#: bounded column's exponent falls like the distance: |F(d)| = |F(0)| + O(d))
+SINGULAR_EXPONENT = 0.25
+#: events tested per column once one approach is found unbounded
+SINGULAR_EVENTS = 50
+
+
+def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, decades: int = SINGULAR_DECADES
+            ) -> float | None:
+    """The exponent a of |F| ~ distance^-a toward the interval's end on `side` ('before': its end, 'after': its
+    start), from readings a decade apart; None where the column stays bounded there (or changes sign)."""
+    d = min(h, 0.5 * (iv.hi - iv.lo)) * 10.0 ** -np.arange(decades + 1)
+    if side == "before":
+        times, position = iv.hi - d, len(iv.rows) - 1
+    else:
+        times, position = iv.lo + d, 0
+    order = np.argsort(times)
+    table = read(iv, position, times[order])
+    f = np.empty(len(d))
+    f[order] = sign * np.asarray(table[column], dtype=float)
+    if not (np.all(np.isfinite(f)) and np.all(f > 0)):
+        return None
+    slopes = np.diff(np.log10(f))            # per decade closer
+    return float(slopes[-1]) if np.all(slopes > SINGULAR_EXPONENT) else None
+
+
+def _impulse(reader, intervals: list[Interval], k: int, coordinates) -> tuple[dict, list, list] | None:
+    """(impulse, speeds before, speeds after) of the event between intervals k and k+1: the generalized impulse is
+    the jump of M(q) v (N*m*s per angle coordinate); None where the reader has no states (a closed form) or a side
+    has no rows. The kinetic energy's change is (v+ + v-)/2 . impulse (M is continuous across the event)."""
+    if not hasattr(reader, "momentum") or not 0 <= k < len(intervals) - 1:
+        return None
+    before, after = intervals[k], intervals[k + 1]
+    if not (len(before.rows) and len(after.rows)):
+        return None
+    p_minus, v_minus = reader.momentum(before, len(before.rows) - 1, before.hi)
+    p_plus, v_plus = reader.momentum(after, 0, after.lo)
+    return ({name: float(x) for name, x in zip(coordinates, p_plus - p_minus)}, v_minus.tolist(), v_plus.tolist())
+
+
+def singular_approaches(column: str, f: np.ndarray, side: str, sense: float, intervals: list[Interval], read,
+                        h: float, events: pd.DataFrame, coordinates, first: int) -> list[dict]:
+    """Every event the column's `sense` (+1 max, -1 min) grows without bound toward, on `side` of it: the event's
+    time and kind, the growth exponent, the impulse it delivers and the energy it loses (the events table). The
+    extremum's own interval `first` is read first; only if its approach is unbounded are the others read."""
+    found = []
+    order = [first] + [k for k in range(len(intervals)) if k != first]
+    for k in order:
+        iv = intervals[k]
+        if k != first and not found:
+            break
+        kind = iv.hi_kind if side == "before" else iv.lo_kind
+        if kind in ("start", "end") or len(iv.rows) < 2:
+            continue
+        near, next_ = (iv.rows[-1], iv.rows[-2]) if side == "before" else (iv.rows[0], iv.rows[1])
+        if not (sense * f[near] > 0 and sense * f[near] >= sense * f[next_]):
+            continue
+        # the first approach is read over SINGULAR_DECADES decades, the others (the same event of later cycles) over
+        # two: a bounded column's exponent is already ~1e-2 there
+        a = _growth(read, iv, side, column, h, sense, SINGULAR_DECADES if not found else 2)
+        if a is None:
+            continue
+        t_e = iv.hi if side == "before" else iv.lo
+        at = events["t_s"].to_numpy(float) == t_e if len(events) else np.zeros(0, bool)
+        lost = float(np.nansum(events.loc[at, "energy_lost_J"].to_numpy(float))) if "energy_lost_J" in events \
+            else None
+        from mechsim.dynamics.extrema import ReadingFailed
+        record = {"t_s": t_e, "events": re.findall(r"event '([^']*)'", kind) or [kind], "side": side,
+                  "growth_exponent": a, "impulse": None, "energy_lost_J": lost}
+        if not found:                          # the impulse of the first (a stop of a periodic motion repeats it)
+            try:
+                got = _impulse(read, intervals, k if side == "before" else k - 1, coordinates)
+            except ReadingFailed:
+                got = None
+            if got is not None:
+                record["impulse"], record["speeds_before"], record["speeds_after"] = got
+        found.append(record)
+        if len(found) >= SINGULAR_EVENTS:
+            break
+    return found
+
+
+def singular_warnings(peaks: dict) -> list[str]:
+    """One warning per column with an unbounded approach: the events, the growth, the impulse and energy lost."""
+    out = []
+    for col, entry in peaks.items():
+        found = entry.get("singular")
+        if not found:
+            continue
+        first = found[0]
+        kinds = sorted({f"'{k}'" for x in found for k in x["events"]})
+        impulse = ("" if not first["impulse"] else ", impulse " + ", ".join(
+            f"{k} {v:.4g}" for k, v in first["impulse"].items() if v != 0.0))
+        lost = "" if first["energy_lost_J"] is None else f", energy lost {first['energy_lost_J']:.4g} J"
+        out.append(f"t = {first['t_s']:.6g} s: {col} grows without bound toward {len(found)} event(s) "
+                   f"{', '.join(kinds)} (|F| ~ (distance in time)^-{first['growth_exponent']:.2g}): no peak is "
+                   f"reported for its {first['extremum']}imum (summary.json peaks.{col}.singular); at the first"
+                   f"{impulse}{lost}")
+    return out

@@ -1,0 +1,72 @@
+"""Start-up apart from the periodic regime, and approaches that grow without bound said as such (docs/theory.md
+§K5): the headline peak of a run that settles is the periodic regime's, the start-up's beside it; a force that grows
+without bound toward a stop has no peak, and the summary gives the stop's impulse and energy lost instead."""
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.scenarios import runner
+
+
+@pytest.fixture(scope="module")
+def six_slot():
+    return runner.run(mechsim.load("geneva-motor", set=["mechanism.slots=6", "duration=4 s"]))
+
+
+def test_motor_start_up_is_apart_from_the_periodic_regime(six_slot):
+    """The issue's 6-slot motor-driven Geneva: the drive torque at t = 0 is the motor line's T0 - slope w0 =
+    40 - 40/8 * 5.34 = 13.3 N*m (the crank starts slow); running, the torque peaks at about 7.2 N*m."""
+    r = six_slot
+    regime = r.summary["regime"]
+    assert regime["startup_turns"] >= 1 and regime["periodic_turns"] >= 2 and regime["turn_spread"] < 1e-3
+    torque = r.summary["peaks"]["drive_torque_N_m"]
+    assert torque["startup"]["max"]["value"] == pytest.approx(40 - 40 / 8 * 5.34, rel=1e-9)
+    assert torque["startup"]["max"]["t_s"] == 0.0
+    assert 7.0 < torque["max"]["value"] < 7.3 and torque["max"]["t_s"] >= regime["from_t_s"]
+    # the periodic regime's maximum is every periodic turn's: the last turn's own maximum, located alone
+    a, b = regime["last_turn"]
+    df = r.timeseries
+    last = df[(df["t_s"] >= a) & (df["t_s"] <= b)]["drive_torque_N_m"].max()
+    assert last <= torque["max"]["value"] < last * (1 + 1e-3)
+    # the crank speed is periodic, so its acceleration averages to zero over a turn (trapezoidal rule between the
+    # events' one-sided limits: O(h^2 F'') of the value's scale)
+    accel = r.summary["peaks"]["crank_accel_rad_s2"]
+    assert abs(accel["periodic"]["mean"]) < 1e-4 * accel["abs_max"]["value"]
+    assert accel["startup"]["max"]["value"] > 10 * accel["max"]["value"]
+
+
+def test_a_run_that_does_not_settle_has_no_regime():
+    """A constant torque runs the Geneva up from 5.34 to about 40 rad/s in its first second (it settles later,
+    against the crank's damping): no two turns alike, the peaks are the whole run's."""
+    r = runner.run(mechsim.load("geneva-torque", set=["duration=1 s"]))
+    assert r.summary["regime"] is None
+    assert all("startup" not in e for e in r.summary["peaks"].values())
+
+
+def test_coupler_force_toward_the_crank_stop_is_unbounded_not_a_row():
+    """chain-mech2-torque: at the apex the coupler's constraint loses rank (§K1.5) and its force grows like
+    1/(t_stop - t) toward each crank stop; no peak is reported for it at any output step, the stop's impulse and
+    energy lost are. The impulse closes the kinetic energy: dKE = (v+ + v-)/2 . impulse (M continuous), against the
+    events table's energies before and after (computed by the transition, apart from the reading here)."""
+    runs = {step: runner.run(mechsim.load("chain-mech2-torque", set=["duration=8 s", f"output_step={step}"]))
+            for step in ("10 ms", "7 ms")}
+    r = runs["10 ms"]
+    force = r.summary["peaks"]["coupler_force_N"]
+    assert force["max"]["value"] is None and force["max"]["unbounded"]
+    assert force["abs_max"]["value"] is None
+    stops = force["singular"]
+    assert len(stops) == (r.events["kind"] == "stop impact").sum() == 2
+    first = stops[0]
+    assert "stop impact" in first["events"] and first["side"] == "before"
+    assert first["growth_exponent"] == pytest.approx(1.0, abs=0.02)
+    at = r.events["t_s"].to_numpy(float) == first["t_s"]
+    lost = float(r.events.loc[at, "energy_lost_J"].sum())
+    assert first["energy_lost_J"] == pytest.approx(lost, rel=1e-12)
+    v_minus, v_plus = np.array(first["speeds_before"]), np.array(first["speeds_after"])
+    impulse = np.array(list(first["impulse"].values()))
+    assert 0.5 * (v_plus + v_minus) @ impulse == pytest.approx(-lost, rel=1e-5)
+    assert any("coupler_force_N grows without bound" in w for w in r.summary["warnings"])
+    assert runs["7 ms"].summary["peaks"]["coupler_force_N"]["max"]["value"] is None
+    # what is bounded stays located: the crank speed's maximum does not move with the output step
+    speeds = [x.summary["peaks"]["crank_speed_rad_s"]["max"]["value"] for x in runs.values()]
+    assert speeds[0] == pytest.approx(speeds[1], rel=1e-7)
