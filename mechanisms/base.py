@@ -47,6 +47,9 @@ class Field:
     help: str = ""
     maximum: float | None = None
     why: str = ""
+    #: (sibling key, value): the key means something only when that sibling has that value (a variant's key); a
+    #: value other than the default under another variant is refused, since it would be ignored
+    only_if: tuple[str, object] | None = None
 
 
 @dataclass(frozen=True)

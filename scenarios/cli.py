@@ -49,6 +49,7 @@ err = LazyConsole(stderr=True)
 out = LazyConsole()
 
 USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
+INTERRUPTED = 130           # 128 + SIGINT, as a shell reports a Ctrl-C
 
 
 def _fail(message: str, code: int = USER_ERROR) -> None:
@@ -171,6 +172,9 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
         try:
             with native_output() as native:
                 result = api.run(sc, progress=lambda t: bar.update(task, completed=t))
+        except KeyboardInterrupt:
+            _fail(f"{sc.name}: interrupted (Ctrl-C) at t = {bar.tasks[0].completed:.4g} s of {duration:g} s; "
+                  "nothing was written", INTERRUPTED)
         except ScenarioError as exc:
             _fail(str(exc))
         except ValueError as exc:
@@ -180,7 +184,11 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
         result.summary["solver_messages"] = native
         bar.update(task, description=f"{sc.name}: writing files")
-        _save_or_fail(result, target, force, f"{sc.name}: the results", worker)
+        try:
+            _save_or_fail(result, target, force, f"{sc.name}: the results", worker)
+        except KeyboardInterrupt:
+            _fail(f"{sc.name}: interrupted (Ctrl-C) while writing {target}; nothing half-written is left",
+                  INTERRUPTED)
     _report_run(result, sc.name, target, quiet)
 
 

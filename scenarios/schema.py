@@ -259,4 +259,10 @@ def check_section(name: str, fields: dict[str, Field], data) -> dict:
             raise ScenarioError(where, "missing (required)")
         else:
             out[key] = spec.default
+    for key, spec in fields.items():
+        if spec.only_if and key in data and out[key] != spec.default and out[spec.only_if[0]] != spec.only_if[1]:
+            sibling, wanted = spec.only_if
+            raise ScenarioError(f"{name}.{key}" if name else key,
+                                f"applies only with {sibling} = {wanted!r}; with {sibling} = {out[sibling]!r} it "
+                                "would be ignored: remove it")
     return out

@@ -1,5 +1,5 @@
 """Validity monitors: the conditions a run's model needs (declared as data by the mechanism,
-`Mechanism.validity_conditions`, and by the thermal model, `thermal/validity.py`), evaluated on every output row.
+`Mechanism.validity_conditions`, and by the thermal model, `thermal/model_validity.py`), evaluated on every output row.
 
 `section` is the summary's `validity`: per condition the share of the run's time it is violated, its worst value
 (and when), the first violation; `stop` cuts a run at the first violating row for `output.on_invalid = "stop"`

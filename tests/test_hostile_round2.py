@@ -188,3 +188,24 @@ def test_pool_workers_die_with_a_killed_sweep(tmp_path):
     finally:
         if p.poll() is None:
             p.kill()
+
+
+def test_ctrl_c_during_a_run_is_one_line_and_exit_130(tmp_path, monkeypatch):
+    from mechsim.scenarios import api
+
+    def interrupted(sc, progress=None):
+        progress(0.25)                                  # a quarter of a second simulated, then Ctrl-C
+        raise KeyboardInterrupt
+    monkeypatch.setattr(api, "run", interrupted)
+    r = invoke("run", "geneva-lc1", "--out", tmp_path / "o", "--set", "output.plots=false")
+    assert r.exit_code == 130
+    line = one_line_error(r)
+    assert "interrupted (Ctrl-C) at t = 0.25 s of 3 s; nothing was written" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_rolling_pair_on_a_line_refuses_the_circle_keys():
+    from mechsim.scenarios.loader import load
+    with pytest.raises(ScenarioError) as e:
+        load("rolling-d-line", ['mechanism.fixed_radius="50 mm"'])
+    assert e.value.field == "mechanism.fixed_radius" and "profile = 'line'" in e.value.problem

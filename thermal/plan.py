@@ -27,7 +27,7 @@ from mechsim.thermal.flash import flash_temperature
 from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
 from mechsim.thermal.models import MODELS
 from mechsim.thermal.network import KELVIN, ContactSource, ThermalSetup, ThermalSetupError, prepare
-from mechsim.thermal.validity import conditions as validity_conditions
+from mechsim.thermal.model_validity import conditions as validity_conditions
 
 __all__ = ["ThermalPlan", "ThermalSetupError", "plan"]
 
@@ -504,7 +504,7 @@ class ThermalPlan:
 
     # ---------------------------------------------------------------------------------------------- validity
     def validity_conditions(self) -> list[dict]:
-        """The conditions this thermal model's formulas need on every row (thermal/validity.py), as data."""
+        """The conditions this thermal model's formulas need on every row (thermal/model_validity.py), as data."""
         return validity_conditions(self.setup.section, self.setup.geometry, self.setup.material)
 
     def _validity(self, df, contact, summary) -> list[str]:
