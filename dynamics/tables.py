@@ -72,27 +72,12 @@ def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:
     return f"{name}_position_m", f"{name}_speed_m_s", f"{name}_accel_m_s2"
 
 
-def _kinetic_energy(mass, q: np.ndarray, v: np.ndarray, p: tuple) -> np.ndarray:
-    """1/2 v^T M(q) v row by row (M evaluated on the whole array where it broadcasts; a configuration-dependent
-    M with constant entries does not form one numpy array, so it is then evaluated row by row)."""
-    n = q.shape[1]
-    rows = len(q)
-    Mb = np.empty((rows, n, n))
-    try:
-        M = mass(q.T, p)
-    except ValueError:
-        for r in range(rows):
-            Mb[r] = np.asarray(mass(q[r], p), dtype=float)
-        return 0.5 * np.einsum("ri,rij,rj->r", v, Mb, v)
-    for i in range(n):
-        for j in range(n):
-            Mb[:, i, j] = np.broadcast_to(np.asarray(M[i][j], dtype=float), (rows,))
-    return 0.5 * np.einsum("ri,rij,rj->r", v, Mb, v)
-
-
 def _rows(entries, n: int, shape: tuple[int, ...]) -> np.ndarray:
     """Flat lambdified entries (arrays over the rows, or scalars) as an (n, *shape) array."""
-    return np.stack([np.broadcast_to(np.asarray(e, dtype=float), (n,)) for e in entries], axis=1).reshape(n, *shape)
+    out = np.empty((n, len(entries)))
+    for i, e in enumerate(entries):
+        out[:, i] = e                   # a scalar entry broadcasts over the rows
+    return out.reshape(n, *shape)
 
 
 def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple):
@@ -102,60 +87,166 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
     multiplier states are not accurate enough to report forces from; the KKT solution at the integrated
     (q, v) is, in every formulation and backend.
     """
+    return _kkt(mf, t, q, v, x, p)[1:]
+
+
+def _kkt(mf, t, q, v, x, p):
+    """(M, a, lam) at every row: `kkt_rows` with the mass matrices it solved with (the kinetic energy's)."""
     f = mf.kkt_flat
     n, nq, m = len(t), q.shape[1], mf.m
     M = _rows(f["mass"](q.T, p), n, (nq, nq))
     Q0 = _rows(f["force0"](t, q.T, v.T, x.T, p), n, (nq,))
     if m == 0:
-        return kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), Q0, np.zeros((n, 0)))
+        return (M,) + kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), Q0, np.zeros((n, 0)))
     G = _rows(f["G"](t, q.T, p), n, (m, nq))
     Ql = _rows(f["force_lam"](t, q.T, v.T, x.T, p), n, (nq, m))
     gamma = _rows(f["gamma"](t, q.T, v.T, p), n, (m,))
-    return kkt.solve(M, G, Ql, Q0, -gamma)
+    return (M,) + kkt.solve(M, G, Ql, Q0, -gamma)
+
+
+def _mode_params(pieces) -> tuple:
+    """The parameters of a mode's pieces, row-aligned with their stacked rows: a value every piece shares as
+    that scalar, one that changes from piece to piece (a re-based drive angle, a restart time) as a per-row array,
+    so each lambdified read-out is called once on all of the mode's rows."""
+    first = pieces[0].params
+    if all(p.params == first for p in pieces[1:]):
+        return first
+    counts = [len(p.t) for p in pieces]
+    return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
+                 else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
+                 for j in range(len(first)))
+
+
+def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple) -> np.ndarray:
+    """Phi(t, q) as (rows, m): one call on all rows; row by row where an entry does not broadcast (a constant
+    constraint entry makes the lambdified matrix ragged)."""
+    try:
+        phi = np.asarray(mf.phi(t, q.T, p), dtype=float)
+        if phi.ndim == 3 and phi.shape[:2] == (mf.m, 1) and phi.shape[2] == len(t):
+            return phi[:, 0, :].T
+    except (ValueError, TypeError):
+        pass
+    rows = [(ti, qi, tuple(pj if np.ndim(pj) == 0 else pj[r] for pj in p)) for r, (ti, qi) in enumerate(zip(t, q))]
+    return np.asarray([np.ravel(mf.phi(ti, qi, pr)) for ti, qi, pr in rows]).reshape(len(t), mf.m)
+
+
+def _kept_rows(t: np.ndarray) -> np.ndarray | None:
+    """Rows to keep where an instant repeats (the later one, the state after a mode change), as
+    DataFrame.drop_duplicates(subset="t_s", keep="last"); None where every row is kept."""
+    d = np.diff(t)
+    if np.all(d >= 0):              # time order (every backend's): repeats are neighbours
+        keep = np.append(d != 0, True)
+    else:
+        keep = ~pd.Series(t).duplicated(keep="last").to_numpy()
+    return None if keep.all() else keep
+
+
+def _layout(model, angle_coordinates: tuple[int, ...], modes: list[str], residual: bool = True) -> list[str]:
+    """The table's columns: time, coordinates (position, speed, acceleration each), the first mode's read-outs,
+    kinetic energy, works, constraint residual, extension states, then a read-out only a later mode has (as
+    pandas' concat of per-piece frames put them); "mode" goes in second place."""
+    names = ["t_s"]
+    for i, name in enumerate(model.coordinates):
+        names += coordinate_columns(name, i in angle_coordinates)
+    first = list(model.modes[modes[0]].readout_names) if modes else []
+    names += first + ["kinetic_energy_J"] + [f"work_{w}_J" for w in model.work_names] + \
+        (["constraint_residual_m"] if residual else []) + list(model.extension_names)
+    later = [nm for mode in modes for nm in model.modes[mode].readout_names]
+    return names + list(dict.fromkeys(nm for nm in later if nm not in names))
+
+
+def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.ndarray:
+    """The columns `names` over the rows of one mode's pieces, stacked, as (len(names), rows): read-outs, the
+    KKT solution, kinetic energy and constraint residual evaluated once on all rows (parameters that differ
+    between pieces as per-row arrays); a read-out this mode lacks is NaN."""
+    mf = model.modes[pieces[0].mode]
+    ix, ncoord = mf.index, len(model.coordinates)
+    at = {nm: i for i, nm in enumerate(names)}
+    t = np.concatenate([pc.t for pc in pieces])
+    y = np.concatenate([pc.y for pc in pieces])
+    q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
+    p = _mode_params(pieces)
+    fixed = set(names[:1 + 3 * ncoord]) | {"kinetic_energy_J", "constraint_residual_m"} | set(
+        model.extension_names) | {f"work_{w}_J" for w in model.work_names}
+    partial = any(nm not in fixed for nm in set(names) - set(mf.readout_names))    # another mode's read-out
+    block = np.full((len(names), len(t)), np.nan) if partial else np.empty((len(names), len(t)))
+    block[0] = t
+    M, a, lam = _kkt(mf, t, q, v, x, p)
+    block[2:1 + 3 * ncoord:3] = v.T
+    block[3:1 + 3 * ncoord:3] = a.T
+    offset = 0
+    for pc in pieces:                                  # positions unwrapped: q is in each piece's re-based frame
+        block[1:1 + 3 * ncoord:3, offset:offset + len(pc.t)] = pc.coordinates(ix["q"]).T
+        offset += len(pc.t)
+    values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, p)
+    for name, val in zip(mf.readout_names, values):
+        block[at[name]] = val                          # a scalar read-out broadcasts over the rows
+    c_ke = at["kinetic_energy_J"]
+    block[c_ke] = 0.5 * np.einsum("ri,rij,rj->r", v, M, v)       # 1/2 v^T M v with the KKT's M
+    c_ext = c_ke + 1 + len(model.work_names)
+    block[c_ke + 1:c_ext] = y[:, ix["work"]].T
+    if residual:
+        n_mech = mf.m - (1 if model.prescribed else 0)
+        block[c_ext] = np.max(np.abs(_constraint_values(mf, t, q, p)[:, :n_mech]), axis=1) if n_mech > 0 else 0.0
+        c_ext += 1
+    block[c_ext:c_ext + len(model.extension_names)] = x.T
+    return block
 
 
 def piece_columns(model, piece, angle_coordinates: tuple[int, ...], residual: bool = True) -> dict[str, np.ndarray]:
-    """The table's columns over one piece's rows, read-outs evaluated with the piece's mode and parameters
-    (residual=False: without constraint_residual_m, a Python loop over the rows)."""
-    mf = model.modes[piece.mode]
-    ix = mf.index
-    t, y = piece.t, piece.y
-    q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
-    q_out = piece.coordinates(ix["q"])       # unwrapped: q is in the mode's re-based frame
-    a, lam = kkt_rows(mf, t, q, v, x, piece.params)
-    cols: dict[str, np.ndarray] = {"t_s": t, "mode": np.full(len(t), piece.mode, dtype=object)}
-    for i, name in enumerate(model.coordinates):
-        pos, spd, acc = coordinate_columns(name, i in angle_coordinates)
-        cols[pos], cols[spd], cols[acc] = q_out[:, i], v[:, i], a[:, i]
-    values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, piece.params)
-    for name, val in zip(mf.readout_names, values):
-        cols[name] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
-    cols["kinetic_energy_J"] = _kinetic_energy(mf.mass, q, v, piece.params)
-    for j, name in enumerate(model.work_names):
-        cols[f"work_{name}_J"] = y[:, ix["work"]][:, j]
-    if residual:
-        phi = np.asarray([np.ravel(mf.phi(ti, qi, piece.params)) for ti, qi in zip(t, q)]) if mf.m else \
-            np.zeros((len(t), 1))
-        n_mech = mf.m - (1 if model.prescribed else 0)
-        cols["constraint_residual_m"] = np.max(np.abs(phi[:, :max(n_mech, 1)]), axis=1) if n_mech else \
-            np.zeros(len(t))
-    for j, name in enumerate(model.extension_names):
-        cols[name] = x[:, j]
+    """The table's columns over one piece's rows, read-outs evaluated with the piece's mode and parameters, as
+    `timeseries` evaluates them (residual=False: without constraint_residual_m)."""
+    names = _layout(model, angle_coordinates, [piece.mode], residual)
+    block = _mode_block(model, [piece], names, residual)
+    cols = {"t_s": block[0], "mode": np.full(len(piece.t), piece.mode, dtype=object)}
+    cols.update((name, block[i]) for i, name in enumerate(names) if i)
     return cols
 
 
 def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataFrame:
-    """One row per output instant, read-outs evaluated with the mode and parameters of that instant."""
-    frames = [pd.DataFrame(piece_columns(traj.model, piece, angle_coordinates)) for piece in traj.pieces]
-    df = pd.concat(frames, ignore_index=True)
-    return df.drop_duplicates(subset="t_s", keep="last").reset_index(drop=True)
+    """One row per output instant, read-outs evaluated with the mode and parameters of that instant.
+
+    The read-outs, the KKT solution, the kinetic energy and the constraint residual are evaluated once per mode on
+    all of that mode's rows (`_mode_block`), copied into one block a piece at a time, from which the frame is
+    built once (columns: `_layout`; NaN where a mode lacks a read-out); a later instant replaces an earlier one
+    at the same time (the state after a mode change)."""
+    model = traj.model
+    pieces = [pc for pc in traj.pieces if len(pc.t)] or list(traj.pieces[:1])
+    by_mode: dict[str, list[int]] = {}
+    for k, pc in enumerate(pieces):
+        by_mode.setdefault(pc.mode, []).append(k)
+    names = _layout(model, angle_coordinates, list(by_mode))
+    starts = np.cumsum([0] + [len(pc.t) for pc in pieces])
+    out = np.empty((len(names), int(starts[-1])))
+    for ks in by_mode.values():
+        block = _mode_block(model, [pieces[k] for k in ks], names)
+        offset = 0
+        for k in ks:
+            rows = int(starts[k + 1] - starts[k])
+            out[:, starts[k]:starts[k + 1]] = block[:, offset:offset + rows]
+            offset += rows
+    piece_of_row = np.repeat(np.arange(len(pieces)), np.diff(starts))
+    keep = _kept_rows(out[0])
+    if keep is not None:
+        out, piece_of_row = out[:, keep], piece_of_row[keep]
+    # the mode names typed once, on one entry per piece (not pandas' string inference on every row), then taken
+    # row by row: the column pandas would infer from the names repeated
+    modes = pd.Series(np.asarray([pc.mode for pc in pieces], dtype=object)).array
+    df = pd.DataFrame(out.T, columns=names, copy=False)    # the block as the frame's float block: no copy
+    df.insert(1, "mode", modes.take(piece_of_row))
+    return df
 
 
 def events_table(traj: Trajectory) -> pd.DataFrame:
     cols = ["t_s", "from_mode", "to_mode", "kind", "guard", "kinetic_energy_before_J", "kinetic_energy_after_J",
             "message"]
-    df = pd.DataFrame(traj.events)
-    if df.empty:
+    events = traj.events
+    if not events:
         return pd.DataFrame(columns=cols)
-    df["energy_lost_J"] = df["kinetic_energy_before_J"] - df["kinetic_energy_after_J"]
+    before, after = "kinetic_energy_before_J", "kinetic_energy_after_J"
+    if all(isinstance(e.get(before), float) and isinstance(e.get(after), float) for e in events):
+        # the loss added to each record: one frame built, no column inserted afterwards
+        return pd.DataFrame([{**e, "energy_lost_J": e[before] - e[after]} for e in events])
+    df = pd.DataFrame(events)
+    df["energy_lost_J"] = df[before] - df[after]
     return df

@@ -1,0 +1,65 @@
+"""A warm `mechsim.run` of case A end to end against the CasADi peer (docs/benchmarks.md, "A warm run end to end").
+
+Case A (`peer_bench.CASE_A`, 5 s, 1 ms outputs, figures off) on diffrax (rtol 1e-5) and ida-compiled index-1
+(rtol 1e-7), both near 1e-6 rad of crank-angle error, and the CasADi IDAS peer of `peer_bench` at rtol 1e-6
+(5.6e-7 rad). Interleaved rounds (order rotated each round), process CPU time, medians. Each run is split into
+the integration (`hybrid.simulate`, its process CPU) and the rest: tables, invariant checks and summary.
+
+    python benchmarks/warm_run.py [rounds]
+"""
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+
+import mechsim
+from mechsim.benchmarks.bench import BenchConfig, make_problem
+from mechsim.benchmarks.bench_methods import quiet_sundials
+from mechsim.benchmarks.peer_bench import CASE_A, METHODS, PEER
+
+#: backend: (scenario overrides, the bench method integrating the same, rtol)
+BACKENDS = {
+    "diffrax": (('solver.backend="diffrax"', "solver.rtol=1e-5", "solver.atol=1e-7"), "diffrax-Tsit5", 1e-5),
+    "ida-compiled": (('solver.backend="ida-compiled"', 'solver.formulation="index1"', "solver.rtol=1e-7",
+                      "solver.atol=1e-9"), "ida-compiled-index1", 1e-7),
+}
+
+
+def main(rounds: int = 9) -> None:
+    base = CASE_A + ("duration=5 s", "output_step=1 ms", "output.plots=false")
+    problem = make_problem(BenchConfig(scenario="geneva-motor", duration=5.0, overrides=CASE_A))
+    calls = {}
+    for name, (extra, method, rtol) in BACKENDS.items():
+        sc = mechsim.load("geneva-motor", set=list(base + extra))
+        calls[name] = lambda sc=sc: mechsim.run(sc)
+        m = METHODS[method]
+        with quiet_sundials():
+            handle = m.setup(problem, rtol, rtol * 1e-2)[0]
+        calls[f"{name} solve"] = lambda m=m, h=handle, rtol=rtol: m.run(h, problem, rtol, rtol * 1e-2)
+    peer = METHODS[PEER]
+    with quiet_sundials():
+        handle = peer.setup(problem, 1e-6, 1e-8)[0]
+    calls[PEER] = lambda: peer.run(handle, problem, 1e-6, 1e-8)
+    names = list(calls)
+    with quiet_sundials():
+        for name in names:                      # warm: compiled, derived, cached
+            calls[name]()
+            calls[name]()
+        cpu: dict[str, list[float]] = {name: [] for name in names}
+        for r in range(rounds):
+            for name in names[r % len(names):] + names[:r % len(names)]:
+                c = time.process_time()
+                calls[name]()
+                cpu[name].append(time.process_time() - c)
+    ms = {name: 1e3 * statistics.median(x) for name, x in cpu.items()}
+    print(f"{PEER} (rtol 1e-6): {ms[PEER]:.1f} ms CPU, median of {rounds}")
+    for name in BACKENDS:
+        run, solve = ms[name], ms[f"{name} solve"]
+        print(f"{name:13s} warm run {run:5.1f} ms CPU = {run / ms[PEER]:.2f}x the peer; its integration alone "
+              f"{solve:4.1f} ms, the rest (tables, checks, summary) {run - solve:4.1f} ms ({(run - solve) / solve:.2f}x "
+              "the integration)")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 9)
