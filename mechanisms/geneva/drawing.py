@@ -110,11 +110,18 @@ class GenevaDrawing:
         ax.set_ylim(-1.1 * max(Rw, self.r + self.R), 1.1 * max(Rw, self.r + self.R))
         finish_axes(ax)
 
-    def update(self, row) -> list:
-        theta, psi = float(row["crank_angle_rad"]), float(row["wheel_angle_rad"])
+    def move(self, theta: float, psi: float) -> tuple[float, float]:
+        """Turn the wheel to psi and the crank to theta; the pin's centre (mm)."""
         self.wheel.set_xy(rotate(self.wheel_shape, psi))
         self.disc.set_xy(rotate(self.disc_shape, np.pi - theta) + [self.c, 0])
-        px, py = self.c - self.r * math.cos(theta), self.r * math.sin(theta)
+        return self.c - self.r * math.cos(theta), self.r * math.sin(theta)
+
+    def artists(self) -> list:
+        return [self.wheel, self.disc, self.arm, self.pin, self.arrow]
+
+    def update(self, row) -> list:
+        """The drawing at one table row: wheel, crank and pin, the normal force's arrow, the pin's temperature."""
+        px, py = self.move(float(row["crank_angle_rad"]), float(row["wheel_angle_rad"]))
         self.arm.set_data([self.c, px], [0, py])
         self.pin.set_center((px, py))
         force = float(row.get("contact_force_N", 0.0) or 0.0)
@@ -125,4 +132,4 @@ class GenevaDrawing:
         if self.temperature is not None and "temp_contact_C" in row:   # no contact (dwell): the pin's own colour
             temp = float(row["temp_contact_C"])
             self.pin.set_facecolor(colour(self.temperature, temp) if math.isfinite(temp) else CRANK)
-        return [self.wheel, self.disc, self.arm, self.pin, self.arrow]
+        return self.artists()

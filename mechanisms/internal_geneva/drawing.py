@@ -12,7 +12,8 @@ from matplotlib.colors import Normalize
 from matplotlib.patches import Circle, PathPatch
 from matplotlib.path import Path
 
-from mechsim.mechanisms.drawing import CRANK, MM, STEEL, STEEL_EDGE, arc, arrow_length, colour, finish_axes, rotate
+from mechsim.mechanisms.drawing import CRANK, MM, STEEL, STEEL_EDGE, arc, finish_axes, rotate
+from mechsim.mechanisms.geneva.drawing import GenevaDrawing
 
 
 def pocket_radius(geometry) -> float:
@@ -70,7 +71,7 @@ def _ring_path(outer: np.ndarray, inner: np.ndarray) -> Path:
     return Path(verts, codes)
 
 
-class InternalGenevaDrawing:
+class InternalGenevaDrawing(GenevaDrawing):
     """Ring wheel (slots 2R wide opening inward, pockets), crank arm and pin, the normal force on the wheel as an
     arrow at the pin; frame of docs/internal_geneva.md (wheel centre at the origin, crank centre at (c, 0))."""
 
@@ -98,18 +99,10 @@ class InternalGenevaDrawing:
         ax.set_ylim(-1.08 * Ro, 1.08 * Ro)
         finish_axes(ax)
 
-    def update(self, row) -> list:
-        theta, psi = float(row["crank_angle_rad"]), float(row["wheel_angle_rad"])
+    def move(self, theta: float, psi: float) -> tuple[float, float]:
+        """Turn the ring to psi and the crank to theta; the pin's centre (mm), on the far side of the crank centre."""
         self.wheel.set_path(_ring_path(self.outer, rotate(self.inner, psi)))
-        px, py = self.c + self.r * math.cos(theta), self.r * math.sin(theta)
-        self.arm.set_data([self.c, px], [0, py])
-        self.pin.set_center((px, py))
-        force = float(row.get("contact_force_N", 0.0) or 0.0)
-        slot = math.atan2(py, px)   # the pin lies on the engaged slot's centre line; N > 0 turns the wheel forward
-        self.arrow.set_offsets([[px, py]])
-        f = arrow_length(force, self.force_scale, self.arrow_nominal)
-        self.arrow.set_UVC([-math.sin(slot) * f], [math.cos(slot) * f])
-        if self.temperature is not None and "temp_contact_C" in row:   # no contact (dwell): the pin's own colour
-            temp = float(row["temp_contact_C"])
-            self.pin.set_facecolor(colour(self.temperature, temp) if math.isfinite(temp) else CRANK)
+        return self.c + self.r * math.cos(theta), self.r * math.sin(theta)
+
+    def artists(self) -> list:
         return [self.wheel, self.arm, self.pin, self.arrow]
