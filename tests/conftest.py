@@ -18,8 +18,10 @@ def pytest_configure(config):
 
 
 def pytest_terminal_summary(terminalreporter):
+    from test_fuzz_scenarios import FUZZ_EXAMPLES       # tests/ is on the path, as for cli_helpers
     seed = os.environ["MECHSIM_FUZZ_SEED"]
-    terminalreporter.write_line(f"scenario fuzzing: seed {seed} (MECHSIM_FUZZ_SEED={seed} repeats this run's cases)")
+    terminalreporter.write_line(f"scenario fuzzing: {FUZZ_EXAMPLES} generated cases, seed {seed} "
+                                f"(MECHSIM_FUZZ_SEED={seed} repeats them)")
 
 
 @pytest.fixture(scope="session")
