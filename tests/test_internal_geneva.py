@@ -333,9 +333,8 @@ def test_design_sensitivities_match_finite_differences():
     assert worst, worst
 
 
-@pytest.mark.xfail(strict=True, reason="a peak located at an event's one-sided limit (the wheel acceleration just "
-                   "after entry, 36.92 rad/s^2): the pass gives the load torque an elasticity of -1.05e-5 where the "
-                   "exact one is 0 (the acceleration at entry is kinematic, G' w1^2) and the differences give "
-                   "4.8e-9; open in issue 28")
 def test_sensitivity_of_a_peak_at_an_event_limit():
+    """The wheel's acceleration peaks at entry's one-sided limit (G' w1^2, kinematic: its elasticity by the load
+    torque is 0 exactly); the derivative of that limit, with dF/dp extrapolated to the event from the two samples
+    inside, equals the differences (to the floor where it is zero)."""
     _design_sensitivities(["peak_wheel_accel_rad_s2"])

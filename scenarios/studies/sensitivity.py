@@ -88,7 +88,9 @@ def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[fl
     """(value, gradient, the traced pass's value) of a located extremum F* = F(t*, p) (docs/sensitivity.md,
     "Peaks"). Interior: dF/dt = 0 at t*, so dF*/dp is the gradient of F at the fixed instant t* (the envelope rule).
     At an event tau (the one-sided limit there): dF*/dp = dF/dp + F'(tau) dtau/dp, with F' from the two samples
-    inside the interval and dtau/dp the event time's derivative (its implicit-function rule)."""
+    inside the interval and dtau/dp the event time's derivative (its implicit-function rule); dF/dp at tau is
+    extrapolated from the two samples as the value is (dF/dp changes at the rate dF'/dp there, which a sample
+    EVENT_OFFSET_S inside would otherwise add: 1e-5 of an elasticity after a Geneva entry)."""
     first = by_time[e["samples"][0]]
     g = np.asarray(first.grads[column], dtype=float)
     traced = first.values[column]
@@ -97,6 +99,7 @@ def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[fl
         h = e["samples"][0] - e["samples"][1]
         slope = (first.values[column] - second.values[column]) / h
         traced = first.values[column] + slope * (e["t_s"] - e["samples"][0])
+        g = g + (g - np.asarray(second.grads[column], dtype=float)) / h * (e["t_s"] - e["samples"][0])
         ev = min(events, key=lambda x: abs(x.t - e["t_s"]), default=None)
         if ev is None or abs(ev.t - e["t_s"]) > EVENT_OFFSET_S:
             raise ValueError(f"no traced event at t = {e['t_s']:.9g} s for the limit of {column}")
