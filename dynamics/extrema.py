@@ -24,6 +24,8 @@ from typing import Callable
 
 import numpy as np
 
+#: values closer than this fraction of the column's largest magnitude are equal (round-off): flat rows, ties
+TIE_ROUNDOFF = 1e-13
 #: readings of the first pass over a bracket; the second pass's step: the first's divided by this
 FIRST_GRID = 33
 STEP_DIVISOR = 64
@@ -119,7 +121,11 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
     the maximum, the best `limit` of them: a row's bracket may hold up to its parabola estimate plus the estimate's
     gain over the row again (the estimate's error is of the order of its gain), and it is kept where that reaches
     the best candidate's lower bound (its row and its estimate less its gain). flat: the row and its neighbours
-    are equal (a column held constant, e.g. zero in a dwell): the row's value is exact."""
+    are equal to round-off (a column held constant, e.g. zero in a dwell): the row's value is exact. Values within
+    round-off of each other are ties, and a tie goes to the earliest (which row of a dwell's zero speed, or which
+    dwell, holds the extremum must not hinge on the BLAS's rounding)."""
+    finite = np.abs(f[np.isfinite(f)])
+    tie = TIE_ROUNDOFF * float(finite.max()) if finite.size else 0.0
     found = []
     for k, iv in enumerate(intervals):
         rows = iv.rows
@@ -136,7 +142,10 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
         peak = (fi >= left) & (fi >= right) & ok
         flat = np.zeros(n, bool)
         if n > 1:
-            flat = ((fi == left) | (np.arange(n) == 0)) & ((fi == right) | (np.arange(n) == n - 1))
+            with np.errstate(invalid="ignore"):
+                flat = (((np.abs(fi - left) <= tie) | (np.arange(n) == 0))
+                        & ((np.abs(fi - right) <= tie) | (np.arange(n) == n - 1)))
+            peak |= flat & ok
         est = _estimates(ti, fi)
         for i in np.flatnonzero(peak & ~flat):
             lo = ti[i - 1] if i > 0 else iv.lo
@@ -149,8 +158,9 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
     if not found:
         return []
     lower = max(c[1] for c in found)
-    keep = [c for c in found if 2 * c[0] - c[1] >= lower]
-    keep.sort(key=lambda c: (-c[0], c[4]))
+    keep = [c for c in found if 2 * c[0] - c[1] >= lower - tie]
+    best = max(c[0] for c in keep)
+    keep.sort(key=lambda c: (-(best if c[0] >= best - tie else c[0]), c[4]))
     return [(c[0], c[2], c[3], c[4], c[5], c[6]) for c in keep[:limit]]
 
 

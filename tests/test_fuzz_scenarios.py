@@ -128,7 +128,7 @@ def malformed_structure(draw):
 
 @st.composite
 def malformed_bytes(draw):
-    """(data, the field its refusal names: "scenario", or None where any field may be named)."""
+    """(data, the field its refusal names)."""
     text = builtin_text(draw(st.sampled_from(BASES)))
     kind = draw(st.sampled_from(["utf-16", "utf-32", "latin-1", "binary", "deep", "truncated", "garbage"]))
     if kind in ("utf-16", "utf-32"):
@@ -144,8 +144,8 @@ def malformed_bytes(draw):
     if kind == "truncated":
         cut = draw(st.integers(1, len(text) - 1))
         data = text.encode()[:cut]
-        # a cut inside a comment keeps the tail a comment: valid TOML without the keys after it (any field named)
-        return (data + b"\n[" if draw(st.booleans()) else data + b" = = \n"), None
+        # the damage on a line of its own (a cut inside a comment would keep it a comment): always malformed TOML
+        return data + (b"\n[" if draw(st.booleans()) else b"\n = = \n"), "scenario"
     return draw(st.binary(min_size=1, max_size=100)).replace(b"\n", b"\x00"), "scenario"
 
 
