@@ -334,14 +334,7 @@ class TrajectoryReader:
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         from mechsim.dynamics.hybrid import Piece
         from mechsim.dynamics.tables import piece_columns
-        k, r = iv.anchors[position]
-        piece = self.traj.pieces[k]
-        mf = self.traj.model.modes[piece.mode]
-        t0 = float(piece.t[r])
-        try:
-            y0, yp0 = self._start(k, r)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            raise ReadingFailed(f"no consistent state at the row t = {t0:.9g} s: {exc}") from None
+        piece, mf, t0, y0, yp0 = self._anchor(iv, position)
         # every reading starts from the row's own state: a restart from an earlier reading's state (projected back
         # onto the constraints) was cheaper but added its own error, which a finite difference of the peak shows
         ts, ys, yps = [], [], []
@@ -361,18 +354,23 @@ class TrajectoryReader:
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
         the generalized momentum, whose jump across an event is the impulse the event delivers."""
+        piece, mf, t0, y0, yp0 = self._anchor(iv, position)
+        _, y, _ = self._integrate(mf, piece.params, t0, y0, yp0, np.array([t]))
+        q, v = y[0, mf.index["q"]], y[0, mf.index["v"]]
+        M = np.atleast_2d(np.asarray(mf.mass(q, piece.params), dtype=float))
+        return M @ v, v
+
+    def _anchor(self, iv: Interval, position: int):
+        """(piece, its mode's functions, t0, y0, y'0): the consistent state at the interval's row `position`, where
+        every reading of it starts."""
         k, r = iv.anchors[position]
         piece = self.traj.pieces[k]
-        mf = self.traj.model.modes[piece.mode]
         t0 = float(piece.t[r])
         try:
             y0, yp0 = self._start(k, r)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise ReadingFailed(f"no consistent state at the row t = {t0:.9g} s: {exc}") from None
-        _, y, _ = self._integrate(mf, piece.params, t0, y0, yp0, np.array([t]))
-        q, v = y[0, mf.index["q"]], y[0, mf.index["v"]]
-        M = np.atleast_2d(np.asarray(mf.mass(q, piece.params), dtype=float))
-        return M @ v, v
+        return piece, self.traj.model.modes[piece.mode], t0, y0, yp0
 
     def _start(self, k: int, r: int):
         """The consistent (y, y') at row r of piece k (the compiled diffrax run keeps states only), kept."""
