@@ -9,9 +9,9 @@
     r.save("results/motor")         # the CLI's output folder, written atomically
     r = mechsim.open("results/motor")   # and read back
 
-`mechsim sweep`, `mechsim compare`, `mechsim sensitivity` and `mechsim size` are `sweep(...)`, `compare(...)`,
-`sensitivity(...)` and `size(...)`. The command line is a thin layer over
-these functions (scenarios/cli.py), so both give the same numbers and files.
+`mechsim sweep`, `mechsim compare A B`, `mechsim compare --backends`, `mechsim sensitivity` and `mechsim size` are
+`sweep(...)`, `compare(a, b)`, `compare_backends(...)`, `sensitivity(...)` and `size(...)`. The command line is a
+thin layer over these functions (scenarios/cli.py), so both give the same numbers and files.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.loader import override_strings as _override_list
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "load", "open", "run", "sensitivity", "size",
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open", "run", "sensitivity", "size",
            "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
@@ -202,17 +202,32 @@ def run(scenario: Scenario | str | Path, set: Overrides = None,  # noqa: A002
     return Result(**fields, mechanism=plan.mechanism)
 
 
-def compare(scenario: Scenario | str | Path, set: Overrides = None, rtol: float = 1e-10,  # noqa: A002
-            atol: float | None = None, solver: str | None = None):
+def compare(a: Scenario | str | Path | Result, b: Scenario | str | Path | Result, set: Overrides = None,  # noqa: A002
+            set_a: Overrides = None, set_b: Overrides = None):
+    """Two designs side by side (`mechsim compare A B`): a and b each a scenario (a loaded Scenario, a built-in
+    name or a TOML file: run here) or a finished run (a Result, or a folder `mechsim run` or `Result.save` wrote).
+    `set` applies to each scenario, `set_a` / `set_b` to one (named in the comparison's labels).
+
+    Returns a Comparison: `.table` (one row per headline quantity both runs have: located peaks, start-up peaks,
+    cycle means and figures, heat, validity; columns quantity (its name ending in its unit), a, b, difference
+    b - a, relative_difference (b - a)/|a|), `.only_a` / `.only_b` (what one run has and the other lacks),
+    `.notes`, `.plot(which=None, x="time")` (the two runs overlaid, A solid, B dashed) and `.save(folder)`.
+    Raises ScenarioError for a user error (a folder mechsim did not write, nothing in common)."""
+    from mechsim.scenarios.studies.compare_designs import compare as compare_designs
+    return compare_designs(a, b, _override_list(set), _override_list(set_a), _override_list(set_b))
+
+
+def compare_backends(scenario: Scenario | str | Path, set: Overrides = None, rtol: float = 1e-10,  # noqa: A002
+                     atol: float | None = None, solver: str | None = None):
     """Run on IDA and on diffrax at rtol (atol = rtol/100 by default) and compare every column (`mechsim
-    compare`): a DataFrame, one row per column (max |diff|, max relative, where, tolerance, passed);
+    compare --backends`): a DataFrame, one row per column (max |diff|, max relative, where, tolerance, passed);
     `.attrs["passed"]` says whether the backends agree, `.attrs` also holds row and event counts, the event-time
     difference, failures and each run's solver statistics."""
-    from mechsim.scenarios.studies.compare import compare as compare_backends
+    from mechsim.scenarios.studies.compare import compare as compare_backends_table
     if not 0 < rtol < 1:
         raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     target = scenario if isinstance(scenario, Scenario) else str(scenario)
-    return compare_backends(target, _override_list(set), rtol=rtol, atol=atol, diffrax_solver=solver)
+    return compare_backends_table(target, _override_list(set), rtol=rtol, atol=atol, diffrax_solver=solver)
 
 
 def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: bool = False,  # noqa: A002

@@ -258,23 +258,97 @@ def animate(
 
 @app.command()
 def compare(
-    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
-    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
-    rtol: float = typer.Option(1e-10, "--rtol", help="relative tolerance of both runs"),
-    atol: Optional[float] = typer.Option(None, "--atol", help="absolute tolerance (default rtol / 100)"),
-    solver: Optional[str] = typer.Option(None, "--solver", help="diffrax solver (default: the scenario's)"),
+    a: str = typer.Argument(..., help="design A: built-in scenario name, TOML file or result folder"),
+    b: Optional[str] = typer.Argument(None, help="design B: built-in scenario name, TOML file or result folder"),
+    set_: List[str] = typer.Option([], "--set", help="override a value of each scenario: section.key=value "
+                                   "(repeatable)"),
+    set_a: List[str] = typer.Option([], "--set-a", help="override a value of A only (repeatable)"),
+    set_b: List[str] = typer.Option([], "--set-b", help="override a value of B only (repeatable)"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/compare-<A>-vs-<B>)"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
+    plots: bool = typer.Option(True, "--plots/--no-plots", help="write the overlaid figures"),
+    backends: bool = typer.Option(False, "--backends", help="instead: run the one scenario A on IDA and on diffrax "
+                                  "and compare the columns; exit 1 if they disagree beyond tolerance"),
+    rtol: Optional[float] = typer.Option(None, "--rtol", help="--backends: relative tolerance of both runs "
+                                         "(default 1e-10)"),
+    atol: Optional[float] = typer.Option(None, "--atol", help="--backends: absolute tolerance (default rtol / 100)"),
+    solver: Optional[str] = typer.Option(None, "--solver", help="--backends: diffrax solver (default: the "
+                                         "scenario's)"),
     fmt: str = typer.Option("table", "--format", help="table (plain full-precision text when piped), csv or json"),
 ) -> None:
-    """Run a scenario on IDA and on diffrax and compare the columns; exit 1 if they disagree beyond tolerance."""
-    from mechsim.scenarios import api
-    if not 0 < rtol < 1:
-        _fail(f"--rtol must be in (0, 1), got {rtol}")
+    """Two designs side by side: the headline figures of A and B (located peaks, cycle means, temperatures,
+    validity) with their differences, and the two runs' columns overlaid in figures, written to --out.
+    With --backends: one scenario on IDA and on diffrax (docs/diffrax.md)."""
     if fmt not in ("table", "csv", "json"):
         _fail(f"--format must be table, csv or json, got {fmt!r}")
+    if backends:
+        if b is not None or set_a or set_b or out_dir is not None:
+            _fail("compare --backends takes one scenario (and --set, --rtol, --atol, --solver); "
+                  f"{'a second argument' if b is not None else '--set-a/--set-b/--out'} belongs to `compare A B`")
+        _compare_backends(a, set_, 1e-10 if rtol is None else rtol, atol, solver, fmt)
+        return
+    if b is None:
+        _fail("compare takes two designs, A and B (scenarios or result folders); --backends compares IDA with "
+              "diffrax on one scenario")
+    if rtol is not None or atol is not None or solver is not None:
+        _fail("--rtol, --atol and --solver belong to `compare --backends`")
+    from mechsim.scenarios import api
     from mechsim.scenarios.console import native_output
     try:
         with native_output():       # the solver libraries' own prints stay off the table
-            table = api.compare(scenario, set_, rtol=rtol, atol=atol, solver=solver)
+            comparison = api.compare(a, b, set_, set_a, set_b)
+        names = [r.summary.get("scenario", side) for r, side in ((comparison.a, "a"), (comparison.b, "b"))]
+        target = _output_folder(out_dir, f"{names[0]}-vs-{names[1]}", force, "compare-")
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"scenario: {exc}")
+    except Exception as exc:  # a backend fault we did not foresee: one line, exit 3, never a traceback
+        _fail(f"compare: a run stopped on an internal error ({_internal_error(exc)})", SOLVER_FAILURE)
+    try:
+        comparison.save(target, force=force, plots=plots)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    except OSError as exc:
+        _os_refused(exc, "compare", target)
+    _print_designs(comparison, fmt, target)
+    if any(r.failure is not None for r in (comparison.a, comparison.b)):
+        raise typer.Exit(SOLVER_FAILURE)
+
+
+def _print_designs(comparison, fmt: str, target: Path) -> None:
+    """The headline table on stdout (rich on a terminal, full-precision plain text when piped, or csv/json); the
+    notes and the folder on stderr, so stdout holds data only."""
+    from mechsim.scenarios.studies.compare_designs import render
+    title = f"A: {comparison.names[0]}   B: {comparison.names[1]}"
+    if fmt == "table" and out.is_terminal:
+        from rich.table import Table
+        view = Table(title=title)
+        for name in ("quantity", "A", "B", "B - A", "(B - A)/|A|"):
+            view.add_column(name, justify="left" if name == "quantity" else "right", no_wrap=name == "quantity")
+        for r in comparison.table.itertuples():
+            rel = r.relative_difference
+            view.add_row(r.quantity, f"{r.a:.6g}", f"{r.b:.6g}", f"{r.difference:+.4g}",
+                         "" if rel != rel else f"{100 * rel:+.3g} %")
+        out.print(view)
+    elif fmt == "table":
+        sys.stdout.write(f"{title}\n{render(comparison, 'text')}")
+    else:
+        sys.stdout.write(render(comparison, fmt))
+    for note in comparison.notes + [f"-> {target}"]:
+        err.print(note, markup=False, highlight=False, soft_wrap=True)
+
+
+def _compare_backends(scenario: str, set_: List[str], rtol: float, atol: Optional[float], solver: Optional[str],
+                      fmt: str) -> None:
+    """`compare --backends`: IDA against diffrax on one scenario; exit 1 if they disagree beyond tolerance."""
+    from mechsim.scenarios import api
+    if not 0 < rtol < 1:
+        _fail(f"--rtol must be in (0, 1), got {rtol}")
+    from mechsim.scenarios.console import native_output
+    try:
+        with native_output():       # the solver libraries' own prints stay off the table
+            table = api.compare_backends(scenario, set_, rtol=rtol, atol=atol, solver=solver)
     except ScenarioError as exc:
         _fail(str(exc))
     except ValueError as exc:

@@ -157,6 +157,11 @@ def render(table: pd.DataFrame, fmt: str) -> str:
     for r in table.itertuples():
         cells.append([r.column, f"{r.max_abs_diff:.17g}", f"{r.max_rel_diff:.17g}", f"{r.t_s:.17g}",
                       f"{r.drive_angle_rad:.17g}", r.tolerance, "" if r.passed is None else ("yes" if r.passed else "NO")])
+    return aligned(cells, left=(0, 5))
+
+
+def aligned(cells: list[list[str]], left: tuple[int, ...] = (0,)) -> str:
+    """Rows of text cells as plain aligned columns (those in `left` left-aligned, the rest right-aligned)."""
     widths = [max(len(row[i]) for row in cells) for i in range(len(cells[0]))]
-    return "".join("  ".join(c.ljust(w) if i in (0, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))).rstrip()
-                   + "\n" for row in cells)
+    return "".join("  ".join(c.ljust(w) if i in left else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
+                   .rstrip() + "\n" for row in cells)

@@ -1,0 +1,357 @@
+"""Two designs side by side (`mechsim compare A B`, `mechsim.compare(a, b)`): each a scenario to run or a saved
+result folder; their headline figures as one table and their columns overlaid in figures.
+
+The headline figures are read from each run's summary, as the sweep table names them (scenarios/studies/sweep/
+rows.py): the located peaks `peak_max_<column>` / `peak_min_<column>` (the periodic regime's where a run reaches
+one, the start-up's beside them as `startup_peak_...`; docs/theory.md §K5), the cycle means `cycle_mean_<column>`
+(over the periodic regime's last turn, located, where the run has one; otherwise the trapezoidal mean of the
+output rows over the last complete drive cycle), the cycle time and the work of each power flow per cycle, the
+heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares (docs/limits.md). Each row holds
+both values, the difference b - a and the relative difference (b - a) / |a|; the quantity's name ends in its unit.
+
+Runs of different mechanisms share only some columns: what both have is compared, what one lacks is listed
+(`only_a`, `only_b`); nothing in common is a user error.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mechsim.scenarios.units import ScenarioError
+
+#: the table's columns: the quantity (its name ends in its unit), both values, b - a and (b - a) / |a|
+COLUMNS = ("quantity", "a", "b", "difference", "relative_difference")
+#: the two sides, as notes and figure legends name them
+SIDES = ("A", "B")
+
+
+def _number(value) -> float:
+    """A summary value as a float (None, e.g. a peak that grows without bound toward an event: NaN)."""
+    return math.nan if value is None else float(value)
+
+
+def _last_cycle(t: np.ndarray, angle: np.ndarray, cycle) -> tuple[float, float] | None:
+    """(start, end) times of the last complete drive cycle (the drive angle passing cycle.start + k period), or None
+    where the drive angle does not advance monotonically through one."""
+    if cycle is None or not cycle.period or len(t) < 2:
+        return None
+    sign = 1.0 if angle[-1] >= angle[0] else -1.0
+    a = sign * angle
+    if not np.all(np.diff(a) > 0):
+        return None
+    lo, hi = sorted(((angle[0] - cycle.start) / cycle.period, (angle[-1] - cycle.start) / cycle.period))
+    ks = np.arange(math.ceil(lo - 1e-12), math.floor(hi + 1e-12) + 1)
+    if len(ks) < 2:
+        return None
+    ends = cycle.start + cycle.period * (ks[-2:] if sign > 0 else ks[:2][::-1])
+    t0, t1 = np.interp(sign * ends, a, t)
+    return float(t0), float(t1)
+
+
+def headline(result) -> dict[str, float]:
+    """The headline figures of one run (module docstring), keyed by quantity name (`<quantity>_<unit>`)."""
+    from mechsim.scenarios.peaks import _turn_mean
+    from mechsim.scenarios.studies.sweep.rows import cycle_figures
+    s, df = result.summary, result.timeseries
+    out: dict[str, float] = {}
+    peaks = s.get("peaks") or {}
+    for col, e in peaks.items():
+        for side in ("max", "min"):
+            out[f"peak_{side}_{col}"] = _number(e[side]["value"])
+    for col, e in peaks.items():
+        for side in ("max", "min"):
+            if side in (e.get("startup") or {}):
+                out[f"startup_peak_{side}_{col}"] = _number(e["startup"][side]["value"])
+    cycle = result.mechanism.drive_cycle() if result.mechanism is not None else None
+    window = None
+    if cycle is not None and cycle.column in df and "t_s" in df:
+        window = _last_cycle(df["t_s"].to_numpy(float), df[cycle.column].to_numpy(float), cycle)
+    for col, e in peaks.items():
+        if "periodic" in e:
+            out[f"cycle_mean_{col}"] = _number(e["periodic"]["mean"])
+        elif window is not None and col in df:
+            mean = _turn_mean(df["t_s"].to_numpy(float), df[col].to_numpy(float), *window)
+            if math.isfinite(mean):             # a column defined only in contact (NaN between) has no cycle mean
+                out[f"cycle_mean_{col}"] = mean
+    if cycle is not None and cycle.column in df:
+        for name, value in cycle_figures(df, cycle.column).items():
+            if name != "cycles" and not (isinstance(value, float) and math.isnan(value)):
+                out[name] = float(value)
+    balance = (s.get("thermal") or {}).get("heat_balance") or {}
+    if "generated_J" in balance:
+        out["thermal_heat_generated_J"] = float(balance["generated_J"])
+    validity = s.get("validity") or {}
+    if validity.get("conditions"):
+        out["validity_violated_conditions"] = float(len(validity.get("violated") or []))
+    for c in validity.get("conditions") or []:
+        if not c.get("evaluated") or not c.get("worst"):
+            continue
+        from mechsim.scenarios.keys import unit_suffix
+        unit = f"_{unit_suffix(c['unit'])}" if c.get("unit") else ""
+        out[f"validity_{c['name']}_worst{unit}"] = _number(c["worst"].get("value"))
+        out[f"validity_{c['name']}_violated_share"] = _number(c.get("violated_share"))
+    return out
+
+
+def headline_table(a: dict[str, float], b: dict[str, float]) -> pd.DataFrame:
+    """One row per quantity both runs have (in a's order): both values, b - a, (b - a) / |a| (0 where both are 0,
+    NaN where a is 0 and b is not)."""
+    rows = []
+    for q, x in a.items():
+        if q not in b:
+            continue
+        y = b[q]
+        d = y - x
+        rel = (0.0 if d == 0 else math.nan) if x == 0 else d / abs(x)
+        rows.append((q, x, y, d, rel))
+    return pd.DataFrame(rows, columns=list(COLUMNS)).astype({c: float for c in COLUMNS[1:]})
+
+
+@dataclass
+class Comparison:
+    """Two runs side by side: `table` (one row per headline quantity both have: a, b, difference, relative
+    difference), `a` and `b` (the Results), their `names`, `only_a` / `only_b` (columns and headline quantities one
+    run has and the other lacks), `notes` (what a reader must know: different regimes, failures, figures not
+    folded). `plot()` the overlaid figures; `save(folder)` the table, the notes and the figures."""
+
+    a: object
+    b: object
+    names: tuple[str, str]
+    table: pd.DataFrame
+    only_a: list[str] = field(default_factory=list)
+    only_b: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def __repr__(self) -> str:
+        return (f"<mechsim.Comparison A={self.names[0]!r} B={self.names[1]!r}: {len(self.table)} quantities, "
+                f"{len(self.common_columns())} common columns>")
+
+    def common_columns(self) -> list[str]:
+        """The timeseries columns both runs have (in a's order)."""
+        return [c for c in self.a.timeseries.columns if c in self.b.timeseries.columns]
+
+    def _cycles(self):
+        """(cycle of a, cycle of b) where both fold over the same drive angle column, else None."""
+        ca, cb = (r.mechanism.drive_cycle() if r.mechanism is not None else None for r in (self.a, self.b))
+        if ca is None or cb is None or ca.column != cb.column or (ca.period is None) != (cb.period is None):
+            return None
+        if ca.column not in self.a.timeseries or cb.column not in self.b.timeseries:
+            return None
+        return ca, cb
+
+    def plot(self, which=None, x: str = "time"):
+        """Overlaid figures, A solid and B dashed in the same colour. which None: every figure group of a run's
+        figures (motion, forces, thermal, energy against time; motion, forces, thermal folded per drive cycle where
+        both runs fold over the same angle), keyed by name (`forces_vs_time`, ...). which a column or columns: one
+        Figure of them against time, or x="angle" per drive cycle. KeyError for a column not in both runs."""
+        from mechsim.scenarios.output.plots import FIGURES, PER_CYCLE, column_panels, panels
+        if x not in ("time", "angle"):
+            raise ValueError(f"plot(x={x!r}): x is \"time\" or \"angle\"")
+        common = self.common_columns()
+        title = f"{self.names[0]} (A, solid) vs {self.names[1]} (B, dashed)"
+        if which is not None:
+            wanted = [which] if isinstance(which, str) else list(which)
+            missing = [w for w in wanted if w not in common]
+            if missing or not wanted:
+                raise KeyError(f"no column {', '.join(map(repr, missing)) or '(none given)'} in both runs; their "
+                               f"common columns: {', '.join(common)}")
+            rows = column_panels(self.a.timeseries, wanted)
+            if x == "time":
+                return self._time(rows, title)
+            if self._cycles() is None:
+                raise ValueError("plot(x=\"angle\"): the two runs do not fold over the same drive angle; use "
+                                 "x=\"time\"")
+            return self._angle(rows, title)
+        df = self.a.timeseries[common]
+        figs = {}
+        cycles = self._cycles()
+        for group in FIGURES:
+            rows = panels(df, group)
+            if rows:
+                figs[f"{group}_vs_time"] = self._time(rows, f"{group}: {title}")
+            if cycles is not None and group in PER_CYCLE:
+                rows = panels(df, group, exclude=(cycles[0].column,))
+                if rows:
+                    figs[f"{group}_vs_angle"] = self._angle(rows, f"{group}: {title}")
+        return figs
+
+    def _time(self, rows, title):
+        from mechsim.scenarios.output.plots import time_figure
+        fig = time_figure(self.a.timeseries, "", title, rows=rows)
+        t = self.b.timeseries["t_s"].to_numpy(float)
+        for ax, panel in zip(fig.axes, rows):
+            colours = {line.get_gid(): line.get_color() for line in ax.get_lines()}
+            for col, label in panel["lines"]:
+                ax.plot(t, self.b.timeseries[col].to_numpy(float) * panel["scale"], lw=1.0, ls="--",
+                        color=colours[col], label=f"{label} (B)", gid=f"B:{col}")
+            _relabel(ax)
+        return fig
+
+    def _angle(self, rows, title):
+        from mechsim.scenarios.output.plots import DEG, _cycle_start_value, angle_figure, cycle_index
+        ca, cb = self._cycles()
+        fig = angle_figure(self.a.timeseries, "", title, ca, rows=rows)
+        df = self.b.timeseries
+        drive = df[cb.column].to_numpy(float)
+        k, within = cycle_index(drive, cb)
+        xb = (within + cb.start) * DEG
+        bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+        for ax, panel in zip(fig.axes, rows):
+            colours = {line.get_gid().split("#")[0]: line.get_color() for line in ax.get_lines()}
+            for col, label in panel["lines"]:
+                y = df[col].to_numpy(float) * panel["scale"]
+                for n, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
+                    yy = y[lo:hi]
+                    if panel["unit"] == "deg" and col.endswith("_angle_rad"):
+                        yy = yy - _cycle_start_value(drive, y, lo, hi, cb)
+                    ax.plot(xb[lo:hi], yy, lw=1.0, ls="--", color=colours[col], gid=f"B:{col}#cycle{k[lo]}",
+                            alpha=0.35 + 0.65 * (n + 1) / (len(bounds) - 1),
+                            label=f"{label} (B)" if n == len(bounds) - 2 else "_nolegend_")
+            _relabel(ax)
+        return fig
+
+    def save(self, folder: str | Path, force: bool = False, plots: bool = True) -> Path:
+        """Write compare.csv (the table, full precision), compare.json (names, what one run lacks, the
+        notes and the table) and with plots the overlaid figures as PNG, atomically (scenarios/output/atomic.py):
+        all or nothing; an existing folder is replaced only with force and only if mechsim wrote it."""
+        from mechsim.scenarios.output.atomic import atomic_folder
+        from mechsim.scenarios.output.plots import save as save_png
+        folder = Path(folder)
+        figs = self.plot() if plots else {}
+        with atomic_folder(folder, force) as tmp:
+            (tmp / "compare.csv").write_text(self.table.to_csv(index=False, float_format="%.17g"))
+            (tmp / "compare.json").write_text(render(self, "json"))
+            for stem, fig in figs.items():
+                save_png(fig, tmp / f"{stem}.png")
+        return folder
+
+
+def _relabel(ax) -> None:
+    """A's lines named "(A)" beside B's, the legend redrawn (plots.py's placement)."""
+    from mechsim.scenarios.output.plots import _legend
+    for line in ax.get_lines():
+        label = line.get_label()
+        if not line.get_gid().startswith("B:") and not label.startswith("_") and not label.endswith(" (A)"):
+            line.set_label(f"{label} (A)")
+    _legend(ax)
+
+
+def _is_result_folder(arg: str) -> bool:
+    """Whether a command-line argument names a result folder: an existing folder, unless a built-in scenario of
+    that name wins (as `mechsim.load` reads a bare name; "./name" forces the folder)."""
+    from mechsim.scenarios.loader import builtin_names
+    path = Path(arg)
+    if not path.is_dir():
+        return False
+    return "/" in arg or arg not in builtin_names()
+
+
+def _is_result(arg) -> bool:
+    """Whether one side is a finished run: a Result, or a path naming a result folder."""
+    from mechsim.dynamics.result import Result as RunResult
+    return isinstance(arg, RunResult) or (isinstance(arg, (str, Path)) and _is_result_folder(str(arg)))
+
+
+def resolve(arg, overrides: list[str], side: str):
+    """(Result, name) of one side: a Result as it is, a result folder read back (`mechsim.open`), a Scenario or a
+    scenario name/file run with the overrides. ScenarioError naming the side for a folder mechsim did not write
+    and for overrides given to a finished run."""
+    from mechsim.scenarios import api
+    if _is_result(arg):
+        if overrides:
+            raise ScenarioError(side, f"{arg if isinstance(arg, (str, Path)) else 'the Result'} is a finished run; "
+                                      "--set applies to scenarios only")
+        if not isinstance(arg, (str, Path)):
+            return arg, str(arg.summary.get("scenario", side))
+        try:
+            result = api.open(arg)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(side, str(exc).replace("; mechsim.open reads", "; compare reads")) from None
+        return result, str(result.summary.get("scenario", Path(arg).name))
+    if isinstance(arg, api.Scenario):
+        sc = arg.set(overrides) if overrides else arg
+    else:
+        sc = api.load(arg, overrides)
+    return api.run(sc), sc.name
+
+
+def compare(a, b, overrides: list[str] | None = None, overrides_a: list[str] | None = None,
+            overrides_b: list[str] | None = None) -> Comparison:
+    """Compare two designs: a and b each a scenario (name, file or Scenario; `overrides` apply to each scenario,
+    `overrides_a`/`overrides_b` to one) or a finished run (a result folder or a Result). See the module
+    docstring. ScenarioError for a user error (a folder mechsim did not write, overrides for a finished run,
+    nothing in common)."""
+    shared = list(overrides or [])
+    if shared and _is_result(a) and _is_result(b):
+        raise ScenarioError("--set", "both sides are finished runs; --set applies to scenarios only")
+    sides = []
+    for side, arg, own in (("A", a, overrides_a), ("B", b, overrides_b)):
+        result, name = resolve(arg, ([] if _is_result(arg) else shared) + list(own or []), side)
+        sides.append((result, f"{name} with {', '.join(own)}" if own else name))   # the side's own changes named
+    (ra, name_a), (rb, name_b) = sides
+    cols_a, cols_b = list(ra.timeseries.columns), list(rb.timeseries.columns)
+    ha, hb = headline(ra), headline(rb)
+    cols_only_a, cols_only_b = [c for c in cols_a if c not in cols_b], [c for c in cols_b if c not in cols_a]
+    only_a = cols_only_a + [q for q in ha if q not in hb and not _of(q, cols_only_a)]
+    only_b = cols_only_b + [q for q in hb if q not in ha and not _of(q, cols_only_b)]
+    table = headline_table(ha, hb)
+    common = [c for c in cols_a if c in cols_b and c not in ("t_s", "mode")]
+    if table.empty and not common:
+        raise ScenarioError("compare", f"{name_a} and {name_b} have no column or headline figure in common "
+                                       f"({ra.summary.get('mechanism', '?')} and {rb.summary.get('mechanism', '?')})")
+    comparison = Comparison(ra, rb, (name_a, name_b), table, only_a, only_b)
+    comparison.notes = _notes(comparison)
+    return comparison
+
+
+def _of(quantity: str, columns: list[str]) -> bool:
+    """Whether a headline quantity is read from one of `columns` (already listed as a column one run lacks)."""
+    return any(quantity.endswith(f"_{c}") for c in columns)
+
+
+def _notes(c: Comparison) -> list[str]:
+    """What a reader of the table must know: what one run lacks, different regimes, failures, no folding."""
+    notes = []
+    ma, mb = (r.summary.get("mechanism", "?") for r in (c.a, c.b))
+    if ma != mb:
+        notes.append(f"different mechanisms ({ma}, {mb}): only what both have is compared")
+    for side, only in (("A", c.only_a), ("B", c.only_b)):
+        if only:
+            notes.append(f"only in {side} ({c.names[SIDES.index(side)]}): {', '.join(only)}")
+    ra, rb = (r.summary.get("regime") for r in (c.a, c.b))
+    if bool(ra) != bool(rb):
+        has, lacks = ("A", "B") if ra else ("B", "A")
+        notes.append(f"{has}'s peaks are its periodic regime's (from t = {(ra or rb)['from_t_s']:.6g} s); {lacks} "
+                     f"reaches none, its peaks are the whole run's")
+    for side, r in zip(SIDES, (c.a, c.b)):
+        if r.failure is not None:
+            notes.append(f"{side} failed: {r.failure.message()}; its figures are of what ran")
+    if c._cycles() is None:
+        notes.append("the runs do not fold over the same drive angle: figures against time only")
+    return notes
+
+
+def render(c: Comparison, fmt: str) -> str:
+    """The comparison as text: "csv" (the table, full precision), "json" (the names, what one run lacks,
+    notes and the table's rows) or "text" (aligned plain columns, full precision, for pipes)."""
+    from mechsim.scenarios.studies.compare import aligned
+    if fmt == "csv":
+        return c.table.to_csv(index=False, float_format="%.17g")
+    if fmt == "json":
+        import json
+
+        from mechsim.scenarios.output.atomic import json_default
+        rows = [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
+                for row in c.table.to_dict(orient="records")]
+        facts = {"a": c.names[0], "b": c.names[1],
+                 "only_a": c.only_a, "only_b": c.only_b, "notes": c.notes, "quantities": rows}
+        return json.dumps(facts, indent=2, default=json_default, allow_nan=False) + "\n"
+    if fmt != "text":
+        raise ValueError(f"format must be csv, json or text, got {fmt!r}")
+    cells = [list(COLUMNS)] + [[r.quantity] + [f"{v:.17g}" for v in (r.a, r.b, r.difference, r.relative_difference)]
+                               for r in c.table.itertuples()]
+    return aligned(cells, left=(0,))
