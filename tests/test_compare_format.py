@@ -37,7 +37,7 @@ def test_angle_bound_is_relative_to_the_peak_and_scales_with_rtol(table):
 
 def _invoke(monkeypatch, table, *args):
     monkeypatch.setattr(cmp, "compare", lambda *a, **k: table)
-    return CliRunner().invoke(app, ["compare", "synthetic", *args])
+    return CliRunner().invoke(app, ["compare", "synthetic", "--backends", *args])
 
 
 def test_csv_parses_with_pandas_at_full_precision(monkeypatch, table):

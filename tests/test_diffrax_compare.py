@@ -59,10 +59,11 @@ def test_work_columns_agree(motor_table):
 
 def test_cli_compare_passes_and_user_errors_are_one_line():
     runner = CliRunner()
-    res = runner.invoke(app, ["compare", "geneva-torque", "--set", "duration='0.6 s'", "--rtol", str(RTOL)])
+    res = runner.invoke(app, ["compare", "geneva-torque", "--backends", "--set", "duration='0.6 s'",
+                              "--rtol", str(RTOL)])
     assert res.exit_code == 0, res.output
     assert "contact_force_N" in res.output
-    bad = runner.invoke(app, ["compare", "no-such-scenario"])
+    bad = runner.invoke(app, ["compare", "no-such-scenario", "--backends"])
     assert bad.exit_code == 2
     assert len(bad.output.strip().splitlines()) == 1
 
@@ -94,6 +95,6 @@ def test_cli_compare_exits_1_when_backends_disagree(monkeypatch):
         return table
 
     monkeypatch.setattr(cmp, "compare", disagreeing)
-    res = CliRunner().invoke(app, ["compare", "geneva-torque"])
+    res = CliRunner().invoke(app, ["compare", "geneva-torque", "--backends"])
     assert res.exit_code == 1
     assert "NO" in res.output

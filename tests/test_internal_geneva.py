@@ -184,12 +184,12 @@ def test_motor_with_friction_energy_closes(geometry):
 
 # -- the scenario pipeline: both integrators, every thermal model ------------------------------------------------
 def test_ida_and_diffrax_agree():
-    """`mechsim compare` on the motor scenario with friction (entries, slip reversals, exits over 2.5 s): the same
-    event sequence, event times within 1e-8 s, every compared column within its tolerance (angles 1e-7 relative,
+    """`mechsim compare --backends` on the motor scenario with friction (entries, slip reversals, exits over 2.5 s):
+    the same event sequence, event times within 1e-8 s, every compared column within its tolerance (angles 1e-7 relative,
     speeds and forces 1e-6 / 1e-5) at rtol 1e-10."""
     from mechsim.scenarios import api
-    table = api.compare("internal-geneva-motor", ["duration=2.5 s", "output_step=2 ms"],
-                        rtol=1e-10)
+    table = api.compare_backends("internal-geneva-motor", ["duration=2.5 s", "output_step=2 ms"],
+                                  rtol=1e-10)
     assert table.attrs["failures"] == {} and table.attrs["passed"]
     assert table.attrs["same_event_sequence"] and table.attrs["events"]["ida"] >= 9
     assert table.attrs["event_time_max_diff_s"] < 1e-8
