@@ -26,8 +26,8 @@ from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.loader import override_strings as _override_list
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open", "run", "sensitivity", "size",
-           "sweep"]
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open", "run",
+           "sensitivity", "size", "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
 

@@ -110,11 +110,15 @@ def list_cmd() -> None:
 
 
 @app.command()
-def show(name: str) -> None:
-    """Print a built-in scenario file."""
-    from mechsim.scenarios.loader import builtin_text
+def show(
+    scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
+    set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
+) -> None:
+    """Print a scenario as TOML, every key with its meaning and unit as a comment and every key it leaves out
+    commented with its default: `mechsim show geneva-lc1 > mine.toml`, edit, `mechsim run mine.toml`."""
+    from mechsim.scenarios.loader import load
     try:
-        print(builtin_text(name), end="")
+        sys.stdout.write(load(scenario, list(set_)).to_toml(comments=True))
     except ScenarioError as exc:
         _fail(str(exc))
 

@@ -63,9 +63,13 @@ class Scenario:
         ...] as `--set`, or {"section.key": value}). Raises ScenarioError naming the field on a bad value."""
         return from_raw(self.raw, self.source, override_strings(overrides))
 
-    def to_toml(self) -> str:
+    def to_toml(self, comments: bool = False) -> str:
         """The scenario as written (units as the user gave them, overrides applied) as TOML text; `load` reads it
-        back to the same values."""
+        back to the same values. comments=True (`mechsim show`): every key with its meaning and SI unit as a
+        comment, and every optional key left out as a commented line with its default (scenarios/scenario_text.py)."""
+        if comments:
+            from mechsim.scenarios.scenario_text import annotated_toml
+            return annotated_toml(self)
         import tomli_w
         return f"# {self.name} (from {self.source})\n" + tomli_w.dumps(self.raw)
 

@@ -6,8 +6,9 @@ rows.py): the located peaks `peak_max_<column>` / `peak_min_<column>` (the perio
 one, the start-up's beside them as `startup_peak_...`; docs/theory.md §K5), the cycle means `cycle_mean_<column>`
 (over the periodic regime's last turn, located, where the run has one; otherwise the trapezoidal mean of the
 output rows over the last complete drive cycle), the cycle time and the work of each power flow per cycle, the
-heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares (docs/limits.md). Each row holds
-both values, the difference b - a and the relative difference (b - a) / |a|; the quantity's name ends in its unit.
+heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares
+(docs/limits.md). Each row holds both values, the difference b - a and the relative difference (b - a) / |a|; the
+quantity's name ends in its unit.
 
 Runs of different mechanisms share only some columns: what both have is compared, what one lacks is listed
 (`only_a`, `only_b`); nothing in common is a user error.
