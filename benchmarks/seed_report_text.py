@@ -303,6 +303,10 @@ Seed: Ambaye, Lemu & Tolcha (2022), *Contact temperature analysis of the classic
 numerical methods*, Mater. Today Proc. 57:545–552 (equations S(n)). Physics reference: `docs/theory.md (Part G)` (§n);
 docs/thermal.md and docs/geneva.md describe mechsim's models. Angular position φ = α + α0 (docs/theory.md §G1): 0° at
 entry, 45° at mid-stroke (pin deepest in the slot), 90° at exit; the pin moves inward for φ < 45°.
+φ and mechsim's crank angle: α is the crank angle within its turn, the `crank_angle_rad` column less whole turns
+(0 with the crank pointing at the wheel centre, growing with the drive), as summary.json's
+`drive_angle_wrapped_deg` and the x axis of the `*_vs_angle` figures give it; α0 = 90° − 180°/n = 45° for the 4-slot
+wheel. So φ = crank angle + 45°: φ = 0°, 45°, 90° are crank angles −45°, 0°, +45°, and φ = 61°…63° is +16°…+18°.
 
 Files: `case_<scenario>.csv` (every model's columns on the φ grid, SI units), `comparison.csv` (peaks per case
 and model), `peak_location.csv`, `speed_vs_torque.csv`, one figure per quantity.
