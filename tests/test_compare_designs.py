@@ -103,6 +103,10 @@ def motors():
     return mechsim.compare(sc, sc.set({"load.wheel_torque": "9 N*m"}))
 
 
+def test_one_scenario_twice_is_labelled_by_what_differs(motors):
+    assert motors.names == ("geneva-motor with load.wheel_torque=7 N*m", "geneva-motor with load.wheel_torque=9 N*m")
+
+
 def test_a_periodic_regime_gives_its_peaks_start_up_peaks_and_located_means(motors):
     for side, r in (("a", motors.a), ("b", motors.b)):
         assert r.summary["regime"], "the motor run settles (scenario description)"

@@ -85,3 +85,27 @@ print(again, "| same timeseries:", again.timeseries.equals(r.timeseries))
 # %%
 table = mechsim.sweep("geneva-lc1", vary={"drive.speed": "2,3,4 rad/s"}, set={"duration": "2 s"})
 print(table[["drive.speed_rad_s", "success", "peak_max_contact_force_N"]])
+
+# %% [markdown]
+# ## Two designs side by side
+# `mechsim.compare(a, b)` takes a scenario or a finished run on each side (here the run above, a Result, against
+# the same scenario with a heavier wheel load) and gives the headline numbers of both with their differences, and
+# figures of both runs overlaid (A solid, B dashed). `mechsim compare A B` on the command line is the same.
+
+# %%
+heavy = sc.set({"load.wheel_torque": "10 N*m"})
+c = mechsim.compare(r, heavy)
+print(c)
+rows = ["peak_max_contact_force_N", "cycle_mean_drive_torque_N_m", "work_load_per_cycle_J", "peak_max_temp_contact_C"]
+print(c.table.set_index("quantity").loc[rows])
+# the crank turns at a prescribed speed, so the wheel moves alike and the load's work per index scales with torque
+print("wheel speed peak differs by", c.table.set_index("quantity").loc["peak_max_wheel_speed_rad_s", "difference"])
+c.plot()["forces_vs_angle"].savefig(folder / "compare_forces_vs_angle.png")
+print("compared:", ", ".join(sorted(p.name for p in c.save(folder / "compare", force=True).iterdir())))
+
+# %% [markdown]
+# `mechsim show NAME` prints a scenario with every key's meaning and unit, and the keys it leaves out commented
+# with their defaults: a template to start your own (`Scenario.to_toml(comments=True)` is the same text).
+
+# %%
+print("\n".join(heavy.to_toml(comments=True).splitlines()[:12]))

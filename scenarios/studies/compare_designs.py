@@ -294,6 +294,10 @@ def compare(a, b, overrides: list[str] | None = None, overrides_a: list[str] | N
         result, name = resolve(arg, ([] if _is_result(arg) else shared) + list(own or []), side)
         sides.append((result, f"{name} with {', '.join(own)}" if own else name))   # the side's own changes named
     (ra, name_a), (rb, name_b) = sides
+    if name_a == name_b and ra.scenario and rb.scenario:    # one scenario twice: the labels say what differs
+        diff = _differences(ra.scenario, rb.scenario)
+        if diff:
+            name_a, name_b = (f"{name_a} with {', '.join(d)}" for d in zip(*diff))
     cols_a, cols_b = list(ra.timeseries.columns), list(rb.timeseries.columns)
     ha, hb = headline(ra), headline(rb)
     cols_only_a, cols_only_b = [c for c in cols_a if c not in cols_b], [c for c in cols_b if c not in cols_a]
@@ -307,6 +311,29 @@ def compare(a, b, overrides: list[str] | None = None, overrides_a: list[str] | N
     comparison = Comparison(ra, rb, (name_a, name_b), table, only_a, only_b)
     comparison.notes = _notes(comparison)
     return comparison
+
+
+def _differences(si_a: dict, si_b: dict) -> list[tuple[str, str]]:
+    """[("key=value_a unit", "key=value_b unit")] for each scenario value (SI) that differs, name and description
+    aside."""
+    from mechsim.scenarios.keys import field_unit
+
+    def flat(d: dict, prefix: str = "") -> dict:
+        out = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+        return out
+    fa, fb = flat(si_a), flat(si_b)
+    out = []
+    for key in [k for k in fa if k not in ("name", "description")] + [k for k in fb if k not in fa]:
+        x, y = fa.get(key), fb.get(key)
+        if x != y:
+            try:
+                unit = f" {field_unit(si_a, key)}".rstrip() if key in fa and key in fb else ""
+            except (KeyError, ValueError):
+                unit = ""
+            out.append(tuple(f"{key}={v:g}{unit}" if isinstance(v, float) else f"{key}={v}" for v in (x, y)))
+    return out
 
 
 def _of(quantity: str, columns: list[str]) -> bool:
