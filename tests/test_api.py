@@ -114,6 +114,9 @@ def test_the_notebook_tour_runs(tmp_path):
     assert np.isfinite(float(out.stdout.split("heat balance closes to")[1].split()[0]))
     assert "to_toml round-trips: True" in out.stdout and "same timeseries: True" in out.stdout
     assert (tmp_path / "tour" / "contact_force.png").stat().st_size > 0
+    # the comparison: a prescribed crank speed moves the wheel alike under either load
+    assert "wheel speed peak differs by 0.0" in out.stdout
+    assert (tmp_path / "tour" / "compare" / "compare.csv").is_file()
 
 
 def test_a_thermal_model_is_one_module_and_its_registry_line(monkeypatch):
