@@ -213,8 +213,36 @@ def compare(a: Scenario | str | Path | Result, b: Scenario | str | Path | Result
     b - a, relative_difference (b - a)/|a|), `.only_a` / `.only_b` (what one run has and the other lacks),
     `.notes`, `.plot(which=None, x="time")` (the two runs overlaid, A solid, B dashed) and `.save(folder)`.
     Raises ScenarioError for a user error (a folder mechsim did not write, nothing in common)."""
-    from mechsim.scenarios.studies.compare_designs import compare as compare_designs
-    return compare_designs(a, b, _override_list(set), _override_list(set_a), _override_list(set_b))
+    from mechsim.scenarios.studies.compare_designs import compare_runs, is_finished_run
+    shared = _override_list(set)
+    if shared and is_finished_run(a) and is_finished_run(b):
+        raise ScenarioError("--set", "both sides are finished runs; --set applies to scenarios only")
+    sides = []
+    for side, arg, own in (("A", a, _override_list(set_a)), ("B", b, _override_list(set_b))):
+        result, name = _design(arg, ([] if is_finished_run(arg) else shared) + own, side)
+        sides.append((result, f"{name} with {', '.join(own)}" if own else name))   # the side's own changes named
+    (ra, name_a), (rb, name_b) = sides
+    return compare_runs(ra, rb, name_a, name_b)
+
+
+def _design(arg, overrides: list[str], side: str) -> tuple[Result, str]:
+    """(Result, label) of one side of `compare`: a Result as it is, a result folder read back (`open`), a Scenario
+    or a scenario name/file run with the overrides. ScenarioError naming the side for a folder mechsim did not
+    write and for overrides given to a finished run."""
+    from mechsim.scenarios.studies.compare_designs import is_finished_run
+    if is_finished_run(arg):
+        if overrides:
+            raise ScenarioError(side, f"{arg if isinstance(arg, (str, Path)) else 'the Result'} is a finished run; "
+                                      "--set applies to scenarios only")
+        if not isinstance(arg, (str, Path)):
+            return arg, str(arg.summary.get("scenario", side))
+        try:
+            result = open(arg)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(side, str(exc).replace("; mechsim.open reads", "; compare reads")) from None
+        return result, str(result.summary.get("scenario", Path(arg).name))
+    sc = (arg.set(overrides) if overrides else arg) if isinstance(arg, Scenario) else load(arg, overrides)
+    return run(sc), sc.name
 
 
 def compare_backends(scenario: Scenario | str | Path, set: Overrides = None, rtol: float = 1e-10,  # noqa: A002

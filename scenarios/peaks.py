@@ -157,7 +157,7 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     return {c: v / (b - a) for c, v in total.items()}
 
 
-def _turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
+def turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
     """The mean of a column over [a, b] by the trapezoidal rule on the rows (the ends interpolated)."""
     inside = (t > a) & (t < b)
     tt = np.r_[a, t[inside], b]
@@ -228,7 +228,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             else:
                 if label == "periodic":
                     a, b = regime["last_turn"]
-                    entry["periodic"] = {"mean": means.get(c, _turn_mean(t[:n], f[:n], a, b)),
+                    entry["periodic"] = {"mean": means.get(c, turn_mean(t[:n], f[:n], a, b)),
                                          "mean_over": [a, b]}
                 out[c] = entry
     return out, regime

@@ -77,7 +77,8 @@ def panels(df: pd.DataFrame, figure: str, exclude: tuple[str, ...] = ()) -> list
     return sorted(out.values(), key=lambda panel: order[(panel["quantity"], panel["unit"])])
 
 
-def _legend(ax) -> None:
+def legend_outside(ax) -> None:
+    """The axes' legend outside the data, to the right (every figure's placement)."""
     handles, labels = ax.get_legend_handles_labels()
     if handles:
         ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False,
@@ -113,7 +114,7 @@ def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | No
             ax.plot(t, df[col].to_numpy(float) * panel["scale"], lw=1.0, label=label, gid=col)
         ax.set_ylabel(f"{panel['quantity']} ({panel['unit']})")
         ax.grid(alpha=0.3)
-        _legend(ax)
+        legend_outside(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
@@ -150,7 +151,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
             for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
                 yy = y[a:b]
                 if panel["unit"] == "deg" and col.endswith("_angle_rad"):
-                    yy = yy - _cycle_start_value(df[cycle.column].to_numpy(float), y, a, b, cycle)
+                    yy = yy - cycle_start_value(df[cycle.column].to_numpy(float), y, a, b, cycle)
                 shade = 0.35 + 0.65 * (n + 1) / len(cycles)
                 ax.plot(x[a:b], yy, lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
                         label=label if n == len(cycles) - 1 else "_nolegend_")
@@ -158,7 +159,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
         quantity = f"angle turned since {since}" if panel["unit"] == "deg" else panel["quantity"]
         ax.set_ylabel(f"{quantity} ({panel['unit']})")
         ax.grid(alpha=0.3)
-        _legend(ax)
+        legend_outside(ax)
     axes[-1].set_xlim(*((x0, x0 + cycle.period * DEG) if cycle.period else (np.nanmin(x), np.nanmax(x))))
     axes[-1].set_xlabel(cycle.label)
     fig.suptitle(f"{title} ({len(cycles)} cycle{'s' if len(cycles) != 1 else ''}, a line each, later darker)"
@@ -166,7 +167,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
     return fig
 
 
-def _cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: DriveCycle) -> float:
+def cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: DriveCycle) -> float:
     """The value of y where this cycle started (interpolated in the drive angle; the first rows if the run
     began inside the cycle)."""
     if a == 0 or cycle.period is None:

@@ -55,7 +55,7 @@ def _last_cycle(t: np.ndarray, angle: np.ndarray, cycle) -> tuple[float, float] 
 
 def headline(result) -> dict[str, float]:
     """The headline figures of one run (module docstring), keyed by quantity name (`<quantity>_<unit>`)."""
-    from mechsim.scenarios.peaks import _turn_mean
+    from mechsim.scenarios.peaks import turn_mean
     from mechsim.scenarios.studies.sweep.rows import cycle_figures
     s, df = result.summary, result.timeseries
     out: dict[str, float] = {}
@@ -75,7 +75,7 @@ def headline(result) -> dict[str, float]:
         if "periodic" in e:
             out[f"cycle_mean_{col}"] = _number(e["periodic"]["mean"])
         elif window is not None and col in df:
-            mean = _turn_mean(df["t_s"].to_numpy(float), df[col].to_numpy(float), *window)
+            mean = turn_mean(df["t_s"].to_numpy(float), df[col].to_numpy(float), *window)
             if math.isfinite(mean):             # a column defined only in contact (NaN between) has no cycle mean
                 out[f"cycle_mean_{col}"] = mean
     if cycle is not None and cycle.column in df:
@@ -193,7 +193,7 @@ class Comparison:
         return fig
 
     def _angle(self, rows, title):
-        from mechsim.scenarios.output.plots import DEG, _cycle_start_value, angle_figure, cycle_index
+        from mechsim.scenarios.output.plots import DEG, angle_figure, cycle_index, cycle_start_value
         ca, cb = self._cycles()
         fig = angle_figure(self.a.timeseries, "", title, ca, rows=rows)
         df = self.b.timeseries
@@ -208,7 +208,7 @@ class Comparison:
                 for n, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
                     yy = y[lo:hi]
                     if panel["unit"] == "deg" and col.endswith("_angle_rad"):
-                        yy = yy - _cycle_start_value(drive, y, lo, hi, cb)
+                        yy = yy - cycle_start_value(drive, y, lo, hi, cb)
                     ax.plot(xb[lo:hi], yy, lw=1.0, ls="--", color=colours[col], gid=f"B:{col}#cycle{k[lo]}",
                             alpha=0.35 + 0.65 * (n + 1) / (len(bounds) - 1),
                             label=f"{label} (B)" if n == len(bounds) - 2 else "_nolegend_")
@@ -233,12 +233,12 @@ class Comparison:
 
 def _relabel(ax) -> None:
     """A's lines named "(A)" beside B's, the legend redrawn (plots.py's placement)."""
-    from mechsim.scenarios.output.plots import _legend
+    from mechsim.scenarios.output.plots import legend_outside
     for line in ax.get_lines():
         label = line.get_label()
         if not line.get_gid().startswith("B:") and not label.startswith("_") and not label.endswith(" (A)"):
             line.set_label(f"{label} (A)")
-    _legend(ax)
+    legend_outside(ax)
 
 
 def _is_result_folder(arg: str) -> bool:
@@ -251,49 +251,15 @@ def _is_result_folder(arg: str) -> bool:
     return "/" in arg or arg not in builtin_names()
 
 
-def _is_result(arg) -> bool:
-    """Whether one side is a finished run: a Result, or a path naming a result folder."""
+def is_finished_run(arg) -> bool:
+    """Whether one side of a comparison is a finished run: a Result, or a path naming a result folder."""
     from mechsim.dynamics.result import Result as RunResult
     return isinstance(arg, RunResult) or (isinstance(arg, (str, Path)) and _is_result_folder(str(arg)))
 
 
-def resolve(arg, overrides: list[str], side: str):
-    """(Result, name) of one side: a Result as it is, a result folder read back (`mechsim.open`), a Scenario or a
-    scenario name/file run with the overrides. ScenarioError naming the side for a folder mechsim did not write
-    and for overrides given to a finished run."""
-    from mechsim.scenarios import api
-    if _is_result(arg):
-        if overrides:
-            raise ScenarioError(side, f"{arg if isinstance(arg, (str, Path)) else 'the Result'} is a finished run; "
-                                      "--set applies to scenarios only")
-        if not isinstance(arg, (str, Path)):
-            return arg, str(arg.summary.get("scenario", side))
-        try:
-            result = api.open(arg)
-        except (ValueError, FileNotFoundError) as exc:
-            raise ScenarioError(side, str(exc).replace("; mechsim.open reads", "; compare reads")) from None
-        return result, str(result.summary.get("scenario", Path(arg).name))
-    if isinstance(arg, api.Scenario):
-        sc = arg.set(overrides) if overrides else arg
-    else:
-        sc = api.load(arg, overrides)
-    return api.run(sc), sc.name
-
-
-def compare(a, b, overrides: list[str] | None = None, overrides_a: list[str] | None = None,
-            overrides_b: list[str] | None = None) -> Comparison:
-    """Compare two designs: a and b each a scenario (name, file or Scenario; `overrides` apply to each scenario,
-    `overrides_a`/`overrides_b` to one) or a finished run (a result folder or a Result). See the module
-    docstring. ScenarioError for a user error (a folder mechsim did not write, overrides for a finished run,
-    nothing in common)."""
-    shared = list(overrides or [])
-    if shared and _is_result(a) and _is_result(b):
-        raise ScenarioError("--set", "both sides are finished runs; --set applies to scenarios only")
-    sides = []
-    for side, arg, own in (("A", a, overrides_a), ("B", b, overrides_b)):
-        result, name = resolve(arg, ([] if _is_result(arg) else shared) + list(own or []), side)
-        sides.append((result, f"{name} with {', '.join(own)}" if own else name))   # the side's own changes named
-    (ra, name_a), (rb, name_b) = sides
+def compare_runs(ra, rb, name_a: str, name_b: str) -> Comparison:
+    """Compare two finished runs labelled name_a and name_b (`mechsim.compare` runs or reads them; see the module
+    docstring). ScenarioError where they have nothing in common."""
     if name_a == name_b and ra.scenario and rb.scenario:    # one scenario twice: the labels say what differs
         diff = _differences(ra.scenario, rb.scenario)
         if diff:
