@@ -262,8 +262,9 @@ def animate(
 
 @app.command()
 def compare(
-    a: str = typer.Argument(..., help="design A: built-in scenario name, TOML file or result folder"),
-    b: Optional[str] = typer.Argument(None, help="design B: built-in scenario name, TOML file or result folder"),
+    a: str = typer.Argument(..., metavar="A", help="design A: built-in scenario name, TOML file or result folder"),
+    b: Optional[str] = typer.Argument(None, metavar="B",
+                                      help="design B: built-in scenario name, TOML file or result folder"),
     set_: List[str] = typer.Option([], "--set", help="override a value of each scenario: section.key=value "
                                    "(repeatable)"),
     set_a: List[str] = typer.Option([], "--set-a", help="override a value of A only (repeatable)"),
@@ -332,8 +333,8 @@ def _print_designs(comparison, fmt: str, target: Path) -> None:
             view.add_column(name, justify="left" if name == "quantity" else "right", no_wrap=name == "quantity")
         for r in comparison.table.itertuples():
             rel = r.relative_difference
-            view.add_row(r.quantity, f"{r.a:.6g}", f"{r.b:.6g}", f"{r.difference:+.4g}",
-                         "" if rel != rel else f"{100 * rel:+.3g} %")
+            view.add_row(r.quantity, f"{r.a:.6g}", f"{r.b:.6g}", f"{r.difference:+.4g}" if r.difference else "0",
+                         "" if rel != rel else f"{100 * rel:+.3g} %" if rel else "0")
         out.print(view)
     elif fmt == "table":
         sys.stdout.write(f"{title}\n{render(comparison, 'text')}")
