@@ -300,6 +300,8 @@ def compare(
     from mechsim.scenarios import api
     from mechsim.scenarios.console import native_output
     try:
+        if out_dir is not None:     # a refused --out is said before the runs
+            _output_folder(out_dir, "", force)
         with native_output():       # the solver libraries' own prints stay off the table
             comparison = api.compare(a, b, set_, set_a, set_b)
         names = [r.summary.get("scenario", side) for r, side in ((comparison.a, "a"), (comparison.b, "b"))]
