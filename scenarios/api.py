@@ -261,7 +261,7 @@ def compare_backends(scenario: Scenario | str | Path, set: Overrides = None, rto
 def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: bool = False,  # noqa: A002
           out: str | Path | None = None, workers: int | None = 0, timeseries: bool = False, plots: bool = False,
           force: bool = False, batch: bool = False, *, dask_local: int | None = None, scheduler: str | None = None,
-          default_folder: bool = False, progress=None):
+          default_folder: bool = False, progress=None, heatmap_aggregate: str = "auto"):
     """A parameter sweep (`mechsim sweep` is this function): the table with one row per case (parameters, peaks,
     cycle figures, success and failure reason), as a DataFrame.
 
@@ -271,16 +271,20 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
     default_folder=True writes results/sweep-<name> as the CLI does. workers: local processes (0 runs here,
     None all cores); dask_local / scheduler: a Dask LocalCluster of N workers / the scheduler at an address.
     batch: one vmapped diffrax solve per model structure. progress: an object with start(total, done, failed)
-    and advance(ok) (the CLI's progress bar). The table's attrs: "report" (the one-line account), "exit_code"
+    and advance(ok) (the CLI's progress bar). heatmap_aggregate: how a heat map reduces the cases that share a cell
+    (those differing only in parameters beyond the third): "auto" (max of a peak_max_*, min of a peak_min_*, else
+    mean), "max", "min" or "mean"; the figure's title names it. The table's attrs: "report" (the one-line account), "exit_code"
     (the CLI's), "interrupted" (why, or None), "recomputed" ([(case, why)]: stored cases that did not verify).
     User errors raise ScenarioError before any case runs."""
     import pandas as pd
 
     from mechsim.scenarios.output.paths import default_folder as results_folder
     from mechsim.scenarios.studies.sweep.execute import make_runner
+    from mechsim.scenarios.studies.sweep.plots import check_aggregate
     from mechsim.scenarios.studies.sweep.run import check_runner_options, exit_code, plan, run_sweep
     from mechsim.scenarios.studies.sweep.spec import build_spec
     check_runner_options(workers, dask_local, scheduler)
+    check_aggregate(heatmap_aggregate)
     if isinstance(vary, Mapping):
         vary = [f"{key}={spec}" for key, spec in vary.items()]
     spec = build_spec(str(scenario), [str(v) for v in (vary or [])], _override_list(set), zip)
@@ -291,7 +295,8 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
             folder = Path(out)
         else:
             folder = results_folder(pl.cases[0].scenario.name, "sweep-") if default_folder else Path(scratch) / "s"
-        report = run_sweep(pl, folder, runner, timeseries=timeseries, force=force, progress=progress, plots=plots)
+        report = run_sweep(pl, folder, runner, timeseries=timeseries, force=force, progress=progress, plots=plots,
+                           heatmap_aggregate=heatmap_aggregate)
         stored = folder / "sweep.parquet"
         table = pd.read_parquet(stored) if stored.exists() else pd.DataFrame()
     table.attrs.update(report=report.line(), exit_code=exit_code(report), interrupted=report.interrupted,

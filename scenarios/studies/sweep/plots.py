@@ -4,8 +4,11 @@ heat maps over the first two varied parameters; drawn half in a forked process w
 
     plots/vs_<parameter>.png     one panel per figure; a line per combination of the other parameters (up to
                                  8, else points); failed cases marked with a red x on the axis
-    plots/heatmap_<figure>.png   figure over (parameter 1, parameter 2), mean over any other parameters;
-                                 plus heatmap_success.png (fraction of cases that ran to the end)
+    plots/heatmap_<figure>.png   figure over (parameter 1, parameter 2), a panel per value of parameter 3
+                                 (small multiples, one colour scale); cases differing only in further
+                                 parameters share a cell, reduced by the aggregate the title names (max of a
+                                 peak_max_*, min of a peak_min_*, else mean); plus heatmap_success.png (share
+                                 of cases that ran to the end)
 """
 from __future__ import annotations
 
@@ -101,27 +104,108 @@ def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[
     return fig
 
 
-def heatmap(df: pd.DataFrame, a: str, b: str, value: str) -> Figure:
+#: how a heat map reduces the cases that share a cell (the parameters it does not show): a peak by its extreme
+AGGREGATES = ("auto", "max", "min", "mean")
+
+
+def aggregate_for(value: str, choice: str = "auto") -> str:
+    """The aggregate of `value` over hidden parameters: `choice` unless "auto", which takes the max of a maximum
+    (peak_max_*), the min of a minimum (peak_min_*), the share of successes, else the mean."""
+    if choice != "auto":
+        return choice
+    if value == "success":
+        return "mean"
+    return "min" if value.startswith("peak_min_") else "max" if value.startswith("peak_") else "mean"
+
+
+def check_aggregate(choice) -> str:
+    """`choice` if it names an aggregate (ScenarioError naming heatmap_aggregate otherwise)."""
+    from mechsim.scenarios.units import ScenarioError
+    if choice not in AGGREGATES:
+        raise ScenarioError("heatmap_aggregate", f"must be one of {', '.join(AGGREGATES)}; got {choice!r}")
+    return choice
+
+
+def _tick(v) -> str:
+    return f"{v:.4g}" if isinstance(v, (float, int, np.number)) else str(v)
+
+
+def heatmap(df: pd.DataFrame, a: str, b: str, value: str, facet: str | None = None, hidden: list[str] = (),
+            aggregate: str = "auto") -> Figure:
+    """`value` over (a, b): one panel, or with `facet` one panel per value of that parameter (small multiples on
+    one colour scale). Cases that differ only in the `hidden` parameters share a cell and are reduced by
+    `aggregate` (aggregate_for), which the title names with the parameters it runs over; a cell without a case
+    is left blank, one whose cases all failed says so."""
     data = df.copy()
     data["success"] = data["success"].astype(float)
-    table = data.pivot_table(index=b, columns=a, values=value, aggfunc="mean", dropna=False)
-    fig = Figure(figsize=(6.5, 4.8))
-    ax = fig.subplots()
-    im = ax.imshow(table.to_numpy(float), origin="lower", aspect="auto", cmap="viridis")
-    ax.set_xticks(range(len(table.columns)), [f"{v:.4g}" if isinstance(v, (float, int)) else str(v)
-                                              for v in table.columns], rotation=45, fontsize=7)
-    ax.set_yticks(range(len(table.index)), [f"{v:.4g}" if isinstance(v, (float, int)) else str(v)
-                                            for v in table.index], fontsize=7)
-    ax.set_xlabel(_label(a))
-    ax.set_ylabel(_label(b))
-    fig.colorbar(im, ax=ax, label=_label(value) if value != "success" else "fraction of cases that succeeded")
-    ax.set_title(_label(value) + ("" if value == "success" else " (successful cases)"), fontsize=9)
-    fig.tight_layout()
+    how = aggregate_for(value, aggregate)
+    panels = [(None, data)] if facet is None else list(data.groupby(facet, sort=True))
+    cols_a = sorted(data[a].unique(), key=_order)
+    rows_b = sorted(data[b].unique(), key=_order)
+    tables = []
+    for _, part in panels:
+        cases = part if value == "success" else part[part["success"] > 0]
+        table = cases.pivot_table(index=b, columns=a, values=value, aggfunc=how, dropna=False)
+        counts = part.pivot_table(index=b, columns=a, values="success", aggfunc="size", dropna=False)
+        tables.append((table.reindex(index=rows_b, columns=cols_a).to_numpy(float),
+                       counts.reindex(index=rows_b, columns=cols_a).to_numpy(float)))
+    finite = np.concatenate([t[np.isfinite(t)] for t, _ in tables]) if tables else np.empty(0)
+    lo, hi = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    if value == "success":
+        lo, hi = 0.0, 1.0
+    elif hi == lo:                                   # one value everywhere: one colour, not a stretched scale
+        lo, hi = lo - max(abs(lo), 1.0), hi + max(abs(hi), 1.0)
+    n = len(panels)
+    ncols = min(n, 4)
+    nrows = int(np.ceil(n / ncols))
+    fig = Figure(figsize=(1.0 + 4.0 * ncols + 0.9, 0.9 + 3.6 * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
+    annotate = len(cols_a) * len(rows_b) <= 64
+    im = None
+    for ax, (key, _), (table, count) in zip(axes.flat, panels, tables):
+        im = ax.imshow(table, origin="lower", aspect="auto", cmap="viridis", vmin=lo, vmax=hi)
+        if annotate:
+            for (i, j), v in np.ndenumerate(table):
+                text = _tick(v) if np.isfinite(v) else ("all failed" if count[i, j] > 0 else "")
+                shade = "white" if not np.isfinite(v) or v < lo + 0.6 * (hi - lo) else "black"
+                ax.text(j, i, text, ha="center", va="center", fontsize=7, color="grey" if not np.isfinite(v)
+                        else shade)
+        ax.set_xticks(range(len(cols_a)), [_tick(v) for v in cols_a], rotation=45, fontsize=7)
+        ax.set_yticks(range(len(rows_b)), [_tick(v) for v in rows_b], fontsize=7)
+        if facet is not None:
+            ax.set_title(f"{_label(facet)} = {_tick(key)}", fontsize=9)
+    for ax in axes[-1, :]:
+        ax.set_xlabel(_label(a))
+    for ax in axes[:, 0]:
+        ax.set_ylabel(_label(b))
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    name = "share of cases that succeeded" if value == "success" else _label(value)
+    fig.colorbar(im, ax=axes, label=name, shrink=0.9 if nrows > 1 else 1.0)
+    fig.suptitle(name + ("" if value == "success" else " (successful cases)") + "\n" + _reduction(how, value, hidden,
+                 data, [a, b] + ([facet] if facet else [])), fontsize=9)
     return fig
 
 
-def write_plots(df: pd.DataFrame, pl, folder: Path) -> list[Path]:
-    """Every plot of a sweep table into `folder` (returns the files written)."""
+def _order(v):
+    return (0, float(v), "") if isinstance(v, (int, float, np.number)) else (1, 0.0, str(v))
+
+
+def _reduction(how: str, value: str, hidden: list[str], data: pd.DataFrame, shown: list[str]) -> str:
+    """The title's account of what a cell holds: one case, or the aggregate over the hidden parameters."""
+    per_cell = data.groupby(shown).size()
+    if not hidden or int(per_cell.max()) <= 1:
+        return "one case per cell"
+    word = "pooled" if value == "success" and how == "mean" else how
+    return (f"{word} over {', '.join(_label(h) for h in hidden)} "
+            f"({int(per_cell.min())}-{int(per_cell.max())} cases per cell)" if per_cell.min() != per_cell.max()
+            else f"{word} over {', '.join(_label(h) for h in hidden)} ({int(per_cell.max())} cases per cell)")
+
+
+def write_plots(df: pd.DataFrame, pl, folder: Path, aggregate: str = "auto") -> list[Path]:
+    """Every plot of a sweep table into `folder` (returns the files written). Heat maps (grid sweeps of two or more
+    parameters) show the first two parameters, a panel per value of the third, and reduce the cases that differ
+    in the others by `aggregate` (aggregate_for)."""
     from mechsim.scenarios.output.render import FigureWriter
     folder.mkdir(parents=True, exist_ok=True)
     params = [p for p in pl.param_columns if p in df and df[p].nunique() > 1]
@@ -133,10 +217,14 @@ def write_plots(df: pd.DataFrame, pl, folder: Path) -> list[Path]:
                                 log_x=p in logs) for p in params]
     if len(params) >= 2 and pl.spec.mode == "grid":
         a, b = params[0], params[1]
+        facet = params[2] if len(params) >= 3 else None
+        hidden = params[3:]
         ok = df[df["success"].astype(bool)]
         if len(ok):
-            makers += [functools.partial(_one, f"heatmap_{_safe(value)}", heatmap, ok, a, b, value) for value in figures]
-        makers.append(functools.partial(_one, "heatmap_success", heatmap, df, a, b, "success"))
+            makers += [functools.partial(_one, f"heatmap_{_safe(value)}", heatmap, df, a, b, value, facet, hidden,
+                                         aggregate) for value in figures]
+        makers.append(functools.partial(_one, "heatmap_success", heatmap, df, a, b, "success", facet, hidden,
+                                        aggregate))
     with FigureWriter(makers, folder) as writer:
         writer.finish()
     return [folder / f"{make.args[0]}.png" for make in makers]

@@ -137,7 +137,7 @@ class Report:
 
 
 def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: bool = False,
-              progress: Progress | None = None, plots: bool = True) -> Report:
+              progress: Progress | None = None, plots: bool = True, heatmap_aggregate: str = "auto") -> Report:
     """Validate, prepare the folder, run what is not finished, write the table, plots and sweep summary."""
     wall0 = time.perf_counter()
     pl = spec_or_plan if isinstance(spec_or_plan, Plan) else plan(spec_or_plan)
@@ -177,17 +177,17 @@ def run_sweep(spec_or_plan, out: Path, runner, timeseries: bool = False, force: 
         report.remaining = sum(1 for c in pl.cases if c.key not in finished)
         report.batching = getattr(runner, "batching_note", None)
         report.wall_time_s = time.perf_counter() - wall0
-        _finish(store, pl, report, plots)
+        _finish(store, pl, report, plots, heatmap_aggregate)
     return report
 
 
-def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool) -> None:
+def _finish(store: SweepStore, pl: Plan, report: Report, plots: bool, aggregate: str = "auto") -> None:
     df = store.table([(c.index, c.key, c.params) for c in pl.cases])
     if len(df):
         store.write_table(df)
     if plots and len(df):
         from mechsim.scenarios.studies.sweep.plots import write_plots
-        write_plots(df, pl, store.root / "plots")
+        write_plots(df, pl, store.root / "plots", aggregate)
     failed = df.loc[~df["success"].astype(bool), ["case", "failure"]].to_dict("records") if len(df) else []
     store.write_summary({
         "scenario": pl.spec.scenario, "mode": pl.spec.mode, "parameters": pl.param_columns,
