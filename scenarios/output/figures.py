@@ -58,17 +58,22 @@ def thermal_cycle_figure(result) -> Figure | None:
     df = result.timeseries
     if not cycle.get("period_s") or "temp_contact_C" not in df or not any(c.startswith("temp_bulk_") for c in df):
         return None
+    from mechsim.scenarios.output.plots import ENVELOPE_NOTE, pixel_columns, trace
     table = cycle_table(df)
     fig = Figure(figsize=(9, 4.2), layout="constrained")
     ax = fig.add_subplot()
-    ax.plot(table["t_mid_s"], table["temp_contact_peak_C"], lw=1.2, color="C3", label="contact, peak of the cycle")
+    t_mid, columns = table["t_mid_s"].to_numpy(float), pixel_columns(fig, ax)
+    enveloped = trace(ax, t_mid, table["temp_contact_peak_C"].to_numpy(float), columns, "C3", lw=1.2,
+                      label="contact, peak of the cycle")
     for i, c in enumerate(c for c in table.columns if c.startswith("temp_bulk_")):
         body = c[len("temp_bulk_"):-len("_mean_C")]
-        ax.plot(table["t_mid_s"], table[c], lw=1.2, color=f"C{i}", label=f"bulk {body}, cycle mean")
+        enveloped |= trace(ax, t_mid, table[c].to_numpy(float), columns, f"C{i}", lw=1.2,
+                           label=f"bulk {body}, cycle mean")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("temperature (°C)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_title(f"{result.summary.get('scenario', '')}: temperatures per drive cycle ({len(table)} cycles; "
-                 f"periodic from {float(cycle['period_s']):.4g} s per cycle)")
+                 f"periodic from {float(cycle['period_s']):.4g} s per cycle)"
+                 + (f"\n({ENVELOPE_NOTE})" if enveloped else ""))
     return fig

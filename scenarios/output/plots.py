@@ -101,22 +101,74 @@ def column_panels(df: pd.DataFrame, columns: list[str]) -> list[dict]:
     return list(out.values())
 
 
+#: a line with more samples than this per pixel column is drawn as its envelope (`trace`): a line through many
+#: samples per pixel fills the column between its extremes anyway, as a solid block that reads like noise
+ROWS_PER_COLUMN = 4
+#: the suptitle's note on a figure that holds envelopes
+ENVELOPE_NOTE = "long run: each line drawn as its envelope, min to max per pixel column"
+
+
+def pixel_columns(fig: Figure, ax) -> int:
+    """About how many pixel columns the axes span in the saved PNG (before the layout engine moves it)."""
+    return max(int(fig.get_figwidth() * DPI * ax.get_position().width), 10)
+
+
+def envelope(x: np.ndarray, y: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(column edges, min, max) of y over `columns` equal spans of x (sorted): each span's extremes, taken with
+    the last sample before it so that the line joining the two is covered; NaN ignored, spans without a sample
+    left out (NaN where a gap breaks the band)."""
+    edges = np.linspace(x[0], x[-1], columns + 1)
+    start = np.searchsorted(x, edges[:-1], side="left")
+    start[0] = 0
+    stop = np.r_[start[1:], len(x)]
+    keep = stop > start
+    lo = np.full(columns, np.nan)
+    hi = np.full(columns, np.nan)
+    with np.errstate(invalid="ignore"):
+        lo[keep] = np.fmin.reduceat(y, start[keep])
+        hi[keep] = np.fmax.reduceat(y, start[keep])
+        before = np.clip(start - 1, 0, None)
+        lo[keep] = np.fmin(lo[keep], y[before[keep]])
+        hi[keep] = np.fmax(hi[keep], y[before[keep]])
+    return edges, lo, hi
+
+
+def trace(ax, x: np.ndarray, y: np.ndarray, columns: int, color: str, **style) -> bool:
+    """Draw y against x (sorted) on ax: a line, or where there are more than ROWS_PER_COLUMN samples per pixel
+    column, the envelope (min to max in each column: a band whose edges are a line where the signal is smooth,
+    the swing of the signal where it oscillates faster than a pixel). True where it drew an envelope."""
+    if len(x) <= ROWS_PER_COLUMN * columns:
+        ax.plot(x, y, color=color, **style)
+        return False
+    from matplotlib.colors import to_rgba
+    edges, lo, hi = envelope(x, y, columns)
+    xs = np.repeat(edges, 2)[1:-1]
+    colour = color
+    style.pop("lw", None)
+    ax.fill_between(xs, np.repeat(lo, 2), np.repeat(hi, 2), facecolor=to_rgba(colour, 0.45), edgecolor=colour,
+                    linewidth=0.6, **style)
+    return True
+
+
 def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None) -> Figure | None:
-    """One panel per unit against time (the panels of `figure`, or `rows` as `column_panels` makes them)."""
+    """One panel per unit against time (the panels of `figure`, or `rows` as `column_panels` makes them); a
+    line with more rows than ROWS_PER_COLUMN per pixel column as its envelope (`trace`), which the title says."""
     rows = panels(df, figure) if rows is None else rows
     if not rows:
         return None
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.8), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     t = df["t_s"].to_numpy(float)
+    enveloped = False
     for ax, panel in zip(axes, rows):
-        for col, label in panel["lines"]:
-            ax.plot(t, df[col].to_numpy(float) * panel["scale"], lw=1.0, label=label, gid=col)
+        for j, (col, label) in enumerate(panel["lines"]):
+            enveloped |= trace(ax, t, df[col].to_numpy(float) * panel["scale"], pixel_columns(fig, ax),
+                               f"C{j % 10}", lw=1.0, label=label, gid=col)
         ax.set_ylabel(f"{panel['quantity']} ({panel['unit']})")
         ax.grid(alpha=0.3)
         legend_outside(ax)
     axes[-1].set_xlabel("time (s)")
-    fig.suptitle(title)
+    fig.suptitle(f"{title}\n({ENVELOPE_NOTE}; {len(t):,} rows)" if enveloped else title)
     return fig
 
 
@@ -130,30 +182,51 @@ def cycle_index(angle: np.ndarray, cycle: DriveCycle) -> tuple[np.ndarray, np.nd
     return k, angle - cycle.start - k * cycle.period
 
 
+#: above this many cycles, the angle figures draw the envelope over all cycles and the last cycle as a line
+MAX_CYCLE_LINES = 40
+
+
 def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
                  rows: list[dict] | None = None) -> Figure | None:
     """One panel per unit against the driven member's angle within its cycle, a line per cycle (later cycles
-    darker). Angles of the other members are shown as their change since the cycle started. The panels of
-    `figure`, or `rows` as `column_panels` makes them."""
+    darker); above MAX_CYCLE_LINES cycles, the envelope over all of them (min to max per pixel column of the
+    angle) with the last cycle as a line. Angles of the other members are shown as their change since the cycle
+    started. The panels of `figure`, or `rows` as `column_panels` makes them."""
     rows = panels(df, figure, exclude=(cycle.column,)) if rows is None else rows
     if not rows or cycle.column not in df:
         return None
-    k, within = cycle_index(df[cycle.column].to_numpy(float), cycle)
+    drive = df[cycle.column].to_numpy(float)
+    k, within = cycle_index(drive, cycle)
     x, x0 = (within + cycle.start) * DEG, cycle.start * DEG
     cycles = np.unique(k)
     bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+    many = len(cycles) > MAX_CYCLE_LINES
+    order = np.argsort(x, kind="stable") if many else None
+    spans = list(zip(bounds[:-1], bounds[1:]))
+    complete = [(a, b) for a, b in spans if cycle.period and np.ptp(within[a:b]) >= 0.98 * cycle.period]
+    last = (complete or spans)[-1]                   # the last complete cycle drawn as a line among many
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.9), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     for ax, panel in zip(axes, rows):
         for j, (col, label) in enumerate(panel["lines"]):
             y = df[col].to_numpy(float) * panel["scale"]
             colour = f"C{j % 10}"
+            if panel["unit"] == "deg" and col.endswith("_angle_rad"):
+                y = y - np.repeat([cycle_start_value(drive, y, a, b, cycle) for a, b in zip(bounds[:-1], bounds[1:])],
+                                  np.diff(bounds))
+            if many:
+                from matplotlib.colors import to_rgba
+                edges, lo, hi = envelope(x[order], y[order], pixel_columns(fig, ax))
+                xs = np.repeat(edges, 2)[1:-1]
+                ax.fill_between(xs, np.repeat(lo, 2), np.repeat(hi, 2), facecolor=to_rgba(colour, 0.3),
+                                edgecolor=to_rgba(colour, 0.6), linewidth=0.5, gid=f"{col}#envelope",
+                                label=f"{label}, all cycles (envelope)")
+                a, b = last
+                ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, gid=f"{col}#cycle{k[a]}", label=f"{label}, last cycle")
+                continue
             for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
-                yy = y[a:b]
-                if panel["unit"] == "deg" and col.endswith("_angle_rad"):
-                    yy = yy - cycle_start_value(df[cycle.column].to_numpy(float), y, a, b, cycle)
                 shade = 0.35 + 0.65 * (n + 1) / len(cycles)
-                ax.plot(x[a:b], yy, lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
+                ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
                         label=label if n == len(cycles) - 1 else "_nolegend_")
         since = "the cycle start" if cycle.period else "the start"
         quantity = f"angle turned since {since}" if panel["unit"] == "deg" else panel["quantity"]
@@ -162,8 +235,13 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
         legend_outside(ax)
     axes[-1].set_xlim(*((x0, x0 + cycle.period * DEG) if cycle.period else (np.nanmin(x), np.nanmax(x))))
     axes[-1].set_xlabel(cycle.label)
-    fig.suptitle(f"{title} ({len(cycles)} cycle{'s' if len(cycles) != 1 else ''}, a line each, later darker)"
-                 if cycle.period else f"{title} (no period: the whole run)")
+    n = len(cycles)
+    if not cycle.period:
+        fig.suptitle(f"{title} (no period: the whole run)")
+    elif many:
+        fig.suptitle(f"{title} ({n:,} cycles: their envelope, min to max per pixel column, and the last complete one as a line)")
+    else:
+        fig.suptitle(f"{title} ({n} cycle{'s' if n != 1 else ''}, a line each, later darker)")
     return fig
 
 

@@ -1,0 +1,68 @@
+"""Long runs drawn honestly: a line with more rows than a few per pixel column becomes its envelope, min to max in
+each pixel column (a solid block of overdrawn line said nothing), and the figure says so; a short run keeps its
+lines. Many cycles against the drive angle: the envelope over all of them and the last complete cycle as a line."""
+import numpy as np
+import pytest
+from matplotlib.collections import PolyCollection
+
+import mechsim
+from mechsim.scenarios.output.plots import ENVELOPE_NOTE, ROWS_PER_COLUMN, envelope
+
+# prescribed speed, closed form: 120,001 rows (about 100 per pixel column) in a fraction of a second
+LONG = ["duration=12 s", "output_step=0.1 ms", "thermal.model=none"]
+
+
+@pytest.fixture(scope="module")
+def long_run():
+    return mechsim.run("geneva-lc1", set=LONG)
+
+
+def _polygons(ax, gid):
+    found = [c for c in ax.collections if isinstance(c, PolyCollection) and c.get_gid() == gid]
+    assert len(found) == 1, [c.get_gid() for c in ax.collections]
+    return np.concatenate([p.vertices for p in found[0].get_paths()])
+
+
+def test_a_long_run_is_drawn_as_its_envelope_holding_every_extreme(long_run):
+    force = long_run["contact_force_N"].to_numpy(float)
+    t = long_run["t_s"].to_numpy(float)
+    fig = long_run.plot("contact_force_N")
+    ax = fig.axes[0]
+    assert not [line for line in ax.get_lines() if len(line.get_xdata()) > 1000]   # no overdrawn line
+    v = _polygons(ax, "contact_force_N")
+    assert len(v) < 6 * 1100                         # a few vertices per pixel column, not one per row
+    assert v[:, 1].max() == force.max() and v[:, 1].min() == force.min()   # the run's extremes are drawn exactly
+    assert v[:, 0].min() == t[0] and v[:, 0].max() == t[-1]
+    assert ENVELOPE_NOTE in fig.get_suptitle() and "120,001 rows" in fig.get_suptitle()
+    # every sample lies inside its column's band, and each band's ends are samples (min to max, not a smoothing)
+    edges, lo, hi = envelope(t, force, 900)
+    col = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, 899)
+    assert (force >= lo[col]).all() and (force <= hi[col]).all()
+    assert np.isin(hi, force).all() and np.isin(lo, force).all()
+    # the CLI's figures: the same envelope for every line of the time figures
+    figs = long_run.plot(["forces_vs_time", "motion_vs_time"])
+    for f in figs.values():
+        assert ENVELOPE_NOTE in f.get_suptitle()
+        assert all(len(line.get_xdata()) <= 1000 for a in f.axes for line in a.get_lines())
+
+
+def test_a_short_run_keeps_its_lines():
+    r = mechsim.run("geneva-lc1", set=["duration=1 s", "output_step=1 ms", "thermal.model=none"])
+    fig = r.plot("contact_force_N")
+    (line,) = [x for x in fig.axes[0].get_lines() if x.get_gid() == "contact_force_N"]
+    np.testing.assert_array_equal(line.get_ydata(), r["contact_force_N"].to_numpy(float))
+    assert ENVELOPE_NOTE not in fig.get_suptitle() and len(r.timeseries) <= ROWS_PER_COLUMN * 800
+
+
+def test_many_cycles_against_angle_the_envelope_and_the_last_complete_cycle(long_run):
+    r = mechsim.run("geneva-lc1", set=["duration=60 s", "output_step=2 ms", "thermal.model=none"])
+    fig = r.plot("contact_force_N", x="angle")
+    ax = fig.axes[0]
+    v = _polygons(ax, "contact_force_N#envelope")
+    force = r["contact_force_N"].to_numpy(float)
+    assert v[:, 1].max() == force.max() and v[:, 1].min() == force.min()
+    (line,) = [x for x in ax.get_lines() if x.get_gid().startswith("contact_force_N#cycle")]
+    # the last complete turn of the crank: a whole period of the drive angle, ending before the run does
+    x = line.get_xdata()
+    assert np.ptp(x) > 0.98 * 360 and len(x) < len(force) / 40
+    assert "51 cycles: their envelope" in fig.get_suptitle()
