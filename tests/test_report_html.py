@@ -3,6 +3,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+from html.parser import HTMLParser
 
 import numpy as np
 import pytest
@@ -35,9 +36,76 @@ def test_page_is_self_contained_with_every_figure_and_section(report):
     assert len(pngs) >= 6
     assert sorted(re.findall(r'<img alt="([^"]+)" src="data:image/png;base64,', page)) == pngs
     assert not re.search(r'(src|href)="(?!data:)', page)            # nothing outside the page
-    for section in ("Model", "Peaks", "Energy balance (J)", "Events", "Warnings", "Figures", "Scenario (resolved, SI)"):
+    for section in ("Model", "Peaks", "Energy balance (J)", "Events", "Warnings", "Figures", "Scenario (resolved, SI)",
+                    "Thermal model"):
         assert f"<h2>{section}</h2>" in page
-    assert "closed-form" in page and "contact_force_N" in page
+    assert "closed-form" in page and "contact force" in page
+    check_sections_are_tables_with_units(page)
+
+
+class Sections(HTMLParser):
+    """The page as {h2 heading: [tables, each a list of rows of cell texts]}, plus the tags it holds."""
+
+    def __init__(self):
+        super().__init__()
+        self.sections, self.tags, self.current, self.text, self.cell = {}, set(), None, None, None
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.add(tag)
+        if tag == "h2":
+            self.text = []
+        elif tag == "table" and self.current is not None:
+            self.sections[self.current].append([])
+        elif tag == "tr" and self.current is not None and self.sections[self.current]:
+            self.sections[self.current][-1].append([])
+        elif tag in ("td", "th"):
+            self.cell = []
+
+    def handle_endtag(self, tag):
+        if tag == "h2":
+            self.current = "".join(self.text).strip()
+            self.sections[self.current], self.text = [], None
+        elif tag in ("td", "th") and self.cell is not None:
+            if self.current is not None and self.sections[self.current]:
+                self.sections[self.current][-1][-1].append("".join(self.cell).strip())
+            self.cell = None
+
+    def handle_data(self, data):
+        for buffer in (self.text, self.cell):
+            if buffer is not None:
+                buffer.append(data)
+
+
+def check_sections_are_tables_with_units(page: str) -> None:
+    """Every section a table (the figures' and an empty warnings list apart), no raw JSON or preformatted dump,
+    every number of the summary's sections beside its unit: the tables of quantities have a unit column, filled
+    wherever the summary key names a unit."""
+    parsed = Sections()
+    parsed.feed(page)
+    assert "pre" not in parsed.tags and not re.search(r'[{\[]\s*"', page)      # no JSON left on the page
+    for heading, tables in parsed.sections.items():
+        if heading == "Figures" or (heading == "Warnings" and not tables):
+            continue
+        assert tables and all(len(t) > 1 for t in tables), heading
+    units = {}
+    for heading in ("Model", "Peaks", "Energy balance (J)", "Solver", "Scenario (resolved, SI)", "Thermal model"):
+        (table,) = parsed.sections[heading]
+        header = table[0]
+        assert "unit" in header, (heading, header)
+        at = header.index("unit")
+        pairs = heading in ("Peaks", "Scenario (resolved, SI)")       # rows named by two cells
+        units[heading] = {tuple(row[:2]) if pairs else row[0]: row[at] for row in table[1:]}
+    assert units["Model"]["geometry: centre distance"] == "m" and units["Model"]["method"] == ""
+    assert units["Peaks"][("contact force", "max")] == "N" and units["Peaks"][("wheel accel", "min")] == "rad/s²"
+    assert units["Energy balance (J)"]["closure error / drive work"] == "1"
+    assert units["Energy balance (J)"]["work: drive"] == "J"
+    assert units["Solver"]["wall time"] == "s"
+    scenario = units["Scenario (resolved, SI)"]
+    assert scenario[("mechanism", "crank_radius")] == "m" and scenario[("load", "wheel_torque")] == "N·m"
+    assert scenario[("thermal", "convection_pin")] == "W/(m²·K)" and scenario[("contact", "friction")] == ""
+    thermal = units["Thermal model"]
+    assert thermal["bodies: pin: capacity"] == "J/K" and thermal["material: conductivity"] == "W/(m·K)"
+    assert thermal["heat balance: closure error (relative)"] == "1" and thermal["time constants"] == "s"
 
 
 def _chromium(*args, timeout=120):
@@ -54,6 +122,7 @@ def test_chromium_renders_the_page_with_every_image_loaded(report, tmp_path):
     dom = _chromium("--dump-dom", probe.as_uri()).stdout
     loaded = re.search(r'data-loaded="(\d+)/(\d+)"', dom)
     assert loaded, dom[-500:]
+    check_sections_are_tables_with_units(dom.replace(PROBE, ""))     # the page as the browser built it
     n_png = len(list(report.glob("*.png")))
     assert loaded.group(1) == loaded.group(2) == str(n_png)
     shot = tmp_path / "shot.png"

@@ -15,7 +15,7 @@ from cli_helpers import invoke
 
 #: fields that measure this machine rather than the simulation (docs/limits.md, "Identical runs")
 TIMING = re.compile(r'"(derive|solve|wall)_time_s": [0-9.e+-]+')
-TIMING_HTML = re.compile(r"<td>(derive|solve|wall)_time_s</td><td class=\"num\">[0-9.e+-]+</td>")
+TIMING_HTML = re.compile(r"<td>(derive|solve|wall) time</td><td class=\"num\">[0-9.e+-]+</td>")
 
 
 #: the CLI with Python's own Ctrl-C handler, whatever SIGINT disposition the test process passes on (a worker may

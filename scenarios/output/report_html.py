@@ -1,10 +1,11 @@
 """report.html: one self-contained page per run (the figures embedded as base64 PNG, no external files or
-scripts) with the scenario, the model chosen and why, peaks, energy balance, events, warnings and the figures."""
+scripts) with the scenario, the model chosen and why, peaks, energy balance, events, warnings and the figures.
+Every section is a table whose numbers carry their unit (a column `unit`, or the unit in the header), read from
+the house naming rule `<quantity>_<unit>` of the summary's keys and from the scenario schema."""
 from __future__ import annotations
 
 import base64
 import html
-import json
 from pathlib import Path
 
 from mechsim.dynamics.result import Result
@@ -24,6 +25,88 @@ figcaption { color: #555; font-size: 0.9em; }
 #: figures in reading order (stems of scenarios.output.plots.figures; others follow alphabetically)
 ORDER = ("mechanism", "motion_vs_angle", "forces_vs_angle", "thermal_vs_angle", "motion_vs_time", "forces_vs_time",
          "thermal_vs_time", "energy_vs_time")
+
+
+#: unit suffixes of the summary's keys (`<quantity>_<unit>`), longest first, and how the page writes them
+UNIT_SUFFIXES = {
+    "N_m_s_rad": "N·m·s/rad", "W_m2K": "W/(m²·K)", "J_kgK": "J/(kg·K)", "kg_m3": "kg/m³", "kg_m2": "kg·m²",
+    "rad_s2": "rad/s²", "W_mK": "W/(m·K)", "m2_s": "m²/s", "rad_s": "rad/s", "m_s": "m/s", "N_m": "N·m", "J_K": "J/K",
+    "W_K": "W/K", "deg": "deg", "rad": "rad", "Pa": "Pa", "m2": "m²", "m3": "m³", "J": "J", "W": "W", "N": "N",
+    "K": "K", "C": "°C", "s": "s", "m": "m", "relative": "1 (relative)",
+}
+#: how the page writes a scenario unit of the schema (scenarios/schema.py)
+SCHEMA_UNITS = {"N*m": "N·m", "kg*m^2": "kg·m²", "N*m*s/rad": "N·m·s/rad", "m/s^2": "m/s²", "m^2": "m²", "m^3": "m³",
+                "kg/m^3": "kg/m³", "J/(kg*K)": "J/(kg·K)", "W/(m*K)": "W/(m·K)", "W/(m^2*K)": "W/(m²·K)"}
+#: units a closing word that is no unit would be mistaken for
+_NOT_UNITS = ("relative",)
+
+
+def quantity(key: str) -> tuple[str, str]:
+    """(words, unit) of a summary key: 'centre_distance_m' -> ('centre distance', 'm'); a key without a unit suffix
+    is a number without dimension or a count, or text: its unit is ''."""
+    for suffix, shown in UNIT_SUFFIXES.items():
+        if key.endswith("_" + suffix) and len(key) > len(suffix) + 1:
+            stem = key[:-len(suffix) - 1]
+            if suffix == "relative":
+                return f"{stem.replace('_', ' ')} (relative)", "1"
+            return stem.replace("_", " "), shown
+    return key.replace("_", " "), ""
+
+
+def _value_text(value) -> str:
+    if isinstance(value, bool) or value is None:
+        return "" if value is None else str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_value_text(v) for v in value)
+    return str(value)
+
+
+def quantity_rows(data: dict, prefix: str = "") -> list[list]:
+    """[item, value, unit] rows of a (nested) summary dict: nested tables flattened to 'outer: inner', lists of
+    numbers on one row, units from each key's suffix."""
+    rows = []
+    for key, value in data.items():
+        words, unit = quantity(str(key))
+        item = f"{prefix}{words}"
+        if isinstance(value, dict):
+            rows += quantity_rows(value, f"{item}: ")
+        elif isinstance(value, (list, tuple)) and value and all(isinstance(v, dict) for v in value):
+            for i, v in enumerate(value):
+                rows += quantity_rows(v, f"{item} {i + 1}: ")
+        elif isinstance(value, (list, tuple)) and not value:
+            rows.append([item, "none", ""])
+        elif value is not None:
+            number = isinstance(value, (int, float)) and not isinstance(value, bool) or (
+                isinstance(value, (list, tuple)) and all(isinstance(v, (int, float)) for v in value))
+            rows.append([item, value if isinstance(value, (int, float)) and not isinstance(value, bool)
+                         else _value_text(value), unit if number else ""])
+    return rows
+
+
+def scenario_rows(si: dict) -> list[list]:
+    """[section, key, value, unit] rows of the resolved scenario (SI), units from the schema."""
+    from mechsim.scenarios.keys import field_unit
+    rows = []
+
+    def unit_of(key: str, value) -> str:
+        try:
+            unit = field_unit(si, key + ("[0]" if isinstance(value, list) else ""))
+        except Exception:            # a key the schema does not know (a later schema): shown without a unit
+            unit = ""
+        return SCHEMA_UNITS.get(unit, unit)
+
+    for section, body in si.items():
+        if isinstance(body, dict):
+            for key, value in body.items():
+                if value is not None:
+                    rows.append([section, key, value if isinstance(value, (int, float)) and not isinstance(value, bool)
+                                 else _value_text(value), unit_of(f"{section}.{key}", value)])
+        elif body is not None:
+            rows.append(["", section, body if isinstance(body, (int, float)) and not isinstance(body, bool)
+                         else _value_text(body), unit_of(section, body)])
+    return rows
 
 
 def _num(value) -> str:
@@ -75,7 +158,7 @@ def _validity(section: dict | None) -> list[str]:
     return ["<h2>Validity</h2>", head, f"<table><tr>{header}</tr>{''.join(rows)}</table>"]
 
 
-def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "") -> str:
+def report_html(result: Result, pngs: dict[str, bytes]) -> str:
     """The page as a string; `pngs` maps figure stems to PNG bytes."""
     s = result.summary
     model = s.get("model", {})
@@ -84,9 +167,11 @@ def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "")
     parts = [f"<h1>{html.escape(str(s.get('scenario', 'run')))}</h1>",
              f"<p>{html.escape(str(result.scenario.get('description', '')))}</p>", status,
              "<h2>Model</h2>",
-             _table(["item", "value"], [[k, v] for k, v in model.items() if v is not None]
-                    + [[f"geometry: {k}", v] for k, v in s.get("geometry", {}).items()
-                       if isinstance(v, (int, float, str))])]
+             _table(["item", "value", "unit"], quantity_rows({k: v for k, v in model.items() if k not in ("rtol", "atol")})
+                    + [["relative tolerance (rtol)", model["rtol"], "1"]] * ("rtol" in model)
+                    + [["absolute tolerance (atol)", model["atol"], "SI unit of each state"]] * ("atol" in model)
+                    + quantity_rows({k: v for k, v in s.get("geometry", {}).items()
+                                     if isinstance(v, (int, float, str))}, "geometry: "))]
     peaks = s.get("peaks", {})
     if peaks:
         regime = s.get("regime")
@@ -100,17 +185,18 @@ def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "")
         for c, p in peaks.items():
             picks = [(side, p[side]) for side in ("max", "min")]
             picks += [(f"start-up {side}", x) for side, x in p.get("startup", {}).items()]
-            rows += [[c, side, "unbounded" if x["value"] is None else x["value"], x["t_s"],
+            words, unit = quantity(c)
+            rows += [[words, side, "unbounded" if x["value"] is None else x["value"], unit or "1", x["t_s"],
                       x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
-        parts += [_table(["column", "", "value", "t (s)", "drive angle, wrapped (deg)", "at", "how"], rows)]
+        parts += [_table(["quantity", "", "value", "unit", "t (s)", "drive angle, wrapped (deg)", "at", "how"], rows)]
     parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
     if energy:
-        rows = [[f"work: {k}", v] for k, v in energy.get("work_J", {}).items()]
-        rows += [["kinetic energy change", energy["kinetic_energy_change_J"]],
-                 ["impact losses", energy["impact_losses_J"]], ["closure error", energy["closure_error_J"]],
-                 ["closure error / drive work", energy["closure_error_relative"]]]
-        parts += ["<h2>Energy balance (J)</h2>", _table(["term", "J"], rows)]
+        rows = [[f"work: {k}", v, "J"] for k, v in energy.get("work_J", {}).items()]
+        rows += [["kinetic energy change", energy["kinetic_energy_change_J"], "J"],
+                 ["impact losses", energy["impact_losses_J"], "J"], ["closure error", energy["closure_error_J"], "J"],
+                 ["closure error / drive work", energy["closure_error_relative"], "1"]]
+        parts += ["<h2>Energy balance (J)</h2>", _table(["term", "value", "unit"], rows)]
     if s.get("events"):
         parts += ["<h2>Events</h2>", _table(["kind", "count"], [[k, v] for k, v in s["events"].items()])]
     groups = s.get("warning_groups", [])
@@ -119,22 +205,25 @@ def report_html(result: Result, pngs: dict[str, bytes], scenario_toml: str = "")
                                             else "", g["last_t_s"] if g["last_t_s"] is not None else "", g["first"]]
                                            for g in groups]) if groups else "<p>none</p>"]
     solver = {k: v for k, v in s.get("solver", {}).items() if isinstance(v, (int, float, str))}
-    parts += ["<h2>Solver</h2>", _table(["item", "value"], [[k, v] for k, v in solver.items()])]
+    parts += ["<h2>Solver</h2>", _table(["item", "value", "unit"], quantity_rows(solver))]
     if pngs:
         parts += ["<h2>Figures</h2>", _images(pngs)]
-    if scenario_toml:
-        parts += ["<h2>Scenario (resolved, SI)</h2>", f"<pre>{html.escape(scenario_toml)}</pre>"]
+    if result.scenario:
+        parts += ["<h2>Scenario (resolved, SI)</h2>",
+                  "<p>every value as run, defaults filled in; scenario.toml beside this page is the same as a file "
+                  "`mechsim run` takes</p>",
+                  _table(["section", "key", "value", "unit"], scenario_rows(result.scenario))]
     if s.get("thermal"):
-        parts += ["<h2>Thermal model</h2>", f"<pre>{html.escape(json.dumps(s['thermal'], indent=2, default=str))}</pre>"]
+        parts += ["<h2>Thermal model</h2>", _table(["item", "value", "unit"], quantity_rows(s["thermal"]))]
     title = html.escape(f"mechsim: {s.get('scenario', 'run')}")
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
             f"<style>{STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
 
 
-def write_report(result: Result, folder: Path, scenario_toml: str = "") -> Path:
+def write_report(result: Result, folder: Path) -> Path:
     """report.html in `folder`, embedding every PNG figure written there."""
     folder = Path(folder)
     pngs = {p.stem: p.read_bytes() for p in sorted(folder.glob("*.png"))}
     path = folder / "report.html"
-    path.write_text(report_html(result, pngs, scenario_toml), encoding="utf-8")
+    path.write_text(report_html(result, pngs), encoding="utf-8")
     return path

@@ -73,5 +73,5 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
             except Exception as exc:       # the data is written all the same
                 warn_skipped("the animation", exc)
         from mechsim.scenarios.output.report_html import write_report
-        write_report(result, tmp, scenario_toml)
+        write_report(result, tmp)
     return out_dir
