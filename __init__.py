@@ -7,14 +7,14 @@ The Python API (docs/api.md), loaded on first use so that `import mechsim` stays
     r = mechsim.run(mechsim.load("geneva-motor", set=["duration=2 s"]))
     r.timeseries, r.events, r.summary, r.plot(), r.save("results/motor")
 
-`load`, `open`, `run`, `sweep`, `compare`, `compare_backends`, `sensitivity`, `size`, `builtins`, `Result`,
-`Scenario` and `ScenarioError` come from `mechsim.scenarios.api`. The repository root is this package: setuptools maps
-``mechsim`` to it and its folders ``mechanisms/``, ``dynamics/``, ``thermal/``, ``scenarios/`` and
+`load`, `open`, `run`, `sweep`, `compare`, `compare_backends`, `sensitivity`, `size`, `output_size`, `builtins`,
+`Result`, `Scenario` and `ScenarioError` come from `mechsim.scenarios.api`. The repository root is this package:
+setuptools maps ``mechsim`` to it and its folders ``mechanisms/``, ``dynamics/``, ``thermal/``, ``scenarios/`` and
 ``benchmarks/`` to ``mechsim.mechanisms`` and so on (``pyproject.toml``, ``[tool.setuptools.package-dir]``).
 """
 #: the API's names, imported from mechsim.scenarios.api on first access (PEP 562)
-_API = ("load", "open", "run", "sweep", "compare", "compare_backends", "sensitivity", "size", "builtins", "Result",
-        "Scenario", "ScenarioError")
+_API = ("load", "open", "run", "sweep", "compare", "compare_backends", "sensitivity", "size", "output_size",
+        "builtins", "Result", "Scenario", "ScenarioError")
 __all__ = [*_API, "__version__"]
 
 

@@ -26,8 +26,8 @@ from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.loader import override_strings as _override_list
 from mechsim.scenarios.units import ScenarioError
 
-__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open", "run",
-           "sensitivity", "size", "sweep"]
+__all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open",
+           "output_size", "run", "sensitivity", "size", "sweep"]
 
 Overrides = Iterable[str] | Mapping[str, object] | None
 
@@ -120,10 +120,18 @@ class Result(RunResult):
             raise ValueError("plot(x=\"angle\"): this run has no drive cycle to fold over; use x=\"time\"")
         return angle_figure(df, "", title, cycle, rows=rows)
 
-    def save(self, folder: str | Path, force: bool = False, plots: bool | None = None) -> Path:
+    def output_size(self):
+        """The size of this run's tables as `save` writes them, measured from the table (an OutputSize,
+        scenarios/output/size.py `table_bytes`)."""
+        from mechsim.scenarios.output.size import table_bytes
+        return table_bytes(self.timeseries)
+
+    def save(self, folder: str | Path, force: bool = False, plots: bool | None = None, progress=None) -> Path:
         """Write the CLI's output folder (timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, extra
         tables and PNG figures) atomically: all or nothing. An existing folder raises FileExistsError unless
-        force=True, and force replaces only a folder mechsim wrote. plots: None follows the scenario's output.plots."""
+        force=True, and force replaces only a folder mechsim wrote. plots: None follows the scenario's output.plots.
+        timeseries.csv follows output.csv ("auto": left out of a large output, `output_size`). progress(fraction,
+        what): called as the tables are written (the share of their bytes, and the file being written)."""
         from mechsim.scenarios.output.atomic import check_replaceable
         from mechsim.scenarios.output.writer import write_result
         folder = Path(folder)
@@ -137,7 +145,7 @@ class Result(RunResult):
                                       "folder without its marker): force=True will not replace it") from None
         if plots is None:
             plots = bool(self.scenario.get("output", {}).get("plots", True))
-        return write_result(self, folder, force=force, plots=plots, mechanism=self.mechanism)
+        return write_result(self, folder, force=force, plots=plots, mechanism=self.mechanism, progress=progress)
 
 
 def open(folder: str | Path) -> Result:  # noqa: A001 (mechsim.open reads a result folder)
@@ -182,6 +190,19 @@ def open(folder: str | Path) -> Result:  # noqa: A001 (mechsim.open reads a resu
                            kind=code.kind, code=code))
     return Result(timeseries=timeseries, events=events, summary=summary, scenario=scenario, failure=failure,
                   extra_tables=extra, mechanism=build_mechanism(scenario))
+
+
+def output_size(scenario: Scenario | str | Path, set: Overrides = None):  # noqa: A002
+    """How large the run's tables will be, before it runs (scenarios/output/size.py): an OutputSize with `rows`,
+    `columns` (estimated), `csv_bytes`, `parquet_bytes` (upper estimates), `total_bytes` and `large` (the size at
+    which `mechsim run` says so and output.csv = "auto" leaves timeseries.csv out). `Result.output_size()` measures
+    a finished run's."""
+    from mechsim.scenarios.output.size import estimate
+    if not isinstance(scenario, Scenario):
+        scenario = load(scenario, set)
+    elif set:
+        raise ValueError("output_size(scenario, set=...): pass the overrides to load(); the scenario is loaded")
+    return estimate(scenario.si)
 
 
 def run(scenario: Scenario | str | Path, set: Overrides = None,  # noqa: A002

@@ -66,16 +66,18 @@ def _internal_error(exc: Exception) -> str:
     return f"{type(exc).__name__}: {text.splitlines()[0] if text else 'no message'}"
 
 
-def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None) -> None:
+def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None, progress=None) -> None:
     """result.save(target): a refused folder is a user error (exit 2), an OSError one line with exit 4. worker: a
-    figure worker started before the run (scenarios/output/figure_worker.py) to draw the figures."""
+    figure worker started before the run (scenarios/output/figure_worker.py) to draw the figures; progress: as
+    write_result's."""
     try:
         if worker is None:
-            result.save(target, force=force)
+            result.save(target, force=force, progress=progress)
         else:
             from mechsim.scenarios.output.writer import write_result
             plots = bool(result.scenario.get("output", {}).get("plots", True))
-            write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker)
+            write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker,
+                         progress=progress)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:
@@ -165,19 +167,17 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
         target = _output_folder(out_dir, sc.name, force)
     except ScenarioError as exc:
         _fail(str(exc))
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-    from mechsim.scenarios.console import native_output
+    from mechsim.scenarios.console import RunProgress, native_output
+    from mechsim.scenarios.output import size
     duration = sc.si["duration"]
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("t = {task.completed:.3f} s"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=err.console, disable=quiet,
-                  transient=True) as bar:
-        task = bar.add_task(sc.name, total=duration)
+    if not quiet and (note := size.large_note(sc.si, size.estimate(sc.si))):
+        err.print(note, markup=False, highlight=False, soft_wrap=True)
+    with RunProgress(err.console, sc.name, duration, disable=quiet) as bar:
         try:
             with native_output() as native:
-                result = api.run(sc, progress=lambda t: bar.update(task, completed=t))
+                result = api.run(sc, progress=bar.simulated)
         except KeyboardInterrupt:
-            _fail(f"{sc.name}: interrupted (Ctrl-C) at t = {bar.tasks[0].completed:.4g} s of {duration:g} s; "
+            _fail(f"{sc.name}: interrupted (Ctrl-C) at t = {bar.time:.4g} s of {duration:g} s; "
                   "nothing was written", INTERRUPTED)
         except ScenarioError as exc:
             _fail(str(exc))
@@ -187,12 +187,16 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
             _fail(f"the integration stopped on an internal error ({_internal_error(exc)}); "
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
         result.summary["solver_messages"] = native
-        bar.update(task, description=f"{sc.name}: writing files")
+        bar.writing(0.0)
         try:
-            _save_or_fail(result, target, force, f"{sc.name}: the results", worker)
+            _save_or_fail(result, target, force, f"{sc.name}: the results", worker, progress=bar.writing)
         except KeyboardInterrupt:
             _fail(f"{sc.name}: interrupted (Ctrl-C) while writing {target}; nothing half-written is left",
                   INTERRUPTED)
+    written = size.table_bytes(result.timeseries)
+    if not quiet and not size.csv_wanted(result.scenario.get("output", {}).get("csv", "always"), written) \
+            and result.scenario.get("output", {}).get("csv") == "auto":
+        err.print(size.skipped_note(written), markup=False, highlight=False, soft_wrap=True)
     _report_run(result, sc.name, target, quiet)
 
 

@@ -70,6 +70,9 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "animation": Field("bool", default=False, help="write an animation of the mechanism beside its force trace"),
         "animation_format": Field("str", default="gif", choices=("gif", "mp4"),
                                   help="gif (Pillow) or mp4 (needs ffmpeg)"),
+        "csv": Field("str", default="always", choices=("always", "auto", "never"), help=(
+            "timeseries.csv beside timeseries.parquet: always, never, or auto (left out of a large output, "
+            "scenarios/output/size.py LARGE_OUTPUT_BYTES; the console says so)")),
         "on_invalid": Field("str", default="warn", choices=("warn", "stop"), help=(
             "where the model leaves its validity (summary.json 'validity'): warn (run on, list each violation) or "
             "stop (exit 3 at the first output row that violates a condition, what ran written)")),

@@ -12,7 +12,7 @@ import tomli_w
 from mechsim.dynamics.result import Result
 
 from mechsim.scenarios.output.atomic import atomic_folder, json_default
-from mechsim.scenarios.output.csv import write_csv
+from mechsim.scenarios.output.csv import write_csv, write_parquet
 
 
 def _toml_clean(d):
@@ -32,11 +32,18 @@ def resolved_scenario_toml(si: dict) -> str:
 
 
 def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool = True, mechanism=None,
-                 worker=None) -> Path:
+                 worker=None, progress=None) -> Path:
     """Write timeseries.parquet/.csv, events.csv, summary.json, scenario.toml, the extra tables (<name>.csv),
     the PNG figures (scenarios/output/figures.py) and report.html (the figures embedded) into out_dir, atomically.
+    timeseries.csv follows [output] csv (scenarios/output/size.py: "auto" leaves it out of a large output).
     worker: a figure worker started before the run (scenarios/output/figure_worker.py, as `mechsim run` does),
-    which then draws the figures; it is stopped here if there are none to draw."""
+    which then draws the figures; it is stopped here if there are none to draw. progress(fraction, what): called
+    as the tables are written (fraction of their bytes; what: the file being written, then "figures")."""
+    from mechsim.scenarios.output.size import csv_wanted, table_bytes
+    tell = progress or (lambda fraction, what: None)
+    size = table_bytes(result.timeseries)
+    csv = csv_wanted(result.scenario.get("output", {}).get("csv", "always"), size)
+    total = max(size.parquet_bytes + (size.csv_bytes if csv else 0.0), 1.0)
     with atomic_folder(out_dir, force) as tmp:
         want = plots and len(result.timeseries)
         if want and worker is not None:
@@ -52,14 +59,21 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
             from mechsim.scenarios.output.render import FigureWriter
             figures = FigureWriter(makers, tmp)           # half the figures drawn meanwhile, in another process
         with figures:
-            result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-            write_csv(result.timeseries, tmp / "timeseries.csv")
+            done = size.parquet_bytes / total
+            tell(0.0, "timeseries.parquet")
+            write_parquet(result.timeseries, tmp / "timeseries.parquet",
+                          progress=progress and (lambda f: tell(done * f, "timeseries.parquet")))
+            if csv:
+                tell(done, "timeseries.csv")
+                write_csv(result.timeseries, tmp / "timeseries.csv",
+                          progress=lambda f: tell(done + (1.0 - done) * f, "timeseries.csv"))
             write_csv(result.events, tmp / "events.csv")
             for name, table in result.extra_tables.items():
                 write_csv(table, tmp / f"{name}.csv")
             (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, default=json_default))
             scenario_toml = resolved_scenario_toml(result.scenario)
             (tmp / "scenario.toml").write_text(scenario_toml)
+            tell(1.0, "figures")
             figures.finish()
         output = result.scenario.get("output", {})
         if output.get("animation") and len(result.timeseries):
