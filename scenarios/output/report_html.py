@@ -29,9 +29,9 @@ ORDER = ("mechanism", "motion_vs_angle", "forces_vs_angle", "thermal_vs_angle", 
 
 #: unit suffixes of the summary's keys (`<quantity>_<unit>`), longest first, and how the page writes them
 UNIT_SUFFIXES = {
-    "N_m_s_rad": "N·m·s/rad", "W_m2K": "W/(m²·K)", "J_kgK": "J/(kg·K)", "kg_m3": "kg/m³", "kg_m2": "kg·m²",
-    "rad_s2": "rad/s²", "W_mK": "W/(m·K)", "m2_s": "m²/s", "rad_s": "rad/s", "m_s": "m/s", "N_m": "N·m", "J_K": "J/K",
-    "W_K": "W/K", "deg": "deg", "rad": "rad", "Pa": "Pa", "m2": "m²", "m3": "m³", "J": "J", "W": "W", "N": "N",
+    "N_m_s_rad": "N·m·s/rad", "m_per_rad": "m/rad", "W_m2K": "W/(m²·K)", "J_kgK": "J/(kg·K)", "kg_m3": "kg/m³", "kg_m2": "kg·m²",
+    "rad_s2": "rad/s²", "m_s2": "m/s²", "W_m2": "W/m²", "W_mK": "W/(m·K)", "m2_s": "m²/s", "rad_s": "rad/s", "m_s": "m/s", "N_m": "N·m", "J_K": "J/K",
+    "W_K": "W/K", "deg": "deg", "rad": "rad", "Pa": "Pa", "kg": "kg", "m2": "m²", "m3": "m³", "J": "J", "W": "W", "N": "N",
     "K": "K", "C": "°C", "s": "s", "m": "m", "relative": "1 (relative)",
 }
 #: how the page writes a scenario unit of the schema (scenarios/schema.py)
