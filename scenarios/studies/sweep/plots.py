@@ -23,6 +23,8 @@ from matplotlib.figure import Figure
 from mechsim.scenarios.studies.sweep.rows import KEY_FIGURES
 
 MAX_LINES = 8
+#: at most this many small multiples (values of the third parameter); beyond, it joins the aggregated ones
+MAX_PANELS = 16
 
 
 def _safe(name: str) -> str:
@@ -217,8 +219,8 @@ def write_plots(df: pd.DataFrame, pl, folder: Path, aggregate: str = "auto") -> 
                                 log_x=p in logs) for p in params]
     if len(params) >= 2 and pl.spec.mode == "grid":
         a, b = params[0], params[1]
-        facet = params[2] if len(params) >= 3 else None
-        hidden = params[3:]
+        facet = params[2] if len(params) >= 3 and df[params[2]].nunique() <= MAX_PANELS else None
+        hidden = params[3:] if facet is not None else params[2:]
         ok = df[df["success"].astype(bool)]
         if len(ok):
             makers += [functools.partial(_one, f"heatmap_{_safe(value)}", heatmap, df, a, b, value, facet, hidden,
