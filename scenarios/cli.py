@@ -193,10 +193,10 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
         except KeyboardInterrupt:
             _fail(f"{sc.name}: interrupted (Ctrl-C) while writing {target}; nothing half-written is left",
                   INTERRUPTED)
-    written = size.table_bytes(result.timeseries)
-    if not quiet and not size.csv_wanted(result.scenario.get("output", {}).get("csv", "always"), written) \
-            and result.scenario.get("output", {}).get("csv") == "auto":
-        err.print(size.skipped_note(written), markup=False, highlight=False, soft_wrap=True)
+    if not quiet and result.scenario.get("output", {}).get("csv") == "auto":
+        written = size.table_bytes(result.timeseries)
+        if not size.csv_wanted("auto", written):
+            err.print(size.skipped_note(written), markup=False, highlight=False, soft_wrap=True)
     _report_run(result, sc.name, target, quiet)
 
 

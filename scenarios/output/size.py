@@ -24,7 +24,7 @@ PARQUET_BYTES_PER_VALUE = 8
 #: writes Parquet only
 LARGE_OUTPUT_BYTES = 512 * 2**20
 #: rows sampled to measure a table's CSV size (`table_bytes`)
-SAMPLE_ROWS = 2000
+SAMPLE_ROWS = 500
 
 
 @dataclass(frozen=True)

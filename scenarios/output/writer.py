@@ -41,9 +41,10 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
     as the tables are written (fraction of their bytes; what: the file being written, then "figures")."""
     from mechsim.scenarios.output.size import csv_wanted, table_bytes
     tell = progress or (lambda fraction, what: None)
-    size = table_bytes(result.timeseries)
-    csv = csv_wanted(result.scenario.get("output", {}).get("csv", "always"), size)
-    total = max(size.parquet_bytes + (size.csv_bytes if csv else 0.0), 1.0)
+    setting = result.scenario.get("output", {}).get("csv", "always")
+    size = table_bytes(result.timeseries) if setting == "auto" or progress is not None else None   # a few ms
+    csv = csv_wanted(setting, size) if size is not None else setting == "always"
+    total = max(size.parquet_bytes + (size.csv_bytes if csv else 0.0), 1.0) if size is not None else 1.0
     with atomic_folder(out_dir, force) as tmp:
         want = plots and len(result.timeseries)
         if want and worker is not None:
@@ -59,7 +60,7 @@ def write_result(result: Result, out_dir: Path, force: bool = False, plots: bool
             from mechsim.scenarios.output.render import FigureWriter
             figures = FigureWriter(makers, tmp)           # half the figures drawn meanwhile, in another process
         with figures:
-            done = size.parquet_bytes / total
+            done = size.parquet_bytes / total if size is not None else 0.0
             tell(0.0, "timeseries.parquet")
             write_parquet(result.timeseries, tmp / "timeseries.parquet",
                           progress=progress and (lambda f: tell(done * f, "timeseries.parquet")))
