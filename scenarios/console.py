@@ -125,7 +125,7 @@ class RunProgress:
 
     def __init__(self, console, name: str, duration: float, disable: bool = False):
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-        self.name, self.duration, self.time = name, duration, 0.0
+        self.name, self.duration, self.time, self.phase = name, duration, 0.0, "run"
         self.bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[where]}"),
                             TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=disable,
                             transient=True)
@@ -145,7 +145,8 @@ class RunProgress:
 
     def writing(self, fraction: float, what: str = "files") -> None:
         """A share `fraction` of the tables is written; `what` is being written now."""
-        if self.bar.tasks[0].total != 1.0:
+        if self.phase != "write":
+            self.phase = "write"
             self.bar.reset(self.task, total=1.0)
         self.bar.update(self.task, completed=fraction, description=f"{self.name}: writing {what}",
                         where=f"{100 * fraction:.0f} %")

@@ -67,3 +67,19 @@ def test_the_time_line_splits_the_whole_command():
     assert "output.plots=false" in line and "output.plots=false" not in time_line(solver, 10.0, plots=False)
     no_compilation = {"wall_time_s": 1.0, "solve_time_s": 0.5}
     assert "compile" not in time_line(no_compilation, 1.5)
+
+
+def test_the_run_bar_moves_from_simulated_time_to_the_share_of_tables_written():
+    import io
+
+    from rich.console import Console
+
+    from mechsim.scenarios.console import RunProgress
+    with RunProgress(Console(file=io.StringIO(), force_terminal=True), "lc1", 1.0) as bar:
+        bar.simulated(1.0)
+        task = bar.bar.tasks[0]
+        assert (task.completed, task.total, task.fields["where"]) == (1.0, 1.0, "t = 1.000 s")
+        bar.writing(0.0, "timeseries.parquet")         # a 1 s run: the bar starts again for the writing
+        assert task.completed == 0.0 and task.description == "lc1: writing timeseries.parquet"
+        bar.writing(0.4, "timeseries.csv")
+        assert (task.completed, task.fields["where"], task.description) == (0.4, "40 %", "lc1: writing timeseries.csv")
