@@ -5,7 +5,7 @@ Before the run only the number of rows is known (duration / output_step, as the 
 columns and the bytes of a value are taken at the high end of what the mechanisms write (`ESTIMATED_COLUMNS`,
 `CSV_BYTES_PER_VALUE`, `PARQUET_BYTES_PER_VALUE`; docs/api.md "Output size" has the measured spread), so the
 estimate is an upper one. After the run, `table_bytes` formats an even sample of the rows as the writer does and
-scales it: the CSV's size to a few per cent. Above `LARGE_OUTPUT_BYTES` the console says so before the run and
+scales it: the CSV's size to within a few per cent. Above `LARGE_OUTPUT_BYTES` the console says so before the run and
 suggests a coarser output_step or Parquet only; [output] csv = "auto" then leaves timeseries.csv out.
 """
 from __future__ import annotations
@@ -14,11 +14,11 @@ import io
 import math
 from dataclasses import dataclass
 
-#: columns a run's table has at most in practice (a Geneva run with a lumped thermal model has 38)
+#: columns a run's table has at most in practice (the measured counts: docs/api.md "Output size")
 ESTIMATED_COLUMNS = 40
-#: bytes of one value in timeseries.csv at the high end (shortest round-trip floats and a comma: 10-18 measured)
+#: bytes of one value in timeseries.csv at the high end (shortest round-trip floats and a comma)
 CSV_BYTES_PER_VALUE = 18
-#: bytes of one value in timeseries.parquet at the high end (3-8 measured)
+#: bytes of one value in timeseries.parquet at the high end
 PARQUET_BYTES_PER_VALUE = 8
 #: above this many bytes of tables (CSV and Parquet together) a run is announced as large; csv = "auto" then
 #: writes Parquet only
