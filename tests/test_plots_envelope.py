@@ -66,3 +66,17 @@ def test_many_cycles_against_angle_the_envelope_and_the_last_complete_cycle(long
     x = line.get_xdata()
     assert np.ptp(x) > 0.98 * 360 and len(x) < len(force) / 40
     assert "51 cycles: their envelope" in fig.get_suptitle()
+
+
+def test_two_long_runs_compared_overlay_their_envelopes_in_one_colour(long_run):
+    """`mechsim.compare(A, B)` draws B over A's figures in A's colours: long runs are envelopes on both sides."""
+    c = mechsim.compare(long_run, "geneva-lc1", set=LONG, set_b={"load.wheel_torque": "9 N*m"})
+    fig = c.plot("contact_force_N")
+    ax = fig.axes[0]
+    a, b = _polygons(ax, "contact_force_N"), _polygons(ax, "B:contact_force_N")
+    assert a[:, 1].max() == long_run["contact_force_N"].max() and b[:, 1].max() > a[:, 1].max()   # more load
+    (pa,) = [x for x in ax.collections if x.get_gid() == "contact_force_N"]
+    (pb,) = [x for x in ax.collections if x.get_gid() == "B:contact_force_N"]
+    np.testing.assert_array_equal(pa.get_edgecolor(), pb.get_edgecolor())
+    assert pa.get_label().endswith("(A)") and pb.get_label().endswith("(B)")
+    assert c.plot()["forces_vs_time"] is not None

@@ -150,6 +150,19 @@ def trace(ax, x: np.ndarray, y: np.ndarray, columns: int, color: str, **style) -
     return True
 
 
+def artist_colours(ax) -> dict[str, str]:
+    """{column: colour} of what `time_figure` and `angle_figure` drew on ax, lines and envelopes alike (keyed by
+    their gid, less any '#...' part), for a caller that overlays more in the same colours."""
+    from matplotlib.colors import to_hex
+    out = {}
+    for artist in [*ax.get_lines(), *ax.collections]:
+        gid = artist.get_gid()
+        if gid:
+            colour = artist.get_color() if hasattr(artist, "get_xdata") else to_hex(artist.get_edgecolor()[0])
+            out.setdefault(gid.split("#")[0], colour)
+    return out
+
+
 def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None) -> Figure | None:
     """One panel per unit against time (the panels of `figure`, or `rows` as `column_panels` makes them); a
     line with more rows than ROWS_PER_COLUMN per pixel column as its envelope (`trace`), which the title says."""

@@ -181,14 +181,14 @@ class Comparison:
         return figs
 
     def _time(self, rows, title):
-        from mechsim.scenarios.output.plots import time_figure
+        from mechsim.scenarios.output.plots import artist_colours, pixel_columns, time_figure, trace
         fig = time_figure(self.a.timeseries, "", title, rows=rows)
         t = self.b.timeseries["t_s"].to_numpy(float)
         for ax, panel in zip(fig.axes, rows):
-            colours = {line.get_gid(): line.get_color() for line in ax.get_lines()}
+            colours = artist_colours(ax)              # a long run's lines are envelopes (plots.trace)
             for col, label in panel["lines"]:
-                ax.plot(t, self.b.timeseries[col].to_numpy(float) * panel["scale"], lw=1.0, ls="--",
-                        color=colours[col], label=f"{label} (B)", gid=f"B:{col}")
+                trace(ax, t, self.b.timeseries[col].to_numpy(float) * panel["scale"], pixel_columns(fig, ax),
+                      colours[col], lw=1.0, ls="--", label=f"{label} (B)", gid=f"B:{col}")
             _relabel(ax)
         return fig
 
@@ -234,9 +234,9 @@ class Comparison:
 def _relabel(ax) -> None:
     """A's lines named "(A)" beside B's, the legend redrawn (plots.py's placement)."""
     from mechsim.scenarios.output.plots import legend_outside
-    for line in ax.get_lines():
+    for line in [*ax.get_lines(), *ax.collections]:           # lines, and the envelopes of long runs
         label = line.get_label()
-        if not line.get_gid().startswith("B:") and not label.startswith("_") and not label.endswith(" (A)"):
+        if not (line.get_gid() or "B:").startswith("B:") and not label.startswith("_") and not label.endswith(" (A)"):
             line.set_label(f"{label} (A)")
     legend_outside(ax)
 
