@@ -80,6 +80,25 @@ class Start:
     y: np.ndarray
     yp: np.ndarray
     offset: np.ndarray
+    #: the breakpoints inside (t0, t_end) (`schedule`): (time, parameter updates, events-table kind), by time
+    knots: list = field(default_factory=list)
+
+
+def schedule(mech: Mechanism, drive: Drive, t0: float, t_end: float) -> tuple[dict, list]:
+    """The time-varying inputs' breakpoints (`Mechanism.schedule`, `Drive.schedule`): (the updates in force at t0,
+    the knots in (t0, t_end) as (time, updates, kind), those at one instant merged). docs/theory.md,
+    'Time-varying loads and drives'."""
+    points = sorted(mech.schedule(t_end) + drive.schedule(t_end), key=lambda b: b.time)
+    initial, knots = {}, []
+    for b in points:
+        if b.time <= t0:
+            initial.update(b.updates)
+        elif b.time < t_end:
+            if knots and knots[-1][0] == b.time:
+                knots[-1] = (b.time, {**knots[-1][1], **b.updates}, f"{knots[-1][2]}, {b.kind}")
+            else:
+                knots.append((b.time, dict(b.updates), b.kind))
+    return initial, knots
 
 
 def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float, angle0: float,
@@ -95,6 +114,8 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
         values.update(ext.parameter_values())
     init = mech.initial_state(angle0, speed0)
     values.update(init.updates)
+    initial, knots = schedule(mech, drive, t0, t_end)
+    values.update(initial)
     n_out = int(np.floor((t_end - t0) / dt_out + 1e-9))
     t_out = np.minimum(t0 + dt_out * np.arange(1, n_out + 1), t_end)   # round-off must not pass t_end
     if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
@@ -109,7 +130,7 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
         y, yp, _ = consistent_state(mf, t0, q_init, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
-    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset)
+    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset, knots)
 
 
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
@@ -166,9 +187,16 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     last = None
     first_step = backend.initial_step
     in_row = stuck = 0
+    knots = list(start.knots)
     wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
-        seg = yield Request(model, mode, mf, p, t, y, yp, t_out[t_out > t], t_end, first_step)
+        while knots and knots[0][0] <= t:     # a breakpoint reached (a segment's end, or a guard's root on it)
+            _, updates, kind = knots.pop(0)
+            values, p, y, yp, row = at_breakpoint(model, mode, values, t, y, updates, kind, offset)
+            events.append(row)
+            stats["restarts"] += 1
+        stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
+        seg = yield Request(model, mode, mf, p, t, y, yp, t_out[(t_out > t) & (t_out <= stop)], stop, first_step)
         stats["segments"] += 1
         for key, count in seg.counts.items():
             stats[key] += count
@@ -201,7 +229,10 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         stuck = stuck + 1 if seg.t_end - t <= 1e-12 * max(1.0, abs(t)) else 0
         t = seg.t_end
         if seg.end is End.END:
-            break
+            if not knots:
+                break
+            t, y, yp, first_step = stop, seg.y_end, seg.yp_end, RESTART_STEP_FACTOR * seg.next_step
+            continue
         q = seg.y_end[mf.index["q"]]
         if stuck > MAX_STUCK:
             guard = mf.guard_names[seg.fired[0]] if seg.fired else "?"
@@ -225,6 +256,26 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         first_step = RESTART_STEP_FACTOR * seg.next_step
     stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+def at_breakpoint(model: DerivedModel, mode: str, values: dict, t: float, y_end: np.ndarray, updates: dict,
+                  kind: str, offset: np.ndarray) -> tuple[dict, tuple, np.ndarray, np.ndarray, dict]:
+    """Restart at a breakpoint of the time-varying inputs (`schedule`), for every loop: (values, p, y, yp, the
+    events-table row). The state is kept (positions and velocities are continuous: a load or drive torque only
+    changes the accelerations and multipliers, re-solved from the KKT system, `consistent_state`); the index-1 form
+    keeps q and v as they are, the others are projected onto their constraints as after a guard."""
+    mf = model.modes[mode]
+    ix = mf.index
+    values = {**values, **updates}
+    p = parameter_tuple(model, values)
+    q, v = y_end[ix["q"]], y_end[ix["v"]]
+    y, yp, impact = consistent_state(mf, t, q, v, y_end[ix["work"]], y_end[ix["ext"]], p,
+                                     project=model.formulation != "index1")
+    row = dict(t_s=t, from_mode=mode, to_mode=mode, kind=kind, guard="breakpoint",
+               **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q + offset)},
+               kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after,
+               message="")
+    return values, p, y, yp, row
 
 
 def fire(mech: Mechanism, model: DerivedModel, mode: str, values: dict, t: float, y_end: np.ndarray, q: np.ndarray,

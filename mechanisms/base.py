@@ -30,7 +30,8 @@ class Field:
     """One scenario key a mechanism reads, declared as data so `scenarios/` can validate it generically.
 
     kind: "quantity" (a string with a unit, converted to `unit`, the SI unit), "int", "float", "str",
-        "bool", "points" (a list of [x, y] pairs with a length unit).
+        "bool", "points" (a list of [x, y] pairs with a length unit), "list" (a list of quantities in `unit`),
+        "profile" (a piecewise-linear function of time, see `profile_key`).
     required: no default; default: the value (SI) when absent. positive/nonnegative/minimum/maximum: checks;
     why: the reason for the range, shown with a refusal (quantities also get their unit's physical range,
     scenarios/schema.py UNIT_RANGES; docs/limits.md).
@@ -50,6 +51,9 @@ class Field:
     #: (sibling key, value): the key means something only when that sibling has that value (a variant's key); a
     #: value other than the default under another variant is refused, since it would be ignored
     only_if: tuple[str, object] | None = None
+    #: kind "profile" (a piecewise-linear function of time, a table {t = [times], <profile_key> = [values]}): the
+    #: name of its value list; the values are in `unit`, the times in s, strictly increasing
+    profile_key: str = "value"
 
 
 @dataclass(frozen=True)
@@ -235,10 +239,44 @@ class TransitionRule:
     hint: str | None = None
     fields: Callable | None = None
 
+    #: the rule reads the scenario's numbers (a per-station load, `Mechanism.station_load`), not only p: the
+    #: compiled run hands it back to the Python loop, which evaluates it with numpy
+    numeric: bool = False
+
     @property
     def python_only(self) -> bool:
-        """True for a rule the compiled run hands back to the Python loop: a stop or an impact."""
-        return self.stop is not None or self.restitution is not None
+        """True for a rule the compiled run hands back to the Python loop: a stop, an impact or a numeric rule."""
+        return self.stop is not None or self.restitution is not None or self.numeric
+
+
+@dataclass(frozen=True)
+class Breakpoint:
+    """An instant where a time-varying input bends or jumps (a load profile's knot, a motor switched on or off):
+    from `time` on, the parameters named in `updates` take these values. The integrators stop and restart there
+    (docs/theory.md, 'Time-varying loads and drives'); `kind` labels its events-table row."""
+
+    time: float
+    updates: Mapping[str, float]
+    kind: str
+
+
+def piecewise_linear(times, values, names: tuple[str, str, str], kind: str
+                     ) -> tuple[dict[str, float], list[Breakpoint]]:
+    """A piecewise-linear function of time f(t) = value + rate (t - time0) as parameters `names` = (value, rate,
+    time0) that hold on each piece: (the parameters before the first knot, the `Breakpoint`s). f is held at its
+    first value before the first knot and at its last after the last (docs/theory.md, 'Time-varying loads and
+    drives'). A knot where the slope does not change is no breakpoint (f is smooth there)."""
+    times, values = [float(x) for x in times], [float(x) for x in values]
+    value, rate, time0 = names
+    first = {value: values[0], rate: 0.0, time0: 0.0}
+    points = []
+    slope = 0.0
+    for k, t in enumerate(times):
+        new = (values[k + 1] - values[k]) / (times[k + 1] - t) if k + 1 < len(times) else 0.0
+        if new != slope:
+            points.append(Breakpoint(t, {value: values[k], rate: new, time0: t}, kind))
+        slope = new
+    return first, points
 
 
 @dataclass(frozen=True)
@@ -387,6 +425,12 @@ class Mechanism(ABC):
             return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
                               kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint))
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
+
+    def schedule(self, t_end: float) -> list[Breakpoint]:
+        """The breakpoints of the mechanism's time-varying inputs up to t_end, sorted by time (default: none; the
+        parameters before the first are `parameter_values`'). The hybrid loop stops at each and takes its
+        updates."""
+        return []
 
     def rebase(self, values: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]] | None:
         """A symmetry that keeps the integrated coordinates small, or None (the default: there is none).

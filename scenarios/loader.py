@@ -264,12 +264,15 @@ def sections_for(mtype: str) -> dict[str, dict[str, Field]]:
 
 
 def _as_text(spec: Field, value):
-    if value is None or spec.kind not in ("quantity", "points", "list") or not spec.unit:
+    if value is None or spec.kind not in ("quantity", "points", "list", "profile") or not spec.unit:
         return value
     if spec.kind == "quantity":
         return f"{value!r} {spec.unit}"
     if spec.kind == "points":
         return [[f"{c!r} {spec.unit}" for c in p] for p in value]
+    if spec.kind == "profile":
+        return {"t": [f"{c!r} s" for c in value["t"]],
+                spec.profile_key: [f"{c!r} {spec.unit}" for c in value[spec.profile_key]]}
     return [f"{c!r} {spec.unit}" for c in value]
 
 
@@ -314,6 +317,12 @@ def validate(raw: dict) -> dict:
     for key in REQUIRED_FOR_DRIVE[drive["type"]]:
         if drive.get(key) is None:
             raise ScenarioError(f"drive.{key}", f"missing (required for drive type '{drive['type']}')")
+    if (drive.get("duty_on") is None) != (drive.get("duty_off") is None):
+        missing = "duty_off" if drive.get("duty_off") is None else "duty_on"
+        raise ScenarioError(f"drive.{missing}", "missing (a duty cycle needs both duty_on and duty_off)")
+    if drive.get("duty_on") is not None and drive["type"] == "speed":
+        raise ScenarioError("drive.duty_on", "a duty cycle needs drive.type 'torque' or 'motor' (a prescribed "
+                                             "speed has no torque to switch off)")
     if si["output_step"] > si["duration"]:
         raise ScenarioError("output_step", "must not exceed duration")
     check_derived(si)

@@ -43,7 +43,8 @@ def solver_settings(si: dict) -> SolverSettings:
 def make_drive(si: dict) -> Drive:
     d = si["drive"]
     return Drive(d["type"], speed=d["speed"] or 0.0, torque=d["torque"] or 0.0,
-                 stall_torque=d["stall_torque"] or 0.0, no_load_speed=d["no_load_speed"] or 0.0)
+                 stall_torque=d["stall_torque"] or 0.0, no_load_speed=d["no_load_speed"] or 0.0,
+                 duty_on=d.get("duty_on") or 0.0, duty_off=d.get("duty_off") or 0.0)
 
 
 @lru_cache(maxsize=1)

@@ -30,6 +30,10 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "torque": Field("quantity", "N*m", default=None, help="constant torque (type = torque)"),
         "stall_torque": Field("quantity", "N*m", default=None, positive=True, help="motor stall torque"),
         "no_load_speed": Field("quantity", "rad/s", default=None, positive=True, help="motor no-load speed"),
+        "duty_on": Field("quantity", "s", default=None, positive=True, help=(
+            "duty cycle (torque or motor drive): on for duty_on, then off for duty_off, repeated from t = 0; off "
+            "is no torque at all (the drive coasts), not a brake")),
+        "duty_off": Field("quantity", "s", default=None, positive=True, help="duty cycle: time off per period"),
     },
     "solver": {
         "backend": Field("str", default="ida", choices=BACKENDS, help="integrator (docs/architecture.md)"),
@@ -186,6 +190,8 @@ def check_field(where: str, spec: Field, value):
             raise ScenarioError(where, "expected a list of [x, y] pairs")
         _check_length(where, value)
         out = [[_element(f"{where}[{i}]", spec, c) for c in p] for i, p in enumerate(value)]
+    elif spec.kind == "profile":
+        out = _profile(where, spec, value)
     elif spec.kind == "list":
         if not isinstance(value, list):
             raise ScenarioError(where, "expected a list")
@@ -206,6 +212,29 @@ def check_field(where: str, spec: Field, value):
     return out
 
 
+def _profile(where: str, spec: Field, value) -> dict:
+    """A piecewise-linear profile {t = [times], <profile_key> = [values]}: both lists of one length (1 to MAX_LIST),
+    times in s, not negative and strictly increasing, values in the field's unit."""
+    name = spec.profile_key
+    if not isinstance(value, dict) or set(value) != {"t", name}:
+        raise ScenarioError(where, f"expected a table {{ t = [times], {name} = [values] }}")
+    times, values = value["t"], value[name]
+    for key, items in (("t", times), (name, values)):
+        if not isinstance(items, list) or not items:
+            raise ScenarioError(f"{where}.{key}", "expected a non-empty list")
+        _check_length(f"{where}.{key}", items)
+    if len(times) != len(values):
+        raise ScenarioError(f"{where}.{name}", f"{len(values)} values for {len(times)} times; give one per time")
+    t = [_element(f"{where}.t[{i}]", Field("list", "s"), x) for i, x in enumerate(times)]
+    for i, x in enumerate(t):
+        if x < 0:
+            raise ScenarioError(f"{where}.t[{i}]", f"must not be negative, got {_shown(times[i])}")
+        if i and not x > t[i - 1]:
+            raise ScenarioError(f"{where}.t[{i}]", f"times must be strictly increasing: {_shown(times[i])} after "
+                                                   f"{_shown(times[i - 1])}")
+    return {"t": t, name: [_element(f"{where}.{name}[{i}]", spec, x) for i, x in enumerate(values)]}
+
+
 def _check_length(where: str, value: list) -> None:
     if len(value) > MAX_LIST:
         raise ScenarioError(where, f"a list of {len(value)} entries; at most {MAX_LIST} (no mechanism here has more)")
@@ -218,6 +247,8 @@ def _element(where: str, spec: Field, value) -> float:
     return out
 
 
+#: at most this many duty-cycle switches in one run (each is a restart of the integrator)
+MAX_SWITCHES = 100_000
 #: the drive turns at most this far in one run (prescribed speed x duration)
 MAX_DRIVE_ANGLE = 1e6
 
@@ -231,6 +262,11 @@ def check_derived(si: dict) -> None:
         raise ScenarioError(field, f"{speed:g} rad/s for {si['duration']:g} s turns the drive {speed * si['duration']:.3g}"
                                    f" rad; at most {MAX_DRIVE_ANGLE:g} rad (160,000 turns) in one run: shorten "
                                    "duration")
+    if drive.get("duty_on") is not None:
+        switches = 2 * si["duration"] / (drive["duty_on"] + drive["duty_off"])
+        if switches > MAX_SWITCHES:
+            raise ScenarioError("drive.duty_on", f"{switches:.3g} switches over the duration; at most "
+                                                 f"{MAX_SWITCHES:,} (each one stops and restarts the integrator)")
     rows = si["duration"] / si["output_step"]
     if rows > MAX_OUTPUT_ROWS:
         raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "

@@ -448,7 +448,10 @@ def run_key(o):
 def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
     """The compiled run of a model (None if the mechanism has no transition table); True if compiled by this
     call. One per model structure and options: the output-buffer size only shapes the row function."""
-    key = (id(model), run_key(o), type(mech).__name__, mech.structure_key(), STEPS_PER_CALL, EVENTS_PER_CALL)
+    rules = mech.transition_rules()
+    hand_back = None if rules is None else tuple((k, tuple(r.python_only for r in v)) for k, v in rules.items())
+    key = (id(model), run_key(o), type(mech).__name__, mech.structure_key(), STEPS_PER_CALL, EVENTS_PER_CALL,
+           hand_back)   # a numeric rule (a per-station load) is handed back: another program
     hit = _CACHE.get(key)
     if hit is not None and hit.model is model:
         return hit, False
@@ -507,7 +510,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
-    from mechsim.dynamics.hybrid import Piece, Trajectory, fire
+    from mechsim.dynamics.hybrid import Piece, Trajectory, at_breakpoint, fire
     from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
     from mechsim.dynamics.transitions import chattering
@@ -533,9 +536,16 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
     events, warnings, failure, last = [], [], None, None
     t, dt0, calls, seg_steps = t0, DT0_FIRST, 0, 0
+    knots = list(start.knots)
     while True:
+        while knots and knots[0][0] <= t:    # a breakpoint (hybrid.schedule): the call ended there, restart
+            _, updates, kind = knots.pop(0)
+            values, p, y, yp, row = at_breakpoint(model, mode, values, t, y, updates, kind, offset)
+            events.append(row)
+            stats["restarts"] += 1
+        stop = knots[0][0] if knots else t_end   # each call ends at the next breakpoint: never stepped over
         mf = model.modes[mode]
-        args = run_arguments(jmod.index(mode), t, t_end, mode_z(mf, y), p, dt0, (o.rtol, o.atol), o.max_steps,
+        args = run_arguments(jmod.index(mode), t, stop, mode_z(mf, y), p, dt0, (o.rtol, o.atol), o.max_steps,
                              seg_steps)
         res = call(entry.fn, args) if call else entry.fn(*args)
         out = entry.outputs.unpack(np.asarray(res["floats"]), np.asarray(res["ints"]))   # (device_get: 5x slower)
@@ -605,7 +615,11 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         code = Code(int(out["code"]))
         q = y[mf.index["q"]]
         if code == Code.DONE:
-            break
+            if not knots:
+                break
+            t, seg_steps = stop, 0
+            dt0 = 0.1 * dt0
+            continue
         seg_steps = int(out["seg_steps"]) if code == Code.STEPS_FULL else 0
         if code == Code.STEPS_FULL:
             continue

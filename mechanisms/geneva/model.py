@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
-from mechsim.mechanisms.base import DriveCycle, Field, Guard, InitialState, Mechanism, Mode, TransitionRule
+from mechsim.mechanisms.base import (Breakpoint, DriveCycle, Field, Guard, InitialState, Mechanism, Mode,
+                                     TransitionRule, piecewise_linear)
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
@@ -43,6 +44,8 @@ class Geneva(Mechanism):
     angle_coordinates = (0, 1)
     parameter_names = (
         "r", "c", "R", "J1", "J2", "T_L", "mu", "c1", "c2", "pitch", "alpha0",
+        # a wheel torque varying in time: T_L + T_L_rate (t - T_L_time0) on each piece of its profile
+        "T_L_rate", "T_L_time0",
         # discrete (mode) parameters
         "slot", "lock_angle", "flank", "slide", "slot_base",
         # the creeping-rest guard: at rest once |theta'| + rest_time |theta''| < rest_speed
@@ -86,6 +89,14 @@ class Geneva(Mechanism):
         "load": {
             "wheel_torque": Field("quantity", "N*m", default=0.0, nonnegative=True,
                                   help="resisting torque on the wheel while it indexes"),
+            "wheel_torque_per_station": Field("list", "N*m", default=None, help=(
+                "the resisting torque of each station, one per slot: station i is the index made by slot i "
+                "(slot 0 the one engaged at crank angle 0), the wheel torque while it indexes; in place of "
+                "wheel_torque")),
+            "wheel_torque_profile": Field("profile", "N*m", default=None, profile_key="torque", help=(
+                "the resisting torque while the wheel indexes as a piecewise-linear function of time, "
+                "{ t = [times], torque = [torques] } (times strictly increasing; held at the first value before "
+                "the first time and at the last after the last); in place of wheel_torque")),
         },
         "contact": {
             "friction": Field("float", default=0.0, nonnegative=True, maximum=2.0,
@@ -98,13 +109,37 @@ class Geneva(Mechanism):
     def from_config(cls, config: dict[str, dict]) -> "Geneva":
         m, load, contact = config["mechanism"], config.get("load", {}), config.get("contact", {})
         geometry = cls.geometry_class(m["crank_radius"], int(m["slots"]), m["pin_radius"], m["thickness"])
+        stations, profile = load.get("wheel_torque_per_station"), load.get("wheel_torque_profile")
+        given = [k for k in ("wheel_torque_per_station", "wheel_torque_profile") if load.get(k) is not None]
+        if len(given) > 1 or (given and load.get("wheel_torque", 0.0)):
+            raise ValueError(f"load.{given[-1]}: give the wheel torque one way: wheel_torque, "
+                             "wheel_torque_per_station or wheel_torque_profile")
+        if stations is not None:
+            if len(stations) != geometry.slots:
+                raise ValueError(f"load.wheel_torque_per_station: {len(stations)} torques for {geometry.slots} "
+                                 "slots; give one per station (slot)")
+            for i, x in enumerate(stations):
+                if x < 0:
+                    raise ValueError(f"load.wheel_torque_per_station[{i}]: must not be negative, got {x:g} N*m")
+        if profile is not None:
+            for i, x in enumerate(profile["torque"]):
+                if x < 0:
+                    raise ValueError(f"load.wheel_torque_profile: torque[{i}] must not be negative, got {x:g} N*m")
         return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
-                   contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0))
+                   contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0),
+                   stations, profile)
 
     def __init__(self, geometry: GenevaGeometry, crank_inertia: float, wheel_inertia: float,
                  wheel_torque: float = 0.0, friction: float = 0.0, crank_damping: float = 0.0,
-                 wheel_damping: float = 0.0) -> None:
+                 wheel_damping: float = 0.0, wheel_torque_per_station=None, wheel_torque_profile=None) -> None:
         super().__init__()
+        #: per-station wheel torques (one per slot) or None; a profile {"t": times, "torque": torques} or None
+        self.station_torques = None if wheel_torque_per_station is None else tuple(
+            float(x) for x in wheel_torque_per_station)
+        self.torque_profile = wheel_torque_profile
+        if self.station_torques is not None and len(self.station_torques) != geometry.slots:
+            raise ValueError(f"load.wheel_torque_per_station: {len(self.station_torques)} torques for "
+                             f"{geometry.slots} slots")
         self.geometry = geometry
         self.crank_inertia = crank_inertia
         self.wheel_inertia = wheel_inertia
@@ -129,7 +164,8 @@ class Geneva(Mechanism):
         rest = Guard("rest", w1 + P("rest_time") * sp.Abs(a1) - P("rest_speed"), -1)
         lam = s.lam[0]
         r, c, R, mu = P("r"), P("c"), P("R"), P("mu")
-        c1, c2, T_L = P("c1"), P("c2"), P("T_L")
+        c1, c2 = P("c1"), P("c2")
+        T_L = P("T_L") + P("T_L_rate") * (t - P("T_L_time0"))     # the wheel torque (piecewise linear in t)
         k, flank, slide = P("slot"), P("flank"), P("slide")
 
         g = self.geometry
@@ -201,11 +237,31 @@ class Geneva(Mechanism):
         return {
             "r": g.crank_radius, "c": g.centre_distance, "R": g.pin_radius,
             "J1": self.crank_inertia, "J2": self.wheel_inertia, "T_L": self.wheel_torque,
+            "T_L_rate": 0.0, "T_L_time0": 0.0,
             "mu": self.friction, "c1": self.crank_damping, "c2": self.wheel_damping,
             "pitch": g.pitch, "alpha0": g.engagement_half_angle,
             "slot": 0.0, "lock_angle": 0.0, "flank": 1.0, "slide": 1.0, "slot_base": 0.0,
             "rest_speed": self.REST_SPEED, "rest_time": self.REST_TIME,
+            **(self._profile()[0] if self.torque_profile is not None else {}),
         }
+
+    # -- a time-varying wheel torque (docs/theory.md, 'Time-varying loads and drives') ---------------------------
+    @property
+    def varying_load(self) -> bool:
+        """True where the wheel torque varies by station or in time (no closed form, no reduced reference)."""
+        return self.station_torques is not None or self.torque_profile is not None
+
+    def _profile(self):
+        return piecewise_linear(self.torque_profile["t"], self.torque_profile["torque"],
+                                ("T_L", "T_L_rate", "T_L_time0"), "load breakpoint")
+
+    def schedule(self, t_end: float) -> list[Breakpoint]:
+        """The wheel-torque profile's knots (where it bends), as breakpoints."""
+        return [] if self.torque_profile is None else [b for b in self._profile()[1] if b.time <= t_end]
+
+    def station_torque(self, slot):
+        """The wheel torque of the station that slot number `slot` (unwrapped, re-based count included) indexes."""
+        return self.station_torques[int(round(float(slot))) % self.geometry.slots]
 
     def initial_state(self, angle: float, speed: float) -> InitialState:
         g = self.geometry
@@ -218,14 +274,19 @@ class Geneva(Mechanism):
             u = (speed * g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)[2]
                  + g.pin_radius * (w2 - g.crank_sense * speed))
             slide = 1.0 if u >= 0 else -1.0
-            return InitialState("engaged", {"slot": k, "flank": 1.0, "slide": slide},
+            return InitialState("engaged", {"slot": k, "flank": 1.0, "slide": slide, **self._station(k)},
                                 np.array([angle, k * g.pitch + beta]), np.array([speed, w2]))
         if alpha >= a0:   # past this slot's exit: wheel locked after index k, next slot k + 1
             lock = (k + 0.5) * g.pitch
-            return InitialState("dwell", {"slot": k + 1, "lock_angle": lock},
+            return InitialState("dwell", {"slot": k + 1, "lock_angle": lock, **self._station(k + 1)},
                                 np.array([angle, lock]), np.array([speed, 0.0]))
         lock = (k - 0.5) * g.pitch
-        return InitialState("dwell", {"slot": k, "lock_angle": lock}, np.array([angle, lock]), np.array([speed, 0.0]))
+        return InitialState("dwell", {"slot": k, "lock_angle": lock, **self._station(k)}, np.array([angle, lock]),
+                            np.array([speed, 0.0]))
+
+    def _station(self, slot) -> dict:
+        """{"T_L": the station's torque} for slot number `slot` with per-station torques, else {}."""
+        return {} if self.station_torques is None else {"T_L": self.station_torque(slot)}
 
     def rebase(self, values: Mapping[str, float]):
         """Slot k in the angles (theta, psi) is slot 0 in (theta - 2 pi k, psi - k pitch) with the lock angle moved
@@ -248,8 +309,13 @@ class Geneva(Mechanism):
             "crank stalled: it crept to rest at crank angle {angle:.4f} deg ({mode}), speed {speed:.2e} rad/s with "
             f"speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} rad/s; it settles where the "
             "drive's torque at zero speed balances the load"))
+        entry = TransitionRule("engaged", self._entry, kind="entry")
+        if self.station_torques is not None:
+            # the station's torque is a number of this scenario, not a parameter: a numeric rule (numpy only)
+            entry = replace(entry, numeric=True, updates=lambda q, v, p, xp: {
+                **self._entry(q, v, p, xp), "T_L": self.station_torque(p["slot"] + p["slot_base"])})
         table = {
-            ("dwell", "entry"): TransitionRule("engaged", self._entry, kind="entry"),
+            ("dwell", "entry"): entry,
             ("engaged", "exit"): TransitionRule("dwell", lambda q, v, p, xp: {
                 "slot": p["slot"] + 1, "lock_angle": (p["slot"] + 0.5) * p["pitch"]}, kind="exit"),
             ("engaged", "flank_switch"): TransitionRule(
@@ -315,7 +381,7 @@ class Geneva(Mechanism):
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
         """Crank angle from the reduced-coordinate equation (`geneva_reduced`, docs/theory.md §G2) on DOP853;
         torque and motor drives only."""
-        if drive.is_prescribed:
+        if drive.is_prescribed or self.varying_load or getattr(drive, "has_duty", False):
             return None
         import mechsim.mechanisms.geneva.reduced as geneva_reduced
         dv = drive.parameter_values(angle0)
@@ -396,13 +462,16 @@ class Geneva(Mechanism):
                 "slip_speed_m_s": u, "pin_sliding_speed_m_s": v_s, "pin_distance_m": x, "friction_power_W": fric * u}
 
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
-        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration).
+        """Columns at constant crank speed from the closed forms of docs/theory.md §G1-2 (no integration); None
+        with a time-varying wheel torque (the DAE then runs with the speed as a constraint).
 
         Normal force from the wheel's moment balance N (x - sigma mu R) = J2 beta'' + c2 beta' + T_L
         (docs/theory.md §G2, with the flank chosen by the sign of N); drive torque from the crank's balance
         T_in = c1 w1 + N a + mu |N| sigma du/dw1 with the normal force's arm a and du/dw1 = s_slide - crank_sense
         flank R (`GenevaGeometry.pin_in_slot`; a = r cos(alpha + beta), s_slide = r sin(alpha + beta) external).
         """
+        if self.varying_load:
+            return None
         g = self.geometry
         theta, kin, alpha, eng, beta, w2, x, s_slide, v_s, sigma, N, u, flank = self._closed_form_contact(
             t, angle0, speed)

@@ -396,6 +396,10 @@ def _check_pieces(plan, keys: list[str], pmap: ParameterMap, moved: dict) -> Non
                                        f"moves by {fd:.6g} per unit of {key}, the map says {exact:.6g}")
 
 
+#: scenario keys that make a load or drive vary in time or by station: their runs are not traced
+TIME_VARYING_KEYS = ("load.wheel_torque_per_station", "load.wheel_torque_profile", "drive.duty_on")
+
+
 def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     """The mechanism's ParameterMap, after checking that every value in `wrt` and every quantity in `of` is traced
     on this plan (ScenarioError naming the first that is not; `mechsim size` checks its requests with it too)."""
@@ -404,6 +408,11 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     pmap = plan.mechanism.parameter_map()
     if pmap is None:
         raise ScenarioError("mechanism.type", f"sensitivities are not traced for '{mtype}' (docs/sensitivity.md)")
+    for key in TIME_VARYING_KEYS:
+        section, name = key.split(".")
+        if si.get(section, {}).get(name) is not None:
+            raise ScenarioError(key, "sensitivities through a time-varying load or drive (per station, a profile, "
+                                     "a duty cycle) are not traced; remove it to trace the others")
     if plan.thermal is not None:
         check_thermal(plan, pmap, mtype)
     allowed = _traced_keys(plan, pmap) + ([] if plan.drive.is_prescribed else [pmap.speed_key])
