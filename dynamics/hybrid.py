@@ -120,6 +120,8 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
     t_out = np.minimum(t0 + dt_out * np.arange(1, n_out + 1), t_end)   # round-off must not pass t_end
     if t_out.size == 0 or t_out[-1] < t_end - 1e-12:
         t_out = np.append(t_out, t_end)
+    for time, _, _ in knots:         # an output time within round-off of a breakpoint is taken at it
+        t_out[np.abs(t_out - time) <= 1e-12 * max(1.0, abs(time))] = time
     mf = model.modes[init.mode]
     values, q_init, offset = rebased(mech, model, values, t0, np.asarray(init.q, dtype=float),
                                      np.zeros(len(model.coordinates)))
