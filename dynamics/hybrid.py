@@ -192,7 +192,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     knots = list(start.knots)
     wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
-        while knots and knots[0][0] <= t:     # a breakpoint reached (a segment's end, or a guard's root on it)
+        while knots and reached(knots, t):     # a breakpoint reached (a segment's end, or a guard's root on it)
             _, updates, kind = knots.pop(0)
             values, p, y, yp, row = at_breakpoint(model, mode, values, t, y, updates, kind, offset)
             events.append(row)
@@ -258,6 +258,12 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         first_step = RESTART_STEP_FACTOR * seg.next_step
     stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
     return Trajectory(model, pieces, events, stats, failure, warnings)
+
+
+def reached(knots: list, t: float) -> bool:
+    """Whether the next breakpoint is at t (within round-off: a guard's root may fall a few ulp before it, and a
+    segment that short is no step at all)."""
+    return bool(knots) and knots[0][0] <= t + 1e-12 * max(1.0, abs(t))
 
 
 def at_breakpoint(model: DerivedModel, mode: str, values: dict, t: float, y_end: np.ndarray, updates: dict,

@@ -197,3 +197,14 @@ def test_the_documented_example_loads_and_its_resolved_form_reads_back():
     assert sc["drive.duty_on"] == 0.6 and sc["load.wheel_torque_profile"]["torque"] == [7.0, 3.0, 3.0, 9.0]
     again = loader.validate(loader.resolved_raw(sc.si))
     assert again["load"] == sc.si["load"] and again["drive"] == sc.si["drive"]
+
+
+def test_cycle_averaged_temperatures_need_a_steady_load():
+    """Cycle averaging stands one periodic crank turn for all later ones: refused under a time-varying load (one
+    line naming thermal.averaging); 'auto' resolves every cycle instead."""
+    from mechsim.scenarios import runner
+    varying = [PROFILE, NO_TORQUE]
+    with pytest.raises(ScenarioError, match=r"^thermal\.averaging: 'cycle' needs a steady load"):
+        runner.plan(mechsim.load("geneva-seed-lc1-mu015", set=[*varying, 'thermal.averaging="cycle"']))
+    plan = runner.plan(mechsim.load("geneva-seed-lc1-mu015", set=varying))
+    assert plan.thermal.averaging == "resolved" and "varies in time" in plan.thermal.averaging_why

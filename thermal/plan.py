@@ -554,10 +554,18 @@ def plan(si: dict, mech: ContactSource, drive, method: str) -> ThermalPlan | Non
     cycles = duration / setup.period
     turns = CYCLE_TURNS_CLOSED_FORM if method == "closed-form" else CYCLE_TURNS_DAE
     window = turns * setup.period + 2 * si["output_step"]
+    varying = getattr(mech, "varying_load", False) or getattr(drive, "has_duty", False)
+    if varying and th["averaging"] == "cycle":
+        # the cycle average needs crank turns that repeat; a load or drive varying in time breaks that
+        raise ThermalSetupError("averaging", "'cycle' needs a steady load and drive; with a time-varying load or "
+                                             "a duty cycle use 'resolved' (docs/theory.md, 'Time-varying loads and "
+                                             "drives')")
     if th["averaging"] == "cycle":
         averaging, why = "cycle", "thermal.averaging = 'cycle' (scenario)"
     elif th["averaging"] == "resolved":
         averaging, why = "resolved", "thermal.averaging = 'resolved' (scenario)"
+    elif varying:
+        averaging, why = "resolved", "auto: the load or drive varies in time, so every cycle is resolved"
     elif MODELS[model].every_cycle:
         averaging, why = "resolved", f"auto: model = '{model}' resolves every cycle (it follows each engagement)"
     elif cycles >= AUTO_CYCLES:

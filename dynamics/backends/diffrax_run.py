@@ -510,7 +510,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
-    from mechsim.dynamics.hybrid import Piece, Trajectory, at_breakpoint, fire
+    from mechsim.dynamics.hybrid import Piece, Trajectory, at_breakpoint, fire, reached
     from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
     from mechsim.dynamics.transitions import chattering
@@ -538,7 +538,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     t, dt0, calls, seg_steps = t0, DT0_FIRST, 0, 0
     knots = list(start.knots)
     while True:
-        while knots and knots[0][0] <= t:    # a breakpoint (hybrid.schedule): the call ended there, restart
+        while knots and reached(knots, t):    # a breakpoint (hybrid.schedule): the call ended there, restart
             _, updates, kind = knots.pop(0)
             values, p, y, yp, row = at_breakpoint(model, mode, values, t, y, updates, kind, offset)
             events.append(row)
