@@ -213,3 +213,23 @@ def test_cycle_averaged_temperatures_need_a_steady_load():
         runner.plan(mechsim.load("geneva-seed-lc1-mu015", set=[*varying, 'thermal.averaging="cycle"']))
     plan = runner.plan(mechsim.load("geneva-seed-lc1-mu015", set=varying))
     assert plan.thermal.averaging == "resolved" and "varies in time" in plan.thermal.averaging_why
+
+
+def test_motor_off_mid_index_follows_the_reduced_equation_to_a_stall():
+    """Off at 0.35 s inside the first index, the crank carries the 7 N*m load on its kinetic energy alone: the DAE
+    follows the independent one-coordinate equation (mechanisms/geneva/reduced.py, T_in = 0, DOP853 at 1e-12)
+    from the switch's state, and stops with a stall (exit 3, a physics stop)."""
+    from mechsim.mechanisms.geneva import reduced
+    from mechsim.scenarios.loader import build_mechanism
+    sc = mechsim.load("geneva-motor", set=[*BASE, 'drive.duty_on="0.35 s"', 'drive.duty_off="0.2 s"'])
+    r = mechsim.run(sc)
+    assert r.failure is not None and r.failure.kind == "physics" and "stalled" in r.failure.reason
+    assert r.events["kind"].tolist() == ["entry", "drive off", "stall"]
+    assert r.events["t_s"].tolist()[1] == 0.35
+    df = r.timeseries
+    after = df[(df["t_s"] >= 0.35) & (df["t_s"] <= r.failure.time - 2e-3)]
+    assert (after["mode"] == "engaged").all() and len(after) > 10
+    theta0, omega0 = float(after["crank_angle_rad"].iloc[0]), float(after["crank_speed_rad_s"].iloc[0])
+    theta, omega = reduced.integrate(build_mechanism(sc.si), 0.0, 0.0, theta0, omega0, after["t_s"].to_numpy())
+    np.testing.assert_allclose(after["crank_angle_rad"].to_numpy(), theta, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(after["crank_speed_rad_s"].to_numpy(), omega, rtol=0, atol=1e-6 * omega0)
