@@ -122,7 +122,7 @@ def test_each_index_of_a_per_station_run_is_the_constant_load_run_from_the_same_
         row = df.iloc[i]
         t_row = float(row["t_s"])
         end = exits[exits > t_entry][0] if (exits > t_entry).any() else 1.5
-        station = (k + 0) % 4      # crank angle -180 deg: slot 0 enters first
+        station = k % 4            # crank angle -180 deg: slot 0 enters first
         one = mechsim.run(mechsim.load("geneva-motor", set=[
             f"duration={end - t_row:.12g} s", f'load.wheel_torque="{torques[station]} N*m"',
             f'initial.crank_angle="{float(row["crank_angle_rad"])!r} rad"',
@@ -135,9 +135,20 @@ def test_each_index_of_a_per_station_run_is_the_constant_load_run_from_the_same_
             scale = np.abs(one.timeseries[col]).max()
             # same rows (the 1 ms grid shifted by a whole number of steps), both at rtol 1e-8
             np.testing.assert_allclose(mine[col].to_numpy(), theirs, atol=1e-6 * scale, err_msg=col)
-        # and the station's torque is the one acting: the wheel balance at the run's rows
-        eng = mine[mine["mode"] == "engaged"]
-        assert len(eng)
+
+
+def test_the_station_is_the_slot_count_modulo_the_slots_rebased_counts_included():
+    """The entry rule sets T_L from slot + slot_base (the re-based frame's count, `Geneva.rebase`) modulo n."""
+    from mechsim.scenarios.loader import build_mechanism
+    mech = build_mechanism(mechsim.load("geneva-motor", set=[STATIONS, NO_TORQUE]).si)
+    values = dict(mech.parameter_values(), slot=1.0, slot_base=8.0)     # the 10th index: station 9 mod 4 = 1
+    g = mech.geometry
+    q = np.array([2 * np.pi * 1 - g.engagement_half_angle, 0.5 * g.pitch])
+    tr = mech.on_guard("dwell", "entry", values, 0.0, q, np.array([5.0, 0.0]))
+    assert tr.mode == "engaged" and tr.updates["T_L"] == 2.0
+    assert mech.transition_rules()[("dwell", "entry")][0].python_only      # the compiled run hands it back
+    assert mech.initial_state(-np.pi, 5.0).updates["T_L"] == 7.0 and mech.initial_state(2 * np.pi * 3, 5.0).updates[
+        "T_L"] == 0.5
 
 
 def test_motor_off_in_a_dwell_coasts_on_the_crank_damping_alone():
