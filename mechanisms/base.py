@@ -239,7 +239,7 @@ class TransitionRule:
     hint: str | None = None
     fields: Callable | None = None
 
-    #: the rule reads the scenario's numbers (a per-station load, `Mechanism.station_load`), not only p: the
+    #: the rule reads the scenario's numbers (a per-station load, `Geneva.station_torque`), not only p: the
     #: compiled run hands it back to the Python loop, which evaluates it with numpy
     numeric: bool = False
 
