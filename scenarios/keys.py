@@ -44,7 +44,7 @@ def _field_unit(mtype: str, key: str) -> str:
         spec = sections_for(mtype).get(parts[0], {}).get(parts[1])
     if spec is None:
         return ""
-    if spec.kind == "quantity" or (indexed and spec.kind in ("list", "points")):
+    if spec.kind == "quantity" or (indexed and spec.kind in ("list", "points", "profile")):
         return spec.unit or ""
     return ""
 

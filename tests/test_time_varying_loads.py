@@ -213,6 +213,11 @@ def test_the_documented_example_loads_and_its_resolved_form_reads_back():
     assert sc["drive.duty_on"] == 0.6 and sc["load.wheel_torque_profile"]["torque"] == [7.0, 3.0, 3.0, 9.0]
     again = loader.validate(tomllib.loads(resolved_scenario_toml(sc.si)))
     assert again["load"] == sc.si["load"] and again["drive"] == sc.si["drive"]
+    # report.html's scenario table: the profile's two lists on rows of their own, each with its unit
+    from mechsim.scenarios.output.report_html import scenario_rows
+    rows = {r[1]: r for r in scenario_rows(sc.si) if r[0] == "load"}
+    assert rows["wheel_torque_profile.t"][2:] == ["0.2, 0.45, 0.5, 1.2", "s"]
+    assert rows["wheel_torque_profile.torque"][2:] == ["7, 3, 3, 9", "N·m"]
 
 
 def test_cycle_averaged_temperatures_need_a_steady_load():

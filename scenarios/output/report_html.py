@@ -100,7 +100,11 @@ def scenario_rows(si: dict) -> list[list]:
     for section, body in si.items():
         if isinstance(body, dict):
             for key, value in body.items():
-                if value is not None:
+                if isinstance(value, dict):      # a profile {t = [...], <values> = [...]}: a row per list
+                    unit = unit_of(f"{section}.{key}", [0])
+                    rows += [[section, f"{key}.{name}", _value_text(part), "s" if name == "t" else unit]
+                             for name, part in value.items()]
+                elif value is not None:
                     rows.append([section, key, value if isinstance(value, (int, float)) and not isinstance(value, bool)
                                  else _value_text(value), unit_of(f"{section}.{key}", value)])
         elif body is not None:
