@@ -54,6 +54,9 @@ class Field:
     #: kind "profile" (a piecewise-linear function of time, a table {t = [times], <profile_key> = [values]}): the
     #: name of its value list; the values are in `unit`, the times in s, strictly increasing
     profile_key: str = "value"
+    #: sibling keys this one is given in place of: an override (`--set`, `Scenario.set`) of this key drops the
+    #: file's values of those siblings unless they are overridden too, so one way of giving a value replaces another
+    replaces: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -102,14 +102,15 @@ def toml_literal(value) -> str:
 
 def override_strings(overrides) -> list[str]:
     """Overrides as the CLI's --set strings: a list of "section.key=value" (or one such string), or a dict
-    {"section.key": value} whose values are written as TOML ("75 mm" stays a quantity string, 3 a number)."""
+    {"section.key": value} whose values are written as TOML ("75 mm" stays a quantity string, 3 a number, a list
+    an array, a dict an inline table)."""
     from collections.abc import Mapping
     if overrides is None:
         return []
     if isinstance(overrides, str):
         return [overrides]
     if isinstance(overrides, Mapping):
-        return [f"{key}={toml_literal(value)}" for key, value in overrides.items()]
+        return [f"{key}={literal(value)}" for key, value in overrides.items()]
     return [str(o) for o in overrides]
 
 
@@ -244,6 +245,24 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     return out
 
 
+def drop_replaced(raw: dict, given: dict, overrides: list[str]) -> dict:
+    """The overridden scenario without the file's values of keys an override gives in place of (`Field.replaces`):
+    setting wheel_torque_profile on a scenario that gives wheel_torque replaces it, unless both are overridden."""
+    paths = {tuple(parse_override(text)[0]) for text in overrides}
+    mtype = raw.get("mechanism", {}).get("type") if isinstance(raw.get("mechanism"), dict) else None
+    if mtype not in MECHANISMS:
+        return raw                                          # validate() says what is wrong with the type
+    sections = sections_for(mtype)
+    for path in paths:
+        if len(path) != 2 or not isinstance(sections.get(path[0]), dict) or path[1] not in sections[path[0]]:
+            continue
+        node = raw.get(path[0])
+        for other in sections[path[0]][path[1]].replaces:
+            if isinstance(node, dict) and (path[0], other) not in paths and other in given.get(path[0], {}):
+                node.pop(other, None)
+    return raw
+
+
 def extra_sections(mech_cls: type[Mechanism]) -> dict:
     """Sections contributed by other packages (thermal), keyed by name, as schema dicts."""
     from mechsim.scenarios.thermal_schema import thermal_section  # local: keeps the import graph one-way and lazy
@@ -352,7 +371,7 @@ def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:
 
 def from_raw(raw: dict, source: str, overrides: list[str] | None = None) -> Scenario:
     """Override and validate a parsed scenario (`read_raw`), e.g. once per sweep case."""
-    raw = apply_overrides(raw, overrides or [])
+    raw = drop_replaced(apply_overrides(raw, overrides or []), raw, overrides or [])
     si = validate(raw)
     build_mechanism(si)  # geometry checks now, before anything runs
     return Scenario(si["name"], raw, si, source)

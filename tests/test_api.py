@@ -117,6 +117,11 @@ def test_the_notebook_tour_runs(tmp_path):
     # the comparison: a prescribed crank speed moves the wheel alike under either load
     assert "wheel speed peak differs by 0.0" in out.stdout
     assert (tmp_path / "tour" / "compare" / "compare.csv").is_file()
+    # per-station loads: each index's peak contact force follows its station's torque (7, 2, 5, 0.5 N*m)
+    forces = [float(f.split()[0]) for f in out.stdout.split("peak contact force per index:")[1].splitlines()[0]
+              .split(",")]
+    assert len(forces) == 4 and np.argsort(forces).tolist() == [3, 1, 2, 0]
+    assert "1200001 rows" in out.stdout and "large: True" in out.stdout
 
 
 def test_a_thermal_model_is_one_module_and_its_registry_line(monkeypatch):

@@ -164,3 +164,20 @@ def test_a_bare_number_is_hinted_in_the_fields_usual_unit(key, value, hint):
     with pytest.raises(mechsim.ScenarioError) as err:
         mechsim.load("geneva-lc1", set={key: value})
     assert err.value.field == key and str(err.value).endswith(f"needs a unit, e.g. {hint}")
+
+
+def test_set_takes_lists_and_tables_and_one_way_of_a_value_replaces_another(tmp_path):
+    """Scenario.set writes a Python list as a TOML array and a dict as an inline table; giving the wheel torque
+    another way (per station, a profile) replaces the way the file gave it, while giving two ways at once is
+    refused naming the key."""
+    sc = mechsim.load("geneva-lc1")
+    stations = sc.set({"load.wheel_torque_per_station": ["7 N*m", "2 N*m", "5 N*m", "0.5 N*m"]})
+    assert stations["load.wheel_torque_per_station"] == [7.0, 2.0, 5.0, 0.5]
+    assert "wheel_torque" not in stations.raw["load"]
+    back = stations.set(["load.wheel_torque=3 N*m"])
+    assert back.raw["load"] == {"wheel_torque": "3 N*m"}
+    profile = sc.set({"load.wheel_torque_profile": {"t": ["0 s", "1 s"], "torque": ["1 N*m", "2 N*m"]}})
+    (tmp_path / "profile.toml").write_text(profile.to_toml())
+    assert mechsim.load(tmp_path / "profile.toml").si["load"] == profile.si["load"]
+    with pytest.raises(mechsim.ScenarioError, match=r"^load\.wheel_torque_profile: give the wheel torque one way"):
+        sc.set({"load.wheel_torque": "3 N*m", "load.wheel_torque_profile": {"t": ["0 s"], "torque": ["1 N*m"]}})

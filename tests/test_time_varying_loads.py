@@ -60,7 +60,9 @@ def test_bad_input_names_the_field(override, field):
 
 def test_two_ways_of_giving_the_wheel_torque_and_a_duty_on_a_prescribed_speed_are_refused():
     with pytest.raises(ScenarioError, match=r"^load\.wheel_torque_profile: give the wheel torque one way"):
-        mechsim.load("geneva-motor", set=[PROFILE])           # wheel_torque = 7 N*m is set too
+        mechsim.load("geneva-motor", set=[PROFILE, "load.wheel_torque=7 N*m"])   # both given at once
+    # given alone, the profile replaces the file's wheel_torque (Field.replaces)
+    assert "wheel_torque" not in mechsim.load("geneva-motor", set=[PROFILE]).raw["load"]
     with pytest.raises(ScenarioError, match=r"^drive\.duty_on: a duty cycle needs drive.type"):
         mechsim.load("geneva-lc1", set=DUTY)
 

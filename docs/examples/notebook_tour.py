@@ -109,3 +109,25 @@ print("compared:", ", ".join(sorted(p.name for p in c.save(folder / "compare", f
 
 # %%
 print("\n".join(heavy.to_toml(comments=True).splitlines()[:12]))
+
+# %% [markdown]
+# ## Loads that change
+# The wheel torque may differ per station (one value per slot, in the order the slots engage) or follow a
+# piecewise-linear profile in time; the motor may run a duty cycle (`drive.duty_on`, `drive.duty_off`). Each
+# breakpoint is an event: the integrator stops there and restarts, so no step straddles a kink.
+
+# %%
+stations = sc.set({"load.wheel_torque_per_station": ["7 N*m", "2 N*m", "5 N*m", "0.5 N*m"], "duration": "4.8 s"})
+rs = mechsim.run(stations)
+ts = rs.timeseries
+index = np.searchsorted(rs.events.loc[rs.events["kind"] == "entry", "t_s"].to_numpy(), ts["t_s"], side="right")
+engaged = ts[ts["mode"] == "engaged"].assign(index=index[ts["mode"] == "engaged"])
+print("peak contact force per index:", ", ".join(f"{f:.0f} N" for f in engaged.groupby("index")["contact_force_N"].max()))
+
+# %% [markdown]
+# How large a run's tables will be is known before it runs; a large output is said by `mechsim run`, and
+# `[output] csv = "auto"` then writes Parquet only.
+
+# %%
+size = mechsim.output_size(sc.set({"duration": "120 s", "output_step": "0.1 ms"}))
+print(f"120 s at 0.1 ms: {size.rows} rows, about {size.total_bytes / 2**20:.0f} MiB, large: {size.large}")

@@ -88,15 +88,17 @@ class Geneva(Mechanism):
         },
         "load": {
             "wheel_torque": Field("quantity", "N*m", default=0.0, nonnegative=True,
-                                  help="resisting torque on the wheel while it indexes"),
+                                  help="resisting torque on the wheel while it indexes",
+                                  replaces=("wheel_torque_per_station", "wheel_torque_profile")),
             "wheel_torque_per_station": Field("list", "N*m", default=None, help=(
                 "the resisting torque of each station, one per slot: station i is the index made by slot i "
                 "(slot 0 the one engaged at crank angle 0), the wheel torque while it indexes; in place of "
-                "wheel_torque")),
+                "wheel_torque"), replaces=("wheel_torque", "wheel_torque_profile")),
             "wheel_torque_profile": Field("profile", "N*m", default=None, profile_key="torque", help=(
                 "the resisting torque while the wheel indexes as a piecewise-linear function of time, "
                 "{ t = [times], torque = [torques] } (times strictly increasing; held at the first value before "
-                "the first time and at the last after the last); in place of wheel_torque")),
+                "the first time and at the last after the last); in place of wheel_torque"),
+                replaces=("wheel_torque", "wheel_torque_per_station")),
         },
         "contact": {
             "friction": Field("float", default=0.0, nonnegative=True, maximum=2.0,
