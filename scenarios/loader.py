@@ -250,15 +250,17 @@ def drop_replaced(raw: dict, given: dict, overrides: list[str]) -> dict:
     setting wheel_torque_profile on a scenario that gives wheel_torque replaces it, unless both are overridden."""
     paths = {tuple(parse_override(text)[0]) for text in overrides}
     mtype = raw.get("mechanism", {}).get("type") if isinstance(raw.get("mechanism"), dict) else None
-    if mtype not in MECHANISMS:
+    if not isinstance(mtype, str) or mtype not in MECHANISMS:
         return raw                                          # validate() says what is wrong with the type
     sections = sections_for(mtype)
     for path in paths:
         if len(path) != 2 or not isinstance(sections.get(path[0]), dict) or path[1] not in sections[path[0]]:
             continue
-        node = raw.get(path[0])
+        node, before = raw.get(path[0]), given.get(path[0])
+        if not isinstance(node, dict) or not isinstance(before, dict):
+            continue
         for other in sections[path[0]][path[1]].replaces:
-            if isinstance(node, dict) and (path[0], other) not in paths and other in given.get(path[0], {}):
+            if (path[0], other) not in paths and other in before:
                 node.pop(other, None)
     return raw
 

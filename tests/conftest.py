@@ -18,6 +18,11 @@ def pytest_configure(config):
 
 
 def pytest_terminal_summary(terminalreporter):
+    """The fuzz's case count and seed, where a fuzz test ran (in this process or an xdist worker)."""
+    ran = [r for kind in ("passed", "failed") for r in terminalreporter.stats.get(kind, [])
+           if getattr(r, "when", "call") == "call" and "test_fuzz_scenarios.py" in getattr(r, "nodeid", "")]
+    if not ran:
+        return
     from test_fuzz_scenarios import FUZZ_EXAMPLES       # tests/ is on the path, as for cli_helpers
     seed = os.environ["MECHSIM_FUZZ_SEED"]
     terminalreporter.write_line(f"scenario fuzzing: {FUZZ_EXAMPLES} generated cases, seed {seed} "
