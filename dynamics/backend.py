@@ -28,6 +28,7 @@ if TYPE_CHECKING:      # the contract is imported by the settings: no sympy mode
 
 #: solver.backend value -> "module:class" of its backend (imported on first use: diffrax pulls in JAX)
 REGISTRY = {
+    "auto": "mechsim.dynamics.backends.ida_compiled:AutoBackend",
     "ida": "mechsim.dynamics.backends.ida:IdaBackend",
     "ida-compiled": "mechsim.dynamics.backends.ida_compiled:IdaCompiledBackend",
     "diffrax": "mechsim.dynamics.backends.diffrax_backend:DiffraxBackend",

@@ -21,11 +21,13 @@ class SolverSettings:
         None picks 1e6 for index2/index3 and 1e3 for index1.
     jacobian: "exact" (generated from the symbolic model, the default) or "fd" (IDA's internal finite
         differences, only when asked for).
+    backend: "auto" (the default) runs `ida-compiled` where the model's compiled callbacks are ready and `ida`
+        otherwise (dynamics/backends/ida_compiled.py AutoBackend); "ida", "ida-compiled" or "diffrax" insist.
     events: False disables root-finding of guards (only for the stability study: mode changes are then
         stepped over and detected afterwards as a failure).
     """
 
-    backend: str = "ida"
+    backend: str = "auto"
     formulation: str = "index2"
     method: str = "auto"
     rtol: float = 1e-8

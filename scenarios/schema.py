@@ -36,7 +36,8 @@ COMMON_SECTIONS: dict[str, dict[str, Field]] = {
         "duty_off": Field("quantity", "s", default=None, positive=True, help="duty cycle: time off per period"),
     },
     "solver": {
-        "backend": Field("str", default="ida", choices=BACKENDS, help="integrator (docs/architecture.md)"),
+        "backend": Field("str", default="auto", choices=BACKENDS,
+                         help="integrator; auto: ida-compiled once compiled, else ida (docs/architecture.md)"),
         "formulation": Field("str", default="index2", choices=("index1", "index2", "index3"),
                              help="DAE index formulation (docs/stability.md)"),
         "method": Field("str", default="auto", choices=("auto", "dae", "closed-form"),

@@ -15,6 +15,9 @@ def pytest_configure(config):
     """One fuzz seed for the whole run (the xdist workers inherit it), new each run unless MECHSIM_FUZZ_SEED is
     set (tests/test_fuzz_scenarios.py)."""
     os.environ.setdefault("MECHSIM_FUZZ_SEED", str(secrets.randbelow(2**32)))
+    # the default backend compiles no callbacks of its own during the tests: a run's backend then never depends on
+    # how far a background compilation had got (tests/test_ida_compiled.py tests that compilation by itself)
+    os.environ.setdefault("MECHSIM_BACKGROUND_COMPILE", "0")
 
 
 def pytest_terminal_summary(terminalreporter):

@@ -13,8 +13,10 @@ import functools
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import mechsim
@@ -175,3 +177,76 @@ def test_without_the_sundials_libraries_the_backend_says_so_in_one_line(monkeypa
     with pytest.raises(ValueError, match=r"solver.backend = 'ida-compiled' is not available .*'ida' was not "
                                          r"found.*use solver.backend = 'ida'"):
         mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.1 s"})
+
+
+def test_the_sundials_version_is_checked_against_the_one_the_prototypes_were_written_for():
+    """The loaded SUNDIALS is the release the C prototypes were written for (the headers they were checked
+    against); any other major or minor release is refused in one line before a prototype is bound."""
+    from mechsim.dynamics.backends.sundials_c import WRITTEN_FOR, SundialsVersionMismatch, check_version
+    assert sundials().version[:2] == WRITTEN_FOR
+    check_version(WRITTEN_FOR + (7,))
+    for other in ((WRITTEN_FOR[0], WRITTEN_FOR[1] + 1, 0), (WRITTEN_FOR[0] + 1, 0, 0), (WRITTEN_FOR[0] - 1, 9, 0)):
+        with pytest.raises(SundialsVersionMismatch) as err:
+            check_version(other)
+        assert "\n" not in str(err.value) and ".".join(map(str, other)) in str(err.value)
+
+
+@pytest.fixture
+def other_sundials_release(monkeypatch):
+    """scikit-sundae's SUNDIALS reported as a release the prototypes were not written for (the version reader
+    patched, the process's loaded interface dropped and restored afterwards)."""
+    from mechsim.dynamics.backends import ida_compiled, sundials_c
+    monkeypatch.setattr(sundials_c, "library_version", lambda core: (sundials_c.WRITTEN_FOR[0],
+                                                                      sundials_c.WRITTEN_FOR[1] + 1, 0))
+    monkeypatch.setattr(ida_compiled, "_NOTED", set())
+    sundials_c.sundials.cache_clear()
+    yield
+    sundials_c.sundials.cache_clear()
+
+
+@pytest.mark.parametrize("backend", ["ida-compiled", "auto"])
+def test_another_sundials_release_runs_on_ida_after_a_one_line_note(backend, other_sundials_release, capfd):
+    """Asked for the compiled path (or given it by default) on another SUNDIALS release: the run completes on the
+    `ida` backend, exactly as an `ida` run, after one line on stderr naming both releases."""
+    sets = {"duration": "0.3 s", "output.plots": False}
+    result = mechsim.run("geneva-motor", set={**sets, "solver.backend": backend})
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "SUNDIALS 7.10.0" in err[0] and "7.9.x" in err[0] and "'ida'" in err[0], err
+    assert result.success and result.summary["solver"]["backend"] == "ida"
+    reference = mechsim.run("geneva-motor", set={**sets, "solver.backend": "ida"})
+    pd.testing.assert_frame_equal(result.timeseries, reference.timeseries)
+    mechsim.run("geneva-motor", set={**sets, "solver.backend": backend})
+    assert capfd.readouterr().err == ""                       # once per process
+
+
+def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_done(tmp_path):
+    """A fresh cache folder: the first process runs the model on `ida` and compiles its callbacks in a background
+    process; a process started after that runs it compiled, loading everything from the cache (nothing compiled
+    in it), with the first run's events and motion within the runs' accuracy. Within a process the first choice is
+    kept. The first process never imports numba: its run costs what an `ida` run costs."""
+    env = dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), NUMBA_CACHE_DIR=str(tmp_path / "numba"),
+               MECHSIM_BACKGROUND_COMPILE="1")
+    code = ("import sys, mechsim, numpy as np\n"
+            "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
+            "runs = [mechsim.run('geneva-motor', set={'duration': '0.5 s', 'output.plots': False}) for _ in (0, 1)]\n"
+            "native = sys.modules.get('mechsim.dynamics.backends.native')\n"
+            "compiled_here = native is not None and sum(native.advance.stats.cache_misses.values())\n"
+            "print(*[r.summary['solver']['backend'] for r in runs], 'numba' in sys.modules,"
+            " all(cm.loaded_from_cache for cm in loaded_modes()) and not compiled_here,"
+            " runs[0].timeseries.equals(runs[1].timeseries))\n"
+            "np.save(sys.argv[1], runs[0].timeseries[['t_s', 'crank_angle_rad', 'wheel_angle_rad']].to_numpy())\n")
+    first = subprocess.run([sys.executable, "-c", code, str(tmp_path / "a.npy")], capture_output=True, text=True,
+                           env=env, timeout=600)
+    assert first.stdout.split() == ["ida", "ida", "False", "True", "True"], first.stderr[-2000:]
+    folder = tmp_path / "cache" / "compiled"
+    for _ in range(600):                    # the background compilation: seconds to minutes on a loaded machine
+        if len(list(folder.glob("*.ready"))) >= 3:
+            break
+        time.sleep(0.5)
+    second = subprocess.run([sys.executable, "-c", code, str(tmp_path / "b.npy")], capture_output=True, text=True,
+                            env=env, timeout=600)
+    assert second.stdout.split() == ["ida-compiled", "ida-compiled", "True", "True", "True"], second.stderr[-2000:]
+    a, b = np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy")
+    assert np.array_equal(a[:, 0], b[:, 0])
+    rtol, atol = 1e-8, 1e-10                # the scenario's solver tolerances
+    assert np.abs(a[:, 1:] - b[:, 1:]).max() <= GLOBAL_FACTOR * (rtol * np.abs(a[:, 1:]).max() + atol)

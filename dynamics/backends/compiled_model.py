@@ -112,21 +112,28 @@ def _cache_key(what: str) -> str:
     """Everything the compiled code depends on: what identifies the expressions (the derivation key and mode,
     with the code's fingerprint; or the generated source itself), the template, numba, Python, and the SUNDIALS
     build (its layout offsets are constants of the code)."""
-    import numba
-    from importlib.metadata import version
+    from importlib.metadata import version         # numba's version without importing numba
     lib = sundials()
-    parts = [str(TEMPLATE_VERSION), numba.__version__, sys.version, version("scikit-sundae"),
+    parts = [str(TEMPLATE_VERSION), version("numba"), sys.version, version("scikit-sundae"),
              str(lib.vector_data_offset), str(lib.matrix_data_offset), what]
     return hashlib.sha256("|".join(parts).encode()).hexdigest()[:24]
+
+
+def module_name(mf) -> str | None:
+    """The file name of the mode's generated module, where the mode's expressions are identified without
+    generating them (a derivation key); None otherwise."""
+    if not mf.cache_key:
+        return None
+    return f"mode_{mf.name}_{_cache_key(f'{mf.cache_key!r}|{code_fingerprint()}')}.py"
 
 
 def _module_path(folder: Path, mf) -> Path:
     """The generated module of the mode in `folder` (written once, atomically, when missing), or in a private
     temporary folder where that cannot be written; numba keeps its cache beside it. The source is generated
     (sympy, about 0.3 s a mode) only when the module is not there yet."""
-    what = (f"{mf.cache_key!r}|{code_fingerprint()}" if mf.cache_key else None)
-    source = None if what else module_source(mf)
-    name = f"mode_{mf.name}_{_cache_key(what or source)}.py"
+    name = module_name(mf)
+    source = None if name else module_source(mf)
+    name = name or f"mode_{mf.name}_{_cache_key(source)}.py"
     for where in (folder, None):
         try:
             where = where if where is not None else Path(tempfile.mkdtemp(prefix="mechsim-compiled-"))
@@ -168,3 +175,75 @@ def loaded_modes() -> list[CompiledMode]:
     """Every mode compiled or loaded in this process so far."""
     with _LOCK:
         return [cm for _, cm in _BY_MODE.values()]
+
+
+# -- compiled once per machine, off the first run's path ----------------------------------------------------------
+#: set to "0" to never compile in the background (the `auto` backend then runs on `ida` until callbacks are ready)
+BACKGROUND_ENV = "MECHSIM_BACKGROUND_COMPILE"
+_READY = ".ready"
+_STARTED: set = set()
+
+
+def _advance_marker(folder: Path) -> Path:
+    return folder / f"advance_{_cache_key('advance|' + code_fingerprint())}{_READY}"
+
+
+def ready(modes, folder: Path) -> bool:
+    """Whether every mode's callbacks (and the compiled segment loop) are in this process already, or compiled
+    and cached on disk by `compile_in_background`: running them compiled then costs loading, not compiling."""
+    with _LOCK:
+        missing = [mf for mf in modes if not ((hit := _BY_MODE.get(id(mf))) is not None and hit[0] is mf)]
+    if not missing:
+        return True
+    names = [module_name(mf) for mf in missing]
+    return (all(names) and _advance_marker(folder).exists()
+            and all((folder / f"{name}{_READY}").exists() for name in names))
+
+
+def compile_in_background(modes, folder: Path) -> bool:
+    """Compile the modes' callbacks and the segment loop into numba's on-disk cache in a detached, lowest-priority
+    process (a fork of this one, which holds the modes' expressions), then mark them ready; this process goes on
+    at once. Not done where a fork is unsafe or impossible (no os.fork; JAX's threads loaded), for modes whose
+    expressions have no derivation key (their module name needs the generated source), once per model and
+    process, nor when $MECHSIM_BACKGROUND_COMPILE is "0". Returns whether a compilation was started."""
+    modes = list(modes)
+    key = tuple(sorted(id(mf) for mf in modes))
+    if (os.environ.get(BACKGROUND_ENV, "1") == "0" or not hasattr(os, "fork") or "jax" in sys.modules
+            or key in _STARTED or not all(mf.cache_key for mf in modes)):
+        return False
+    _STARTED.add(key)
+    pid = os.fork()
+    if pid:
+        os.waitpid(pid, 0)            # the first child only forks the worker and leaves: no zombie is left
+        return True
+    try:                              # the first child
+        if os.fork():
+            os._exit(0)
+        _compile_detached(modes, folder)
+    finally:
+        os._exit(0)
+
+
+def _compile_detached(modes, folder: Path) -> None:
+    """The worker of `compile_in_background`: its own session, no terminal, nice 19; one such worker compiles at a
+    time (a lock file in `folder`); every failure leaves the modes unmarked (they are tried again later)."""
+    global _LOCK
+    _LOCK = threading.Lock()         # a lock another thread held at the fork would never be released here
+    try:
+        os.setsid()
+        devnull = os.open(os.devnull, os.O_RDWR)
+        for fd in (0, 1, 2):
+            os.dup2(devnull, fd)
+        os.nice(19)
+        import fcntl
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(folder / ".compile.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            for mf in modes:
+                compiled_mode(mf, folder)
+                (folder / f"{module_name(mf)}{_READY}").touch()
+            from mechsim.dynamics.backends.native import compile_advance
+            compile_advance()
+            _advance_marker(folder).touch()
+    except BaseException:           # a worker's failure must never reach the user's process or terminal
+        pass

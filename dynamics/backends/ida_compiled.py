@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import ctypes
 import importlib
+import importlib.util
+import sys
 import time as _time
 from dataclasses import dataclass, field
 
@@ -24,12 +26,34 @@ from mechsim.dynamics.backend import Backend, End, Request, Segment
 from mechsim.dynamics.backends.ida import IdaBackend, atol_vector
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
-from mechsim.dynamics.backends.native import advance
-from mechsim.dynamics.backends.sundials_c import IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable, sundials
+from mechsim.dynamics.backends.sundials_c import (IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable,
+                                                   SundialsVersionMismatch, sundials)
 from mechsim.dynamics.user_cache import cache_dir
 
 #: scikit-sundae's defaults, kept so both IDA backends run the same algorithm
 MAX_NONLINEAR_ITERATIONS, MAX_CONVERGENCE_FAILURES, MAX_ORDER = 4, 10, 5
+
+_NOTED: set = set()
+
+
+def note(text: str) -> None:
+    """A one-line note on stderr, once per process and text."""
+    if text not in _NOTED:
+        _NOTED.add(text)
+        print(f"mechsim: note: {text}", file=sys.stderr)
+
+
+def unavailable() -> Exception | None:
+    """Why the compiled path cannot run in this installation (None: it can): numba missing, or scikit-sundae's
+    SUNDIALS libraries missing, unloadable or of another release (`sundials_c.SundialsVersionMismatch`). Finding
+    numba does not import it."""
+    if importlib.util.find_spec("numba") is None:
+        return ImportError("numba is not installed")
+    try:
+        sundials()
+    except (ImportError, OSError, SundialsUnavailable) as exc:
+        return exc
+    return None
 
 
 @dataclass
@@ -60,15 +84,25 @@ class IdaCompiledBackend(Backend):
     notes = {"rejected_steps": "IDA's error-test and nonlinear-convergence failures",
              "compile_time_s": "compiling (or loading from the cache) the modes' callbacks "}
 
+    def __new__(cls, settings: SolverSettings):
+        """Another SUNDIALS release than the prototypes' gives the `ida` backend, with a one-line note (the same
+        algorithm on the same libraries through scikit-sundae's own binding); a missing piece is a ValueError."""
+        reason = unavailable()
+        if isinstance(reason, SundialsVersionMismatch):
+            note(f"{reason}: solver.backend = '{cls.name}' runs on 'ida' (the same IDA through scikit-sundae's "
+                 "binding)")
+            return IdaBackend(settings)
+        if reason is not None:
+            raise ValueError(f"solver.backend = 'ida-compiled' is not available in this installation ({reason}); "
+                             "use solver.backend = 'ida'")
+        return super().__new__(cls)
+
     def __init__(self, settings: SolverSettings):
         self.settings = settings
         self.solver = f"IDA (BDF, {settings.formulation}; compiled callbacks)"
-        try:
-            importlib.import_module("numba")
-            self.lib = sundials()
-        except (ImportError, OSError, SundialsUnavailable) as exc:
-            raise ValueError(f"solver.backend = 'ida-compiled' is not available in this installation ({exc}); "
-                             "use solver.backend = 'ida'") from None
+        from mechsim.dynamics.backends.native import advance      # numba: imported where it is used
+        self._advance = advance
+        self.lib = sundials()
         self._memories: dict[int, tuple[object, _Memory]] = {}
         self._tret = np.zeros(1)
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
@@ -159,7 +193,7 @@ class IdaCompiledBackend(Backend):
         t_out = np.ascontiguousarray(t_out, dtype=float)
         rows_t = np.empty(len(t_out))
         rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
-        flag, k = advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
+        flag, k = self._advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
                                rows_t, rows_y, rows_yp)
         flag, k = int(flag), int(k)
         counts.update(self._counters(m.mem))
@@ -199,3 +233,64 @@ class IdaCompiledBackend(Backend):
         return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,
                     residual_evaluations=lib.counter(lib.IDAGetNumResEvals, mem),
                     jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))
+
+
+class AutoBackend(Backend):
+    """The default (`solver.backend = "auto"`): `ida-compiled` for a model whose callbacks are compiled already
+    (cached on disk once per machine), else `ida`, with the model's callbacks then compiled in a background
+    process for the runs after. Both run the same IDA algorithm (docs/benchmarks.md, "The default backend").
+
+    The choice is made once per model and process, at its first run in the process, so that every run of a model
+    in one process is computed the same way; a process that starts after the background compilation has
+    finished runs the model compiled. Where the compiled path is unavailable (`unavailable`), every run is on
+    `ida`, with a one-line note when the cause is another SUNDIALS release.
+    """
+
+    name = "auto"
+    _CHOSEN: dict = {}        # id(model) -> (model, compiled?) : the process's choice for each model
+
+    def __init__(self, settings: SolverSettings):
+        self.settings = settings
+        self._ida = IdaBackend(settings)
+        reason = unavailable()
+        if isinstance(reason, SundialsVersionMismatch):
+            note(f"{reason}: the default solver.backend runs on 'ida' (the same IDA through scikit-sundae's "
+                 "binding)")
+        self._compiled = None if reason is not None else IdaCompiledBackend
+        self._use(self._ida)
+        self._inner = None
+
+    def _use(self, inner: Backend) -> None:
+        self._inner = inner
+        for key in ("name", "solver", "initial_step", "recoverable", "unavailable", "notes"):
+            setattr(self, key, getattr(inner, key))
+
+    def choose(self, model) -> Backend:
+        """The backend for `model` in this process (chosen at the model's first run here, then kept)."""
+        from mechsim.dynamics.backends import compiled_model
+        hit = self._CHOSEN.get(id(model))
+        if hit is None or hit[0] is not model:
+            compiled = False
+            if self._compiled is not None:
+                folder = cache_dir() / "compiled"
+                compiled = compiled_model.ready(model.modes.values(), folder)
+                if not compiled:
+                    compiled_model.compile_in_background(model.modes.values(), folder)
+            hit = self._CHOSEN[id(model)] = (model, compiled)
+        if hit[1] and not isinstance(self._inner, IdaCompiledBackend):
+            self._use(self._compiled(self.settings))
+        elif not hit[1] and self._inner is not self._ida:
+            self._use(self._ida)
+        return self._inner
+
+    def whole_run(self, mech, start, t0: float, t_end: float, progress=None):
+        """Chooses the backend for the run's model before the hybrid loop starts (so that the run's statistics
+        are the chosen backend's); returns None: the run goes segment by segment."""
+        self.choose(start.model)
+        return None
+
+    def integrate(self, request: Request) -> Segment:
+        return self.choose(request.model).integrate(request)
+
+    def hint(self, code: FailureCode) -> str:
+        return self._inner.hint(code)

@@ -71,3 +71,10 @@ def advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tr
         if flag == 1:          # IDA_TSTOP_RETURN: the end of the segment
             break
     return flag, k
+
+
+def compile_advance() -> None:
+    """Compile `advance` for the argument types `IdaCompiledBackend.integrate` passes (numba caches it on disk):
+    a call with no output time, which returns before calling IDASolve."""
+    advance(0, 0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros((0, 1)),
+            np.zeros((0, 1)))

@@ -9,6 +9,11 @@ Every pointer is declared as a plain 64-bit integer (`c_size_t`): on the platfor
 and a size_t travel the same way in a call, and numba-compiled code (the segment driver) can then pass the
 addresses it holds without pointer types. The layout facts the compiled callbacks rely on (where a serial
 vector's and a dense matrix's data pointer sit) are read from the library at load time, not assumed.
+
+ctypes checks none of these prototypes against the library, so they hold only for the SUNDIALS release they were
+written from (`WRITTEN_FOR`, checked against that release's headers). The library's own version
+(SUNDIALSGetVersionNumber) is read before anything else is bound; any other release raises
+`SundialsVersionMismatch`, and the callers run on the `ida` backend instead (dynamics/backends/ida_compiled.py).
 """
 from __future__ import annotations
 
@@ -29,6 +34,10 @@ L = ctypes.c_long            # long int
 IDA_NORMAL, IDA_ONE_STEP = 1, 2
 IDA_SUCCESS, IDA_TSTOP_RETURN, IDA_ROOT_RETURN = 0, 1, 2
 IDA_TOO_MUCH_WORK = -1
+
+#: the SUNDIALS release (major, minor) whose headers the prototypes below were written from and checked against;
+#: a patch release keeps them (SUNDIALS changes its interface only in a major or minor release)
+WRITTEN_FOR = (7, 9)
 
 # name: (library, restype, argtypes)
 _PROTOTYPES = {
@@ -80,6 +89,31 @@ class SundialsUnavailable(RuntimeError):
     """scikit-sundae's SUNDIALS libraries cannot be found or do not have the expected interface."""
 
 
+class SundialsVersionMismatch(SundialsUnavailable):
+    """scikit-sundae ships another SUNDIALS release than the one the prototypes were written for."""
+
+
+def library_version(core: ctypes.CDLL) -> tuple[int, int, int]:
+    """(major, minor, patch) of the loaded SUNDIALS, from SUNDIALSGetVersionNumber(int*, int*, int*, char*, int)
+    (a prototype unchanged since SUNDIALS 3)."""
+    fn = getattr(core, "SUNDIALSGetVersionNumber", None)
+    if fn is None:
+        raise SundialsUnavailable("SUNDIALSGetVersionNumber not found in scikit-sundae's SUNDIALS")
+    fn.restype, fn.argtypes = I, [P, P, P, P, I]
+    parts, label = [ctypes.c_int(0) for _ in range(3)], ctypes.create_string_buffer(64)
+    if fn(*(ctypes.addressof(x) for x in parts), ctypes.addressof(label), len(label)) != 0:
+        raise SundialsUnavailable("SUNDIALSGetVersionNumber failed")
+    return parts[0].value, parts[1].value, parts[2].value
+
+
+def check_version(version: tuple[int, int, int]) -> None:
+    """SundialsVersionMismatch (one line) unless `version` is a release of `WRITTEN_FOR`."""
+    if tuple(version[:2]) != WRITTEN_FOR:
+        raise SundialsVersionMismatch(
+            f"scikit-sundae ships SUNDIALS {'.'.join(map(str, version))}, and the compiled path's C prototypes "
+            f"are written for SUNDIALS {'.'.join(map(str, WRITTEN_FOR))}.x")
+
+
 def _library_files() -> dict[str, str]:
     """The SUNDIALS shared libraries bundled with the installed scikit-sundae wheel (Linux: scikit_sundae.libs,
     macOS: sksundae/.dylibs, Windows: scikit_sundae.libs with .dll files)."""
@@ -111,6 +145,8 @@ class Sundials:
         mode = getattr(os, "RTLD_GLOBAL", 0)
         libs = {part: ctypes.CDLL(path, mode=mode) for part, path in files.items()}
         self.files = files
+        self.version = library_version(libs["core"])
+        check_version(self.version)       # before any prototype is bound or called
         for name, (part, restype, argtypes) in _PROTOTYPES.items():
             try:
                 fn = getattr(libs[part], name)
