@@ -180,7 +180,9 @@ def loaded_modes() -> list[CompiledMode]:
 # -- compiled once per machine, off the first run's path ----------------------------------------------------------
 #: set to "0" to never compile in the background (the `auto` backend then runs on `ida` until callbacks are ready)
 BACKGROUND_ENV = "MECHSIM_BACKGROUND_COMPILE"
-_READY = ".ready"
+_READY, _FAILED = ".ready", ".failed"      # a mode that failed to compile is not tried again in the background
+#: how long a background compilation waits for another one to finish before it gives up
+_LOCK_WAIT_S = 600.0
 _STARTED: set = set()
 
 
@@ -209,10 +211,14 @@ def compile_in_background(modes, folder: Path) -> bool:
     modes = list(modes)
     key = tuple(sorted(id(mf) for mf in modes))
     if (os.environ.get(BACKGROUND_ENV, "1") == "0" or not hasattr(os, "fork") or "jax" in sys.modules
-            or key in _STARTED or not all(mf.cache_key for mf in modes)):
+            or key in _STARTED or not all(mf.cache_key for mf in modes)
+            or any((folder / f"{module_name(mf)}{_FAILED}").exists() for mf in modes)):
         return False
     _STARTED.add(key)
-    pid = os.fork()
+    try:
+        pid = os.fork()
+    except OSError:                   # no process to spare: the run goes on, on `ida`
+        return False
     if pid:
         os.waitpid(pid, 0)            # the first child only forks the worker and leaves: no zombie is left
         return True
@@ -226,7 +232,9 @@ def compile_in_background(modes, folder: Path) -> bool:
 
 def _compile_detached(modes, folder: Path) -> None:
     """The worker of `compile_in_background`: its own session, no terminal, nice 19; one such worker compiles at a
-    time (a lock file in `folder`); every failure leaves the modes unmarked (they are tried again later)."""
+    time (a lock file in `folder`). A mode whose compilation raises is marked failed (not tried in the background
+    again); a worker stopped, or waiting for another longer than `_LOCK_WAIT_S`, leaves its modes to a later
+    process."""
     global _LOCK
     _LOCK = threading.Lock()         # a lock another thread held at the fork would never be released here
     try:
@@ -236,11 +244,24 @@ def _compile_detached(modes, folder: Path) -> None:
             os.dup2(devnull, fd)
         os.nice(19)
         import fcntl
+        import time
         folder.mkdir(parents=True, exist_ok=True)
         with open(folder / ".compile.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+            deadline = time.monotonic() + _LOCK_WAIT_S
+            while True:
+                try:
+                    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        return
+                    time.sleep(1.0)
             for mf in modes:
-                compiled_mode(mf, folder)
+                try:
+                    compiled_mode(mf, folder)
+                except Exception:
+                    (folder / f"{module_name(mf)}{_FAILED}").touch()
+                    raise
                 (folder / f"{module_name(mf)}{_READY}").touch()
             from mechsim.dynamics.backends.native import compile_advance
             compile_advance()
