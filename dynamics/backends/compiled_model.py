@@ -233,8 +233,8 @@ def compile_in_background(modes, folder: Path) -> bool:
 def _compile_detached(modes, folder: Path) -> None:
     """The worker of `compile_in_background`: its own session, no terminal, nice 19; one such worker compiles at a
     time (a lock file in `folder`). A mode whose compilation raises is marked failed (not tried in the background
-    again); a worker stopped, or waiting for another longer than `_LOCK_WAIT_S`, leaves its modes to a later
-    process."""
+    again); a worker stopped, waiting for another longer than `_LOCK_WAIT_S`, or still running after three times
+    that (SIGALRM), leaves its modes to a later process."""
     global _LOCK
     _LOCK = threading.Lock()         # a lock another thread held at the fork would never be released here
     try:
@@ -244,7 +244,9 @@ def _compile_detached(modes, folder: Path) -> None:
             os.dup2(devnull, fd)
         os.nice(19)
         import fcntl
+        import signal
         import time
+        signal.alarm(int(3 * _LOCK_WAIT_S))   # never left behind: a worker stuck on a lock inherited from the fork
         folder.mkdir(parents=True, exist_ok=True)
         with open(folder / ".compile.lock", "w") as lock:
             deadline = time.monotonic() + _LOCK_WAIT_S
