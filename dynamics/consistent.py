@@ -18,10 +18,12 @@ from mechsim.dynamics.model import ModeFunctions
 
 @dataclass(frozen=True)
 class Impact:
-    """Kinetic energy before and after a velocity projection (J)."""
+    """Kinetic energy before and after a velocity projection (J), and the constraint impulses it applied (per
+    constraint, the multiplier's unit times s; v+ = v - M^-1 G^T impulse; None where nothing was projected)."""
 
     energy_before: float
     energy_after: float
+    impulse: np.ndarray | None = None
 
 
 def _min_norm(G, r, xp, pad):
@@ -111,7 +113,9 @@ def project_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray
     if mf.m == 0:
         return v, Impact(e_before, e_before)
     _, v_new = reinitialise(_parts(mf, t, p), q, v, steps=0, restitution=restitution)
-    return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new))
+    G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
+    impulse = np.linalg.lstsq(G.T, M @ (v - v_new), rcond=None)[0]
+    return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new), impulse)
 
 
 def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple

@@ -120,8 +120,15 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
     p = parameter_tuple(model, values)
     out.mode, out.values, out.p, out.offset = new_mode, values, p, offset
     try:
-        restitution, rebound = tr.restitution, None
-        if restitution:
+        restitution, rebound, hit = tr.restitution, None, None
+        if restitution is not None and tr.contact is not None and tr.contact != new_mode:
+            # an impact on another mode's constraints (Newton's law there), the new mode free of them: the rebound
+            # stands, nothing is absorbed
+            contact = model.modes[tr.contact]
+            q = project_positions(contact, t, q, p)
+            v, hit = project_velocities(contact, t, q, v, p, restitution)
+            restitution = None
+        elif restitution:
             # Newton's law with e > 0 leaves G v = -e G v-, which the new mode's constraints forbid: its own
             # row, then the plastic projection of consistent_state removes the rebound (a second row)
             q = project_positions(mf, t, q, p)
@@ -142,6 +149,10 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
             f"the rebound of '{tr.kind}' (restitution {tr.restitution:g}) is not admissible in mode "
             f"'{new_mode}': removed by a plastic projection onto its constraints"))
     row.update(kinetic_energy_before_J=impact.energy_before, kinetic_energy_after_J=impact.energy_after)
+    if tr.contact is not None:
+        hit = hit if hit is not None else impact
+        row.update(kinetic_energy_before_J=hit.energy_before,
+                   impulse_N_s=float(hit.impulse[0]) if hit.impulse is not None and len(hit.impulse) else 0.0)
     row.setdefault("message", tr.message or "")
     carried = carried_stop(mech, model, mode, out.mode, values_before, p_before, p, t, y_end, y)
     if carried is not None:

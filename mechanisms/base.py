@@ -196,6 +196,10 @@ class Transition:
         is then removed by a plastic projection, reported as a second row ("rebound absorbed").
     stop: a reason to stop the run here (stall, reversal, ...), reported to the user; None to go on.
     kind: a short label for the events table ("entry", "exit", "flank switch", "impact", ...).
+    contact: with `restitution`, the mode whose constraints the impact acts on when it is not the new mode (an
+        impact that rebounds into a mode free of them, e.g. a pin leaving the flank it struck); None: the new mode.
+        With `contact` set the events row also carries the impulse on that mode's first constraint (`impulse_N_s`,
+        signed as its multiplier; N s where that constraint is a length) and no rebound is absorbed.
     """
 
     mode: str
@@ -206,6 +210,7 @@ class Transition:
     message: str | None = None
     #: with `stop`: what the user can do about it (shown after the reason)
     hint: str | None = None
+    contact: str | None = None
 
 
 @dataclass(frozen=True)
@@ -226,6 +231,7 @@ class TransitionRule:
     restitution: None = velocities stay (projected onto the new mode's constraints, which removes only
         round-off); e in [0, 1] = an impact (`Transition`). Applied by the Python loop only: the compiled run
         hands such a rule back to it.
+    contact: with `restitution`, the mode whose constraints the impact acts on (`Transition.contact`).
     stop, message, hint: templates (`str.format`) of the reason to stop here (the rule is then a stop: the run
         ends, handed back to the Python loop by the compiled run), of a note for the events table, and of what
         the user can do about a stop. Placeholders: `mode` (the mode the guard fired in) and the keys of
@@ -241,6 +247,7 @@ class TransitionRule:
     message: str | None = None
     hint: str | None = None
     fields: Callable | None = None
+    contact: str | None = None
 
     #: the rule reads the scenario's numbers (a per-station load, `Geneva.station_torque`), not only p: the
     #: compiled run hands it back to the Python loop, which evaluates it with numpy
@@ -426,7 +433,8 @@ class Mechanism(ABC):
             def fill(template):
                 return None if template is None else template.format(**fields)
             return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
-                              kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint))
+                              kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
+                              contact=rule.contact)
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def schedule(self, t_end: float) -> list[Breakpoint]:

@@ -23,6 +23,7 @@ import numpy as np
 
 from mechsim.mechanisms.base import (Breakpoint, DriveCycle, Field, Guard, InitialState, Mechanism, Mode,
                                      TransitionRule, piecewise_linear)
+from mechsim.mechanisms.base import load as load_ref
 import mechsim.mechanisms.geneva.contact as geneva_contact
 import mechsim.mechanisms.geneva.kinematics as gk
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
@@ -69,6 +70,8 @@ class Geneva(Mechanism):
     #: the geometry `from_config` builds: it carries every formula in which the pin meets the slot
     #: (`GenevaGeometry.wheel_motion`, `pin_in_slot`, `crank_sense`); the internal Geneva swaps it
     geometry_class = GenevaGeometry
+    #: "module:Class" of the model with slot clearance, built where mechanism.slot_clearance > 0
+    clearance_model = "mechsim.mechanisms.geneva.clearance:GenevaClearance"
     schema = {
         "mechanism": {
             "slots": Field("int", required=True, minimum=3, maximum=72, help="number of slots n (>= 3)",
@@ -85,6 +88,9 @@ class Geneva(Mechanism):
                                    help="viscous damping on the crank shaft"),
             "wheel_damping": Field("quantity", "N*m*s/rad", default=0.0, nonnegative=True,
                                    help="viscous damping on the wheel shaft"),
+            "slot_clearance": Field("quantity", "m", default=0.0, nonnegative=True,
+                                    help="slot width - 2 R (0: the exact fit; > 0: the pin crosses a gap and "
+                                         "strikes the flanks, mechanisms/geneva/clearance.py; external drive only)"),
         },
         "load": {
             "wheel_torque": Field("quantity", "N*m", default=0.0, nonnegative=True,
@@ -104,6 +110,10 @@ class Geneva(Mechanism):
             "friction": Field("float", default=0.0, nonnegative=True, maximum=2.0,
                               help="Coulomb friction coefficient, pin-slot",
                               why="Coulomb coefficients of engineering material pairs lie below about 1.5"),
+            "restitution": Field("float", default=0.0, nonnegative=True, maximum=1.0,
+                                 help="Newton's coefficient of restitution of the pin-flank impacts (with "
+                                      "mechanism.slot_clearance > 0), 0..1",
+                                 why="Newton's law: 0 plastic, 1 elastic"),
         },
     }
 
@@ -127,9 +137,35 @@ class Geneva(Mechanism):
             for i, x in enumerate(profile["torque"]):
                 if x < 0:
                     raise ValueError(f"load.wheel_torque_profile: torque[{i}] must not be negative, got {x:g} N*m")
+        clearance = m.get("slot_clearance", 0.0)
+        if clearance > 0:
+            return cls._with_clearance(geometry, m, load, contact, clearance, given)
         return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
                    contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0),
                    stations, profile)
+
+    @classmethod
+    def _with_clearance(cls, geometry, m, load, contact, clearance: float, given=()) -> "Geneva":
+        """The clearance model (mechanisms/geneva/clearance.py), the pin and the widened slot checked: the
+        clearance at most the pin radius, and the slot (half-width R + c_s/2) narrower than the rim allows
+        (`GenevaGeometry.max_pin_radius`)."""
+        if cls is not Geneva:
+            raise ValueError(f"mechanism.slot_clearance: clearance is modelled for the external Geneva only "
+                             f"(type = 'geneva'), not {cls.name!r}")
+        if given:
+            raise ValueError(f"load.{given[0]}: with mechanism.slot_clearance > 0 the wheel torque is one constant "
+                             "(load.wheel_torque); per-station and time-varying loads are not modelled with clearance")
+        if clearance > geometry.pin_radius:
+            raise ValueError(f"mechanism.slot_clearance: {clearance:g} m is larger than the pin radius "
+                             f"{geometry.pin_radius:g} m")
+        if geometry.pin_radius + clearance / 2 >= geometry.max_pin_radius:
+            raise ValueError(f"mechanism.slot_clearance: the slot's half-width R + c/2 = "
+                             f"{geometry.pin_radius + clearance / 2:g} m makes neighbouring slots merge at the rim "
+                             f"(it must stay below {geometry.max_pin_radius:.6g} m)")
+        return load_ref(cls.clearance_model)(
+            geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
+            contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0),
+            slot_clearance=clearance, restitution=contact.get("restitution", 0.0))
 
     def __init__(self, geometry: GenevaGeometry, crank_inertia: float, wheel_inertia: float,
                  wheel_torque: float = 0.0, friction: float = 0.0, crank_damping: float = 0.0,

@@ -1,0 +1,192 @@
+"""External Geneva drive with slot clearance: the pin (radius R) in a slot of width 2R + c_s, rigid impacts.
+
+The slot's centre-line offset of the pin centre, Phi(alpha, beta) (`GenevaGeometry.pin_in_slot`, docs/theory.md
+§G1), is positive towards the driving flank (the wall ahead of the pin in the wheel's indexing sense). The gaps of
+the two flanks are
+    g_drive = c_s/2 - Phi,    g_trail = c_s/2 + Phi.
+Modes (docs/geneva.md 'Clearance and impacts'):
+  engaged (flank f = +1 driving, -1 trailing): Phi - f c_s/2 = 0, normal force N = lam (f N > 0 compressive);
+      friction as in the exact-fit model, with the pin centre's sliding speed along the slot
+      v_s = theta' r sin(alpha + beta) + psi' Phi (the wheel frame turning at the offset Phi);
+  free: no constraint; the wheel turns under its own inertia, load and damping, the crank under its drive;
+  dwell: as in the exact-fit model, the wheel held at its nominal lock angle (no locking play).
+Transitions: entry (dwell -> free: the locked wheel meets the pin on the slot's centre line, both gaps c_s/2
+open); gap closure on either flank (free -> engaged, a Newton impact with restitution e on the flank's normal
+relative velocity, in the kinetic-energy metric; the pin rebounds into the gap unless the rebound speed e v_n is
+below BOUNCE_SPEED, where it stays on the flank, a plastic impact); separation (f N falls through 0: engaged ->
+free); exit (the pin leaves the slot: the locking arc takes the wheel at its nominal dwell angle, a plastic lock
+impact that also removes the wheel's small lag behind it, at most asin(c_s / (2 x_exit)); docs/geneva.md).
+The impact is frictionless (Newton's law along the normal only).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from mechsim.mechanisms.base import Guard, Mode, TransitionRule
+from mechsim.mechanisms.geneva.model import Geneva
+
+
+class GenevaClearance(Geneva):
+    """External Geneva with slot clearance c_s > 0 and rigid (Newton) impacts; `Geneva.from_config` builds it
+    where `mechanism.slot_clearance` > 0."""
+
+    parameter_names = Geneva.parameter_names + ("clearance", "restitution", "bounce_speed")
+    #: a rebound slower than this (normal relative speed after the impact, m/s) is taken as a plastic impact, the
+    #: pin staying on the flank: without it a rebounding pin under a closing force strikes infinitely often in a
+    #: finite time (Zeno); the same device as Project Chrono's minimum bounce speed (ChSystemNSC SetMinBounceSpeed)
+    BOUNCE_SPEED = 1e-3
+    peak_columns = Geneva.peak_columns + ("gap_m",)
+
+    def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
+                 wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0) -> None:
+        super().__init__(geometry, crank_inertia, wheel_inertia, wheel_torque, friction, crank_damping,
+                         wheel_damping)
+        if not (np.isfinite(slot_clearance) and slot_clearance > 0):
+            raise ValueError(f"mechanism.slot_clearance: must be positive here, got {slot_clearance!r}")
+        if not 0.0 <= restitution <= 1.0:
+            raise ValueError(f"contact.restitution: must lie in [0, 1], got {restitution!r}")
+        self.slot_clearance = float(slot_clearance)
+        self.restitution = float(restitution)
+
+    def structure_key(self) -> tuple:
+        return super().structure_key() + ("clearance",)
+
+    def parameter_values(self) -> dict[str, float]:
+        return dict(super().parameter_values(), clearance=self.slot_clearance, restitution=self.restitution,
+                    bounce_speed=self.BOUNCE_SPEED)
+
+    def closed_form(self, t, angle0, speed):
+        """None: with clearance the motion at a prescribed crank speed is integrated (impacts, free flight)."""
+        return None
+
+    def describe(self) -> dict:
+        return dict(super().describe(), slot_clearance_m=self.slot_clearance, restitution=self.restitution)
+
+    # -- symbolic model ---------------------------------------------------------------------------------
+    def modes(self) -> dict[str, Mode]:
+        import sympy as sp
+        base = super().modes()
+        s, P = self.symbols, self.symbols.p
+        theta, psi = s.q
+        w1, w2 = s.v
+        r, c, R, mu, half = P("r"), P("c"), P("R"), P("mu"), P("clearance") / 2
+        k, flank, slide = P("slot"), P("flank"), P("slide")
+        c1, c2 = P("c1"), P("c2")
+        T_L = P("T_L") + P("T_L_rate") * (s.t - P("T_L_time0"))     # as the exact-fit model's (constant here)
+        g = self.geometry
+        alpha, beta = theta - 2 * sp.pi * k, psi - k * P("pitch")
+        phi, x, s_slide, _ = g.pin_in_slot(r, c, alpha, beta, sp)
+        lam = s.lam[0]
+
+        # engaged on flank f: the constraint moved to the flank, the sliding speed with the frame term psi' Phi
+        v_s = w1 * s_slide + w2 * flank * half
+        u = v_s + flank * R * (w2 - g.crank_sense * w1)
+        fric_mag = mu * flank * lam
+        fric_force = [-fric_mag * slide * sp.diff(u, vi) for vi in (w1, w2)]
+        eng = base["engaged"]
+        guards = {gd.name: gd for gd in eng.guards}
+        engaged = replace(
+            eng, constraints=(phi - flank * half,),
+            force=(-c1 * w1 + fric_force[0], -c2 * w2 + fric_force[1] - T_L),
+            guards=(guards["exit"], Guard("separation", flank * lam, -1), Guard("slip_reversal", slide * u, -1),
+                    guards["stall"], guards["rest"]),
+            powers=dict(eng.powers, friction=-fric_mag * slide * u),
+            readouts=dict(eng.readouts, friction_force_N=fric_mag * slide, slip_speed_m_s=u, pin_sliding_speed_m_s=v_s,
+                          friction_power_W=fric_mag * slide * u, pin_offset_m=phi, gap_m=half - flank * phi),
+            heat=dict(eng.heat, slip_speed=u, source_speed_driven=v_s, heat_rate=fric_mag * slide * u))
+        dwell = base["dwell"]
+        dwell = replace(dwell, readouts=dict(dwell.readouts, pin_offset_m=sp.Integer(0), gap_m=half))
+        zero = sp.Integer(0)
+        free = Mode(
+            name="free", constraints=(), force=(-c1 * w1, -c2 * w2 - T_L),
+            guards=(guards["exit"], Guard("close_driving", half - phi, -1), Guard("close_trailing", half + phi, -1),
+                    guards["stall"], guards["rest"]),
+            powers={"load": -T_L * w2, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
+            readouts=dict(dwell.readouts, pin_distance_m=x, lock_force_N=zero, pin_offset_m=phi,
+                          gap_m=half - sp.Abs(phi)),
+            heat=dwell.heat)
+        return {"engaged": engaged, "dwell": dwell, "free": free}
+
+    # -- transitions -----------------------------------------------------------------------------------------
+    def transitions(self):
+        """Entry into the open gap, impacts at gap closure (rebound or plastic), separation, exit; stall and rest
+        stops as in the exact-fit model (`Geneva.transitions`)."""
+        table = super().transitions()
+        stall, rest = table[("dwell", "stall")], table[("dwell", "rest")]
+        table.pop(("engaged", "flank_switch"))
+        table[("dwell", "entry")] = TransitionRule("free", kind="entry")
+        table[("engaged", "separation")] = TransitionRule("free", kind="separation", fields=lambda q, v, p: {
+            "side": "driving" if p["flank"] > 0 else "trailing"}, message="the pin left the {side} flank")
+        table[("free", "exit")] = table[("engaged", "exit")]
+        for guard, f, side in (("close_driving", 1.0, "driving"), ("close_trailing", -1.0, "trailing")):
+            table[("free", guard)] = (
+                TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact",
+                               when=lambda q, v, p, xp, f=f: self._rebound_speed(q, v, p, xp, f) - p["bounce_speed"],
+                               restitution=self.restitution, contact="engaged",
+                               message=f"pin struck the {side} flank and rebounded"),
+                TransitionRule("engaged", lambda q, v, p, xp, f=f: {"flank": f, "slide": self._slide_after(
+                    q, v, p, xp, f)}, kind="impact", restitution=0.0, contact="engaged",
+                    when=lambda q, v, p, xp, f=f: self._pressing(q, v, p, xp, f),
+                    message=f"pin struck the {side} flank and stays on it"),
+                TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact", restitution=0.0,
+                               contact="engaged", message=f"pin struck the {side} flank and slides off it"))
+        for mode in ("free",):
+            table[(mode, "stall")] = stall
+            table[(mode, "rest")] = rest
+        return table
+
+    @staticmethod
+    def _local(q, p):
+        """The local crank and wheel angles (alpha, beta) of the current slot (as model.py's rules read them)."""
+        return q[0] - 2 * np.pi * p["slot"], q[1] - p["slot"] * p["pitch"]
+
+    def _normal(self, q, v, p, xp, f):
+        """(dg/dq of the struck flank's constraint Phi - f c_s/2, its rate G v): dPhi/dtheta = r cos(alpha + beta),
+        dPhi/dpsi = -x (`GenevaGeometry.pin_in_slot`: a = r cos(alpha + beta) external, x the pin distance)."""
+        g = self.geometry
+        alpha, beta = self._local(q, p)
+        _, x, _, arm = g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)
+        G = (arm, -x)
+        return G, G[0] * v[0] + G[1] * v[1]
+
+    def _after_impact(self, q, v, p, xp, f, e):
+        """The velocities after Newton's law with restitution e on the flank (diagonal mass matrix J1, J2):
+        v+ = v - M^-1 G^T (G M^-1 G^T)^-1 (1 + e) G v (`dynamics/consistent.reinitialise`'s law, written out)."""
+        (g1, g2), rate = self._normal(q, v, p, xp, f)
+        J1, J2 = p["J1"], p["J2"]
+        impulse = (1 + e) * rate / (g1 * g1 / J1 + g2 * g2 / J2)
+        return v[0] - g1 * impulse / J1, v[1] - g2 * impulse / J2
+
+    def _rebound_speed(self, q, v, p, xp, f):
+        """e |Phi'|: the normal relative speed (m/s) after the impact (Phi the lateral offset, a length)."""
+        return p["restitution"] * xp.abs(self._normal(q, v, p, xp, f)[1])
+
+    def _pressing(self, q, v, p, xp, f):
+        """>= 0 where the free motion presses the pin onto flank f after a plastic impact there: f Phi'' of the
+        free mode at the velocities after it, with Phi'' = r cos(alpha + beta) theta'' - x psi''
+        - r sin(alpha + beta) (theta'^2 + 2 theta' psi') - Phi psi'^2 (Phi's Hessian in (alpha, beta)) and the free
+        accelerations theta'' = (T_in - c1 theta') / J1 (0 at a prescribed speed), psi'' = -(T_L + c2 psi') / J2.
+        For one frictionless contact the contact force has this sign (the one-constraint complementarity problem:
+        N = -Phi''_free / (G M^-1 G^T)), so where it is negative the pin leaves the flank at once."""
+        g = self.geometry
+        alpha, beta = self._local(q, p)
+        phi, x, _, arm = g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)
+        w1, w2 = self._after_impact(q, v, p, xp, f, 0.0)
+        a1 = xp.where(p["drive_speed"] != 0, 0.0,
+                      (p["drive_T0"] - p["drive_slope"] * w1 - p["c1"] * w1) / p["J1"])
+        a2 = -(p["T_L"] + p["c2"] * w2) / p["J2"]
+        s_ab = g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2]       # r sin(alpha + beta) external
+        acc = arm * a1 - x * a2 - s_ab * (w1 * w1 + 2 * w1 * w2) - phi * w2 * w2
+        return f * acc + 1e-300
+
+    def _slide_after(self, q, v, p, xp, f):
+        """The friction direction on the flank after a plastic impact: the sign of the slip at the velocities
+        after it (kept at +1 where the slip vanishes)."""
+        g = self.geometry
+        alpha, beta = self._local(q, p)
+        w1, w2 = self._after_impact(q, v, p, xp, f, 0.0)
+        u = (w1 * g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] + w2 * f * p["clearance"] / 2
+             + f * p["R"] * (w2 - g.crank_sense * w1))
+        return xp.where(u >= 0, 1.0, -1.0)

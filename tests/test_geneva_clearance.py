@@ -1,0 +1,170 @@
+"""The Geneva with slot clearance (mechanisms/geneva/clearance.py): the exact fit at zero clearance, the DAE against
+the independent reduced-coordinate reference, Newton's law and the energy balance at every impact, convergence as
+the clearance shrinks, IDA against diffrax, refused input (docs/geneva.md 'Clearance and impacts')."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsim.scenarios.api as api
+from mechsim.dynamics.invariants import energy_closure
+from mechsim.mechanisms.geneva import clearance_reduced
+from mechsim.mechanisms.geneva.clearance import GenevaClearance
+from mechsim.mechanisms.geneva.model import Geneva
+from mechsim.scenarios import runner
+from mechsim.scenarios.schema import ScenarioError
+
+SCENARIO = "geneva-clearance"
+TIGHT = ["solver.rtol=1e-10", "solver.atol=1e-12"]
+
+
+def run(*settings):
+    return api.run(api.load(SCENARIO, set=list(settings)))
+
+
+def test_zero_clearance_is_the_exact_fit_model():
+    """slot_clearance 0 (the default) builds today's two-mode model, with today's parameters: same code path."""
+    scenario = api.load(SCENARIO, set=["mechanism.slot_clearance=0 m"])
+    mech = runner.plan(scenario).mechanism
+    assert type(mech) is Geneva
+    plain = api.load("geneva-motor")
+    assert set(runner.plan(plain).mechanism.parameter_values()) == set(mech.parameter_values())
+    assert type(runner.plan(api.load(SCENARIO)).mechanism) is GenevaClearance
+
+
+def test_dae_matches_the_reduced_reference():
+    """Frictionless, restitution 0.5: the DAE's crank and wheel angles and its impact times against the
+    reduced-coordinate integration (scipy DOP853, its own impact law), both at tight tolerances; the bounce
+    sequence at entry, the separation and the overrun impacts all in the same order."""
+    r = run("contact.friction=0", "duration=0.6 s", *TIGHT)
+    assert r.failure is None
+    ts, mech = r.timeseries, r.mechanism
+    dv = runner.plan(api.load(SCENARIO)).drive.parameter_values(0.0)
+    t = ts.t_s.to_numpy()
+    theta, psi, events = clearance_reduced.integrate(mech, dv["drive_T0"], dv["drive_slope"],
+                                                     float(ts.crank_angle_rad[0]), float(ts.crank_speed_rad_s[0]), t)
+    assert np.max(np.abs(theta - ts.crank_angle_rad.to_numpy())) < 1e-7
+    assert np.max(np.abs(psi - ts.wheel_angle_rad.to_numpy())) < 1e-7
+    dae = r.events[r.events.kind != "slip reversal"]      # at mu = 0 the slip's sign is bookkeeping only
+    assert list(dae.kind) == [e[1] for e in events]
+    assert list(dae.to_mode) == [e[2] for e in events]
+    assert sum(k == "impact" for k in dae.kind) >= 8
+    assert np.max(np.abs(dae.t_s.to_numpy() - [e[0] for e in events])) < 1e-8
+
+
+def test_flank_kinematics_against_finite_differences():
+    """The reference's wheel angle on a flank, beta_f = beta0 - asin(f h / rho), and its derivatives G, G'."""
+    mech = runner.plan(api.load(SCENARIO)).mechanism
+    h = 1e-5
+    for alpha in (-0.6, -0.1, 0.3, 0.7):
+        for f in (1.0, -1.0):
+            b = [clearance_reduced.flank_motion(mech, alpha + k * h, f) for k in (-1, 0, 1)]
+            assert b[1][1] == pytest.approx((b[2][0] - b[0][0]) / (2 * h), rel=1e-8, abs=1e-9)
+            assert b[1][2] == pytest.approx((b[2][1] - b[0][1]) / (2 * h), rel=1e-6, abs=1e-7)
+            g = mech.geometry
+            offset = g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, b[1][0])[0]
+            assert offset == pytest.approx(f * mech.slot_clearance / 2, rel=1e-12)
+
+
+@pytest.fixture(scope="module")
+def with_friction():
+    return run("duration=0.6 s", *TIGHT)
+
+
+def test_newton_law_at_every_impact(with_friction):
+    """Each impact's energy lost and impulse obey Newton's law in the mass metric: with k = G M^-1 G^T at the
+    impact's position and e the rule's coefficient (0 where the pin stays on the flank),
+    energy lost = (1 - e) / (2 (1 + e)) k impulse^2."""
+    r = with_friction
+    assert r.failure is None
+    mech = r.mechanism
+    g = mech.geometry
+    impacts = r.events[r.events.kind == "impact"]
+    assert len(impacts) >= 8
+    e_rule = mech.restitution
+    for row in impacts.itertuples():
+        k = np.floor((row.crank_q + np.pi) / (2 * np.pi))
+        alpha, beta = row.crank_q - 2 * np.pi * k, row.wheel_q - k * g.pitch
+        _, x, _, arm = g.pin_in_slot(g.crank_radius, g.centre_distance, alpha, beta)
+        kk = arm**2 / mech.crank_inertia + x**2 / mech.wheel_inertia
+        e = e_rule if row.to_mode == "free" and "rebounded" in row.message else 0.0
+        assert row.energy_lost_J == pytest.approx((1 - e) / (2 * (1 + e)) * kk * row.impulse_N_s**2, rel=1e-6)
+        assert row.energy_lost_J > 0
+
+
+def test_energy_closes_with_the_impact_losses(with_friction):
+    """Works of drive, load, friction and damping = change of kinetic energy + impact losses, on every row, to
+    1e-6 of the energy throughput."""
+    r = with_friction
+    ts = r.timeseries
+    closure = energy_closure(ts, r.events)
+    works = [c for c in ts.columns if c.startswith("work_")]
+    throughput = sum(float(np.max(np.abs(ts[c]))) for c in works) + float(np.max(ts.kinetic_energy_J))
+    assert r.events.energy_lost_J.sum() > 1e-4 * throughput
+    assert np.max(np.abs(closure)) < 1e-6 * throughput
+
+
+def test_impacts_in_every_engagement():
+    """Light load, heavy wheel, 0.25 mm clearance (the built-in scenario): every engagement has impacts (the
+    entry's bounce sequence at least), and the gap column is zero in contact, c/2 - |offset| in flight."""
+    r = api.run(api.load(SCENARIO, set=["duration=2 s"]))
+    assert r.failure is None
+    ev = r.events
+    entries, exits = ev.t_s[ev.kind == "entry"].to_numpy(), ev.t_s[ev.kind == "exit"].to_numpy()
+    assert len(entries) >= 2
+    for t0, t1 in zip(entries, exits):
+        assert np.sum((ev.kind == "impact") & (ev.t_s > t0) & (ev.t_s < t1)) >= 1
+    ts = r.timeseries
+    half = r.mechanism.slot_clearance / 2
+    gap, residual = ts.gap_m.to_numpy(), np.abs(ts.constraint_residual_m.to_numpy())
+    engaged = (ts["mode"] == "engaged").to_numpy()
+    # in contact the gap is the flank constraint's residual (the integrator's drift, within its tolerances)
+    assert np.allclose(np.abs(gap[engaged]), residual[engaged], rtol=1e-6, atol=1e-15)
+    assert np.max(residual) < 1e-3 * half
+    assert np.all(gap[~engaged] >= -1e-3 * half) and np.all(gap <= half * (1 + 1e-12))
+    assert np.min(gap[~engaged]) < 0.5 * half
+
+
+def test_convergence_to_the_exact_fit():
+    """Plastic impacts, a load that keeps the pin on the driving flank: as the clearance c shrinks the energy lost
+    (the entry impact and the lock taking the wheel) is proportional to c, and the crank angle approaches the
+    exact-fit model's at order between 1/2 (the gap crossed at entry in a crank angle ~ sqrt(c / r)) and 1."""
+    base = ["contact.restitution=0", "duration=0.8 s", "load.wheel_torque=2 N*m", *TIGHT]
+    exact = run(*base, "mechanism.slot_clearance=0 m").timeseries.crank_angle_rad.to_numpy()
+    err, lost = [], []
+    for c in (2e-4, 1e-4, 5e-5):
+        r = run(*base, f"mechanism.slot_clearance={c} m")
+        assert r.failure is None
+        assert set(r.events.kind) == {"entry", "impact", "exit", "slip reversal"} - (
+            set() if "slip reversal" in set(r.events.kind) else {"slip reversal"})
+        err.append(np.max(np.abs(r.timeseries.crank_angle_rad.to_numpy() - exact)))
+        lost.append(r.events.energy_lost_J.sum())
+    assert lost[0] / lost[1] == pytest.approx(2.0, rel=1e-2) and lost[1] / lost[2] == pytest.approx(2.0, rel=1e-2)
+    orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    assert np.all((orders > 0.5) & (orders < 1.0))
+
+
+def test_ida_and_diffrax_agree():
+    """The same impacts on both backends (diffrax hands every impact back to the Python loop)."""
+    over = ["duration=0.32 s", "solver.rtol=1e-9", "solver.atol=1e-11"]
+    a, b = run(*over), run(*over, "solver.backend=diffrax")
+    assert a.failure is None and b.failure is None
+    for col in ("crank_angle_rad", "wheel_angle_rad"):
+        assert np.max(np.abs(a.timeseries[col].to_numpy() - b.timeseries[col].to_numpy())) < 1e-7
+    assert list(a.events.kind) == list(b.events.kind)
+    assert np.max(np.abs(a.events.t_s.to_numpy() - b.events.t_s.to_numpy())) < 1e-7
+    ia, ib = (x.events.impulse_N_s.dropna().to_numpy() for x in (a, b))
+    assert np.max(np.abs(ia - ib)) < 1e-5 * np.max(np.abs(ia))
+
+
+@pytest.mark.parametrize("setting, field", [
+    ("mechanism.slot_clearance=-1 mm", "mechanism.slot_clearance"),
+    ("mechanism.slot_clearance=nan mm", "mechanism.slot_clearance"),
+    ("mechanism.slot_clearance=5 mm", "mechanism.slot_clearance"),
+    ("contact.restitution=1.5", "contact.restitution"),
+    ("contact.restitution=-0.1", "contact.restitution"),
+])
+def test_bad_input_names_the_field(setting, field):
+    with pytest.raises((ScenarioError, ValueError)) as info:
+        runner.plan(api.load(SCENARIO, set=[setting]))
+    assert field in str(info.value) and "\n" not in str(info.value)
