@@ -64,6 +64,26 @@ class GenevaClearance(Geneva):
     def describe(self) -> dict:
         return dict(super().describe(), slot_clearance_m=self.slot_clearance, restitution=self.restitution)
 
+    def extra_outputs(self, timeseries, events) -> dict:
+        """impacts.csv: one row per pin-flank impact (`clearance_plots.impacts_table`)."""
+        from mechsim.mechanisms.geneva.clearance_plots import impacts_table
+        return {"impacts": impacts_table(events)}
+
+    def extra_figures(self, timeseries, tables: dict) -> dict:
+        """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn."""
+        from mechsim.mechanisms.geneva.clearance_plots import gap_figure, impacts_table
+        impacts = tables.get("impacts")
+        return {"clearance_vs_angle": gap_figure(timeseries, impacts if impacts is not None else impacts_table(None),
+                                                 self.slot_clearance)}
+
+    def contact_starts(self, table, events) -> np.ndarray:
+        """Times at which the pin came to rest on a flank (a plastic impact into the engaged mode): where the
+        sliding contact, and its heat source, begins (`Mechanism.contact_starts`)."""
+        if events is None or not len(events):
+            return np.array([])
+        on = (events["to_mode"] == "engaged") & (events["from_mode"] == "free")
+        return np.sort(events.loc[on, "t_s"].to_numpy(float))
+
     # -- symbolic model ---------------------------------------------------------------------------------
     def modes(self) -> dict[str, Mode]:
         import sympy as sp
@@ -117,21 +137,20 @@ class GenevaClearance(Geneva):
         stall, rest = table[("dwell", "stall")], table[("dwell", "rest")]
         table.pop(("engaged", "flank_switch"))
         table[("dwell", "entry")] = TransitionRule("free", kind="entry")
-        table[("engaged", "separation")] = TransitionRule("free", kind="separation", fields=lambda q, v, p: {
-            "side": "driving" if p["flank"] > 0 else "trailing"}, message="the pin left the {side} flank")
+        table[("engaged", "separation")] = TransitionRule("free", kind="separation")
         table[("free", "exit")] = table[("engaged", "exit")]
-        for guard, f, side in (("close_driving", 1.0, "driving"), ("close_trailing", -1.0, "trailing")):
+        for guard, f in (("close_driving", 1.0), ("close_trailing", -1.0)):
+            # the events' kind says what followed (the flank struck is the guard): "impact" into free is a rebound,
+            # into engaged the pin stays on the flank; "impact, slides off" a plastic impact the pin leaves at once
             table[("free", guard)] = (
                 TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact",
                                when=lambda q, v, p, xp, f=f: self._rebound_speed(q, v, p, xp, f) - p["bounce_speed"],
-                               restitution=self.restitution, contact="engaged",
-                               message=f"pin struck the {side} flank and rebounded"),
+                               restitution=self.restitution, contact="engaged"),
                 TransitionRule("engaged", lambda q, v, p, xp, f=f: {"flank": f, "slide": self._slide_after(
                     q, v, p, xp, f)}, kind="impact", restitution=0.0, contact="engaged",
-                    when=lambda q, v, p, xp, f=f: self._pressing(q, v, p, xp, f),
-                    message=f"pin struck the {side} flank and stays on it"),
-                TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact", restitution=0.0,
-                               contact="engaged", message=f"pin struck the {side} flank and slides off it"))
+                    when=lambda q, v, p, xp, f=f: self._pressing(q, v, p, xp, f)),
+                TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact, slides off",
+                               restitution=0.0, contact="engaged"))
         for mode in ("free",):
             table[(mode, "stall")] = stall
             table[(mode, "rest")] = rest

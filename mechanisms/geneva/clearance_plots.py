@@ -1,0 +1,73 @@
+"""The clearance model's own outputs: the impacts table and the figure of the gap and the impacts over a crank turn
+(docs/geneva.md 'Clearance and impacts')."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+
+def local_angle_deg(theta):
+    """The crank angle within its turn, degrees, 0 at mid-engagement (`Geneva.drive_cycle`)."""
+    theta = np.asarray(theta, dtype=float)
+    return np.degrees(theta - 2 * np.pi * np.floor((theta + np.pi) / (2 * np.pi)))
+
+
+def impacts_table(events: pd.DataFrame) -> pd.DataFrame:
+    """One row per pin-flank impact: time, crank turn and angle within it, flank struck, impulse, energy lost,
+    and whether the pin rebounded; `impacts_in_turn` counts the impacts of the same crank turn."""
+    cols = ["t_s", "turn", "crank_angle_deg", "flank", "impulse_N_s", "energy_lost_J", "rebound"]
+    if events is None or not len(events) or "impulse_N_s" not in events:
+        return pd.DataFrame(columns=cols + ["impacts_in_turn"])
+    ev = events[events["kind"].astype(str).str.startswith("impact")]
+    theta = ev["crank_q"].to_numpy(float)
+    out = pd.DataFrame({
+        "t_s": ev["t_s"].to_numpy(float),
+        "turn": np.floor((theta + np.pi) / (2 * np.pi)).astype(int),
+        "crank_angle_deg": local_angle_deg(theta),
+        "flank": np.where(ev["guard"] == "close_driving", "driving", "trailing"),
+        "impulse_N_s": ev["impulse_N_s"].to_numpy(float),
+        "energy_lost_J": ev["energy_lost_J"].to_numpy(float),
+        "rebound": ((ev["kind"] == "impact") & (ev["to_mode"] == "free")).to_numpy(),
+    })
+    out["impacts_in_turn"] = out.groupby("turn")["t_s"].transform("size")
+    return out
+
+
+def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float) -> Figure:
+    """Gap (the lesser of the two flanks', mm) and the pin's offset from the slot's centre line against the crank
+    angle within its turn, one line per turn; below it the impulse of every impact at its crank angle."""
+    fig = Figure(figsize=(9, 6.5), layout="constrained")
+    ax, bx = fig.subplots(2, 1, sharex=True)
+    theta = timeseries["crank_angle_rad"].to_numpy(float)
+    mode = np.asarray(timeseries["mode"])
+    angle = local_angle_deg(theta)
+    turn = np.floor((theta + np.pi) / (2 * np.pi))
+    offset = timeseries["pin_offset_m"].to_numpy(float) * 1e3
+    for k in np.unique(turn):
+        rows = (turn == k) & (mode != "dwell")
+        if np.count_nonzero(rows) > 1:
+            ax.plot(angle[rows], offset[rows], lw=1.2, label=f"turn {int(k)}")
+    half = clearance / 2 * 1e3
+    for y, name in ((half, "driving flank"), (-half, "trailing flank")):
+        ax.axhline(y, color="0.3", lw=0.8, ls="--")
+        ax.annotate(name, (0.01, y), xycoords=("axes fraction", "data"), va="bottom", fontsize=8, color="0.3")
+    ax.set_ylabel("pin centre offset from the slot's\ncentre line (mm)")
+    ax.set_ylim(-1.35 * half, 1.35 * half)
+    ax.set_title(f"Geneva with slot clearance {clearance * 1e3:g} mm: the pin in its slot over a crank turn")
+    if len(ax.get_lines()) > 2:
+        ax.legend(fontsize=8, loc="lower right")
+    if len(impacts):
+        for flank, colour in (("driving", "C3"), ("trailing", "C0")):
+            sel = impacts[impacts["flank"] == flank]
+            if len(sel):
+                bx.vlines(sel["crank_angle_deg"], 0, sel["impulse_N_s"].abs() * 1e3, color=colour, lw=1.2)
+                bx.plot(sel["crank_angle_deg"], sel["impulse_N_s"].abs() * 1e3, "o", color=colour, ms=4,
+                        label=f"{flank} flank")
+        bx.legend(fontsize=8)
+    bx.set_ylabel("impact impulse |J| (mN s)")
+    bx.set_xlabel("crank angle within its turn (deg; 0 = mid-engagement)")
+    engaged = angle[mode != "dwell"]
+    if len(engaged):
+        bx.set_xlim(engaged.min() - 3, engaged.max() + 3)
+    return fig
