@@ -246,7 +246,12 @@ def events_table(traj: Trajectory) -> pd.DataFrame:
     before, after = "kinetic_energy_before_J", "kinetic_energy_after_J"
     if all(isinstance(e.get(before), float) and isinstance(e.get(after), float) for e in events):
         # the loss added to each record: one frame built, no column inserted afterwards
-        return pd.DataFrame([{**e, "energy_lost_J": e[before] - e[after]} for e in events])
+        # an impact may state its own loss (with a prescribed motion the kinetic energy's change is not all lost:
+        # transitions.impact_split)
+        return pd.DataFrame([{**e, "energy_lost_J": e.get("energy_lost_J", e[before] - e[after])} for e in events])
     df = pd.DataFrame(events)
+    own = df["energy_lost_J"] if "energy_lost_J" in df else None
     df["energy_lost_J"] = df[before] - df[after]
+    if own is not None:
+        df["energy_lost_J"] = own.where(own.notna(), df["energy_lost_J"])
     return df

@@ -112,7 +112,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q + offset),
                            hint=tr.hint or DEFAULT_STOP_HINT, kind="physics")
         return out
-    values_before, p_before, q_before, offset_before = values, p, q, offset
+    values_before, p_before, q_before, offset_before, v_before = values, p, q, offset, v
     values = {**values, **tr.updates}
     values, q, offset = rebased(mech, model, values, t, q, offset)
     new_mode = tr.mode
@@ -153,6 +153,13 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         hit = hit if hit is not None else impact
         row.update(kinetic_energy_before_J=hit.energy_before,
                    impulse_N_s=float(hit.impulse[0]) if hit.impulse is not None and len(hit.impulse) else 0.0)
+        if hit.impulse is not None and len(hit.impulse):
+            lost, driven = impact_split(model.modes[tr.contact], t, q, v_before, y[ix_new(model, out.mode)["v"]],
+                                        p, hit.impulse)
+            row["energy_lost_J"] = lost
+            if driven != 0.0 and "drive" in model.work_names:
+                # a rheonomic constraint (a prescribed drive) works impulsively: its work joins the drive's
+                y[ix_new(model, out.mode)["work"].start + model.work_names.index("drive")] += driven
     row.setdefault("message", tr.message or "")
     carried = carried_stop(mech, model, mode, out.mode, values_before, p_before, p, t, y_end, y)
     if carried is not None:
@@ -168,6 +175,26 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
     out.rows.append(row)
     out.y, out.yp = y, yp
     return out
+
+
+def ix_new(model: DerivedModel, mode: str) -> dict:
+    """The state layout of `mode`."""
+    return model.modes[mode].index
+
+
+def impact_split(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after: np.ndarray, p: tuple,
+                 impulse: np.ndarray) -> tuple[float, float]:
+    """(energy dissipated, work of the rheonomic constraints) of an impulse on `contact`'s constraints.
+
+    With v+ = v- - M^-1 G^T P and the constraint rates r = G v + Phi_t, the kinetic energy changes by
+    -P.(G v+ + G v-)/2 = P.Phi_t - P.(r+ + r-)/2: the dissipation D = P.(r+ + r-)/2 (Newton's law: (1 - e^2)/2 of
+    r-^2 over G M^-1 G^T, >= 0) and the work of a prescribed motion P.Phi_t, zero for a scleronomic system."""
+    impulse = np.asarray(impulse, dtype=float)
+    r_minus = np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel())
+    r_plus = np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel())
+    G = np.atleast_2d(np.asarray(contact.G(t, q, p), dtype=float))
+    phi_t_minus = r_minus - G @ np.asarray(v_before, dtype=float)
+    return float(0.5 * impulse @ (r_plus + r_minus)), float(impulse @ phi_t_minus)
 
 
 def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_old: np.ndarray, p_old: tuple,

@@ -38,6 +38,8 @@ class GenevaClearance(Geneva):
     #: finite time (Zeno); the same device as Project Chrono's minimum bounce speed (ChSystemNSC SetMinBounceSpeed)
     BOUNCE_SPEED = 1e-3
     peak_columns = Geneva.peak_columns + ("gap_m",)
+    #: the fraction of the clearance at which a closing gap fires its impact (see `modes`)
+    GAP_ARM = 1e-9
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
                  wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0) -> None:
@@ -99,6 +101,7 @@ class GenevaClearance(Geneva):
         alpha, beta = theta - 2 * sp.pi * k, psi - k * P("pitch")
         phi, x, s_slide, _ = g.pin_in_slot(r, c, alpha, beta, sp)
         lam = s.lam[0]
+        arm = self.GAP_ARM * P("clearance")
 
         # engaged on flank f: the constraint moved to the flank, the sliding speed with the frame term psi' Phi
         v_s = w1 * s_slide + w2 * flank * half
@@ -121,7 +124,14 @@ class GenevaClearance(Geneva):
         zero = sp.Integer(0)
         free = Mode(
             name="free", constraints=(), force=(-c1 * w1, -c2 * w2 - T_L),
-            guards=(guards["exit"], Guard("close_driving", half - phi, -1), Guard("close_trailing", half + phi, -1),
+            # the gap guards fire GAP_ARM of the clearance before contact: a free flight that starts on a flank (a
+            # separation, a rebound) starts below it, so round-off in the gap there cannot close it again at once
+            # the apex of a flight from flank f (its gap's rate -f Phi' falls through 0) ends the flight's rising part:
+            # the gap then falls monotonically to its closure, which a step cannot cross unseen, while a short
+            # rebound's whole rise and fall within one step leaves the gap guard negative at both ends
+            guards=(guards["exit"], Guard("close_driving", half - phi - arm, -1),
+                    Guard("close_trailing", half + phi - arm, -1),
+                    Guard("apex", -flank * (sp.diff(phi, theta) * w1 + sp.diff(phi, psi) * w2), -1),
                     guards["stall"], guards["rest"]),
             powers={"load": -T_L * w2, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts=dict(dwell.readouts, pin_distance_m=x, lock_force_N=zero, pin_offset_m=phi,
@@ -139,6 +149,10 @@ class GenevaClearance(Geneva):
         table[("dwell", "entry")] = TransitionRule("free", kind="entry")
         table[("engaged", "separation")] = TransitionRule("free", kind="separation")
         table[("free", "exit")] = table[("engaged", "exit")]
+        # past the apex the guard watches the other turning point (flank only directs it in flight): the restart
+        # cannot fire it again from round-off in the rate there
+        table[("free", "apex")] = TransitionRule("free", lambda q, v, p, xp: {"flank": -p["flank"]},
+                                                 kind="flight apex")
         for guard, f in (("close_driving", 1.0), ("close_trailing", -1.0)):
             # the events' kind says what followed (the flank struck is the guard): "impact" into free is a rebound,
             # into engaged the pin stays on the flank; "impact, slides off" a plastic impact the pin leaves at once
