@@ -16,7 +16,7 @@ relative velocity, in the kinetic-energy metric; the pin rebounds into the gap u
 below BOUNCE_SPEED, where it stays on the flank, a plastic impact); separation (f N falls through 0: engaged ->
 free); exit (the pin leaves the slot: the locking arc takes the wheel at its nominal dwell angle, a plastic lock
 impact that also removes the wheel's small lag behind it, at most asin(c_s / (2 x_exit)); docs/geneva.md).
-The impact is frictionless (Newton's law along the normal only).
+The impact is frictionless (Newton's law along the normal only). Theory and sources: docs/theory.md §G2.1.
 """
 from __future__ import annotations
 
