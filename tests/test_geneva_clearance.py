@@ -190,3 +190,12 @@ def test_bad_input_names_the_field(setting, field):
     with pytest.raises((ScenarioError, ValueError)) as info:
         runner.plan(api.load(SCENARIO, set=[setting]))
     assert field in str(info.value) and "\n" not in str(info.value)
+
+
+def test_clearance_refuses_varying_loads():
+    """Per-station and time-varying wheel torques are not modelled with clearance: refused, naming the key."""
+    m = dict(slots=4, crank_radius=0.075, pin_radius=0.004, thickness=0.004, crank_inertia=0.02,
+             wheel_inertia=1.5e-3, slot_clearance=2.5e-4)
+    with pytest.raises(ValueError, match=r"^load\.wheel_torque_per_station: with mechanism\.slot_clearance"):
+        Geneva.from_config({"mechanism": m, "load": {"wheel_torque_per_station": [1.0, 1.0, 1.0, 1.0]}})
+    assert type(Geneva.from_config({"mechanism": m, "load": {"wheel_torque": 1.0}})) is GenevaClearance
