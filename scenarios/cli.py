@@ -422,6 +422,9 @@ def sweep(
     batch: bool = typer.Option(False, "--batch", help="diffrax DAE cases of one model structure: one vmapped "
                                "solve (the rest on the pool; on the CPU the pool is faster: docs/sweeps.md, "
                                "'Batching')"),
+    heatmap_aggregate: str = typer.Option("auto", "--heatmap-aggregate", help="how a heat map's cell reduces the "
+                                          "cases sharing it: auto (max of maxima, min of minima, else mean), "
+                                          "max, min or mean"),
 ) -> None:
     """Run a parameter sweep: sweep.parquet/.csv (a row per case) and plots; re-running resumes (docs/sweeps.md)."""
     from mechsim.scenarios.api import sweep as run_sweep
@@ -429,7 +432,8 @@ def sweep(
     try:
         with RichProgress(err.console, f"sweep {Path(target).stem}", disable=quiet) as bar:
             table = run_sweep(target, vary, set_, zip_, out_dir, workers, timeseries, plots, force, batch,
-                              dask_local=dask_local, scheduler=scheduler, default_folder=True, progress=bar)
+                              dask_local=dask_local, scheduler=scheduler, default_folder=True, progress=bar,
+                              heatmap_aggregate=heatmap_aggregate)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:

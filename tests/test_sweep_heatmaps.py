@@ -76,3 +76,17 @@ def test_a_bad_aggregate_is_one_error_naming_it_before_any_case_runs(tmp_path):
                                                    r"got 'median'"):
         mechsim.sweep("geneva-lc1", AXES, set=BASE, out=tmp_path / "s", plots=True, heatmap_aggregate="median")
     assert not (tmp_path / "s").exists()
+
+
+def test_the_cli_takes_the_aggregate_and_refuses_a_bad_one_in_one_line(tmp_path):
+    from cli_helpers import invoke, one_line_error
+    bad = invoke("sweep", "geneva-lc1", "--vary", "contact.friction=0.1,0.3", *sum((["--set", s] for s in BASE), []),
+                 "--out", tmp_path / "bad", "--heatmap-aggregate", "median", "--workers", "0")
+    assert bad.exit_code == 2 and "heatmap_aggregate: must be one of" in one_line_error(bad)
+    assert not (tmp_path / "bad").exists()
+    good = invoke("sweep", "geneva-lc1", "--vary", "contact.friction=0.1,0.3", "--vary", "load.wheel_torque=5,9 N*m",
+                  "--vary", "mechanism.pin_radius=3,5 mm", *sum((["--set", s] for s in BASE), []),
+                  "--out", tmp_path / "good", "--heatmap-aggregate", "min", "--workers", "0", "--quiet")
+    assert good.exit_code == 0, good.output
+    with Image.open(tmp_path / "good" / "plots" / "heatmap_peak_max_contact_force_N.png") as im:
+        assert im.size[0] > 0
