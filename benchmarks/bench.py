@@ -240,7 +240,8 @@ def time_at_error(rows: pd.DataFrame, method: str, target: float, column: str = 
     """Warm time (`column`) to reach `target` error: log-log interpolation on the method's Pareto front (the
     runs that are cheaper than every more accurate run). A target coarser than the whole front takes the
     cheapest run, which meets it; NaN for a target finer than every run (no extrapolation)."""
-    d = rows[(rows.method == method) & (rows.status == "ok") & np.isfinite(rows.error_rad) & (rows.error_rad > 0)]
+    d = rows[(rows.method == method) & (rows.status == "ok") & np.isfinite(rows.error_rad) & (rows.error_rad > 0)
+             & np.isfinite(rows[column])]
     if d.empty:
         return NAN
     d = d.sort_values("error_rad")
@@ -295,9 +296,7 @@ def ratios(rows: pd.DataFrame, column: str = "wall_time_s") -> dict:
 def run_bench(config: BenchConfig, progress: Callable[[str], None] | None = None) -> BenchResult:
     problem = make_problem(config)
     say = progress or (lambda _msg: None)
-    skipped = {n: (f"written for {', '.join(METHODS[n].mechanisms)} only (not {problem.mech.name})"
-                   if not METHODS[n].supports(problem.mech) else "integrates no thermal states")
-               for n in config.methods if not METHODS[n].supports_problem(problem)}
+    skipped = {n: METHODS[n].skip_reason(problem) for n in config.methods if not METHODS[n].supports_problem(problem)}
     methods = tuple(n for n in config.methods if n not in skipped)
     for n, why in skipped.items():
         say(f"{n}: skipped, {why}")

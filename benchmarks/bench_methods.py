@@ -7,7 +7,9 @@
   are written for its equations, `Method.mechanisms`; other mechanisms bench mechsim's methods alone): scipy `solve_ivp`
   (`scipy-Radau`, `scipy-BDF`, `scipy-LSODA`, `scipy-DOP853`) on the reduced-coordinate ODE of
   `mechanisms.geneva.reduced`, and CasADi's IDAS on the index-1 equations with the algebraic rows solved by
-  CasADi, driven the way a careful CasADi user writes it (`casadi-idas`, see `bench_casadi`).
+  CasADi, driven the way a careful CasADi user writes it (`casadi-idas`, see `bench_casadi`); diffsol (pydiffsol)
+  on the crank angle per mode in minimal coordinates, DiffSL compiled by LLVM (`diffsol-tsit45`, `diffsol-bdf`,
+  see `bench_diffsol`; the external Geneva without friction).
 
 `setup` does the cold work once (derivation and code generation, compilation, integrator construction) and
 says how often it is paid (`per process` or `per tolerance`); `run` is what is timed; `count` repeats a run
@@ -83,6 +85,12 @@ class Method:
 
     #: integrates thermal states alongside (False: mechanics only)
     thermal = True
+
+    def skip_reason(self, problem: "Problem") -> str:
+        """Why the method does not run on `problem` (when `supports_problem` says so)."""
+        if not self.supports(problem.mech):
+            return f"written for {', '.join(self.mechanisms)} only (not {problem.mech.name})"
+        return "integrates no thermal states"
 
     def setup(self, problem: Problem, rtol: float, atol: float):
         """(handle, setup time in s, 'per process' | 'per tolerance')."""
@@ -284,6 +292,33 @@ class CasadiMethod(Method):
                 if k in s}
 
 
+@dataclass
+class DiffsolMethod(Method):
+    """The diffsol peer (`bench_diffsol`): the Geneva's crank angle per mode in DiffSL, a Python loop restarting
+    at each located boundary. The external Geneva without friction or thermal states only."""
+
+    solver: str = "tsit45"
+    thermal = False
+
+    def supports_problem(self, problem):
+        from mechsim.benchmarks import bench_diffsol as bd
+        return self.supports(problem.mech) and bd.supports(problem)
+
+    def skip_reason(self, problem):
+        if not self.supports(problem.mech):
+            return super().skip_reason(problem)
+        return "written for the external Geneva without friction, torque or motor drive, mechanics only"
+
+    def setup(self, problem, rtol, atol):
+        from mechsim.benchmarks import bench_diffsol as bd
+        model = bd.build(problem, rtol, atol, self.solver)
+        return model, model.build_time_s, "per process (JIT), tolerances set per run"
+
+    def run(self, handle, problem, rtol, atol):
+        from mechsim.benchmarks import bench_diffsol as bd
+        return bd.simulate(handle, problem.grid, problem.angle0, problem.speed0)
+
+
 GENEVA = ("geneva",)    # the peers' equations (reduced ODE, the CasADi translation) are checked on the Geneva
 METHODS: dict[str, Method] = {m.name: m for m in [
     IdaMethod("ida-index1", "mechsim IDA", "DAE", "index-1 DAE + Baumgarte (9 states)", formulation="index1"),
@@ -306,6 +341,10 @@ METHODS: dict[str, Method] = {m.name: m for m in [
                  "casadi", GENEVA, variant="loop"),
     CasadiMethod("casadi-idas-events", "CasADi", "implicit", "the same, CasADi's event support (4 + 5 states)",
                  "casadi", GENEVA, variant="events"),
+    DiffsolMethod("diffsol-tsit45", "diffsol", "explicit", "crank angle per mode, DiffSL JIT (2 states)",
+                  "pydiffsol", GENEVA, solver="tsit45"),
+    DiffsolMethod("diffsol-bdf", "diffsol", "implicit", "crank angle per mode, DiffSL JIT (2 states)",
+                  "pydiffsol", GENEVA, solver="bdf"),
 ]}
 
 

@@ -131,13 +131,15 @@ def sweep_scaling(workers: int = 2, sizes=(2, 5, 10), repeats: dict | None = Non
     return pd.DataFrame(rows), tables
 
 
-def _one_sweep(per_axis: int, method: str, workers: int) -> tuple[dict, pd.DataFrame]:
+def _one_sweep(per_axis: int, method: str, workers: int, scenario: str = "geneva-lc1",
+               backend: str = "ida") -> tuple[dict, pd.DataFrame]:
     """One sweep_bench.py run in a fresh process: its JSON row (+ process_wall_s) and its sweep table."""
     tmp = Path(tempfile.mkdtemp(prefix="scaling-sweep-"))
     try:
         wall = time.perf_counter()
         subprocess.run([sys.executable, "-m", "mechsim.benchmarks.sweep_bench", "--per-axis", str(per_axis),
                         "--method", method, "--runners", "pool", "--workers", str(workers),
+                        "--scenario", scenario, "--backend", backend,
                         "--json", str(tmp / "row.json"), "--table", str(tmp / "table.parquet")],
                        check=True, stdout=subprocess.DEVNULL)
         process_wall = time.perf_counter() - wall

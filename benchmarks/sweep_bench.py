@@ -5,7 +5,8 @@
 
 Each case runs for 3 turns of its own crank speed (duration = 6 pi / w, a per-case override). The scenario's
 prescribed speed lets the runner use the closed form (method auto); --method dae integrates the DAE on IDA
-instead. Thermal: lumped (bulk pin/crank/wheel temperatures alongside) when the schema has it, else none.
+instead. --scenario geneva-motor: the motor-driven Geneva over friction x wheel torque x no-load speed, 5 s
+each (the scenario's duration), always a DAE (--backend picks the integrator). Thermal: lumped (bulk pin/crank/wheel temperatures alongside) when the schema has it, else none.
 Output rows every 5 ms (a sweep wants summary figures; peaks move by < 1e-5 relative against 1 ms here).
 
 Reports, per runner: the time to validate every case (the loader, in this process), the wall time of the run
@@ -40,13 +41,19 @@ COMPARE = ("peak_max_contact_force_N", "peak_max_drive_torque_N_m", "cycle_time_
            "peak_max_temp_contact_C")
 
 
-def build(per_axis: int, method: str, thermal: str, backend: str):
+def build(per_axis: int, method: str, thermal: str, backend: str, scenario: str = "geneva-lc1"):
+    """The sweep spec and per-case overrides. geneva-lc1: crank speed prescribed, 3 turns per case;
+    geneva-motor: the motor's no-load speed 6-10 rad/s, the scenario's 5 s per case (always a DAE)."""
+    motor = scenario == "geneva-motor"
     axes = (parse_vary(f"contact.friction=0.05:0.3:{per_axis}"),
             parse_vary(f"load.wheel_torque=2:12:{per_axis} N*m"),
-            parse_vary(f"drive.speed=3:8:{per_axis} rad/s"))
+            parse_vary(f"drive.no_load_speed=6:10:{per_axis} rad/s") if motor
+            else parse_vary(f"drive.speed=3:8:{per_axis} rad/s"))
     base = ['output_step="5 ms"', f'thermal.model="{thermal}"', f'solver.method="{method}"',
             f'solver.backend="{backend}"']
-    spec = SweepSpec("geneva-lc1", axes, "grid", tuple(base))
+    spec = SweepSpec(scenario, axes, "grid", tuple(base))
+    if motor:
+        return spec, None
     speeds = [float(v.split()[0]) for v in axes[2].values]
     extra = [[f'duration="{6 * np.pi / speeds[idx[2]]!r} s"'] for idx in spec.indices()]
     return spec, extra
@@ -60,6 +67,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-axis", type=int, default=10, help="points per axis (cases = per-axis^3)")
     ap.add_argument("--method", default="auto", choices=("auto", "dae"))
+    ap.add_argument("--scenario", default="geneva-lc1", choices=("geneva-lc1", "geneva-motor"))
+    ap.add_argument("--backend", default="ida")
     ap.add_argument("--thermal", default=None, help="thermal model (default: lumped if available, else none)")
     ap.add_argument("--runners", default="pool,dask", help="comma list of pool, dask, serial")
     ap.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
@@ -71,8 +80,8 @@ def main() -> None:
     results = []
     tables = {}
     for name in runners:
-        backend, method = "ida", args.method
-        spec, extra = build(args.per_axis, method, thermal, backend)
+        backend, method = args.backend, args.method
+        spec, extra = build(args.per_axis, method, thermal, backend, args.scenario)
         load_before = os.getloadavg()[0]
         start, cpu0 = time.perf_counter(), time.process_time()
         if name == "pool":          # first, as mechsim sweep does: the pool's fork server starts while cases validate
@@ -100,7 +109,8 @@ def main() -> None:
             shutil.rmtree(out, ignore_errors=True)
         tables[name] = df
         n = len(pl.cases)
-        row = {"runner": name, "describe": runner.describe(), "cases": n, "method": method, "backend": backend,
+        row = {"runner": name, "describe": runner.describe(), "scenario": args.scenario, "cases": n, "method": method,
+               "backend": backend,
                "thermal": thermal, "failed": int((~df["success"]).sum()), "validate_s": round(t_plan, 2),
                "run_s": round(t_run, 2), "total_s": round(total, 2), "cases_per_s": round(n / total, 1),
                "median_case_s": round(float(df["case_wall_time_s"].median()), 4),

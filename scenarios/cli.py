@@ -474,9 +474,10 @@ def bench(
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     force: bool = typer.Option(False, "--force", help="replace an existing output folder"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress lines"),
-    peer: bool = typer.Option(False, "--peer", help="mechsim against the CasADi IDAS peer side by side on case A "
-                                                    "and its friction and thermal variants: CPU-time ratios at "
-                                                    "equal error (small: case A, IDA and the peer; --full: all)"),
+    peer: bool = typer.Option(False, "--peer", help="mechsim against the CasADi IDAS and diffsol peers side by side "
+                                                    "on case A and its friction and thermal variants: solve and "
+                                                    "warm end-to-end run, CPU-time ratios at equal error (small: "
+                                                    "case A, IDA and the peers; --full: all)"),
 ) -> None:
     """Work-precision diagrams (CSV + PNG): mechsim's IDA and diffrax against scipy and CasADi IDAS (the Geneva's
     peers) on any scenario, the error against the mechanism's reference solution."""
@@ -497,13 +498,16 @@ def bench(
 
 
 def _bench_peer(out_dir: Path, full: bool, force: bool, quiet: bool) -> None:
-    from mechsim.benchmarks.peer_bench import PeerConfig, report_lines, run_peer_bench, write
+    from mechsim.benchmarks.peer_bench import PeerConfig, report_lines, run_peer_bench, unavailable, write
     try:
         _output_folder(out_dir, "bench", force)
     except ScenarioError as exc:
         _fail(str(exc))
     say = None if quiet else (lambda m: err.print(m, markup=False, highlight=False, soft_wrap=True))
-    result = run_peer_bench(PeerConfig() if full else PeerConfig.small(), say)
+    config = PeerConfig() if full else PeerConfig.small()
+    for line in unavailable(config.methods):
+        err.print(line, markup=False, highlight=False, soft_wrap=True)
+    result = run_peer_bench(config, say)
     write(result, out_dir, force)
     for line in report_lines(result) + [f"-> {out_dir}"]:
         out.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -123,7 +123,7 @@ def test_peer_bench_reaches_its_target_and_ratios_come_from_the_curves(tmp_path)
     reduced reference, with the same 9 mode changes (entry/exit, no slip guard at mu = 0) as the reference's
     boundaries; each reported ratio is the quotient of the two methods' times interpolated on the measured
     (error, median CPU) curves. No timing is asserted."""
-    from mechsim.benchmarks.peer_bench import PEER, PEER_TARGET_ERROR
+    from mechsim.benchmarks.peer_bench import DEFAULT, PEER, PEER_TARGET_ERROR
     out = tmp_path / "p"
     r = runner.invoke(app, ["bench", "--peer", "--out", str(out), "--quiet"])
     assert r.exit_code == 0, r.output
@@ -148,6 +148,63 @@ def test_peer_bench_reaches_its_target_and_ratios_come_from_the_curves(tmp_path)
     # both target errors lie inside the measured curves of the small run: the ratios are numbers
     assert all(np.isfinite(v) for e in summary["ratios_at_equal_error_cpu"]["A"].values()
                for v in e["ratio_to_peer"].values())
+    # end to end: the warm mechsim.run integrates what the solve integrates (the same crank angle, so the same
+    # error), and its ratios are its own curve's times over the peer's solve
+    d = rows[rows.method == "ida-compiled-index1"]
+    assert np.allclose(d.run_error_rad, d.error_rad, rtol=1e-6, atol=0) and np.isfinite(d.run_cpu_time_s).all()
+    default = rows[rows.method == DEFAULT].set_index("rtol")
+    assert (default.error_rad == default.run_error_rad).all() and default.cpu_time_s.isna().all()
+    assert default.error_rad[min(default.index)] < default.error_rad[max(default.index)] / 20
+    runs = rows.assign(error_rad=rows.run_error_rad)
+    for target, entry in summary["ratios_by_peer"][PEER]["end_to_end"]["A"].items():
+        t_peer = time_at_error(rows, PEER, float(target), "cpu_time_s")
+        assert set(entry["ratio_to_peer"]) == {"ida-compiled-index1", DEFAULT}
+        for method, ratio in entry["ratio_to_peer"].items():
+            assert ratio == pytest.approx(time_at_error(runs, method, float(target), "run_cpu_time_s") / t_peer,
+                                          rel=1e-12)
+    assert "end to end" in r.stdout
+    if METHODS["diffsol-tsit45"].available():
+        assert set(summary["ratios_by_peer"]) == {PEER, "diffsol-tsit45"}
+    else:
+        assert "diffsol-tsit45: skipped, pydiffsol is not installed" in r.stderr
+
+
+def _case_a():
+    from mechsim.benchmarks.bench import BenchConfig, make_problem, reference
+    from mechsim.benchmarks.peer_bench import CASE_A
+    problem = make_problem(BenchConfig(scenario="geneva-motor", duration=5.0, overrides=CASE_A))
+    return problem, reference(problem)
+
+
+@pytest.mark.parametrize("name", ["diffsol-tsit45", "diffsol-bdf"])
+def test_diffsol_peer_matches_the_reference(name):
+    """The diffsol peer (the crank angle per mode in DiffSL, restarted at each located boundary) on case A: the
+    reference's 9 boundary crossings, every output, and an error that follows the tolerance (100x tighter:
+    at least 20x smaller), below 1e-6 rad at rtol 1e-7 (angles ~ 25 rad)."""
+    method = METHODS[name]
+    if not method.available():
+        pytest.skip("pydiffsol not installed")
+    problem, ref = _case_a()
+    errors = {}
+    for rtol in (1e-7, 1e-9):
+        handle = method.setup(problem, rtol, rtol * 1e-2)[0]
+        run = method.run(handle, problem, rtol, rtol * 1e-2)
+        assert run.failure is None and len(run.t) == 5001 and run.stats["events"] == 9
+        errors[rtol] = np.max(np.abs(run.angle - ref["angle"]))
+    assert errors[1e-7] < 1e-6 and errors[1e-9] < errors[1e-7] / 20
+
+
+def test_diffsol_peer_covers_the_external_geneva_without_friction_only():
+    """Friction makes slip reversals mode changes and the lumped model adds states: neither is in the peer's
+    program, so the bench skips it there, saying why."""
+    from mechsim.benchmarks.bench import BenchConfig, make_problem
+    from mechsim.benchmarks.peer_bench import CASES
+    method = METHODS["diffsol-tsit45"]
+    for case, supported in (("A", True), ("A-mu0.15", False), ("A-mu0.15-lumped", False)):
+        problem = make_problem(BenchConfig(scenario="geneva-motor", duration=1.0, overrides=CASES[case]))
+        assert method.supports_problem(problem) is supported, case
+        if not supported:
+            assert "without friction" in method.skip_reason(problem)
 
 
 def test_casadi_event_support_variant_matches_the_reference():
