@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mechsim.benchmarks.bench_methods import Problem, Run
+from mechsim.mechanisms.geneva.kinematics import speed_ratio
 
 #: the Geneva's crank angle per mode in one DiffSL program (docs/theory.md §G1-G2); inputs in this order
 CODE = """
@@ -44,6 +45,28 @@ F_i {
   omega,
   (T0 - (slope + c1) * omega - G * (J2 * Gp * omega * omega + c2 * G * omega + TL)) / (J1 + J2 * G * G),
 }
+stop_i { theta - bound }
+"""
+
+#: the same modes in two coordinates (crank theta, wheel angle beta from the slot's line of centres) with the
+#: pin-in-slot constraint and a Lagrange multiplier, as mechsim's index-1 form integrates them (docs/theory.md
+#: §K4 'Index 1 + Baumgarte'): phi = lam sin(alpha + beta) - sin(beta) engaged (the slot's lateral offset over
+#: c, §G1), phi = beta - lock in the dwell; one constraint, so the KKT system is solved by its Schur scalar.
+#: Only to measure what the minimal coordinates save (`lever`), not a peer of its own.
+CODE_INDEX1 = """
+in_i { T0 = 0, slope = 0, J1 = 1, J2 = 1, c1 = 0, c2 = 0, TL = 0, lam = 0.5, e = 0, k = 0, bound = 1,
+       theta0 = 0, omega0 = 0, beta0 = 0, wheel0 = 0, lock = 0, ab = 10, bb = 10 }
+u_i { theta = theta0, beta = beta0, omega = omega0, wheel = wheel0 }
+alpha { theta - k }
+phi { e * (lam * sin(alpha + beta) - sin(beta)) + (1 - e) * (beta - lock) }
+gt { e * lam * cos(alpha + beta) }
+gb { e * (lam * cos(alpha + beta) - cos(beta)) + 1 - e }
+gam { e * (sin(beta) * wheel * wheel - lam * sin(alpha + beta) * (omega + wheel) * (omega + wheel)) }
+Q1 { T0 - (slope + c1) * omega }
+Q2 { -c2 * wheel - TL }
+mu { (gt * Q1 / J1 + gb * Q2 / J2 + gam + 2 * ab * (gt * omega + gb * wheel) + bb * bb * phi)
+     / (gt * gt / J1 + gb * gb / J2) }
+F_i { omega, wheel, (Q1 - gt * mu) / J1, (Q2 - gb * mu) / J2 }
 stop_i { theta - bound }
 """
 SOLVERS = ("tsit45", "bdf")
@@ -65,20 +88,23 @@ class DiffsolModel:
     build_time_s: float
 
 
-def build(problem: Problem, rtol: float, atol: float, solver: str = "tsit45") -> DiffsolModel:
-    """Compile the DiffSL program (LLVM) and set the tolerances."""
+def build(problem: Problem, rtol: float, atol: float, solver: str = "tsit45",
+          coordinates: str = "minimal") -> DiffsolModel:
+    """Compile the DiffSL program (LLVM) and set the tolerances; coordinates "index1": `CODE_INDEX1`."""
     import pydiffsol as ds
 
     if not supports(problem):
         raise ValueError("the diffsol peer integrates the external Geneva without friction or thermal states")
     wall = time.perf_counter()
-    ode = ds.Ode(CODE, ode_solver=getattr(ds, solver))
+    ode = ds.Ode(CODE if coordinates == "minimal" else CODE_INDEX1, ode_solver=getattr(ds, solver))
     ode.rtol, ode.atol = rtol, atol
     m, g = problem.mech, problem.mech.geometry
     dv = problem.drive.parameter_values(problem.angle0)
-    inputs = np.array([dv["drive_T0"], dv["drive_slope"], m.crank_inertia, m.wheel_inertia, m.crank_damping,
-                       m.wheel_damping, m.wheel_torque, g.ratio, 0.0, 0.0, 0.0, 0.0, 0.0], float)
-    return DiffsolModel(ode, inputs, g.engagement_half_angle, time.perf_counter() - wall)
+    inputs = [dv["drive_T0"], dv["drive_slope"], m.crank_inertia, m.wheel_inertia, m.crank_damping,
+              m.wheel_damping, m.wheel_torque, g.ratio, 0.0, 0.0, 0.0, 0.0, 0.0]
+    if coordinates != "minimal":
+        inputs += [0.0, 0.0, 0.0, *problem.baumgarte]
+    return DiffsolModel(ode, np.array(inputs, float), g.engagement_half_angle, time.perf_counter() - wall)
 
 
 def simulate(model: DiffsolModel, grid: np.ndarray, angle0: float, speed0: float,
@@ -100,8 +126,14 @@ def simulate(model: DiffsolModel, grid: np.ndarray, angle0: float, speed0: float
     out[0] = angle0
     theta, omega, t, j, events = angle0, speed0, float(grid[0]), 0, 0
     failure = None
+    index1 = len(p) > 13
+    lam = p[7]
     while j < n - 1:
-        p[8:] = (1.0 if engaged else 0.0), two_pi * k, bound, theta, omega
+        p[8:13] = (1.0 if engaged else 0.0), two_pi * k, bound, theta, omega
+        if index1:          # the wheel consistent with the crank (on the constraint), locked in the dwell
+            a = theta - two_pi * k
+            beta = math.atan2(lam * math.sin(a), 1 - lam * math.cos(a))
+            p[13:16] = (beta, speed_ratio(lam, a) * omega, 0.0) if engaged else (beta, 0.0, beta)
         ode.t0 = t
         try:
             sol = ode.solve_dense(p, np.concatenate(([t], grid[j + 1:])))
@@ -115,7 +147,7 @@ def simulate(model: DiffsolModel, grid: np.ndarray, angle0: float, speed0: float
         inside = len(ts) - 2                             # outputs strictly between the restart and the stop
         out[j + 1:j + 1 + inside] = ys[0, 1:1 + inside]
         j += inside
-        t, theta, omega = float(ts[-1]), float(ys[0, -1]), float(ys[1, -1])
+        t, theta, omega = float(ts[-1]), float(ys[0, -1]), float(ys[len(ys) // 2, -1])    # (q, v) states
         events += 1
         if events > max_events:
             failure = f"t = {t:.6g} s: too many events"

@@ -298,6 +298,7 @@ class DiffsolMethod(Method):
     at each located boundary. The external Geneva without friction or thermal states only."""
 
     solver: str = "tsit45"
+    coordinates: str = "minimal"      # "index1": two coordinates and the constraint (`bench_diffsol.CODE_INDEX1`)
     thermal = False
 
     def supports_problem(self, problem):
@@ -311,7 +312,7 @@ class DiffsolMethod(Method):
 
     def setup(self, problem, rtol, atol):
         from mechsim.benchmarks import bench_diffsol as bd
-        model = bd.build(problem, rtol, atol, self.solver)
+        model = bd.build(problem, rtol, atol, self.solver, self.coordinates)
         return model, model.build_time_s, "per process (JIT), tolerances set per run"
 
     def run(self, handle, problem, rtol, atol):
@@ -345,6 +346,9 @@ METHODS: dict[str, Method] = {m.name: m for m in [
                   "pydiffsol", GENEVA, solver="tsit45"),
     DiffsolMethod("diffsol-bdf", "diffsol", "implicit", "crank angle per mode, DiffSL JIT (2 states)",
                   "pydiffsol", GENEVA, solver="bdf"),
+    DiffsolMethod("diffsol-tsit45-index1", "diffsol", "explicit",
+                  "crank and wheel, index-1 + Baumgarte, DiffSL JIT (4 states)", "pydiffsol", GENEVA,
+                  solver="tsit45", coordinates="index1"),
 ]}
 
 

@@ -388,6 +388,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=None)
     ap.add_argument("--cases", default=None, help="comma list of " + ", ".join(CASES))
     ap.add_argument("--methods", default=None)
+    ap.add_argument("--end-to-end", default=None, help="comma list of the methods also run end to end, or none")
     args = ap.parse_args()
     config = PeerConfig.small() if args.small else PeerConfig()
     from dataclasses import replace
@@ -397,6 +398,8 @@ def main() -> None:
         config = replace(config, cases=tuple(args.cases.split(",")))
     if args.methods:
         config = replace(config, methods=tuple(args.methods.split(",")))
+    if args.end_to_end:
+        config = replace(config, end_to_end=() if args.end_to_end == "none" else tuple(args.end_to_end.split(",")))
     for line in unavailable(config.methods):
         print(line, flush=True)
     result = run_peer_bench(config, progress=lambda m: print(m, flush=True))

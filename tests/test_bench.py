@@ -176,7 +176,7 @@ def _case_a():
     return problem, reference(problem)
 
 
-@pytest.mark.parametrize("name", ["diffsol-tsit45", "diffsol-bdf"])
+@pytest.mark.parametrize("name", ["diffsol-tsit45", "diffsol-bdf", "diffsol-tsit45-index1"])
 def test_diffsol_peer_matches_the_reference(name):
     """The diffsol peer (the crank angle per mode in DiffSL, restarted at each located boundary) on case A: the
     reference's 9 boundary crossings, every output, and an error that follows the tolerance (100x tighter:
