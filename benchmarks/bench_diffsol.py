@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mechsim.benchmarks.bench_methods import Problem, Run
+from mechsim.benchmarks.bench_casadi import PeerRun
 from mechsim.mechanisms.geneva.kinematics import speed_ratio
 
 #: the Geneva's crank angle per mode in one DiffSL program (docs/theory.md §G1-G2); inputs in this order
@@ -72,8 +72,9 @@ stop_i { theta - bound }
 SOLVERS = ("tsit45", "bdf")
 
 
-def supports(problem: Problem) -> bool:
-    """The external Geneva without friction, torque or motor drive, no thermal states."""
+def supports(problem) -> bool:
+    """The external Geneva without friction, torque or motor drive, no thermal states (`problem`: a
+    `bench_methods.Problem`)."""
     mech = problem.mech
     g = getattr(mech, "geometry", None)
     return (mech.name == "geneva" and g is not None and getattr(g, "crank_sense", 0) == -1
@@ -88,7 +89,7 @@ class DiffsolModel:
     build_time_s: float
 
 
-def build(problem: Problem, rtol: float, atol: float, solver: str = "tsit45",
+def build(problem, rtol: float, atol: float, solver: str = "tsit45",
           coordinates: str = "minimal") -> DiffsolModel:
     """Compile the DiffSL program (LLVM) and set the tolerances; coordinates "index1": `CODE_INDEX1`."""
     import pydiffsol as ds
@@ -108,7 +109,7 @@ def build(problem: Problem, rtol: float, atol: float, solver: str = "tsit45",
 
 
 def simulate(model: DiffsolModel, grid: np.ndarray, angle0: float, speed0: float,
-             max_events: int = 10000) -> Run:
+             max_events: int = 10000) -> PeerRun:
     """Crank angle on `grid` (grid[0] = 0 is the start): solve_dense from each restart to the end of the grid,
     cut short by the stop function at the mode's boundary."""
     ode, p, a0 = model.ode, model.inputs.copy(), model.half_angle
@@ -158,4 +159,4 @@ def simulate(model: DiffsolModel, grid: np.ndarray, angle0: float, speed0: float
         else:                                            # entry into slot k
             engaged, bound = True, two_pi * k + a0
     ok = np.isfinite(out)
-    return Run(grid[ok], out[ok], {"events": events, "segments": events + 1}, failure)
+    return PeerRun(grid[ok], out[ok], {"events": events, "segments": events + 1}, [], failure)

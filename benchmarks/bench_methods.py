@@ -317,7 +317,8 @@ class DiffsolMethod(Method):
 
     def run(self, handle, problem, rtol, atol):
         from mechsim.benchmarks import bench_diffsol as bd
-        return bd.simulate(handle, problem.grid, problem.angle0, problem.speed0)
+        r = bd.simulate(handle, problem.grid, problem.angle0, problem.speed0)
+        return Run(r.t, r.angle, r.stats, r.failure)
 
 
 GENEVA = ("geneva",)    # the peers' equations (reduced ODE, the CasADi translation) are checked on the Geneva

@@ -110,7 +110,7 @@ def sweep_scaling(workers: int = 2, sizes=(2, 5, 10), repeats: dict | None = Non
         for per_axis in sizes:
             runs = []
             for _ in range(max(1, repeats.get(method, 1))):
-                runs.append(_one_sweep(per_axis, method, workers))
+                runs.append(one_sweep(per_axis, method, workers))
                 r = runs[-1][0]
                 print(f"sweep {label:<12} {r['cases']:5d} cases: {r['total_s']:7.1f} s wall ({r['process_wall_s']:.1f} s "
                       f"with start-up), case CPU median {1e3 * r['median_case_cpu_s']:.1f} ms, mean "
@@ -131,7 +131,7 @@ def sweep_scaling(workers: int = 2, sizes=(2, 5, 10), repeats: dict | None = Non
     return pd.DataFrame(rows), tables
 
 
-def _one_sweep(per_axis: int, method: str, workers: int, scenario: str = "geneva-lc1",
+def one_sweep(per_axis: int, method: str, workers: int, scenario: str = "geneva-lc1",
                backend: str = "ida") -> tuple[dict, pd.DataFrame]:
     """One sweep_bench.py run in a fresh process: its JSON row (+ process_wall_s) and its sweep table."""
     tmp = Path(tempfile.mkdtemp(prefix="scaling-sweep-"))

@@ -3,7 +3,7 @@
     python benchmarks/sweep_dae.py                       # 8, 125, 1000 cases of each sweep; long (minutes)
     python benchmarks/sweep_dae.py --sizes 2,5           # 8 and 125 cases
 
-Sweeps on a 2-worker process pool, each in a fresh process (`scaling._one_sweep`, i.e. `sweep_bench.py
+Sweeps on a 2-worker process pool, each in a fresh process (`scaling.one_sweep`, i.e. `sweep_bench.py
 --runners pool`), lumped thermal, 5 ms rows, timed once each:
 - `geneva-lc1` as a DAE on IDA (3 crank turns per case): the same sweeps as the DAE rows recorded in
   docs/benchmarks_sweep.csv, which are drawn beside them as "recorded";
@@ -18,7 +18,7 @@ import os
 import numpy as np
 import pandas as pd
 
-from mechsim.benchmarks.scaling import DOCS, _one_sweep
+from mechsim.benchmarks.scaling import DOCS, one_sweep
 
 RECORDED = DOCS / "benchmarks_sweep.csv"
 
@@ -28,7 +28,7 @@ def measure(sizes, backends, workers: int = 2) -> tuple[pd.DataFrame, dict]:
     plan = [("geneva-lc1", "ida")] + [("geneva-motor", b) for b in backends]
     for per_axis in sizes:
         for scenario, backend in plan:
-            r, df = _one_sweep(per_axis, "dae", workers, scenario, backend)
+            r, df = one_sweep(per_axis, "dae", workers, scenario, backend)
             label = f"{scenario} DAE ({backend}), now"
             rows.append(dict(label=label, scenario=scenario, backend=backend, cases=r["cases"],
                              wall_time_s=r["total_s"], process_wall_s=r["process_wall_s"],
