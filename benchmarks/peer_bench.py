@@ -62,7 +62,8 @@ TARGETS = (1e-6, 1e-8)
 #: the peer's error target on case A (issue: <= 1e-6 rad within 25 ms CPU on the 2-core machine)
 PEER_TARGET_ERROR = 1e-6
 COLUMNS = ["case", "method", "family", "rtol", "atol", "status", "error_rad", "cpu_time_s", "cpu_time_min_s",
-           "wall_time_s", "run_error_rad", "run_cpu_time_s", "run_cpu_time_min_s", "rounds", "setup_time_s", "setup_scope", "steps", "rejected_steps",
+           "wall_time_s", "run_error_rad", "run_cpu_time_s", "run_cpu_time_min_s", "rounds", "setup_time_s",
+           "setup_scope", "steps", "rejected_steps",
            "residual_evaluations", "jacobian_evaluations", "events", "segments", "output_points", "failure"]
 
 
@@ -348,7 +349,8 @@ def comparison_lines(summary: dict) -> list[str]:
                 tr = run[peers[0]].get("time_s", {}).get(m, NAN)
                 if not (np.isfinite(ts) or np.isfinite(tr)):
                     continue
-                cells = [_ms(ts)] + [_x(ts / t_peer[p]) for p in peers] + [_ms(tr)] + [_x(tr / t_peer[p]) for p in peers]
+                cells = ([_ms(ts)] + [_x(ts / t_peer[p]) for p in peers] + [_ms(tr)]
+                         + [_x(tr / t_peer[p]) for p in peers])
                 lines.append(f"  {m:<20} {cells[0]:>9}" + "".join(f" {c:>17}" for c in cells[1:1 + len(peers)])
                              + f"   {cells[1 + len(peers)]:>10}" + "".join(f" {c:>17}" for c in cells[2 + len(peers):]))
     if "default_backend" in summary:
