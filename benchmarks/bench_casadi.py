@@ -95,9 +95,12 @@ def translate(mech: Mechanism, ext=None) -> PeerModel:
     P = ca.SX.sym("p", len(pnames))
     by = {n: P[i] for i, n in enumerate(pnames)}
     ext_syms = {n: sp.Symbol(n, real=True) for n in ext_params}
-    syms = [*s.q, *s.v, *s.params, *ext_syms.values()]
+    # time enters the equations only through a time-varying load (the wheel torque's rate times t - t0); the
+    # peer integrates constant loads (`constant_load`), so t stands at the load's reference time t0
+    t_value = by["T_L_time0"] if "T_L_time0" in by else 0.0
+    syms = [*s.q, *s.v, *s.params, *ext_syms.values(), s.t]
     vals = [*[q[i] for i in range(nq)], *[v[i] for i in range(nq)], *[by[p.name] for p in s.params],
-            *[by[n] for n in ext_params]]
+            *[by[n] for n in ext_params], t_value]
     entries = _to_casadi(list(mech.mass_matrix()), syms, vals)
     M = ca.vertcat(*[ca.horzcat(*entries[i * nq:(i + 1) * nq]) for i in range(nq)])
     x = ca.vertcat(q, v, X)
@@ -140,6 +143,12 @@ def translate(mech: Mechanism, ext=None) -> PeerModel:
         directions[name] = [g.direction for g in mode.guards]
     names = tuple(f"q_{c}" for c in mech.coordinates) + tuple(f"v_{c}" for c in mech.coordinates) + ext_names
     return PeerModel(nq, nq * 2 + len(ext_names), pnames, modes, guard_names, directions, names)
+
+
+def constant_load(mech) -> bool:
+    """Whether the mechanism's load is constant in time and the same at every station (no per-station torques,
+    no torque profile): what the peers' equations assume."""
+    return getattr(mech, "station_torques", None) is None and getattr(mech, "torque_profile", None) is None
 
 
 def geneva_transition(mech, mode: str, guard: str, values: dict, q) -> tuple[str, dict, str | None]:

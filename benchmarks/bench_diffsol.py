@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mechsim.benchmarks.bench_casadi import PeerRun
+from mechsim.benchmarks.bench_casadi import PeerRun, constant_load
 from mechsim.mechanisms.geneva.kinematics import speed_ratio
 
 #: the Geneva's crank angle per mode in one DiffSL program (docs/theory.md §G1-G2); inputs in this order
@@ -73,12 +73,13 @@ SOLVERS = ("tsit45", "bdf")
 
 
 def supports(problem) -> bool:
-    """The external Geneva without friction, torque or motor drive, no thermal states (`problem`: a
+    """The external Geneva without friction, a constant load, torque or motor drive, no thermal states (`problem`: a
     `bench_methods.Problem`)."""
     mech = problem.mech
     g = getattr(mech, "geometry", None)
     return (mech.name == "geneva" and g is not None and getattr(g, "crank_sense", 0) == -1
-            and mech.friction == 0 and problem.ext is None and not problem.drive.is_prescribed)
+            and mech.friction == 0 and problem.ext is None and not problem.drive.is_prescribed
+            and constant_load(mech))
 
 
 @dataclass

@@ -80,7 +80,12 @@ class Method:
         return not self.mechanisms or mech.name in self.mechanisms
 
     def supports_problem(self, problem: "Problem") -> bool:
-        """Whether this method integrates the whole problem (the mechanism, and its thermal states if any)."""
+        """Whether this method integrates the whole problem (the mechanism, and its thermal states if any; the
+        peers, written for the Geneva, a constant load)."""
+        if self.mechanisms:
+            from mechsim.benchmarks.bench_casadi import constant_load
+            if not constant_load(problem.mech) or problem.drive.has_duty:
+                return False
         return self.supports(problem.mech) and (problem.ext is None or self.thermal)
 
     #: integrates thermal states alongside (False: mechanics only)
@@ -90,6 +95,9 @@ class Method:
         """Why the method does not run on `problem` (when `supports_problem` says so)."""
         if not self.supports(problem.mech):
             return f"written for {', '.join(self.mechanisms)} only (not {problem.mech.name})"
+        from mechsim.benchmarks.bench_casadi import constant_load
+        if not constant_load(problem.mech) or problem.drive.has_duty:
+            return "written for a constant wheel torque and a drive always on (no station torques, profile or duty)"
         return "integrates no thermal states"
 
     def setup(self, problem: Problem, rtol: float, atol: float):
@@ -303,12 +311,13 @@ class DiffsolMethod(Method):
 
     def supports_problem(self, problem):
         from mechsim.benchmarks import bench_diffsol as bd
-        return self.supports(problem.mech) and bd.supports(problem)
+        return super().supports_problem(problem) and bd.supports(problem)
 
     def skip_reason(self, problem):
-        if not self.supports(problem.mech):
+        if not super().supports_problem(problem):
             return super().skip_reason(problem)
-        return "written for the external Geneva without friction, torque or motor drive, mechanics only"
+        return ("written for the external Geneva without friction, a constant load, torque or motor drive, "
+                "mechanics only")
 
     def setup(self, problem, rtol, atol):
         from mechsim.benchmarks import bench_diffsol as bd

@@ -160,8 +160,12 @@ def test_peer_bench_reaches_its_target_and_ratios_come_from_the_curves(tmp_path)
         t_peer = time_at_error(rows, PEER, float(target), "cpu_time_s")
         assert set(entry["ratio_to_peer"]) == {"ida-compiled-index1", DEFAULT}
         for method, ratio in entry["ratio_to_peer"].items():
-            assert ratio == pytest.approx(time_at_error(runs, method, float(target), "run_cpu_time_s") / t_peer,
-                                          rel=1e-12)
+            t = time_at_error(runs, method, float(target), "run_cpu_time_s")
+            if np.isfinite(t):      # NaN: its run's curve does not reach the target (index-2 stalls near 1e-8)
+                assert ratio == pytest.approx(t / t_peer, rel=1e-12)
+            else:
+                assert ratio is None or np.isnan(ratio)
+        assert np.isfinite(entry["ratio_to_peer"]["ida-compiled-index1"])
     assert "end to end" in r.stdout
     if METHODS["diffsol-tsit45"].available():
         assert set(summary["ratios_by_peer"]) == {PEER, "diffsol-tsit45"}
@@ -204,7 +208,20 @@ def test_diffsol_peer_covers_the_external_geneva_without_friction_only():
         problem = make_problem(BenchConfig(scenario="geneva-motor", duration=1.0, overrides=CASES[case]))
         assert method.supports_problem(problem) is supported, case
         if not supported:
-            assert "without friction" in method.skip_reason(problem)
+            assert "without friction" in method.skip_reason(problem) or "thermal" in method.skip_reason(problem)
+
+
+def test_geneva_peers_refuse_a_time_varying_load():
+    """The peers' equations hold one constant wheel torque and a drive always on: per-station torques (or a
+    profile, or a duty cycle) are skipped with the reason, mechsim's own methods run."""
+    from mechsim.benchmarks.bench import BenchConfig, make_problem
+    from mechsim.benchmarks.peer_bench import CASE_A
+    problem = make_problem(BenchConfig(scenario="geneva-motor", duration=1.0, overrides=CASE_A + (
+        'load.wheel_torque="0 N*m"', 'load.wheel_torque_per_station=["7 N*m", "2 N*m", "5 N*m", "0.5 N*m"]')))
+    for name in ("casadi-idas", "casadi-idas-events", "scipy-LSODA", "diffsol-tsit45"):
+        assert not METHODS[name].supports_problem(problem), name
+        assert "constant wheel torque" in METHODS[name].skip_reason(problem)
+    assert METHODS["ida-index1"].supports_problem(problem)
 
 
 def test_casadi_event_support_variant_matches_the_reference():
