@@ -65,6 +65,7 @@ class Extremum:
     limit: str | None = None   # at an interval's end: the one-sided limit from 'before' or 'after' that instant
     edge: str | None = None    # the bracket reaches the interval's end ('before' it) or start ('after' it)
     interval: int = -1         # the smooth interval it lies in (the `intervals` list given to `locate`)
+    constant: bool = False     # a constant stretch's (its first instant; the value is the rows')
 
 
 Reader = Callable[[Interval, int, np.ndarray], dict]
@@ -97,6 +98,8 @@ class _Job:
     where: str = "interior"
     limit: str | None = None
     edge: str | None = None
+    tie: float = 0.0
+    constant: bool = False
 
 
 def _estimates(t: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -115,17 +118,31 @@ def _estimates(t: np.ndarray, f: np.ndarray) -> np.ndarray:
     return est
 
 
+def tie_of(f: np.ndarray) -> float:
+    """The round-off tie of a column: TIE_ROUNDOFF of its largest finite magnitude (values closer are equal)."""
+    finite = np.abs(f[np.isfinite(f)])
+    return TIE_ROUNDOFF * float(finite.max()) if finite.size else 0.0
+
+
+def _beats(new: Extremum, old: Extremum | None, sense: float, tie: float) -> bool:
+    """Whether `new` is the better extremum: larger (sense +1) by more than the tie, or tied and earlier."""
+    if old is None:
+        return True
+    gain = sense * (new.value - old.value)
+    return gain > tie or (gain >= -tie and new.t < old.t)
+
+
 def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: float, limit: int = CANDIDATES
                ) -> list[tuple[float, int, int, float, float, bool]]:
     """(estimate, interval, position, bracket lo, bracket hi, flat) of the local maxima of sense*f that may hold
-    the maximum, the best `limit` of them: a row's bracket may hold up to its parabola estimate plus the estimate's
+    the maximum, the best `limit` of them (and the best constant stretch): a row's bracket may hold up to its parabola estimate plus the estimate's
     gain over the row again (the estimate's error is of the order of its gain), and it is kept where that reaches
     the best candidate's lower bound (its row and its estimate less its gain). flat: the row and its neighbours
-    are equal to round-off (a column held constant, e.g. zero in a dwell): the row's value is exact. Values within
-    round-off of each other are ties, and a tie goes to the earliest (which row of a dwell's zero speed, or which
-    dwell, holds the extremum must not hinge on the BLAS's rounding)."""
-    finite = np.abs(f[np.isfinite(f)])
-    tie = TIE_ROUNDOFF * float(finite.max()) if finite.size else 0.0
+    are equal to round-off (a column held constant, e.g. zero in a dwell): the row's value is exact, and the
+    stretch's extremum lies at its first instant (lo = hi): the interval's start where the stretch holds the
+    interval's first row, else its first row. Values within round-off of each other are ties, and a tie goes to
+    the earliest (which dwell's zero speed holds the extremum must not hinge on the BLAS's rounding)."""
+    tie = tie_of(f)
     found = []
     for k, iv in enumerate(intervals):
         rows = iv.rows
@@ -152,16 +169,25 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
             hi = ti[i + 1] if i < n - 1 else iv.hi
             found.append((float(est[i]), float(fi[i]), k, int(i), float(lo), float(hi), False))
         flats = np.flatnonzero(peak & flat)
-        if len(flats):                          # one row of a constant stretch stands for it
-            i = int(flats[0])
-            found.append((float(fi[i]), float(fi[i]), k, i, float(ti[i]), float(ti[i]), True))
+        if len(flats):      # a constant stretch stands for itself: the best level's earliest row (its first row)
+            i = int(flats[np.argmax(fi[flats] >= fi[flats].max() - tie)])
+            # the stretch holds the interval's first row: it is constant from the interval's start
+            at = float(iv.lo) if i == 0 else float(ti[i])
+            found.append((float(fi[i]), float(fi[i]), k, i, at, at, True))
     if not found:
         return []
     lower = max(c[1] for c in found)
     keep = [c for c in found if 2 * c[0] - c[1] >= lower - tie]
-    best = max(c[0] for c in keep)
-    keep.sort(key=lambda c: (-(best if c[0] >= best - tie else c[0]), c[4]))
-    return [(c[0], c[2], c[3], c[4], c[5], c[6]) for c in keep[:limit]]
+    # constant stretches are exact: only the best level's earliest can hold the extremum (it costs no refining)
+    flats = [c for c in keep if c[6]]
+    if flats:
+        level = max(c[0] for c in flats)
+        flats = [min((c for c in flats if c[0] >= level - tie), key=lambda c: c[4])]
+    keep = [c for c in keep if not c[6]]
+    if keep:
+        best = max(c[0] for c in keep)
+        keep.sort(key=lambda c: (-(best if c[0] >= best - tie else c[0]), c[4]))
+    return [(c[0], c[2], c[3], c[4], c[5], c[6]) for c in flats + keep[:limit]]
 
 
 def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader,
@@ -171,18 +197,29 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
     arrays, read from the interval's row at `position`). Brackets within a few rows of each other are read
     together, from the row before the first of them (one forward integration per reading)."""
     jobs: list[_Job] = []
+    ties: dict[str, float] = {}
+    starts: dict[int, list[_Job]] = {}          # constant stretches from an interval's start (read there)
     for col, f in values.items():
         f = np.asarray(f, dtype=float)
+        ties[col] = tie = tie_of(f)
         for sense in (1.0, -1.0):
             for est, k, i, lo, hi, flat in candidates(t, f, intervals, sense, limit):
-                j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]))
+                j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]), tie=tie)
                 j.t_row = float(t[intervals[k].rows[i]])
                 j.edge = "before" if hi == intervals[k].hi else "after" if lo == intervals[k].lo else None
-                if flat:             # the row's value is the extremum's
+                if flat:             # the row's value is the extremum's, at the stretch's first instant
                     r = intervals[k].rows[i]
-                    j.best_f, j.best_t, j.done, j.where = j.sampled, float(t[r]), True, "output row (constant here)"
+                    j.best_f, j.best_t, j.done, j.edge, j.constant = j.sampled, lo, True, None, True
                     j.best_row = {c: v[r] for c, v in values.items()}
+                    if lo != j.t_row:
+                        starts.setdefault(k, []).append(j)
+                    elif lo == intervals[k].lo:
+                        j.where = f"{intervals[k].lo_kind} (constant from here)"
+                    else:
+                        j.where = "output row (constant from here)"
                 jobs.append(j)
+    for k, group in starts.items():
+        _constant_from_start(intervals[k], k, group, read)
     jobs.sort(key=lambda j: (j.interval, j.anchor))
     clusters: list[list[_Job]] = []
     for j in jobs:
@@ -209,11 +246,28 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
         if j.best_row is None:
             continue
         e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.sense * j.sampled, j.limit, j.edge,
-                     j.interval)
-        old = slot.get(name)
-        if old is None or j.sense * e.value > j.sense * old.value:
+                     j.interval, j.constant)
+        if _beats(e, slot.get(name), j.sense, ties[j.column]):
             slot[name] = e
     return out
+
+
+def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader) -> None:
+    """Constant stretches that hold their interval's first row lie at the interval's start: every column is read
+    there (the one-sided limit after an event; the window's start for the first interval). The value stays the
+    rows' (exact); if the reading fails, the stretch's first row stands."""
+    try:
+        row = _at(read(iv, 0, np.array([iv.lo])), 0)
+    except ReadingFailed:
+        for j in group:
+            j.best_t = j.t_row
+        return
+    for j in group:
+        j.best_row = dict(row)
+        j.best_row[j.column] = j.sense * j.best_f
+        j.where = (f"{iv.lo_kind} (constant from here, limit from after)" if k > 0
+                   else f"{iv.lo_kind} (constant from here)")
+        j.limit = "after" if k > 0 else None
 
 
 def _lagrange(x3: np.ndarray, x: float) -> np.ndarray:
@@ -253,7 +307,7 @@ def _refine(iv: Interval, i: int, group: list[_Job], read: Reader) -> None:
         if not np.isfinite(f).any():
             continue
         f = np.where(np.isfinite(f), f, -np.inf)
-        b = int(np.argmax(f))
+        b = int(np.argmax(f >= f.max() - j.tie))          # the earliest of readings tied to round-off
         j.best_f, j.best_t, j.best_row = float(f[b]), float(g[b]), _at(table, pos[b])
         at_lo, at_hi = b == 0 and g[0] == iv.lo, b == len(g) - 1 and g[-1] == iv.hi
         if at_lo or at_hi or len(g) < 3:           # the one-sided limit at the interval's end

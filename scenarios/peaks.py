@@ -256,7 +256,7 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
         e = got.get(name)
         # an extremum in the bracket next to an event: does the column grow without bound toward it?
         edge = None if e is None else e.limit if e.limit is not None else e.edge
-        if edge is None or read is None or e.where.startswith(("start", "end")):
+        if edge is None or read is None or e.constant or e.where.startswith(("start", "end")):
             continue
         found = singular_approaches(c, f, edge, sense, intervals, read, h, events, coordinates, e.interval)
         if found:
