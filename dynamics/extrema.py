@@ -9,9 +9,9 @@ A column F(t) of the result table is smooth between events. Its maximum (and min
 2. a `reader` evaluates every column of the table at any instants of one smooth interval: for a DAE run by
    re-integrating the mode from an output row next to the candidate, forward and backward, at a tenth of the
    run's tolerances (`TrajectoryReader`); for a closed-form run by the closed form itself;
-3. in the bracket, a grid of readings, the parabola through the best one and its neighbours, then three readings
-   a small step apart around that vertex, whose parabola gives t* and the value. At an interval's end the
-   extremum is the one-sided limit (the reading at the event instant from that side).
+3. in the bracket, one pass of a grid of readings; the polynomial through the seven readings around the best one
+   gives t* and the value (and every column there). At an interval's end the extremum is the one-sided limit
+   (the reading at the event instant from that side).
 
 The value, time and drive angle do not depend on the output step beyond the integrator's tolerance: at an
 interior extremum a time error dt changes the value by F''dt^2/2 only, and the reading itself carries the
@@ -26,9 +26,9 @@ import numpy as np
 
 #: values closer than this fraction of the column's largest magnitude are equal (round-off): flat rows, ties
 TIE_ROUNDOFF = 1e-13
-#: readings of the first pass over a bracket; the second pass's step: the first's divided by this
+#: readings over a bracket; readings through which the polynomial around the best one is taken (degree + 1)
 FIRST_GRID = 33
-STEP_DIVISOR = 64
+STENCIL = 7
 #: candidates refined per column and sense (the best by the rows' parabola estimate)
 CANDIDATES = 2
 #: brackets whose rows lie within this many rows of each other are read together
@@ -49,7 +49,7 @@ class Interval:
     lo_kind: str
     hi_kind: str
     rows: np.ndarray
-    anchors: list = field(default_factory=list)
+    anchors: list | np.ndarray = field(default_factory=list)
 
 
 @dataclass
@@ -69,16 +69,6 @@ class Extremum:
 
 
 Reader = Callable[[Interval, int, np.ndarray], dict]
-
-
-def _vertex(t3: np.ndarray, f3: np.ndarray) -> float:
-    """The abscissa of the parabola's vertex through three points (the middle one if they are collinear)."""
-    (t0, t1, t2), (f0, f1, f2) = t3, f3
-    den = (t1 - t0) * (f1 - f2) - (t1 - t2) * (f1 - f0)
-    if den == 0 or not np.isfinite(den):
-        return float(t1)
-    num = (t1 - t0) ** 2 * (f1 - f2) - (t1 - t2) ** 2 * (f1 - f0)
-    return float(np.clip(t1 - 0.5 * num / den, min(t0, t2), max(t0, t2)))
 
 
 @dataclass
@@ -132,8 +122,20 @@ def _beats(new: Extremum, old: Extremum | None, sense: float, tie: float) -> boo
     return gain > tie or (gain >= -tie and new.t < old.t)
 
 
-def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: float, limit: int = CANDIDATES
-               ) -> list[tuple[float, int, int, float, float, bool]]:
+def _layout(intervals: list[Interval]) -> tuple | None:
+    """Every interval's rows side by side (a row's neighbours are its interval's; the ends reach out to its
+    ends): (rows, interval, interval's row count, position in it, first, last); None without rows."""
+    sizes = np.array([len(iv.rows) for iv in intervals], dtype=int)
+    if not sizes.sum():
+        return None
+    rows = np.concatenate([iv.rows for iv in intervals]).astype(int)
+    n_of = np.repeat(sizes, sizes)
+    pos = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    return rows, np.repeat(np.arange(len(intervals)), sizes), n_of, pos, pos == 0, pos == n_of - 1
+
+
+def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: float, limit: int = CANDIDATES,
+               layout: tuple | None = None) -> list[tuple[float, int, int, float, float, bool]]:
     """(estimate, interval, position, bracket lo, bracket hi, flat) of the local maxima of sense*f that may hold
     the maximum, the best `limit` of them (and the best constant stretch): a row's bracket may hold up to its parabola estimate plus the estimate's
     gain over the row again (the estimate's error is of the order of its gain), and it is kept where that reaches
@@ -143,51 +145,48 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
     interval's first row, else its first row. Values within round-off of each other are ties, and a tie goes to
     the earliest (which dwell's zero speed holds the extremum must not hinge on the BLAS's rounding)."""
     tie = tie_of(f)
-    found = []
-    for k, iv in enumerate(intervals):
-        rows = iv.rows
-        if not len(rows):
-            continue
-        ti, fi = t[rows], sense * f[rows]
-        ok = np.isfinite(fi)
-        if not ok.any():
-            continue
-        fi = np.where(ok, fi, -np.inf)
-        n = len(rows)
-        left = np.r_[-np.inf, fi[:-1]]
-        right = np.r_[fi[1:], -np.inf]
-        peak = (fi >= left) & (fi >= right) & ok
-        flat = np.zeros(n, bool)
-        if n > 1:
-            with np.errstate(invalid="ignore"):
-                flat = (((np.abs(fi - left) <= tie) | (np.arange(n) == 0))
-                        & ((np.abs(fi - right) <= tie) | (np.arange(n) == n - 1)))
-            peak |= flat & ok
-        est = _estimates(ti, fi)
-        for i in np.flatnonzero(peak & ~flat):
-            lo = ti[i - 1] if i > 0 else iv.lo
-            hi = ti[i + 1] if i < n - 1 else iv.hi
-            found.append((float(est[i]), float(fi[i]), k, int(i), float(lo), float(hi), False))
-        flats = np.flatnonzero(peak & flat)
-        if len(flats):      # a constant stretch stands for itself: the best level's earliest row (its first row)
-            i = int(flats[np.argmax(fi[flats] >= fi[flats].max() - tie)])
-            # the stretch holds the interval's first row: it is constant from the interval's start
-            at = float(iv.lo) if i == 0 else float(ti[i])
-            found.append((float(fi[i]), float(fi[i]), k, i, at, at, True))
-    if not found:
+    if layout is None:
+        layout = _layout(intervals)
+    if layout is None:
         return []
-    lower = max(c[1] for c in found)
-    keep = [c for c in found if 2 * c[0] - c[1] >= lower - tie]
-    # constant stretches are exact: only the best level's earliest can hold the extremum (it costs no refining)
-    flats = [c for c in keep if c[6]]
-    if flats:
-        level = max(c[0] for c in flats)
-        flats = [min((c for c in flats if c[0] >= level - tie), key=lambda c: c[4])]
-    keep = [c for c in keep if not c[6]]
-    if keep:
-        best = max(c[0] for c in keep)
-        keep.sort(key=lambda c: (-(best if c[0] >= best - tie else c[0]), c[4]))
-    return [(c[0], c[2], c[3], c[4], c[5], c[6]) for c in flats + keep[:limit]]
+    rows, k_of, n_of, pos, first, last = layout
+    ti, fi = t[rows], sense * f[rows]
+    ok = np.isfinite(fi)
+    fi = np.where(ok, fi, -np.inf)
+    left = np.where(first, -np.inf, np.r_[-np.inf, fi[:-1]])
+    right = np.where(last, -np.inf, np.r_[fi[1:], -np.inf])
+    with np.errstate(invalid="ignore"):
+        flat = (((np.abs(fi - left) <= tie) | first) & ((np.abs(fi - right) <= tie) | last) & (n_of > 1) & ok)
+    peak = ((fi >= left) & (fi >= right) & ok) | flat
+    est = _estimates(ti, fi)
+    est = np.where(first | last, fi, est)
+    smooth = np.flatnonzero(peak & ~flat)
+    flats = np.flatnonzero(flat)
+    if not len(smooth) and not len(flats):
+        return []
+    lower = float(fi[np.r_[smooth, flats]].max())
+    out = []
+    if len(flats):
+        # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it
+        # lies at its first instant (the interval's start where it holds the interval's first row)
+        level = float(fi[flats].max())
+        if level >= lower - tie:
+            i = int(flats[np.argmax(fi[flats] >= level - tie)])
+            k = int(k_of[i])
+            at = float(intervals[k].lo) if first[i] else float(ti[i])
+            out.append((float(fi[i]), k, int(pos[i]), at, at, True))
+    e, g = est[smooth], fi[smooth]
+    keep = smooth[2 * e - g >= lower - tie]
+    if len(keep):
+        best = float(est[keep].max())
+        rank = np.where(est[keep] >= best - tie, best, est[keep])
+        keep = keep[np.lexsort((ti[keep], -rank))][:limit]      # by estimate, ties to the earliest
+        for i in keep.tolist():
+            iv = intervals[int(k_of[i])]
+            lo = float(iv.lo) if first[i] else float(ti[i - 1])
+            hi = float(iv.hi) if last[i] else float(ti[i + 1])
+            out.append((float(est[i]), int(k_of[i]), int(pos[i]), lo, hi, False))
+    return out
 
 
 def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader,
@@ -199,11 +198,12 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
     jobs: list[_Job] = []
     ties: dict[str, float] = {}
     starts: dict[int, list[_Job]] = {}          # constant stretches from an interval's start (read there)
+    layout = _layout(intervals)
     for col, f in values.items():
         f = np.asarray(f, dtype=float)
         ties[col] = tie = tie_of(f)
         for sense in (1.0, -1.0):
-            for est, k, i, lo, hi, flat in candidates(t, f, intervals, sense, limit):
+            for est, k, i, lo, hi, flat in candidates(t, f, intervals, sense, limit, layout):
                 j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]), tie=tie)
                 j.t_row = float(t[intervals[k].rows[i]])
                 j.edge = "before" if hi == intervals[k].hi else "after" if lo == intervals[k].lo else None
@@ -229,10 +229,13 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
             clusters[-1].append(j)
         else:
             clusters.append([j])
-    for group in clusters:
-        first = group[0]
+    plans = [_grids(group) for group in clusters]
+    requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), p[1]) for g, p in zip(clusters, plans)]
+    many = getattr(read, "read_many", None)
+    tables = many(requests) if many is not None else [None] * len(requests)
+    for group, (grids, _), request, table in zip(clusters, plans, requests, tables):
         try:
-            _refine(intervals[first.interval], max(first.anchor - 1, 0), group, read)
+            _refine(request[0], group, grids, table if table is not None else read(*request))
         except ReadingFailed:          # the rows' value stands, and says so
             for j in group:
                 r = intervals[j.interval].rows[j.anchor]
@@ -270,15 +273,9 @@ def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader) 
         j.limit = "after" if k > 0 else None
 
 
-def _lagrange(x3: np.ndarray, x: float) -> np.ndarray:
-    """Weights of the quadratic through three abscissae, at x."""
-    a, b, c = x3
-    return np.array([(x - b) * (x - c) / ((a - b) * (a - c)), (x - a) * (x - c) / ((b - a) * (b - c)),
-                     (x - a) * (x - b) / ((c - a) * (c - b))])
-
-
 def _at(table: dict, pos, w: np.ndarray | None = None) -> dict:
-    """Every column at one instant: the reading at pos, or the quadratic through the readings at pos (3)."""
+    """Every column at one instant: the reading at pos, or the polynomial through the readings at pos (weights
+    w; a column that is not float: the reading of the largest weight)."""
     out = {}
     for c, v in table.items():
         v = np.asarray(v)
@@ -287,53 +284,95 @@ def _at(table: dict, pos, w: np.ndarray | None = None) -> dict:
         elif v.dtype.kind == "f":
             out[c] = float(w @ v[pos])
         else:
-            out[c] = v[pos[1]]
+            out[c] = v[pos[int(np.argmax(w))]]
     return out
 
 
-def _refine(iv: Interval, i: int, group: list[_Job], read: Reader) -> None:
-    """Each job's maximum in its bracket, all jobs of one anchor row read together: a grid over the bracket, the
-    parabola through the best reading and its neighbours, then three readings a small step d apart around that
-    vertex, whose parabola gives t* and the value (its error is of order d^3 F''', far below the tolerance)."""
-    # the candidate's own row is one of the readings, so that the result is never below it
-    grids = [np.unique(np.r_[np.linspace(j.lo, j.hi, FIRST_GRID), j.t_row]) if j.hi > j.lo else np.array([j.lo])
-             for j in group]
-    table = read(iv, i, np.unique(np.concatenate(grids)))
+def _stencil_tables(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """For n equally spaced nodes 0..n-1: the barycentric weights, and for each node b the inverse of the
+    Vandermonde matrix in x - b (the monomial coefficients about b of the polynomial through n values)."""
+    nodes = np.arange(n, dtype=float)
+    bary = np.array([1.0 / np.prod(x - np.delete(nodes, i)) for i, x in enumerate(nodes)])
+    inverse = np.stack([np.linalg.inv(np.vander(nodes - b, increasing=True)) for b in range(n)])
+    return bary, inverse
+
+
+_BARY, _INVERSE = _stencil_tables(STENCIL)
+#: instants per grid step at which the interpolant is first searched for its maximum (then Newton's method)
+_SEARCH = np.linspace(-1.0, 1.0, 33)
+
+
+def _stencil_weights(x: float) -> np.ndarray:
+    """Weights of the polynomial through the STENCIL nodes 0..STENCIL-1 at x (barycentric form)."""
+    d = x - np.arange(STENCIL, dtype=float)
+    hit = np.flatnonzero(d == 0)
+    if len(hit):
+        w = np.zeros(STENCIL)
+        w[hit[0]] = 1.0
+        return w
+    w = _BARY / d
+    return w / w.sum()
+
+
+def _poly_max(f: np.ndarray, b: int) -> tuple[float, np.ndarray]:
+    """(x*, weights): the maximum of the polynomial through the STENCIL readings f within a grid step of the best
+    one b (x in grid steps from the stencil's first node): sampled, then Newton's method on its derivative; the
+    weights give any column at x*."""
+    c = _INVERSE[b] @ f                       # coefficients in x - b
+    d1 = c[1:] * np.arange(1, STENCIL)
+    d2 = d1[1:] * np.arange(1, STENCIL - 1)
+    lo, hi = max(-1.0, -float(b)), min(1.0, float(STENCIL - 1 - b))
+    xs = np.clip(_SEARCH, lo, hi)
+    x = float(xs[np.argmax(np.polynomial.polynomial.polyval(xs, c))])
+    for _ in range(4):
+        g, h = np.polynomial.polynomial.polyval(x, d1), np.polynomial.polynomial.polyval(x, d2)
+        if not h < 0:
+            break
+        x = min(max(x - g / h, lo), hi)
+    x = b + x
+    return x, _stencil_weights(x)
+
+
+def _grids(group: list[_Job]) -> tuple[list[np.ndarray], np.ndarray]:
+    """Each job's readings over its bracket (FIRST_GRID), and the instants the group reads: those and the jobs'
+    own rows (so that the result is never below the row)."""
+    grids = [np.linspace(j.lo, j.hi, FIRST_GRID) if j.hi > j.lo else np.array([j.lo]) for j in group]
+    return grids, np.unique(np.concatenate(grids + [np.array([j.t_row for j in group])]))
+
+
+def _refine(iv: Interval, group: list[_Job], grids: list[np.ndarray], table: dict) -> None:
+    """Each job's maximum in its bracket from one pass of readings (`_grids`, read from one anchor row): the
+    polynomial through the STENCIL readings around the best one gives t* and the value, and every column there
+    (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far below the tolerance)."""
     tt = np.asarray(table["t_s"], dtype=float)
-    second = []
     for j, g in zip(group, grids):
         pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
-        f = j.sense * np.asarray(table[j.column], dtype=float)[pos]
+        column = np.asarray(table[j.column], dtype=float)
+        f = j.sense * column[pos]
         if not np.isfinite(f).any():
             continue
         f = np.where(np.isfinite(f), f, -np.inf)
         b = int(np.argmax(f >= f.max() - j.tie))          # the earliest of readings tied to round-off
         j.best_f, j.best_t, j.best_row = float(f[b]), float(g[b]), _at(table, pos[b])
+        r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
+        if j.sense * column[r] > j.best_f + j.tie:        # the row itself (between grid readings)
+            j.best_f, j.best_t, j.best_row = float(j.sense * column[r]), float(tt[r]), _at(table, r)
         at_lo, at_hi = b == 0 and g[0] == iv.lo, b == len(g) - 1 and g[-1] == iv.hi
-        if at_lo or at_hi or len(g) < 3:           # the one-sided limit at the interval's end
+        if at_lo or at_hi or len(g) < STENCIL:           # the one-sided limit at the interval's end
             j.where = (f"{iv.lo_kind} (limit from after)" if at_lo else f"{iv.hi_kind} (limit from before)"
                        if at_hi else "output row")
             j.limit = "after" if at_lo else "before" if at_hi else None
             continue
-        c = min(max(b, 1), len(g) - 2)
-        v1 = _vertex(g[c - 1:c + 2], f[c - 1:c + 2])
-        d = (j.hi - j.lo) / ((FIRST_GRID - 1) * STEP_DIVISOR)
-        v1 = min(max(v1, iv.lo + d), iv.hi - d)
-        second.append((j, np.array([v1 - d, v1, v1 + d])))
-    if not second:
-        return
-    table = read(iv, i, np.unique(np.concatenate([p for _, p in second])))
-    tt = np.asarray(table["t_s"], dtype=float)
-    for j, p3 in second:
-        pos = np.clip(np.searchsorted(tt, p3), 0, len(tt) - 1)
-        f3 = j.sense * np.asarray(table[j.column], dtype=float)[pos]
-        if not np.isfinite(f3).all():
+        c0 = min(max(b - STENCIL // 2, 0), len(g) - STENCIL)
+        part = f[c0:c0 + STENCIL]
+        if not np.isfinite(part).all():
             continue
-        tv = _vertex(p3, f3)
-        w = _lagrange(p3, tv)
-        value = float(w @ f3)
+        x, w = _poly_max(part, b - c0)
+        value = float(w @ part)
         if value >= j.best_f:
-            j.best_f, j.best_t, j.best_row, j.where = value, tv, _at(table, pos, w), "interior"
+            tv = float(g[c0] + x * (g[1] - g[0]))
+            j.best_f, j.best_t, j.best_row, j.where = value, tv, _at(table, pos[c0:c0 + STENCIL], w), "interior"
+            j.best_row["t_s"] = tv
 
 
 def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float, t_end: float,
@@ -368,12 +407,17 @@ class TrajectoryReader:
         own = dataclasses.replace(settings, multiplier_atol=settings.lam_atol, events=False)
         #: the tighter tolerances first, the run's own where IDA cannot meet those
         self.tries = (dataclasses.replace(own, rtol=rtol, atol=settings.atol * rtol / settings.rtol), own)
-        self.reintegrations = 0
+        self.reintegrations = self.dense_readings = 0
         self._starts: dict = {}
+        self._solvers: dict = {}
+        self._anchors = None
+        self._keep: list = []
 
-    def anchors(self, t_rows: np.ndarray) -> list:
-        """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), None
-        for a time no piece holds."""
+    def anchors(self, t_rows: np.ndarray) -> np.ndarray:
+        """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), as
+        rows of an (n, 2) array; (-1, -1) for a time no piece holds. Kept for the reader's life (one table)."""
+        if self._anchors is not None and np.array_equal(self._anchors[0], t_rows):
+            return self._anchors[1]
         pieces = self.traj.pieces
         all_t = np.concatenate([p.t for p in pieces])
         all_k = np.concatenate([np.full(len(p.t), k) for k, p in enumerate(pieces)])
@@ -383,9 +427,14 @@ class TrajectoryReader:
         at = np.searchsorted(st, t_rows, side="right") - 1
         hit = (at >= 0) & (st[np.clip(at, 0, None)] == t_rows)
         ks, rs = all_k[order][np.clip(at, 0, None)], all_r[order][np.clip(at, 0, None)]
-        return [(int(k), int(r)) if h else None for k, r, h in zip(ks.tolist(), rs.tolist(), hit.tolist())]
+        out = np.where(hit[:, None], np.stack([ks, rs], axis=1), -1)
+        self._anchors = (t_rows, out)
+        return out
 
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+        table = self.read_many([(iv, position, times)])[0]
+        if table is not None:
+            return table
         from mechsim.dynamics.hybrid import Piece
         from mechsim.dynamics.tables import piece_columns
         piece, mf, t0, y0, yp0 = self._anchor(iv, position)
@@ -405,6 +454,35 @@ class TrajectoryReader:
                      piece.offset)
         return piece_columns(self.traj.model, part, self.angle_coordinates, residual=False)
 
+    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
+        """The columns of each (interval, position, times) from the run's own dense output where the integrator
+        keeps one (the compiled diffrax run: the interpolant its output rows come from), all evaluated together:
+        one read-out per mode and parameters; None for a request it does not hold (read by re-integration)."""
+        dense = getattr(self.traj, "dense", None)
+        if dense is None:
+            return [None] * len(requests)
+        from mechsim.dynamics.hybrid import Piece
+        from mechsim.dynamics.tables import piece_columns
+        got = dense.read_many([(np.asarray(times, float), iv.lo, iv.hi) for iv, _, times in requests])
+        groups: dict = {}
+        for r, g in enumerate(got):
+            if g is not None:
+                key = (g[0], np.asarray(g[1], float).tobytes(), np.asarray(g[2], float).tobytes())
+                groups.setdefault(key, []).append(r)
+        out: list[dict | None] = [None] * len(requests)
+        for rs in groups.values():
+            mode, params, offset = got[rs[0]][:3]
+            t = np.concatenate([np.asarray(requests[r][2], float) for r in rs])
+            table = piece_columns(self.traj.model, Piece(mode, params, t, np.vstack([got[r][3] for r in rs]), None,
+                                                         offset), self.angle_coordinates, residual=False)
+            a = 0
+            for r in rs:
+                n = len(requests[r][2])
+                out[r] = {c: v[a:a + n] for c, v in table.items()}
+                a += n
+        self.dense_readings += len(groups)
+        return out
+
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
         the generalized momentum, whose jump across an event is the impulse the event delivers."""
@@ -417,7 +495,7 @@ class TrajectoryReader:
     def _anchor(self, iv: Interval, position: int):
         """(piece, its mode's functions, t0, y0, y'0): the consistent state at the interval's row `position`, where
         every reading of it starts."""
-        k, r = iv.anchors[position]
+        k, r = (int(x) for x in iv.anchors[position])
         piece = self.traj.pieces[k]
         t0 = float(piece.t[r])
         try:
@@ -458,11 +536,16 @@ class TrajectoryReader:
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])
-            for s in self.tries:
-                solver = IDA(mf.residual, userdata=p, rtol=s.rtol, atol=atol_vector(mf, s),
-                             algebraic_idx=mf.algebraic or None,
-                             jacfn=mf.jacobian if s.jacobian == "exact" else None, max_num_steps=s.max_steps,
-                             linsolver="dense")
+            for n, s in enumerate(self.tries):
+                # one solver per mode, parameter values and try, re-initialised at each solve
+                key = (id(mf), np.asarray(p, dtype=float).tobytes(), n)
+                solver = self._solvers.get(key)
+                if solver is None:
+                    solver = self._solvers[key] = IDA(
+                        mf.residual, userdata=p, rtol=s.rtol, atol=atol_vector(mf, s),
+                        algebraic_idx=mf.algebraic or None, jacfn=mf.jacobian if s.jacobian == "exact" else None,
+                        max_num_steps=s.max_steps, linsolver="dense")
+                    self._keep.append(mf)          # the id stays this mode's while the reader lives
                 sol = solver.solve(tspan, y0, yp0)
                 if sol.success:
                     break

@@ -133,9 +133,10 @@ def _intervals(t: np.ndarray, events, lo: float, hi: float, kinds: tuple[str, st
     intervals = intervals_of(t, _breaks(events), lo, hi, *kinds)
     if isinstance(read, TrajectoryReader):
         anchors = read.anchors(t)
+        held = anchors[:, 0] >= 0
         for iv in intervals:
-            keep = [r for r in iv.rows if anchors[r] is not None]
-            iv.rows, iv.anchors = np.asarray(keep, dtype=int), [anchors[r] for r in keep]
+            keep = iv.rows[held[iv.rows]]
+            iv.rows, iv.anchors = keep, anchors[keep]
     return intervals
 
 
@@ -145,11 +146,14 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     output step h); {} where an interval holds no row to read from."""
     intervals = _intervals(t, events, a, b, ("turn start", "turn end"), read)
     total = {c: 0.0 for c in values}
-    for iv in intervals:
-        if not len(iv.rows):
-            return {}
-        first = read(iv, 0, np.array([iv.lo]))
-        last = read(iv, len(iv.rows) - 1, np.array([iv.hi]))
+    if any(not len(iv.rows) for iv in intervals):
+        return {}
+    requests = [r for iv in intervals for r in ((iv, 0, np.array([iv.lo])), (iv, len(iv.rows) - 1, np.array([iv.hi])))]
+    many = getattr(read, "read_many", None)
+    tables = many(requests) if many is not None else [None] * len(requests)
+    tables = [got if got is not None else read(*r) for r, got in zip(requests, tables)]
+    for n, iv in enumerate(intervals):
+        first, last = tables[2 * n], tables[2 * n + 1]
         tt = np.r_[iv.lo, t[iv.rows], iv.hi]
         for c, f in values.items():
             ff = np.r_[np.asarray(first[c], float)[0], f[iv.rows], np.asarray(last[c], float)[0]]

@@ -416,6 +416,122 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     return rows
 
 
+#: instants one call of the dense reading takes (padded)
+DENSE_BATCH = 256
+
+
+def make_dense(o, record: StepRecord) -> Callable:
+    """dense(rows, ts) -> z: the states at instants ts, ts[i] from the step record rows[i], by the same
+    interpolant the output rows come from (`make_rows`)."""
+    solver = solver_for(o)
+
+    def interpolate(row, t):
+        return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(t)
+
+    def dense(rows, ts):
+        return jax.vmap(interpolate)(rows, ts)
+    return dense
+
+
+class DenseOutput:
+    """A compiled run's states at any instants between its events, from the step buffers its output rows were
+    interpolated from (`make_dense`): `read(times, lo, hi)` -> (mode, parameters, offset, y rows in the mode's
+    IDA layout, multipliers NaN as on the rows), or None where the instants are not all inside one mode segment
+    overlapping (lo, hi)."""
+
+    def __init__(self, entry: CompiledRun, o, model, nq: int):
+        self.entry, self.o, self.model, self.nq = entry, o, model, nq
+        self.segments: list[tuple] = []       # (t start, t end, call, segment, mode, parameters, offset)
+        self.buffers: list = []
+        self.heads: dict = {}                 # call -> its steps' (t0, t_acc, segment) on the host
+
+    def add_call(self, st, t0: float, t1: float, ev_t, modes, params, offset) -> None:
+        c = len(self.buffers)
+        self.buffers.append(st)
+        bounds = [t0] + [float(x) for x in ev_t] + [t1]
+        for s, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+            self.segments.append((a, b, c, s, modes[s], params[s], offset))
+
+    def _steps(self, call: int, seg: int, ts: np.ndarray) -> np.ndarray | None:
+        """The step of segment `seg` whose interval [t0, t_acc] holds each instant (at the segment's first
+        instant, an event's: its first step, the limit after the event); None where one is not held."""
+        head = self.heads.get(call)
+        if head is None:             # the taken steps' records, on the host
+            h = np.asarray(self.buffers[call])
+            taken = np.flatnonzero(np.isfinite(h[:, ST_ACC]))
+            head = self.heads[call] = (h[taken], h[taken, ST_T0], h[taken, ST_ACC], h[taken, ST_SEG])
+        _, t0, acc, segs = head
+        mine = np.flatnonzero(segs == seg)
+        if not len(mine):
+            return None
+        k = np.minimum(np.searchsorted(acc[mine], ts, side="left"), len(mine) - 1)
+        j = mine[k]
+        if not ((t0[j] <= ts) & (ts <= acc[j])).all():
+            return None
+        return j
+
+    def _fn(self):
+        key = ("dense", DENSE_BATCH)
+        fn = self.entry.rows.get(key)
+        if fn is None:
+            example = (np.zeros((DENSE_BATCH, self.entry.record.width)), np.zeros(DENSE_BATCH, np.float64))
+            fn = jax.jit(make_dense(self.o, self.entry.record)).lower(*example).compile()
+            self.entry.rows[key] = fn
+        return fn
+
+    def read(self, times: np.ndarray, lo: float, hi: float):
+        return self.read_many([(times, lo, hi)])[0]
+
+    def read_many(self, requests: list[tuple[np.ndarray, float, float]]) -> list:
+        """`read` for each (times, lo, hi), the instants of all evaluated together (one compiled call per
+        DENSE_BATCH instants of a call's buffer)."""
+        out: list = [None] * len(requests)
+        work = []                   # (request, its mode segment, the instants' positions, the steps)
+        for r, (times, lo, hi) in enumerate(requests):
+            inside = [g for g in self.segments if g[0] < hi and g[1] > lo]
+            if not inside or not len(times) or any(
+                    g[4] != inside[0][4] or not np.array_equal(g[5], inside[0][5])
+                    or not np.array_equal(g[6], inside[0][6]) for g in inside[1:]):
+                continue
+            which = np.full(len(times), -1)
+            for n, g in reversed(list(enumerate(inside))):       # the first segment that holds each instant
+                which[(times >= g[0]) & (times <= g[1])] = n
+            if (which < 0).any():
+                continue
+            parts = []
+            for n in np.unique(which):
+                g = inside[int(n)]
+                at = np.flatnonzero(which == n)
+                j = self._steps(g[2], g[3], times[at])
+                if j is None:
+                    break
+                parts.append((g[2], at, j))
+            else:
+                work.append((r, inside[0], parts))
+        by_call: dict[int, list] = {}
+        for w, (r, _, parts) in enumerate(work):
+            for call, at, j in parts:
+                by_call.setdefault(call, []).append((w, at, j))
+        z = [np.empty((len(requests[r][0]), self.entry.jmod.nz)) for r, _, _ in work]
+        for call, items in by_call.items():
+            records = self.heads[call][0][np.concatenate([j for _, _, j in items])]
+            ts = np.concatenate([requests[work[w][0]][0][at] for w, at, _ in items])
+            got = np.empty((len(ts), self.entry.jmod.nz))
+            for a in range(0, len(ts), DENSE_BATCH):
+                n = min(DENSE_BATCH, len(ts) - a)
+                rows = np.repeat(records[a + n - 1:a + n], DENSE_BATCH, axis=0)
+                tt = np.full(DENSE_BATCH, ts[a + n - 1])
+                rows[:n], tt[:n] = records[a:a + n], ts[a:a + n]
+                got[a:a + n] = np.asarray(self._fn()(rows, tt))[:n]
+            a = 0
+            for w, at, _ in items:
+                z[w][at] = got[a:a + len(at)]
+                a += len(at)
+        for w, (r, g, _) in enumerate(work):
+            out[r] = (g[4], g[5], g[6], state_rows(self.model.modes[g[4]], self.nq, z[w]))
+        return out
+
+
 # -- compilation cache -------------------------------------------------------------------------------------
 @dataclass
 class CompiledRun:
@@ -534,6 +650,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     wall0 = _time.perf_counter()
     mode, values, p, y, yp, offset = start.mode, dict(start.values), start.p, start.y, start.yp, start.offset
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
+    dense = DenseOutput(entry, o, model, nq)
     events, warnings, failure, last = [], [], None, None
     t, dt0, calls, seg_steps = t0, DT0_FIRST, 0, 0
     knots = list(start.knots)
@@ -578,6 +695,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         stats["segments"] += n_ev + 1
         modes = [mode] + [jmod.names[k] for k in out["ev_k"][:n_ev].tolist()]
         params = [p] + [tuple(row) for row in out["ev_p"][:n_ev].tolist()]
+        dense.add_call(res["st"], t, float(out["t"]), out["ev_t"][:n_ev], modes, params, offset)
         seg = out["row_seg"][:n_out]
         # rows are in segment order: one piece per segment, split where the segment number changes
         cuts = np.flatnonzero(np.diff(seg)) + 1
@@ -641,5 +759,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         dt0 = 0.1 * dt0
     stats["notes"]["segments"] = f"mode segments, inside {calls} compiled whole-run call(s)"
     stats["solve_time_s"] = _time.perf_counter() - wall0
-    return Trajectory(model, pieces, events, stats, failure, warnings)
+    traj = Trajectory(model, pieces, events, stats, failure, warnings)
+    traj.dense = dense            # the run's own dense output, for readings between rows (dynamics/extrema.py)
+    return traj
 
