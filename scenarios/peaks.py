@@ -1,8 +1,9 @@
 """The summary's `peaks`: the maximum and minimum of each key column of the continuous solution, located between
 output rows (`dynamics/extrema.py`), with its instant and drive angle (docs/theory.md §K5).
 
-Which columns are located and how is part of every entry (`how`): a DAE run's mechanical columns by re-integrating
-the mode from the nearest output row, a closed-form run's by the closed form; columns the thermal model adds after
+Which columns are located and how is part of every entry (`how`): a DAE run's mechanical columns on the run's own
+dense output where its integrator keeps one (the compiled diffrax run), else by re-integrating the mode from the
+nearest output row, a closed-form run's by the closed form; columns the thermal model adds after
 the run are the output rows' extremes and say so. Where a run settles into a periodic regime (crank turn to turn)
 the entries are the regime's, the start-up's beside them; a column that grows without bound toward an event has
 no value there, and its events, growth, impulse and energy lost are listed instead (`singular`).
@@ -18,6 +19,7 @@ import pandas as pd
 from mechsim.dynamics.extrema import Extremum, Interval, TrajectoryReader, intervals_of, locate
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
+HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
 HOW_CLOSED = "located: the closed form evaluated between output rows"
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 
@@ -196,7 +198,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             read, how = _closed_form_reader(source, angle0, t[:n], {c: np.asarray(cols[c], float)[:n]
                                                                    for c in check}, check), HOW_CLOSED
         else:
-            read, how = TrajectoryReader(source.traj, source.mech.angle_coordinates, source.settings), HOW_DAE
+            read = TrajectoryReader(source.traj, source.mech.angle_coordinates, source.settings)
+            how = HOW_DENSE if getattr(source.traj, "dense", None) is not None else HOW_DAE
             model = source.traj.model
             coordinates = tuple(f"{c}_N_m_s" if i in source.mech.angle_coordinates else f"{c}_N_s"
                                 for i, c in enumerate(model.coordinates))
