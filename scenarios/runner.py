@@ -19,6 +19,7 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.invariants import first_violation
 from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
+from mechsim.dynamics.stats import new_stats
 from mechsim.dynamics.tables import TableColumns, coordinate_columns, events_table, timeseries
 from mechsim.mechanisms.base import Mechanism
 
@@ -221,9 +222,14 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
     stats: dict = {}
     traj = None
     if the_plan.method == "closed-form":
+        wall0 = time.perf_counter()
         df = _closed_form_table(mech, run_si, drive)
         rows = df.attrs.pop("events", [])
         events = pd.DataFrame(rows) if rows else pd.DataFrame(columns=["t_s", "from_mode", "to_mode", "kind"])
+        # the statistics every path reports (dynamics/stats.py): nothing integrated, so no step was taken
+        stats = new_stats("closed-form", "closed form", 0.0)
+        stats.update(events=len(rows), solve_time_s=time.perf_counter() - wall0)
+        stats["notes"]["backend"] = "a prescribed speed on the mechanism's closed form: no DAE was integrated"
         if progress:
             progress(si["duration"])
     else:

@@ -34,9 +34,11 @@ from typing import Callable
 import numpy as np
 
 from mechsim.dynamics import kkt
+from mechsim.dynamics.backend import End
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
                                                       result_message, solver_for, state_rows)
 from mechsim.dynamics.backends.jax_transitions import JaxTransitions, jax_transitions
@@ -140,6 +142,8 @@ class Outputs:
 
 
 class Code(IntEnum):
+    """The compiled call's status, an integer on the device; the driver reads it only through `OUTCOME`."""
+
     RUNNING = 0
     DONE = 1           # reached t_end
     HAND_BACK = 2      # a guard fired whose transition is the Python loop's (or several fired together)
@@ -147,6 +151,19 @@ class Code(IntEnum):
     MAX_STEPS = 5      # one segment took more than max_steps steps
     NON_FINITE = 6     # the state or the step size is not finite / the step size underflowed
     CHATTERING = 7     # a guard fired again at the instant of its own transition
+
+
+#: the one table from a finished call's device code to the public vocabulary every path reports in: how the
+#: call ended (`dynamics.backend.End`, as a segment of the loop ends) and, for a failure, its
+#: `dynamics.result.FailureCode`
+OUTCOME = {
+    Code.DONE: (End.END, None),
+    Code.HAND_BACK: (End.GUARD, None),
+    Code.STEPS_FULL: (End.PAUSE, None),
+    Code.MAX_STEPS: (End.FAILED, FailureCode.MAX_STEPS),
+    Code.NON_FINITE: (End.FAILED, FailureCode.NON_FINITE),
+    Code.CHATTERING: (End.FAILED, FailureCode.CHATTERING),
+}
 
 
 # -- constraints of mode k, padded to the largest mode ------------------------------------------------------
@@ -608,16 +625,15 @@ def run_arguments(k, t0, t_end, z0, p, dt0, tol, max_steps, seg_steps=0) -> tupl
 
 
 # -- the driver: compiled calls, and the Python loop's transitions where the table hands back ----------------
-def _failure(model, mode: str, t: float, q, code: Code, o) -> dict:
-    from mechsim.dynamics.result import FailureCode
+def _failure(model, mode: str, t: float, q, code: FailureCode, o) -> dict:
     where = {c: float(v) for c, v in zip(model.coordinates, q)}
-    if code == Code.MAX_STEPS:
+    if code is FailureCode.MAX_STEPS:
         msg = result_message(int(diffrax.RESULTS.max_steps_reached._value))
         return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: {msg} ({o.max_steps} in one mode "
-                    "segment)", code=FailureCode.MAX_STEPS, where=where,
+                    "segment)", code=code, where=where,
                     hint="raise solver.max_steps or loosen rtol; check for a singular configuration here")
     return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: non-finite state or step size underflow",
-                code=FailureCode.NON_FINITE, where=where,
+                code=code, where=where,
                 hint="check for a singular configuration here, or try another solver.diffrax_solver")
 
 
@@ -627,7 +643,6 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
     from mechsim.dynamics.hybrid import Piece, Trajectory, at_breakpoint, fire, reached
-    from mechsim.dynamics.result import FailureCode
     from mechsim.dynamics.stats import new_stats
     from mechsim.dynamics.transitions import chattering
 
@@ -730,22 +745,22 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         dt0 = float(out["dt"])
         if progress:
             progress(t)
-        code = Code(int(out["code"]))
+        end, code = OUTCOME[Code(int(out["code"]))]
         q = y[mf.index["q"]]
-        if code == Code.DONE:
+        if end is End.END:
             if not knots:
                 break
             t, seg_steps = stop, 0
             dt0 = 0.1 * dt0
             continue
-        seg_steps = int(out["seg_steps"]) if code == Code.STEPS_FULL else 0
-        if code == Code.STEPS_FULL:
+        seg_steps = int(out["seg_steps"]) if end is End.PAUSE else 0
+        if end is End.PAUSE:
             continue
-        if code == Code.CHATTERING:
+        if code is FailureCode.CHATTERING:
             guard = mf.guard_names[int(out["hand"])]
-            failure = dict(chattering(model, mode, guard, t, q + offset, (guard, t)), code=FailureCode.CHATTERING)
+            failure = dict(chattering(model, mode, guard, t, q + offset, (guard, t)), code=code)
             break
-        if code != Code.HAND_BACK:
+        if end is End.FAILED:
             failure = _failure(model, mode, t, q + offset, code, o)
             break
         fired = [int(out["hand"])] + [int(j) for j in np.flatnonzero(out["fired"]) if j != int(out["hand"])]
