@@ -1,8 +1,10 @@
-"""What a wheel holds, from pyproject.toml's setuptools configuration (building one is too slow for the suite):
+"""What a wheel holds, from pyproject.toml's setuptools configuration and setup.py's package discovery (building
+one is too slow for the suite):
 only `mechsim` and its subpackages, every folder of ours with code in it, no tests; the docs that messages and
 summary.json cite ship inside the package, and `mechsim docs` says where."""
 import fnmatch
 import re
+import runpy
 import tomllib
 from pathlib import Path
 
@@ -10,6 +12,8 @@ from cli_helpers import invoke, one_line_error
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+#: the packages setup.py finds (its setup() runs only as a script)
+PACKAGES = runpy.run_path(str(ROOT / "setup.py"), run_name="setup_discovery")["PACKAGES"]
 SKIP = {"tests", "build", "dist", "__pycache__"}
 
 
@@ -22,7 +26,7 @@ def shipped(path: Path) -> bool:
     """`path` (a file of the repository) is in the wheel: a module of a listed package, or its package data."""
     rel_parent = path.parent.relative_to(ROOT)
     package = ".".join(["mechsim", *rel_parent.parts])
-    if package not in CONFIG["packages"]:
+    if package not in PACKAGES:
         return False
     if path.suffix == ".py":
         return True
@@ -33,7 +37,9 @@ def test_only_mechsim_and_every_code_folder_no_tests():
     assert CONFIG["package-dir"] == {"mechsim": "."}
     code = {".".join(["mechsim", *p.parent.relative_to(ROOT).parts]) for p in ROOT.rglob("__init__.py")
             if not SKIP & set(p.relative_to(ROOT).parts) and not any(s.startswith(".") for s in p.parts)}
-    listed = set(CONFIG["packages"])
+    assert "packages" not in CONFIG          # found, not listed: a new folder needs no pyproject edit
+    listed = set(PACKAGES)
+    assert len(listed) == len(PACKAGES)
     assert code <= listed, sorted(code - listed)                 # no code folder left out of the wheel
     assert all(folder_of(p).is_dir() for p in listed)
     assert not any("tests" in p.split(".") for p in listed)
