@@ -8,9 +8,9 @@ a loaded model computes bit for bit what a fresh derivation computes. The sympy 
 (`ModeFunctions.symbolic`, which the diffrax backend, the compiled IDA callbacks and the sensitivities build on)
 are not stored: they are derived on first use.
 
-One JSON file per derivation in the user's cache folder (`dynamics/user_cache.py`), named by a hash of everything
-the derivation depends on: the derivation key (mechanism structure, formulation, drive kind, state extension), a
-fingerprint of the code that derives it (mechanisms/, dynamics/, thermal/), this file's format, Python, sympy and
+One JSON file per derivation and per target in the user's cache folder (`dynamics/user_cache.py`), named by a
+hash of everything the stored functions depend on: the derivation key (mechanism structure, formulation, drive
+kind, state extension), the `codegen` targets they were emitted for (`TARGETS`), a fingerprint of the code that derives it (mechanisms/, dynamics/, thermal/), this file's format, Python, sympy and
 numpy. Written atomically; a file that is missing, damaged or of another format is ignored and written again.
 Correctness never depends on the cache.
 """
@@ -30,6 +30,9 @@ import numpy as np
 
 #: bump when what is stored, or how it is read back, changes
 FORMAT = 1
+#: the `codegen` target each kind of stored function is emitted for (dynamics/model.py emits with these): part
+#: of the file's key, so functions emitted for one target are never loaded as another's
+TARGETS = {"codegen": "python", "lambdified": "numpy"}
 #: the lambdified functions of a mode (attribute names of ModeFunctions; kkt_flat entries as "kkt_flat.<name>")
 LAMBDIFIED = ("phi", "G", "phi_dot", "mass", "force0", "force_lam", "gamma")
 CODEGEN = ("residual", "jacobian", "events")
@@ -40,12 +43,14 @@ class NotStorable(ValueError):
     """A function whose namespace cannot be written down (a global that is not a numpy attribute or a number)."""
 
 
-def file_for(key: tuple) -> Path:
-    """The cache file of a derivation key (see the module docstring for what the name hashes)."""
+def file_for(key: tuple, targets: dict[str, str] = TARGETS) -> Path:
+    """The cache file of a derivation key emitted for `targets` (see the module docstring for what the name
+    hashes)."""
     from importlib.metadata import version
 
     from mechsim.dynamics.user_cache import cache_dir, code_fingerprint
-    parts = [f"format {FORMAT}", repr(key), code_fingerprint(), sys.version, version("sympy"), np.__version__]
+    parts = [f"format {FORMAT}", repr(key), f"targets {sorted(targets.items())!r}", code_fingerprint(),
+             sys.version, version("sympy"), np.__version__]
     name = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
     return cache_dir() / "derived" / f"{name}.json"
 
@@ -96,7 +101,7 @@ def store(key: tuple, model) -> Path | None:
     """Write the derived model's file (atomically); None where it cannot be stored or written (no error: the cache
     is an optimisation)."""
     try:
-        record = {"format": FORMAT, "key": repr(key), "coordinates": list(model.coordinates),
+        record = {"format": FORMAT, "key": repr(key), "targets": TARGETS, "coordinates": list(model.coordinates),
                   "parameter_names": list(model.parameter_names), "work_names": list(model.work_names),
                   "extension_names": list(model.extension_names), "formulation": model.formulation,
                   "prescribed": bool(model.prescribed),
@@ -155,7 +160,7 @@ def load(key: tuple, symbolic_of):
     path = file_for(key)
     try:
         record = json.loads(path.read_text())
-        if record.get("format") != FORMAT or record.get("key") != repr(key):
+        if record.get("format") != FORMAT or record.get("key") != repr(key) or record.get("targets") != TARGETS:
             return None
         modes = {}
         for r in record["modes"]:

@@ -103,6 +103,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
     import sympy as sp
 
     from mechsim.dynamics.codegen import emit, lambdify
+    from mechsim.dynamics.derivation_cache import TARGETS
     from mechsim.dynamics.formulation import differentiate_constraints, mechanical_residual
     s = mech.symbols
     t, q, v, a = s.t, list(s.q), list(s.v), list(s.a)
@@ -175,7 +176,7 @@ def _build_mode(mech: Mechanism, mode: Mode, formulation: str, prescribed: bool,
                   [(f"out[{i}]", g) for i, g in enumerate(guards)])
 
     def lamb(args, expr):
-        return lambdify(args, expr, "numpy")
+        return lambdify(args, expr, TARGETS["lambdified"])
 
     lam_zero = {li: 0 for li in lam}
     fmat = force

@@ -98,6 +98,9 @@ def test_the_file_name_follows_the_key_and_the_code():
     a = derivation_cache.file_for(("Geneva",))
     assert a == derivation_cache.file_for(("Geneva",))
     assert a != derivation_cache.file_for(("Geneva", "index1"))
+    # and the targets the functions were emitted for: another target's functions are another file
+    assert a == derivation_cache.file_for(("Geneva",), derivation_cache.TARGETS)
+    assert a != derivation_cache.file_for(("Geneva",), {**derivation_cache.TARGETS, "lambdified": "jax"})
 
 
 def test_a_second_process_runs_a_dae_scenario_without_sympy(tmp_path, monkeypatch):

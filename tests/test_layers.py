@@ -1,7 +1,8 @@
 """The layer contract (docs/architecture.md, "The import rule"): imports run one way and only through the
 `mechsim` namespace.
 
-- `mechanisms/` and `thermal/` import nothing of ours outside themselves;
+- `mechanisms/` and `thermal/` import nothing of ours outside themselves, but the one emitter from sympy to
+  callables (`mechsim.dynamics.codegen`, a leaf that imports nothing of ours);
 - `dynamics/` imports neither `scenarios/` nor `benchmarks/`;
 - the scenario pipeline (every module of `scenarios/` but the studies and the two faces, api.py and cli.py)
   never imports `scenarios/studies/`;
@@ -25,6 +26,8 @@ FORBIDDEN = {  # importer -> subpackages it must not import
     "thermal": {"mechanisms", "dynamics", "scenarios", "benchmarks"},
     "dynamics": {"scenarios", "benchmarks"},
 }
+#: modules every layer may import: leaves below all of them (they import nothing of ours, checked below)
+LEAVES = ("mechsim.dynamics.codegen",)
 #: the faces of the studies: the only modules outside scenarios/studies/ that import it
 STUDY_FACES = ("scenarios/api.py", "scenarios/cli.py")
 #: the one product module outside benchmarks/ that imports it (`mechsim bench`, `mechsim report`)
@@ -78,13 +81,38 @@ def test_imports_follow_the_layers(path):
         if top in SUBPACKAGES:
             problems.append(f"line {line}: bare import of {name!r}; use 'mechsim.{name}'")
         parts = name.split(".")
-        if parts[0] == "mechsim" and len(parts) > 1 and parts[1] in FORBIDDEN.get(layer, ()):
+        if (parts[0] == "mechsim" and len(parts) > 1 and parts[1] in FORBIDDEN.get(layer, ())
+                and name not in LEAVES):
             problems.append(f"line {line}: {layer}/ must not import {name!r}")
         if parts[:3] == ["mechsim", "scenarios", "studies"] and pipeline(path):
             problems.append(f"line {line}: the scenario pipeline must not import the studies ({name!r})")
         if parts[:2] == ["mechsim", "benchmarks"] and not may_import_benchmarks(path):
             problems.append(f"line {line}: only {', '.join(BENCHMARK_FACES)} and benchmarks/ import {name!r}")
     assert not problems, "\n".join(problems)
+
+
+@pytest.mark.parametrize("leaf", LEAVES)
+def test_the_shared_leaves_import_nothing_of_ours(leaf):
+    path = ROOT.joinpath(*leaf.split(".")[1:]).with_suffix(".py")
+    ours = [f"line {line}: {name}" for line, name in imported_modules(path) if name.split(".")[0] == "mechsim"]
+    assert not ours, ours
+
+
+def test_no_lambdify_but_the_emitter():
+    """Every way from sympy to a callable goes through the one emitter (dynamics/codegen.py, by target); the
+    benchmarks, which measure other ways on purpose, aside."""
+    emitter = ROOT.joinpath(*LEAVES[0].split(".")[1:]).with_suffix(".py")
+    offenders = []
+    for path in PRODUCT:
+        if path == emitter or path.relative_to(ROOT).parts[0] == "benchmarks":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and node.attr in ("lambdify", "ufuncify", "autowrap"):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: {ast.unparse(node)}")
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sympy") and any(
+                    a.name in ("lambdify", "ufuncify", "autowrap") for a in node.names):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: from {node.module} import ...")
+    assert not offenders, offenders
 
 
 def pipeline(path: Path) -> bool:

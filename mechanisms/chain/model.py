@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import sympy as sp
 
+from mechsim.dynamics.codegen import lambdify
 from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, Transition,
                                      ValidityCondition)
 from mechsim.mechanisms.chain.dwell import ChainDwellMechanism, ChainDwellParams
@@ -491,7 +492,7 @@ class ChainDwell(Mechanism):
         md = self._model()
 
         def entries(args, exprs, shape):
-            fns = [sp.lambdify(args, e, "numpy") for e in exprs]
+            fns = [lambdify(args, e, "numpy") for e in exprs]
 
             def f(*a):
                 n = np.shape(a[0])[1:]
@@ -506,8 +507,8 @@ class ChainDwell(Mechanism):
             G = sp.Matrix(mode.constraints).jacobian(qa)
             out["modes"][name] = dict(
                 G=entries([qa, pa], list(G), (2, 3)),
-                readouts=sp.lambdify([s.t, qa, va, list(s.a), list(s.lam[:2]), pa], list(mode.readouts.values()),
-                                     "numpy"),
+                readouts=lambdify([s.t, qa, va, list(s.a), list(s.lam[:2]), pa], list(mode.readouts.values()),
+                                  "numpy"),
                 names=list(mode.readouts))
         self._numeric_cache.update(out)
         return out

@@ -39,6 +39,7 @@ import sympy as sp
 from scipy.optimize import brentq
 from sympy.simplify.fu import TR5, TR10i
 
+from mechsim.dynamics.codegen import lambdify
 from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, TransitionRule,
                                      ValidityCondition)
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
@@ -393,7 +394,7 @@ class RollingPairFourBar(Mechanism):
         pars = list(s.params)
 
         def lamb(args, expr):
-            return sp.lambdify(args, expr, modules="numpy", cse=True)
+            return lambdify(args, expr, "numpy")
 
         Gm = sp.Matrix(md["constraints"]).jacobian(q)
         out = dict(
