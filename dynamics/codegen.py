@@ -1,9 +1,10 @@
 """The one way from sympy expressions to callables, by target.
 
-- "python": straight-line scalar Python for the IDA hot path (`emit`). docs/architecture.md measured one `jax.jit`
-  call from Python at ~11 us against ~3 us for plain scalar Python, so the residual, Jacobian and event functions
-  IDA calls thousands of times are emitted with common subexpressions eliminated (sympy.cse) and `math`
-  functions, then compiled once with `exec`; the generated source is kept on the function (`__source__`).
+- "python": straight-line scalar Python for the IDA hot path (`emit`). One `jax.jit` call from Python costs
+  several times a plain scalar Python call (docs/benchmarks.md, "Costs behind the code"), so the residual,
+  Jacobian and event functions IDA calls thousands of times are emitted with common subexpressions eliminated
+  (sympy.cse) and `math` functions, then compiled once with `exec`; the generated source is kept on the function
+  (`__source__`).
 - "numba": the same source with each symbol unpacked by indexing (`source_of`), the form numba compiles
   (dynamics/backends/compiled_model.py).
 - "numpy" and "jax": one function of array arguments returning the expressions (`lambdify`, sympy.lambdify with

@@ -17,9 +17,8 @@ first such row instead of writing it. Checked once per run on the finished table
   accumulated), times QUADRATURE_FACTOR, since there the works are quadratures of exact powers.
 
 K = 1000 (GLOBAL_FACTOR): integrators control the local error per step to rtol; the global error of a run is a
-modest multiple of it (measured: at most 18 rtol S over the built-ins and 0 violations over the robustness grid,
-docs/stability.md). A violation is far outside it: a missed stall makes a power balance miss by watts, not
-round-off.
+modest multiple of it (docs/stability.md measures it over the built-ins and the robustness grid). A violation is
+far outside it: a missed stall makes a power balance miss by watts, not round-off.
 """
 from __future__ import annotations
 
@@ -32,8 +31,8 @@ from mechsim.dynamics.tables import TableColumns
 
 #: global error of a run in units of the local tolerance (see the module docstring)
 GLOBAL_FACTOR = 1000.0
-#: the closed form's energy bound in units of the trapezoidal rule's error estimate (measured 1.0-2.0 times it
-#: over the built-ins: the estimate is rough at the kinks of the power at entry and exit)
+#: the closed form's energy bound in units of the trapezoidal rule's error estimate, with a margin: the estimate
+#: is rough at the kinks of the power at entry and exit (docs/benchmarks.md, "Costs behind the code")
 QUADRATURE_FACTOR = 10.0
 #: lever arm (m) turning atol on angular speeds (rad/s) into a slip-speed resolution (m/s)
 LEVER_M = 1.0

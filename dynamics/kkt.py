@@ -33,9 +33,9 @@ def unrolled_solve(K, b, xp, spd_block: int = 0):
     for stability (Golub & Van Loan, Matrix Computations, 4th ed., §4.2), and what is left of the constraint
     rows after it is their Schur complement -G M^-1 (G^T - Ql) (the range-space method, Nocedal & Wright,
     Numerical Optimization, 2nd ed., §16.2). The remaining columns take partial pivoting; a column with one
-    candidate row needs no search. Without the pivot searches (argmax and row gathers, a chain of small kernels
-    on the CPU, measured) the compiled run's step loop is about 17 % cheaper on case A (one constraint: no
-    search at all); the pivots that remain are chosen by comparisons and `where`, as argmax would (first largest).
+    candidate row needs no search. The pivot searches (argmax and row gathers) are a chain of small kernels on
+    the CPU, so the compiled run's step loop is cheaper without them (docs/benchmarks.md, "Costs behind the
+    code"); the pivots that remain are chosen by comparisons and `where`, as argmax would (first largest).
     Works on jax.numpy and numpy scalars alike."""
     n = K.shape[-1]
     A = [[K[i, j] for j in range(n)] + [b[i]] for i in range(n)]      # scalars: every operation elementwise

@@ -14,7 +14,7 @@ if TYPE_CHECKING:      # the tables read a finished Trajectory; importing the lo
 
 
 class TableColumns(Mapping):
-    """A result table's columns as numpy arrays, each read from the frame once (a pandas column read costs ~20 us
+    """A result table's columns as numpy arrays, each read from the frame once (a pandas column read is not free,
     and a run's summary and checks read the same columns several times); `names` in the frame's order.
     The arrays are the frame's own data (`Series.to_numpy`, no copy): use it while the frame is unchanged."""
 
@@ -52,7 +52,7 @@ _COLUMN_ARRAY = getattr(pd.DataFrame, "_get_column_array", None)
 def column_values(frame: pd.DataFrame, i: int) -> np.ndarray:
     """frame.iloc[:, i].to_numpy() as Series.to_numpy gives it (a read-only view of a numpy column; an extension
     column, such as pandas' string dtype, through its own to_numpy with the same defaults), read from the frame's
-    block directly: ~0.6 us instead of ~11 us for building the Series first (pandas 3). The block read is a
+    block directly, without building the Series first (docs/benchmarks.md, "Costs behind the code"). The block read is a
     pandas internal: if a pandas version lacks it or it fails, the column is read through the public Series."""
     try:
         values = _COLUMN_ARRAY(frame, i)

@@ -35,8 +35,8 @@ def use_for_jax(jax) -> str | None:
     unless a folder is chosen already (JAX_COMPILATION_CACHE_DIR, or `jax_compilation_cache_dir` set by the
     caller), which is then kept. The folder in use, or None when JAX has no such option.
 
-    Why: the compiled diffrax run costs 8-11 s to compile in every new process; a later process loads it and
-    pays only the tracing, about half (case A, docs/diffrax.md 'Compilation'). JAX keys each program by the
+    Why: the compiled diffrax run takes seconds to compile in every new process; a later process loads it and
+    pays only the tracing (docs/diffrax.md 'Compilation'). JAX keys each program by the
     lowered program, the compile options and the jax/jaxlib versions, so a loaded program is the one a fresh
     compilation would give; a folder that cannot be written only costs the compilation (JAX warns)."""
     try:

@@ -21,14 +21,14 @@ STARTED = time.perf_counter()
 
 # Cold start (docs/benchmarks.md, "Cold start"): this module imports only typer; rich, the scientific stack and
 # the solvers load inside the commands that use them, and help is click's plain text (typer's rich help alone
-# costs ~0.3 s of imports), so `mechsim --help` answers in a fraction of a second.
+# imports rich), so `mechsim --help` answers in a fraction of a second.
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None,
                   help="Simulate intermittent-motion mechanisms and their contact temperatures.")
 
 
 class LazyConsole:
-    """A rich Console made on first use (importing rich costs ~0.1 s that `--help` need not pay)."""
+    """A rich Console made on first use (importing rich is a cost `--help` need not pay)."""
 
     def __init__(self, stderr: bool = False):
         self._stderr = stderr
@@ -688,7 +688,7 @@ def main() -> None:
 
 def _leave(code) -> None:
     """Exit with `code` (as sys.exit reads it) without tearing the interpreter down: freeing pandas, pyarrow and
-    the rest module by module took 0.1-0.2 s of CPU at the end of every `mechsim run` (docs/benchmarks.md, "Cold
+    the rest module by module is a noticeable cost at the end of every `mechsim run` (docs/benchmarks.md, "Cold
     start"). The exit handlers still run (atexit: the unit cache's flush, logging, temporary folders) and the
     standard streams are flushed (exit status 120 if that fails, as Python does), then os._exit. Where another
     Python thread is still alive (it would be cut off) or atexit has no way to run its handlers, sys.exit."""

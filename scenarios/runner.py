@@ -50,7 +50,7 @@ def make_drive(si: dict) -> Drive:
 
 @lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
-    """Versions of Python and the packages a result depends on (read once per process: ~40 ms of metadata)."""
+    """Versions of Python and the packages a result depends on (read once per process: the metadata is slow to read)."""
     out = {"python": platform.python_version()}
     for pkg in VERSION_PACKAGES:
         try:
@@ -90,7 +90,7 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     for name, power in powers.items():
         p = np.broadcast_to(np.asarray(power, dtype=float), t.shape)      # the trapezoidal rule, cumulative
         works[f"work_{name}_J"] = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(t))])
-    df = pd.DataFrame({"t_s": t, **cols, **works})      # one constructor: a column at a time costs ~0.1 ms each
+    df = pd.DataFrame({"t_s": t, **cols, **works})      # one constructor, not a column at a time
     df.attrs["events"] = events
     return df
 
@@ -141,7 +141,7 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
 def event_counts(events: pd.DataFrame) -> dict[str, int]:
     """Events by kind, as {str(kind): count} of events["kind"].value_counts(): most frequent first, ties in the
     order of their first appearance (pandas orders the counts so: first appearance, then a stable sort), missing
-    kinds left out; counted over the column's Python values (a value_counts Series costs ~0.15 ms a run)."""
+    kinds left out; counted over the column's Python values (cheaper than building a value_counts Series)."""
     if not len(events):
         return {}
     counts = Counter(k for k in events["kind"].tolist() if k is not None and k == k)

@@ -112,7 +112,7 @@ UNIT_RANGES: dict[str, tuple[float, float, str]] = {
 #: about 40 float64 columns is then about 3 GB (a cycle-averaged thermal run keeps only its mechanics window)
 MAX_OUTPUT_ROWS = 10_000_000
 #: bytes of memory a run needs per output row at its peak (tables, their copies while writing Parquet and CSV):
-#: measured 0.8-1.2 kB for the ~38 columns of a Geneva run, taken with a margin (docs/limits.md)
+#: what a Geneva run's columns need, with a margin (docs/limits.md has the figures)
 BYTES_PER_ROW = 2048
 #: the share of the machine's physical memory one run may plan to use
 MEMORY_SHARE = 0.5

@@ -81,7 +81,7 @@ class ScenarioError(ValueError):
 
 @lru_cache(maxsize=1)
 def registry():
-    """The unit registry (pint is imported here, on first use: it costs ~0.3 s, which `mechsim --help` and the
+    """The unit registry (pint is imported here, on first use: a cost `mechsim --help` and the
     error paths should not pay)."""
     import pint
     ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True)

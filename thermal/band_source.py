@@ -149,7 +149,7 @@ def band_theta_avg_exact(L: float, kind: str = "uniform") -> float:
 
 
 def band_theta_exact(L, kind: str = "uniform", statistic: str = "max"):
-    """Exact theta_max or theta_avg for scalar or array L (slow: ~1-20 ms per value)."""
+    """Exact theta_max or theta_avg for scalar or array L (slow: a quadrature per value)."""
     _check(kind, statistic)
     if statistic == "max":
         fn = lambda x: band_theta_max_exact(float(x), kind)[0]
@@ -216,7 +216,7 @@ def table_log_nodes() -> np.ndarray:
 
 
 def table_nodes_exact(kind: str, statistic: str) -> np.ndarray:
-    """The exact theta at the table's nodes (quadrature, ~0.1 s per kind and statistic)."""
+    """The exact theta at the table's nodes (quadrature: slow, for building and checking the table)."""
     return band_theta_exact(np.exp(table_log_nodes()), kind, statistic)
 
 

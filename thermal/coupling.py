@@ -80,8 +80,9 @@ def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> ty
     """`expr(args)` as an opaque sympy function whose derivatives are opaque functions too (made on demand).
 
     sympy's Jacobian and common-subexpression passes then see one call instead of nested powers and logs
-    (for the heat share this cut the model derivation from ~6 s to ~1 s); every code printer (plain Python,
-    numpy, jax, lambdify) prints the explicit expression with the call's arguments substituted.
+    (for the heat share this cut the model derivation several times: docs/benchmarks.md, "Costs behind the
+    code"); every code printer (plain Python, numpy, jax, lambdify) prints the explicit expression with the call's
+    arguments substituted.
     """
     import sympy as sp
     cache: dict[int, type[sp.Function]] = {}

@@ -332,7 +332,7 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
                 new[col] = new[col] + m * per_turn
         elif isinstance(column.dtype, np.dtype):
             new[col] = column.to_numpy()[side]
-        else:       # the mode's strings: taken as they are stored (an hour's rows as Python objects cost ~0.5 s)
+        else:       # the mode's strings: taken as they are stored (as Python objects, an hour's rows would be slow)
             new[col] = column.array.take(side)
     table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
     return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim, kept

@@ -9,8 +9,8 @@ network is linear with constant coefficients, so each output interval is integra
 
 with A = -C^-1 K; intervals are split where the contact switches (the input jumps there), so the quadrature
 only ever sees a smooth input (error ~ h^12 u^(12)). The inputs at every node come from one vectorised call of
-the closed form. (`LinearThermalSystem.integrate` with BDF and a per-call closed form took ~3 s for 2 s of
-motion; this takes ~0.1 s and is exact for the linear network.)
+the closed form: exact for the linear network, and far cheaper than `LinearThermalSystem.integrate` with BDF and
+a closed-form call per step (docs/benchmarks.md, "Costs behind the code").
 The bookkeeping energies (generated, into the pin, convected) are integrated alongside (the convected one
 exactly, from the modal integral of T), so the heat balance closes to round-off here too.
 """
@@ -88,7 +88,7 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
     All brackets are bisected together, `levels` halvings per closed-form call: each call evaluates the whole
     tree of midpoints the next `levels` halvings can visit (2^levels - 1 per bracket, each computed as the
     bisection computes it, 0.5 (a + b) of its own parents), then the halvings walk down that tree. About 36
-    halvings take 6 calls instead of 36 (the call's fixed cost dominates: ~0.2 ms against ~0.3 us a point);
+    halvings take 6 calls instead of 36 (a call's fixed cost dominates the cost of a point);
     each bracket stops on its own tolerance, so the times are those of one-at-a-time bisection, to the bit.
     grid_columns: columns_fn(t_grid) when already at hand (the run's closed-form table), to save that call."""
     code = contact_code(columns_fn(t_grid) if grid_columns is None else grid_columns)
@@ -128,8 +128,8 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
 
 @functools.lru_cache(maxsize=8)
 def _gauss_legendre(nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1] (numpy's leggauss on [-1, 1] mapped; ~0.1 ms to compute, so
-    kept once per node count; read-only)."""
+    """Gauss-Legendre nodes and weights on [0, 1] (numpy's leggauss on [-1, 1] mapped; kept once per node
+    count, read-only)."""
     x, w = np.polynomial.legendre.leggauss(nodes)
     x, w = 0.5 * (x + 1.0), 0.5 * w
     x.setflags(write=False)
@@ -224,8 +224,8 @@ class ModalNetwork:
             q_int = np.zeros(len(h)), np.zeros(len(h))
         y = np.asarray(y0, dtype=float)
         # the modal recurrence z_{k+1} = decay_k z_k + forcing_k is the only sequential part: per mode, over Python
-        # floats (the same IEEE operations as numpy's, ~4x faster than a loop of length-n array steps; a plain loop
-        # ~1.6x faster than itertools.accumulate with a lambda); the rest is whole-array work. cumsum adds in
+        # floats (the same IEEE operations as numpy's, faster than a loop of length-n array steps, and a plain loop
+        # faster than itertools.accumulate with a lambda); the rest is whole-array work. cumsum adds in
         # order, as the step-by-step sum did.
         Z = np.empty((len(cuts), self.n))
         for i, z in enumerate((self.Vinv @ y[:self.n]).tolist()):

@@ -54,7 +54,7 @@ WINDOW_TRIES = 5
 
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
-    as assigning them one at a time would, but in one step (each insertion into a frame costs ~0.1 ms)."""
+    as assigning them one at a time would, but in one step (each insertion into a frame has a cost of its own)."""
     kept = df.drop(columns=drop) if drop else df
     present = {k: v for k, v in new.items() if k in kept.columns}
     if present:
@@ -123,7 +123,7 @@ class ThermalPlan:
         averaging the timeseries and events cover the whole duration (thermal/cycle.py: the periodic turn
         continued after the simulated window). columns: df's columns as a mapping of the same arrays, each read
         from the frame once (the runner's dynamics.tables.TableColumns), if at hand: the contact and the closed
-        form's switch search read them there instead of from the frame (a pandas column read costs ~11 us)."""
+        form's switch search read them there instead of from the frame again."""
         setup, mech = self.setup, self.mech
         warnings = list(setup.warnings) + list(self.warnings)
         n_states = setup.system.size + 3 if setup.system else 0

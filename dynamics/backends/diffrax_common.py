@@ -77,7 +77,7 @@ IMPLICIT_DEFAULTS = dict(newton="patient", newton_kappa=0.1)
 
 
 def default_options(settings: SolverSettings) -> DiffraxOptions:
-    """The options a scenario's solver settings imply (implicit solvers get the measured best defaults)."""
+    """The options a scenario's solver settings imply (implicit solvers get the best defaults of docs/diffrax.md)."""
     name = settings.diffrax_solver
     if name not in SOLVERS:
         raise ValueError(f"solver.diffrax_solver must be one of {', '.join(SOLVERS)}; got {name!r}")

@@ -72,7 +72,8 @@ def request() -> str:
         flags = os.environ.get("XLA_FLAGS", "")
         if _backend_started():
             _state = ("off: JAX's CPU backend was started before mechsim was imported, so XLA keeps its defaults "
-                      "(same results; compiled runs about 3x slower, batched sweeps can hang); import mechsim first")
+                      "(same results; compiled runs several times slower, batched sweeps can hang); "
+                      "import mechsim first")
         else:
             os.environ["XLA_FLAGS"] = with_options(flags)
             kept = [name for name in (LOOP_OPTION, SCHEDULER_FLAG.lstrip("-")) if name in flags]

@@ -1,8 +1,9 @@
 """A figure worker started before the run, so that importing matplotlib overlaps the run (docs/benchmarks.md,
 "Cold start").
 
-`mechsim run` with figures spent about 0.3 s importing matplotlib after the run, before the first figure, and
-about as long loading the scenario and running it. `FigureWorker.start()` forks a process once the run's stack
+`mechsim run` with figures spent about as long importing matplotlib after the run, before the first figure, as
+loading the scenario and running it (docs/benchmarks.md, "Cold start").
+`FigureWorker.start()` forks a process once the run's stack
 (numpy, pandas) is imported, so both share it; the worker imports the figure code while this process loads the
 scenario and runs it, then waits for a job. `draw(result, mechanism, folder)` sends it the result (pickled, from a thread, so
 this process goes on writing the tables); the worker forks once more and the two processes save every other

@@ -93,8 +93,9 @@ def run_chunk(tasks: list[CaseTask]) -> list[Outcome]:
     return [run_case(task) for task in tasks]
 
 
-#: a pool call should hold about this much work: one call costs ~0.5 ms of the main process's CPU (pickling,
-#: futures, the executor's thread), a 10 ms closed-form case sent alone spends ~5 % of the CPU on it
+#: a pool call should hold about this much work: each call costs the main process CPU (pickling, futures, the
+#: executor's thread), a noticeable share for a short closed-form case sent alone
+#: (docs/benchmarks.md, "Costs behind the code")
 CHUNK_SECONDS = 0.15
 #: at most this many cases a call, and this many calls a worker queued or running (so no worker waits for the next
 #: call to be sent, and an interruption drops at most this many calls' unfinished cases per worker)
@@ -163,7 +164,7 @@ class SerialRunner:
 
 
 #: imported once by the pool's fork server, before it forks the workers: each worker then starts with them
-#: loaded (~1 s of imports, pandas the most, instead of once per worker; DAE-only modules load on first use)
+#: loaded (pandas the most, instead of once per worker; DAE-only modules load on first use)
 WORKER_PRELOAD = ("mechsim.scenarios.studies.sweep.execute", "mechsim.scenarios.studies.sweep.rows",
                   "mechsim.scenarios.runner", "mechsim.thermal.plan")
 
