@@ -10,9 +10,10 @@ are not stored: they are derived on first use.
 
 One JSON file per derivation and per target in the user's cache folder (`dynamics/user_cache.py`), named by a
 hash of everything the stored functions depend on: the derivation key (mechanism structure, formulation, drive
-kind, state extension), the `codegen` targets they were emitted for (`TARGETS`), a fingerprint of the code that derives it (mechanisms/, dynamics/, thermal/), this file's format, Python, sympy and
-numpy. Written atomically; a file that is missing, damaged or of another format is ignored and written again.
-Correctness never depends on the cache.
+kind, state extension), the `codegen` targets they were emitted for (`TARGETS`), a fingerprint of the code that
+derives it (mechanisms/, dynamics/, thermal/), this file's format, Python, sympy and numpy. Written atomically;
+a file that is missing, damaged or of another format is ignored and written again. Correctness never depends on
+the cache.
 """
 from __future__ import annotations
 
@@ -184,6 +185,7 @@ def load(key: tuple, symbolic_of):
         return DerivedModel(coordinates=tuple(record["coordinates"]),
                             parameter_names=tuple(record["parameter_names"]),
                             work_names=tuple(record["work_names"]), extension_names=tuple(record["extension_names"]),
-                            modes=modes, formulation=record["formulation"], prescribed=bool(record["prescribed"]))
+                            modes=modes, formulation=record["formulation"], prescribed=bool(record["prescribed"]),
+                            key=key)
     except (OSError, ValueError, KeyError, TypeError, AttributeError, SyntaxError):
         return None

@@ -12,7 +12,6 @@ mode's power flows; extension (thermal) rows are linear in their rates, F = A x'
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Callable
 
 import jax
@@ -30,6 +29,7 @@ import sympy as sp  # noqa: E402
 from mechsim.dynamics import kkt  # noqa: E402
 from mechsim.dynamics.codegen import lambdify  # noqa: E402
 from mechsim.dynamics.model import ModeFunctions  # noqa: E402
+from mechsim.dynamics.programs import program  # noqa: E402
 
 
 def _stack(values, shape) -> jnp.ndarray:
@@ -245,30 +245,12 @@ class JaxModel:
         return self.evaluate(k, t, z, p)[3]
 
 
-@lru_cache(maxsize=64)
-def _cached(key, mf_ref, parameter_names):
-    return build_mode(mf_ref.obj, parameter_names)
-
-
-class _ById:
-    def __init__(self, obj):
-        self.obj = obj
-
-    def __hash__(self):
-        return id(self.obj)
-
-    def __eq__(self, other):
-        return isinstance(other, _ById) and other.obj is self.obj
-
-
 def jax_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
-    """The JaxMode of a derived mode (cached on the ModeFunctions object, which `derive` caches)."""
-    return _cached(id(mf), _ById(mf), tuple(parameter_names))
+    """The JaxMode of a derived mode (one per mode structure and process, `dynamics/programs.py`)."""
+    return program("jax_mode", mf, tuple(parameter_names), lambda: build_mode(mf, tuple(parameter_names)))[0]
 
 
-@lru_cache(maxsize=16)
-def _cached_model(key, model_ref):
-    model = model_ref.obj
+def _build_model(model) -> JaxModel:
     modes = tuple(jax_mode(mf, model.parameter_names) for mf in model.modes.values())
     layouts = {(jm.nz, jm.nw, jm.ne) for jm in modes}
     if len(layouts) != 1:
@@ -277,5 +259,5 @@ def _cached_model(key, model_ref):
 
 
 def jax_model(model) -> JaxModel:
-    """The JaxModel of a DerivedModel (cached on the object, which `derive` caches)."""
-    return _cached_model(id(model), _ById(model))
+    """The JaxModel of a DerivedModel (one per model structure and process, `dynamics/programs.py`)."""
+    return program("jax_model", model, (), lambda: _build_model(model))[0]

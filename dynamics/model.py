@@ -92,6 +92,7 @@ class DerivedModel:
     modes: dict[str, ModeFunctions]
     formulation: str
     prescribed: bool
+    key: tuple = ()      # the derivation key: the structure its compiled programs are kept under (dynamics/programs.py)
 
 
 def _as_list(x) -> list:
@@ -292,7 +293,7 @@ def _derive_fresh(key, mech, formulation, prescribed, ext) -> DerivedModel:
     work_names = tuple(n for n in _work_names(mech))
     return DerivedModel(coordinates=mech.coordinates, parameter_names=pnames, work_names=work_names,
                         extension_names=tuple(ext.names) if ext else (), modes=modes,
-                        formulation=formulation, prescribed=prescribed)
+                        formulation=formulation, prescribed=prescribed, key=key)
 
 
 def _work_names(mech: Mechanism) -> tuple[str, ...]:

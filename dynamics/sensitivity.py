@@ -18,8 +18,10 @@ event, which moves with the event time where a transition re-bases a prescribed 
 R is the project's consistent re-initialisation (dynamics/consistent.py): positions projected onto Phi = 0 with
 minimum-norm corrections, velocities projected in the kinetic-energy metric (the plastic impact law; an impact
 with restitution whose rebound the new mode absorbs ends at the same velocities), work and thermal states kept.
-It is written here again in jax so that jax differentiates it; every restart state it gives is checked against
-the one `apply_transition` computes, so the two cannot drift apart unnoticed.
+It is the same `consistent.reinitialise` the loop and the compiled run call, traced by jax with one Newton step
+(at a consistent point that step's derivative is the converged projection's); every restart state it gives is
+checked against the one `apply_transition` computes. The per-mode pieces (rates, guards, KKT solve, constraint
+parts) are the compiled run's `jax_model`; docs/architecture.md, "The sensitivity pass", lists what is shared.
 
 The mode sequence, event times and discrete updates come from a finished run (its events table) and from the
 project's own transition logic (`apply_transition`); this module adds the derivatives. Not covered (raises
@@ -40,6 +42,7 @@ from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
 from mechsim.dynamics.backends.diffrax_common import result_message
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
+from mechsim.dynamics.programs import program
 from mechsim.dynamics.transitions import apply_transition
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -166,17 +169,16 @@ COLUMNS = 8
 def _padded(a, n: int) -> np.ndarray:
     a = np.asarray(a, float)
     return np.hstack([a, np.zeros((a.shape[0], n - a.shape[1]))])
-_SOLVES: dict = {}
-
-
 def _segment_solve(jmod, model, n: int, solver: str, max_steps: int):
     """(the compiled solve of z and S over one segment, seconds spent compiling it now: 0 when compiled before);
     the tolerances are its arguments (rtol, atol last), so one compilation serves every tolerance of the model."""
-    key = (id(model), n, solver, max_steps)
-    hit = _SOLVES.get(key)
-    if hit is not None and hit[1] is model:
-        return hit[0], False
+    wall = _time.perf_counter()
+    fn, fresh = program("sensitivity_segment_solve", model, (n, solver, max_steps),
+                        lambda: _compile_segment_solve(jmod, model, n, solver, max_steps))
+    return fn, (_time.perf_counter() - wall if fresh else 0.0)
 
+
+def _compile_segment_solve(jmod, model, n: int, solver: str, max_steps: int):
     def field_(t, y, args):
         k, p, P = args
         z, S = y
@@ -199,13 +201,10 @@ def _segment_solve(jmod, model, n: int, solver: str, max_steps: int):
         return dict(z=sol.ys[0][0], S=sol.ys[0][1], z1=sol.ys[1][0][0], S1=sol.ys[1][1][0],
                     result=sol.result._value, steps=sol.stats["num_steps"])
 
-    wall = _time.perf_counter()
     nz, npar = jmod.nz, len(model.parameter_names)
     example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
                np.ones(N_SAVE), 1e-8, 1e-10)
-    fn = jax.jit(solve).lower(*example).compile()
-    _SOLVES[key] = (fn, model)
-    return fn, _time.perf_counter() - wall
+    return jax.jit(solve).lower(*example).compile()
 
 
 def _z(mf, y):
@@ -305,16 +304,9 @@ class _Tools:
         return jax.jit(sample)
 
 
-_TOOLS: dict = {}
-
-
 def _tools(mech, model, jmod, columns: tuple, n: int) -> _Tools:
     """The model's jitted tools (each piece compiled on its first use, `_Tools`)."""
-    key = (id(model), columns, n)
-    hit = _TOOLS.get(key)
-    if hit is None or hit.model is not model:
-        hit = _TOOLS[key] = _Tools(mech, model, jmod, columns, n)
-    return hit
+    return program("sensitivity_tools", model, (columns, n), lambda: _Tools(mech, model, jmod, columns, n))[0]
 
 
 def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sample_times, columns,

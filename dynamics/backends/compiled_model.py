@@ -130,7 +130,7 @@ def module_name(mf) -> str | None:
 def _module_path(folder: Path, mf) -> Path:
     """The generated module of the mode in `folder` (written once, atomically, when missing), or in a private
     temporary folder where that cannot be written; numba keeps its cache beside it. The source is generated
-    (sympy, about 0.3 s a mode) only when the module is not there yet."""
+    (by sympy, the slow part) only when the module is not there yet."""
     name = module_name(mf)
     source = None if name else module_source(mf)
     name = name or f"mode_{mf.name}_{_cache_key(source)}.py"

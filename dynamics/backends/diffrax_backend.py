@@ -14,7 +14,7 @@ heading for, so a root located a hair before the crossing does not fire again: t
 initial point are not reported.
 
 Known limitation of diffrax 0.7.2 (docs/diffrax.md): its implicit solvers reject many steps; the defaults here
-are the measured best.
+are the best docs/diffrax.md found.
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ import numpy as np
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.backend import Backend, End, Request, Segment
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics.programs import program
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, DT0_FLOOR, DiffraxOptions, default_options,
                                                       evaluations_per_step, ida_rows, mode_z, result_message,
@@ -136,10 +137,6 @@ class _Compiled:
     fn: Callable
     compile_time: float
     compile_cpu_time: float
-    model: object        # keeps the derived model (and so the id in the key) alive
-
-
-_CACHE: dict[tuple, _Compiled] = {}
 
 
 def segment_arguments(k, t0, t1, z0, p, enabled, ts, dt0, tol):
@@ -161,18 +158,15 @@ def compile_key(o: DiffraxOptions) -> DiffraxOptions:
 def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]:
     """The compiled segment solve of a model (all its modes; AOT-compiled once per model structure and
     options); True if it was compiled by this call."""
-    key = (id(model), compile_key(o))
-    hit = _CACHE.get(key)
-    if hit is not None and hit.model is model:
-        return hit, jax_model(model), False
-    wall, cpu = _time.perf_counter(), _time.process_time()
-    jmod = jax_model(model)          # sympy -> jax lambdification (once per model), counted with the compilation
-    example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                    np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
-    fn = jax.jit(make_solve(jmod, o)).lower(*example).compile()
-    entry = _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
-    _CACHE[key] = entry
-    return entry, jmod, True
+    def build() -> _Compiled:
+        wall, cpu = _time.perf_counter(), _time.process_time()
+        jmod = jax_model(model)      # sympy -> jax lambdification (once per model), counted with the compilation
+        example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+                                    np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
+        fn = jax.jit(make_solve(jmod, o)).lower(*example).compile()
+        return _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
+    entry, fresh = program("diffrax_segment_solve", model, (compile_key(o),), build)
+    return entry, jax_model(model), fresh
 
 
 # -- the backend ----------------------------------------------------------------------------------------------

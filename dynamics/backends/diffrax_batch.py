@@ -32,6 +32,7 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import Trajectory, hybrid_loop, prepare
 from mechsim.dynamics.jax_model import JaxModel, jax_model
 from mechsim.dynamics.model import StateExtension
+from mechsim.dynamics.programs import program
 from mechsim.dynamics.settings import SolverSettings
 
 import jax  # noqa: E402
@@ -42,10 +43,8 @@ class _Batched:
     fn: object
     compile_time: float
     compile_cpu_time: float
-    model: object
 
 
-_CACHE: dict[tuple, _Batched] = {}
 #: the latest batch: lanes, rounds (vmapped calls), compile_time_s (0 if cached), solve_time_s
 last_batch: dict = {}
 
@@ -55,19 +54,16 @@ def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched
     size); True if it was compiled by this call."""
     # the vmapped segment solve does not depend on compiled_run (which picks the single run's loop): a sweep with it
     # on or off shares one compilation
-    key = (id(model), compile_key(o), lanes)
-    hit = _CACHE.get(key)
-    if hit is not None and hit.model is model:
-        return hit, jax_model(model), False
-    wall, cpu = _time.perf_counter(), _time.process_time()
-    jmod = jax_model(model)
-    one = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
-                np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
-    example = tuple(np.stack([a] * lanes) for a in one)
-    fn = jax.jit(jax.vmap(make_solve(jmod, o))).lower(*example).compile()
-    entry = _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu, model)
-    _CACHE[key] = entry
-    return entry, jmod, True
+    def build() -> _Batched:
+        wall, cpu = _time.perf_counter(), _time.process_time()
+        jmod = jax_model(model)
+        one = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
+                                np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
+        example = tuple(np.stack([a] * lanes) for a in one)
+        fn = jax.jit(jax.vmap(make_solve(jmod, o))).lower(*example).compile()
+        return _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
+    entry, fresh = program("diffrax_batch_solve", model, (compile_key(o), lanes), build)
+    return entry, jax_model(model), fresh
 
 
 def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], settings: SolverSettings,

@@ -38,6 +38,7 @@ from mechsim.dynamics.backend import End
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
+from mechsim.dynamics.programs import program
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
                                                       result_message, solver_for, state_rows)
@@ -71,7 +72,7 @@ ST_T0, ST_T1, ST_ACC, ST_SEG, ST_DENSE = range(5)
 
 class StepRecord:
     """The dense output of one step as one float64 row (and back): a step writes its record with one update
-    of the buffer instead of one per field (about 1 us a step, measured on case A)."""
+    of the buffer instead of one per field (docs/benchmarks.md, "Costs behind the code")."""
 
     def __init__(self, dense_struct):
         self.struct = dense_struct          # the dense output's shapes and dtypes (jax.ShapeDtypeStruct leaves)
@@ -111,7 +112,7 @@ def step_record(jmod: JaxModel, o) -> StepRecord:
 class Outputs:
     """The step loop's small outputs (everything but the step buffer) packed into one float64 and one int32
     vector in the compiled call, and unpacked on the host as views: two transfers instead of one per output
-    (28 of them cost about 0.4 ms a call, case A). The layout is read off the outputs while the call is traced
+    (docs/benchmarks.md, "Costs behind the code"). The layout is read off the outputs while the call is traced
     (`pack`), so the run is traced once."""
 
     def __init__(self):
@@ -556,13 +557,9 @@ class CompiledRun:
     jmod: JaxModel
     compile_time: float
     compile_cpu_time: float
-    model: object
     rows: dict          # output-buffer size -> the compiled row function
     record: StepRecord
     outputs: Outputs
-
-
-_CACHE: dict[tuple, CompiledRun] = {}
 
 
 def row_bucket(n: int) -> int:
@@ -581,29 +578,27 @@ def run_key(o):
 def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
     """The compiled run of a model (None if the mechanism has no transition table); True if compiled by this
     call. One per model structure and options: the output-buffer size only shapes the row function."""
+    def build() -> CompiledRun | None:
+        wall, cpu = _time.perf_counter(), _time.process_time()
+        jmod = jax_model(model)
+        table = jax_transitions(mech, model, jmod)
+        if table is None:
+            return None
+        example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
+                                (1e-6, 1e-8), 100)
+        record = step_record(jmod, o)
+        with kkt.unrolled_solves():   # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
+            run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
+            outputs = Outputs()
+            fn = jax.jit(lambda *a: outputs.pack(run(*a))).lower(*example).compile()
+        return CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, {}, record, outputs)
     rules = mech.transition_rules()
     hand_back = None if rules is None else tuple((k, tuple(r.python_only for r in v)) for k, v in rules.items())
-    key = (id(model), run_key(o), type(mech).__name__, mech.structure_key(), STEPS_PER_CALL, EVENTS_PER_CALL,
-           hand_back)   # a numeric rule (a per-station load) is handed back: another program
-    hit = _CACHE.get(key)
-    if hit is not None and hit.model is model:
-        return hit, False
-    wall, cpu = _time.perf_counter(), _time.process_time()
-    jmod = jax_model(model)
-    table = jax_transitions(mech, model, jmod)
-    if table is None:
-        return None, False
-    example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
-                            (1e-6, 1e-8), 100)
-    record = step_record(jmod, o)
-    with kkt.unrolled_solves():       # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
-        run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
-        outputs = Outputs()
-        fn = jax.jit(lambda *a: outputs.pack(run(*a))).lower(*example).compile()
-    entry = CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, model, {}, record,
-                        outputs)
-    _CACHE[key] = entry
-    return entry, True
+    # the transition table is traced in: the mechanism's class and structure shape the program too, and a numeric
+    # rule (a per-station load) is handed back: another program
+    entry, fresh = program("diffrax_whole_run", model, (run_key(o), type(mech).__name__, mech.structure_key(),
+                                                        STEPS_PER_CALL, EVENTS_PER_CALL, hand_back), build)
+    return entry, fresh and entry is not None
 
 
 def compiled_rows(entry: CompiledRun, o, n_rows: int, example: tuple) -> tuple[Callable, float, float]:
@@ -680,7 +675,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         args = run_arguments(jmod.index(mode), t, stop, mode_z(mf, y), p, dt0, (o.rtol, o.atol), o.max_steps,
                              seg_steps)
         res = call(entry.fn, args) if call else entry.fn(*args)
-        out = entry.outputs.unpack(np.asarray(res["floats"]), np.asarray(res["ints"]))   # (device_get: 5x slower)
+        out = entry.outputs.unpack(np.asarray(res["floats"]), np.asarray(res["ints"]))   # (not device_get: slower)
         calls += 1
         # the call's output rows, from its step buffer (left where it is), in chunks of the row buffer
         ts = start.t_out[(start.t_out > t) & (start.t_out <= float(out["t"]))]
