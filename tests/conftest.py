@@ -18,6 +18,11 @@ def pytest_configure(config):
     # the default backend compiles no callbacks of its own during the tests: a run's backend then never depends on
     # how far a background compilation had got (tests/test_ida_compiled.py tests that compilation by itself)
     os.environ.setdefault("MECHSIM_BACKGROUND_COMPILE", "0")
+    config.pluginmanager.register(xdist_schedule.Schedule(config), "mechsim-xdist-schedule")
+
+
+def pytest_addoption(parser):
+    xdist_schedule.addoption(parser)
 
 
 def pytest_terminal_summary(terminalreporter):
@@ -155,8 +160,8 @@ def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, s
         assert_matches_finite_differences(part, ref0, fd, p, key, value_rel, floor, worst)
     return worst
 
-# files that compile the same jax models run in one xdist worker (tests/worker_families.py)
-from worker_families import pytest_xdist_make_scheduler  # noqa: E402,F401
+# the xdist schedule, derived from the durations and compiled programs the suite records (tests/xdist_schedule.py)
+import xdist_schedule  # noqa: E402
 
 # one persistent jax compilation cache per session (tests/jax_cache.py), before any test imports jax
 import jax_cache  # noqa: E402
