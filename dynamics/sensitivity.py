@@ -40,9 +40,10 @@ import numpy as np
 from mechsim.dynamics.codegen import lambdify
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
-from mechsim.dynamics.backends.diffrax_common import result_message
+from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
 from mechsim.dynamics.programs import program
+from mechsim.dynamics.stats import new_stats
 from mechsim.dynamics.transitions import apply_transition
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -207,11 +208,6 @@ def _compile_segment_solve(jmod, model, n: int, solver: str, max_steps: int):
     return jax.jit(solve).lower(*example).compile()
 
 
-def _z(mf, y):
-    ix = mf.index
-    return np.concatenate([y[ix["q"]], y[ix["v"]], y[ix["work"]], y[ix["ext"]]])
-
-
 class _Tools:
     """The jitted pieces of one model (jax dispatches the lambdified expressions op by op otherwise, which costs
     seconds per call): the event rule of all modes, and each mode's reset and read-outs, compiled when the path
@@ -329,7 +325,10 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     tools = _tools(mech, model, jmod, columns, n)
     nq, nz = jmod.nq, jmod.nz
     P = _padded(seed.dp, n)
-    stats = dict(segments=0, steps=0, compile_time_s=0.0)
+    # the statistics every path reports (dynamics/stats.py), with the pass's wall and CPU time beside them
+    stats = new_stats("sensitivity", solver, start.derive_time, unavailable={
+        key: "not counted by the sensitivity pass" for key in ("accepted_steps", "rejected_steps",
+                                                              "residual_evaluations", "jacobian_evaluations")})
 
     def compiled(piece):
         """A tool of the pass (`_Tools`), its compilation (if this is its first use) counted in the statistics."""
@@ -338,6 +337,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
         return fn
     solve, compile_s = _segment_solve(jmod, model, n, solver, settings.max_steps)
     stats["compile_time_s"] += compile_s
+    stats["compilations"] += bool(compile_s)
 
     # the initial state: the projection of the initial guess, differentiated (the guess is re-based by a constant)
     mode, values, p, offset = start.mode, start.values, np.asarray(start.p), np.asarray(start.offset, float)
@@ -346,7 +346,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     nw = len(model.work_names)
     dx0 = np.zeros((nz - 2 * nq - nw, seed.n)) if seed.dx0 is None else seed.dx0
     dguess = np.vstack([_padded(seed.dq0, n), _padded(seed.dv0, n), np.zeros((nw, n)), _padded(dx0, n)])
-    z = _z(model.modes[mode], start.y)
+    z = mode_z(model.modes[mode], start.y)
     guess[2 * nq + nw:] = z[2 * nq + nw:]
     names = list(model.parameter_names)
     if seed.piece_dp is not None:
@@ -404,11 +404,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
         if not (np.isfinite(gdot) and abs(gdot) > 0):
             raise SensitivityUnavailable(f"guard '{row['guard']}' reaches zero tangentially at t = {t:.6g} s "
                                          "(grazing): the event time is not differentiable there")
-        ix = mf.index
-        y_end = np.zeros(mf.ny)
-        y_end[ix["q"]], y_end[ix["v"]], y_end[ix["work"]], y_end[ix["ext"]] = (
-            z[:nq], z[nq:2 * nq], z[2 * nq:2 * nq + len(model.work_names)], z[2 * nq + len(model.work_names):])
-        y_end[ix["lam"]] = lam_end[:mf.m]
+        y_end = ida_rows(mf, nq, z, np.zeros_like(z), a_end, lam_end[:mf.m])[0][0]     # the IDA layout
         res = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, [j], offset)
         if res.failure or res.y is None:
             raise SensitivityUnavailable(f"the transition at t = {t:.6g} s does not restart here "
@@ -432,11 +428,13 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
         new_mode, p_new = res.mode, np.asarray(res.p)
         reset = compiled(tools.reset(new_mode))
         z_new, dz_new, f_new = (np.asarray(x) for x in reset(t, z, shift, p_new, dz, P, dtau))
-        z_ref = _z(model.modes[new_mode], res.y)
+        z_ref = mode_z(model.modes[new_mode], res.y)
         _check_restart(z_new, z_ref, f"the restart after '{row['kind']}' at t = {t:.6g} s")
         S = dz_new - np.outer(f_new, dtau)
         z = z_ref
         mode, values, p, offset = new_mode, res.values, p_new, np.asarray(res.offset, float)
+    stats["events"] = stats["restarts"] = len(out_events)
+    stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
     stats["wall_time_s"] = _time.perf_counter() - wall0
     stats["cpu_time_s"] = _time.process_time() - cpu0
     return PathSensitivity(out_events, samples, stats)

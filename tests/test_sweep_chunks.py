@@ -13,7 +13,9 @@ from mechsim.scenarios.studies.sweep.execute import (CHUNK_MAX, CHUNK_SECONDS, C
 from mechsim.scenarios.studies.sweep.run import plan
 from mechsim.scenarios.studies.sweep.spec import build_spec
 
-TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "worker")
+#: columns that time the work (every path's solver statistics time the solve, the closed form's too)
+TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s",
+          "solver_compile_time_s", "solver_compile_cpu_time_s", "worker")
 
 
 def test_chunk_sizes_follow_the_case_time_and_shrink_towards_the_end():
