@@ -1,8 +1,9 @@
-"""`mechsim compare --backends` on every built-in: IDA and diffrax integrate the same DAE (solver.method = 'dae', also
-for a prescribed speed) and agree within the bounds compare states (scenarios/studies/compare.py: angles 1e3 rtol,
-speeds 1e4 rtol, contact force 1e5 rtol of the column's peak). A short run (0.3 s) keeps this cheap: each model
-structure is compiled once per process, and the bounds are per step, so the start covers every mode the
-formulation has to hold; the whole default runs were checked by hand (docs/diffrax.md)."""
+"""`mechsim compare --backends` on every built-in model (SAME_PATH_AS: the built-ins another case stands for): IDA and
+diffrax integrate the same DAE (solver.method = 'dae', also for a prescribed speed) and agree within the bounds compare
+states (scenarios/studies/compare.py: angles 1e3 rtol, speeds 1e4 rtol, contact force 1e5 rtol of the column's peak).
+A short run (0.3 s) keeps this cheap: each model structure is compiled once per process, and the bounds are per step,
+so the start covers every mode the formulation has to hold; the whole default runs were checked by hand
+(docs/diffrax.md)."""
 import numpy as np
 import pytest
 
