@@ -154,9 +154,11 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         row.update(kinetic_energy_before_J=hit.energy_before,
                    impulse_N_s=float(hit.impulse[0]) if hit.impulse is not None and len(hit.impulse) else 0.0)
         if hit.impulse is not None and len(hit.impulse):
-            lost, driven = impact_split(model.modes[tr.contact], t, q, v_before, y[ix_new(model, out.mode)["v"]],
-                                        p, hit.impulse)
+            v_after = y[ix_new(model, out.mode)["v"]]
+            lost, driven = impact_split(model.modes[tr.contact], t, q, v_before, v_after, p, hit.impulse)
             row["energy_lost_J"] = lost
+            row["approach_speed_m_s"], row["impact_mass_kg"] = impact_speed_mass(
+                model.modes[tr.contact], t, q, v_before, v_after, p, hit.impulse)
             if driven != 0.0 and "drive" in model.work_names:
                 # a rheonomic constraint (a prescribed drive) works impulsively: its work joins the drive's
                 y[ix_new(model, out.mode)["work"].start + model.work_names.index("drive")] += driven
@@ -195,6 +197,17 @@ def impact_split(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after
     G = np.atleast_2d(np.asarray(contact.G(t, q, p), dtype=float))
     phi_t_minus = r_minus - G @ np.asarray(v_before, dtype=float)
     return float(0.5 * impulse @ (r_plus + r_minus)), float(impulse @ phi_t_minus)
+
+
+def impact_speed_mass(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after: np.ndarray, p: tuple,
+                      impulse: np.ndarray) -> tuple[float, float]:
+    """(approach speed |r-|, effective mass |P|/|r+ - r-|) of an impulse P on `contact`'s first constraint, r = G v +
+    Phi_t its rate: the normal speed the bodies close with and the mass 1/(G M^-1 G^T) the impulse sees (Newton's
+    law in the mass metric, docs/theory.md §G2.1); what an impact's Hertz duration and flash estimate need (§G2.2)."""
+    r_minus = float(np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel())[0])
+    r_plus = float(np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel())[0])
+    jump = abs(r_plus - r_minus)
+    return abs(r_minus), (abs(float(np.asarray(impulse, dtype=float)[0])) / jump if jump > 0 else float("nan"))
 
 
 def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_old: np.ndarray, p_old: tuple,

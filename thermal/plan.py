@@ -25,6 +25,7 @@ from mechsim.thermal.conduction1d import validity
 from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form
 from mechsim.thermal.flash import flash_temperature
 from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
+from mechsim.thermal.impact import ImpactHeat, impact_flash, impact_share_pin
 from mechsim.thermal.models import MODELS
 from mechsim.thermal.network import KELVIN, ContactSource, ThermalSetup, ThermalSetupError, prepare
 from mechsim.thermal.model_validity import conditions as validity_conditions
@@ -138,6 +139,7 @@ class ThermalPlan:
             return df, events, extra, summary, warnings
         table = df if columns is None else columns
         states, inputs, breaks = self._window_states(df, table)
+        events, states, impacts = self._impacts(events, table, states, summary)
         window = None
         if self.averaging == "cycle" and not failed:
             window = self._cycle(df, events, states, inputs, breaks, summary, warnings, extra)
@@ -153,6 +155,10 @@ class ThermalPlan:
         df = self._add_columns(df, contact, states, t_on_pin)
         if states is not None and window is None:
             summary["heat_balance"] = self._balance(states)
+            if impacts is not None:
+                summary["heat_balance"]["impacts_J"] = float(np.sum(impacts.energies))
+                summary["heat_balance"]["sliding_J"] = summary["heat_balance"]["generated_J"] - float(
+                    np.sum(impacts.energies))
         summary.update(setup.describe())
         summary["heat_share"] = ("flash columns: Blok partition of the exact band rises (fast table) with the "
                                  "transient floors of docs/theory.md §G4.7; bulk states: the same partition with the "
@@ -160,6 +166,55 @@ class ThermalPlan:
         summary["notes"] = list(setup.notes)
         warnings += self._validity(df, contact, summary)
         return df, events, extra, summary, warnings
+
+    def _impacts(self, events: pd.DataFrame, table, states, summary: dict):
+        """(events with impact_flash_rise_K, states with the impacts' heat, the ImpactHeat or None): each impact's
+        energy lost (events 'impact...' rows, energy_lost_J) enters the network at its instant, split between pin
+        and wheel by effusivity, with its flash estimate (thermal/impact.py; docs/theory.md §G2.2)."""
+        if events is None or not len(events) or "energy_lost_J" not in events:
+            return events, states, None
+        rows = events["kind"].astype(str).str.startswith("impact").to_numpy() & np.isfinite(
+            events["energy_lost_J"].to_numpy(float))
+        if not rows.any():
+            return events, states, None
+        setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
+        hit = events[rows]
+        t_k, energy = hit["t_s"].to_numpy(float), np.maximum(hit["energy_lost_J"].to_numpy(float), 0.0)
+        e = mat.conductivity / math.sqrt(mat.diffusivity)
+        flash = impact_flash(energy, hit["approach_speed_m_s"].to_numpy(float), hit["impact_mass_kg"].to_numpy(float),
+                             geo.contact_radius, geo.contact_length, effective_modulus(mat), 2 * e)
+        column = np.full(len(events), np.nan)
+        column[rows] = flash["rise_K"]
+        events = events.assign(impact_flash_rise_K=column)
+        share = impact_share_pin(mat.conductivity, mat.diffusivity, mat.conductivity, mat.diffusivity)
+        t = np.asarray(table["t_s"], dtype=float)
+        wheel = np.ones(len(t_k), dtype=int)
+        if setup.mesh is not None:                    # the wheel's share into the surface of the track in contact
+            track = np.asarray(self.mech.contact_state(table)["track"], dtype=float)
+            at = np.clip(np.searchsorted(t, t_k, side="left"), 0, len(t) - 1)
+            wheel = 1 + np.mod(np.rint(track[at]), geo.tracks).astype(int)
+        heat = ImpactHeat(t_k, energy, wheel, share)
+        peak = int(np.argmax(flash["rise_K"]))
+        summary["impacts"] = {
+            "count": int(len(t_k)), "heat_J": float(np.sum(energy)), "heat_share_pin": share,
+            "flash_rise_max_K": float(flash["rise_K"][peak]), "flash_rise_max_t_s": float(t_k[peak]),
+            "duration_at_max_s": float(flash["duration_s"][peak]), "force_at_max_N": float(flash["force_N"][peak]),
+            "half_width_at_max_m": float(flash["half_width_m"][peak]),
+            "source": "each impact's energy lost enters the network at its instant, split by effusivity (stationary "
+                      "source, Carslaw & Jaeger §2.9); flash estimate: half-sine pulse of a linear contact spring "
+                      "E* l under the impact's effective mass, its heat uniform over the Hertz band for the pulse "
+                      "(docs/theory.md §G2.2)"}
+        if states is None:
+            return events, states, heat
+        n = setup.system.size
+        dT, generated, pin, convected = heat.response(ModalNetwork(setup.system), setup.system.capacity,
+                                                      setup.system.input_matrix, setup.extension.loss, t)
+        states = np.array(states, dtype=float, copy=True)
+        states[:, :n] += dT
+        states[:, n] += generated
+        states[:, n + 1] += pin
+        states[:, n + 2] += convected
+        return events, states, heat
 
     def _window_states(self, df: pd.DataFrame, table=None):
         """(states, input function, its breaks) of the thermal network over the mechanics table `df`: the DAE's
@@ -560,12 +615,20 @@ def plan(si: dict, mech: ContactSource, drive, method: str) -> ThermalPlan | Non
         raise ThermalSetupError("averaging", "'cycle' needs a steady load and drive; with a time-varying load or "
                                              "a duty cycle use 'resolved' (docs/theory.md, 'Time-varying loads and "
                                              "drives')")
+    impacts = getattr(mech, "impacts", False)
+    if impacts and th["averaging"] == "cycle":
+        # the cycle mean reads the sliding heat of the window's rows; the impacts' heat arrives at instants
+        raise ThermalSetupError("averaging", "'cycle' does not carry the impacts' heat (mechanism.slot_clearance > "
+                                             "0); use 'resolved' (docs/theory.md §G2.2)")
     if th["averaging"] == "cycle":
         averaging, why = "cycle", "thermal.averaging = 'cycle' (scenario)"
     elif th["averaging"] == "resolved":
         averaging, why = "resolved", "thermal.averaging = 'resolved' (scenario)"
     elif varying:
         averaging, why = "resolved", "auto: the load or drive varies in time, so every cycle is resolved"
+    elif impacts:
+        averaging, why = "resolved", "auto: the contact has impacts, whose heat arrives at their instants, so every " \
+                                     "cycle is resolved"
     elif MODELS[model].every_cycle:
         averaging, why = "resolved", f"auto: model = '{model}' resolves every cycle (it follows each engagement)"
     elif cycles >= AUTO_CYCLES:

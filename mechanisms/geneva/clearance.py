@@ -38,6 +38,8 @@ class GenevaClearance(Geneva):
     #: finite time (Zeno); the same device as Project Chrono's minimum bounce speed (ChSystemNSC SetMinBounceSpeed)
     BOUNCE_SPEED = 1e-3
     peak_columns = Geneva.peak_columns + ("gap_m",)
+    #: the contact has impacts: their energy lost is heat of the contact (thermal/plan.py, docs/theory.md §G2.2)
+    impacts = True
     #: the fraction of the clearance at which a closing gap fires its impact (see `modes`)
     GAP_ARM = 1e-9
 

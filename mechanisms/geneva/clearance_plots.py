@@ -15,7 +15,8 @@ def local_angle_deg(theta):
 
 def impacts_table(events: pd.DataFrame) -> pd.DataFrame:
     """One row per pin-flank impact: time, crank turn and angle within it, flank struck, impulse, energy lost,
-    and whether the pin rebounded; `impacts_in_turn` counts the impacts of the same crank turn."""
+    and whether the pin rebounded; `impacts_in_turn` counts the impacts of the same crank turn; the approach speed
+    and, with a thermal model, the impact's flash estimate (docs/theory.md §G2.2)."""
     cols = ["t_s", "turn", "crank_angle_deg", "flank", "impulse_N_s", "energy_lost_J", "rebound"]
     if events is None or not len(events) or "impulse_N_s" not in events:
         return pd.DataFrame(columns=cols + ["impacts_in_turn"])
@@ -31,6 +32,9 @@ def impacts_table(events: pd.DataFrame) -> pd.DataFrame:
         "rebound": ((ev["kind"] == "impact") & (ev["to_mode"] == "free")).to_numpy(),
     })
     out["impacts_in_turn"] = out.groupby("turn")["t_s"].transform("size")
+    for extra in ("approach_speed_m_s", "impact_flash_rise_K"):      # the latter with a thermal model
+        if extra in ev:
+            out[extra] = ev[extra].to_numpy(float)
     return out
 
 
