@@ -199,3 +199,67 @@ def test_clearance_refuses_varying_loads():
     with pytest.raises(ValueError, match=r"^load\.wheel_torque_per_station: with mechanism\.slot_clearance"):
         Geneva.from_config({"mechanism": m, "load": {"wheel_torque_per_station": [1.0, 1.0, 1.0, 1.0]}})
     assert type(Geneva.from_config({"mechanism": m, "load": {"wheel_torque": 1.0}})) is GenevaClearance
+
+
+@pytest.fixture(scope="module")
+def heated():
+    """The built-in scenario with the lumped bulk network: impacts in every engagement beside the sliding heat."""
+    return run("thermal.model=lumped")
+
+
+def test_impact_heat_closes_the_heat_balance(heated):
+    """The heat generated is the mechanics' friction work plus the pin-flank impacts' energy lost (the lock taking
+    the wheel at exit dissipates at the locking arc, not at this contact), to 1e-6; stored +
+    convected close it at the tolerance the sliding-only balance closes (the impacts' jumps and their decay,
+    thermal/impact.py, are in the stored and the convected heat independently)."""
+    hb, ev = heated.summary["thermal"]["heat_balance"], heated.events
+    lost = ev.energy_lost_J[ev.kind.str.startswith("impact")].sum()
+    assert lost > 5e-3 * hb["generated_J"]                                   # the impacts matter at this tolerance
+    assert hb["impacts_J"] == pytest.approx(lost, rel=1e-12)
+    assert heated.summary["thermal"]["impacts"]["heat_J"] == pytest.approx(lost, rel=1e-12)
+    friction = -heated.summary["energy"]["work_J"]["friction"]        # the mechanics' own friction work
+    assert hb["generated_J"] == pytest.approx(friction + lost, rel=1e-6)
+    assert hb["sliding_J"] == pytest.approx(hb["generated_J"] - lost, rel=1e-12)
+    assert abs(hb["closure_error_relative"]) < 1e-7, hb
+
+
+def test_impact_flash_estimate_closed_form(heated):
+    """Each impact's approach speed v and effective mass m obey Newton's law (impulse m (1 + e) v, energy lost
+    m (1 - e^2) v^2 / 2); the largest impact's flash rise against the closed form of docs/theory.md §G2.2: a
+    half-sine pulse of the spring E* l, tau = pi sqrt(m / (E* l)), F = v sqrt(m E* l), Hertz half-width b(F),
+    dT = E / (b l 2 e sqrt(pi tau)) with the effusivity e = k / sqrt(chi) of the one material."""
+    ev = heated.events
+    hits = ev[ev.kind.str.startswith("impact")]
+    e = np.where((hits.kind == "impact") & (hits.to_mode == "free"), 0.5, 0.0)
+    m, v = hits.impact_mass_kg.to_numpy(), hits.approach_speed_m_s.to_numpy()
+    # rtol: a plastic restart's projection leaves the rebound rate r+ at the solver's tolerance, not at zero
+    np.testing.assert_allclose(np.abs(hits.impulse_N_s), m * (1 + e) * v, rtol=1e-8)
+    np.testing.assert_allclose(hits.energy_lost_J, 0.5 * m * (1 - e**2) * v**2, rtol=1e-6)
+    th = heated.summary["thermal"]
+    mat = th["material"]
+    E_star = mat["E_Pa"] / (2 * (1 - mat["nu"] ** 2))
+    R, l = 4e-3, 4e-3
+    k = hits.impact_flash_rise_K.to_numpy().argmax()
+    tau = np.pi * np.sqrt(m[k] / (E_star * l))
+    F = v[k] * np.sqrt(m[k] * E_star * l)
+    b = np.sqrt(4 * F * R / (np.pi * l * E_star))
+    effusivity = mat["conductivity_W_mK"] / np.sqrt(mat["diffusivity_m2_s"])
+    rise = hits.energy_lost_J.iloc[k] / (b * l * 2 * effusivity * np.sqrt(np.pi * tau))
+    assert hits.impact_flash_rise_K.iloc[k] == pytest.approx(rise, rel=1e-12)
+    assert th["impacts"]["flash_rise_max_K"] == pytest.approx(rise, rel=1e-12)
+    assert th["impacts"]["duration_at_max_s"] == pytest.approx(tau, rel=1e-12)
+    np.testing.assert_allclose(heated.extra_tables["impacts"].impact_flash_rise_K,
+                               hits.impact_flash_rise_K, rtol=0)
+
+
+def test_impact_heat_in_the_track_mesh_and_no_cycle_averaging():
+    """The 1-D track model takes the wheel's share as a pulse into the surface cell of the track in contact: its
+    balance closes with the impacts too. Cycle averaging, which reads the sliding heat only, is refused."""
+    r = run("thermal.model=1d", "duration=0.8 s")
+    hb = r.summary["thermal"]["heat_balance"]
+    lost = r.events.energy_lost_J[r.events.kind.str.startswith("impact")].sum()
+    assert lost > 0 and hb["impacts_J"] == pytest.approx(lost, rel=1e-12)
+    assert abs(hb["closure_error_relative"]) < 1e-7, hb
+    with pytest.raises((ScenarioError, ValueError), match="thermal.averaging") as info:
+        runner.plan(api.load(SCENARIO, set=["thermal.model=lumped", "thermal.averaging=cycle"]))
+    assert "\n" not in str(info.value)
