@@ -18,8 +18,8 @@ tau = pi sqrt(m/k_c) and peak F = v sqrt(m k_c); its heat E spread uniformly ove
 tau raises both surfaces by (uniform flux on a semi-infinite solid, Carslaw & Jaeger 1959 §2.9)
     dT = E / (b l (e_pin + e_wheel) sqrt(pi tau)).
 b sqrt(tau) ~ (m v)^(1/2) does not depend on k_c (b ~ F^(1/2) ~ k_c^(1/4), tau ~ k_c^(-1/2)): the estimate does not
-depend on the spring's stiffness, only on the pulse's shape (Johnson 1985, Contact Mechanics §11.4: the duration of
-a 2-D (line) impact depends logarithmically on the bodies' size, so no Hertz duration exists for it).
+depend on the spring's stiffness, only on the pulse's shape (Johnson 1985, Contact Mechanics ch. 4 and 11: the approach
+of a 2-D (line) contact depends logarithmically on the bodies' size, so no Hertz impact duration exists for it).
 """
 from __future__ import annotations
 
