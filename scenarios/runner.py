@@ -345,5 +345,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     elif not mech.has_sliding_contact:
         summary["thermal"] = {"model": "none", "why": f"{mech.name} has no sliding contact in the model (pure "
                               "rolling or pin joints): no frictional heat, so no thermal model was built"}
-    return Result(df, events, summary, si, failure,
-                  extra_tables={**mech.extra_outputs(df, events), **thermal_tables})
+    extra_tables = {**mech.extra_outputs(df, events), **thermal_tables}
+    if hasattr(mech, "extra_summary"):              # the mechanism's own figures of its tables (impacts)
+        summary.update(mech.extra_summary(extra_tables))
+    return Result(df, events, summary, si, failure, extra_tables=extra_tables)

@@ -263,3 +263,23 @@ def test_impact_heat_in_the_track_mesh_and_no_cycle_averaging():
     with pytest.raises((ScenarioError, ValueError), match="thermal.averaging") as info:
         runner.plan(api.load(SCENARIO, set=["thermal.model=lumped", "thermal.averaging=cycle"]))
     assert "\n" not in str(info.value)
+
+
+def test_impacts_summary_sweep_row_and_report(heated):
+    """summary['impacts']: the largest impulse is the events' largest |P| (impacts are located events), the impacts
+    per turn are the impacts table's; a sweep table's row carries them, and report.html has their section."""
+    from mechsim.scenarios.output.report_html import report_html
+    from mechsim.scenarios.studies.sweep.rows import summary_row
+    ev, table = heated.events, heated.extra_tables["impacts"]
+    hits = ev[ev.kind.str.startswith("impact")]
+    s = heated.summary["impacts"]
+    assert s["count"] == len(hits) and s["peak_impulse_N_s"] == np.abs(hits.impulse_N_s).max()
+    at = hits.t_s.iloc[int(np.argmax(np.abs(hits.impulse_N_s.to_numpy())))]
+    assert s["peak_impulse_at_t_s"] == at
+    per_turn = table.groupby("turn").size()
+    assert s["impacts_per_turn_max"] == per_turn.max() >= 8 and s["impacts_per_turn_mean"] == per_turn.mean()
+    assert s["energy_lost_J"] == pytest.approx(hits.energy_lost_J.sum(), rel=1e-12)
+    row = summary_row(heated.summary)
+    assert row["peak_impulse_N_s"] == s["peak_impulse_N_s"] and row["impacts_per_turn_max"] == s["impacts_per_turn_max"]
+    page = report_html(heated, {})
+    assert "<h2>Impacts</h2>" in page and "peak impulse" in page and "N·s" in page

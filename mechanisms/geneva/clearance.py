@@ -73,6 +73,11 @@ class GenevaClearance(Geneva):
         from mechsim.mechanisms.geneva.clearance_plots import impacts_table
         return {"impacts": impacts_table(events)}
 
+    def extra_summary(self, tables: dict) -> dict:
+        """summary['impacts'] from the impacts table (`clearance_plots.impacts_summary`)."""
+        from mechsim.mechanisms.geneva.clearance_plots import impacts_summary
+        return {"impacts": impacts_summary(tables.get("impacts"))}
+
     def extra_figures(self, timeseries, tables: dict) -> dict:
         """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn."""
         from mechsim.mechanisms.geneva.clearance_plots import gap_figure, impacts_table

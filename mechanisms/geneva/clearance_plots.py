@@ -38,6 +38,27 @@ def impacts_table(events: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def impacts_summary(impacts: pd.DataFrame) -> dict:
+    """The run's impacts in figures (summary['impacts']; sweep tables): count, the largest impulse |P| (an impact is
+    a located event, so this is the located peak) with its instant and crank angle, the impacts per crank turn
+    (largest and mean over the turns that have any) and their energy lost; with a thermal model the largest
+    flash estimate."""
+    if impacts is None or not len(impacts):
+        return {"count": 0, "peak_impulse_N_s": 0.0, "impacts_per_turn_max": 0, "impacts_per_turn_mean": 0.0,
+                "energy_lost_J": 0.0}
+    k = int(np.argmax(np.abs(impacts["impulse_N_s"].to_numpy(float))))
+    per_turn = impacts.groupby("turn").size()
+    out = {"count": int(len(impacts)), "peak_impulse_N_s": float(abs(impacts["impulse_N_s"].iloc[k])),
+           "peak_impulse_at_t_s": float(impacts["t_s"].iloc[k]),
+           "peak_impulse_at_crank_angle_deg": float(impacts["crank_angle_deg"].iloc[k]),
+           "peak_impulse_flank": str(impacts["flank"].iloc[k]),
+           "impacts_per_turn_max": int(per_turn.max()), "impacts_per_turn_mean": float(per_turn.mean()),
+           "energy_lost_J": float(impacts["energy_lost_J"].sum())}
+    if "impact_flash_rise_K" in impacts:
+        out["impact_flash_rise_max_K"] = float(impacts["impact_flash_rise_K"].max())
+    return out
+
+
 def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float) -> Figure:
     """Gap (the lesser of the two flanks', mm) and the pin's offset from the slot's centre line against the crank
     angle within its turn, one line per turn; below it the impulse of every impact at its crank angle."""

@@ -30,7 +30,7 @@ ORDER = ("mechanism", "motion_vs_angle", "forces_vs_angle", "thermal_vs_angle", 
 #: unit suffixes of the summary's keys (`<quantity>_<unit>`), longest first, and how the page writes them
 UNIT_SUFFIXES = {
     "N_m_s_rad": "N·m·s/rad", "m_per_rad": "m/rad", "W_m2K": "W/(m²·K)", "J_kgK": "J/(kg·K)", "kg_m3": "kg/m³", "kg_m2": "kg·m²",
-    "rad_s2": "rad/s²", "m_s2": "m/s²", "W_m2": "W/m²", "W_mK": "W/(m·K)", "m2_s": "m²/s", "rad_s": "rad/s", "m_s": "m/s", "N_m": "N·m", "J_K": "J/K",
+    "rad_s2": "rad/s²", "m_s2": "m/s²", "W_m2": "W/m²", "W_mK": "W/(m·K)", "m2_s": "m²/s", "rad_s": "rad/s", "m_s": "m/s", "N_m": "N·m", "N_s": "N·s", "J_K": "J/K",
     "W_K": "W/K", "deg": "deg", "rad": "rad", "Pa": "Pa", "kg": "kg", "m2": "m²", "m3": "m³", "J": "J", "W": "W", "N": "N",
     "K": "K", "C": "°C", "s": "s", "m": "m", "relative": "1 (relative)",
 }
@@ -201,6 +201,10 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
                  ["impact losses", energy["impact_losses_J"], "J"], ["closure error", energy["closure_error_J"], "J"],
                  ["closure error / drive work", energy["closure_error_relative"], "1"]]
         parts += ["<h2>Energy balance (J)</h2>", _table(["term", "value", "unit"], rows)]
+    if s.get("impacts"):
+        parts += ["<h2>Impacts</h2>", "<p>pin-flank impacts of the slot clearance (docs/geneva.md, 'Clearance and "
+                  "impacts'); every impact in impacts.csv</p>",
+                  _table(["item", "value", "unit"], quantity_rows(s["impacts"]))]
     if s.get("events"):
         parts += ["<h2>Events</h2>", _table(["kind", "count"], [[k, v] for k, v in s["events"].items()])]
     groups = s.get("warning_groups", [])

@@ -114,6 +114,12 @@ def summary_row(summary: dict) -> dict:
         row["energy_closure_error_relative"] = energy["closure_error_relative"]
     for kind, n in (summary.get("events") or {}).items():
         row[f"events_{kind.replace(' ', '_')}"] = n
+    impacts = summary.get("impacts")
+    if impacts:                                     # contacts with impacts (slot clearance)
+        row["peak_impulse_N_s"] = impacts["peak_impulse_N_s"]
+        row["impacts_per_turn_max"] = impacts["impacts_per_turn_max"]
+        row["impacts_per_turn_mean"] = impacts["impacts_per_turn_mean"]
+        row["impacts_energy_lost_J"] = impacts["energy_lost_J"]
     for k, v in (summary.get("solver") or {}).items():
         if _scalar(v) and not k.endswith("_note"):
             row[f"solver_{k}"] = v
