@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mechsim.thermal.exact import ModalNetwork, _phi1
+from mechsim.thermal.exact import ModalNetwork
 from mechsim.thermal.hertz import half_width
 
 
@@ -77,8 +77,10 @@ class ImpactHeat:
             s = t[after] - t_k
             dT[after] += network.exp(s, x)
             z0 = network.Vinv @ x
-            lt = network.lam[None, :] * s[:, None]
-            convected[after] += (s[:, None] * _phi1(lt) * z0[None, :]) @ (loss @ network.V)
+            lam = network.lam[None, :]
+            small = np.abs(lam * s[:, None]) < 1e-12                  # int_0^s e^{lam u} du, exact
+            integral = np.where(small, s[:, None], np.expm1(lam * s[:, None]) / np.where(small, 1.0, lam))
+            convected[after] += (integral * z0[None, :]) @ (loss @ network.V)
             generated[after] += E
             pin[after] += self.share_pin * E
         return dT, generated, pin, convected
