@@ -33,10 +33,10 @@ def _safe(name: str) -> str:
 
 def _label(column: str) -> str:
     """'load.wheel_torque_N_m' -> 'load.wheel_torque (N_m)' style labels from the column naming rule."""
-    for unit in ("N_m_s_rad", "kg_m2", "rad_s2", "rad_s", "m_s", "N_m", "t_s", "deg", "rad", "N", "W", "J",
+    for unit in ("N_m_s_rad", "kg_m2", "rad_s2", "rad_s", "m_s", "N_m", "N_s", "t_s", "deg", "rad", "N", "W", "J",
                  "C", "K", "m", "s"):
         if column.endswith("_" + unit):
-            shown = {"N_m": "N·m", "rad_s": "rad/s", "rad_s2": "rad/s²", "m_s": "m/s", "kg_m2": "kg·m²",
+            shown = {"N_m": "N·m", "N_s": "N·s", "rad_s": "rad/s", "rad_s2": "rad/s²", "m_s": "m/s", "kg_m2": "kg·m²",
                      "N_m_s_rad": "N·m·s/rad", "C": "°C", "t_s": "s"}.get(unit, unit)
             return f"{column[:-len(unit) - 1]} ({shown})"
     return column

@@ -21,7 +21,7 @@ KEY_FIGURES = ("peak_max_contact_force_N", "peak_max_drive_torque_N_m", "peak_mi
                "peak_max_wheel_accel_rad_s2", "peak_min_wheel_accel_rad_s2", "peak_max_slip_speed_m_s",
                "peak_min_slip_speed_m_s", "peak_max_friction_power_W", "peak_max_temp_contact_C", "cycle_time_s",
                "work_drive_per_cycle_J",
-               "work_friction_per_cycle_J", "case_wall_time_s")
+               "work_friction_per_cycle_J", "peak_impulse_N_s", "impacts_per_turn_max", "case_wall_time_s")
 
 
 def parameter_columns(sc: Scenario, keys: list[str]) -> dict:
