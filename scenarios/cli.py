@@ -226,8 +226,10 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
         out.print(f"{name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
                   f"{len(result.events)} events -> {target}", markup=False, highlight=False, soft_wrap=True)
         from mechsim.scenarios.peaks import console_lines
-        for line in console_lines(s):
-            out.print(line, markup=False, highlight=False, soft_wrap=True)
+        from mechsim.scenarios.console import impacts_line
+        for line in [*console_lines(s), impacts_line(s)]:
+            if line:
+                out.print(line, markup=False, highlight=False, soft_wrap=True)
         plots = bool(result.scenario.get("output", {}).get("plots", True))
         out.print(time_line(solver, time.perf_counter() - STARTED, plots), markup=False, highlight=False,
                   soft_wrap=True)

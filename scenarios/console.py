@@ -150,3 +150,19 @@ class RunProgress:
             self.bar.reset(self.task, total=1.0)
         self.bar.update(self.task, completed=fraction, description=f"{self.name}: writing {what}",
                         where=f"{100 * fraction:.0f} %")
+
+
+def impacts_line(summary: dict) -> str | None:
+    """The console's line on a run's impacts (summary["impacts"], a mechanism with clearance): how many, per turn,
+    the largest impulse with where it struck, the energy lost, and the largest impact flash where a thermal model
+    ran (docs/theory.md §G2.1-G2.2)."""
+    imp = summary.get("impacts")
+    if not imp or not imp.get("count"):
+        return None
+    text = (f"impacts: {imp['count']} ({imp['impacts_per_turn_max']} per turn at most); largest impulse "
+            f"{imp['peak_impulse_N_s'] * 1e3:.4g} mN*s on the {imp['peak_impulse_flank']} flank at t = "
+            f"{imp['peak_impulse_at_t_s']:.6g} s (crank {imp['peak_impulse_at_crank_angle_deg']:.2f} deg); "
+            f"energy lost {imp['energy_lost_J'] * 1e3:.4g} mJ")
+    flash = ((summary.get("thermal") or {}).get("impacts") or {})
+    rise = flash.get("flash_rise_max_K")
+    return text + (f"; largest impact flash +{rise:.3g} K (estimate)" if rise is not None else "")

@@ -283,3 +283,15 @@ def test_impacts_summary_sweep_row_and_report(heated):
     assert row["peak_impulse_N_s"] == s["peak_impulse_N_s"] and row["impacts_per_turn_max"] == s["impacts_per_turn_max"]
     page = report_html(heated, {})
     assert "<h2>Impacts</h2>" in page and "peak impulse" in page and "N·s" in page
+
+
+def test_the_console_names_the_impacts(heated):
+    """The console's impacts line says the summary's numbers: the count, the largest impulse and where, the energy
+    lost and the largest impact flash."""
+    from mechsim.scenarios.console import impacts_line
+    s = heated.summary
+    line = impacts_line(s)
+    assert line.startswith(f"impacts: {s['impacts']['count']} ({s['impacts']['impacts_per_turn_max']} per turn")
+    assert f"{s['impacts']['peak_impulse_N_s'] * 1e3:.4g} mN*s" in line
+    assert f"+{s['thermal']['impacts']['flash_rise_max_K']:.3g} K" in line
+    assert impacts_line({"impacts": {"count": 0}}) is None and impacts_line({}) is None
