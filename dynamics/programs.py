@@ -1,7 +1,7 @@
 """The process's compiled programs, in one place, each kept under the structure of the model it was built from.
 
 A program (the diffrax segment solve, the compiled whole run, the vmapped batch solve, the sensitivity pass's
-solve and tools, a mode's jax functions) depends only on the model's structure, the
+solve and tools, a mode's jax functions, a mode's numba callbacks for ida-compiled) depends only on the model's structure, the
 derivation key of `dynamics/model.py` (mechanism structure, formulation, drive kind, state extension), and on the
 options that shape it; parameter values, tolerances and initial states are its arguments. So it is kept under
 (kind, structure, options), never under an object's id: a model derived again, or loaded from the derivation
@@ -12,6 +12,7 @@ the derived source in the derivation cache, numba's and JAX's compiled code in t
 """
 from __future__ import annotations
 
+import os
 import threading
 from typing import Callable, TypeVar
 
@@ -24,6 +25,17 @@ _PROGRAMS: dict[tuple, tuple[object, object]] = {}
 _USES: dict[tuple, int] = {}
 #: one lock per key while its program is built: threads wait for the program they need, not for others
 _BUILDING: dict[tuple, threading.Lock] = {}
+
+
+def _after_fork_in_child() -> None:
+    """A lock another thread held at a fork would never be released in the child (compiled_model's background
+    compilation forks): the child starts with its own."""
+    global _LOCK
+    _LOCK = threading.Lock()
+    _BUILDING.clear()
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def structure(obj) -> tuple:
@@ -53,6 +65,12 @@ def program(kind: str, of, options: tuple, build: Callable[[], T]) -> tuple[T, b
             _PROGRAMS[key] = (of if key[1][0] == "object" else None, made)
             _BUILDING.pop(key, None)
         return made, True
+
+
+def built(kind: str, of, options: tuple) -> bool:
+    """Whether the program `kind` of `of`'s structure under `options` is built in this process already."""
+    with _LOCK:
+        return (kind, structure(of), options) in _PROGRAMS
 
 
 def programs(kind: str) -> list:

@@ -17,10 +17,10 @@ import importlib.util
 import os
 import sys
 import tempfile
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+from mechsim.dynamics import programs
 from mechsim.dynamics.backends.sundials_c import sundials
 from mechsim.dynamics.user_cache import code_fingerprint
 
@@ -150,31 +150,28 @@ def _module_path(folder: Path, mf) -> Path:
     raise AssertionError("unreachable")
 
 
-_LOCK = threading.Lock()
-_BY_MODE: dict[int, tuple[object, CompiledMode]] = {}
+#: the kind under which a mode's callbacks are kept among the process's programs (dynamics/programs.py)
+PROGRAM = "numba_callbacks"
 
 
 def compiled_mode(mf, folder: Path) -> tuple[CompiledMode, bool]:
-    """The native callbacks of a mode (compiled, or loaded from numba's cache, once per process), and whether
-    this call built them."""
-    with _LOCK:
-        hit = _BY_MODE.get(id(mf))
-        if hit is not None and hit[0] is mf:
-            return hit[1], False
+    """The native callbacks of a mode (compiled, or loaded from numba's cache, once per process and mode
+    structure: dynamics/programs.py), and whether this call built them."""
+
+    def build() -> CompiledMode:
         path = _module_path(folder, mf)
         spec = importlib.util.spec_from_file_location(f"mechsim_compiled_{path.stem}", path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module      # numba's cache resolves the kernels' globals through it
         spec.loader.exec_module(module)
-        compiled = CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
-        _BY_MODE[id(mf)] = (mf, compiled)
-        return compiled, True
+        return CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
+
+    return programs.program(PROGRAM, mf, (str(folder),), build)
 
 
 def loaded_modes() -> list[CompiledMode]:
     """Every mode compiled or loaded in this process so far."""
-    with _LOCK:
-        return [cm for _, cm in _BY_MODE.values()]
+    return programs.programs(PROGRAM)
 
 
 # -- compiled once per machine, off the first run's path ----------------------------------------------------------
@@ -193,8 +190,7 @@ def _advance_marker(folder: Path) -> Path:
 def ready(modes, folder: Path) -> bool:
     """Whether every mode's callbacks (and the compiled segment loop) are in this process already, or compiled
     and cached on disk by `compile_in_background`: running them compiled then costs loading, not compiling."""
-    with _LOCK:
-        missing = [mf for mf in modes if not ((hit := _BY_MODE.get(id(mf))) is not None and hit[0] is mf)]
+    missing = [mf for mf in modes if not programs.built(PROGRAM, mf, (str(folder),))]
     if not missing:
         return True
     names = [module_name(mf) for mf in missing]
@@ -209,7 +205,7 @@ def compile_in_background(modes, folder: Path) -> bool:
     expressions have no derivation key (their module name needs the generated source), once per model and
     process, nor when $MECHSIM_BACKGROUND_COMPILE is "0". Returns whether a compilation was started."""
     modes = list(modes)
-    key = tuple(sorted(id(mf) for mf in modes))
+    key = tuple(sorted(repr(programs.structure(mf)) for mf in modes))
     if (os.environ.get(BACKGROUND_ENV, "1") == "0" or not hasattr(os, "fork") or "jax" in sys.modules
             or key in _STARTED or not all(mf.cache_key for mf in modes)
             or any((folder / f"{module_name(mf)}{_FAILED}").exists() for mf in modes)):
@@ -235,8 +231,6 @@ def _compile_detached(modes, folder: Path) -> None:
     time (a lock file in `folder`). A mode whose compilation raises is marked failed (not tried in the background
     again); a worker stopped, waiting for another longer than `_LOCK_WAIT_S`, or still running after three times
     that (SIGALRM), leaves its modes to a later process."""
-    global _LOCK
-    _LOCK = threading.Lock()         # a lock another thread held at the fork would never be released here
     try:
         os.setsid()
         devnull = os.open(os.devnull, os.O_RDWR)

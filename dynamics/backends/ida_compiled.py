@@ -247,7 +247,7 @@ class AutoBackend(Backend):
     """
 
     name = "auto"
-    _CHOSEN: dict = {}        # id(model) -> (model, compiled?) : the process's choice for each model
+    _CHOSEN: dict = {}        # the model's structure (dynamics/programs.py) -> (compiled?, model): the choice
 
     def __init__(self, settings: SolverSettings):
         self.settings = settings
@@ -268,18 +268,20 @@ class AutoBackend(Backend):
     def choose(self, model) -> Backend:
         """The backend for `model` in this process (chosen at the model's first run here, then kept)."""
         from mechsim.dynamics.backends import compiled_model
-        hit = self._CHOSEN.get(id(model))
-        if hit is None or hit[0] is not model:
+        from mechsim.dynamics.programs import structure
+        key = structure(model)
+        compiled = self._CHOSEN.get(key, (None,))[0]
+        if compiled is None:
             compiled = False
             if self._compiled is not None:
                 folder = cache_dir() / "compiled"
                 compiled = compiled_model.ready(model.modes.values(), folder)
                 if not compiled:
                     compiled_model.compile_in_background(model.modes.values(), folder)
-            hit = self._CHOSEN[id(model)] = (model, compiled)
-        if hit[1] and not isinstance(self._inner, IdaCompiledBackend):
+            self._CHOSEN[key] = (compiled, model)     # the model kept alive: a structure by identity stays valid
+        if compiled and not isinstance(self._inner, IdaCompiledBackend):
             self._use(self._compiled(self.settings))
-        elif not hit[1] and self._inner is not self._ida:
+        elif not compiled and self._inner is not self._ida:
             self._use(self._ida)
         return self._inner
 
