@@ -28,7 +28,8 @@ HOW_ROWS = "output rows (not located: a column computed after the run from the r
 class Source:
     """What the locating needs of a finished run: the method, the DAE's trajectory (None for the closed form), the
     mechanism and drive, the settings, the scenario's SI values and the columns the table had before any
-    post-processing (only those can be read between rows)."""
+    post-processing (those are read between rows; the thermal columns through the thermal plan and the mechanics
+    table `window`, scenarios/thermal_peaks.py)."""
 
     method: str
     traj: object
@@ -37,6 +38,8 @@ class Source:
     settings: object
     si: dict
     columns: frozenset
+    thermal: object = None          # the thermal plan, whose columns are read between rows (scenarios/thermal_peaks.py)
+    window: pd.DataFrame | None = None   # the mechanics table before the thermal finish
 
 
 def _wrapped_deg(angle: float) -> float:
@@ -215,19 +218,29 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is not None and read is not None:
         means = _turn_means(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, *regime["last_turn"],
                             events, read)
+    thermal, treader = [c for c in present if c not in readable], None
+    if source is not None and thermal and len(t) > 1:
+        from mechsim.scenarios.thermal_peaks import thermal_reader
+        treader = thermal_reader(source, events, float(t[-1]))
     for lo, hi, label in windows:
         located, intervals = {}, []
         if read is not None and readable:
             intervals = _intervals(t[:n], events, lo, hi, kinds[label], read)
             located = locate(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, intervals, read)
+        heat = {}
+        if treader is not None:       # the thermal columns over the whole table (a cycle-averaged run's continues)
+            from mechsim.scenarios.thermal_peaks import locate_thermal
+            heat = locate_thermal(treader, t, cols, thermal, events, lo, hi if label == "startup" else float(t[-1]),
+                                  kinds[label])
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
         # run's table continues the simulated window periodically)
         inside = (np.ones(len(t), bool) if label == "run" else t >= lo if label == "periodic"
                   else (t >= lo) & (t <= hi))
         for c in present:
             f = np.asarray(cols[c], dtype=float)
-            entry = _column_entry(c, f, t, angles, inside, angle_column, located.get(c, {}), how, intervals, read, h,
-                                  events, coordinates)
+            got, own = ((heat[c][0], (treader.how, heat[c][1], treader)) if c in heat else
+                        (located.get(c, {}), (how, intervals, read)))
+            entry = _column_entry(c, f, t, angles, inside, angle_column, got, *own, h, events, coordinates)
             if label == "startup":
                 out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
                 if "singular" in entry:

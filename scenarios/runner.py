@@ -287,7 +287,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     si = scenario.si
     angle_col, speed_col, _ = coordinate_columns(mech.coordinates[mech.drive_coordinate],
                                                  mech.drive_coordinate in mech.angle_coordinates)
-    source = PeakSource(method, traj, mech, drive, settings, si, frozenset(df.columns))
+    source = PeakSource(method, traj, mech, drive, settings, si, frozenset(df.columns), thermal, df)
     cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols)
     if checked is not df:

@@ -245,6 +245,27 @@ class ThermalPlan:
         times = np.asarray(t_rows, float) + np.asarray(repetitions) * means.period
         return times, cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, times)[1]
 
+    def cycle_solution(self, df: pd.DataFrame) -> dict | None:
+        """The cycle-averaged solution `finish` continues the mechanics window `df` with (`_cycle`): the periodic
+        turn's start and period, and with bulk states its cycle means and period input, so that `cycle_states`
+        gives the network's states at any instant after the window (the located peaks read them between rows).
+        None without a full turn."""
+        states, inputs, breaks = self._window_states(df)
+        means = self._cycle_means(df, states)
+        if means is None:
+            return None
+        out = {"t_start": means.t_start, "period": means.period, "means": means}
+        if states is not None:
+            out["input"] = self._period_input(df, states, inputs, breaks, means)
+        return out
+
+    def cycle_states(self, solution: dict, times) -> np.ndarray:
+        """The network's states (K, one row per instant) of the cycle-averaged solution (`cycle_solution`) at
+        `times` after the window: thermal/cycle.py `bulk_response`, as `_cycle` writes them on the later rows."""
+        u_of_phase, phase_breaks = solution["input"]
+        return cyc.bulk_response(self.setup.system, solution["means"], u_of_phase, phase_breaks,
+                                 np.asarray(times, float))[1]
+
     def _cycle_means(self, df: pd.DataFrame, states):
         """The cycle means of the last full turn of the window (thermal/cycle.py `cycle_means_from_energies`) with
         the network's states at its start (linear between rows), or None with fewer than one full turn."""
