@@ -264,6 +264,8 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             # a constant stretch's row carries the peak columns only: its angle is the table's at that row
             angle = float(e.row[angle_column]) if angle_column in e.row else float(np.interp(e.t, t, angles))
             entry[name] = _entry(e.value, e.t, angle, e.where, e.sampled, e.limit)
+            if "window_t_s" in e.row:     # after a cycle-averaged window: the instant of the turn it repeats
+                entry[name]["window_t_s"] = float(e.row["window_t_s"])
         elif len(rows):
             i = int(rows[pick(f[rows])])
             entry[name] = _entry(f[i], t[i], angles[i], "output row")

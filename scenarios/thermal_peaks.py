@@ -68,6 +68,10 @@ class ThermalReader:
             self.solution = thermal.cycle_solution(window)
             if self.solution is None:
                 raise ValueError("no cycle-averaged solution for the window")
+            from mechsim.thermal.cycle import cumulative
+            a, P = self.solution["t_start"], self.solution["period"]
+            self.per_turn = {c: float(np.diff(np.interp([a, a + P], t_win, window[c].to_numpy(float)))[0])
+                             for c in window.columns if cumulative(c)}
         self.scale = max(1.0, abs(t_table_end))
         self.how = HOW_THERMAL_CYCLE if self.cycle else HOW_THERMAL
 
@@ -103,12 +107,19 @@ class ThermalReader:
             back[order] = np.arange(len(order))
             frame = frame.iloc[back].reset_index(drop=True)
             frame["t_s"] = times[pick]
+            if self.cycle:
+                frame["window_t_s"] = at
+            if late:              # the turns continued: cumulative columns advance by one turn's increase per turn
+                turns = np.round((times[pick] - at) / self.solution["period"])
+                for c in frame.columns:
+                    if c in self.per_turn:
+                        frame[c] = frame[c].to_numpy(float) + turns * self.per_turn[c]
             out_frames.append((np.flatnonzero(pick), self._thermal(frame, at, late)))
         n = len(times)
-        columns = out_frames[0][1].columns
+        columns = list(dict.fromkeys(c for _, frame in out_frames for c in frame.columns))
         out = {}
         for c in columns:
-            first = np.asarray(out_frames[0][1][c])
+            first = next(np.asarray(frame[c]) for _, frame in out_frames if c in frame)
             arr = np.empty(n, dtype=first.dtype if first.dtype.kind in "fiub" else object)
             if arr.dtype.kind == "f":
                 arr[:] = np.nan

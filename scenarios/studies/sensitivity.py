@@ -73,7 +73,9 @@ def _located(peaks: dict, column: str) -> dict | None:
     e = dict(entry[side])
     other = entry["min" if side == "max" else "max"]["value"]
     e["other_magnitude"] = abs(other) if other is not None else None
-    t = e["t_s"]
+    # after a cycle-averaged window the instant of the periodic turn it repeats (scenarios/thermal_peaks.py): the
+    # traced pass runs the window, and the periodic turn's instant is held fixed (the envelope rule on its phase)
+    t = e["sample_t_s"] = e.get("window_t_s", e["t_s"])
     if e.get("unbounded"):
         e["samples"] = []
     elif e.get("limit") is None or e["at"].startswith(("start", "end")):   # interior, or the run's fixed ends
@@ -98,11 +100,12 @@ def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[fl
         second = by_time[e["samples"][1]]
         h = e["samples"][0] - e["samples"][1]
         slope = (first.values[column] - second.values[column]) / h
-        traced = first.values[column] + slope * (e["t_s"] - e["samples"][0])
-        g = g + (g - np.asarray(second.grads[column], dtype=float)) / h * (e["t_s"] - e["samples"][0])
-        ev = min(events, key=lambda x: abs(x.t - e["t_s"]), default=None)
-        if ev is None or abs(ev.t - e["t_s"]) > EVENT_OFFSET_S:
-            raise ValueError(f"no traced event at t = {e['t_s']:.9g} s for the limit of {column}")
+        t = e["sample_t_s"]
+        traced = first.values[column] + slope * (t - e["samples"][0])
+        g = g + (g - np.asarray(second.grads[column], dtype=float)) / h * (t - e["samples"][0])
+        ev = min(events, key=lambda x: abs(x.t - t), default=None)
+        if ev is None or abs(ev.t - t) > EVENT_OFFSET_S:
+            raise ValueError(f"no traced event at t = {t:.9g} s for the limit of {column}")
         g = g + slope * np.asarray(ev.dt, dtype=float)
     return float(e["value"]), g, float(traced)
 
@@ -221,12 +224,22 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             return y
         return df[peak_columns[q]].to_numpy(float)
     located = {q: e for q in of if q in PEAKS and (e := _located(result.summary.get("peaks", {}), PEAKS[q]))}
+    # the thermal peaks located on the run's continuous solution: with cycle averaging the run itself (its hour
+    # continues the window the derivatives trace); at a prescribed speed the closed-form run's rows (not located)
+    thermal_peaks = result.summary.get("peaks", {})
+    if cycle and run_plan.method == "dae" and any(q in THERMAL_PEAKS for q in of):
+        whole = runner.execute(run_plan)
+        thermal_peaks = whole.summary.get("peaks", {}) if whole.failure is None else {}
+    if run_plan.method == "dae":
+        located.update({q: e for q in of if q in THERMAL_PEAKS
+                        and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
                  and q not in located and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
     sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows}
                           | {t for e in located.values() for t in e["samples"]})
     thermal_times = sorted({float(df["t_s"].iloc[i]) for q, rows in peak_rows.items() if q in THERMAL_PEAKS
-                            for i in rows})
+                            for i in rows} | {t for q, e in located.items() if q in THERMAL_PEAKS
+                                              for t in e["samples"]})
     columns = {PEAKS[q] for q in [*peak_rows, *located] if q in PEAKS} | {"work_drive_J"}
     if thermal_times:
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
@@ -254,17 +267,22 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             warnings.append(f"{q}: {PEAKS[q]} grows without bound toward an event (t = {located[q]['t_s']:.6g} s; "
                             "summary.json peaks): no peak, so no derivative")
         elif q in located:
-            y, g, traced = _located_derivative(located[q], PEAKS[q], by_time, path.events)
+            y, g, traced = _located_derivative(located[q], peak_columns[q], by_time, path.events)
             other = located[q]["other_magnitude"]
             if other is not None and abs(abs(y) - other) <= change * abs(y):
-                warnings.append(f"{q}: the maximum and minimum of {PEAKS[q]} are equal in magnitude to "
+                warnings.append(f"{q}: the maximum and minimum of {peak_columns[q]} are equal in magnitude to "
                                 f"{abs(abs(y) - other) / abs(y):.2g} (relative): the one of larger magnitude may "
                                 f"change within the stated change; the derivative is the "
                                 f"{'maximum' if y >= 0 else 'minimum'}'s")
             results[q] = (y, g, located[q]["t_s"])
             traced_values[q] = traced
             if located[q].get("limit") is None:
-                note = _event_crosses_row(q, wrt, relative, located[q]["t_s"], path.events, change)
+                note = _event_crosses_row(q, wrt, relative, located[q]["sample_t_s"], path.events, change)
+                if note:
+                    warnings.append(note)
+            if turn is not None and q == "peak_temp_contact_C" and ext is not None:
+                note = repetition_crosses_end(q, wrt, relative, turn, located[q]["sample_t_s"],
+                                              period_gradient(turn, by_time), change)
                 if note:
                     warnings.append(note)
         elif q in peak_columns:

@@ -346,12 +346,16 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
         raise SensitivityUnavailable("the traced cycle-averaged bulk is not the one the quantity is read from "
                                      f"(difference {np.max(np.abs(value - turn['bulk'])):.2e} K)")
     state_names = list(sysm.state_names)
-    where = {int(i): k for k, i in enumerate(layout.inner)}
+    inner = t[layout.inner]
     for s in samples:
-        k = where[int(np.argmin(np.abs(t - s.t)))]
+        # a sample between the turn's rows (a located peak's instant) reads the bulk linearly between the rows
+        # around it, at their last repetitions: the bulk is smooth there, so the error is O(h^2) of its curvature
+        k = int(np.clip(np.searchsorted(inner, s.t), 1, len(inner) - 1))
+        w = float(np.clip((s.t - inner[k - 1]) / (inner[k] - inner[k - 1]), 0.0, 1.0))
         for name in ("temp_bulk_pin_K", "temp_bulk_wheel_K"):
             j = state_names.index(name)
-            s.values[name], s.grads[name] = float(value[k, j]), grads[:, k, j]
+            s.values[name] = float((1 - w) * value[k - 1, j] + w * value[k, j])
+            s.grads[name] = (1 - w) * grads[:, k - 1, j] + w * grads[:, k, j]
 
 
 
