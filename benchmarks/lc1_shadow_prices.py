@@ -4,6 +4,7 @@ radius against the shadow price `mechsim size` reports at the nominal limits (dr
 12.34). Each solve starts from the design given (the nominal optimum), so it takes a few iterations.
 
     python -m mechsim.benchmarks.lc1_shadow_prices RADIUS_MM STALL_TORQUE_NM [--index-step 0.0025] [--temp-step 0.5]
+        [--design docs/lc1_sizing_design.toml]
 """
 from __future__ import annotations
 
@@ -40,8 +41,13 @@ def main() -> None:
     parser.add_argument("torque_nm", type=float)
     parser.add_argument("--index-step", type=float, default=0.0025, help="index-time limit moved by +-this (s)")
     parser.add_argument("--temp-step", type=float, default=0.5, help="temperature limit moved by +-this (K)")
+    parser.add_argument("--design", help="write the nominal design (the design.toml `mechsim size` writes) here")
     args = parser.parse_args()
     r0, nominal = solve(args.radius_mm, args.torque_nm, LIMIT_C, LIMIT_S)
+    if args.design:
+        with open(args.design, "w", encoding="utf-8") as fh:
+            fh.write(nominal.design_toml())
+    print(nominal.summary, flush=True)
     prices = {c["quantity"]: c["shadow_price"] for c in nominal.constraints}
     start = (r0 * 1e3, float(nominal.values["drive.stall_torque"]))
     for quantity, step, moved in (("index_time_s", args.index_step, lambda d: (LIMIT_C, LIMIT_S + d)),

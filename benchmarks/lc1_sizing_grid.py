@@ -1,7 +1,6 @@
 """Cross-check of the seed's load case 1 sizing (docs/sensitivity.md, "A thermal sizing: the seed's load case 1"):
 plain runs on a grid of crank radius x stall torque around the optimum `mechsim size` found, each giving the
-periodic turn's peak contact temperature after one hour (the quantity the sizing limits and the run reports,
-`cycle_temperatures` on the run's mechanics window) and the index time (the last complete index), so that a reader
+peak contact temperature over the hour (the run's located peak, which the sizing limits) and the index time (the last complete index), so that a reader
 can see that no grid point with a smaller crank radius meets both limits.
 
     python -m mechsim.benchmarks.lc1_sizing_grid RADIUS_MM STALL_TORQUE_NM [--out docs/lc1_sizing_grid.csv]
@@ -10,12 +9,10 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
 import pandas as pd
 
 import mechsim
 from mechsim.scenarios import runner
-from mechsim.scenarios.studies.sensitivity import cycle_temperatures, cycle_window
 
 NAME = "geneva-seed-lc1-mu015"
 #: the seed's load case 1 with the motor of geneva-motor's speed class (docs/sensitivity.md)
@@ -31,15 +28,14 @@ def evaluate(radius_mm: float, torque_nm: float) -> dict:
     """Peak contact temperature of the periodic turn after the hour (°C) and the index time (s) of one design."""
     plan = runner.plan(mechsim.load(NAME, set=SETS + [f"mechanism.crank_radius={radius_mm!r} mm",
                                                      f"drive.stall_torque={torque_nm!r} N*m"]))
-    result = runner.execute(cycle_window(plan))
+    result = runner.execute(plan)          # the whole hour: its located peak (scenarios/thermal_peaks.py)
     if result.failure is not None:
         raise RuntimeError(result.failure.message())
-    turn = cycle_temperatures(plan, result.timeseries)
-    ev = result.events
+    ev = result.events[result.events["t_s"] <= result.summary["thermal"]["cycle"]["mechanics_simulated_until_s"]]
     entry = ev.loc[ev["kind"] == "entry", "t_s"].to_numpy(float)
     exit_ = ev.loc[ev["kind"] == "exit", "t_s"].to_numpy(float)[-1]
     return {"crank_radius_mm": radius_mm, "stall_torque_N_m": torque_nm,
-            "peak_temp_contact_C": float(np.nanmax(turn["temp_contact_C"])),
+            "peak_temp_contact_C": float(result.summary["peaks"]["temp_contact_C"]["max"]["value"]),
             "index_time_s": float(exit_ - entry[entry < exit_][-1])}
 
 

@@ -31,7 +31,7 @@ import pandas as pd
 from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
                                                          cycle_temperatures, cycle_window, event_crosses_turn_row,
                                                          switch_correction, period_gradient, repetition_crosses_end,
-                                                         turn_peak)
+                                                         repetition_trend, turn_peak)
 from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request,
                                                        make_seed, scenario_value, traced_quantities)
 from mechsim.scenarios.studies.sensitivity_rows import row_state_columns, thermal_samples
@@ -261,6 +261,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
 
     results: dict[str, tuple[float, np.ndarray]] = {}
     traced_values: dict[str, float] = {}     # the traced pass's own value of each quantity
+    trends: dict[str, np.ndarray] = {}       # the slope of the peak's trend across repetitions (`repetition_trend`)
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
         if q in located and located[q].get("unbounded"):
@@ -281,10 +282,11 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 if note:
                     warnings.append(note)
             if turn is not None and q == "peak_temp_contact_C" and ext is not None:
-                note = repetition_crosses_end(q, wrt, relative, turn, located[q]["sample_t_s"],
-                                              period_gradient(turn, by_time), change)
+                dP = period_gradient(turn, by_time)
+                note = repetition_crosses_end(q, wrt, relative, turn, located[q]["sample_t_s"], dP, change)
                 if note:
                     warnings.append(note)
+                trends[q] = g + repetition_trend(turn, located[q]["sample_t_s"], dP)
         elif q in peak_columns:
             column = peak_columns[q]
             if q not in peak_rows:
@@ -351,6 +353,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                                         "elasticity", "parameter_change", "quantity_change"])
     table.attrs.update(
         scenario=scenario.name, change=change, warnings=warnings,
+        trend={q: {key: float(g[j]) / scales[j] for j, key in enumerate(wrt)} for q, g in trends.items()},
         cost={"run_wall_time_s": run_wall, "run_backend": settings.backend,
               "sensitivity_wall_time_s": sens_wall, "sensitivity_compile_time_s": path.stats["compile_time_s"],
               # the pass without its one-off compilation, per run of the scenario's backend

@@ -229,6 +229,20 @@ def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], turn: d
                         for key, d in found.items()))
 
 
+def repetition_trend(turn: dict, t_row: float, period_grad: np.ndarray) -> np.ndarray:
+    """The trend of the cycle-averaged run's peak across repetitions less its derivative, per scaled value
+    (docs/sensitivity.md, "A thermal sizing"): the peak rides on the bulk's rise at its last repetition
+    t_w + m P <= duration, which a change dP of the period moves by m dP; each time it crosses the run's end one
+    repetition more (or less) is in the run and the peak jumps by the bulk's rise over a period, dT_P (the row's
+    value less its previous repetition's). So the peak is a sawtooth in any value that moves the period, whose teeth
+    have the derivative's slope and whose trend adds -dT_P m dP / P: what a change of more than a few teeth sees."""
+    layout = turn["layout"]
+    k = int(np.argmin(np.abs(layout.t[turn["rows"]] - t_row)))
+    m, P = float(layout.periods[k]), float(turn["period"])
+    jump = float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k])
+    return -jump * m * np.asarray(period_grad, dtype=float) / P
+
+
 _CYCLE_FNS: dict = {}
 
 

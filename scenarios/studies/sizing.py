@@ -168,6 +168,10 @@ class Problem:
                                    + (f": {why[0]}" if why else ""))
             y = float(part["value"].iloc[0])
             g = np.array([float(part[part["wrt"] == k]["derivative"].iloc[0]) for k in self.keys])
+            # a cycle-averaged run's peak after the hour is a sawtooth in the period (`repetition_trend`): its trend
+            trend = table.attrs.get("trend", {}).get(q)
+            if trend is not None:
+                g = np.array([trend[k] for k in self.keys])
             sign = np.sign(y) if q.startswith("peak_") and y != 0 else 1.0   # peaks: magnitudes
             values[q], grads[q] = sign * y, sign * g
         if self.objective in self.keys:
