@@ -186,9 +186,13 @@ def test_cycle_temperatures_match_finite_differences(cycle_table):
     """The located peaks of the cycle-averaged run (scenarios/thermal_peaks.py: the periodic turn's mechanics at
     the phase, the cycle-averaged bulk at the instant) against central differences of the runs' own located peaks."""
     nominal = _cycle_run(FD)
-    for q, c in CYCLE_COLUMNS.items():         # the sensitivity's peak is the run's, at its instant
-        assert cycle_table.loc[cycle_table["quantity"] == q, "t_s"].iloc[0] == pytest.approx(
-            located_peak(nominal, c)["t_s"], abs=1e-6)
+    period = nominal.summary["thermal"]["cycle"]["period_s"]
+    for q, c in CYCLE_COLUMNS.items():
+        # the sensitivity's peak is the run's, at its instant; the flash rise repeats every turn of the periodic
+        # regime, equal to the solver's tolerance, so its instant is one of those turns' (the tolerance decides)
+        gap = cycle_table.loc[cycle_table["quantity"] == q, "t_s"].iloc[0] - located_peak(nominal, c)["t_s"]
+        turns = 0 if q == "peak_temp_contact_C" else round(gap / period)
+        assert gap == pytest.approx(turns * period, abs=1e-6 + 1e-6 * abs(turns)), q
 
     def quantities(sets):
         result = _cycle_run(FD + sets)
