@@ -109,7 +109,9 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
         du = np.vstack([s.grads[c] for c in pmap.contact_columns] + dbase + [-start.dt]
                        + [flash[name] for name in FLASH_INPUTS + extra] + ([np.zeros(len(dbase[0]))] if wall else []))
         _check_row_formula(plan, df, events, row, distribution)
-        if wall:
+        if wall and abs(float(t_all[row]) - s.t) <= 1e-9 * max(1.0, abs(s.t)):
+            # the surface check needs the row's own contact with the sample's T_0: at a located instant between
+            # rows it is made where a sample falls on a row (the formulas are the same at every instant)
             _check_wall_surface(plan, df, row, u, distribution)
         values, jac = (np.asarray(a) for a in fn(u))
         grads = jac @ du
