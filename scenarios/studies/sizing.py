@@ -96,9 +96,10 @@ class SizingResult:
         from mechsim.scenarios.output.writer import resolved_scenario_toml
         return resolved_scenario_toml(self.design.si)
 
-    def save(self, folder, force: bool = False):
+    def save(self, folder, force: bool = False, progress=None):
         """design.toml (the chosen design, a scenario `mechsim run` accepts), convergence.csv, convergence.png and
-        summary.json, atomically. Without a feasible optimum, everything but design.toml (what ran)."""
+        summary.json, atomically. Without a feasible optimum, everything but design.toml (what ran). progress: as a
+        run's save takes it (the CLI passes one to every result); a sizing's files are few and not reported."""
         import json
         from pathlib import Path
 
