@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import Extremum, Interval, TrajectoryReader, intervals_of, locate
+from mechsim.dynamics.extrema import TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, intervals_of, locate
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -272,7 +272,10 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             entry[name] = _entry(f[i], t[i], angles[i], "output row")
         else:
             entry[name] = _entry(np.nan, np.nan, np.nan, "no rows")
-    side = "max" if abs(entry["max"]["value"]) >= abs(entry["min"]["value"]) else "min"
+    # the larger magnitude; magnitudes equal to round-off (a motion symmetric in sign) go to the maximum, so the
+    # signed value reported and differentiated does not follow the rounding
+    big, small = abs(entry["max"]["value"]), abs(entry["min"]["value"])
+    side = "max" if big >= small - TIE_ROUNDOFF * max(big, small) or not np.isfinite(small) else "min"
     entry["abs_max"] = dict(entry[side], value=abs(entry[side]["value"]), side=side)
     entry["how"] = how if got else HOW_ROWS
     for name, sense in (("max", 1.0), ("min", -1.0)):
