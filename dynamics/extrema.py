@@ -94,24 +94,31 @@ class _Job:
 
 def _estimates(t: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The peak value of the parabola through each row and its neighbours (the row's value at the ends, and where
-    the parabola opens upwards)."""
+    the parabola opens upwards); f may hold several series (along its last axis)."""
     est = f.copy()
-    if len(f) < 3:
+    if f.shape[-1] < 3:
         return est
-    f0, f1, f2 = f[:-2], f[1:-1], f[2:]
+    f0, f1, f2 = f[..., :-2], f[..., 1:-1], f[..., 2:]
     h0, h1 = t[1:-1] - t[:-2], t[2:] - t[1:-1]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         d2 = 2.0 * ((f2 - f1) / h1 - (f1 - f0) / h0) / (h0 + h1)
         d1 = ((f2 - f1) / h1 * h0 + (f1 - f0) / h0 * h1) / (h0 + h1)
         gain = np.where(d2 < 0, -0.5 * d1 * d1 / d2, 0.0)
-    est[1:-1] = f1 + np.where(np.isfinite(gain), gain, 0.0)
+    est[..., 1:-1] = f1 + np.where(np.isfinite(gain), gain, 0.0)
     return est
 
 
 def tie_of(f: np.ndarray) -> float:
     """The round-off tie of a column: TIE_ROUNDOFF of its largest finite magnitude (values closer are equal)."""
-    finite = np.abs(f[np.isfinite(f)])
-    return TIE_ROUNDOFF * float(finite.max()) if finite.size else 0.0
+    return float(_ties(np.asarray(f, dtype=float)[None, :])[0])
+
+
+def _ties(F: np.ndarray) -> np.ndarray:
+    """`tie_of` of each row of F."""
+    if not F.shape[-1]:
+        return np.zeros(len(F))
+    with np.errstate(invalid="ignore"):
+        return TIE_ROUNDOFF * np.where(np.isfinite(F), np.abs(F), 0.0).max(axis=-1)
 
 
 def _beats(new: Extremum, old: Extremum | None, sense: float, tie: float) -> bool:
@@ -144,48 +151,60 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
     stretch's extremum lies at its first instant (lo = hi): the interval's start where the stretch holds the
     interval's first row, else its first row. Values within round-off of each other are ties, and a tie goes to
     the earliest (which dwell's zero speed holds the extremum must not hinge on the BLAS's rounding)."""
-    tie = tie_of(f)
+    f = np.asarray(f, dtype=float)[None, :]
+    return _candidates(t, f, np.array([sense]), _ties(f), intervals, limit, layout)[0]
+
+
+def _candidates(t: np.ndarray, F: np.ndarray, senses: np.ndarray, ties: np.ndarray, intervals: list[Interval],
+                limit: int = CANDIDATES, layout: tuple | None = None) -> list[list[tuple]]:
+    """`candidates` of every series F[m] (over the table's rows) in the sense senses[m], its tie ties[m]: the
+    comparisons of all series at once, elementwise as for one."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
-        return []
+        return [[] for _ in range(len(F))]
     rows, k_of, n_of, pos, first, last = layout
-    ti, fi = t[rows], sense * f[rows]
+    ti, fi = t[rows], senses[:, None] * F[:, rows]
     ok = np.isfinite(fi)
     fi = np.where(ok, fi, -np.inf)
-    left = np.where(first, -np.inf, np.r_[-np.inf, fi[:-1]])
-    right = np.where(last, -np.inf, np.r_[fi[1:], -np.inf])
+    edge = np.full((len(fi), 1), -np.inf)
+    left = np.where(first, -np.inf, np.concatenate([edge, fi[:, :-1]], axis=1))
+    right = np.where(last, -np.inf, np.concatenate([fi[:, 1:], edge], axis=1))
+    tie = ties[:, None]
     with np.errstate(invalid="ignore"):
         flat = (((np.abs(fi - left) <= tie) | first) & ((np.abs(fi - right) <= tie) | last) & (n_of > 1) & ok)
     peak = ((fi >= left) & (fi >= right) & ok) | flat
     est = _estimates(ti, fi)
     est = np.where(first | last, fi, est)
-    smooth = np.flatnonzero(peak & ~flat)
-    flats = np.flatnonzero(flat)
-    if not len(smooth) and not len(flats):
-        return []
-    lower = float(fi[np.r_[smooth, flats]].max())
-    out = []
-    if len(flats):
-        # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it
-        # lies at its first instant (the interval's start where it holds the interval's first row)
-        level = float(fi[flats].max())
-        if level >= lower - tie:
-            i = int(flats[np.argmax(fi[flats] >= level - tie)])
+    smooth = peak & ~flat
+    lower = np.where(peak, fi, -np.inf).max(axis=1)
+    level = np.where(flat, fi, -np.inf).max(axis=1)
+    with np.errstate(invalid="ignore"):
+        kept = smooth & (2 * est - fi >= (lower - ties)[:, None])
+    out: list[list[tuple]] = []
+    for m in range(len(fi)):
+        got: list[tuple] = []
+        out.append(got)
+        if not peak[m].any():
+            continue
+        if flat[m].any() and level[m] >= lower[m] - ties[m]:
+            # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it
+            # lies at its first instant (the interval's start where it holds the interval's first row)
+            i = int(np.argmax(flat[m] & (fi[m] >= level[m] - ties[m])))
             k = int(k_of[i])
             at = float(intervals[k].lo) if first[i] else float(ti[i])
-            out.append((float(fi[i]), k, int(pos[i]), at, at, True))
-    e, g = est[smooth], fi[smooth]
-    keep = smooth[2 * e - g >= lower - tie]
-    if len(keep):
-        best = float(est[keep].max())
-        rank = np.where(est[keep] >= best - tie, best, est[keep])
-        keep = keep[np.lexsort((ti[keep], -rank))][:limit]      # by estimate, ties to the earliest
-        for i in keep.tolist():
-            iv = intervals[int(k_of[i])]
-            lo = float(iv.lo) if first[i] else float(ti[i - 1])
-            hi = float(iv.hi) if last[i] else float(ti[i + 1])
-            out.append((float(est[i]), int(k_of[i]), int(pos[i]), lo, hi, False))
+            got.append((float(fi[m, i]), k, int(pos[i]), at, at, True))
+        keep = np.flatnonzero(kept[m])
+        if len(keep):
+            e = est[m, keep]
+            best = float(e.max())
+            rank = np.where(e >= best - ties[m], best, e)
+            keep = keep[np.lexsort((ti[keep], -rank))][:limit]      # by estimate, ties to the earliest
+            for i in keep.tolist():
+                iv = intervals[int(k_of[i])]
+                lo = float(iv.lo) if first[i] else float(ti[i - 1])
+                hi = float(iv.hi) if last[i] else float(ti[i + 1])
+                got.append((float(est[m, i]), int(k_of[i]), int(pos[i]), lo, hi, False))
     return out
 
 
@@ -199,11 +218,16 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
     ties: dict[str, float] = {}
     starts: dict[int, list[_Job]] = {}          # constant stretches from an interval's start (read there)
     layout = _layout(intervals)
-    for col, f in values.items():
-        f = np.asarray(f, dtype=float)
-        ties[col] = tie = tie_of(f)
-        for sense in (1.0, -1.0):
-            for est, k, i, lo, hi, flat in candidates(t, f, intervals, sense, limit, layout):
+    names = list(values)
+    F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
+    col_ties = _ties(F)
+    found = _candidates(t, np.repeat(F, 2, axis=0), np.tile([1.0, -1.0], len(names)), np.repeat(col_ties, 2),
+                        intervals, limit, layout)
+    for n, col in enumerate(names):
+        f = F[n]
+        ties[col] = tie = float(col_ties[n])
+        for sense, got in ((1.0, found[2 * n]), (-1.0, found[2 * n + 1])):
+            for est, k, i, lo, hi, flat in got:
                 j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]), tie=tie)
                 j.t_row = float(t[intervals[k].rows[i]])
                 j.edge = "before" if hi == intervals[k].hi else "after" if lo == intervals[k].lo else None
@@ -346,33 +370,43 @@ def _refine(iv: Interval, group: list[_Job], grids: list[np.ndarray], table: dic
     (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far below the tolerance)."""
     tt = np.asarray(table["t_s"], dtype=float)
     for j, g in zip(group, grids):
-        pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
-        column = np.asarray(table[j.column], dtype=float)
-        f = j.sense * column[pos]
-        if not np.isfinite(f).any():
-            continue
-        f = np.where(np.isfinite(f), f, -np.inf)
-        b = int(np.argmax(f >= f.max() - j.tie))          # the earliest of readings tied to round-off
-        j.best_f, j.best_t, j.best_row = float(f[b]), float(g[b]), _at(table, pos[b])
-        r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
-        if j.sense * column[r] > j.best_f + j.tie:        # the row itself (between grid readings)
-            j.best_f, j.best_t, j.best_row = float(j.sense * column[r]), float(tt[r]), _at(table, r)
-        at_lo, at_hi = b == 0 and g[0] == iv.lo, b == len(g) - 1 and g[-1] == iv.hi
-        if at_lo or at_hi or len(g) < STENCIL:           # the one-sided limit at the interval's end
-            j.where = (f"{iv.lo_kind} (limit from after)" if at_lo else f"{iv.hi_kind} (limit from before)"
-                       if at_hi else "output row")
-            j.limit = "after" if at_lo else "before" if at_hi else None
-            continue
-        c0 = min(max(b - STENCIL // 2, 0), len(g) - STENCIL)
-        part = f[c0:c0 + STENCIL]
-        if not np.isfinite(part).all():
-            continue
-        x, w = _poly_max(part, b - c0)
-        value = float(w @ part)
-        if value >= j.best_f:
-            tv = float(g[c0] + x * (g[1] - g[0]))
-            j.best_f, j.best_t, j.best_row, j.where = value, tv, _at(table, pos[c0:c0 + STENCIL], w), "interior"
-            j.best_row["t_s"] = tv
+        got = _refine_one(iv, j, g, tt, table)
+        if got is not None:                     # every column at the best instant, read out once
+            j.best_row = _at(table, *got)
+            if got[1] is not None:
+                j.best_row["t_s"] = j.best_t
+
+
+def _refine_one(iv: Interval, j: _Job, g: np.ndarray, tt: np.ndarray, table: dict) -> tuple | None:
+    """`_refine` of one job: sets its value, instant and where; returns (positions, weights or None) of the
+    readings that give every column at its instant (`_at`), None where no reading is finite."""
+    pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
+    column = np.asarray(table[j.column], dtype=float)
+    f = j.sense * column[pos]
+    if not np.isfinite(f).any():
+        return None
+    f = np.where(np.isfinite(f), f, -np.inf)
+    b = int(np.argmax(f >= f.max() - j.tie))          # the earliest of readings tied to round-off
+    j.best_f, j.best_t, best = float(f[b]), float(g[b]), (pos[b], None)
+    r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
+    if j.sense * column[r] > j.best_f + j.tie:        # the row itself (between grid readings)
+        j.best_f, j.best_t, best = float(j.sense * column[r]), float(tt[r]), (r, None)
+    at_lo, at_hi = b == 0 and g[0] == iv.lo, b == len(g) - 1 and g[-1] == iv.hi
+    if at_lo or at_hi or len(g) < STENCIL:           # the one-sided limit at the interval's end
+        j.where = (f"{iv.lo_kind} (limit from after)" if at_lo else f"{iv.hi_kind} (limit from before)"
+                   if at_hi else "output row")
+        j.limit = "after" if at_lo else "before" if at_hi else None
+        return best
+    c0 = min(max(b - STENCIL // 2, 0), len(g) - STENCIL)
+    part = f[c0:c0 + STENCIL]
+    if not np.isfinite(part).all():
+        return best
+    x, w = _poly_max(part, b - c0)
+    value = float(w @ part)
+    if value >= j.best_f:
+        j.best_f, j.best_t, j.where = value, float(g[c0] + x * (g[1] - g[0])), "interior"
+        best = (pos[c0:c0 + STENCIL], w)
+    return best
 
 
 def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float, t_end: float,
@@ -410,6 +444,7 @@ class TrajectoryReader:
         self.reintegrations = self.dense_readings = 0
         self._starts: dict = {}
         self._solvers: dict = {}
+        self._compiled: list | None = None       # per try: the compiled IDA backend (a compiled run's readings)
         self._anchors = None
         self._keep: list = []
 
@@ -517,10 +552,20 @@ class TrajectoryReader:
             got = self._starts[(k, r)] = (y0, yp0)
         return got
 
+    def _compiled_tries(self) -> bool:
+        """Whether readings forward in time run on the compiled IDA callbacks, as the run did (the same algorithm as
+        scikit-sundae's binding, without a Python call per residual); builds one backend per try."""
+        if self._compiled is None:
+            from mechsim.dynamics.backends.ida_compiled import IdaCompiledBackend, runs_compiled
+            self._compiled = ([IdaCompiledBackend(s) for s in self.tries]
+                              if runs_compiled(self.tries[-1], self.traj.model) else [])
+        return bool(self._compiled)
+
     def _integrate(self, mf, p, t0, y0, yp0, times):
         """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0)."""
         from sksundae.ida import IDA
 
+        from mechsim.dynamics.backend import End, Request
         from mechsim.dynamics.backends.ida import atol_vector
         self.reintegrations += 1
         # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
@@ -532,7 +577,17 @@ class TrajectoryReader:
             rows_t.append(times[at_start])
             rows_y.append(np.repeat(y0[None, :], n0, axis=0))
             rows_yp.append(np.repeat(yp0[None, :], n0, axis=0))
-        if len(out_t):
+        if len(out_t) and out_t[0] > t0 and self._compiled_tries():
+            for backend in self._compiled:
+                seg = backend.integrate(Request(self.traj.model, "", mf, p, t0, y0, yp0, out_t, float(out_t[-1])))
+                if seg.end is End.END and len(seg.t) == len(out_t):
+                    break
+            else:
+                raise ReadingFailed(f"re-integration between rows failed: {seg.message}")
+            rows_t.append(seg.t)
+            rows_y.append(seg.y)
+            rows_yp.append(seg.yp)
+        elif len(out_t):
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])

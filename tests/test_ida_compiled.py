@@ -255,3 +255,33 @@ def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_d
     assert np.array_equal(a[:, 0], b[:, 0])
     rtol, atol = 1e-8, 1e-10                # the scenario's solver tolerances
     assert np.abs(a[:, 1:] - b[:, 1:]).max() <= GLOBAL_FACTOR * (rtol * np.abs(a[:, 1:]).max() + atol)
+
+
+def test_a_compiled_runs_peaks_are_re_integrated_on_its_compiled_callbacks(monkeypatch):
+    """The located peaks of an `ida-compiled` run re-integrate on the compiled callbacks (dynamics/extrema.py
+    TrajectoryReader): the same IDA algorithm as scikit-sundae's binding, so every located value and instant
+    agrees with the readings through that binding, and lies at the same kind of place, within the readings' own
+    accuracy, GLOBAL_FACTOR x (their rtol x scale + atol) (the two step sequences differ by round-off only)."""
+    from mechsim.dynamics.backends import ida_compiled
+    sets = {"duration": "1 s", "solver.formulation": "index1", "solver.backend": "ida-compiled"}
+    used = []
+    real = ida_compiled.runs_compiled
+    monkeypatch.setattr(ida_compiled, "runs_compiled", lambda s, m: used.append(real(s, m)) or used[-1])
+    sc = mechsim.load("geneva-motor", set=sets)
+    fast = mechsim.run(sc)
+    monkeypatch.setattr(ida_compiled, "runs_compiled", lambda s, m: False)
+    binding = mechsim.run(sc)
+    assert used and all(used)
+    settings = plan(sc).settings
+    rtol, atol = 0.1 * settings.rtol, 0.1 * settings.atol          # the readings' (TrajectoryReader's tighten)
+    pa, pb = fast.summary["peaks"], binding.summary["peaks"]
+    assert pa.keys() == pb.keys() and len(pa) > 3
+    for col in pa:
+        for side in ("max", "min"):
+            a, b = pa[col][side], pb[col][side]
+            assert a["at"] == b["at"], (col, side)
+            if a["value"] is None:
+                assert b["value"] is None
+                continue
+            scale = max(1.0, abs(b["value"]))
+            assert abs(a["value"] - b["value"]) <= GLOBAL_FACTOR * (rtol * scale + atol), (col, side)

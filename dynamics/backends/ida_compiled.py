@@ -235,6 +235,15 @@ class IdaCompiledBackend(Backend):
                     jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))
 
 
+def runs_compiled(settings: SolverSettings, model) -> bool:
+    """Whether a run of `model` with these settings ran on the compiled callbacks (`ida-compiled`, or `auto` where
+    it chose them in this process), so that what re-integrates it (the located peaks' readings) can too."""
+    if settings.backend == "ida-compiled":
+        return unavailable() is None
+    hit = AutoBackend._CHOSEN.get(id(model)) if settings.backend == "auto" else None
+    return hit is not None and hit[0] is model and bool(hit[1]) and unavailable() is None
+
+
 class AutoBackend(Backend):
     """The default (`solver.backend = "auto"`): `ida-compiled` for a model whose callbacks are compiled already
     (cached on disk once per machine), else `ida`, with the model's callbacks then compiled in a background
