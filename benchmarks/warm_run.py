@@ -1,7 +1,8 @@
 """A warm `mechsim.run` of case A end to end against the CasADi peer (docs/benchmarks.md, "A warm run end to end").
 
-Case A (`peer_bench.CASE_A`, 5 s, 1 ms outputs, figures off) on diffrax (rtol 1e-5) and ida-compiled index-1
-(rtol 1e-7), both near 1e-6 rad of crank-angle error, and the CasADi IDAS peer of `peer_bench` at rtol 1e-6
+Case A (`peer_bench.CASE_A`, 5 s, 1 ms outputs, figures off) on diffrax (rtol 1e-5) and ida-compiled, ida and
+the default backend (`auto`: ida-compiled once its callbacks are cached), index-1 at rtol 1e-7, all near 1e-6 rad
+of crank-angle error, and the CasADi IDAS peer of `peer_bench` at rtol 1e-6
 (5.6e-7 rad). Interleaved rounds (order rotated each round), process CPU time, medians. Each run is split into
 the integration (`hybrid.simulate`, its process CPU) and the rest: tables, invariant checks and summary.
 
@@ -23,6 +24,9 @@ BACKENDS = {
     "diffrax": (('solver.backend="diffrax"', "solver.rtol=1e-5", "solver.atol=1e-7"), "diffrax-Tsit5", 1e-5),
     "ida-compiled": (('solver.backend="ida-compiled"', 'solver.formulation="index1"', "solver.rtol=1e-7",
                       "solver.atol=1e-9"), "ida-compiled-index1", 1e-7),
+    "ida": (('solver.backend="ida"', 'solver.formulation="index1"', "solver.rtol=1e-7", "solver.atol=1e-9"),
+            "ida-index1", 1e-7),
+    "default": (('solver.formulation="index1"', "solver.rtol=1e-7", "solver.atol=1e-9"), "ida-compiled-index1", 1e-7),
 }
 
 

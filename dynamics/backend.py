@@ -48,7 +48,8 @@ class End(str, Enum):
 @dataclass
 class Request:
     """One mode to integrate: from the consistent state (t0, y0, yp0) through the output times t_out
-    (all > t0, <= t_end) to t_end or the first guard crossing. States are in the IDA layout of the mode
+    (all > t0, <= t_end; or all < t0, >= t_end, backward in time, where a backend can) to t_end or the first
+    guard crossing. States are in the IDA layout of the mode
     (`ModeFunctions.index`: q, v, lam, mu, work, ext); p is the mode's parameter tuple."""
 
     model: DerivedModel

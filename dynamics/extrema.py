@@ -553,7 +553,7 @@ class TrajectoryReader:
         return got
 
     def _compiled_tries(self) -> bool:
-        """Whether readings forward in time run on the compiled IDA callbacks, as the run did (the same algorithm as
+        """Whether the readings run on the compiled IDA callbacks, as the run did (the same algorithm as
         scikit-sundae's binding, without a Python call per residual); builds one backend per try."""
         if self._compiled is None:
             from mechsim.dynamics.backends.ida_compiled import IdaCompiledBackend, runs_compiled
@@ -577,7 +577,7 @@ class TrajectoryReader:
             rows_t.append(times[at_start])
             rows_y.append(np.repeat(y0[None, :], n0, axis=0))
             rows_yp.append(np.repeat(yp0[None, :], n0, axis=0))
-        if len(out_t) and out_t[0] > t0 and self._compiled_tries():
+        if len(out_t) and self._compiled_tries():
             for backend in self._compiled:
                 seg = backend.integrate(Request(self.traj.model, "", mf, p, t0, y0, yp0, out_t, float(out_t[-1])))
                 if seg.end is End.END and len(seg.t) == len(out_t):

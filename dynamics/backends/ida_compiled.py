@@ -186,9 +186,10 @@ class IdaCompiledBackend(Backend):
         self._check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")
         self._check(lib.IDASetInitStep(m.mem, r.first_step), "IDASetInitStep")
         self._check(lib.IDASetStopTime(m.mem, r.t_end), "IDASetStopTime")
-        t_out = r.t_out[r.t_out > r.t0]
+        ahead = (r.t_out > r.t0) if r.t_end >= r.t0 else (r.t_out < r.t0)      # t_end < t0: backward in time
+        t_out = r.t_out[ahead]
         n_req = len(t_out)
-        if not (n_req and t_out[-1] >= r.t_end):
+        if not (n_req and (t_out[-1] - r.t_end) * (r.t_end - r.t0) >= 0):
             t_out = np.append(t_out, r.t_end)
         t_out = np.ascontiguousarray(t_out, dtype=float)
         rows_t = np.empty(len(t_out))
