@@ -470,8 +470,13 @@ class TrajectoryReader:
         table = self.read_many([(iv, position, times)])[0]
         if table is not None:
             return table
-        from mechsim.dynamics.hybrid import Piece
         from mechsim.dynamics.tables import piece_columns
+        return piece_columns(self.traj.model, self._reading(iv, position, times), self.angle_coordinates,
+                             residual=False)
+
+    def _reading(self, iv: Interval, position: int, times: np.ndarray):
+        """The re-integrated states at `times` (ordered) as a Piece of the row's mode; ReadingFailed if IDA fails."""
+        from mechsim.dynamics.hybrid import Piece
         piece, mf, t0, y0, yp0 = self._anchor(iv, position)
         # every reading starts from the row's own state: a restart from an earlier reading's state (projected back
         # onto the constraints) was cheaper but added its own error, which a finite difference of the peak shows
@@ -485,20 +490,28 @@ class TrajectoryReader:
             yps.append(yyp)
         t = np.concatenate(ts)
         order = np.argsort(t, kind="stable")
-        part = Piece(piece.mode, piece.params, t[order], np.concatenate(ys)[order], np.concatenate(yps)[order],
+        return Piece(piece.mode, piece.params, t[order], np.concatenate(ys)[order], np.concatenate(yps)[order],
                      piece.offset)
-        return piece_columns(self.traj.model, part, self.angle_coordinates, residual=False)
 
     def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
         """The columns of each (interval, position, times) from the run's own dense output where the integrator
-        keeps one (the compiled diffrax run: the interpolant its output rows come from), all evaluated together:
-        one read-out per mode and parameters; None for a request it does not hold (read by re-integration)."""
-        dense = getattr(self.traj, "dense", None)
-        if dense is None:
-            return [None] * len(requests)
+        keeps one (the compiled diffrax run: the interpolant its output rows come from), else re-integrated, all
+        read out together: one read-out per mode and parameters; None for a request the dense output does not hold
+        (read by re-integration) or whose re-integration failed."""
         from mechsim.dynamics.hybrid import Piece
         from mechsim.dynamics.tables import piece_columns
-        got = dense.read_many([(np.asarray(times, float), iv.lo, iv.hi) for iv, _, times in requests])
+        dense = getattr(self.traj, "dense", None)
+        if dense is not None:
+            got = dense.read_many([(np.asarray(times, float), iv.lo, iv.hi) for iv, _, times in requests])
+        else:                  # re-integrated, each request on its own; read out together (None where IDA failed)
+            got = []
+            for request in requests:
+                try:
+                    p = self._reading(*request)
+                except ReadingFailed:
+                    got.append(None)
+                    continue
+                got.append((p.mode, p.params, p.offset, p.y, p.t, p.yp))
         groups: dict = {}
         for r, g in enumerate(got):
             if g is not None:
@@ -507,15 +520,18 @@ class TrajectoryReader:
         out: list[dict | None] = [None] * len(requests)
         for rs in groups.values():
             mode, params, offset = got[rs[0]][:3]
-            t = np.concatenate([np.asarray(requests[r][2], float) for r in rs])
-            table = piece_columns(self.traj.model, Piece(mode, params, t, np.vstack([got[r][3] for r in rs]), None,
+            if dense is not None:
+                t, yp = np.concatenate([np.asarray(requests[r][2], float) for r in rs]), None
+            else:
+                t, yp = np.concatenate([got[r][4] for r in rs]), np.vstack([got[r][5] for r in rs])
+            table = piece_columns(self.traj.model, Piece(mode, params, t, np.vstack([got[r][3] for r in rs]), yp,
                                                          offset), self.angle_coordinates, residual=False)
             a = 0
             for r in rs:
-                n = len(requests[r][2])
+                n = len(got[r][3])
                 out[r] = {c: v[a:a + n] for c, v in table.items()}
                 a += n
-        self.dense_readings += len(groups)
+        self.dense_readings += len(groups) if dense is not None else 0
         return out
 
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
