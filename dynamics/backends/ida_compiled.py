@@ -241,8 +241,10 @@ def runs_compiled(settings: SolverSettings, model) -> bool:
     it chose them in this process), so that what re-integrates it (the located peaks' readings) can too."""
     if settings.backend == "ida-compiled":
         return unavailable() is None
-    hit = AutoBackend._CHOSEN.get(id(model)) if settings.backend == "auto" else None
-    return hit is not None and hit[0] is model and bool(hit[1]) and unavailable() is None
+    if settings.backend != "auto":
+        return False
+    from mechsim.dynamics.programs import structure
+    return bool(AutoBackend._CHOSEN.get(structure(model), (False,))[0]) and unavailable() is None
 
 
 class AutoBackend(Backend):
