@@ -28,7 +28,8 @@ def pytest_addoption(parser):
 def pytest_terminal_summary(terminalreporter):
     """The fuzz's case count and seed, where a fuzz test ran (in this process or an xdist worker)."""
     ran = [r for kind in ("passed", "failed") for r in terminalreporter.stats.get(kind, [])
-           if getattr(r, "when", "call") == "call" and "test_fuzz_scenarios.py" in getattr(r, "nodeid", "")]
+           if getattr(r, "when", "call") == "call"
+           and getattr(r, "nodeid", "").split("::")[0].endswith("test_fuzz_scenarios.py")]
     if not ran:
         return
     from test_fuzz_scenarios import FUZZ_EXAMPLES       # tests/ is on the path, as for cli_helpers

@@ -52,8 +52,7 @@ def ida_solve(typingctx, address, mem, tout, tret, yy, yp, itask):
                        types.int32), codegen
 
 
-@njit(cache=True)
-def advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
+def _advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
     """IDASolve in IDA_NORMAL mode at each output time until the last one, a root (flag 2) or a failure (< 0);
     copies each row. Returns (last flag, rows written)."""
     flag = 0
@@ -71,6 +70,25 @@ def advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tr
         if flag == 1:          # IDA_TSTOP_RETURN: the end of the segment
             break
     return flag, k
+
+
+def _cached_in_the_user_cache_folder(py_func):
+    """`njit(cache=True)` with numba's cache in mechsim's user-cache folder (dynamics/user_cache.py, numba/) instead
+    of beside this module, like the compiled callbacks: one folder holds what mechsim compiles. numba picks the
+    folder when the function is decorated, so its setting is changed only for this decoration; a folder that
+    cannot be written falls back to numba's own choice."""
+    import numba
+    from mechsim.dynamics.user_cache import cache_dir
+    before = numba.config.CACHE_DIR
+    if not before:                    # a NUMBA_CACHE_DIR the user set is kept
+        numba.config.CACHE_DIR = str(cache_dir() / "numba")
+    try:
+        return njit(cache=True)(py_func)
+    finally:
+        numba.config.CACHE_DIR = before
+
+
+advance = _cached_in_the_user_cache_folder(_advance)
 
 
 def compile_advance() -> None:

@@ -517,10 +517,11 @@ class BatchRunner:
         except _Captured as c:
             mech, drive, settings, t_end, dt_out, angle0, speed0 = c.args_
             ext = c.kwargs.get("ext")
+            from mechsim.dynamics.programs import structure   # cases of one model structure share a batch
             model = derive(mech, settings.formulation, drive.is_prescribed, ext or None)
             call = dict(mech=mech, drive=drive, settings=settings, t_end=t_end, dt_out=dt_out, angle0=angle0,
                         speed0=speed0, ext=ext or None, ext_initial=c.kwargs.get("ext_initial"))
-            return (id(model), default_options(settings), float(dt_out), settings), call
+            return (structure(model), default_options(settings), float(dt_out), settings), call
         except Exception:
             return None
         return None
