@@ -201,6 +201,9 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         seg = yield Request(model, mode, mf, p, t, y, yp, t_out[(t_out > t) & (t_out <= stop)], stop, first_step)
         stats["segments"] += 1
         for key, count in seg.counts.items():
+            if stats[key] is None:            # said unavailable by a backend whose choice came later (`auto`)
+                stats[key] = 0
+                stats["notes"].pop(key, None)
             stats[key] += count
         crossed = None if settings.events else stepped_over(mf, p, t, y, yp, seg)
         if crossed:

@@ -2,6 +2,8 @@
 import copy
 import os
 import secrets
+import shutil
+import tempfile
 import tomllib
 
 import numpy as np
@@ -11,6 +13,10 @@ from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 from mechsim.scenarios.loader import builtin_text
 
 
+#: the user-cache folder this process made for the session (removed at its end), None when one was given
+_OWN_CACHE: str | None = None
+
+
 def pytest_configure(config):
     """One fuzz seed for the whole run (the xdist workers inherit it), new each run unless MECHSIM_FUZZ_SEED is
     set (tests/test_fuzz_scenarios.py)."""
@@ -18,7 +24,19 @@ def pytest_configure(config):
     # the default backend compiles no callbacks of its own during the tests: a run's backend then never depends on
     # how far a background compilation had got (tests/test_ida_compiled.py tests that compilation by itself)
     os.environ.setdefault("MECHSIM_BACKGROUND_COMPILE", "0")
+    # mechsim's user cache (derivations, compiled callbacks and their ready marks, units) fresh for the session, as
+    # on a clean machine, unless MECHSIM_CACHE_DIR is set: the default backend's choice (ida-compiled where a
+    # model's callbacks are cached and marked ready) must not follow what this machine ran before
+    global _OWN_CACHE
+    if "MECHSIM_CACHE_DIR" not in os.environ:
+        _OWN_CACHE = tempfile.mkdtemp(prefix="mechsim-test-cache-")
+        os.environ["MECHSIM_CACHE_DIR"] = _OWN_CACHE
     config.pluginmanager.register(xdist_schedule.Schedule(config), "mechsim-xdist-schedule")
+
+
+def pytest_unconfigure(config):
+    if _OWN_CACHE:
+        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
 def pytest_addoption(parser):

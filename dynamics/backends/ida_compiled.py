@@ -291,6 +291,7 @@ class AutoBackend(Backend):
                 if not compiled:
                     compiled_model.compile_in_background(model.modes.values(), folder)
             self._CHOSEN[key] = (compiled, model)     # the model kept alive: a structure by identity stays valid
+        compiled = compiled and self._compiled is not None   # another instance may have chosen where this one can't
         if compiled and not isinstance(self._inner, IdaCompiledBackend):
             self._use(self._compiled(self.settings))
         elif not compiled and self._inner is not self._ida:
