@@ -18,7 +18,7 @@ import os
 import numpy as np
 import pandas as pd
 
-from mechsim.benchmarks.scaling import DOCS, one_sweep
+from mechsim.benchmarks.scaling import DOCS, case_cost_histogram, one_sweep
 
 RECORDED = DOCS / "benchmarks_sweep.csv"
 
@@ -80,16 +80,9 @@ def figure(df: pd.DataFrame, tables: dict, path) -> None:
     for d_label, r in df[df.label.str.endswith("recorded")].sort_values("cases").tail(1).iterrows():
         ax2.axvline(1e3 * r.median_case_cpu_s, color="k", ls="--",
                     label=f"recorded geneva-lc1, {int(r.cases)} cases: median {1e3 * r.median_case_cpu_s:.0f} ms")
-    for label, t in tables.items():
-        cpu = 1e3 * t["case_cpu_time_s"].to_numpy(float)
-        ax2.hist(cpu, bins=np.geomspace(max(cpu.min(), 1e-1), cpu.max() * 1.01, 40), alpha=0.6,
-                 label=f"{label.replace(', now', '')}: median {np.median(cpu):.0f} ms")
-    ax2.set_xscale("log")
-    ax2.set_xlabel("CPU time per case (ms)")
-    ax2.set_ylabel("cases")
-    ax2.set_title(f"largest sweeps now ({max(len(t) for t in tables.values())} cases): cost per case", fontsize=10)
-    ax2.legend(fontsize=7)
-    ax2.grid(True, which="both", alpha=0.3)
+    case_cost_histogram(ax2, {label.replace(", now", ""): t for label, t in tables.items()},
+                        f"largest sweeps now ({max(len(t) for t in tables.values())} cases): cost per case",
+                        floor_ms=1e-1, digits=0)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
