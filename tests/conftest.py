@@ -1,4 +1,5 @@
 """Shared fixtures: the seed geometry (docs/theory.md §G0) and helpers to build scenarios in memory."""
+import atexit
 import copy
 import os
 import secrets
@@ -13,7 +14,7 @@ from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 from mechsim.scenarios.loader import builtin_text
 
 
-#: the user-cache folder this process made for the session (removed at its end), None when one was given
+#: the user-cache folder this process made for the session (removed at its exit), None when one was given
 _OWN_CACHE: str | None = None
 
 
@@ -31,12 +32,10 @@ def pytest_configure(config):
     if "MECHSIM_CACHE_DIR" not in os.environ:
         _OWN_CACHE = tempfile.mkdtemp(prefix="mechsim-test-cache-")
         os.environ["MECHSIM_CACHE_DIR"] = _OWN_CACHE
+        # removed at exit, after what the session's own exit handlers write there (the unit cache's flush is
+        # registered later, and atexit runs the last registered first)
+        atexit.register(shutil.rmtree, _OWN_CACHE, True)
     config.pluginmanager.register(xdist_schedule.Schedule(config), "mechsim-xdist-schedule")
-
-
-def pytest_unconfigure(config):
-    if _OWN_CACHE:
-        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
 def pytest_addoption(parser):
