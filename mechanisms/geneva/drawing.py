@@ -97,7 +97,16 @@ class GenevaDrawing:
         self.wheel = ax.add_patch(Polygon(self.wheel_shape, closed=True, fc=STEEL, ec=STEEL_EDGE, lw=1.0))
         self.disc = ax.add_patch(Polygon(self.disc_shape + [self.c, 0], closed=True, fc="#e8d9c8", ec="#6b5a48",
                                          lw=1.0))
-        self.arm, = ax.plot([], [], color=CRANK, lw=3.0, solid_capstyle="round")
+        self._crank_pin_and_force(ax, force_peak, temperature, arrow_length_mm)
+        Rw, Rl = g.entry_pin_distance * MM, locking_radius(g) * MM
+        ax.set_xlim(-1.08 * Rw, self.c + 1.1 * max(Rl, self.r + self.R))
+        ax.set_ylim(-1.1 * max(Rw, self.r + self.R), 1.1 * max(Rw, self.r + self.R))
+        finish_axes(ax)
+
+    def _crank_pin_and_force(self, ax, force_peak, temperature, arrow_length_mm, **arm_style) -> None:
+        """The crank arm, the pin, the two centres' marks and the normal force's arrow (its length scaled so the
+        peak force draws `arrow_length_mm`, by default 0.45 r), shared by every Geneva drawing."""
+        self.arm, = ax.plot([], [], color=CRANK, lw=3.0, solid_capstyle="round", **arm_style)
         self.pin = ax.add_patch(Circle((0, 0), self.R, fc=CRANK, ec="k", lw=0.6, zorder=4))
         ax.plot([0, self.c], [0, 0], "k+", ms=9, mew=1.2)
         self.arrow_nominal = arrow_length_mm or 0.45 * self.r
@@ -105,10 +114,6 @@ class GenevaDrawing:
         self.arrow = ax.quiver([0], [0], [0], [0], angles="xy", scale_units="xy", scale=1, color="tab:blue",
                                width=0.012, zorder=5)
         self.temperature = temperature
-        Rw, Rl = g.entry_pin_distance * MM, locking_radius(g) * MM
-        ax.set_xlim(-1.08 * Rw, self.c + 1.1 * max(Rl, self.r + self.R))
-        ax.set_ylim(-1.1 * max(Rw, self.r + self.R), 1.1 * max(Rw, self.r + self.R))
-        finish_axes(ax)
 
     def move(self, theta: float, psi: float) -> tuple[float, float]:
         """Turn the wheel to psi and the crank to theta; the pin's centre (mm)."""

@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 from matplotlib.colors import Normalize
-from matplotlib.patches import Circle, PathPatch
+from matplotlib.patches import PathPatch
 from matplotlib.path import Path
 
-from mechsim.mechanisms.drawing import CRANK, MM, STEEL, STEEL_EDGE, arc, finish_axes, rotate
+from mechsim.mechanisms.drawing import MM, STEEL, STEEL_EDGE, arc, finish_axes, rotate
 from mechsim.mechanisms.geneva.drawing import GenevaDrawing
 
 
@@ -87,14 +87,7 @@ class InternalGenevaDrawing(GenevaDrawing):
         self.outer = np.column_stack([Ro * np.cos(a), Ro * np.sin(a)])
         self.inner = wheel_inner_outline(g) * MM
         self.wheel = ax.add_patch(PathPatch(_ring_path(self.outer, self.inner), fc=STEEL, ec=STEEL_EDGE, lw=1.0))
-        self.arm, = ax.plot([], [], color=CRANK, lw=3.0, solid_capstyle="round", alpha=0.6, zorder=3)
-        self.pin = ax.add_patch(Circle((0, 0), self.R, fc=CRANK, ec="k", lw=0.6, zorder=4))
-        ax.plot([0, self.c], [0, 0], "k+", ms=9, mew=1.2)
-        self.arrow_nominal = arrow_length_mm or 0.45 * self.r
-        self.force_scale = self.arrow_nominal / force_peak if force_peak else 0.0
-        self.arrow = ax.quiver([0], [0], [0], [0], angles="xy", scale_units="xy", scale=1, color="tab:blue",
-                               width=0.012, zorder=5)
-        self.temperature = temperature
+        self._crank_pin_and_force(ax, force_peak, temperature, arrow_length_mm, alpha=0.6, zorder=3)
         ax.set_xlim(-1.08 * Ro, 1.08 * Ro)
         ax.set_ylim(-1.08 * Ro, 1.08 * Ro)
         finish_axes(ax)
