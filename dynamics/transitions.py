@@ -102,6 +102,8 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
         guard = tr.kind     # the mechanism recognised its own stop guard at another guard's root (a stall)
     row = dict(t_s=t, from_mode=mode, to_mode=tr.mode, kind=tr.kind, guard=guard,
                **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q + offset)})
+    if tr.record is not None:
+        row.update(tr.record, **{f"work_{n}_J": float(w) for n, w in zip(model.work_names, y_end[ix["work"]])})
     out = Outcome(mode, values, p, offset=offset)
     if tr.message:
         out.warnings.append(f"t = {t:.6g} s: {tr.message}")

@@ -211,6 +211,8 @@ class Transition:
     #: with `stop`: what the user can do about it (shown after the reason)
     hint: str | None = None
     contact: str | None = None
+    #: readings at the guard's root added to the events row (name -> number), with the work states there
+    record: Mapping[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -252,11 +254,15 @@ class TransitionRule:
     #: the rule reads the scenario's numbers (a per-station load, `Geneva.station_torque`), not only p: the
     #: compiled run hands it back to the Python loop, which evaluates it with numpy
     numeric: bool = False
+    #: (q, v, p) -> {column: number} (numpy): readings at the guard's root written into the events row with the
+    #: work states there (a contact episode's onset, force peak and end); evaluated by the Python loop only
+    record: Callable | None = None
 
     @property
     def python_only(self) -> bool:
-        """True for a rule the compiled run hands back to the Python loop: a stop, an impact or a numeric rule."""
-        return self.stop is not None or self.restitution is not None or self.numeric
+        """True for a rule the compiled run hands back to the Python loop: a stop, an impact, a numeric rule or one
+        that records readings."""
+        return self.stop is not None or self.restitution is not None or self.numeric or self.record is not None
 
 
 @dataclass(frozen=True)
@@ -432,9 +438,11 @@ class Mechanism(ABC):
 
             def fill(template):
                 return None if template is None else template.format(**fields)
+            record = None if rule.record is None else {
+                name: float(x) for name, x in rule.record(q, v, values).items()}
             return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
                               kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
-                              contact=rule.contact)
+                              contact=rule.contact, record=record)
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def schedule(self, t_end: float) -> list[Breakpoint]:
@@ -497,6 +505,10 @@ class Mechanism(ABC):
     def extra_figures(self, timeseries, tables: dict) -> dict:
         """The mechanism's own figures of a run (file stem -> matplotlib Figure; default: none)."""
         return {}
+
+    def completed_events(self, events):
+        """The events table completed from its own rows before anything reads it (default: as it is)."""
+        return events
 
     def extra_outputs(self, timeseries, events) -> dict:
         """Mechanism-specific tables derived from a run (name -> pandas DataFrame, written as <name>.csv)."""

@@ -354,6 +354,8 @@ def build_mechanism(si: dict) -> Mechanism:
     """The mechanism model of a validated scenario (geometry errors become ScenarioError)."""
     cls = MECHANISMS[si["mechanism"]["type"]]
     try:
+        if (si.get("contact") or {}).get("model") == "compliant":
+            si = _with_contact_modulus(si)
         return cls.from_config(si)
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
@@ -364,6 +366,15 @@ def build_mechanism(si: dict) -> Mechanism:
         raise ScenarioError("mechanism", str(exc)) from None
     except ArithmeticError as exc:                        # overflow/zero division in a degenerate geometry
         raise ScenarioError("mechanism", f"the geometry cannot be built ({type(exc).__name__}: {exc})") from None
+
+
+def _with_contact_modulus(si: dict) -> dict:
+    """si with contact.modulus, the contact modulus E* of the thermal section's material (its library values or
+    overrides; thermal/hertz.py): a compliant contact's stiffness is made of it (mechanisms/ reads no thermal/)."""
+    from mechsim.thermal.hertz import effective_modulus
+    from mechsim.thermal.materials import material_with_overrides
+    return {**si, "contact": {**si["contact"], "modulus": effective_modulus(material_with_overrides(
+        si.get("thermal") or {}))}}
 
 
 def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:

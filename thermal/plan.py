@@ -169,17 +169,19 @@ class ThermalPlan:
 
     def _impacts(self, events: pd.DataFrame, table, states, summary: dict):
         """(events with impact_flash_rise_K, states with the impacts' heat, the ImpactHeat or None): each impact's
-        energy lost (events 'impact...' rows, energy_lost_J) enters the network at its instant, split between pin
+        energy lost (events 'impact...' rows, energy_lost_J, or heat_J where given) enters the network at its instant, split between pin
         and wheel by effusivity, with its flash estimate (thermal/impact.py; docs/theory.md §G2.2)."""
         if events is None or not len(events) or "energy_lost_J" not in events:
             return events, states, None
-        rows = events["kind"].astype(str).str.startswith("impact").to_numpy() & np.isfinite(
-            events["energy_lost_J"].to_numpy(float))
+        # a compliant contact's impact loses its energy over the episode (a work column, not the rows' energy_lost_J):
+        # its heat_J, on the episode's onset row
+        lost = events["heat_J" if "heat_J" in events else "energy_lost_J"].to_numpy(float)
+        rows = events["kind"].astype(str).str.startswith("impact").to_numpy() & np.isfinite(lost)
         if not rows.any():
             return events, states, None
         setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
         hit = events[rows]
-        t_k, energy = hit["t_s"].to_numpy(float), np.maximum(hit["energy_lost_J"].to_numpy(float), 0.0)
+        t_k, energy = hit["t_s"].to_numpy(float), np.maximum(lost[rows], 0.0)
         e = mat.conductivity / math.sqrt(mat.diffusivity)
         flash = impact_flash(energy, hit["approach_speed_m_s"].to_numpy(float), hit["impact_mass_kg"].to_numpy(float),
                              geo.contact_radius, geo.contact_length, effective_modulus(mat), 2 * e)

@@ -72,6 +72,8 @@ class Geneva(Mechanism):
     geometry_class = GenevaGeometry
     #: "module:Class" of the model with slot clearance, built where mechanism.slot_clearance > 0
     clearance_model = "mechsim.mechanisms.geneva.clearance:GenevaClearance"
+    #: "module:Class" of the model with slot clearance and a compliant contact (contact.model = "compliant")
+    compliant_model = "mechsim.mechanisms.geneva.clearance_compliant:GenevaCompliant"
     schema = {
         "mechanism": {
             "slots": Field("int", required=True, minimum=3, maximum=72, help="number of slots n (>= 3)",
@@ -114,6 +116,13 @@ class Geneva(Mechanism):
                                  help="Newton's coefficient of restitution of the pin-flank impacts (with "
                                       "mechanism.slot_clearance > 0), 0..1",
                                  why="Newton's law: 0 plastic, 1 elastic"),
+            "model": Field("str", default="rigid", choices=("rigid", "compliant"), help=(
+                "the pin-flank contact with mechanism.slot_clearance > 0: 'rigid' (Newton impacts) or 'compliant' "
+                "(a linear line-contact spring with Hunt-Crossley damping, finite impact forces; "
+                "mechanisms/geneva/clearance_compliant.py)")),
+            "stiffness": Field("quantity", "N/m", default=None, positive=True, only_if=("model", "compliant"),
+                               help="the compliant contact's stiffness K (default: E* times the wheel thickness, "
+                                    "E* of the thermal model's material)"),
         },
     }
 
@@ -138,6 +147,8 @@ class Geneva(Mechanism):
                 if x < 0:
                     raise ValueError(f"load.wheel_torque_profile: torque[{i}] must not be negative, got {x:g} N*m")
         clearance = m.get("slot_clearance", 0.0)
+        if contact.get("model", "rigid") != "rigid" and not clearance > 0:
+            raise ValueError("contact.model: 'compliant' needs mechanism.slot_clearance > 0 (the pin in a wider slot)")
         if clearance > 0:
             return cls._with_clearance(geometry, m, load, contact, clearance, given)
         return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
@@ -162,10 +173,19 @@ class Geneva(Mechanism):
             raise ValueError(f"mechanism.slot_clearance: the slot's half-width R + c/2 = "
                              f"{geometry.pin_radius + clearance / 2:g} m makes neighbouring slots merge at the rim "
                              f"(it must stay below {geometry.max_pin_radius:.6g} m)")
-        return load_ref(cls.clearance_model)(
-            geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
-            contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0),
-            slot_clearance=clearance, restitution=contact.get("restitution", 0.0))
+        args = (geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
+                contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0))
+        kw = dict(slot_clearance=clearance, restitution=contact.get("restitution", 0.0))
+        if contact.get("model", "rigid") == "compliant":
+            # K = E* l: the contact modulus of the thermal model's materials (the scenario loader puts it in
+            # contact.modulus) over the contact length, the wheel thickness (docs/theory.md §G2.1)
+            stiffness = contact.get("stiffness")
+            if stiffness is None:
+                if contact.get("modulus") is None:
+                    raise ValueError("contact.stiffness: give it, or the contact modulus (contact.modulus, Pa)")
+                stiffness = contact["modulus"] * geometry.thickness
+            return load_ref(cls.compliant_model)(*args, **kw, stiffness=stiffness)
+        return load_ref(cls.clearance_model)(*args, **kw)
 
     def __init__(self, geometry: GenevaGeometry, crank_inertia: float, wheel_inertia: float,
                  wheel_torque: float = 0.0, friction: float = 0.0, crank_damping: float = 0.0,
