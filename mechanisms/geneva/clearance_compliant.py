@@ -174,6 +174,13 @@ class GenevaCompliant(GenevaClearance):
         """impacts.csv: one row per contact episode (`contact_episodes`)."""
         return {"impacts": contact_episodes(events).drop(columns="row")}
 
+    def extra_figures(self, timeseries, tables: dict) -> dict:
+        """clearance_vs_angle: the pin's offset in its slot and the episodes' peak forces over a crank turn."""
+        from mechsim.mechanisms.geneva.clearance_plots import gap_figure
+        impacts = tables.get("impacts")
+        return {"clearance_vs_angle": gap_figure(timeseries, impacts if impacts is not None else contact_episodes(
+            None).drop(columns="row"), self.slot_clearance, force=True)}
+
     def extra_summary(self, tables: dict) -> dict:
         """summary['impacts']: the rigid model's figures of the episodes (`clearance_plots.impacts_summary`) and
         the largest located force peak with its instant."""

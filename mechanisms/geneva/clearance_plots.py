@@ -59,9 +59,12 @@ def impacts_summary(impacts: pd.DataFrame) -> dict:
     return out
 
 
-def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float) -> Figure:
+def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float, force: bool = False) -> Figure:
     """Gap (the lesser of the two flanks', mm) and the pin's offset from the slot's centre line against the crank
-    angle within its turn, one line per turn; below it the impulse of every impact at its crank angle."""
+    angle within its turn, one line per turn; below it the impulse of every impact at its crank angle (force: the
+    peak contact force of every contact episode of the compliant model)."""
+    column, scale, label = (("peak_force_N", 1.0, "contact episode's peak force (N)") if force else
+                            ("impulse_N_s", 1e3, "impact impulse |J| (mN s)"))
     fig = Figure(figsize=(9, 6.5), layout="constrained")
     ax, bx = fig.subplots(2, 1, sharex=True)
     theta = timeseries["crank_angle_rad"].to_numpy(float)
@@ -86,11 +89,11 @@ def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float) -> Figure:
         for flank, colour in (("driving", "C3"), ("trailing", "C0")):
             sel = impacts[impacts["flank"] == flank]
             if len(sel):
-                bx.vlines(sel["crank_angle_deg"], 0, sel["impulse_N_s"].abs() * 1e3, color=colour, lw=1.2)
-                bx.plot(sel["crank_angle_deg"], sel["impulse_N_s"].abs() * 1e3, "o", color=colour, ms=4,
+                bx.vlines(sel["crank_angle_deg"], 0, sel[column].abs() * scale, color=colour, lw=1.2)
+                bx.plot(sel["crank_angle_deg"], sel[column].abs() * scale, "o", color=colour, ms=4,
                         label=f"{flank} flank")
         bx.legend(fontsize=8)
-    bx.set_ylabel("impact impulse |J| (mN s)")
+    bx.set_ylabel(label)
     bx.set_xlabel("crank angle within its turn (deg; 0 = mid-engagement)")
     engaged = angle[mode != "dwell"]
     if len(engaged):
