@@ -163,6 +163,9 @@ def impacts_line(summary: dict) -> str | None:
             f"{imp['peak_impulse_N_s'] * 1e3:.4g} mN*s on the {imp['peak_impulse_flank']} flank at t = "
             f"{imp['peak_impulse_at_t_s']:.6g} s (crank {imp['peak_impulse_at_crank_angle_deg']:.2f} deg); "
             f"energy lost {imp['energy_lost_J'] * 1e3:.4g} mJ")
+    if imp.get("peak_force_N") is not None:           # the compliant contact: its located peak force
+        text += (f"; peak contact force {imp['peak_force_N']:.4g} N at t = {imp['peak_force_at_t_s']:.6g} s, "
+                 f"lasting {imp['duration_at_peak_force_s'] * 1e6:.3g} us")
     flash = ((summary.get("thermal") or {}).get("impacts") or {})
     rise = flash.get("flash_rise_max_K")
     return text + (f"; largest impact flash +{rise:.3g} K (estimate)" if rise is not None else "")
