@@ -120,6 +120,8 @@ def summary_row(summary: dict) -> dict:
         row["impacts_per_turn_max"] = impacts["impacts_per_turn_max"]
         row["impacts_per_turn_mean"] = impacts["impacts_per_turn_mean"]
         row["impacts_energy_lost_J"] = impacts["energy_lost_J"]
+        if "peak_force_N" in impacts:               # the compliant contact's located peak force
+            row["peak_impact_force_N"] = impacts["peak_force_N"]
     for k, v in (summary.get("solver") or {}).items():
         if _scalar(v) and not k.endswith("_note"):
             row[f"solver_{k}"] = v
