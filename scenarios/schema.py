@@ -99,6 +99,7 @@ UNIT_RANGES: dict[str, tuple[float, float, str]] = {
     "kg": (1e-9, 1e6, "masses between 1 microgram and 1000 t"),
     "kg*m^2": (1e-15, 1e6, "inertias between a 1 mm steel pin's (about 1e-14 kg*m^2) and a large flywheel's"),
     "N*m*s/rad": (1e-15, 1e6, "viscous damping up to 1e6 N*m*s/rad (a locked shaft)"),
+    "N/m": (1.0, 1e13, "stiffnesses up to 1e13 N/m (a steel line contact 10 cm long is about 1e10 N/m)"),
     "m/s^2": (1e-9, 1e4, "accelerations of gravity up to 1000 g"),
     "K": (1.0, 3000.0, "temperatures between 1 K and 3000 K (above the melting point of steel)"),
     "Pa": (1e5, 2e12, "Young's moduli between soft foams and diamond (1.2e12 Pa)"),
