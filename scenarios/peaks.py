@@ -351,7 +351,11 @@ def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, d
     else:
         times, position = iv.lo + d, 0
     order = np.argsort(times)
-    table = read(iv, position, times[order])
+    from mechsim.dynamics.extrema import ReadingFailed
+    try:
+        table = read(iv, position, times[order])
+    except ReadingFailed:           # the approach cannot be read (a stiff mode re-integrated): no growth claimed
+        return None
     f = np.empty(len(d))
     f[order] = sign * np.asarray(table[column], dtype=float)
     if not (np.all(np.isfinite(f)) and np.all(f > 0)):
