@@ -169,8 +169,9 @@ class ThermalPlan:
 
     def _impacts(self, events: pd.DataFrame, table, states, summary: dict):
         """(events with impact_flash_rise_K, states with the impacts' heat, the ImpactHeat or None): each impact's
-        energy lost (events 'impact...' rows, energy_lost_J, or heat_J where given) enters the network at its instant, split between pin
-        and wheel by effusivity, with its flash estimate (thermal/impact.py; docs/theory.md §G2.2)."""
+        energy lost (events 'impact...' rows, energy_lost_J, or heat_J where given) enters the network at its
+        instant, split between pin and wheel by effusivity, with its flash estimate (thermal/impact.py;
+        docs/theory.md §G2.2)."""
         if events is None or not len(events) or "energy_lost_J" not in events:
             return events, states, None
         # a compliant contact's impact loses its energy over the episode (a work column, not the rows' energy_lost_J):

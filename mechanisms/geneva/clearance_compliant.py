@@ -37,7 +37,6 @@ class GenevaCompliant(GenevaClearance):
     parameter_names = GenevaClearance.parameter_names + ("stiffness", "v_onset", "peaked")
     #: the gap guards fire at the gap's zero: the contact force's kink is located, not anticipated
     GAP_ARM = 0.0
-    peak_columns = GenevaClearance.peak_columns
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
                  wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0,
@@ -66,7 +65,7 @@ class GenevaCompliant(GenevaClearance):
         return replace(init, mode="free")
 
     # -- the contact law ------------------------------------------------------------------------------------
-    def _law(self, phi, rate, flank, p, xp=None):
+    def _law(self, phi, rate, flank, p):
         """(delta, delta', F) of the contact on `flank` (module docstring): phi the offset, rate its time rate."""
         delta = flank * phi - p["clearance"] / 2
         ddot = flank * rate
@@ -162,7 +161,8 @@ class GenevaCompliant(GenevaClearance):
     def completed_events(self, events):
         """Each contact episode's heat (its hysteresis work, from the work states recorded at its onset and end)
         on its onset row, `heat_J`: the contact's heat of the impact (thermal/plan.py). The rows' energy_lost_J
-        stays 0: the loss is the hysteresis work column."""
+        stays 0: the loss is the hysteresis work column. An episode still open where the run ends (or stops) has
+        no end reading, so no heat_J."""
         if events is None or not len(events) or "work_hysteresis_J" not in events:
             return events
         episodes = contact_episodes(events)
