@@ -506,8 +506,9 @@ class Mechanism(ABC):
         """The mechanism's own figures of a run (file stem -> matplotlib Figure; default: none)."""
         return {}
 
-    def completed_events(self, events):
-        """The events table completed from its own rows before anything reads it (default: as it is)."""
+    def completed_events(self, events, table):
+        """The events table completed from its own rows and the result table (default: as it is), before anything
+        reads it."""
         return events
 
     def extra_outputs(self, timeseries, events) -> dict:

@@ -241,7 +241,7 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)
         df = timeseries(traj, mech.angle_coordinates)
-        events = mech.completed_events(events_table(traj))
+        events = mech.completed_events(events_table(traj), df)
         stats = traj.stats
         warnings += traj.warnings
         if traj.failure:

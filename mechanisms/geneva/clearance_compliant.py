@@ -158,21 +158,20 @@ class GenevaCompliant(GenevaClearance):
         return out
 
     # -- outputs ---------------------------------------------------------------------------------------------
-    def completed_events(self, events):
-        """Each contact episode's heat (its hysteresis work, from the work states recorded at its onset and end)
-        on its onset row, `heat_J`: the contact's heat of the impact (thermal/plan.py). The rows' energy_lost_J
-        stays 0: the loss is the hysteresis work column. An episode still open where the run ends (or stops) has
-        no end reading, so no heat_J."""
+    def completed_events(self, events, table):
+        """Each contact episode's heat (its hysteresis work, from the work states recorded at its onset and end, the
+        table's last row for an episode the run's end closes) on its onset row, `heat_J`: the contact's heat of the
+        impact (thermal/plan.py). The rows' energy_lost_J stays 0: the loss is the hysteresis work column."""
         if events is None or not len(events) or "work_hysteresis_J" not in events:
             return events
-        episodes = contact_episodes(events)
+        episodes = contact_episodes(events, table)
         heat = np.full(len(events), np.nan)
         heat[episodes["row"].to_numpy(int)] = episodes["energy_lost_J"].to_numpy(float)
         return events.assign(heat_J=heat)
 
     def extra_outputs(self, timeseries, events) -> dict:
         """impacts.csv: one row per contact episode (`contact_episodes`)."""
-        return {"impacts": contact_episodes(events).drop(columns="row")}
+        return {"impacts": contact_episodes(events, timeseries).drop(columns="row")}
 
     def extra_figures(self, timeseries, tables: dict) -> dict:
         """clearance_vs_angle: the pin's offset in its slot and the episodes' peak forces over a crank turn."""
@@ -201,13 +200,14 @@ EPISODE_COLUMNS = ["t_s", "turn", "crank_angle_deg", "flank", "approach_speed_m_
                    "impacts_in_turn", "row"]
 
 
-def contact_episodes(events: pd.DataFrame) -> pd.DataFrame:
+def contact_episodes(events: pd.DataFrame, table=None) -> pd.DataFrame:
     """One row per contact episode of the compliant model, from its events (onset "impact", "contact force peak",
     "separation" or the exit that ends it): onset time, crank turn and angle, flank, approach and separation speeds
     (normal, m/s), the first force maximum (located: its event) and its instant, duration, the impulse
     m (v_in + v_out) of the normal's effective mass m at the onset (signed as the force; the rigid law's impulse it
-    tends to as K grows), energy lost (the hysteresis work between the onset and the end), whether the pin left
-    the flank (rebound), the episodes in the crank turn; `row` the onset's row in `events`."""
+    tends to as K grows), energy lost (the hysteresis work between the onset and the end: the table's last row
+    where the run ends in contact, its duration then not known), whether the pin left the flank (rebound), the
+    episodes in the crank turn; `row` the onset's row in `events`."""
     from mechsim.mechanisms.geneva.clearance_plots import local_angle_deg
     if events is None or not len(events) or "work_hysteresis_J" not in events:
         return pd.DataFrame(columns=EPISODE_COLUMNS)
@@ -228,7 +228,10 @@ def contact_episodes(events: pd.DataFrame) -> pd.DataFrame:
             rows.append(dict(current, t_end=e.t_s, v_out=v_out, w1=end, rebound=e.kind == "separation"))
             current = None
     if current is not None:                                    # in contact when the run ended
-        rows.append(dict(current, t_end=np.nan, v_out=np.nan, w1=np.nan, rebound=False))
+        last = np.nan
+        if table is not None and len(table) and "work_hysteresis_J" in table:
+            last = float(np.asarray(table["work_hysteresis_J"], dtype=float)[-1])
+        rows.append(dict(current, t_end=np.nan, v_out=np.nan, w1=last, rebound=False))
     if not rows:
         return pd.DataFrame(columns=EPISODE_COLUMNS)
     r = pd.DataFrame(rows)
