@@ -44,7 +44,8 @@ class GenevaClearance(Geneva):
     GAP_ARM = 1e-9
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
-                 wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0) -> None:
+                 wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0,
+                 lock_clearance: float = 0.0) -> None:
         super().__init__(geometry, crank_inertia, wheel_inertia, wheel_torque, friction, crank_damping,
                          wheel_damping)
         if not (np.isfinite(slot_clearance) and slot_clearance > 0):
@@ -53,30 +54,45 @@ class GenevaClearance(Geneva):
             raise ValueError(f"contact.restitution: must lie in [0, 1], got {restitution!r}")
         self.slot_clearance = float(slot_clearance)
         self.restitution = float(restitution)
+        self.lock_clearance = self._checked_lock_play(lock_clearance)
+        if self.lock_clearance > 0:
+            self.parameter_names = GenevaClearance.parameter_names + ("lock_play", "lock_end")
 
     def structure_key(self) -> tuple:
-        return super().structure_key() + ("clearance",)
+        return super().structure_key() + ("clearance",) + (("lock play",) if self.lock_clearance > 0 else ())
 
     def parameter_values(self) -> dict[str, float]:
-        return dict(super().parameter_values(), clearance=self.slot_clearance, restitution=self.restitution,
-                    bounce_speed=self.BOUNCE_SPEED)
+        values = dict(super().parameter_values(), clearance=self.slot_clearance, restitution=self.restitution,
+                      bounce_speed=self.BOUNCE_SPEED)
+        if self.lock_clearance > 0:
+            values.update(lock_play=self.lock_clearance, lock_end=-1.0)
+        return values
 
     def closed_form(self, t, angle0, speed):
         """None: with clearance the motion at a prescribed crank speed is integrated (impacts, free flight)."""
         return None
 
     def describe(self) -> dict:
-        return dict(super().describe(), slot_clearance_m=self.slot_clearance, restitution=self.restitution)
+        out = dict(super().describe(), slot_clearance_m=self.slot_clearance, restitution=self.restitution)
+        if self.lock_clearance > 0:
+            out["lock_clearance_rad"] = self.lock_clearance
+        return out
 
     def extra_outputs(self, timeseries, events) -> dict:
         """impacts.csv: one row per pin-flank impact (`clearance_plots.impacts_table`)."""
-        from mechsim.mechanisms.geneva.clearance_plots import impacts_table
-        return {"impacts": impacts_table(events)}
+        from mechsim.mechanisms.geneva.clearance_plots import impacts_table, lock_impacts_table
+        out = {"impacts": impacts_table(events)}
+        if self.lock_clearance > 0:
+            out["lock_impacts"] = lock_impacts_table(events)
+        return out
 
     def extra_summary(self, tables: dict) -> dict:
         """summary['impacts'] from the impacts table (`clearance_plots.impacts_summary`)."""
-        from mechsim.mechanisms.geneva.clearance_plots import impacts_summary
-        return {"impacts": impacts_summary(tables.get("impacts"))}
+        from mechsim.mechanisms.geneva.clearance_plots import impacts_summary, lock_impacts_summary
+        out = {"impacts": impacts_summary(tables.get("impacts"))}
+        if self.lock_clearance > 0:
+            out["lock_impacts"] = lock_impacts_summary(tables.get("lock_impacts"))
+        return out
 
     def extra_figures(self, timeseries, tables: dict) -> dict:
         """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn."""
@@ -144,7 +160,10 @@ class GenevaClearance(Geneva):
             readouts=dict(dwell.readouts, pin_distance_m=x, lock_force_N=zero, pin_offset_m=phi,
                           gap_m=half - sp.Abs(phi)),
             heat=dwell.heat)
-        return {"engaged": engaged, "dwell": dwell, "free": free}
+        modes = {"engaged": engaged, "dwell": dwell, "free": free}
+        if self.lock_clearance > 0:
+            modes.update(self._play_modes(dwell, free))
+        return modes
 
     # -- transitions -----------------------------------------------------------------------------------------
     def transitions(self):
@@ -175,6 +194,8 @@ class GenevaClearance(Geneva):
         for mode in ("free",):
             table[(mode, "stall")] = stall
             table[(mode, "rest")] = rest
+        if self.lock_clearance > 0:
+            self._play_transitions(table)
         return table
 
     @staticmethod
@@ -230,3 +251,111 @@ class GenevaClearance(Geneva):
         u = (w1 * g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] + w2 * f * p["clearance"] / 2
              + f * p["R"] * (w2 - g.crank_sense * w1))
         return xp.where(u >= 0, 1.0, -1.0)
+
+    # -- the locking arc's play in the dwell (mechanism.lock_clearance > 0) -------------------------------------
+    def _checked_lock_play(self, play) -> float:
+        """The lock's angular play delta (rad), refused where the pin could not enter the slot it meets: a wheel
+        turned by delta/2 off its nominal dwell angle moves the slot's centre line by x_e sin(delta/2) at the pin's
+        entry (x_e the entry pin distance), which must stay below the half clearance c_s/2, or the pin strikes the
+        slot mouth's corner (docs/geneva.md 'Clearance and impacts')."""
+        if not (np.isfinite(play) and play >= 0):
+            raise ValueError(f"mechanism.lock_clearance: must be a finite angle >= 0, got {play!r}")
+        play = float(play)
+        x_e = self.geometry.entry_pin_distance
+        if play > 0 and x_e * np.sin(play / 2) >= self.slot_clearance / 2:
+            raise ValueError(
+                f"mechanism.lock_clearance: {play:g} rad moves the slot mouth by x_entry sin(play/2) = "
+                f"{x_e * np.sin(play / 2):.4g} m at the pin's entry, not below the half slot clearance "
+                f"{self.slot_clearance / 2:.4g} m: the pin would strike the slot's corner (at most "
+                f"{2 * np.arcsin(self.slot_clearance / (2 * x_e)):.6g} rad here)")
+        return play
+
+    def initial_state(self, angle: float, speed: float):
+        """As the exact fit's; with lock play a dwell start holds the wheel on the trailing end of its play, where
+        the (resisting) load keeps it at rest."""
+        state = super().initial_state(angle, speed)
+        if self.lock_clearance <= 0 or state.mode != "dwell":
+            return state
+        q = np.array(state.q, dtype=float)
+        q[1] -= self.lock_clearance / 2
+        return replace(state, updates={**state.updates, "lock_end": -1.0}, q=q)
+
+    def _play_modes(self, dwell: Mode, free: Mode) -> dict[str, Mode]:
+        """The dwell with lock play delta: 'dwell' holds the wheel on an end s = lock_end of its play, the
+        constraint r (psi - psi_lock - s delta/2) = 0 (a length, as the exact fit's lock; its multiplier, the lock
+        force at radius r, is compressive where s lam > 0), under the load; 'play' leaves it free between the
+        ends under its own inertia, load and damping, the crank under its drive. In 'play' lock_end is the end the
+        wheel last moved away from: the apex guard -s psi' watches its turning point, as the slot's flight apex."""
+        import sympy as sp
+        s, P = self.symbols, self.symbols.p
+        psi, (w1, w2) = s.q[1], s.v
+        r, end, half = P("r"), P("lock_end"), P("lock_play") / 2
+        T_L = P("T_L") + P("T_L_rate") * (s.t - P("T_L_time0"))
+        lock, lam = P("lock_angle"), s.lam[0]
+        zero = sp.Integer(0)
+        guards = {gd.name: gd for gd in dwell.guards}
+        arm = self.GAP_ARM * r * P("lock_play")
+        powers = {"load": -T_L * w2, "friction": zero, "damping": -P("c1") * w1**2 - P("c2") * w2**2}
+        held = replace(
+            dwell, constraints=(r * (psi - lock - end * half),), force=(-P("c1") * w1, -P("c2") * w2 - T_L),
+            guards=(guards["entry"], Guard("lock_release", end * lam, -1), guards["stall"], guards["rest"]),
+            powers=powers)
+        play = Mode(
+            name="play", constraints=(), force=(-P("c1") * w1, -P("c2") * w2 - T_L),
+            guards=(guards["entry"], Guard("lock_lead", r * (lock + half - psi) - arm, -1),
+                    Guard("lock_trail", r * (psi - lock + half) - arm, -1), Guard("lock_apex", -end * w2, -1),
+                    guards["stall"], guards["rest"]),
+            powers=powers, readouts=dict(dwell.readouts, lock_force_N=zero), heat=dwell.heat)
+        return {"dwell": held, "play": play}
+
+    def _play_transitions(self, table) -> None:
+        """Lock play: the wheel strikes an end of its play with Newton's law (restitution e and the bounce speed of
+        the pin's impacts, on the lock constraint's rate r psi'); a plastic impact holds it there where the load
+        presses it on, else it leaves at once. Entry takes the wheel as it is (the gaps then differ); exit leaves
+        a wheel within its play free in it with its speed, and takes one outside it (the pin on a flank turns the
+        wheel by asin(c_s / (2 x_exit)) >= delta/2) to the nearer end with a plastic lock impact."""
+        stall, rest = table[("dwell", "stall")], table[("dwell", "rest")]
+        entry = TransitionRule("free", self._entry_flank, kind="entry")
+        table[("dwell", "entry")] = table[("play", "entry")] = entry
+        table[("play", "stall")], table[("play", "rest")] = stall, rest
+        table[("dwell", "lock_release")] = TransitionRule("play", kind="lock release")
+        table[("play", "lock_apex")] = TransitionRule("play", lambda q, v, p, xp: {"lock_end": -p["lock_end"]},
+                                                      kind="play apex")
+        for guard, e in (("lock_lead", 1.0), ("lock_trail", -1.0)):
+            table[("play", guard)] = (
+                TransitionRule("play", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact",
+                               when=lambda q, v, p, xp: p["restitution"] * p["r"] * xp.abs(v[1]) - p["bounce_speed"],
+                               restitution=self.restitution, contact="dwell"),
+                TransitionRule("dwell", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact",
+                               restitution=0.0, contact="dwell", when=lambda q, v, p, xp, e=e: self._lock_pressing(p, e)),
+                TransitionRule("play", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact, leaves",
+                               restitution=0.0, contact="dwell"))
+        exit_ = table[("engaged", "exit")]
+
+        def offset(q, p):                                 # the wheel off its next lock angle
+            return q[1] - (p["slot"] + 0.5) * p["pitch"]
+
+        def nearer(q, v, p, xp):
+            return {**exit_.updates(q, v, p, xp), "lock_end": xp.where(offset(q, p) >= 0, 1.0, -1.0)}
+        rules = (
+            TransitionRule("play", lambda q, v, p, xp: {**exit_.updates(q, v, p, xp), "lock_end": xp.where(
+                v[1] >= 0, -1.0, 1.0)}, kind="exit", when=lambda q, v, p, xp: p["lock_play"] / 2 - xp.abs(offset(q, p))),
+            TransitionRule("dwell", nearer, kind="exit", restitution=0.0, contact="dwell",
+                           when=lambda q, v, p, xp: self._lock_pressing(p, xp.where(offset(q, p) >= 0, 1.0, -1.0))),
+            TransitionRule("play", nearer, kind="exit", restitution=0.0, contact="dwell"))
+        table[("engaged", "exit")] = table[("free", "exit")] = rules
+
+    @staticmethod
+    def _lock_pressing(p, end):
+        """>= 0 where the wheel at rest on end `end` of its play is pressed onto it: its free acceleration
+        -(T_L)/J2 at zero speed points out of the play there (the one-constraint complementarity test of the pin's
+        `_pressing`)."""
+        return -end * p["T_L"] + 1e-300
+
+    def _entry_flank(self, q, v, p, xp):
+        """Entry with the wheel where its play left it: the pin meets the slot off its centre line (Phi =
+        -rho sin(beta - beta0)) and with a lateral rate Phi' of either sign; flank directs the flight's apex guard
+        (-flank Phi', see `modes`), set so that it starts positive."""
+        (g1, g2), _ = self._normal(q, v, p, xp, 1.0)
+        rate = g1 * v[0] + g2 * v[1]
+        return {"flank": xp.where(rate > 0, -1.0, 1.0)}

@@ -59,6 +59,33 @@ def impacts_summary(impacts: pd.DataFrame) -> dict:
     return out
 
 
+def lock_impacts_table(events: pd.DataFrame) -> pd.DataFrame:
+    """One row per impact of the wheel on an end of its locking play (the lock impacts in the dwell and the exit's
+    plastic lock impact where the lock takes the wheel): time, crank turn and angle, the end struck (leading:
+    the wheel ahead of its nominal dwell angle), impulse (at the crank radius, the lock constraint's), energy lost."""
+    cols = ["t_s", "turn", "crank_angle_deg", "end", "impulse_N_s", "energy_lost_J", "rebound"]
+    if events is None or not len(events) or "impulse_N_s" not in events:
+        return pd.DataFrame(columns=cols)
+    kind = events["kind"].astype(str)
+    ev = events[kind.str.startswith("lock impact") | ((kind == "exit") & events["impulse_N_s"].notna())]
+    theta = ev["crank_q"].to_numpy(float)
+    lead = np.where(ev["kind"] == "exit", ev["impulse_N_s"].to_numpy(float) > 0, ev["guard"] == "lock_lead")
+    return pd.DataFrame({
+        "t_s": ev["t_s"].to_numpy(float), "turn": np.floor((theta + np.pi) / (2 * np.pi)).astype(int),
+        "crank_angle_deg": local_angle_deg(theta), "end": np.where(lead, "leading", "trailing"),
+        "impulse_N_s": ev["impulse_N_s"].to_numpy(float), "energy_lost_J": ev["energy_lost_J"].to_numpy(float),
+        "rebound": ((ev["kind"] == "lock impact") & (ev["to_mode"] == "play")).to_numpy()})
+
+
+def lock_impacts_summary(table: pd.DataFrame) -> dict:
+    """summary['lock_impacts']: count, the largest impulse |P| and the energy lost at the locking arc (a contact
+    apart from the pin's: not in the pin contact's heat, docs/theory.md §G2.2)."""
+    if table is None or not len(table):
+        return {"count": 0, "peak_impulse_N_s": 0.0, "energy_lost_J": 0.0}
+    return {"count": int(len(table)), "peak_impulse_N_s": float(table["impulse_N_s"].abs().max()),
+            "energy_lost_J": float(table["energy_lost_J"].sum())}
+
+
 def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float, force: bool = False) -> Figure:
     """Gap (the lesser of the two flanks', mm) and the pin's offset from the slot's centre line against the crank
     angle within its turn, one line per turn; below it the impulse of every impact at its crank angle (force: the
@@ -73,7 +100,7 @@ def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float, force: bool 
     turn = np.floor((theta + np.pi) / (2 * np.pi))
     offset = timeseries["pin_offset_m"].to_numpy(float) * 1e3
     for k in np.unique(turn):
-        rows = (turn == k) & (mode != "dwell")
+        rows = (turn == k) & ~np.isin(mode, ("dwell", "play"))
         if np.count_nonzero(rows) > 1:
             ax.plot(angle[rows], offset[rows], lw=1.2, label=f"turn {int(k)}")
     half = clearance / 2 * 1e3
@@ -95,7 +122,7 @@ def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float, force: bool 
         bx.legend(fontsize=8)
     bx.set_ylabel(label)
     bx.set_xlabel("crank angle within its turn (deg; 0 = mid-engagement)")
-    engaged = angle[mode != "dwell"]
+    engaged = angle[~np.isin(mode, ("dwell", "play"))]
     if len(engaged):
         bx.set_xlim(engaged.min() - 3, engaged.max() + 3)
     return fig

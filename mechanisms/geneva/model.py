@@ -93,6 +93,10 @@ class Geneva(Mechanism):
             "slot_clearance": Field("quantity", "m", default=0.0, nonnegative=True,
                                     help="slot width - 2 R (0: the exact fit; > 0: the pin crosses a gap and "
                                          "strikes the flanks, mechanisms/geneva/clearance.py; external drive only)"),
+            "lock_clearance": Field("quantity", "rad", default=0.0, nonnegative=True,
+                                    help="angular play of the wheel about its nominal dwell angle in the locking arc "
+                                         "(0: held exactly; > 0: free within +-play/2, striking the play's ends; "
+                                         "needs mechanism.slot_clearance > 0)"),
         },
         "load": {
             "wheel_torque": Field("quantity", "N*m", default=0.0, nonnegative=True,
@@ -149,6 +153,9 @@ class Geneva(Mechanism):
         clearance = m.get("slot_clearance", 0.0)
         if contact.get("model", "rigid") != "rigid" and not clearance > 0:
             raise ValueError("contact.model: 'compliant' needs mechanism.slot_clearance > 0 (the pin in a wider slot)")
+        if m.get("lock_clearance", 0.0) > 0 and not clearance > 0:
+            raise ValueError("mechanism.lock_clearance: lock play needs slot clearance (mechanism.slot_clearance > 0): "
+                             "an exact-fit slot turned off its nominal angle cannot take the pin")
         if clearance > 0:
             return cls._with_clearance(geometry, m, load, contact, clearance, given)
         return cls(geometry, m["crank_inertia"], m["wheel_inertia"], load.get("wheel_torque", 0.0),
@@ -177,6 +184,9 @@ class Geneva(Mechanism):
                 contact.get("friction", 0.0), m.get("crank_damping", 0.0), m.get("wheel_damping", 0.0))
         kw = dict(slot_clearance=clearance, restitution=contact.get("restitution", 0.0))
         if contact.get("model", "rigid") == "compliant":
+            if m.get("lock_clearance", 0.0) > 0:
+                raise ValueError("mechanism.lock_clearance: lock play is modelled with the rigid contact only "
+                                 "(contact.model = 'rigid')")
             # K = E* l: the contact modulus of the thermal model's materials (the scenario loader puts it in
             # contact.modulus) over the contact length, the wheel thickness (docs/theory.md §G2.1)
             stiffness = contact.get("stiffness")
@@ -185,6 +195,8 @@ class Geneva(Mechanism):
                     raise ValueError("contact.stiffness: give it, or the contact modulus (contact.modulus, Pa)")
                 stiffness = contact["modulus"] * geometry.thickness
             return load_ref(cls.compliant_model)(*args, **kw, stiffness=stiffness)
+        if m.get("lock_clearance", 0.0) > 0:
+            kw["lock_clearance"] = m["lock_clearance"]
         return load_ref(cls.clearance_model)(*args, **kw)
 
     def __init__(self, geometry: GenevaGeometry, crank_inertia: float, wheel_inertia: float,
