@@ -83,7 +83,7 @@ class GenevaClearance(Geneva):
         from mechsim.mechanisms.geneva.clearance_plots import impacts_table, lock_impacts_table
         out = {"impacts": impacts_table(events)}
         if self.lock_clearance > 0:
-            out["lock_impacts"] = lock_impacts_table(events)
+            out["lock_impacts"] = lock_impacts_table(events, self.geometry.pitch)
         return out
 
     def extra_summary(self, tables: dict) -> dict:

@@ -59,19 +59,22 @@ def impacts_summary(impacts: pd.DataFrame) -> dict:
     return out
 
 
-def lock_impacts_table(events: pd.DataFrame) -> pd.DataFrame:
+def lock_impacts_table(events: pd.DataFrame, pitch: float) -> pd.DataFrame:
     """One row per impact of the wheel on an end of its locking play (the lock impacts in the dwell and the exit's
     plastic lock impact where the lock takes the wheel): time, crank turn and angle, the end struck (leading:
-    the wheel ahead of its nominal dwell angle), impulse (at the crank radius, the lock constraint's), energy lost."""
+    the wheel ahead of its nominal dwell angle; at exit the side of the lock angle (turn + 1/2) pitch the wheel is
+    on), impulse (at the crank radius, the lock constraint's), energy lost."""
     cols = ["t_s", "turn", "crank_angle_deg", "end", "impulse_N_s", "energy_lost_J", "rebound"]
     if events is None or not len(events) or "impulse_N_s" not in events:
         return pd.DataFrame(columns=cols)
     kind = events["kind"].astype(str)
     ev = events[kind.str.startswith("lock impact") | ((kind == "exit") & events["impulse_N_s"].notna())]
     theta = ev["crank_q"].to_numpy(float)
-    lead = np.where(ev["kind"] == "exit", ev["impulse_N_s"].to_numpy(float) > 0, ev["guard"] == "lock_lead")
+    turn = np.floor((theta + np.pi) / (2 * np.pi))
+    lead = np.where(ev["kind"] == "exit", ev["wheel_q"].to_numpy(float) >= (turn + 0.5) * pitch,
+                    ev["guard"] == "lock_lead")
     return pd.DataFrame({
-        "t_s": ev["t_s"].to_numpy(float), "turn": np.floor((theta + np.pi) / (2 * np.pi)).astype(int),
+        "t_s": ev["t_s"].to_numpy(float), "turn": turn.astype(int),
         "crank_angle_deg": local_angle_deg(theta), "end": np.where(lead, "leading", "trailing"),
         "impulse_N_s": ev["impulse_N_s"].to_numpy(float), "energy_lost_J": ev["energy_lost_J"].to_numpy(float),
         "rebound": ((ev["kind"] == "lock impact") & (ev["to_mode"] == "play")).to_numpy()})

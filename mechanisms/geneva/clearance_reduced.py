@@ -12,9 +12,14 @@ Frictionless (mu = 0), torque or motor drive T_in = T0 - slope theta'. Per mode 
       rho' = r c sin(alpha) / rho. Lagrange in theta: (J1 + J2 G^2) theta'' = T_in - c1 theta'
       - G (J2 G' theta'^2 + c2 G theta' + T_L); the wheel's moment balance gives the normal force
       N = (J2 (G theta'' + G' theta'^2) + c2 G theta' + T_L) / X.
+Lock play delta (`lock_clearance`): the dwell holds the wheel on an end s of its play (psi = psi_lock + s delta/2;
+theta alone) or leaves it free within the play ('play': the free equations above); the ends' impacts reverse the
+wheel's speed, psi'+ = -e psi'- (Newton's law on the lock constraint r (psi - psi_end), which moves the wheel only),
+plastic below the bounce speed (e r |psi'| against it), held where the load presses the wheel on (-s T_L >= 0).
 Events: entry (dwell -> free), gap closure (Newton's law e on the flank's normal, in the mass metric, with the
 normal Phi's gradient (r cos(alpha + beta), -X); rebound speed below the bounce speed: plastic, onto the flank),
-separation (f N falls through 0 -> free), exit (-> dwell at the nominal lock angle). scipy's DOP853 between them.
+separation (f N falls through 0 -> free), exit (-> dwell at the nominal lock angle; with play: a wheel within it
+goes on free, one outside it is taken to the nearer end with its speed removed). scipy's DOP853 between them.
 Written from the geometry alone: nothing of dynamics/ (docs/geneva.md 'Clearance and impacts').
 """
 from __future__ import annotations
@@ -67,11 +72,13 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
         raise ValueError("start in a dwell")
     if alpha >= a0:
         k += 1
+    half_play = getattr(m, "lock_clearance", 0.0) / 2
     mode, lock, f = "dwell", (k - 0.5) * pitch, 0.0
+    end = -1.0                                         # the end of the lock's play the wheel rests on
     t, t_end = float(t_eval[0]), float(t_eval[-1])
-    y = np.array([theta0, omega0, lock, 0.0])          # theta, theta', psi, psi' (psi, psi' read in free only)
+    y = np.array([theta0, omega0, lock + end * half_play, 0.0])   # theta, theta', psi, psi' (psi' read when free)
     out = np.full((len(t_eval), 2), np.nan)
-    out[0] = theta0, lock
+    out[0] = theta0, y[2]
     events = []
 
     def T_in(w):
@@ -83,10 +90,28 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
         a = (T_in(w) - c1 * w - G * (J2 * Gp * w**2 + c2 * G * w + TL)) / (J1 + J2 * G * G)
         return a, (J2 * (G * a + Gp * w**2) + c2 * G * w + TL) / X
 
+    def free_rhs(_t, s):
+        return [s[1], (T_in(s[1]) - c1 * s[1]) / J1, s[3], (-TL - c2 * s[3]) / J2]
+
+    def entry(_t, s):
+        return s[0] - (2 * np.pi * k - a0)
+    entry.terminal, entry.direction = True, 1
+
+    def held(end):                                     # at rest on `end` after a plastic hit: pressed there?
+        return -end * TL >= 0
+
     while t < t_end:
-        if mode == "free":
-            def rhs(_t, s):
-                return [s[1], (T_in(s[1]) - c1 * s[1]) / J1, s[3], (-TL - c2 * s[3]) / J2]
+        if mode == "play":
+            def lead(_t, s):
+                return lock + half_play - s[2]
+
+            def trail(_t, s):
+                return s[2] - lock + half_play
+            lead.terminal = trail.terminal = True
+            lead.direction = trail.direction = -1
+            rhs, evs, names, state = free_rhs, [entry, lead, trail], ["entry", "lock_lead", "lock_trail"], y
+        elif mode == "free":
+            rhs = free_rhs
 
             def close_d(_t, s):
                 return h - offset(m, s[0] - 2 * np.pi * k, s[2] - k * pitch)
@@ -113,25 +138,22 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
                 sep.direction, exit_.direction = -1, 1
                 evs, names = [sep, exit_], ["separation", "exit"]
             else:
-                def entry(_t, s):
-                    return s[0] - (2 * np.pi * k - a0)
-                entry.terminal, entry.direction = True, 1
                 evs, names = [entry], ["entry"]
             state = y[:2]
         mask = (t_eval > t) & (t_eval <= t_end)
         # a rebound's flight can be shorter than a step, its gap zero at both ends: free flights take short steps
         sol = solve_ivp(rhs, (t, t_end), state, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval[mask],
-                        events=evs, max_step=max_free_step if mode == "free" else np.inf)
+                        events=evs, max_step=max_free_step if mode in ("free", "play") else np.inf)
         n = len(sol.t)
         if n:
             idx = np.flatnonzero(mask)[:n]
-            if mode == "free":
+            if mode in ("free", "play"):
                 out[idx] = sol.y[[0, 2]].T[:n]
             elif mode == "engaged":
                 out[idx, 0] = sol.y[0][:n]
                 out[idx, 1] = [k * pitch + flank_motion(m, th - 2 * np.pi * k, f)[0] for th in sol.y[0][:n]]
             else:
-                out[idx] = np.c_[sol.y[0][:n], np.full(n, lock)]
+                out[idx] = np.c_[sol.y[0][:n], np.full(n, y[2])]
         if sol.status != 1:
             if sol.status != 0:
                 raise RuntimeError(sol.message)
@@ -142,11 +164,30 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
         name = names[j]
         alpha = s[0] - 2 * np.pi * k
         if name == "entry":
-            mode, y = "free", np.array([s[0], s[1], lock, 0.0])
+            mode, y = "free", (np.array([s[0], s[1], y[2], 0.0]) if len(s) == 2 else s)
         elif name == "exit":
+            if mode == "engaged":                      # the wheel follows the pin on its flank
+                beta, G, _, _ = flank_motion(m, alpha, f)
+                psi, w2 = k * pitch + beta, G * s[1]
+            else:
+                psi, w2 = s[2], s[3]
             k += 1
             lock = (k - 0.5) * pitch
-            mode, y = "dwell", np.array([s[0], s[1], lock, 0.0])
+            if half_play > 0 and abs(psi - lock) < half_play:
+                mode, y = "play", np.array([s[0], s[1], psi, w2])
+            else:                                      # the lock takes the wheel to its nominal angle or nearer end
+                end = 1.0 if psi - lock >= 0 else -1.0
+                mode = "dwell" if half_play == 0 or held(end) else "play"
+                y = np.array([s[0], s[1], lock + end * half_play, 0.0])
+        elif name in ("lock_lead", "lock_trail"):
+            end = 1.0 if name == "lock_lead" else -1.0
+            if e * g.crank_radius * abs(s[3]) > bounce:
+                mode, y = "play", np.array([s[0], s[1], lock + end * half_play, -e * s[3]])
+                name = "lock impact"
+            else:
+                mode = "dwell" if held(end) else "play"
+                y = np.array([s[0], s[1], lock + end * half_play, 0.0])
+                name = "lock impact" if mode == "dwell" else "lock impact, leaves"
         elif name == "separation":
             beta, G, _, _ = flank_motion(m, alpha, f)
             mode, y = "free", np.array([s[0], s[1], k * pitch + beta, G * s[1]])

@@ -1,0 +1,183 @@
+"""The Geneva's lock play (mechanism.lock_clearance, mechanisms/geneva/clearance.py): zero play is the clearance model
+as it was, the DAE against the reduced-coordinate reference with the play, Newton's law and the energy balance at
+the lock impacts, the lock impacts kept out of the pin contact's heat, convergence as the play shrinks, IDA against
+diffrax, refused input (docs/geneva.md 'Clearance and impacts')."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsim.scenarios.api as api
+from mechsim.dynamics.invariants import energy_closure
+from mechsim.mechanisms.geneva import clearance_reduced
+from mechsim.mechanisms.geneva.clearance import GenevaClearance
+from mechsim.scenarios import runner
+from mechsim.scenarios.schema import ScenarioError
+
+SCENARIO = "geneva-clearance"
+TIGHT = ["solver.rtol=1e-10", "solver.atol=1e-12"]
+#: a fast, lightly loaded index: the wheel overruns the pin late in the index, so the pin leaves on the trailing
+#: flank, the lock takes the wheel at the leading end of a 3.2 mrad play (at most 3.33 mrad here) and the load
+#: swings it back onto the trailing end, where it bounces (restitution 0.5) and comes to rest
+PLAY = ["mechanism.lock_clearance=3.2e-3 rad", "drive.no_load_speed=14 rad/s", "initial.crank_speed=10 rad/s",
+        "load.wheel_torque=0.1 N*m"]
+#: events that only split the integration (a flight's or a play's apex) or are bookkeeping at mu = 0
+SPLITS = ["slip reversal", "flight apex", "play apex"]
+
+
+def run(*settings):
+    return api.run(api.load(SCENARIO, set=list(settings)))
+
+
+def throughput(ts):
+    works = [c for c in ts.columns if c.startswith("work_")]
+    return sum(float(np.max(np.abs(ts[c]))) for c in works) + float(np.max(ts.kinetic_energy_J))
+
+
+def test_zero_lock_clearance_is_the_clearance_model():
+    """lock_clearance 0 (the default) builds the clearance model as it was: its parameters, structure, modes and
+    transition table; a play adds the 'play' mode and the lock's parameters."""
+    plain = runner.plan(api.load(SCENARIO)).mechanism
+    zero = runner.plan(api.load(SCENARIO, set=["mechanism.lock_clearance=0 rad"])).mechanism
+    assert type(zero) is GenevaClearance and zero.lock_clearance == 0.0
+    assert zero.parameter_values() == plain.parameter_values() and "lock_play" not in zero.parameter_names
+    assert zero.structure_key() == plain.structure_key()
+    assert set(zero.modes()) == {"engaged", "dwell", "free"}
+    assert set(zero.transitions()) == set(plain.transitions())
+    played = runner.plan(api.load(SCENARIO, set=PLAY)).mechanism
+    assert set(played.modes()) == {"engaged", "dwell", "free", "play"}
+    assert played.parameter_values()["lock_play"] == 3.2e-3 and played.structure_key() != plain.structure_key()
+
+
+def test_dae_matches_the_reduced_reference_with_lock_play():
+    """Frictionless, restitution 0.5: crank and wheel angles and every event (the entry with the wheel on the
+    trailing end of its play, the pin's impacts, the exit onto the leading end, the wheel's bounces on the trailing
+    end) against the reduced-coordinate integration with its own lock law (scipy DOP853), both at tight
+    tolerances: the clearance test's bounds (1e-7 rad, 1e-8 s)."""
+    scenario = api.load(SCENARIO, set=["contact.friction=0", "duration=0.6 s", *TIGHT, *PLAY])
+    r = api.run(scenario)
+    assert r.failure is None
+    ts, mech = r.timeseries, r.mechanism
+    dv = runner.plan(scenario).drive.parameter_values(0.0)
+    t = ts.t_s.to_numpy()
+    theta, psi, events = clearance_reduced.integrate(mech, dv["drive_T0"], dv["drive_slope"],
+                                                     float(ts.crank_angle_rad[0]), float(ts.crank_speed_rad_s[0]), t)
+    assert np.max(np.abs(theta - ts.crank_angle_rad.to_numpy())) < 1e-7
+    assert np.max(np.abs(psi - ts.wheel_angle_rad.to_numpy())) < 1e-7
+    dae = r.events[~r.events.kind.isin(SPLITS)]
+    assert list(dae.kind) == [e[1] for e in events]
+    assert list(dae.to_mode) == [e[2] for e in events]
+    assert np.max(np.abs(dae.t_s.to_numpy() - [e[0] for e in events])) < 1e-8
+    lock = dae[dae.kind == "lock impact"]
+    assert (lock.to_mode == "play").sum() >= 3 and list(lock.to_mode)[-1] == "dwell"
+    # the wheel stays within its play in the dwell: on its ends, within the integrator's tolerance
+    dwell = ts["mode"].isin(["dwell", "play"]).to_numpy()
+    lock_angle = (np.floor((ts.crank_angle_rad.to_numpy() + np.pi) / (2 * np.pi)) - 0.5) * mech.geometry.pitch
+    offset = ts.wheel_angle_rad.to_numpy() - np.where(ts.crank_angle_rad.to_numpy() % (2 * np.pi) < np.pi,
+                                                      lock_angle + mech.geometry.pitch, lock_angle)
+    assert np.max(np.abs(offset[dwell])) < mech.lock_clearance / 2 * (1 + 1e-6)
+
+
+@pytest.fixture(scope="module")
+def heated():
+    """Friction 0.15, the lumped thermal network: pin impacts, the exit's lock impact and the wheel's bounces (the
+    scenario's tolerances, rtol 1e-8)."""
+    return run("duration=0.6 s", "thermal.model=lumped", *PLAY)
+
+
+def test_newton_law_at_every_lock_impact(heated):
+    """The lock constraint r (psi - psi_end) moves the wheel only: k = G M^-1 G^T = r^2 / J2, and each lock impact's
+    energy lost is (1 - e) / (2 (1 + e)) k P^2 with e the rule's (0 where the wheel stays or leaves at once); a
+    rebound leaves the wheel at -e times its speed."""
+    r = heated
+    assert r.failure is None
+    mech, ev = r.mechanism, r.events
+    hits = ev[ev.kind.str.startswith("lock impact") | ((ev.kind == "exit") & ev.impulse_N_s.notna())]
+    assert len(hits) >= 4
+    k = mech.geometry.crank_radius**2 / mech.wheel_inertia
+    e = np.where((hits.kind == "lock impact") & (hits.to_mode == "play"), mech.restitution, 0.0)
+    np.testing.assert_allclose(hits.energy_lost_J, (1 - e) / (2 * (1 + e)) * k * hits.impulse_N_s**2, rtol=1e-6)
+    assert np.all(hits.energy_lost_J > 0)
+    table = r.extra_tables["lock_impacts"]
+    assert len(table) == len(hits) and r.summary["lock_impacts"]["count"] == len(hits)
+    assert r.summary["lock_impacts"]["energy_lost_J"] == pytest.approx(hits.energy_lost_J.sum(), rel=1e-12)
+    assert set(table.end) == {"leading", "trailing"}
+
+
+def test_energy_closes_with_the_lock_losses(heated):
+    """Works = change of kinetic energy + pin and lock impact losses, on every row, to 1e-6 of the throughput; the
+    lock's losses exceed that tolerance tenfold."""
+    r = heated
+    ts, ev = r.timeseries, r.events
+    lock = ev.energy_lost_J[ev.kind.str.startswith("lock impact") | (ev.kind == "exit")].sum()
+    bound = 1e-6 * throughput(ts)
+    assert lock > 10 * bound                                   # left out, they would open the balance
+    assert np.max(np.abs(energy_closure(ts, ev))) < bound
+
+
+def test_lock_impacts_do_not_heat_the_pin_contact(heated):
+    """The locking arc is another contact than the pin and slot: the pin contact's heat is its friction work plus the
+    pin-flank impacts' losses only (docs/theory.md §G2.2), and its balance still closes."""
+    hb, ev = heated.summary["thermal"]["heat_balance"], heated.events
+    pin = ev.energy_lost_J[ev.kind.str.startswith("impact")].sum()
+    assert hb["impacts_J"] == pytest.approx(pin, rel=1e-12)
+    friction = -heated.summary["energy"]["work_J"]["friction"]
+    assert hb["generated_J"] == pytest.approx(friction + pin, rel=1e-6)
+    assert abs(hb["closure_error_relative"]) < 1e-7, hb
+
+
+def test_convergence_as_the_play_shrinks():
+    """Plastic impacts, the load holding the wheel on the trailing end of its play: as the play delta halves, the
+    crank angle approaches the model without play at first order (the pin meets the slot's driving flank nearer by
+    x_e sin(delta/2), which shifts its entry impact linearly) and the energy lost by delta's linear term."""
+    base = ["contact.restitution=0", "duration=0.8 s", "load.wheel_torque=2 N*m", *TIGHT]
+    ref = run(*base)
+    exact = ref.timeseries.crank_angle_rad.to_numpy()
+    err, lost = [], []
+    for d in (8e-4, 4e-4, 2e-4, 1e-4):
+        r = run(*base, f"mechanism.lock_clearance={d} rad")
+        assert r.failure is None
+        err.append(np.max(np.abs(r.timeseries.crank_angle_rad.to_numpy() - exact)))
+        lost.append(r.events.energy_lost_J.sum() - ref.events.energy_lost_J.sum())
+    orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    assert np.all((orders > 0.95) & (orders < 1.15)), orders
+    np.testing.assert_allclose(np.array(lost[:-1]) / np.array(lost[1:]), 2.0, rtol=2e-3)
+
+
+def test_ida_and_diffrax_agree_with_lock_play():
+    """The same events and angles on both backends through the exit and the wheel's bounces in its play."""
+    over = ["duration=0.36 s", "solver.rtol=1e-9", "solver.atol=1e-11", *PLAY]
+    a, b = run(*over), run(*over, "solver.backend=diffrax")
+    assert a.failure is None and b.failure is None
+    for col in ("crank_angle_rad", "wheel_angle_rad"):
+        assert np.max(np.abs(a.timeseries[col].to_numpy() - b.timeseries[col].to_numpy())) < 1e-7
+    assert list(a.events.kind) == list(b.events.kind) and (a.events.kind == "lock impact").sum() >= 3
+    assert np.max(np.abs(a.events.t_s.to_numpy() - b.events.t_s.to_numpy())) < 1e-7
+    ia, ib = (x.events.impulse_N_s.dropna().to_numpy() for x in (a, b))
+    assert np.max(np.abs(ia - ib)) < 1e-5 * np.max(np.abs(ia))
+
+
+@pytest.mark.parametrize("setting, reason", [
+    ("mechanism.lock_clearance=-1e-3 rad", "must not be negative"),
+    ("mechanism.lock_clearance=nan rad", "finite"),
+    ("mechanism.lock_clearance=0.2 deg", "strike the slot's corner"),
+])
+def test_bad_lock_play_names_the_field(setting, reason):
+    with pytest.raises((ScenarioError, ValueError)) as info:
+        runner.plan(api.load(SCENARIO, set=[setting]))
+    message = str(info.value)
+    assert "mechanism.lock_clearance" in message and reason in message and "\n" not in message
+
+
+def test_lock_play_needs_slot_clearance():
+    """An exact-fit slot turned off its nominal angle cannot take the pin: refused in one line."""
+    with pytest.raises((ScenarioError, ValueError), match=r"mechanism\.lock_clearance: lock play needs slot") as info:
+        runner.plan(api.load(SCENARIO, set=["mechanism.slot_clearance=0 m", "mechanism.lock_clearance=1e-3 rad"]))
+    assert "\n" not in str(info.value)
+
+
+def test_cli_refuses_a_play_too_large(tmp_path):
+    from cli_helpers import invoke, one_line_error
+    r = invoke("run", SCENARIO, "--set", "mechanism.lock_clearance=1 deg", "--out", tmp_path / "o", "--quiet")
+    assert r.exit_code == 2 and "mechanism.lock_clearance" in one_line_error(r)
+    assert not (tmp_path / "o").exists()
