@@ -168,4 +168,7 @@ def impacts_line(summary: dict) -> str | None:
                  f"lasting {imp['duration_at_peak_force_s'] * 1e6:.3g} us")
     flash = ((summary.get("thermal") or {}).get("impacts") or {})
     rise = flash.get("flash_rise_max_K")
-    return text + (f"; largest impact flash +{rise:.3g} K (estimate)" if rise is not None else "")
+    lock = summary.get("lock_impacts") or {}
+    return text + (f"; largest impact flash +{rise:.3g} K (estimate)" if rise is not None else "") + (
+        f"; lock impacts {lock['count']} (largest {lock['peak_impulse_N_s'] * 1e3:.4g} mN*s at the crank radius, "
+        f"energy lost {lock['energy_lost_J'] * 1e3:.4g} mJ)" if lock.get("count") else "")

@@ -126,6 +126,22 @@ def test_lock_impacts_do_not_heat_the_pin_contact(heated):
     assert abs(hb["closure_error_relative"]) < 1e-7, hb
 
 
+def test_lock_impacts_in_console_report_and_figure(heated):
+    """The console's impacts line and report.html name the lock impacts' count and energy; the lock figure draws
+    the wheel's offset inside the play's ends."""
+    from mechsim.scenarios.console import impacts_line
+    from mechsim.scenarios.output.report_html import report_html
+    lock = heated.summary["lock_impacts"]
+    assert f"lock impacts {lock['count']} (largest {lock['peak_impulse_N_s'] * 1e3:.4g} mN*s" in impacts_line(
+        heated.summary)
+    assert "lock impacts: count" in report_html(heated, {})
+    fig = heated.mechanism.extra_figures(heated.timeseries, heated.extra_tables)["lock_play_vs_angle"]
+    ax = fig.axes[0]
+    half = heated.mechanism.lock_clearance / 2 * 1e3
+    drawn = np.concatenate([line.get_ydata() for line in ax.get_lines()[:-2]] if len(ax.get_lines()) > 2 else [[]])
+    assert len(drawn) and np.max(np.abs(drawn)) <= half * (1 + 1e-6)
+
+
 def test_convergence_as_the_play_shrinks():
     """Plastic impacts, the load holding the wheel on the trailing end of its play: as the play delta halves, the
     crank angle approaches the model without play at first order (the pin meets the slot's driving flank nearer by

@@ -95,11 +95,19 @@ class GenevaClearance(Geneva):
         return out
 
     def extra_figures(self, timeseries, tables: dict) -> dict:
-        """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn."""
+        """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn; with lock play
+        lock_play_vs_angle: the wheel in its play and the lock impacts over the dwell."""
         from mechsim.mechanisms.geneva.clearance_plots import gap_figure, impacts_table
         impacts = tables.get("impacts")
-        return {"clearance_vs_angle": gap_figure(timeseries, impacts if impacts is not None else impacts_table(None),
-                                                 self.slot_clearance)}
+        out = {"clearance_vs_angle": gap_figure(timeseries, impacts if impacts is not None else impacts_table(None),
+                                                self.slot_clearance)}
+        if self.lock_clearance > 0:
+            from mechsim.mechanisms.geneva.clearance_plots import lock_figure, lock_impacts_table
+            lock = tables.get("lock_impacts")
+            out["lock_play_vs_angle"] = lock_figure(
+                timeseries, lock if lock is not None else lock_impacts_table(None, self.geometry.pitch),
+                self.lock_clearance, self.geometry.pitch, self.geometry.engagement_half_angle)
+        return out
 
     def contact_starts(self, table, events) -> np.ndarray:
         """Times at which the pin came to rest on a flank (a plastic impact into the engaged mode): where the

@@ -205,6 +205,10 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
         parts += ["<h2>Impacts</h2>", "<p>pin-flank impacts of the slot clearance (docs/geneva.md, 'Clearance and "
                   "impacts'); every impact in impacts.csv</p>",
                   _table(["item", "value", "unit"], quantity_rows(s["impacts"]))]
+    if s.get("lock_impacts"):
+        parts += ["<p>the wheel's impacts on the ends of its locking play (mechanism.lock_clearance; impulse at the "
+                  "crank radius); every one in lock_impacts.csv</p>",
+                  _table(["item", "value", "unit"], quantity_rows(s["lock_impacts"], "lock impacts: "))]
     if s.get("events"):
         parts += ["<h2>Events</h2>", _table(["kind", "count"], [[k, v] for k, v in s["events"].items()])]
     groups = s.get("warning_groups", [])
