@@ -15,7 +15,8 @@ Frictionless (mu = 0), torque or motor drive T_in = T0 - slope theta'. Per mode 
 Lock play delta (`lock_clearance`): the dwell holds the wheel on an end s of its play (psi = psi_lock + s delta/2;
 theta alone) or leaves it free within the play ('play': the free equations above); the ends' impacts reverse the
 wheel's speed, psi'+ = -e psi'- (Newton's law on the lock constraint r (psi - psi_end), which moves the wheel only),
-plastic below the bounce speed (e r |psi'| against it), held where the load presses the wheel on (-s T_L >= 0).
+plastic below the bounce speed (e r |psi'| against it), held where the load presses the wheel on (-s T_L >= 0); the
+play is split where the wheel turns back, so that a short rebound cannot be stepped over.
 Events: entry (dwell -> free), gap closure (Newton's law e on the flank's normal, in the mass metric, with the
 normal Phi's gradient (r cos(alpha + beta), -X); rebound speed below the bounce speed: plastic, onto the flank),
 separation (f N falls through 0 -> free), exit (-> dwell at the nominal lock angle; with play: a wheel within it
@@ -107,9 +108,12 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
 
             def trail(_t, s):
                 return s[2] - lock + half_play
-            lead.terminal = trail.terminal = True
-            lead.direction = trail.direction = -1
-            rhs, evs, names, state = free_rhs, [entry, lead, trail], ["entry", "lock_lead", "lock_trail"], y
+            def apex(_t, s):                           # the wheel turns back: its speed away from `end` ends
+                return -end * s[3]
+            lead.terminal = trail.terminal = apex.terminal = True
+            lead.direction = trail.direction = apex.direction = -1
+            rhs, evs, state = free_rhs, [entry, lead, trail, apex], y
+            names = ["entry", "lock_lead", "lock_trail", "play_apex"]
         elif mode == "free":
             rhs = free_rhs
 
@@ -143,7 +147,7 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
         mask = (t_eval > t) & (t_eval <= t_end)
         # a rebound's flight can be shorter than a step, its gap zero at both ends: free flights take short steps
         sol = solve_ivp(rhs, (t, t_end), state, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval[mask],
-                        events=evs, max_step=max_free_step if mode in ("free", "play") else np.inf)
+                        events=evs, max_step=max_free_step if mode == "free" else np.inf)
         n = len(sol.t)
         if n:
             idx = np.flatnonzero(mask)[:n]
@@ -174,11 +178,14 @@ def integrate(m, drive_T0: float, drive_slope: float, theta0: float, omega0: flo
             k += 1
             lock = (k - 0.5) * pitch
             if half_play > 0 and abs(psi - lock) < half_play:
-                mode, y = "play", np.array([s[0], s[1], psi, w2])
+                mode, y, end = "play", np.array([s[0], s[1], psi, w2]), (-1.0 if w2 >= 0 else 1.0)
             else:                                      # the lock takes the wheel to its nominal angle or nearer end
                 end = 1.0 if psi - lock >= 0 else -1.0
                 mode = "dwell" if half_play == 0 or held(end) else "play"
                 y = np.array([s[0], s[1], lock + end * half_play, 0.0])
+        elif name == "play_apex":                      # splits the play only: a short rebound cannot be stepped over
+            end, y = -end, s
+            continue
         elif name in ("lock_lead", "lock_trail"):
             end = 1.0 if name == "lock_lead" else -1.0
             if e * g.crank_radius * abs(s[3]) > bounce:
