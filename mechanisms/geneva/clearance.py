@@ -9,13 +9,18 @@ Modes (docs/geneva.md 'Clearance and impacts'):
       friction as in the exact-fit model, with the pin centre's sliding speed along the slot
       v_s = theta' r sin(alpha + beta) + psi' Phi (the wheel frame turning at the offset Phi);
   free: no constraint; the wheel turns under its own inertia, load and damping, the crank under its drive;
-  dwell: as in the exact-fit model, the wheel held at its nominal lock angle (no locking play).
+  dwell: as in the exact-fit model, the wheel held at its nominal lock angle; with lock play delta
+      (lock_clearance > 0) held on an end s of its play, r (psi - psi_lock - s delta/2) = 0, under the load;
+  play (lock_clearance > 0 only): the wheel free within psi_lock +- delta/2, as in free flight.
 Transitions: entry (dwell -> free: the locked wheel meets the pin on the slot's centre line, both gaps c_s/2
 open); gap closure on either flank (free -> engaged, a Newton impact with restitution e on the flank's normal
 relative velocity, in the kinetic-energy metric; the pin rebounds into the gap unless the rebound speed e v_n is
 below BOUNCE_SPEED, where it stays on the flank, a plastic impact); separation (f N falls through 0: engaged ->
 free); exit (the pin leaves the slot: the locking arc takes the wheel at its nominal dwell angle, a plastic lock
 impact that also removes the wheel's small lag behind it, at most asin(c_s / (2 x_exit)); docs/geneva.md).
+With lock play: entry with the wheel where the play left it (the gaps c_s/2 +- x_e sin d); the ends of the play
+struck with the same Newton law on the lock constraint; exit into the play, or onto its nearer end with a plastic
+lock impact where the pin holds the wheel outside it (docs/theory.md §G2.1 'Lock play').
 The impact is frictionless (Newton's law along the normal only). Theory and sources: docs/theory.md §G2.1.
 """
 from __future__ import annotations
