@@ -144,7 +144,7 @@ def test_lock_impacts_do_not_heat_the_pin_contact(heated):
 
 
 def test_lock_impacts_in_console_report_and_figure(heated):
-    """The console's impacts line and report.html name the lock impacts' count and energy; the lock figure draws
+    """The console's impacts line, report.html and a sweep table's row name the lock impacts; the lock figure draws
     the wheel's offset inside the play's ends."""
     from mechsim.scenarios.console import impacts_line
     from mechsim.scenarios.output.report_html import report_html
@@ -152,6 +152,9 @@ def test_lock_impacts_in_console_report_and_figure(heated):
     assert f"lock impacts {lock['count']} (largest {lock['peak_impulse_N_s'] * 1e3:.4g} mN*s" in impacts_line(
         heated.summary)
     assert "lock impacts: count" in report_html(heated, {})
+    from mechsim.scenarios.studies.sweep.rows import summary_row
+    row = summary_row(heated.summary)
+    assert row["lock_impacts"] == lock["count"] and row["lock_peak_impulse_N_s"] == lock["peak_impulse_N_s"]
     fig = heated.mechanism.extra_figures(heated.timeseries, heated.extra_tables)["lock_play_vs_angle"]
     ax = fig.axes[0]
     half = heated.mechanism.lock_clearance / 2 * 1e3

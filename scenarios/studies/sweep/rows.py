@@ -122,6 +122,11 @@ def summary_row(summary: dict) -> dict:
         row["impacts_energy_lost_J"] = impacts["energy_lost_J"]
         if "peak_force_N" in impacts:               # the compliant contact's located peak force
             row["peak_impact_force_N"] = impacts["peak_force_N"]
+    lock = summary.get("lock_impacts")
+    if lock:                                        # the wheel's impacts in its locking play (lock clearance)
+        row["lock_peak_impulse_N_s"] = lock["peak_impulse_N_s"]
+        row["lock_impacts"] = lock["count"]
+        row["lock_impacts_energy_lost_J"] = lock["energy_lost_J"]
     for k, v in (summary.get("solver") or {}).items():
         if _scalar(v) and not k.endswith("_note"):
             row[f"solver_{k}"] = v
