@@ -95,6 +95,22 @@ def test_dae_matches_the_reduced_reference_with_lock_play(settings, duration, dt
     assert np.max(np.abs(offset[dwell])) < mech.lock_clearance / 2 * (1 + 1e-6)
 
 
+def test_without_load_the_wheel_stays_where_the_lock_put_it():
+    """No wheel torque: a wheel at rest on an end has a lock force of exactly zero; it stays there (no release, no
+    motion) through the dwell, as the reduced reference holds it (-s T_L >= 0)."""
+    r = run("duration=1.2 s", "mechanism.lock_clearance=3.2e-3 rad", "load.wheel_torque=0 N*m")
+    assert r.failure is None
+    ev, ts = r.events, r.timeseries
+    assert "lock release" not in set(ev.kind) and (ev.kind == "entry").sum() == 2
+    t_exit, t_entry = ev.t_s[ev.kind == "exit"].iloc[0], ev.t_s[ev.kind == "entry"].iloc[1]
+    held = ((ts.t_s > t_exit) & (ts.t_s < t_entry)).to_numpy()
+    assert set(ts["mode"][held]) == {"dwell"}
+    w = ts.wheel_angle_rad.to_numpy()[held]
+    pitch = r.mechanism.geometry.pitch
+    offset = w - (np.round(w / pitch - 0.5) + 0.5) * pitch     # the pin left on the trailing flank: leading end
+    assert np.allclose(offset, r.mechanism.lock_clearance / 2, rtol=0, atol=1e-9)
+
+
 @pytest.fixture(scope="module")
 def heated():
     """Friction 0.15, the lumped thermal network: pin impacts, the exit's lock impact and the wheel's bounces (the

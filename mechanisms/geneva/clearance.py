@@ -266,6 +266,10 @@ class GenevaClearance(Geneva):
         return xp.where(u >= 0, 1.0, -1.0)
 
     # -- the locking arc's play in the dwell (mechanism.lock_clearance > 0) -------------------------------------
+    #: the pull (N, at the crank radius) at which a held wheel leaves its end of the play: a wheel at rest without load
+    #: has a lock force of exactly zero, a release guard at zero would be identically zero (no root to find)
+    LOCK_RELEASE_FORCE = 1e-9
+
     def _checked_lock_play(self, play) -> float:
         """The lock's angular play delta (rad), refused where the pin could not enter the slot it meets: a wheel
         turned by delta/2 off its nominal dwell angle moves the slot's centre line by x_e sin(delta/2) at the pin's
@@ -311,7 +315,8 @@ class GenevaClearance(Geneva):
         powers = {"load": -T_L * w2, "friction": zero, "damping": -P("c1") * w1**2 - P("c2") * w2**2}
         held = replace(
             dwell, constraints=(r * (psi - lock - end * half),), force=(-P("c1") * w1, -P("c2") * w2 - T_L),
-            guards=(guards["entry"], Guard("lock_release", end * lam, -1), guards["stall"], guards["rest"]),
+            guards=(guards["entry"], Guard("lock_release", end * lam + self.LOCK_RELEASE_FORCE, -1), guards["stall"],
+                    guards["rest"]),
             powers=powers)
         play = Mode(
             name="play", constraints=(), force=(-P("c1") * w1, -P("c2") * w2 - T_L),
