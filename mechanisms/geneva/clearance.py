@@ -345,7 +345,8 @@ class GenevaClearance(Geneva):
                                when=lambda q, v, p, xp: p["restitution"] * p["r"] * xp.abs(v[1]) - p["bounce_speed"],
                                restitution=self.restitution, contact="dwell"),
                 TransitionRule("dwell", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact",
-                               restitution=0.0, contact="dwell", when=lambda q, v, p, xp, e=e: self._lock_pressing(p, e)),
+                               restitution=0.0, contact="dwell",
+                               when=lambda q, v, p, xp, e=e: self._lock_pressing(p, e)),
                 TransitionRule("play", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact, leaves",
                                restitution=0.0, contact="dwell"))
         exit_ = table[("engaged", "exit")]
@@ -355,9 +356,11 @@ class GenevaClearance(Geneva):
 
         def nearer(q, v, p, xp):
             return {**exit_.updates(q, v, p, xp), "lock_end": xp.where(offset(q, p) >= 0, 1.0, -1.0)}
+        def inside(q, v, p, xp):                          # the wheel within its play: on free, moving away
+            return {**exit_.updates(q, v, p, xp), "lock_end": xp.where(v[1] >= 0, -1.0, 1.0)}
         rules = (
-            TransitionRule("play", lambda q, v, p, xp: {**exit_.updates(q, v, p, xp), "lock_end": xp.where(
-                v[1] >= 0, -1.0, 1.0)}, kind="exit", when=lambda q, v, p, xp: p["lock_play"] / 2 - xp.abs(offset(q, p))),
+            TransitionRule("play", inside, kind="exit",
+                           when=lambda q, v, p, xp: p["lock_play"] / 2 - xp.abs(offset(q, p))),
             TransitionRule("dwell", nearer, kind="exit", restitution=0.0, contact="dwell",
                            when=lambda q, v, p, xp: self._lock_pressing(p, xp.where(offset(q, p) >= 0, 1.0, -1.0))),
             TransitionRule("play", nearer, kind="exit", restitution=0.0, contact="dwell"))
