@@ -228,6 +228,13 @@ def test_lock_play_needs_slot_clearance():
     assert "\n" not in str(info.value)
 
 
+def test_lock_play_needs_the_rigid_contact():
+    """The compliant contact's model has no play modes: lock play with it is refused in one line."""
+    with pytest.raises((ScenarioError, ValueError), match=r"mechanism\.lock_clearance: .*rigid") as info:
+        runner.plan(api.load(SCENARIO, set=["contact.model=compliant", "mechanism.lock_clearance=1e-3 rad"]))
+    assert "\n" not in str(info.value)
+
+
 def test_cli_refuses_a_play_too_large(tmp_path):
     from cli_helpers import invoke, one_line_error
     r = invoke("run", SCENARIO, "--set", "mechanism.lock_clearance=1 deg", "--out", tmp_path / "o", "--quiet")
