@@ -19,6 +19,7 @@ re-integration's error from the row's state (the run's own error at that row).
 """
 from __future__ import annotations
 
+from collections.abc import MutableMapping
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -213,7 +214,68 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
     """{column: {'max': Extremum, 'min': Extremum}} of the table's `values` (arrays over its rows at times t),
     refined by `read(interval, position, times)` (every column at those instants of the interval, as a dict of
     arrays, read from the interval's row at `position`). Brackets within a few rows of each other are read
-    together, from the row before the first of them (one forward integration per reading)."""
+    together, from the row before the first of them (one forward integration per reading). The same as
+    `plan`, its requests read (`read_all`), then `Plan.finish`: a caller that locates several tables reads all
+    their requests together."""
+    p = plan(t, values, intervals, limit)
+    return p.finish(read_all(read, p.requests), read)
+
+
+def read_all(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
+    """The readings of every (interval, position, times) in one call where the reader reads many at once
+    (`read_many`); None for each request it did not read (read alone by the caller)."""
+    many = getattr(read, "read_many", None)
+    return many(requests) if many is not None and requests else [None] * len(requests)
+
+
+@dataclass
+class Plan:
+    """What `locate` does before any reading: the jobs (each column's and sense's candidates), the brackets read
+    together (`clusters`, each job's grid) and the requests: each cluster's readings, then each interval's start
+    where a constant stretch holds its first row (`starts`)."""
+
+    t: np.ndarray
+    values: dict
+    intervals: list
+    jobs: list
+    ties: dict
+    clusters: list
+    grids: list
+    starts: dict
+    requests: list
+
+    def finish(self, tables: list[dict | None], read: Reader) -> dict[str, dict[str, Extremum]]:
+        """`locate`'s result from the readings of `requests` (None: read here, alone)."""
+        t, values, intervals = self.t, self.values, self.intervals
+        n = len(self.clusters)
+        for (k, group), request, table in zip(self.starts.items(), self.requests[n:], tables[n:]):
+            _constant_from_start(intervals[k], k, group, read, table)
+        ready = []
+        for group, grids, request, table in zip(self.clusters, self.grids, self.requests[:n], tables[:n]):
+            try:
+                ready.append((request[0], group, grids, table if table is not None else read(*request)))
+            except ReadingFailed:          # the rows' value stands, and says so
+                for j in group:
+                    r = intervals[j.interval].rows[j.anchor]
+                    j.best_f, j.best_t, j.limit = j.sampled, float(t[r]), None
+                    j.best_row = {c: v[r] for c, v in values.items()}
+                    j.where = "output row (the re-integration between rows failed)"
+        _refine(ready)
+        out: dict[str, dict[str, Extremum]] = {}
+        for j in self.jobs:
+            slot = out.setdefault(j.column, {})
+            name = "max" if j.sense > 0 else "min"
+            if j.best_row is None:
+                continue
+            e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.sense * j.sampled, j.limit, j.edge,
+                         j.interval, j.constant)
+            if _beats(e, slot.get(name), j.sense, self.ties[j.column]):
+                slot[name] = e
+        return out
+
+
+def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], limit: int = CANDIDATES) -> Plan:
+    """`locate`'s candidates, brackets and reading requests (see `Plan`)."""
     jobs: list[_Job] = []
     ties: dict[str, float] = {}
     starts: dict[int, list[_Job]] = {}          # constant stretches from an interval's start (read there)
@@ -242,8 +304,6 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
                     else:
                         j.where = "output row (constant from here)"
                 jobs.append(j)
-    for k, group in starts.items():
-        _constant_from_start(intervals[k], k, group, read)
     jobs.sort(key=lambda j: (j.interval, j.anchor))
     clusters: list[list[_Job]] = []
     for j in jobs:
@@ -255,36 +315,16 @@ def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interva
             clusters.append([j])
     plans = [_grids(group) for group in clusters]
     requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), p[1]) for g, p in zip(clusters, plans)]
-    many = getattr(read, "read_many", None)
-    tables = many(requests) if many is not None else [None] * len(requests)
-    for group, (grids, _), request, table in zip(clusters, plans, requests, tables):
-        try:
-            _refine(request[0], group, grids, table if table is not None else read(*request))
-        except ReadingFailed:          # the rows' value stands, and says so
-            for j in group:
-                r = intervals[j.interval].rows[j.anchor]
-                j.best_f, j.best_t, j.limit = j.sampled, float(t[r]), None
-                j.best_row = {c: v[r] for c, v in values.items()}
-                j.where = "output row (the re-integration between rows failed)"
-    out: dict[str, dict[str, Extremum]] = {}
-    for j in jobs:
-        slot = out.setdefault(j.column, {})
-        name = "max" if j.sense > 0 else "min"
-        if j.best_row is None:
-            continue
-        e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.sense * j.sampled, j.limit, j.edge,
-                     j.interval, j.constant)
-        if _beats(e, slot.get(name), j.sense, ties[j.column]):
-            slot[name] = e
-    return out
+    requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
+    return Plan(t, values, intervals, jobs, ties, clusters, [p[0] for p in plans], starts, requests)
 
 
-def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader) -> None:
+def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader, table: dict | None = None) -> None:
     """Constant stretches that hold their interval's first row lie at the interval's start: every column is read
-    there (the one-sided limit after an event; the window's start for the first interval). The value stays the
-    rows' (exact); if the reading fails, the stretch's first row stands."""
+    there (the one-sided limit after an event; the window's start for the first interval; `table`: that reading
+    where already read). The value stays the rows' (exact); if the reading fails, the stretch's first row stands."""
     try:
-        row = _at(read(iv, 0, np.array([iv.lo])), 0)
+        row = _at(table if table is not None else read(iv, 0, np.array([iv.lo])), 0)
     except ReadingFailed:
         for j in group:
             j.best_t = j.t_row
@@ -302,14 +342,44 @@ def _at(table: dict, pos, w: np.ndarray | None = None) -> dict:
     w; a column that is not float: the reading of the largest weight)."""
     out = {}
     for c, v in table.items():
-        v = np.asarray(v)
-        if w is None:
-            out[c] = v[pos]
-        elif v.dtype.kind == "f":
-            out[c] = float(w @ v[pos])
-        else:
-            out[c] = v[pos[int(np.argmax(w))]]
+        out[c] = _at_one(np.asarray(v), pos, w)
     return out
+
+
+def _at_one(v: np.ndarray, pos, w: np.ndarray | None):
+    """`_at` of one column."""
+    if w is None:
+        return v[pos]
+    if v.dtype.kind == "f":
+        return float(w @ v[pos])
+    return v[pos[int(np.argmax(w))]]
+
+
+class _Row(MutableMapping):
+    """`_at` of a table as a mapping, each column evaluated when first read (a summary reads one or two)."""
+
+    def __init__(self, table: dict, pos, w: np.ndarray | None):
+        self._table, self._pos, self._w, self._got = table, pos, w, {}
+
+    def __getitem__(self, c):
+        if c not in self._got:
+            self._got[c] = _at_one(np.asarray(self._table[c]), self._pos, self._w)
+        return self._got[c]
+
+    def __setitem__(self, c, value):
+        self._got[c] = value
+
+    def __delitem__(self, c):
+        raise TypeError("a located row's columns are fixed")
+
+    def __iter__(self):
+        return iter(dict.fromkeys([*self._table, *self._got]))
+
+    def __len__(self):
+        return len(dict.fromkeys([*self._table, *self._got]))
+
+    def __repr__(self):
+        return repr(dict(self))
 
 
 def _stencil_tables(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -326,33 +396,44 @@ _BARY, _INVERSE = _stencil_tables(STENCIL)
 _SEARCH = np.linspace(-1.0, 1.0, 33)
 
 
-def _stencil_weights(x: float) -> np.ndarray:
-    """Weights of the polynomial through the STENCIL nodes 0..STENCIL-1 at x (barycentric form)."""
-    d = x - np.arange(STENCIL, dtype=float)
-    hit = np.flatnonzero(d == 0)
-    if len(hit):
-        w = np.zeros(STENCIL)
-        w[hit[0]] = 1.0
-        return w
-    w = _BARY / d
-    return w / w.sum()
+def _stencil_weights(x: np.ndarray) -> np.ndarray:
+    """Weights (rows) of the polynomial through the STENCIL nodes 0..STENCIL-1 at each x (barycentric form)."""
+    d = np.asarray(x, dtype=float)[:, None] - np.arange(STENCIL, dtype=float)
+    hit = d == 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = _BARY / d
+        w = w / w.sum(axis=1, keepdims=True)
+    on = hit.any(axis=1)
+    w[on] = (np.cumsum(hit[on], axis=1) == 1) & hit[on]          # the first node it lies on
+    return w
 
 
-def _poly_max(f: np.ndarray, b: int) -> tuple[float, np.ndarray]:
-    """(x*, weights): the maximum of the polynomial through the STENCIL readings f within a grid step of the best
-    one b (x in grid steps from the stencil's first node): sampled, then Newton's method on its derivative; the
-    weights give any column at x*."""
-    c = _INVERSE[b] @ f                       # coefficients in x - b
-    d1 = c[1:] * np.arange(1, STENCIL)
-    d2 = d1[1:] * np.arange(1, STENCIL - 1)
-    lo, hi = max(-1.0, -float(b)), min(1.0, float(STENCIL - 1 - b))
-    xs = np.clip(_SEARCH, lo, hi)
-    x = float(xs[np.argmax(np.polynomial.polynomial.polyval(xs, c))])
-    for _ in range(4):
-        g, h = np.polynomial.polynomial.polyval(x, d1), np.polynomial.polynomial.polyval(x, d2)
-        if not h < 0:
-            break
-        x = min(max(x - g / h, lo), hi)
+def _horner(c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Each row's polynomial (monomial coefficients c[m], lowest first) at x[m] (a number or a row of them), by
+    Horner's rule as numpy's polyval."""
+    c = c if x.ndim == 1 else c[:, :, None]
+    v = c[:, -1] + x * 0
+    for i in range(2, c.shape[1] + 1):
+        v = c[:, -i] + v * x
+    return v
+
+
+def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x*, weights) of each row of f (STENCIL readings, their best at b): the maximum of the polynomial through
+    them within a grid step of the best one (x in grid steps from the stencil's first node): sampled, then
+    Newton's method on its derivative; the weights give any column at x*."""
+    c = np.matmul(_INVERSE[b], f[:, :, None])[:, :, 0]           # coefficients in x - b
+    d1 = c[:, 1:] * np.arange(1, STENCIL)
+    d2 = d1[:, 1:] * np.arange(1, STENCIL - 1)
+    lo, hi = np.maximum(-1.0, -b.astype(float)), np.minimum(1.0, (STENCIL - 1 - b).astype(float))
+    xs = np.clip(_SEARCH[None, :], lo[:, None], hi[:, None])
+    x = xs[np.arange(len(b)), np.argmax(_horner(c, xs), axis=1)]
+    going = np.ones(len(b), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(4):
+            g, h = _horner(d1, x), _horner(d2, x)
+            going &= h < 0
+            x = np.where(going, np.minimum(np.maximum(x - g / h, lo), hi), x)
     x = b + x
     return x, _stencil_weights(x)
 
@@ -364,49 +445,70 @@ def _grids(group: list[_Job]) -> tuple[list[np.ndarray], np.ndarray]:
     return grids, np.unique(np.concatenate(grids + [np.array([j.t_row for j in group])]))
 
 
-def _refine(iv: Interval, group: list[_Job], grids: list[np.ndarray], table: dict) -> None:
-    """Each job's maximum in its bracket from one pass of readings (`_grids`, read from one anchor row): the
-    polynomial through the STENCIL readings around the best one gives t* and the value, and every column there
-    (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far below the tolerance)."""
-    tt = np.asarray(table["t_s"], dtype=float)
-    for j, g in zip(group, grids):
-        got = _refine_one(iv, j, g, tt, table)
-        if got is not None:                     # every column at the best instant, read out once
-            j.best_row = _at(table, *got)
-            if got[1] is not None:
-                j.best_row["t_s"] = j.best_t
-
-
-def _refine_one(iv: Interval, j: _Job, g: np.ndarray, tt: np.ndarray, table: dict) -> tuple | None:
-    """`_refine` of one job: sets its value, instant and where; returns (positions, weights or None) of the
-    readings that give every column at its instant (`_at`), None where no reading is finite."""
-    pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
-    column = np.asarray(table[j.column], dtype=float)
-    f = j.sense * column[pos]
-    if not np.isfinite(f).any():
-        return None
-    f = np.where(np.isfinite(f), f, -np.inf)
-    b = int(np.argmax(f >= f.max() - j.tie))          # the earliest of readings tied to round-off
-    j.best_f, j.best_t, best = float(f[b]), float(g[b]), (pos[b], None)
-    r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
-    if j.sense * column[r] > j.best_f + j.tie:        # the row itself (between grid readings)
-        j.best_f, j.best_t, best = float(j.sense * column[r]), float(tt[r]), (r, None)
-    at_lo, at_hi = b == 0 and g[0] == iv.lo, b == len(g) - 1 and g[-1] == iv.hi
-    if at_lo or at_hi or len(g) < STENCIL:           # the one-sided limit at the interval's end
-        j.where = (f"{iv.lo_kind} (limit from after)" if at_lo else f"{iv.hi_kind} (limit from before)"
-                   if at_hi else "output row")
-        j.limit = "after" if at_lo else "before" if at_hi else None
-        return best
-    c0 = min(max(b - STENCIL // 2, 0), len(g) - STENCIL)
-    part = f[c0:c0 + STENCIL]
-    if not np.isfinite(part).all():
-        return best
-    x, w = _poly_max(part, b - c0)
-    value = float(w @ part)
-    if value >= j.best_f:
-        j.best_f, j.best_t, j.where = value, float(g[c0] + x * (g[1] - g[0])), "interior"
-        best = (pos[c0:c0 + STENCIL], w)
-    return best
+def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) -> None:
+    """Each job's maximum in its bracket from one pass of readings (`_grids`, each group's table read from one
+    anchor row), all jobs together: the polynomial through the STENCIL readings around the best one gives t* and
+    the value, and every column there (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far
+    below the tolerance); at an interval's end the one-sided limit there."""
+    jobs, tables, G, P, F, n_g, ivs, R, FR, TR = [], [], [], [], [], [], [], [], [], []
+    for iv, group, grids, table in ready:
+        tt = np.asarray(table["t_s"], dtype=float)
+        for j, g in zip(group, grids):
+            pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
+            column = np.asarray(table[j.column], dtype=float)
+            r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
+            jobs.append(j)
+            tables.append(table)
+            ivs.append(iv)
+            n_g.append(len(g))
+            short = len(g) < FIRST_GRID                # a bracket of one instant: its reading repeated
+            G.append(np.full(FIRST_GRID, g[-1]) if short else g)
+            P.append(np.full(FIRST_GRID, pos[-1]) if short else pos)
+            F.append(j.sense * column[P[-1]])
+            R.append(r)
+            FR.append(j.sense * column[r])
+            TR.append(tt[r])
+    if not jobs:
+        return
+    G, P, F, n_g, R, FR, TR = (np.array(a) for a in (G, P, F, n_g, R, FR, TR))
+    sense_tie = np.array([j.tie for j in jobs])
+    every = np.arange(len(jobs))
+    held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row
+    F = np.where(np.isfinite(F), F, -np.inf)
+    with np.errstate(invalid="ignore"):
+        b = np.argmax(F >= (F.max(axis=1) - sense_tie)[:, None], axis=1)    # the earliest of ties to round-off
+        best_f, best_t, best_pos = F[every, b], G[every, b], P[every, b]
+        row = FR > best_f + sense_tie                 # the row itself (between grid readings)
+    best_f, best_t, best_pos = np.where(row, FR, best_f), np.where(row, TR, best_t), np.where(row, R, best_pos)
+    lo = np.array([iv.lo for iv in ivs])
+    hi = np.array([iv.hi for iv in ivs])
+    at_lo = (b == 0) & (G[:, 0] == lo)
+    at_hi = (b == n_g - 1) & (G[every, n_g - 1] == hi)
+    end = at_lo | at_hi | (n_g < STENCIL)            # the one-sided limit at the interval's end
+    c0 = np.clip(b - STENCIL // 2, 0, np.maximum(n_g - STENCIL, 0))
+    part = F[every[:, None], np.minimum(c0[:, None] + np.arange(STENCIL), FIRST_GRID - 1)]
+    poly = ~end & np.isfinite(part).all(axis=1) & held
+    x = np.full(len(jobs), np.nan)
+    W = np.full((len(jobs), STENCIL), np.nan)
+    value = np.full(len(jobs), -np.inf)
+    if poly.any():
+        x[poly], W[poly] = _poly_max(part[poly], (b - c0)[poly])
+        value[poly] = [w @ f for w, f in zip(W[poly], part[poly])]       # as one job's dot product
+    better = poly & (value >= best_f)
+    for m in np.flatnonzero(held).tolist():
+        j, iv = jobs[m], ivs[m]
+        if better[m]:
+            j.best_f, j.where = float(value[m]), "interior"
+            j.best_t = float(G[m, c0[m]] + x[m] * (G[m, 1] - G[m, 0]))
+            j.best_row = _Row(tables[m], P[m, c0[m]:c0[m] + STENCIL], W[m])
+            j.best_row["t_s"] = j.best_t
+            continue
+        j.best_f, j.best_t = float(best_f[m]), float(best_t[m])
+        j.best_row = _Row(tables[m], int(best_pos[m]), None)
+        if end[m]:
+            j.where = (f"{iv.lo_kind} (limit from after)" if at_lo[m] else f"{iv.hi_kind} (limit from before)"
+                       if at_hi[m] else "output row")
+            j.limit = "after" if at_lo[m] else "before" if at_hi[m] else None
 
 
 def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float, t_end: float,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, intervals_of, locate
+from mechsim.dynamics.extrema import TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, intervals_of, plan, read_all
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -134,9 +134,11 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict
             "turn_spread": float(np.max(np.abs(periods[k:] - periods[-1])) / periods[-1])}
 
 
-def _intervals(t: np.ndarray, events, lo: float, hi: float, kinds: tuple[str, str], read) -> list[Interval]:
-    """The smooth intervals of [lo, hi] with the reader's anchors (a DAE run: each row's piece and row)."""
-    intervals = intervals_of(t, _breaks(events), lo, hi, *kinds)
+def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],
+               read) -> list[Interval]:
+    """The smooth intervals of [lo, hi] between the events' `breaks` (`_breaks`) with the reader's anchors (a DAE
+    run: each row's piece and row)."""
+    intervals = intervals_of(t, breaks, lo, hi, *kinds)
     if isinstance(read, TrajectoryReader):
         anchors = read.anchors(t)
         held = anchors[:, 0] >= 0
@@ -146,18 +148,20 @@ def _intervals(t: np.ndarray, events, lo: float, hi: float, kinds: tuple[str, st
     return intervals
 
 
-def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float, events, read) -> dict:
-    """The mean of each column over the turn [a, b]: the trapezoidal rule on each smooth interval's rows with the
-    one-sided limits read at its ends (so that a jump at an event costs nothing: the error is O(h^2 F'') of the
-    output step h); {} where an interval holds no row to read from."""
-    intervals = _intervals(t, events, a, b, ("turn start", "turn end"), read)
-    total = {c: 0.0 for c in values}
+def _turn_mean_requests(intervals: list[Interval]) -> list[tuple] | None:
+    """The readings `_turn_means` needs: each smooth interval's one-sided limits at its ends; None where an
+    interval holds no row to read from."""
     if any(not len(iv.rows) for iv in intervals):
-        return {}
-    requests = [r for iv in intervals for r in ((iv, 0, np.array([iv.lo])), (iv, len(iv.rows) - 1, np.array([iv.hi])))]
-    many = getattr(read, "read_many", None)
-    tables = many(requests) if many is not None else [None] * len(requests)
-    tables = [got if got is not None else read(*r) for r, got in zip(requests, tables)]
+        return None
+    return [r for iv in intervals for r in ((iv, 0, np.array([iv.lo])), (iv, len(iv.rows) - 1, np.array([iv.hi])))]
+
+
+def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float, intervals: list[Interval],
+                tables: list) -> dict:
+    """The mean of each column over the turn [a, b] (its smooth `intervals`): the trapezoidal rule on each
+    interval's rows with the one-sided limits read at its ends (`tables`, the readings of `_turn_mean_requests`),
+    so that a jump at an event costs nothing: the error is O(h^2 F'') of the output step h."""
+    total = {c: 0.0 for c in values}
     for n, iv in enumerate(intervals):
         first, last = tables[2 * n], tables[2 * n + 1]
         tt = np.r_[iv.lo, t[iv.rows], iv.hi]
@@ -215,19 +219,40 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
              "startup": ("start", "end of the start-up")}
     h = float(np.median(np.diff(t[:n]))) if n > 1 else 0.0
-    means = {}
+    values = {c: np.asarray(cols[c], float)[:n] for c in readable}
+    # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
+    breaks = _breaks(events) if read is not None else []
+    plans, requests = [], []
+    for lo, hi, label in windows:
+        intervals = _intervals(t[:n], breaks, lo, hi, kinds[label], read) if read is not None and readable else []
+        plans.append(plan(t[:n], values, intervals) if intervals else None)
+        requests += plans[-1].requests if plans[-1] is not None else []
+    turn = means_asked = None
     if regime is not None and read is not None:
-        means = _turn_means(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, *regime["last_turn"],
-                            events, read)
+        turn = _intervals(t[:n], breaks, *regime["last_turn"], ("turn start", "turn end"), read)
+        means_asked = _turn_mean_requests(turn)
+    tables = read_all(read, requests + (means_asked or [])) if read is not None else []
+    means = {}
+    if means_asked is not None:
+        got = tables[len(requests):]
+        means = _turn_means(t[:n], values, *regime["last_turn"], turn,
+                            [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
+    located, a = [], 0
+    for p in plans:
+        located.append(p.finish(tables[a:a + len(p.requests)], read) if p is not None else {})
+        a += len(p.requests) if p is not None else 0
+    # the growth toward an event where an extremum lies next to one, every window's and column's first approach
+    # read in one pass too
+    if read is not None:
+        read = _Readings(read)
+        read.prefetch([r for p, got in zip(plans, located) if p is not None
+                       for c, e in got.items() for r in _first_approaches(c, values[c], e, p.intervals, h)])
     thermal, treader = [c for c in present if c not in readable], None
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
         treader = thermal_reader(source, events, float(t[-1]))
-    for lo, hi, label in windows:
-        located, intervals = {}, []
-        if read is not None and readable:
-            intervals = _intervals(t[:n], events, lo, hi, kinds[label], read)
-            located = locate(t[:n], {c: np.asarray(cols[c], float)[:n] for c in readable}, intervals, read)
+    for (lo, hi, label), p, got in zip(windows, plans, located):
+        intervals = p.intervals if p is not None else []
         heat = {}
         if treader is not None:       # the thermal columns over the whole table (a cycle-averaged run's continues)
             from mechsim.scenarios.thermal_peaks import locate_thermal
@@ -239,9 +264,9 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                   else (t >= lo) & (t <= hi))
         for c in present:
             f = np.asarray(cols[c], dtype=float)
-            got, own = ((heat[c][0], (treader.how, heat[c][1], treader)) if c in heat else
-                        (located.get(c, {}), (how, intervals, read)))
-            entry = _column_entry(c, f, t, angles, inside, angle_column, got, *own, h, events, coordinates)
+            mine, own = ((heat[c][0], (treader.how, heat[c][1], treader)) if c in heat else
+                         (got.get(c, {}), (how, intervals, read)))
+            entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates)
             if label == "startup":
                 out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
                 if "singular" in entry:
@@ -253,6 +278,30 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                                          "mean_over": [a, b]}
                 out[c] = entry
     return out, regime
+
+
+class _Readings:
+    """A reader with readings taken ahead (`prefetch`: many requests in one pass of its `read_many`), handed back
+    when the same request comes; anything else is the reader's own."""
+
+    def __init__(self, read):
+        self.read, self.kept = read, {}
+
+    @staticmethod
+    def _key(iv: Interval, position: int, times: np.ndarray):
+        return id(iv), int(position), np.asarray(times, float).tobytes()
+
+    def prefetch(self, requests: list[tuple]) -> None:
+        for r, got in zip(requests, read_all(self.read, requests)):
+            if got is not None:
+                self.kept[self._key(*r)] = got
+
+    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+        got = self.kept.get(self._key(iv, position, times))
+        return got if got is not None else self.read(iv, position, times)
+
+    def __getattr__(self, name):
+        return getattr(self.read, name)
 
 
 def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates) -> dict:
@@ -281,8 +330,8 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
     for name, sense in (("max", 1.0), ("min", -1.0)):
         e = got.get(name)
         # an extremum in the bracket next to an event: does the column grow without bound toward it?
-        edge = None if e is None else e.limit if e.limit is not None else e.edge
-        if edge is None or read is None or e.constant or e.where.startswith(("start", "end")):
+        edge = _edge(e)
+        if edge is None or read is None:
             continue
         found = singular_approaches(c, f, edge, sense, intervals, read, h, events, coordinates, e.interval)
         if found:
@@ -341,27 +390,62 @@ SINGULAR_EXPONENT = 0.25
 SINGULAR_EVENTS = 50
 
 
-def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, decades: int = SINGULAR_DECADES
-            ) -> float | None:
-    """The exponent a of |F| ~ distance^-a toward the interval's end on `side` ('before': its end, 'after': its
-    start), from readings a decade apart; None where the column stays bounded there (or changes sign)."""
+def _growth_request(iv: Interval, side: str, h: float, decades: int = SINGULAR_DECADES) -> tuple:
+    """The reading `_growth` takes, (interval, position, times in order), and the order of its distances."""
     d = min(h, 0.5 * (iv.hi - iv.lo)) * 10.0 ** -np.arange(decades + 1)
     if side == "before":
         times, position = iv.hi - d, len(iv.rows) - 1
     else:
         times, position = iv.lo + d, 0
     order = np.argsort(times)
+    return (iv, position, times[order]), order
+
+
+def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, decades: int = SINGULAR_DECADES
+            ) -> float | None:
+    """The exponent a of |F| ~ distance^-a toward the interval's end on `side` ('before': its end, 'after': its
+    start), from readings a decade apart; None where the column stays bounded there (or changes sign)."""
     from mechsim.dynamics.extrema import ReadingFailed
+    request, order = _growth_request(iv, side, h, decades)
     try:
-        table = read(iv, position, times[order])
+        table = read(*request)
     except ReadingFailed:           # the approach cannot be read (a stiff mode re-integrated): no growth claimed
         return None
-    f = np.empty(len(d))
+    f = np.empty(len(order))
     f[order] = sign * np.asarray(table[column], dtype=float)
     if not (np.all(np.isfinite(f)) and np.all(f > 0)):
         return None
     slopes = np.diff(np.log10(f))            # per decade closer
     return float(slopes[-1]) if np.all(slopes > SINGULAR_EXPONENT) else None
+
+
+def _approached(f: np.ndarray, iv: Interval, side: str, sense: float) -> bool:
+    """Whether the column may grow toward the interval's end on `side`: an event there, and its rows' last two
+    growing toward it (sense*f positive and not falling)."""
+    kind = iv.hi_kind if side == "before" else iv.lo_kind
+    if kind in ("start", "end") or len(iv.rows) < 2:
+        return False
+    near, next_ = (iv.rows[-1], iv.rows[-2]) if side == "before" else (iv.rows[0], iv.rows[1])
+    return bool(sense * f[near] > 0 and sense * f[near] >= sense * f[next_])
+
+
+def _edge(e: Extremum | None) -> str | None:
+    """The side of the event next to a located extremum whose growth toward it is checked, or None."""
+    if e is None or e.constant or e.where.startswith(("start", "end")):
+        return None
+    return e.limit if e.limit is not None else e.edge
+
+
+def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval], h: float) -> list[tuple]:
+    """The readings `singular_approaches` takes first for the column's located extrema `got` (max, min): the
+    growth toward the event next to each, in its own interval."""
+    out = []
+    for name, sense in (("max", 1.0), ("min", -1.0)):
+        e = got.get(name)
+        side = _edge(e)
+        if side is not None and _approached(f, intervals[e.interval], side, sense):
+            out.append(_growth_request(intervals[e.interval], side, h)[0])
+    return out
 
 
 def _impulse(reader, intervals: list[Interval], k: int, coordinates) -> tuple[dict, list, list] | None:
@@ -389,12 +473,9 @@ def singular_approaches(column: str, f: np.ndarray, side: str, sense: float, int
         iv = intervals[k]
         if k != first and not found:
             break
+        if not _approached(f, iv, side, sense):
+            continue
         kind = iv.hi_kind if side == "before" else iv.lo_kind
-        if kind in ("start", "end") or len(iv.rows) < 2:
-            continue
-        near, next_ = (iv.rows[-1], iv.rows[-2]) if side == "before" else (iv.rows[0], iv.rows[1])
-        if not (sense * f[near] > 0 and sense * f[near] >= sense * f[next_]):
-            continue
         # the first approach is read over SINGULAR_DECADES decades, the others (the same event of later cycles) over
         # two: a bounded column's exponent is already ~1e-2 there
         a = _growth(read, iv, side, column, h, sense, SINGULAR_DECADES if not found else 2)

@@ -461,7 +461,7 @@ class DenseOutput:
         self.entry, self.o, self.model, self.nq = entry, o, model, nq
         self.segments: list[tuple] = []       # (t start, t end, call, segment, mode, parameters, offset)
         self.buffers: list = []
-        self.heads: dict = {}                 # call -> its steps' (t0, t_acc, segment) on the host
+        self._table = None                    # the segments and their taken steps as arrays, on the host
 
     def add_call(self, st, t0: float, t1: float, ev_t, modes, params, offset) -> None:
         c = len(self.buffers)
@@ -469,24 +469,34 @@ class DenseOutput:
         bounds = [t0] + [float(x) for x in ev_t] + [t1]
         for s, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
             self.segments.append((a, b, c, s, modes[s], params[s], offset))
+        self._table = None
 
-    def _steps(self, call: int, seg: int, ts: np.ndarray) -> np.ndarray | None:
-        """The step of segment `seg` whose interval [t0, t_acc] holds each instant (at the segment's first
-        instant, an event's: its first step, the limit after the event); None where one is not held."""
-        head = self.heads.get(call)
-        if head is None:             # the taken steps' records, on the host
-            h = np.asarray(self.buffers[call])
-            taken = np.flatnonzero(np.isfinite(h[:, ST_ACC]))
-            head = self.heads[call] = (h[taken], h[taken, ST_T0], h[taken, ST_ACC], h[taken, ST_SEG])
-        _, t0, acc, segs = head
-        mine = np.flatnonzero(segs == seg)
-        if not len(mine):
-            return None
-        k = np.minimum(np.searchsorted(acc[mine], ts, side="left"), len(mine) - 1)
-        j = mine[k]
-        if not ((t0[j] <= ts) & (ts <= acc[j])).all():
-            return None
-        return j
+    def _tables(self) -> tuple:
+        """(segment starts, ends, mode-and-parameters group of each; the taken steps' records, their t0, t_acc and
+        segment (its index in `segments`), each segment's first and last step + 1), built once."""
+        if self._table is None:
+            groups: dict = {}
+            S = self.segments
+            lo = np.array([g[0] for g in S], dtype=float)
+            hi = np.array([g[1] for g in S], dtype=float)
+            group = np.array([groups.setdefault((g[4], np.asarray(g[5], float).tobytes(),
+                                                  np.asarray(g[6], float).tobytes()), len(groups)) for g in S])
+            first = {}                # call -> index of its first segment
+            for n, g in enumerate(S):
+                first.setdefault(g[2], n)
+            recs, segs = [], []
+            for c, buf in enumerate(self.buffers):
+                h = np.asarray(buf)
+                taken = h[np.isfinite(h[:, ST_ACC])]
+                recs.append(taken)
+                segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
+            rec = np.concatenate(recs) if recs else np.zeros((0, self.entry.record.width))
+            seg = np.concatenate(segs) if segs else np.zeros(0, int)
+            order = np.argsort(seg, kind="stable")        # each segment's steps together, in time order
+            rec, seg = rec[order], seg[order]
+            at = np.searchsorted(seg, np.arange(len(S) + 1))
+            self._table = (lo, hi, group, rec, rec[:, ST_T0], rec[:, ST_ACC], at)
+        return self._table
 
     def _fn(self):
         key = ("dense", DENSE_BATCH)
@@ -502,51 +512,50 @@ class DenseOutput:
 
     def read_many(self, requests: list[tuple[np.ndarray, float, float]]) -> list:
         """`read` for each (times, lo, hi), the instants of all evaluated together (one compiled call per
-        DENSE_BATCH instants of a call's buffer)."""
+        DENSE_BATCH instants). Each instant is read on the first segment overlapping (lo, hi) that holds it, by
+        the step of that segment whose [t0, t_acc] holds it (at a segment's first instant, an event's: its first
+        step, the limit after the event)."""
         out: list = [None] * len(requests)
-        work = []                   # (request, its mode segment, the instants' positions, the steps)
-        for r, (times, lo, hi) in enumerate(requests):
-            inside = [g for g in self.segments if g[0] < hi and g[1] > lo]
-            if not inside or not len(times) or any(
-                    g[4] != inside[0][4] or not np.array_equal(g[5], inside[0][5])
-                    or not np.array_equal(g[6], inside[0][6]) for g in inside[1:]):
-                continue
-            which = np.full(len(times), -1)
-            for n, g in reversed(list(enumerate(inside))):       # the first segment that holds each instant
-                which[(times >= g[0]) & (times <= g[1])] = n
-            if (which < 0).any():
-                continue
-            parts = []
-            for n in np.unique(which):
-                g = inside[int(n)]
-                at = np.flatnonzero(which == n)
-                j = self._steps(g[2], g[3], times[at])
-                if j is None:
-                    break
-                parts.append((g[2], at, j))
-            else:
-                work.append((r, inside[0], parts))
-        by_call: dict[int, list] = {}
-        for w, (r, _, parts) in enumerate(work):
-            for call, at, j in parts:
-                by_call.setdefault(call, []).append((w, at, j))
-        z = [np.empty((len(requests[r][0]), self.entry.jmod.nz)) for r, _, _ in work]
-        for call, items in by_call.items():
-            records = self.heads[call][0][np.concatenate([j for _, _, j in items])]
-            ts = np.concatenate([requests[work[w][0]][0][at] for w, at, _ in items])
-            got = np.empty((len(ts), self.entry.jmod.nz))
-            for a in range(0, len(ts), DENSE_BATCH):
-                n = min(DENSE_BATCH, len(ts) - a)
-                rows = np.repeat(records[a + n - 1:a + n], DENSE_BATCH, axis=0)
-                tt = np.full(DENSE_BATCH, ts[a + n - 1])
-                rows[:n], tt[:n] = records[a:a + n], ts[a:a + n]
-                got[a:a + n] = np.asarray(self._fn()(rows, tt))[:n]
-            a = 0
-            for w, at, _ in items:
-                z[w][at] = got[a:a + len(at)]
-                a += len(at)
-        for w, (r, g, _) in enumerate(work):
-            out[r] = (g[4], g[5], g[6], state_rows(self.model.modes[g[4]], self.nq, z[w]))
+        if not requests or not self.segments:
+            return out
+        s_lo, s_hi, group, rec, t0, acc, at = self._tables()
+        lo = np.array([r[1] for r in requests], dtype=float)
+        hi = np.array([r[2] for r in requests], dtype=float)
+        sizes = np.array([len(r[0]) for r in requests])
+        inside = (s_lo < hi[:, None]) & (s_hi > lo[:, None])             # requests x segments
+        own = np.argmax(inside, axis=1)
+        ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own][:, None])).any(axis=1)
+        rid = np.repeat(np.arange(len(requests)), sizes)
+        ts = np.concatenate([np.asarray(r[0], dtype=float) for r in requests])
+        hold = inside[rid] & (ts[:, None] >= s_lo) & (ts[:, None] <= s_hi)  # instants x segments
+        seg = np.argmax(hold, axis=1)                                       # the first segment that holds each
+        j = np.zeros(len(ts), dtype=int)
+        for g in np.unique(seg).tolist():
+            mine = np.flatnonzero(seg == g)
+            a, b = int(at[g]), int(at[g + 1])
+            if b > a:
+                j[mine] = a + np.minimum(np.searchsorted(acc[a:b], ts[mine], side="left"), b - a - 1)
+        good = hold.any(axis=1) & (at[seg + 1] > at[seg]) & (t0[j] <= ts) & (ts <= acc[j])
+        ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
+        read = ok[rid]
+        z = np.empty((int(read.sum()), self.entry.jmod.nz))
+        records, tt = rec[j[read]], ts[read]
+        for a in range(0, len(tt), DENSE_BATCH):
+            n = min(DENSE_BATCH, len(tt) - a)
+            rows = np.repeat(records[a + n - 1:a + n], DENSE_BATCH, axis=0)
+            tb = np.full(DENSE_BATCH, tt[a + n - 1])
+            rows[:n], tb[:n] = records[a:a + n], tt[a:a + n]
+            z[a:a + n] = np.asarray(self._fn()(rows, tb))[:n]
+        starts = np.cumsum(np.r_[0, sizes[ok]])
+        kept = np.flatnonzero(ok)
+        by_mode: dict[str, list[int]] = {}
+        for n, r in enumerate(kept.tolist()):
+            by_mode.setdefault(self.segments[own[r]][4], []).append(n)
+        for mode, ns in by_mode.items():        # the IDA layout, once per mode
+            y = state_rows(self.model.modes[mode], self.nq, z)
+            for n in ns:
+                g = self.segments[own[kept[n]]]
+                out[int(kept[n])] = (g[4], g[5], g[6], y[starts[n]:starts[n + 1]])
         return out
 
 
