@@ -93,20 +93,16 @@ class _Job:
     constant: bool = False
 
 
-def _estimates(t: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """The peak value of the parabola through each row and its neighbours (the row's value at the ends, and where
-    the parabola opens upwards); f may hold several series (along its last axis)."""
-    est = f.copy()
-    if f.shape[-1] < 3:
-        return est
-    f0, f1, f2 = f[..., :-2], f[..., 1:-1], f[..., 2:]
-    h0, h1 = t[1:-1] - t[:-2], t[2:] - t[1:-1]
+def _estimates(t: np.ndarray, f: np.ndarray, m: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """The peak value of the parabola through rows i of series f[m] and their neighbours (each row's value where
+    the parabola opens upwards); 0 < i < len(t) - 1."""
+    f0, f1, f2 = f[m, i - 1], f[m, i], f[m, i + 1]
+    h0, h1 = t[i] - t[i - 1], t[i + 1] - t[i]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         d2 = 2.0 * ((f2 - f1) / h1 - (f1 - f0) / h0) / (h0 + h1)
         d1 = ((f2 - f1) / h1 * h0 + (f1 - f0) / h0 * h1) / (h0 + h1)
         gain = np.where(d2 < 0, -0.5 * d1 * d1 / d2, 0.0)
-    est[..., 1:-1] = f1 + np.where(np.isfinite(gain), gain, 0.0)
-    return est
+    return f1 + np.where(np.isfinite(gain), gain, 0.0)
 
 
 def tie_of(f: np.ndarray) -> float:
@@ -167,45 +163,46 @@ def _candidates(t: np.ndarray, F: np.ndarray, senses: np.ndarray, ties: np.ndarr
     rows, k_of, n_of, pos, first, last = layout
     ti, fi = t[rows], senses[:, None] * F[:, rows]
     ok = np.isfinite(fi)
-    fi = np.where(ok, fi, -np.inf)
-    edge = np.full((len(fi), 1), -np.inf)
-    left = np.where(first, -np.inf, np.concatenate([edge, fi[:, :-1]], axis=1))
-    right = np.where(last, -np.inf, np.concatenate([fi[:, 1:], edge], axis=1))
+    fi[~ok] = -np.inf
+    left, right = np.empty_like(fi), np.empty_like(fi)      # each row's neighbours in its interval
+    left[:, 0], left[:, 1:], right[:, -1], right[:, :-1] = -np.inf, fi[:, :-1], -np.inf, fi[:, 1:]
+    left[:, first], right[:, last] = -np.inf, -np.inf
     tie = ties[:, None]
     with np.errstate(invalid="ignore"):
         flat = (((np.abs(fi - left) <= tie) | first) & ((np.abs(fi - right) <= tie) | last) & (n_of > 1) & ok)
     peak = ((fi >= left) & (fi >= right) & ok) | flat
-    est = _estimates(ti, fi)
-    est = np.where(first | last, fi, est)
     smooth = peak & ~flat
-    lower = np.where(peak, fi, -np.inf).max(axis=1)
-    level = np.where(flat, fi, -np.inf).max(axis=1)
+    lower = fi.max(axis=1)                          # the best peak's: the largest row is a peak
+    any_peak, any_flat = peak.any(axis=1), flat.any(axis=1)
+    ms, ii = np.nonzero(smooth)                     # the estimates where they are compared: the smooth peaks
+    est = fi[ms, ii]
+    inner = ~(first[ii] | last[ii])
+    est[inner] = _estimates(ti, fi, ms[inner], ii[inner])
     with np.errstate(invalid="ignore"):
-        kept = smooth & (2 * est - fi >= (lower - ties)[:, None])
-    out: list[list[tuple]] = []
-    for m in range(len(fi)):
-        got: list[tuple] = []
-        out.append(got)
-        if not peak[m].any():
-            continue
-        if flat[m].any() and level[m] >= lower[m] - ties[m]:
+        kept = 2 * est - fi[ms, ii] >= (lower - ties)[ms]
+    ms, ii, est = ms[kept], ii[kept], est[kept]
+    best = np.full(len(fi), -np.inf)
+    np.maximum.at(best, ms, est)
+    rank = np.where(est >= best[ms] - ties[ms], best[ms], est)
+    order = np.lexsort((ti[ii], -rank, ms))         # each series' by estimate, ties to the earliest
+    ms, ii, est = ms[order], ii[order], est[order]
+    nth = np.arange(len(ms)) - np.searchsorted(ms, ms)
+    chosen = nth < limit
+    out: list[list[tuple]] = [[] for _ in range(len(fi))]
+    for m in np.flatnonzero(any_flat & any_peak).tolist():
+        level = fi[m, flat[m]].max()
+        if level >= lower[m] - ties[m]:
             # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it
             # lies at its first instant (the interval's start where it holds the interval's first row)
-            i = int(np.argmax(flat[m] & (fi[m] >= level[m] - ties[m])))
+            i = int(np.argmax(flat[m] & (fi[m] >= level - ties[m])))
             k = int(k_of[i])
             at = float(intervals[k].lo) if first[i] else float(ti[i])
-            got.append((float(fi[m, i]), k, int(pos[i]), at, at, True))
-        keep = np.flatnonzero(kept[m])
-        if len(keep):
-            e = est[m, keep]
-            best = float(e.max())
-            rank = np.where(e >= best - ties[m], best, e)
-            keep = keep[np.lexsort((ti[keep], -rank))][:limit]      # by estimate, ties to the earliest
-            for i in keep.tolist():
-                iv = intervals[int(k_of[i])]
-                lo = float(iv.lo) if first[i] else float(ti[i - 1])
-                hi = float(iv.hi) if last[i] else float(ti[i + 1])
-                got.append((float(est[m, i]), int(k_of[i]), int(pos[i]), lo, hi, False))
+            out[m].append((float(fi[m, i]), k, int(pos[i]), at, at, True))
+    for m, i, value in zip(ms[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
+        iv = intervals[int(k_of[i])]
+        lo = float(iv.lo) if first[i] else float(ti[i - 1])
+        hi = float(iv.hi) if last[i] else float(ti[i + 1])
+        out[m].append((value, int(k_of[i]), int(pos[i]), lo, hi, False))
     return out
 
 

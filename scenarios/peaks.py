@@ -231,20 +231,24 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is not None and read is not None:
         turn = _intervals(t[:n], breaks, *regime["last_turn"], ("turn start", "turn end"), read)
         means_asked = _turn_mean_requests(turn)
-    tables = read_all(read, requests + (means_asked or [])) if read is not None else []
+    # a dense output's readings cost no integration: the growth toward every event a bracket reaches (what the
+    # singular-approach check may read) is read in the same pass; other readers read it once the extrema are known
+    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, values, h)]
+             if how == HOW_DENSE else [])
+    read = _Readings(read) if read is not None else None
+    tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
     means = {}
     if means_asked is not None:
-        got = tables[len(requests):]
+        got = tables[len(requests):len(requests) + len(means_asked)]
         means = _turn_means(t[:n], values, *regime["last_turn"], turn,
                             [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
     located, a = [], 0
     for p in plans:
         located.append(p.finish(tables[a:a + len(p.requests)], read) if p is not None else {})
         a += len(p.requests) if p is not None else 0
-    # the growth toward an event where an extremum lies next to one, every window's and column's first approach
-    # read in one pass too
+    # the growth toward an event where an extremum lies next to one: every window's and column's first approach
+    # read together (already read on a dense output)
     if read is not None:
-        read = _Readings(read)
         read.prefetch([r for p, got in zip(plans, located) if p is not None
                        for c, e in got.items() for r in _first_approaches(c, values[c], e, p.intervals, h)])
     thermal, treader = [c for c in present if c not in readable], None
@@ -291,10 +295,15 @@ class _Readings:
     def _key(iv: Interval, position: int, times: np.ndarray):
         return id(iv), int(position), np.asarray(times, float).tobytes()
 
-    def prefetch(self, requests: list[tuple]) -> None:
-        for r, got in zip(requests, read_all(self.read, requests)):
+    def prefetch(self, requests: list[tuple]) -> list[dict | None]:
+        """The readings of `requests` (None where the reader did not read one), kept: those not kept yet read in
+        one pass."""
+        keys = [self._key(*r) for r in requests]
+        new = {k: r for k, r in zip(keys, requests) if k not in self.kept}
+        for k, got in zip(new, read_all(self.read, list(new.values()))):
             if got is not None:
-                self.kept[self._key(*r)] = got
+                self.kept[k] = got
+        return [self.kept.get(k) for k in keys]
 
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         got = self.kept.get(self._key(iv, position, times))
@@ -434,6 +443,20 @@ def _edge(e: Extremum | None) -> str | None:
     if e is None or e.constant or e.where.startswith(("start", "end")):
         return None
     return e.limit if e.limit is not None else e.edge
+
+
+def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tuple]:
+    """The readings `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py` `plan`), before its
+    extrema are known: the growth toward each event a bracket reaches, on that side."""
+    out = []
+    for j in p.jobs:
+        if j.done:
+            continue
+        iv = p.intervals[j.interval]
+        for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
+            if reaches and _approached(values[j.column], iv, side, j.sense):
+                out.append(_growth_request(iv, side, h)[0])
+    return out
 
 
 def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval], h: float) -> list[tuple]:
