@@ -436,9 +436,12 @@ def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _grids(group: list[_Job]) -> tuple[list[np.ndarray], np.ndarray]:
-    """Each job's readings over its bracket (FIRST_GRID), and the instants the group reads: those and the jobs'
-    own rows (so that the result is never below the row)."""
-    grids = [np.linspace(j.lo, j.hi, FIRST_GRID) if j.hi > j.lo else np.array([j.lo]) for j in group]
+    """Each job's readings over its bracket (FIRST_GRID, as np.linspace spaces them), and the instants the group
+    reads: those and the jobs' own rows (so that the result is never below the row)."""
+    lo, hi = np.array([j.lo for j in group]), np.array([j.hi for j in group])
+    grid = np.arange(FIRST_GRID) * ((hi - lo) / (FIRST_GRID - 1))[:, None] + lo[:, None]
+    grid[:, -1] = hi
+    grids = [g if j.hi > j.lo else np.array([j.lo]) for j, g in zip(group, grid)]
     return grids, np.unique(np.concatenate(grids + [np.array([j.t_row for j in group])]))
 
 
@@ -450,24 +453,26 @@ def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) ->
     jobs, tables, G, P, F, n_g, ivs, R, FR, TR = [], [], [], [], [], [], [], [], [], []
     for iv, group, grids, table in ready:
         tt = np.asarray(table["t_s"], dtype=float)
-        for j, g in zip(group, grids):
-            pos = np.clip(np.searchsorted(tt, g), 0, len(tt) - 1)
+        # a bracket of one instant: its reading repeated
+        g = np.array([x if len(x) == FIRST_GRID else np.full(FIRST_GRID, x[-1]) for x in grids])
+        pos = np.minimum(tt.searchsorted(g), len(tt) - 1)
+        r = np.minimum(tt.searchsorted([j.t_row for j in group]), len(tt) - 1)
+        for n, j in enumerate(group):
             column = np.asarray(table[j.column], dtype=float)
-            r = int(np.clip(np.searchsorted(tt, j.t_row), 0, len(tt) - 1))
-            jobs.append(j)
-            tables.append(table)
-            ivs.append(iv)
-            n_g.append(len(g))
-            short = len(g) < FIRST_GRID                # a bracket of one instant: its reading repeated
-            G.append(np.full(FIRST_GRID, g[-1]) if short else g)
-            P.append(np.full(FIRST_GRID, pos[-1]) if short else pos)
-            F.append(j.sense * column[P[-1]])
-            R.append(r)
-            FR.append(j.sense * column[r])
-            TR.append(tt[r])
+            F.append(j.sense * column[pos[n]])
+            FR.append(j.sense * column[r[n]])
+        jobs += group
+        tables += [table] * len(group)
+        ivs += [iv] * len(group)
+        n_g += [len(x) for x in grids]
+        G.append(g)
+        P.append(pos)
+        R.append(r)
+        TR.append(tt[r])
     if not jobs:
         return
-    G, P, F, n_g, R, FR, TR = (np.array(a) for a in (G, P, F, n_g, R, FR, TR))
+    G, P, R, TR = (np.concatenate(a) for a in (G, P, R, TR))
+    F, FR, n_g = np.array(F), np.array(FR), np.array(n_g)
     sense_tie = np.array([j.tie for j in jobs])
     every = np.arange(len(jobs))
     held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row

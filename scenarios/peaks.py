@@ -97,9 +97,8 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
 def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
     if events is None or not len(events):
         return []
-    kinds = events["kind"].astype(str).tolist() if "kind" in events else ["event"] * len(events)
-    return sorted((float(t), f"event '{k}' at t = {float(t):.9g} s") for t, k in zip(events["t_s"].to_numpy(float),
-                                                                                   kinds))
+    kinds = [str(k) for k in events["kind"].tolist()] if "kind" in events else ["event"] * len(events)
+    return sorted((t, f"event '{k}' at t = {t:.9g} s") for t, k in zip(events["t_s"].to_numpy(float).tolist(), kinds))
 
 
 #: consecutive crank turns agree to this (their durations, and the drive speed at their starts, relative) where the
@@ -161,14 +160,18 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     """The mean of each column over the turn [a, b] (its smooth `intervals`): the trapezoidal rule on each
     interval's rows with the one-sided limits read at its ends (`tables`, the readings of `_turn_mean_requests`),
     so that a jump at an event costs nothing: the error is O(h^2 F'') of the output step h."""
-    total = {c: 0.0 for c in values}
+    names = list(values)
+    V = np.array([values[c] for c in names]).reshape(len(names), -1)
+    total = np.zeros(len(names))
     for n, iv in enumerate(intervals):
         first, last = tables[2 * n], tables[2 * n + 1]
         tt = np.r_[iv.lo, t[iv.rows], iv.hi]
-        for c, f in values.items():
-            ff = np.r_[np.asarray(first[c], float)[0], f[iv.rows], np.asarray(last[c], float)[0]]
-            total[c] += float(np.sum(0.5 * (ff[1:] + ff[:-1]) * np.diff(tt)))
-    return {c: v / (b - a) for c, v in total.items()}
+        ff = np.empty((len(names), len(tt)))
+        ff[:, 0] = [np.asarray(first[c], float)[0] for c in names]
+        ff[:, 1:-1] = V[:, iv.rows]
+        ff[:, -1] = [np.asarray(last[c], float)[0] for c in names]
+        total += np.sum(0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt), axis=1)
+    return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
 def turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
