@@ -173,7 +173,8 @@ def _candidates(t: np.ndarray, F: np.ndarray, senses: np.ndarray, ties: np.ndarr
     peak = ((fi >= left) & (fi >= right) & ok) | flat
     smooth = peak & ~flat
     lower = fi.max(axis=1)                          # the best peak's: the largest row is a peak
-    any_peak, any_flat = peak.any(axis=1), flat.any(axis=1)
+    level = np.where(flat, fi, -np.inf).max(axis=1)
+    any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
     ms, ii = np.nonzero(smooth)                     # the estimates where they are compared: the smooth peaks
     est = fi[ms, ii]
     inner = ~(first[ii] | last[ii])
@@ -189,15 +190,14 @@ def _candidates(t: np.ndarray, F: np.ndarray, senses: np.ndarray, ties: np.ndarr
     nth = np.arange(len(ms)) - np.searchsorted(ms, ms)
     chosen = nth < limit
     out: list[list[tuple]] = [[] for _ in range(len(fi))]
-    for m in np.flatnonzero(any_flat & any_peak).tolist():
-        level = fi[m, flat[m]].max()
-        if level >= lower[m] - ties[m]:
-            # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it
-            # lies at its first instant (the interval's start where it holds the interval's first row)
-            i = int(np.argmax(flat[m] & (fi[m] >= level - ties[m])))
-            k = int(k_of[i])
-            at = float(intervals[k].lo) if first[i] else float(ti[i])
-            out[m].append((float(fi[m, i]), k, int(pos[i]), at, at, True))
+    # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
+    # its first instant (the interval's start where it holds the interval's first row)
+    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - ties))
+    earliest = np.argmax(flat[constant] & (fi[constant] >= (level - ties)[constant, None]), axis=1)
+    for m, i in zip(constant.tolist(), earliest.tolist()):
+        k = int(k_of[i])
+        at = float(intervals[k].lo) if first[i] else float(ti[i])
+        out[m].append((float(fi[m, i]), k, int(pos[i]), at, at, True))
     for m, i, value in zip(ms[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
         iv = intervals[int(k_of[i])]
         lo = float(iv.lo) if first[i] else float(ti[i - 1])
