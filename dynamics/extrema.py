@@ -19,7 +19,7 @@ re-integration's error from the row's state (the run's own error at that row).
 """
 from __future__ import annotations
 
-from collections.abc import MutableMapping
+from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -56,12 +56,13 @@ class Interval:
 @dataclass
 class Extremum:
     """The located extremum of one column: its value, instant, where it lies (interior, or the one-sided limit at
-    an interval's end) and every column of the table at that instant (`row`)."""
+    an interval's end) and every column of the table at that instant (`row`, a mapping; a refined extremum's
+    columns are evaluated when read)."""
 
     value: float
     t: float
     where: str
-    row: dict
+    row: Mapping
     sampled: float          # the best output row's value (for comparison)
     limit: str | None = None   # at an interval's end: the one-sided limit from 'before' or 'after' that instant
     edge: str | None = None    # the bracket reaches the interval's end ('before' it) or start ('after' it)
