@@ -537,7 +537,14 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
 class TrajectoryReader:
     """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated from the state
     at an output row (forward and backward) by IDA at `tighten` times the run's tolerances, its rows read out as
-    the run's own (`tables.timeseries`). The anchors of an interval are (piece, row) of its table rows."""
+    the run's own (`tables.timeseries`). The anchors of an interval are (piece, row) of its table rows.
+
+    An index-1 IDA run's row is IDA's own (y, y'), the state its next steps would have continued from: a reading
+    starts there as it is, so that it continues the run's own solution (a projection onto the constraints first
+    moves the start by the run's drift, within its tolerance, and costs a Gauss-Newton and KKT solve per row).
+    Other rows are made consistent first (`consistent.consistent_state`): diffrax's, the index-2/3 forms' (their
+    position and velocity constraints hold to the run's tolerance only, a jump IDA's error test at the tighter
+    tolerances rejects), and an index-1 row IDA fails from at the tighter tolerances."""
 
     def __init__(self, traj, angle_coordinates: tuple[int, ...], settings, tighten: float = 1e-1):
         import dataclasses
@@ -546,6 +553,8 @@ class TrajectoryReader:
         own = dataclasses.replace(settings, multiplier_atol=settings.lam_atol, events=False)
         #: the tighter tolerances first, the run's own where IDA cannot meet those
         self.tries = (dataclasses.replace(own, rtol=rtol, atol=settings.atol * rtol / settings.rtol), own)
+        #: an index-1 IDA run's rows are IDA's own states (y, y'): a reading starts from them as they are
+        self._own_rows = settings.backend in ("auto", "ida", "ida-compiled") and settings.formulation == "index1"
         self.reintegrations = self.dense_readings = 0
         self._starts: dict = {}
         self._solvers: dict = {}
@@ -589,7 +598,7 @@ class TrajectoryReader:
         for part in (times[times < t0][::-1], times[times >= t0]):
             if not len(part):
                 continue
-            tt, yy, yyp = self._integrate(mf, piece.params, t0, y0, yp0, part)
+            tt, yy, yyp = self._from_row(iv, position, mf, piece.params, t0, y0, yp0, part)
             ts.append(tt)
             ys.append(yy)
             yps.append(yyp)
@@ -643,22 +652,38 @@ class TrajectoryReader:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
         the generalized momentum, whose jump across an event is the impulse the event delivers."""
         piece, mf, t0, y0, yp0 = self._anchor(iv, position)
-        _, y, _ = self._integrate(mf, piece.params, t0, y0, yp0, np.array([t]))
+        _, y, _ = self._from_row(iv, position, mf, piece.params, t0, y0, yp0, np.array([t]))
         q, v = y[0, mf.index["q"]], y[0, mf.index["v"]]
         M = np.atleast_2d(np.asarray(mf.mass(q, piece.params), dtype=float))
         return M @ v, v
 
-    def _anchor(self, iv: Interval, position: int):
-        """(piece, its mode's functions, t0, y0, y'0): the consistent state at the interval's row `position`, where
-        every reading of it starts."""
+    def _anchor(self, iv: Interval, position: int, own: bool = True):
+        """(piece, its mode's functions, t0, y0, y'0): the state at the interval's row `position` where every
+        reading of it starts: an index-1 IDA run's own (y, y') there (own=True), else the consistent state made from
+        its positions and speeds (`_start`)."""
         k, r = (int(x) for x in iv.anchors[position])
         piece = self.traj.pieces[k]
         t0 = float(piece.t[r])
+        if own and self._own_rows and piece.yp is not None:
+            return piece, self.traj.model.modes[piece.mode], t0, piece.y[r], piece.yp[r]
         try:
             y0, yp0 = self._start(k, r)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise ReadingFailed(f"no consistent state at the row t = {t0:.9g} s: {exc}") from None
         return piece, self.traj.model.modes[piece.mode], t0, y0, yp0
+
+    def _from_row(self, iv: Interval, position: int, mf, p, t0, y0, yp0, times):
+        """`_integrate` from the row's state. From the run's own (y, y') at the tighter tolerances only: where IDA
+        fails from it there, the reading starts from the consistent state made at that row (both tries)."""
+        piece = self.traj.pieces[int(iv.anchors[position][0])]
+        if not (self._own_rows and piece.yp is not None):
+            return self._integrate(mf, p, t0, y0, yp0, times)
+        try:
+            return self._integrate(mf, p, t0, y0, yp0, times, self.tries[:1])
+        except ReadingFailed:
+            pass
+        _, _, t0, y0, yp0 = self._anchor(iv, position, own=False)
+        return self._integrate(mf, p, t0, y0, yp0, times)
 
     def _start(self, k: int, r: int):
         """The consistent (y, y') at row r of piece k (the compiled diffrax run keeps states only), kept."""
@@ -682,8 +707,9 @@ class TrajectoryReader:
                               if runs_compiled(self.tries[-1], self.traj.model) else [])
         return bool(self._compiled)
 
-    def _integrate(self, mf, p, t0, y0, yp0, times):
-        """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0)."""
+    def _integrate(self, mf, p, t0, y0, yp0, times, tries: tuple | None = None):
+        """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0), with
+        the first of `tries` (default: all the reader's tolerance tries) that IDA meets."""
         from sksundae.ida import IDA
 
         from mechsim.dynamics.backend import End, Request
@@ -698,8 +724,9 @@ class TrajectoryReader:
             rows_t.append(times[at_start])
             rows_y.append(np.repeat(y0[None, :], n0, axis=0))
             rows_yp.append(np.repeat(yp0[None, :], n0, axis=0))
+        n_tries = len(tries if tries is not None else self.tries)
         if len(out_t) and self._compiled_tries():
-            for backend in self._compiled:
+            for backend in self._compiled[:n_tries]:
                 seg = backend.integrate(Request(self.traj.model, "", mf, p, t0, y0, yp0, out_t, float(out_t[-1])))
                 if seg.end is End.END and len(seg.t) == len(out_t):
                     break
@@ -712,7 +739,7 @@ class TrajectoryReader:
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])
-            for n, s in enumerate(self.tries):
+            for n, s in enumerate(self.tries[:n_tries]):
                 # one solver per mode, parameter values and try, re-initialised at each solve
                 key = (id(mf), np.asarray(p, dtype=float).tobytes(), n)
                 solver = self._solvers.get(key)
