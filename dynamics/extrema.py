@@ -700,10 +700,11 @@ class TrajectoryReader:
 
     def _compiled_tries(self) -> bool:
         """Whether the readings run on the compiled IDA callbacks, as the run did (the same algorithm as
-        scikit-sundae's binding, without a Python call per residual); builds one backend per try."""
+        scikit-sundae's binding, without a Python call per residual); one backend per try, kept for the thread's
+        later readers (`ida_compiled.reusable`)."""
         if self._compiled is None:
-            from mechsim.dynamics.backends.ida_compiled import IdaCompiledBackend, runs_compiled
-            self._compiled = ([IdaCompiledBackend(s) for s in self.tries]
+            from mechsim.dynamics.backends.ida_compiled import reusable, runs_compiled
+            self._compiled = ([reusable(s) for s in self.tries]
                               if runs_compiled(self.tries[-1], self.traj.model) else [])
         return bool(self._compiled)
 

@@ -17,6 +17,7 @@ import ctypes
 import importlib
 import importlib.util
 import sys
+import threading
 import time as _time
 from dataclasses import dataclass, field
 
@@ -234,6 +235,28 @@ class IdaCompiledBackend(Backend):
         return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,
                     residual_evaluations=lib.counter(lib.IDAGetNumResEvals, mem),
                     jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))
+
+
+#: the backends `reusable` hands out, per thread (an IDA memory serves one integration at a time), by settings
+_REUSABLE = threading.local()
+#: settings kept per thread (the oldest is dropped beyond this)
+REUSABLE_SETTINGS = 8
+
+
+def reusable(settings: SolverSettings) -> Backend:
+    """An `IdaCompiledBackend` for these settings kept for the thread's later calls: what integrates many short
+    segments for run after run (the located peaks' readings) creates each mode's IDA memory once and re-initialises
+    it at every segment, as one run does."""
+    kept = getattr(_REUSABLE, "backends", None)
+    if kept is None:
+        kept = _REUSABLE.backends = {}
+    backend = kept.pop(settings, None)
+    if backend is None:
+        backend = IdaCompiledBackend(settings)
+        while len(kept) >= REUSABLE_SETTINGS:
+            kept.pop(next(iter(kept)))
+    kept[settings] = backend                    # the newest last
+    return backend
 
 
 def runs_compiled(settings: SolverSettings, model) -> bool:
