@@ -610,7 +610,7 @@ class TrajectoryReader:
     def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
         """The columns of each (interval, position, times) from the run's own dense output where the integrator
         keeps one (the compiled diffrax run: the interpolant its output rows come from), else re-integrated, all
-        read out together: one read-out per mode and parameters; None for a request the dense output does not hold
+        read out together: one read-out per mode; None for a request the dense output does not hold
         (read by re-integration) or whose re-integration failed."""
         from mechsim.dynamics.hybrid import Piece
         from mechsim.dynamics.tables import piece_columns
@@ -629,17 +629,16 @@ class TrajectoryReader:
         groups: dict = {}
         for r, g in enumerate(got):
             if g is not None:
-                key = (g[0], np.asarray(g[1], float).tobytes(), np.asarray(g[2], float).tobytes())
-                groups.setdefault(key, []).append(r)
+                groups.setdefault(g[0], []).append(r)
         out: list[dict | None] = [None] * len(requests)
-        for rs in groups.values():
-            mode, params, offset = got[rs[0]][:3]
-            if dense is not None:
-                t, yp = np.concatenate([np.asarray(requests[r][2], float) for r in rs]), None
-            else:
-                t, yp = np.concatenate([got[r][4] for r in rs]), np.vstack([got[r][5] for r in rs])
-            table = piece_columns(self.traj.model, Piece(mode, params, t, np.vstack([got[r][3] for r in rs]), yp,
-                                                         offset), self.angle_coordinates, residual=False)
+        for mode, rs in groups.items():        # one read-out per mode (parameters and offsets per row)
+            pieces = []
+            for r in rs:
+                params, offset = got[r][1], got[r][2]
+                params = params if isinstance(params, tuple) else tuple(np.asarray(params, float).tolist())
+                t = np.asarray(requests[r][2], float) if dense is not None else got[r][4]
+                pieces.append(Piece(mode, params, t, got[r][3], None if dense is not None else got[r][5], offset))
+            table = piece_columns(self.traj.model, pieces, self.angle_coordinates, residual=False)
             a = 0
             for r in rs:
                 n = len(got[r][3])

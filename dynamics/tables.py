@@ -194,11 +194,13 @@ def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.nd
 
 
 def piece_columns(model, piece, angle_coordinates: tuple[int, ...], residual: bool = True) -> dict[str, np.ndarray]:
-    """The table's columns over one piece's rows, read-outs evaluated with the piece's mode and parameters, as
-    `timeseries` evaluates them (residual=False: without constraint_residual_m)."""
-    names = _layout(model, angle_coordinates, [piece.mode], residual)
-    block = _mode_block(model, [piece], names, residual)
-    cols = {"t_s": block[0], "mode": np.full(len(piece.t), piece.mode, dtype=object)}
+    """The table's columns over one piece's rows (or over a list of one mode's pieces, stacked: one evaluation for
+    all), read-outs evaluated with the piece's mode and parameters, as `timeseries` evaluates them (residual=False:
+    without constraint_residual_m)."""
+    pieces = piece if isinstance(piece, list) else [piece]
+    names = _layout(model, angle_coordinates, [pieces[0].mode], residual)
+    block = _mode_block(model, pieces, names, residual)
+    cols = {"t_s": block[0], "mode": np.full(block.shape[1], pieces[0].mode, dtype=object)}
     cols.update((name, block[i]) for i, name in enumerate(names) if i)
     return cols
 
