@@ -712,7 +712,6 @@ class TrajectoryReader:
         the first of `tries` (default: all the reader's tolerance tries) that IDA meets."""
         from sksundae.ida import IDA
 
-        from mechsim.dynamics.backend import End, Request
         from mechsim.dynamics.backends.ida import atol_vector
         self.reintegrations += 1
         # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
@@ -727,14 +726,14 @@ class TrajectoryReader:
         n_tries = len(tries if tries is not None else self.tries)
         if len(out_t) and self._compiled_tries():
             for backend in self._compiled[:n_tries]:
-                seg = backend.integrate(Request(self.traj.model, "", mf, p, t0, y0, yp0, out_t, float(out_t[-1])))
-                if seg.end is End.END and len(seg.t) == len(out_t):
+                got = backend.read(mf, p, t0, y0, yp0, out_t)
+                if got is not None:
                     break
             else:
-                raise ReadingFailed(f"re-integration between rows failed: {seg.message}")
-            rows_t.append(seg.t)
-            rows_y.append(seg.y)
-            rows_yp.append(seg.yp)
+                raise ReadingFailed("re-integration between rows failed: IDA failed on the compiled callbacks")
+            rows_t.append(got[0])
+            rows_y.append(got[1])
+            rows_yp.append(got[2])
         elif len(out_t):
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:

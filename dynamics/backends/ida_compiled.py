@@ -175,18 +175,36 @@ class IdaCompiledBackend(Backend):
             pass
 
     # -- one segment -------------------------------------------------------------------------------------------
+    def _begin(self, mf, p, t0: float, y0, yp0, first_step: float, t_end: float, counts: dict) -> _Memory:
+        """The mode's IDA memory re-initialised at (t0, y0, yp0) with the parameters, first step and stop time."""
+        lib = self.lib
+        hit = self._memories.get(id(mf))
+        m = hit[1] if hit is not None and hit[0] is mf else self._first_use(mf, counts, len(p))
+        m.y[:] = y0
+        m.yp[:] = yp0
+        m.p[:] = p
+        self._check(lib.IDAReInit(m.mem, t0, m.yy_nv, m.yp_nv), "IDAReInit")
+        self._check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")
+        self._check(lib.IDASetInitStep(m.mem, first_step), "IDASetInitStep")
+        self._check(lib.IDASetStopTime(m.mem, t_end), "IDASetStopTime")
+        return m
+
+    def read(self, mf, p, t0: float, y0, yp0, t_out: np.ndarray) -> tuple | None:
+        """(t, y, y') at every t_out (ordered away from t0, the last one the stop time) from (y0, y0'), None where IDA
+        fails first: `integrate` without its segment's bookkeeping (counters, guards, the end state), for what
+        re-integrates a run's rows many times over (the located peaks' readings)."""
+        m = self._begin(mf, p, t0, y0, yp0, 0.0, float(t_out[-1]), {})
+        t_out = np.ascontiguousarray(t_out, dtype=float)
+        rows_t = np.empty(len(t_out))
+        rows_y, rows_yp = np.empty((len(t_out), mf.ny)), np.empty((len(t_out), mf.ny))
+        flag, k = self._advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp,
+                                self._tret, rows_t, rows_y, rows_yp)
+        return (rows_t, rows_y, rows_yp) if int(flag) >= 0 and int(k) == len(t_out) else None
+
     def integrate(self, request: Request) -> Segment:
         r, lib = request, self.lib
         counts = {}
-        hit = self._memories.get(id(r.mf))
-        m = hit[1] if hit is not None and hit[0] is r.mf else self._first_use(r.mf, counts, len(r.p))
-        m.y[:] = r.y0
-        m.yp[:] = r.yp0
-        m.p[:] = r.p
-        self._check(lib.IDAReInit(m.mem, r.t0, m.yy_nv, m.yp_nv), "IDAReInit")
-        self._check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")
-        self._check(lib.IDASetInitStep(m.mem, r.first_step), "IDASetInitStep")
-        self._check(lib.IDASetStopTime(m.mem, r.t_end), "IDASetStopTime")
+        m = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts)
         ahead = (r.t_out > r.t0) if r.t_end >= r.t0 else (r.t_out < r.t0)      # t_end < t0: backward in time
         t_out = r.t_out[ahead]
         n_req = len(t_out)
