@@ -167,7 +167,9 @@ class GenevaClearance(Geneva):
             # rebound's whole rise and fall within one step leaves the gap guard negative at both ends
             guards=(guards["exit"], Guard("close_driving", half - phi - arm, -1),
                     Guard("close_trailing", half + phi - arm, -1),
-                    Guard("apex", -flank * (sp.diff(phi, theta) * w1 + sp.diff(phi, psi) * w2), -1),
+                    Guard("apex", self._apex_guard(half - flank * phi, -flank * (sp.diff(phi, theta) * w1
+                                                                                  + sp.diff(phi, psi) * w2),
+                                                   arm, P("bounce_speed")), -1),
                     guards["stall"], guards["rest"]),
             powers={"load": -T_L * w2, "friction": zero, "damping": -c1 * w1**2 - c2 * w2**2},
             readouts=dict(dwell.readouts, pin_distance_m=x, lock_force_N=zero, pin_offset_m=phi,
@@ -177,6 +179,19 @@ class GenevaClearance(Geneva):
         if self.lock_clearance > 0:
             modes.update(self._play_modes(dwell, free))
         return modes
+
+    @staticmethod
+    def _apex_guard(gap, rate, arm, speed):
+        """The flight apex guard: the watched gap's rate, armed only once the gap has opened past `arm`.
+
+        A flight that leaves a flank without a rebound starts with the gap and its rate both zero: after a
+        separation (the normal force falling through zero) the rate has a double zero there (g' ~ g''' t^2 / 2),
+        after a plastic impact that slides off a simple one, so its sign at the start is round-off and a root
+        found there is no apex. Below the arm (where the gap guards cannot see a closure either) the guard is
+        held up by `speed` (the bounce speed) times (1 - gap/arm); above it the guard is the rate itself, so an
+        apex is located exactly where it was (docs/theory.md §G2.1)."""
+        lift = 1 - gap / arm
+        return rate + speed * (lift + abs(lift)) / 2
 
     # -- transitions -----------------------------------------------------------------------------------------
     def transitions(self):
