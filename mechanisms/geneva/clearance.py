@@ -187,10 +187,11 @@ class GenevaClearance(Geneva):
         A flight that leaves a flank without a rebound starts with the gap and its rate both zero: after a
         separation (the normal force falling through zero) the rate has a double zero there (g' ~ g''' t^2 / 2),
         after a plastic impact that slides off a simple one, so its sign at the start is round-off and a root
-        found there is no apex. Below the arm (where the gap guards cannot see a closure either) the guard is
-        held up by `speed` (the bounce speed) times (1 - gap/arm); above it the guard is the rate itself, so an
-        apex is located exactly where it was (docs/theory.md §G2.1)."""
-        lift = 1 - gap / arm
+        found there is no apex. Within the arm of the flank (|gap| < arm, where the gap guards cannot see a
+        closure either) the guard is held up by `speed` (the bounce speed) times (1 - |gap|/arm); outside it the
+        guard is the rate itself, so an apex is located exactly where it was, and a step that carries a short
+        rebound past its closure (the gap below -arm) still ends with the rate negative (docs/theory.md §G2.1)."""
+        lift = 1 - abs(gap) / arm
         return rate + speed * (lift + abs(lift)) / 2
 
     # -- transitions -----------------------------------------------------------------------------------------
