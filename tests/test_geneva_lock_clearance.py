@@ -178,6 +178,37 @@ def test_lock_impacts_in_console_report_and_figure(heated):
     assert len(drawn) and np.max(np.abs(drawn)) <= half * (1 + 1e-6)
 
 
+def test_a_separation_starts_a_flight_without_an_apex():
+    """The wheel overruns the pin: its normal force falls through zero and the pin leaves the driving flank with the
+    gap, its rate and its acceleration all zero, the rate's zero a double one, so its sign there is round-off. The
+    flight's apex guard is armed only once the gap has opened past the arm (`GenevaClearance._apex_guard`): at tight
+    tolerances it fired at the separation itself, then again at once (a chattering failure at t = 0.2305 s). The
+    pin crosses the gap: its offset falls monotonically to the trailing flank's impact, no apex between, and the
+    energy closes through the flight to 1e-6 of the throughput."""
+    r = run("duration=0.24 s", "thermal.model=lumped", *TIGHT, *PLAY)
+    assert r.failure is None
+    ev, ts = r.events.reset_index(drop=True), r.timeseries
+    k = int(np.flatnonzero(ev.kind == "separation")[0])
+    sep, hit = ev.iloc[k], ev.iloc[k + 1]
+    assert sep.from_mode == "engaged" and (hit.kind, hit.guard, hit.from_mode) == ("impact", "close_trailing", "free")
+    flight = ((ts.t_s > sep.t_s) & (ts.t_s < hit.t_s)).to_numpy()
+    offset = ts.pin_offset_m.to_numpy()[flight]
+    half = r.mechanism.slot_clearance / 2
+    assert len(offset) >= 5 and np.all(np.diff(offset) < 0) and half > offset[0] > offset[-1] > -half
+    assert np.max(np.abs(energy_closure(ts, r.events))) < 1e-6 * throughput(ts)
+
+
+def test_apex_guard_is_the_gap_rate_outside_the_arm():
+    """The apex guard: the gap's rate where |gap| >= arm (an apex located where it was), lifted by the bounce speed
+    at the flank (gap 0: a flight leaving without a rebound) and linearly in between."""
+    arm, speed = 2.5e-13, 1e-3
+    guard = runner.plan(api.load(SCENARIO)).mechanism._apex_guard
+    for gap in (arm, 3 * arm, 1e-4, -arm, -1e-6):
+        assert guard(gap, -0.2, arm, speed) == -0.2
+    assert guard(0.0, 0.0, arm, speed) == speed
+    assert guard(arm / 4, 1e-4, arm, speed) == pytest.approx(1e-4 + 0.75 * speed, rel=1e-12)
+
+
 def test_convergence_as_the_play_shrinks():
     """Plastic impacts, the load holding the wheel on the trailing end of its play: as the play delta halves, the
     crank angle approaches the model without play at first order (the pin meets the slot's driving flank nearer by

@@ -180,9 +180,9 @@ class GenevaClearance(Geneva):
             modes.update(self._play_modes(dwell, free))
         return modes
 
-    @staticmethod
-    def _apex_guard(gap, rate, arm, speed):
-        """The flight apex guard: the watched gap's rate, armed only once the gap has opened past `arm`.
+    def _apex_guard(self, gap, rate, arm, speed):
+        """The flight apex guard: the watched gap's rate, armed only once the gap has opened past `arm` (the rate
+        itself where the gap guards fire at the gap's zero, GAP_ARM = 0).
 
         A flight that leaves a flank without a rebound starts with the gap and its rate both zero: after a
         separation (the normal force falling through zero) the rate has a double zero there (g' ~ g''' t^2 / 2),
@@ -191,6 +191,8 @@ class GenevaClearance(Geneva):
         closure either) the guard is held up by `speed` (the bounce speed) times (1 - |gap|/arm); outside it the
         guard is the rate itself, so an apex is located exactly where it was, and a step that carries a short
         rebound past its closure (the gap below -arm) still ends with the rate negative (docs/theory.md §G2.1)."""
+        if self.GAP_ARM == 0:
+            return rate
         lift = 1 - abs(gap) / arm
         return rate + speed * (lift + abs(lift)) / 2
 
