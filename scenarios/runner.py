@@ -194,6 +194,9 @@ def plan(scenario: Scenario) -> Plan:
     drive = make_drive(si)
     settings = solver_settings(si)
     method, why = choose_method(si, mech, drive, settings)
+    refused = getattr(mech, "refused_formulations", {}).get(settings.formulation)
+    if refused and method == "dae" and settings.backend != "diffrax":     # diffrax integrates the index-1 ODE
+        raise ScenarioError("solver.formulation", f"{settings.formulation!r} {refused}")
     thermal = None
     if si.get("thermal", {}).get("model", "none") != "none":
         from mechsim.thermal.plan import ThermalSetupError, plan as thermal_plan   # local: optional per scenario

@@ -295,3 +295,16 @@ def test_the_console_names_the_impacts(heated):
     assert f"{s['impacts']['peak_impulse_N_s'] * 1e3:.4g} mN*s" in line
     assert f"+{s['thermal']['impacts']['flash_rise_max_K']:.3g} K" in line
     assert impacts_line({"impacts": {"count": 0}}) is None and impacts_line({}) is None
+
+
+def test_index3_is_refused_with_the_rigid_contact(tmp_path):
+    """IDA's index-3 form fails at the first restart onto a flank (a plastic impact; docs/geneva.md 'Clearance and
+    impacts'): refused at load, one line naming solver.formulation, exit 2, nothing written. diffrax (the index-1 ODE
+    whatever the key) and the compliant contact (no flank constraint) keep it."""
+    from cli_helpers import invoke, one_line_error
+    r = invoke("run", SCENARIO, "--set", "solver.formulation=index3", "--out", tmp_path / "o", "--quiet")
+    line = one_line_error(r)
+    assert r.exit_code == 2 and "solver.formulation" in line and "'index2'" in line
+    assert not (tmp_path / "o").exists()
+    for kept in (["solver.backend=diffrax"], ["contact.model=compliant"]):
+        assert runner.plan(api.load(SCENARIO, set=["solver.formulation=index3", *kept])).settings.formulation == "index3"

@@ -47,6 +47,11 @@ class GenevaClearance(Geneva):
     impacts = True
     #: the fraction of the clearance at which a closing gap fires its impact (see `modes`)
     GAP_ARM = 1e-9
+    #: formulations refused at load (solver.formulation, IDA), with the reason: the index-3 Newton matrix fails at a
+    #: restart onto a nonlinear constraint at working tolerances (docs/stability.md), and a plastic impact is one
+    refused_formulations = {"index3": (
+        "cannot hold the rigid pin-flank impacts: IDA's index-3 Newton matrix, conditioned like h^-3, fails at the "
+        "first restart onto a flank (docs/geneva.md 'Clearance and impacts'); use 'index2' or 'index1'")}
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
                  wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0,

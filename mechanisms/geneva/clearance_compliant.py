@@ -37,6 +37,8 @@ class GenevaCompliant(GenevaClearance):
     parameter_names = GenevaClearance.parameter_names + ("stiffness", "v_onset", "peaked")
     #: the gap guards fire at the gap's zero: the contact force's kink is located, not anticipated
     GAP_ARM = 0.0
+    #: no restart onto a flank constraint (the contact is a spring): every formulation holds
+    refused_formulations: dict = {}
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
                  wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0,
