@@ -3,9 +3,8 @@ output rows (`dynamics/extrema.py`), with its instant and drive angle (docs/theo
 
 Which columns are located and how is part of every entry (`how`): a DAE run's mechanical columns on the run's own
 dense output where its integrator keeps one (the compiled diffrax run), else by re-integrating the mode from the
-nearest output row, a closed-form run's by the closed form; the thermal model's columns of a DAE run by its formulas
-on the re-integrated readings (scenarios/thermal_peaks.py), a closed-form run's are the output rows' extremes and say
-so. Where a run settles into a periodic regime (crank turn to turn)
+nearest output row, a closed-form run's by the closed form; the thermal model's columns by its formulas on those
+readings with the network's states there (scenarios/thermal_peaks.py). Where a run settles into a periodic regime (crank turn to turn)
 the entries are the regime's, the start-up's beside them; a column that grows without bound toward an event has
 no value there, and its events, growth, impulse and energy lost are listed instead (`singular`).
 """

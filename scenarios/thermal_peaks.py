@@ -14,22 +14,32 @@ thermal column can be evaluated at any instant from the mechanical state and the
   solution at the instant itself (`bulk_response`: the mean curve, exact in the network's modes, plus the
   periodic ripple).
 
-`ThermalReader` is a `dynamics/extrema.py` reader of those columns on the run's table, so that `locate` finds their
-extrema as it finds the mechanical ones. A closed-form run's network is integrated exactly between rows by its
-own modal solution, which is not re-evaluated between rows: its thermal columns stay the rows' (said in `how`).
+A closed-form run (a prescribed speed) has no DAE: its mechanics is the closed form at any instant (scenarios/peaks.py
+`_closed_form_reader`), and its network's states are integrated exactly in the network's modes from the output
+row at or before the instant, by the same quadrature of the closed form's heat input that integrated the rows
+(thermal/exact.py `ModalNetwork.integrate`, its intervals split at the contact's switches); after a
+cycle-averaged window they are the cycle-averaged solution at the instant, as above (`ClosedFormThermalReader`).
+
+`ThermalReader` and `ClosedFormThermalReader` are `dynamics/extrema.py` readers of those columns on the run's
+table, so that `locate` finds their extrema as it finds the mechanical ones.
 """
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of
+from mechsim.dynamics.extrema import Extremum, Interval, ReadingFailed, TrajectoryReader, intervals_of, tie_of
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
                "(the network's states in the same DAE) and the thermal formulas evaluated there")
 HOW_THERMAL_CYCLE = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's "
                      "tolerances (after the simulated window at the periodic turn's phase), the network's states "
                      "the DAE's, then the cycle-averaged solution at the instant, and the thermal formulas there")
+HOW_THERMAL_CLOSED = ("located: the closed form evaluated between output rows, the network's states integrated exactly "
+                      "in its modes from the output row before the instant, and the thermal formulas there")
+HOW_THERMAL_CYCLE_CLOSED = ("located: the closed form evaluated between output rows, the network's states integrated "
+                            "exactly in its modes from the output row before the instant, after the simulated window "
+                            "the cycle-averaged solution at the instant, and the thermal formulas there")
 #: instants this close to an interval's end (relative to the run's time scale) count as its one-sided limit
 ROUNDOFF = 1e-12
 
@@ -146,12 +156,111 @@ class ThermalReader:
         return th._add_columns(frame, contact, states, t_on_pin)
 
 
+class ClosedFormThermalReader:
+    """Every column of a closed-form run's finished table at any instants of a smooth interval of it (module
+    docstring), as `ThermalReader` reads a DAE run's: the closed form's columns (scenarios/peaks.py
+    `_closed_form_reader`), the network's states integrated exactly from the window's row at or before each instant
+    (or the cycle-averaged solution after the simulated rows), and the finish's thermal columns there."""
+
+    def __init__(self, thermal, source, window: pd.DataFrame, events: pd.DataFrame, t_table_end: float):
+        from mechsim.scenarios.peaks import _closed_form_reader
+        from mechsim.thermal import cycle as cyc
+        from mechsim.thermal.exact import ModalNetwork
+        self.thermal, self.mech = thermal, source.mech
+        mech, si = source.mech, source.si
+        t_win = window["t_s"].to_numpy(float)
+        check = [c for c in mech.peak_columns if c in window]
+        self.mechanics = _closed_form_reader(source, si["initial"][mech.initial_keys[0]], t_win,
+                                             {c: window[c].to_numpy(float) for c in check}, check)
+        self.states, self.inputs, self.breaks = thermal._window_states(window)
+        if self.breaks is None:       # no network (the flash model): the switches alone
+            from mechsim.thermal.exact import closed_form_columns, contact_columns, switch_times
+            angle0 = si["initial"][mech.initial_keys[0]]
+            columns = closed_form_columns(mech, angle0, thermal.speed)
+            self.breaks = switch_times(contact_columns(mech, angle0, thermal.speed, columns), t_win)
+        ext = thermal.setup.extension
+        self.network = None if self.states is None else ModalNetwork(ext.system, ext.loss)
+        self.t_win = t_win
+        self.cycle = t_table_end > t_win[-1] * (1 + ROUNDOFF) + ROUNDOFF
+        self.t_sim = float(t_win[-1])
+        self.solution = None
+        win_events = events
+        if self.cycle:
+            self.t_sim = float(t_win[cyc.simulated_rows(t_win, float(si["duration"]), float(si["output_step"]))[-1]])
+            self.solution = thermal.cycle_solution(window)
+            if self.solution is None:
+                raise ValueError("no cycle-averaged solution for the window")
+            if events is not None and len(events):
+                win_events = events[events["t_s"].to_numpy(float) <= t_win[-1]]
+        self.starts = np.asarray(mech.contact_starts(window, win_events), dtype=float)
+        self.how = HOW_THERMAL_CYCLE_CLOSED if self.cycle else HOW_THERMAL_CLOSED
+
+    def kinks(self, lo: float, hi: float) -> list[tuple[float, str]]:
+        """The heat input's switches inside (lo, hi) that are no event of the table (thermal/exact.py
+        `switch_times`: a slip reversal, a flank switch), as (time, kind) breaks: the thermal columns kink there
+        (the flash rise follows |slip speed|), so an extremum there is read as the one-sided limits; after the
+        simulated rows the periodic turn's, every period."""
+        found = [b for b in self.breaks if b <= self.t_sim]
+        if self.cycle:
+            a, P = self.solution["t_start"], self.solution["period"]
+            turn = np.array([b for b in self.breaks if a <= b < a + P])
+            if len(turn):
+                m = np.arange(np.floor((self.t_sim - a) / P), np.ceil((hi - a) / P) + 1)
+                later = (turn[None, :] + P * m[:, None]).ravel()
+                found += later[later > self.t_sim].tolist()
+        return [(float(b), f"switch of the heat input at t = {b:.9g} s") for b in sorted(found) if lo < b < hi]
+
+    def _window_time(self, t: np.ndarray) -> np.ndarray:
+        """The window instant at the same phase of the periodic turn (after the simulated rows), else t itself."""
+        if not self.cycle:
+            return t
+        a, P = self.solution["t_start"], self.solution["period"]
+        return np.where(t <= self.t_sim, t, a + np.mod(t - a, P))
+
+    def _network(self, t: np.ndarray) -> np.ndarray | None:
+        """The network's states (with the bookkeeping energies; NaN after the simulated rows) at the instants t."""
+        if self.states is None:
+            return None
+        from mechsim.thermal.exact import states_between_rows
+        n = self.thermal.setup.system.size
+        out = np.full((len(t), self.states.shape[1]), np.nan)
+        late = t > self.t_sim if self.cycle else np.zeros(len(t), bool)
+        if late.any():
+            out[late, :n] = self.thermal.cycle_states(self.solution, t[late])
+        if not late.all():
+            out[~late] = states_between_rows(self.network, self.inputs, self.breaks, self.t_win, self.states, t[~late],
+                                             self.thermal.quadrature_piece)
+        return out
+
+    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+        times = np.asarray(times, dtype=float)
+        frame = pd.DataFrame({k: np.asarray(v) for k, v in self.mechanics(iv, position, times).items()})
+        # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
+        eps = 1e-12 * max(1.0, abs(iv.hi))
+        inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
+        at = self._window_time(inner)
+        if self.cycle:
+            frame["window_t_s"] = at
+        th = self.thermal
+        table = th._add_columns(frame, self.mech.contact_state(frame), self._network(inner),
+                                th._time_since(at, self.starts))
+        return {c: table[c].to_numpy() for c in table.columns}
+
+
 def thermal_reader(source, events: pd.DataFrame, t_table_end: float):
-    """The `ThermalReader` of a finished run (scenarios/peaks.py Source), or None where its thermal columns are
-    not read between rows (no thermal model, a closed-form run, no mechanics window kept)."""
+    """The `ThermalReader` (a closed-form run: `ClosedFormThermalReader`) of a finished run (scenarios/peaks.py
+    Source), or None where its thermal columns are not read between rows (no thermal model, no mechanics window
+    kept, no full turn to average)."""
     thermal = getattr(source, "thermal", None)
     window = getattr(source, "window", None)
-    if thermal is None or window is None or source.traj is None or not len(window):
+    if thermal is None or window is None or not len(window):
+        return None
+    if source.method == "closed-form":
+        try:
+            return ClosedFormThermalReader(thermal, source, window, events, t_table_end)
+        except ValueError:
+            return None
+    if source.traj is None:
         return None
     try:
         return ThermalReader(thermal, source.traj, window, events, source.mech, source.settings, t_table_end)
@@ -200,12 +309,70 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
                    hi: float, kinds: tuple[str, str]) -> dict:
     """{column: ({'max', 'min'} located by `dynamics/extrema.py` `locate` with the reader, the intervals searched)}
     for the thermal columns over [lo, hi] of the table, between its events (a cycle-averaged run's repeated ones
-    included), on the intervals that may hold the extremum (`_promising`)."""
+    included) and the heat input's own switches where the reader knows them (`kinks`), on the intervals that may
+    hold the extremum (`_promising`), then against the one-sided limits at the intervals' ends that may beat it
+    (`_limits`)."""
     from mechsim.dynamics.extrema import locate
-    intervals = intervals_of(t, _breaks(events), lo, hi, *kinds)
+    breaks = _breaks(events)
+    kinks = getattr(reader, "kinks", None)
+    if kinks is not None:         # the heat input's own switches that are no event (within round-off of none)
+        known = np.array([b for b, _ in breaks])
+        near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
+        breaks = sorted(breaks + [k for k in kinks(lo, hi) if not len(known) or np.min(np.abs(known - k[0])) > near])
+    intervals = intervals_of(t, breaks, lo, hi, *kinds)
     out = {}
     for c in columns:
         f = np.asarray(cols[c], float)
         own = _promising(f, intervals)
-        out[c] = (locate(t, {c: f}, own, reader).get(c, {}), own)
+        got = locate(t, {c: f}, own, reader).get(c, {})
+        for name, sense in (("max", 1.0), ("min", -1.0)):
+            found = _limits(got.get(name), c, sense, t, f, own, intervals, reader, tie_of(f))
+            if found is not None:
+                got[name] = found
+        out[c] = (got, own)
     return out
+
+
+def _limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: np.ndarray, own: list[Interval],
+            intervals: list[Interval], reader, tie: float) -> Extremum | None:
+    """The extremum `e` against the one-sided limits at the intervals' ends that may beat it: `locate` ranks an
+    interval's end by its row next to it, but a column that falls toward a break on one side and jumps or kinks
+    there (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the share jumps) has
+    its limit up to one row step beyond that row, and the side whose row is the better one need not hold the better
+    limit. Each end whose linear extrapolation from its two rows, plus one step for margin, beats `e` is read
+    there (the PROMISING best guesses of them); the best limit that beats `e` is returned (`e` where none does). An end read
+    that `own` lacks is appended to it (the entry's later checks index the intervals searched)."""
+    ends = []
+    for k, iv in enumerate(intervals):
+        if len(iv.rows) < 2:
+            continue
+        for side, (r0, r1), te in (("after", iv.rows[:2], iv.lo), ("before", iv.rows[-1:-3:-1], iv.hi)):
+            step = f[r0] - f[r1]
+            if not np.isfinite(step) or t[r1] == t[r0]:
+                continue
+            guess = sense * (f[r0] + step * (t[r0] - te) / (t[r1] - t[r0]))
+            ends.append((guess, guess + abs(step), k, side, te))
+    floor = -np.inf if e is None else sense * e.value + tie
+    best = e
+    # the best guesses first (those whose margin reaches the extremum; the earliest of equal guesses)
+    for _, _, k, side, te in sorted((x for x in ends if x[1] > floor), key=lambda x: (-x[0], x[4]))[:PROMISING]:
+        iv = intervals[k]
+        if best is not None and te == best.t and best.limit == side:
+            continue
+        try:
+            table = reader(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([te]))
+        except ReadingFailed:
+            continue
+        value = float(np.asarray(table[column], float)[0])
+        if not np.isfinite(value) or (best is not None and sense * (value - best.value) <= tie):
+            continue
+        at = next((i for i, x in enumerate(own) if x is iv), None)
+        if at is None:
+            own.append(iv)
+            at = len(own) - 1
+        kind = iv.lo_kind if side == "after" else iv.hi_kind
+        row = {c: np.asarray(v)[0] for c, v in table.items()}
+        sampled = f[iv.rows[0] if side == "after" else iv.rows[-1]]
+        best = Extremum(value, te, f"{kind} (limit from {side})", row, sense * float(sense * sampled), side, side,
+                        at, False)
+    return best

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from mechsim.thermal.exact import ModalNetwork
+from mechsim.thermal.exact import ModalNetwork, states_between_rows
 from mechsim.thermal.linear import LinearThermalSystem
 
 #: rows of the bulk history table over the whole duration
@@ -32,6 +32,9 @@ PHASE_RESOLUTION = 1e-10
 #: phases and the breaks (`_ripple_hermite`) instead of integrated to every phase
 HERMITE_NODES = 4096
 HERMITE_ABOVE = 4
+#: up to this many distinct phases (a located peak's readings) each is integrated from the periodic ripple at the
+#: start of its piece, kept between calls (`bulk_response`'s cache)
+FEW_PHASES = 64
 
 
 def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarray:
@@ -172,10 +175,13 @@ def _hermite(x, y0, y1, d0, d1):
 
 
 def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Callable[[np.ndarray], np.ndarray],
-                  phase_breaks: list[float], times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                  phase_breaks: list[float], times: np.ndarray, cache: dict | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """(mean curve, mean curve + ripple) of the network states at `times` (s from the run's start, >= t_start):
     continued from the states means.start at means.t_start with the turn's input u_of_phase (phase 0 = t_start)
-    repeated every period (module docstring)."""
+    repeated every period (module docstring). cache: a dict kept between calls for the same turn (the located
+    peaks' many small readings): the input's mean and the periodic ripple at the turn's fixed pieces' ends, from
+    which each phase is integrated exactly over its own piece."""
     times = np.asarray(times, dtype=float)
     n = system.size
     u_bar = np.array([means.share_mean * means.heat_mean, (1.0 - means.share_mean) * means.heat_mean])
@@ -187,18 +193,33 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     # moves by at most PHASE_RESOLUTION * P * |dT/dt|: ~1e-9 K at the seed's rates)
     phase = np.round((since % P) / (PHASE_RESOLUTION * P)) * (PHASE_RESOLUTION * P)
     phase = np.minimum(phase, P)
-    tau = np.unique(np.concatenate([[0.0, P], phase]))
     breaks = sorted({b for b in phase_breaks if 0.0 < b < P})
+    # the ripple is integrated over the turn on pieces fixed by the turn (HERMITE_NODES uniform phases and the
+    # input's breaks) and the phases asked for: so that its value at a phase does not depend on which other phases
+    # (which output grid) are asked for with it, as a few phases alone would make the pieces long
+    nodes = np.unique(np.concatenate([[0.0, P], breaks, np.linspace(0.0, P, HERMITE_NODES + 1)]))
+    tau = np.unique(np.concatenate([nodes, phase]))
+    cache = {} if cache is None else cache
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
-    u_own = _period_mean(u_of_phase, P, breaks)
+    if "u_own" not in cache:
+        cache["u_own"] = _period_mean(u_of_phase, P, breaks)
+    u_own = cache["u_own"]
 
     def ripple_input(x):
         return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
-    if len(tau) > HERMITE_ABOVE * (HERMITE_NODES + len(breaks)):
+    if len(tau) > (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks)):
         ripple, periodic0 = _ripple_hermite(homogeneous, ripple_input, P, breaks, phase)
+    elif len(np.unique(phase)) <= FEW_PHASES:          # a few phases: each from its piece's start
+        if "nodes" not in cache:
+            Z = homogeneous.integrate(ripple_input, nodes, np.zeros(n + 3), breaks)
+            cache["nodes"] = homogeneous.exp(nodes, homogeneous.resolvent_periodic(Z[-1, :n], P)) + Z[:, :n]
+        at = cache["nodes"]
+        ripple = states_between_rows(homogeneous, ripple_input, breaks, nodes, np.c_[at, np.zeros((len(at), 3))],
+                                     phase)[:, :n]
+        periodic0 = at[0]
     else:
         Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
         start = homogeneous.resolvent_periodic(Z[-1], P)
@@ -298,6 +319,13 @@ def turn_rows(t: np.ndarray, t_start: float, period: float) -> np.ndarray:
     return np.flatnonzero((t > t_start) & (t < t_start + period))
 
 
+def simulated_rows(t: np.ndarray, duration: float, step: float) -> np.ndarray:
+    """Indices of the window's rows at times t that lie on the run's output grid (`output_times`): the simulated rows
+    a cycle-averaged table keeps (`continue_periodically`); the last of them is where its continuation starts."""
+    grid = output_times(duration, step)
+    return np.flatnonzero(np.isin(np.round(np.asarray(t, float) / step, 6), np.round(grid / step, 6)))
+
+
 def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
                           step: float) -> tuple[pd.DataFrame, pd.DataFrame, float, np.ndarray]:
     """The whole run on the output grid (`output_times`: k step, and the end time): the simulated rows on it up to the
@@ -309,7 +337,7 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
     period (`message` says so). Returns (table, events, t_sim, the indices into df of the simulated rows kept)."""
     t = df["t_s"].to_numpy(float)
     grid = output_times(duration, step)
-    kept = np.flatnonzero(np.isin(np.round(t / step, 6), np.round(grid / step, 6)))
+    kept = simulated_rows(t, duration, step)
     simulated = df.iloc[kept]
     t_sim = float(t[kept[-1]])
     new_t = grid[grid > t_sim + 1e-9 * step]

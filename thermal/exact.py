@@ -197,14 +197,20 @@ class ModalNetwork:
         return z @ self.V.T, integral @ self.loss_m - t[:, 0] * float(np.sum(self.s))
 
     def integrate(self, inputs: Callable[[np.ndarray], np.ndarray], t_out: np.ndarray, y0: np.ndarray,
-                  breaks: list[float], nodes: int = QUADRATURE_NODES) -> np.ndarray:
+                  breaks: list[float], nodes: int = QUADRATURE_NODES, max_piece: float | None = None) -> np.ndarray:
         """States [T, E_gen, E_pin, E_conv] at t_out from y0 at t_out[0]; inputs(t) -> [u..., Q, gamma Q] rows.
+        max_piece: intervals longer than this are split into equal pieces (so that the quadrature's error does not
+        grow with the spacing of t_out).
 
         Per interval h (split at the breaks): z <- e^{lambda h} z + sum_j h w_j e^{lambda h (1 - x_j)} g_j, and
         int z = h phi1(lambda h) z + sum_j h w_j h (1 - x_j) phi1(lambda h (1 - x_j)) g_j, g_j the modal forcing.
         """
         t_out = np.asarray(t_out, dtype=float)
         cuts = np.unique(np.concatenate([t_out, [b for b in breaks if t_out[0] < b < t_out[-1]]]))
+        if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
+            pieces = np.maximum(1, np.ceil(np.diff(cuts) / max_piece).astype(int))
+            cuts = np.unique(np.concatenate([cuts] + [np.linspace(a, b, k + 1)[1:-1] for a, b, k in
+                                                      zip(cuts[:-1], cuts[1:], pieces) if k > 1]))
         h = np.diff(cuts)
         x, w = _gauss_legendre(nodes)
         u = np.asarray(inputs((cuts[:-1, None] + h[:, None] * x[None, :]).ravel()), dtype=float)
@@ -245,12 +251,33 @@ class ModalNetwork:
         return out[np.searchsorted(cuts, t_out)]
 
 
+def states_between_rows(network: ModalNetwork, inputs: Callable, breaks: list[float], t_rows: np.ndarray,
+                        rows: np.ndarray, times: np.ndarray, max_piece: float | None = None) -> np.ndarray:
+    """The states [T, E_gen, E_pin, E_conv] at any instants from the states `rows` at the rows t_rows: each
+    integrated exactly in the modes (`ModalNetwork.integrate`, split at the breaks) from the row at or before it (the
+    first row for an instant before it), as the rows themselves were: so a reading between rows is the solution
+    the rows sample, whatever the rows' spacing (to the quadrature's error on the pieces between them)."""
+    times = np.asarray(times, dtype=float)
+    out = np.empty((len(times), rows.shape[1]))
+    at = np.clip(np.searchsorted(t_rows, times, side="right") - 1, 0, len(t_rows) - 1)
+    for r in np.unique(at).tolist():
+        pick = np.flatnonzero(at == r)
+        out[pick] = rows[r]
+        ahead = times[pick] > t_rows[r]
+        if ahead.any():
+            later = np.unique(times[pick][ahead])
+            got = network.integrate(inputs, np.r_[t_rows[r], later], rows[r], breaks, max_piece=max_piece)[1:]
+            out[pick[ahead]] = got[np.searchsorted(later, times[pick][ahead])]
+    return out
+
+
 def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: float, t_out: np.ndarray,
-                          y0: np.ndarray, table=None) -> tuple[np.ndarray, Callable, list[float]]:
+                          y0: np.ndarray, table=None, max_piece: float | None = None
+                          ) -> tuple[np.ndarray, Callable, list[float]]:
     """Thermal states [T..., E_gen, E_pin, E_conv] at t_out for the closed-form motion; also the input function
     and the contact switch times (for reuse by the cycle-averaged model). table: the closed form's columns at
-    t_out, if already computed (the run's table)."""
+    t_out, if already computed (the run's table). max_piece: the longest quadrature piece (`ModalNetwork.integrate`)."""
     columns = closed_form_columns(mech, angle0, speed)
     inputs = input_function(ext, mech, contact_columns(mech, angle0, speed, columns, "closed_form_heat"))
     breaks = switch_times(contact_columns(mech, angle0, speed, columns), t_out, grid_columns=table)
-    return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks), inputs, breaks
+    return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks, max_piece=max_piece), inputs, breaks

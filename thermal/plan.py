@@ -15,14 +15,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import numpy as np
 import pandas as pd
 
 import mechsim.thermal.cycle as cyc
 from mechsim.thermal.conduction1d import validity
-from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form
+from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form, states_between_rows
 from mechsim.thermal.flash import flash_temperature
 from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
 from mechsim.thermal.impact import ImpactHeat, impact_flash, impact_share_pin
@@ -52,6 +52,26 @@ SCATTER = 1e-2
 WINDOW_SHARE = 0.5
 #: windows tried at most before resolving the whole run
 WINDOW_TRIES = 5
+#: the periodic turn's heat input read between rows (`WindowReadings`) on this many pieces per turn, each piece within
+#: one smooth stretch between the window's events, at INPUT_NODES Gauss-Legendre nodes per piece and polynomial
+#: between them (`_period_input`)
+INPUT_PIECES = 1024
+INPUT_NODES = 4
+#: Newton steps on the drive angle that put the periodic turn's ends where the drive passes its start angle
+TURN_END_STEPS = 4
+
+
+@dataclass
+class WindowReadings:
+    """The mechanics window's columns and the network's states at any instants of the window, on its continuous
+    solution, not its rows: `read(times)` gives a table of the window's columns (the network's states under their
+    extension names) at the instants (at an event: the limit from after it); `breaks`, the window's events (where
+    the heat input may jump). With these the cycle averaging takes the periodic turn's ends, its states and energies
+    there and its heat input from the solution itself, so that it does not depend on the output step
+    (docs/thermal.md, "Reported temperatures")."""
+
+    read: Callable[[np.ndarray], pd.DataFrame]
+    breaks: list[float]
 
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
@@ -107,11 +127,19 @@ class ThermalPlan:
     warnings: list[str] = field(default_factory=list)
     tried: tuple = ()          # the earlier mechanics windows of cycle mode, each with its periodicity (`extend`)
     fallback: str = ""         # why cycle averaging fell back to the resolved run (`extend`)
+    #: a DAE window's `WindowReadings` (set by the runner once the window has run; a closed form reads its own)
+    dense: WindowReadings | None = None
 
     @property
     def extension(self):
         """The StateExtension for the DAE (None when no DAE runs or the model has no states)."""
         return self.setup.extension if self.method == "dae" else None
+
+    @property
+    def quadrature_piece(self) -> float:
+        """The longest piece of the closed form's quadrature of the heat input (thermal/exact.py
+        `ModalNetwork.integrate`): fixed by the cycle, so that the states do not depend on the output step."""
+        return self.setup.period / INPUT_PIECES
 
     @property
     def ext_initial(self):
@@ -231,7 +259,8 @@ class ThermalPlan:
             return df[list(ext.names)].to_numpy(float), None, None
         table = df if table is None else table
         return integrate_closed_form(ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
-                                     np.asarray(table["t_s"], dtype=float), setup.initial, table=table)
+                                     np.asarray(table["t_s"], dtype=float), setup.initial, table=table,
+                                     max_piece=self.quadrature_piece)
 
     def cycle_bulk(self, df: pd.DataFrame, t_rows, repetitions) -> tuple[np.ndarray, np.ndarray]:
         """(times, bulk states in K) of the run's cycle-averaged bulk at the window's rows t_rows repeated
@@ -241,10 +270,11 @@ class ThermalPlan:
         evaluated at those times only. The design sensitivities read the run's own peak contact temperature this
         way at a prescribed speed (docs/sensitivity.md, "Cycle averaging") without continuing the whole duration."""
         states, inputs, breaks = self._window_states(df)
-        means = self._cycle_means(df, states)
+        readings = self._readings(df, states, inputs, breaks)
+        means = self._cycle_means(df, states, readings)
         if states is None or means is None:
             raise ValueError("cycle_bulk needs bulk states and a full turn in the window")
-        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, readings)
         times = np.asarray(t_rows, float) + np.asarray(repetitions) * means.period
         return times, cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, times)[1]
 
@@ -254,12 +284,13 @@ class ThermalPlan:
         gives the network's states at any instant after the window (the located peaks read them between rows).
         None without a full turn."""
         states, inputs, breaks = self._window_states(df)
-        means = self._cycle_means(df, states)
+        readings = self._readings(df, states, inputs, breaks)
+        means = self._cycle_means(df, states, readings)
         if means is None:
             return None
         out = {"t_start": means.t_start, "period": means.period, "means": means}
         if states is not None:
-            out["input"] = self._period_input(df, states, inputs, breaks, means)
+            out["input"] = self._period_input(df, states, inputs, breaks, means, readings)
         return out
 
     def cycle_states(self, solution: dict, times) -> np.ndarray:
@@ -267,16 +298,58 @@ class ThermalPlan:
         `times` after the window: thermal/cycle.py `bulk_response`, as `_cycle` writes them on the later rows."""
         u_of_phase, phase_breaks = solution["input"]
         return cyc.bulk_response(self.setup.system, solution["means"], u_of_phase, phase_breaks,
-                                 np.asarray(times, float))[1]
+                                 np.asarray(times, float), solution.setdefault("cache", {}))[1]
 
-    def _cycle_means(self, df: pd.DataFrame, states):
+    def _readings(self, df: pd.DataFrame, states, inputs, breaks) -> WindowReadings | None:
+        """The window's `WindowReadings`: a closed form's own (its columns at the instants, the network integrated
+        exactly from the row before each, thermal/exact.py `states_between_rows`), a DAE window's as the runner
+        set them (`dense`); None without bulk states or readings (the rows then stand for the solution)."""
+        if states is None:
+            return None
+        if self.method != "closed-form":
+            return self.dense
+        ext = self.setup.extension
+        columns = closed_form_columns(self.mech, self.si["initial"][self.mech.initial_keys[0]], self.speed)
+        network = ModalNetwork(ext.system, ext.loss)
+        t = df["t_s"].to_numpy(float)
+
+        def read(times):
+            times = np.asarray(times, dtype=float)
+            got = states_between_rows(network, inputs, breaks, t, states, times, self.quadrature_piece)
+            return pd.DataFrame({**columns(times), **{name: got[:, j] for j, name in enumerate(ext.names)}})
+        return WindowReadings(read, list(breaks))
+
+    def _turn_ends(self, df: pd.DataFrame, bounds: np.ndarray, readings: WindowReadings) -> np.ndarray:
+        """The instants the drive passes its start angle + 2 pi m near `bounds` (the rows' linear estimates), on the
+        continuous solution: Newton on the angle read there, its speed the slope."""
+        column = _angle_column(df)
+        speed = column[:-len("_angle_rad")] + "_speed_rad_s"
+        angle = df[column].to_numpy(float)
+        t = df["t_s"].to_numpy(float)
+        targets = angle[0] + 2 * np.pi * np.round((np.interp(bounds, t, angle) - angle[0]) / (2 * np.pi))
+        ends = np.asarray(bounds, dtype=float)
+        for _ in range(TURN_END_STEPS):
+            got = readings.read(ends)
+            ends = ends - (got[column].to_numpy(float) - targets) / got[speed].to_numpy(float)
+        return ends
+
+    def _cycle_means(self, df: pd.DataFrame, states, readings: WindowReadings | None = None):
         """The cycle means of the last full turn of the window (thermal/cycle.py `cycle_means_from_energies`) with
-        the network's states at its start (linear between rows), or None with fewer than one full turn."""
+        the network's states at its start, or None with fewer than one full turn: with `readings` the turn's ends
+        where the drive passes its start angle and the energies and states there read on the continuous solution,
+        else the rows' (linear between them)."""
         t = df["t_s"].to_numpy(float)
         angle = df[_angle_column(df)].to_numpy(float)
         bounds = cyc.turn_boundaries(t, angle, angle[0])
         if len(bounds) < 2:
             return None
+        if readings is not None and states is not None:
+            n, names = self.setup.system.size, list(self.setup.extension.names)
+            ends = self._turn_ends(df, bounds[-3:], readings)
+            at = readings.read(ends)[names].to_numpy(float)
+            means = cyc.cycle_means_from_energies(ends, ends, at[:, n], at[:, n + 1])
+            means.start = at[-2, :n]
+            return means
         if states is None:            # flash only: nothing to extrapolate, the last turn is the periodic state
             e_gen = self._heat_generated(df, t)
             return cyc.CycleMeans(float(bounds[-2]), float(bounds[-1] - bounds[-2]),
@@ -307,21 +380,23 @@ class ThermalPlan:
         power = np.asarray(self.mech.contact_state(df)["heat_rate"], dtype=float)
         return cyc.turn_periodicity(t, angle, speed, energy, SCATTER * PERIODICITY_TOLERANCE, accel, power)
 
-    def averaging_error(self, df: pd.DataFrame, states, per: cyc.Periodicity) -> float:
+    def averaging_error(self, df: pd.DataFrame, states, per: cyc.Periodicity,
+                        readings: WindowReadings | None = None) -> float:
         """The cycle averaging's estimated error on a row, relative to the bulk body's rise over the run (the largest
         over the bodies): the level, the continued turn's heat off by per.error, so per.error times the rise after
         the turn's start (the mean curve's), plus the phase drift of the in-cycle swing, the time continued times
         per.period_error, times the body's largest rate of change over the turn, plus how far the continuation
         misses the resolved states over the turn itself, twice (its input linear between rows where the resolved
         run's is not: that error repeats in the swing and stays in the mean curve's start, but does not grow).
-        Without bulk states per.error."""
+        Without bulk states per.error. readings: the window's `WindowReadings`, where the run reads the turn with
+        them."""
         if states is None or not math.isfinite(per.error):
             return per.error
-        means = self._cycle_means(df, states)
+        means = self._cycle_means(df, states, readings)
         if means is None:
             return math.inf
         _, inputs, breaks = self._window_states(df)
-        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, readings)
         t = df["t_s"].to_numpy(float)
         own = (t > means.t_start) & (t <= means.t_start + means.period)
         again = cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, t[own])[1]
@@ -481,12 +556,13 @@ class ThermalPlan:
         solution (mean + periodic ripple) from the window's states at the turn's start. (table, events, states)
         or None when there is no full turn to average."""
         setup, mech = self.setup, self.mech
-        means = self._cycle_means(df, states)
+        readings = self._readings(df, states, inputs, breaks)
+        means = self._cycle_means(df, states, readings)
         if means is None:
             warnings.append("thermal: fewer than one full crank turn in the mechanics window; shown resolved")
             return None
         per = self.periodicity(df, states)
-        estimate = self.averaging_error(df, states, per)
+        estimate = self.averaging_error(df, states, per, readings)
         n = None if states is None else setup.system.size
         duration, step = float(self.si["duration"]), float(self.si["output_step"])
         full, full_events, t_sim, kept = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
@@ -532,7 +608,7 @@ class ThermalPlan:
         summary["cycle"] = info
         if states is None:
             return full, full_events, None
-        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means)
+        u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, readings)
         full_states = np.full((len(full), n + 3), np.nan)      # per-row energies after t_sim: see the history table
         full_states[:len(kept)] = states[kept]
         if later.any():
@@ -545,18 +621,50 @@ class ThermalPlan:
         full = full.drop(columns=[c for c in setup.extension.names if c in full])
         return full, full_events, full_states
 
-    def _period_input(self, df, states, inputs, breaks, means):
-        """u(phase) over the periodic turn (phase 0 = means.t_start) and the phases where it jumps."""
+    def _period_input(self, df, states, inputs, breaks, means, readings: WindowReadings | None = None):
+        """u(phase) over the periodic turn (phase 0 = means.t_start) and the phases where it jumps: a closed form's
+        own; a DAE window's read on its solution where `readings` are given (`_read_input`), else linear between
+        its rows."""
         a, P = means.t_start, means.period
         if inputs is not None:                                    # closed form: exact at any time
             n_in = self.setup.system.input_matrix.shape[1]
             return (lambda s: inputs(a + s)[:n_in]), [b - a for b in breaks if a < b < a + P]
+        if readings is not None:
+            return self._read_input(readings, a, P)
         t = df["t_s"].to_numpy(float)
         u, _, _ = self.setup.extension.inputs_numeric(self.mech.contact_state(df))
         # the input is linear between output rows: every row inside the turn is a break, so that the quadratures
         # of the mean and of the ripple are exact for it (thermal/cycle_exact.py gives the same in closed form)
         rows = [float(x) - a for x in t[(t > a) & (t < a + P)]]
         return (lambda s: np.array([np.interp(a + s, t, ui) for ui in u])), rows
+
+    def _read_input(self, readings: WindowReadings, a: float, P: float):
+        """(u(phase), the phases of its pieces' ends) of the turn [a, a + P) read on the window's solution: each
+        smooth stretch between the window's events split into pieces of at most P/INPUT_PIECES, the input read at
+        INPUT_NODES Gauss-Legendre nodes of each (never at an event: a jump is met from its own side) and
+        polynomial through them on the piece. The pieces are fixed by the turn and its events, not by the output
+        rows; the quadratures of the mean and the ripple split at their ends (thermal/cycle.py `bulk_response`)."""
+        cuts = np.unique(np.r_[a, [b for b in readings.breaks if a < b < a + P], a + P])
+        edges = np.unique(np.concatenate([np.linspace(lo, hi, max(1, int(np.ceil((hi - lo) * INPUT_PIECES / P))) + 1)
+                                          for lo, hi in zip(cuts[:-1], cuts[1:])])) - a
+        h = np.diff(edges)
+        x, _ = np.polynomial.legendre.leggauss(INPUT_NODES)
+        x = 0.5 * (x + 1.0)
+        frame = readings.read(a + (edges[:-1, None] + h[:, None] * x[None, :]).ravel())
+        u, _, _ = self.setup.extension.inputs_numeric(self.mech.contact_state(frame))
+        u = u.reshape(len(u), len(h), INPUT_NODES)
+        # Lagrange basis through the nodes: weights[j] = 1 / prod_{m != j} (x_j - x_m)
+        weights = np.array([1.0 / np.prod([x[j] - x[m] for m in range(INPUT_NODES) if m != j])
+                            for j in range(INPUT_NODES)])
+
+        def u_of_phase(s):
+            s = np.asarray(s, dtype=float)
+            k = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(h) - 1)
+            xi = (s - edges[k]) / h[k]
+            basis = np.stack([weights[j] * np.prod([xi - x[m] for m in range(INPUT_NODES) if m != j], axis=0)
+                              for j in range(INPUT_NODES)])
+            return np.einsum("isj,js->is", u[:, k, :], basis)
+        return u_of_phase, [float(b) for b in edges[1:-1]]
 
     def _mean_balance(self, means, duration, t_window, states) -> dict:
         """Heat balance at the end of the run: the window's bookkeeping states up to the periodic turn's start a

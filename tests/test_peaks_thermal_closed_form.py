@@ -1,0 +1,101 @@
+"""The thermal peaks of a closed-form run (a prescribed crank speed, no DAE) are located on the continuous solution
+too (scenarios/thermal_peaks.py `ClosedFormThermalReader`, docs/thermal.md "Reported temperatures"): the closed form
+between rows, the network's states integrated exactly in its modes from the row before the instant on quadrature
+pieces fixed by the cycle (not by the output step), and the heat input's switches that are no event (the slip
+reversal, where the contact temperature's minimum lies) read as one-sided limits. So the peaks do not move with the
+output step beyond the quadrature's own error, which is estimated here by doubling its nodes; the rows' peaks do."""
+import numpy as np
+import pytest
+
+import mechsim
+from mechsim.scenarios import runner
+from mechsim.thermal.exact import ModalNetwork, integrate_closed_form
+
+COLUMNS = ("temp_contact_C", "temp_flash_rise_K", "temp_bulk_pin_C", "temp_bulk_wheel_C", "heat_rate_W")
+STEPS = (0.25, 1, 4)
+
+
+def _scenario(step, *extra):
+    return mechsim.load("geneva-lc1", set=["duration=1 s", f"output_step={step} ms", *extra])
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {step: runner.run(_scenario(step)) for step in STEPS}
+
+
+def quadrature_error(step) -> float:
+    """The largest error of the network's temperatures on the rows (K), estimated as their change when the
+    quadrature's nodes per piece are doubled (6 -> 12; the quadrature's error is of far higher order)."""
+    plan = runner.plan(_scenario(step))
+    th, mech = plan.thermal, plan.mechanism
+    ext = th.setup.extension
+    t = np.asarray(runner.run(_scenario(step)).timeseries["t_s"], float)
+    angle0 = plan.scenario.si["initial"][mech.initial_keys[0]]
+    six, inputs, breaks = integrate_closed_form(ext, mech, angle0, th.speed, t, th.setup.initial,
+                                                max_piece=th.quadrature_piece)
+    twelve = ModalNetwork(ext.system, ext.loss).integrate(inputs, t, th.setup.initial, breaks, nodes=12,
+                                                          max_piece=th.quadrature_piece)
+    n = ext.system.size
+    return float(np.max(np.abs(six[:, :n] - twelve[:, :n])))
+
+
+def test_closed_form_thermal_peaks_do_not_move_with_the_output_step(runs):
+    """0.25 / 1 / 4 ms: every thermal peak located, equal to the quadrature's error (round-off here: the pieces are
+    the cycle's, at most 1.2 ms) plus the locating polynomial's own error at an interior peak (|F^(7)| d^7 for its
+    grid step d = h/16: 1.6e-12 of the contact temperature measured at 4 ms; bound 1e-11), at one instant; the 4 ms
+    rows miss the contact temperature's peak by far more than that."""
+    error = max(quadrature_error(step) for step in STEPS)
+    ref = runs[0.25].summary["peaks"]
+    for col in COLUMNS:
+        assert ref[col]["how"].startswith("located: the closed form"), col
+        for step, r in runs.items():
+            got = r.summary["peaks"][col]
+            for side in ("max", "min"):
+                bound = 4 * error + 1e-11 * max(1.0, abs(ref[col][side]["value"]))
+                assert got[side]["value"] == pytest.approx(ref[col][side]["value"], rel=0, abs=bound), (col, side, step)
+                assert got[side]["t_s"] == pytest.approx(ref[col][side]["t_s"], abs=1e-5), (col, side, step)
+    assert ref["temp_contact_C"]["max"]["at"] == "interior"
+    # the minimum of the contact temperature: the slip reversal, where the flash rise vanishes (a kink of the
+    # heat input that no event marks) and the pin's share jumps: the lower one-sided limit there
+    assert ref["temp_contact_C"]["min"]["at"].startswith("switch of the heat input")
+    rows = np.nanmax(runs[4].timeseries["temp_contact_C"])
+    assert ref["temp_contact_C"]["max"]["value"] - rows > 1e3 * (4 * error + 1e-11 * rows)
+
+
+def test_closed_form_thermal_peaks_are_never_below_a_row(runs):
+    for step, r in runs.items():
+        for col in COLUMNS:
+            rows = r.timeseries[col].to_numpy(float)
+            entry = r.summary["peaks"][col]
+            scale = 1e-12 * max(1.0, float(np.nanmax(np.abs(rows))))
+            assert entry["max"]["value"] >= np.nanmax(rows) - scale, (col, step)
+            assert entry["min"]["value"] <= np.nanmin(rows) + scale, (col, step)
+
+
+def test_flash_model_peaks_are_located_at_a_prescribed_speed():
+    """The flash model (no network: the contact temperature is the ambient plus the flash rise, algebraic in the
+    closed form): the same peaks at 1 and 4 ms to round-off, its minimum the slip reversal's ambient."""
+    one, four = (runner.run(_scenario(step, "thermal.model=flash")).summary["peaks"] for step in (1, 4))
+    for col in ("temp_contact_C", "temp_flash_rise_K"):
+        for side in ("max", "min"):
+            assert four[col][side]["value"] == pytest.approx(one[col][side]["value"], rel=1e-12, abs=1e-12)
+    assert one["temp_contact_C"]["min"]["value"] == pytest.approx(20.0, abs=1e-6)
+
+
+def test_cycle_averaged_closed_form_peaks_do_not_move_with_the_output_step():
+    """Cycle averaging at a prescribed speed: after the window the thermal columns are the closed form at the
+    instant with the cycle-averaged bulk there (its ripple integrated on pieces fixed by the turn, its start state
+    read between rows): 1 and 4 ms give the same located peaks, to the bound above; the 4 ms rows do not."""
+    got = {step: runner.run(_scenario(step, "duration=10 s", "thermal.averaging=cycle")) for step in (1, 4)}
+    one, four = (got[s].summary["peaks"] for s in (1, 4))
+    assert got[4].summary["thermal"]["averaging"] == "cycle"
+    error = max(quadrature_error(step) for step in (1, 4))
+    for col in COLUMNS:
+        assert "cycle-averaged solution" in four[col]["how"], col
+        for side in ("max", "min"):
+            bound = 4 * error + 1e-11 * max(1.0, abs(one[col][side]["value"]))
+            assert four[col][side]["value"] == pytest.approx(one[col][side]["value"], rel=0, abs=bound), (col, side)
+    peak = one["temp_contact_C"]["max"]
+    assert peak["t_s"] > got[1].summary["thermal"]["cycle"]["mechanics_simulated_until_s"]      # after the window
+    assert peak["value"] - np.nanmax(got[4].timeseries["temp_contact_C"]) > 1e-4
