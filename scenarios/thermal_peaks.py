@@ -71,6 +71,7 @@ class ThermalReader:
             iv.rows, iv.anchors = np.asarray(keep, dtype=int), [anchors[r] for r in keep]
         self.t_win = t_win
         self.lows = np.array([iv.lo for iv in self.windows])
+        self.highs = np.array([iv.hi for iv in self.windows])
         self.starts = np.asarray(mech.contact_starts(window, win_events), dtype=float)
         self.solution = None
         self.cycle = t_table_end > self.t_sim_end * (1 + ROUNDOFF) + ROUNDOFF
@@ -100,60 +101,67 @@ class ThermalReader:
         # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
         inner = np.clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
         which = np.clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
-        later = times > self.t_sim_end
-        out_frames = []
-        for w, late in sorted(set(zip(which.tolist(), later.tolist()))):
-            pick = (which == w) & (later == late)
-            wiv = self.windows[w]
-            if not len(wiv.rows):
-                raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
-            at = np.clip(self._phase(times[pick]), wiv.lo, wiv.hi)
-            order = np.argsort(at, kind="stable")
-            mid = float(np.median(at))
-            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - mid)))
-            frame = self.reader(wiv, pos, at[order])
-            frame = pd.DataFrame({k: np.asarray(v) for k, v in frame.items()})
-            back = np.empty(len(order), dtype=int)
-            back[order] = np.arange(len(order))
-            frame = frame.iloc[back].reset_index(drop=True)
-            frame["t_s"] = times[pick]
-            if self.cycle:
-                frame["window_t_s"] = at
-            if late:              # the turns continued: cumulative columns advance by one turn's increase per turn
-                turns = np.round((times[pick] - at) / self.solution["period"])
-                for c in frame.columns:
-                    if c in self.per_turn:
-                        frame[c] = frame[c].to_numpy(float) + turns * self.per_turn[c]
-            out_frames.append((np.flatnonzero(pick), self._thermal(frame, at, late)))
-        n = len(times)
-        columns = list(dict.fromkeys(c for _, frame in out_frames for c in frame.columns))
-        out = {}
-        for c in columns:
-            first = next(np.asarray(frame[c]) for _, frame in out_frames if c in frame)
-            arr = np.empty(n, dtype=first.dtype if first.dtype.kind in "fiub" else object)
-            if arr.dtype.kind == "f":
-                arr[:] = np.nan
-            for idx, frame in out_frames:
-                arr[idx] = np.asarray(frame[c]) if c in frame else np.nan
-            out[c] = arr
-        return out
-
-    def _thermal(self, frame: pd.DataFrame, at: np.ndarray, late: bool) -> pd.DataFrame:
-        """The finish's thermal columns on a frame of mechanical readings (`at`: the window instants they are
-        read at; `late`: after the simulated window, where the network's states are the cycle-averaged ones)."""
+        at = np.clip(self._phase(times), self.lows[which], self.highs[which])
+        frame = self.frame(at, which)
+        frame["t_s"] = times
+        late = times > self.t_sim_end if self.cycle else np.zeros(len(times), bool)
+        if self.cycle:
+            frame["window_t_s"] = at
+        if late.any():            # the turns continued: cumulative columns advance by one turn's increase per turn
+            turns = np.where(late, np.round((times - at) / self.solution["period"]), 0.0)
+            for c in frame.columns:
+                if c in self.per_turn:
+                    frame[c] = frame[c].to_numpy(float) + turns * self.per_turn[c]
         th = self.thermal
         ext = th.setup.extension
         states = None
         if ext is not None:
-            if late:
+            states = np.array(frame[list(ext.names)].to_numpy(float))
+            if late.any():        # after the window: the cycle-averaged solution's states (no bookkeeping energies)
                 n = th.setup.system.size
-                states = np.full((len(frame), n + 3), np.nan)
-                states[:, :n] = th.cycle_states(self.solution, frame["t_s"].to_numpy(float))
-            else:
-                states = frame[list(ext.names)].to_numpy(float)
-        t_on_pin = th._time_since(at, self.starts)
-        contact = self.mech.contact_state(frame)
-        return th._add_columns(frame, contact, states, t_on_pin)
+                states[late] = np.nan
+                states[late, :n] = th.cycle_states(self.solution, times[late])
+        table = th._add_columns(frame, self.mech.contact_state(frame), states, th._time_since(at, self.starts))
+        return {c: table[c].to_numpy() for c in table.columns}
+
+    def frame(self, at: np.ndarray, which: np.ndarray) -> pd.DataFrame:
+        """The window's columns (mechanics and the network's states) at the window instants `at`, each in the
+        window interval `which` (its end: the one-sided limit from inside it), in their order: the mode
+        re-integrated from the interval's output row nearest the instants read in it."""
+        parts = []
+        for w in np.unique(which).tolist():
+            pick = np.flatnonzero(which == w)
+            wiv = self.windows[w]
+            if not len(wiv.rows):
+                raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
+            # each distinct window instant read once (instants a period apart, or clipped to an end, coincide)
+            distinct, back = np.unique(at[pick], return_inverse=True)
+            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - float(np.median(at[pick])))))
+            part = pd.DataFrame({k: np.asarray(v) for k, v in self.reader(wiv, pos, distinct).items()})
+            part = part.iloc[np.ravel(back)]
+            part.index = pick
+            parts.append(part)
+        return pd.concat(parts).sort_index().reset_index(drop=True)
+
+    def readings(self):
+        """The window's `WindowReadings` (thermal/plan.py) for the cycle averaging: the window's columns at any
+        instants of it (at an event: the limit from after it), and its events."""
+        from mechsim.thermal.plan import WindowReadings
+
+        def read(times):
+            times = np.asarray(times, dtype=float)
+            which = np.clip(np.searchsorted(self.lows, times, side="right") - 1, 0, len(self.windows) - 1)
+            return self.frame(np.clip(times, self.lows[which], self.highs[which]), which)
+        return WindowReadings(read, [iv.lo for iv in self.windows[1:]])
+
+
+def window_readings(thermal, traj, window: pd.DataFrame, events: pd.DataFrame, mech, settings):
+    """The `WindowReadings` of a DAE run's mechanics window (`ThermalReader.readings`), for thermal/plan.py's cycle
+    averaging; None where the window cannot be read (no output rows in it)."""
+    try:
+        return ThermalReader(thermal, traj, window, events, mech, settings, float(traj.pieces[-1].t[-1])).readings()
+    except ValueError:
+        return None
 
 
 class ClosedFormThermalReader:
@@ -339,19 +347,23 @@ def _limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: np.
     interval's end by its row next to it, but a column that falls toward a break on one side and jumps or kinks
     there (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the share jumps) has
     its limit up to one row step beyond that row, and the side whose row is the better one need not hold the better
-    limit. Each end whose linear extrapolation from its two rows, plus one step for margin, beats `e` is read
-    there (the PROMISING best guesses of them); the best limit that beats `e` is returned (`e` where none does). An end read
-    that `own` lacks is appended to it (the entry's later checks index the intervals searched)."""
+    limit. Each end whose linear extrapolation from its two rows, plus their second difference for margin (the
+    extrapolation's error over a step), beats `e` is read there (the PROMISING best guesses of them); the best
+    limit that beats `e` is returned (`e` where none does). An end read that `own` lacks is appended to it (the
+    entry's later checks index the intervals searched)."""
     ends = []
     for k, iv in enumerate(intervals):
         if len(iv.rows) < 2:
             continue
-        for side, (r0, r1), te in (("after", iv.rows[:2], iv.lo), ("before", iv.rows[-1:-3:-1], iv.hi)):
+        for side, near, te in (("after", iv.rows[:3], iv.lo), ("before", iv.rows[-1:-4:-1], iv.hi)):
+            r0, r1 = near[0], near[1]
             step = f[r0] - f[r1]
             if not np.isfinite(step) or t[r1] == t[r0]:
                 continue
             guess = sense * (f[r0] + step * (t[r0] - te) / (t[r1] - t[r0]))
-            ends.append((guess, guess + abs(step), k, side, te))
+            # the extrapolation's error over (at most) one step: its second difference, else the step itself
+            curve = abs(step - (f[r1] - f[near[2]])) if len(near) > 2 else abs(step)
+            ends.append((guess, guess + (curve if np.isfinite(curve) else abs(step)), k, side, te))
     floor = -np.inf if e is None else sense * e.value + tie
     best = e
     # the best guesses first (those whose margin reaches the extremum; the earliest of equal guesses)

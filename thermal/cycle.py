@@ -254,11 +254,13 @@ def _ripple_hermite(homogeneous: ModalNetwork, ripple_input, period: float, brea
     return out @ homogeneous.V.T, values[0]
 
 
-def _period_mean(u_of_phase, period: float, breaks: list[float], nodes: int = 8, pieces: int = 64) -> np.ndarray:
-    """(1/P) int_0^P u(s) ds by Gauss-Legendre on `pieces` sub-intervals of each smooth stretch between breaks."""
+def _period_mean(u_of_phase, period: float, breaks: list[float], nodes: int = 8, pieces: int = 512) -> np.ndarray:
+    """(1/P) int_0^P u(s) ds by Gauss-Legendre on each smooth stretch between breaks, split into its share of
+    `pieces` sub-intervals over the period (at least one)."""
     x, w = np.polynomial.legendre.leggauss(nodes)
     edges = np.unique(np.concatenate([[0.0, period], [b for b in breaks if 0.0 < b < period]]))
-    fine = np.unique(np.concatenate([np.linspace(a, b, pieces + 1) for a, b in zip(edges[:-1], edges[1:])]))
+    fine = np.unique(np.concatenate([np.linspace(a, b, max(1, int(np.ceil(pieces * (b - a) / period))) + 1)
+                                     for a, b in zip(edges[:-1], edges[1:])]))
     h = np.diff(fine)
     s = (fine[:-1, None] + 0.5 * h[:, None] * (x[None, :] + 1.0)).ravel()
     weights = (0.5 * h[:, None] * w[None, :]).ravel()
