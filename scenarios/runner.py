@@ -287,8 +287,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
-    if thermal is not None and thermal.averaging == "cycle" and traj is not None and failure is None:
-        # the cycle averaging reads the periodic turn on the window's solution, not its rows
+    if thermal is not None and thermal.read_turn and thermal.averaging == "cycle" and traj is not None \
+            and failure is None:       # the cycle averaging reads the periodic turn on the window's solution
         from mechsim.scenarios.thermal_peaks import window_readings
         thermal = dataclasses.replace(thermal, dense=window_readings(thermal, traj, df, events, mech, settings))
     si = scenario.si

@@ -1,13 +1,16 @@
-"""A cycle-averaged DAE run reads its periodic turn on the window's continuous solution, not on its output rows
-(thermal/plan.py `WindowReadings`, scenarios/thermal_peaks.py `ThermalReader.readings`; docs/thermal.md "Reported
-temperatures"): the turn's ends where the crank passes its start angle, the network's states and heat energies there,
-and the heat input on pieces fixed by the turn and its events. The cycle-averaged solution, and the peaks located on
-it, then do not depend on the output step beyond the run's tolerance; with the input linear between the rows they
-moved by about 1e-4 K per ms of output step (the input jumps at the entries and exits between rows)."""
+"""A cycle-averaged DAE run can read its periodic turn on the window's continuous solution, not on its output rows
+(`ThermalPlan.read_turn`: thermal/plan.py `WindowReadings`, scenarios/thermal_peaks.py `ThermalReader.readings`;
+docs/thermal.md "Reported temperatures"): the turn's ends where the crank passes its start angle, the network's states
+and heat energies there, and the heat input on pieces fixed by the turn and its events. The cycle-averaged solution,
+and the peaks located on it, then do not depend on the output step beyond the run's tolerance; with the input linear
+between the rows (the default, which the design sensitivities trace) they move by about 1e-4 K per ms of output step
+(the input jumps at the entries and exits between rows)."""
+import dataclasses
+
 import pytest
 
 import mechsim
-from mechsim.scenarios import runner, thermal_peaks
+from mechsim.scenarios import runner
 
 COLUMNS = ("temp_contact_C", "temp_flash_rise_K", "temp_bulk_pin_C", "temp_bulk_wheel_C")
 #: geneva-motor (its speed follows from the dynamics) with the lumped network, cycle-averaged after its window
@@ -15,8 +18,9 @@ SETS = ["duration=12 s", "thermal.model=lumped", "thermal.averaging=cycle", "sol
         "solver.atol=1e-12"]
 
 
-def _run(step):
-    return runner.run(mechsim.load("geneva-motor", set=SETS + [f"output_step={step} ms"]))
+def _run(step, read_turn=True):
+    plan = runner.plan(mechsim.load("geneva-motor", set=SETS + [f"output_step={step} ms"]))
+    return runner.execute(dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, read_turn=read_turn)))
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +28,7 @@ def runs():
     return {step: _run(step) for step in (1, 4)}
 
 
-def test_cycle_averaged_peaks_do_not_move_with_the_output_step(runs, monkeypatch):
+def test_cycle_averaged_peaks_do_not_move_with_the_output_step(runs):
     """1 and 4 ms: the periodic turn, its mean heat and every located thermal peak equal to 100 times the run's
     rtol (relative; measured: 1e-10 on the pin's bulk peak, 2e-11 on the contact temperature's), the peaks after the
     window; the same run with the turn's input linear between its 4 ms rows misses by a hundred times that."""
@@ -40,8 +44,6 @@ def test_cycle_averaged_peaks_do_not_move_with_the_output_step(runs, monkeypatch
                 (col, side)
     peak = one["peaks"]["temp_contact_C"]["max"]
     assert peak["t_s"] > a["mechanics_simulated_until_s"]
-    # the regression this guards against: the turn read on its rows (linear between them)
-    monkeypatch.setattr(thermal_peaks, "window_readings", lambda *args, **kwargs: None)
-    rows = _run(4).summary["peaks"]
+    rows = _run(4, read_turn=False).summary["peaks"]
     for col in ("temp_contact_C", "temp_bulk_pin_C"):
         assert abs(rows[col]["max"]["value"] - one["peaks"][col]["max"]["value"]) > 1e2 * 1e-8 * peak["value"], col

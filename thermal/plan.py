@@ -72,6 +72,8 @@ class WindowReadings:
 
     read: Callable[[np.ndarray], pd.DataFrame]
     breaks: list[float]
+    #: what was read of the turn, by what it was read for (finish and the located peaks read the same turn)
+    memo: dict = field(default_factory=dict)
 
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
@@ -127,8 +129,13 @@ class ThermalPlan:
     warnings: list[str] = field(default_factory=list)
     tried: tuple = ()          # the earlier mechanics windows of cycle mode, each with its periodicity (`extend`)
     fallback: str = ""         # why cycle averaging fell back to the resolved run (`extend`)
-    #: a DAE window's `WindowReadings` (set by the runner once the window has run; a closed form reads its own)
+    #: a DAE window's `WindowReadings` (set by the runner once the window has run, where `read_turn`; a closed form
+    #: reads its own)
     dense: WindowReadings | None = None
+    #: whether a DAE window's periodic turn is read on its solution (`dense`) rather than linear between its rows:
+    #: off while the design sensitivities trace the rows' input (thermal/cycle_exact.py), so that what they
+    #: differentiate is what the run reports (docs/thermal.md, "Reported temperatures")
+    read_turn: bool = False
 
     @property
     def extension(self):
@@ -322,6 +329,9 @@ class ThermalPlan:
     def _turn_ends(self, df: pd.DataFrame, bounds: np.ndarray, readings: WindowReadings) -> np.ndarray:
         """The instants the drive passes its start angle + 2 pi m near `bounds` (the rows' linear estimates), on the
         continuous solution: Newton on the angle read there, its speed the slope."""
+        key = ("ends", tuple(np.asarray(bounds, dtype=float).tolist()))
+        if key in readings.memo:
+            return readings.memo[key]
         column = _angle_column(df)
         speed = column[:-len("_angle_rad")] + "_speed_rad_s"
         angle = df[column].to_numpy(float)
@@ -331,6 +341,7 @@ class ThermalPlan:
         for _ in range(TURN_END_STEPS):
             got = readings.read(ends)
             ends = ends - (got[column].to_numpy(float) - targets) / got[speed].to_numpy(float)
+        readings.memo[key] = ends
         return ends
 
     def _cycle_means(self, df: pd.DataFrame, states, readings: WindowReadings | None = None):
@@ -644,6 +655,8 @@ class ThermalPlan:
         INPUT_NODES Gauss-Legendre nodes of each (never at an event: a jump is met from its own side) and
         polynomial through them on the piece. The pieces are fixed by the turn and its events, not by the output
         rows; the quadratures of the mean and the ripple split at their ends (thermal/cycle.py `bulk_response`)."""
+        if ("input", a, P) in readings.memo:
+            return readings.memo[("input", a, P)]
         cuts = np.unique(np.r_[a, [b for b in readings.breaks if a < b < a + P], a + P])
         edges = np.unique(np.concatenate([np.linspace(lo, hi, max(1, int(np.ceil((hi - lo) * INPUT_PIECES / P))) + 1)
                                           for lo, hi in zip(cuts[:-1], cuts[1:])])) - a
@@ -664,7 +677,8 @@ class ThermalPlan:
             basis = np.stack([weights[j] * np.prod([xi - x[m] for m in range(INPUT_NODES) if m != j], axis=0)
                               for j in range(INPUT_NODES)])
             return np.einsum("isj,js->is", u[:, k, :], basis)
-        return u_of_phase, [float(b) for b in edges[1:-1]]
+        got = readings.memo[("input", a, P)] = (u_of_phase, [float(b) for b in edges[1:-1]])
+        return got
 
     def _mean_balance(self, means, duration, t_window, states) -> dict:
         """Heat balance at the end of the run: the window's bookkeeping states up to the periodic turn's start a
