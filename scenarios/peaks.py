@@ -4,9 +4,10 @@ output rows (`dynamics/extrema.py`), with its instant and drive angle (docs/theo
 Which columns are located and how is part of every entry (`how`): a DAE run's mechanical columns on the run's own
 dense output where its integrator keeps one (the compiled diffrax run), else by re-integrating the mode from the
 nearest output row, a closed-form run's by the closed form; the thermal model's columns by its formulas on those
-readings with the network's states there (scenarios/thermal_peaks.py). Where a run settles into a periodic regime (crank turn to turn)
-the entries are the regime's, the start-up's beside them; a column that grows without bound toward an event has
-no value there, and its events, growth, impulse and energy lost are listed instead (`singular`).
+readings with the network's states there (scenarios/thermal_peaks.py). Where a run settles into a periodic regime
+(crank turn to turn) the entries are the regime's, the start-up's beside them; a column that grows without bound
+toward an event has no value there, and its events, growth, impulse and energy lost are listed instead
+(`singular`).
 """
 from __future__ import annotations
 
@@ -256,7 +257,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     thermal, treader = [c for c in present if c not in readable], None
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
-        treader = thermal_reader(source, events, float(t[-1]))
+        treader = thermal_reader(source, events, float(t[-1]), read if source.method == "closed-form" else None)
     for (lo, hi, label), p, got in zip(windows, plans, located):
         intervals = p.intervals if p is not None else []
         heat = {}

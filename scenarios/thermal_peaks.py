@@ -166,20 +166,17 @@ def window_readings(thermal, traj, window: pd.DataFrame, events: pd.DataFrame, m
 
 class ClosedFormThermalReader:
     """Every column of a closed-form run's finished table at any instants of a smooth interval of it (module
-    docstring), as `ThermalReader` reads a DAE run's: the closed form's columns (scenarios/peaks.py
-    `_closed_form_reader`), the network's states integrated exactly from the window's row at or before each instant
+    docstring), as `ThermalReader` reads a DAE run's: the closed form's columns (`mechanics`: the run's reader of
+    them, scenarios/peaks.py), the network's states integrated exactly from the window's row at or before each instant
     (or the cycle-averaged solution after the simulated rows), and the finish's thermal columns there."""
 
-    def __init__(self, thermal, source, window: pd.DataFrame, events: pd.DataFrame, t_table_end: float):
-        from mechsim.scenarios.peaks import _closed_form_reader
+    def __init__(self, thermal, source, window: pd.DataFrame, events: pd.DataFrame, t_table_end: float, mechanics):
         from mechsim.thermal import cycle as cyc
         from mechsim.thermal.exact import ModalNetwork
         self.thermal, self.mech = thermal, source.mech
         mech, si = source.mech, source.si
         t_win = window["t_s"].to_numpy(float)
-        check = [c for c in mech.peak_columns if c in window]
-        self.mechanics = _closed_form_reader(source, si["initial"][mech.initial_keys[0]], t_win,
-                                             {c: window[c].to_numpy(float) for c in check}, check)
+        self.mechanics = mechanics
         self.states, self.inputs, self.breaks = thermal._window_states(window)
         if self.breaks is None:       # no network (the flash model): the switches alone
             from mechsim.thermal.exact import closed_form_columns, contact_columns, switch_times
@@ -255,17 +252,19 @@ class ClosedFormThermalReader:
         return {c: table[c].to_numpy() for c in table.columns}
 
 
-def thermal_reader(source, events: pd.DataFrame, t_table_end: float):
-    """The `ThermalReader` (a closed-form run: `ClosedFormThermalReader`) of a finished run (scenarios/peaks.py
-    Source), or None where its thermal columns are not read between rows (no thermal model, no mechanics window
-    kept, no full turn to average)."""
+def thermal_reader(source, events: pd.DataFrame, t_table_end: float, mechanics=None):
+    """The `ThermalReader` (a closed-form run: `ClosedFormThermalReader`, its closed form read by `mechanics`, the
+    run's reader of it) of a finished run (scenarios/peaks.py Source), or None where its thermal columns are not read
+    between rows (no thermal model, no mechanics window kept, no full turn to average)."""
     thermal = getattr(source, "thermal", None)
     window = getattr(source, "window", None)
     if thermal is None or window is None or not len(window):
         return None
     if source.method == "closed-form":
+        if mechanics is None:
+            return None
         try:
-            return ClosedFormThermalReader(thermal, source, window, events, t_table_end)
+            return ClosedFormThermalReader(thermal, source, window, events, t_table_end, mechanics)
         except ValueError:
             return None
     if source.traj is None:
