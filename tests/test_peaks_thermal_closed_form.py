@@ -24,13 +24,13 @@ def runs():
     return {step: runner.run(_scenario(step)) for step in STEPS}
 
 
-def quadrature_error(step) -> float:
-    """The largest error of the network's temperatures on the rows (K), estimated as their change when the
+def quadrature_error(step, run) -> float:
+    """The largest error of the network's temperatures on a run's rows (K), estimated as their change when the
     quadrature's nodes per piece are doubled (6 -> 12; the quadrature's error is of far higher order)."""
     plan = runner.plan(_scenario(step))
     th, mech = plan.thermal, plan.mechanism
     ext = th.setup.extension
-    t = np.asarray(runner.run(_scenario(step)).timeseries["t_s"], float)
+    t = np.asarray(run.timeseries["t_s"], float)
     angle0 = plan.scenario.si["initial"][mech.initial_keys[0]]
     six, inputs, breaks = integrate_closed_form(ext, mech, angle0, th.speed, t, th.setup.initial,
                                                 max_piece=th.quadrature_piece)
@@ -45,7 +45,7 @@ def test_closed_form_thermal_peaks_do_not_move_with_the_output_step(runs):
     the cycle's, at most 1.2 ms) plus the locating polynomial's own error at an interior peak (|F^(7)| d^7 for its
     grid step d = h/16: 1.6e-12 of the contact temperature measured at 4 ms; bound 1e-11), at one instant; the 4 ms
     rows miss the contact temperature's peak by far more than that."""
-    error = max(quadrature_error(step) for step in STEPS)
+    error = max(quadrature_error(step, r) for step, r in runs.items())
     ref = runs[0.25].summary["peaks"]
     for col in COLUMNS:
         assert ref[col]["how"].startswith("located: the closed form"), col
@@ -83,14 +83,14 @@ def test_flash_model_peaks_are_located_at_a_prescribed_speed():
     assert one["temp_contact_C"]["min"]["value"] == pytest.approx(20.0, abs=1e-6)
 
 
-def test_cycle_averaged_closed_form_peaks_do_not_move_with_the_output_step():
+def test_cycle_averaged_closed_form_peaks_do_not_move_with_the_output_step(runs):
     """Cycle averaging at a prescribed speed: after the window the thermal columns are the closed form at the
     instant with the cycle-averaged bulk there (its ripple integrated on pieces fixed by the turn, its start state
     read between rows): 1 and 4 ms give the same located peaks, to the bound above; the 4 ms rows do not."""
     got = {step: runner.run(_scenario(step, "duration=10 s", "thermal.averaging=cycle")) for step in (1, 4)}
     one, four = (got[s].summary["peaks"] for s in (1, 4))
     assert got[4].summary["thermal"]["averaging"] == "cycle"
-    error = max(quadrature_error(step) for step in (1, 4))
+    error = max(quadrature_error(step, r) for step, r in runs.items())       # the same pieces, the same quadrature
     for col in COLUMNS:
         assert "cycle-averaged solution" in four[col]["how"], col
         for side in ("max", "min"):
