@@ -534,6 +534,45 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
     return out
 
 
+#: readings over an interval that holds no output row (its ends included): the rows its extrema are located from
+ROWLESS_READINGS = 9
+
+
+def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader
+                 ) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
+    """(t, values, intervals) for `locate` where some smooth intervals hold no output row (a stretch between events
+    shorter than the output step, e.g. a contact episode): each such interval read at ROWLESS_READINGS instants
+    evenly over [lo, hi], its ends the one-sided limits at its events, and the readings appended to the table as
+    its rows (their anchors (-1, -1): a reader starts from the state at the interval's opening event), so that its
+    extrema are candidates as any interval's. The given intervals are not changed (copies get the rows); an
+    interval whose reading fails stays without rows. Without such intervals, the arguments themselves."""
+    empty = [k for k, iv in enumerate(intervals) if not len(iv.rows) and iv.hi > iv.lo]
+    if not empty:
+        return t, values, intervals
+    requests = [(intervals[k], 0, np.linspace(intervals[k].lo, intervals[k].hi, ROWLESS_READINGS)) for k in empty]
+    many = getattr(read, "read_many", None)
+    tables = many(requests) if many is not None else [None] * len(requests)
+    out, t_new, v_new, n = list(intervals), [], {c: [] for c in values}, len(t)
+    for k, request, table in zip(empty, requests, tables):
+        if table is None:
+            try:
+                table = read(*request)
+            except ReadingFailed:
+                continue
+        times, iv = request[2], intervals[k]
+        t_new.append(times)
+        for c in values:
+            got = table.get(c)
+            v_new[c].append(np.full(len(times), np.nan) if got is None else np.asarray(got, dtype=float))
+        out[k] = Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, np.arange(n, n + len(times)),
+                          np.full((len(times), 2), -1))
+        n += len(times)
+    if not t_new:
+        return t, values, intervals
+    return (np.concatenate([np.asarray(t, dtype=float)] + t_new),
+            {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()}, out)
+
+
 class TrajectoryReader:
     """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated from the state
     at an output row (forward and backward) by IDA at `tighten` times the run's tolerances, its rows read out as
@@ -560,6 +599,7 @@ class TrajectoryReader:
         self._solvers: dict = {}
         self._compiled: list | None = None       # per try: the compiled IDA backend (a compiled run's readings)
         self._anchors = None
+        self._segments = self._rows = None
         self._keep: list = []
 
     def anchors(self, t_rows: np.ndarray) -> np.ndarray:
@@ -591,14 +631,15 @@ class TrajectoryReader:
     def _reading(self, iv: Interval, position: int, times: np.ndarray):
         """The re-integrated states at `times` (ordered) as a Piece of the row's mode; ReadingFailed if IDA fails."""
         from mechsim.dynamics.hybrid import Piece
-        piece, mf, t0, y0, yp0 = self._anchor(iv, position)
+        anchor = self._anchor(iv, position, float(np.min(times)))
+        piece, t0 = anchor[0], anchor[2]
         # every reading starts from the row's own state: a restart from an earlier reading's state (projected back
         # onto the constraints) was cheaper but added its own error, which a finite difference of the peak shows
         ts, ys, yps = [], [], []
         for part in (times[times < t0][::-1], times[times >= t0]):
             if not len(part):
                 continue
-            tt, yy, yyp = self._from_row(iv, position, mf, piece.params, t0, y0, yp0, part)
+            tt, yy, yyp = self._from_row(anchor, part)
             ts.append(tt)
             ys.append(yy)
             yps.append(yyp)
@@ -650,39 +691,92 @@ class TrajectoryReader:
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
         the generalized momentum, whose jump across an event is the impulse the event delivers."""
-        piece, mf, t0, y0, yp0 = self._anchor(iv, position)
-        _, y, _ = self._from_row(iv, position, mf, piece.params, t0, y0, yp0, np.array([t]))
+        anchor = self._anchor(iv, position, t)
+        piece, mf = anchor[0], anchor[1]
+        _, y, _ = self._from_row(anchor, np.array([t]))
         q, v = y[0, mf.index["q"]], y[0, mf.index["v"]]
         M = np.atleast_2d(np.asarray(mf.mass(q, piece.params), dtype=float))
         return M @ v, v
 
-    def _anchor(self, iv: Interval, position: int, own: bool = True):
-        """(piece, its mode's functions, t0, y0, y'0): the state at the interval's row `position` where every
-        reading of it starts: an index-1 IDA run's own (y, y') there (own=True), else the consistent state made from
-        its positions and speeds (`_start`)."""
-        k, r = (int(x) for x in iv.anchors[position])
+    def _anchor(self, iv: Interval, position: int, first: float | None = None, own: bool = True):
+        """(piece, its mode's functions, t0, y0, y'0, row): the state a reading of the interval starts from: the
+        interval's row `position`, or where the reading's `first` instant lies before that row (or the interval has
+        no row there), the latest state the run holds at or before `first` (`_earlier`), so that every reading runs
+        forward in time: backward, a damped stiff mode (a compliant contact) is unstable. The row itself only where
+        the run holds no earlier state (its segments' starts not kept). A row's state is `_row_state`'s; `row` is
+        (piece, row) where it is an index-1 IDA run's own (y, y'), else None (a consistent state)."""
+        k, r = (int(x) for x in iv.anchors[position]) if 0 <= position < len(iv.anchors) else (-1, -1)
+        if first is not None and (k < 0 or first < float(self.traj.pieces[k].t[r])):
+            got = self._earlier(first, iv.hi, own)
+            if got is not None:
+                return got
+        if k < 0:
+            raise ReadingFailed(f"no state to read the interval ({iv.lo:.9g}, {iv.hi:.9g}) s from")
+        return self._row_state(k, r, own)
+
+    def _row_state(self, k: int, r: int, own: bool = True):
+        """`_anchor`'s tuple at row r of piece k: an index-1 IDA run's own (y, y') there (own=True), else the
+        consistent state made from its positions and speeds (`_start`)."""
         piece = self.traj.pieces[k]
         t0 = float(piece.t[r])
         if own and self._own_rows and piece.yp is not None:
-            return piece, self.traj.model.modes[piece.mode], t0, piece.y[r], piece.yp[r]
+            return piece, self.traj.model.modes[piece.mode], t0, piece.y[r], piece.yp[r], (k, r)
         try:
             y0, yp0 = self._start(k, r)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise ReadingFailed(f"no consistent state at the row t = {t0:.9g} s: {exc}") from None
-        return piece, self.traj.model.modes[piece.mode], t0, y0, yp0
+        return piece, self.traj.model.modes[piece.mode], t0, y0, yp0, None
 
-    def _from_row(self, iv: Interval, position: int, mf, p, t0, y0, yp0, times):
-        """`_integrate` from the row's state. From the run's own (y, y') at the tighter tolerances only: where IDA
+    def _from_row(self, anchor: tuple, times):
+        """`_integrate` from an `_anchor` state. From the run's own (y, y') at the tighter tolerances only: where IDA
         fails from it there, the reading starts from the consistent state made at that row (both tries)."""
-        piece = self.traj.pieces[int(iv.anchors[position][0])]
-        if not (self._own_rows and piece.yp is not None):
-            return self._integrate(mf, p, t0, y0, yp0, times)
+        piece, mf, t0, y0, yp0, row = anchor
+        if row is None:
+            return self._integrate(mf, piece.params, t0, y0, yp0, times)
         try:
-            return self._integrate(mf, p, t0, y0, yp0, times, self.tries[:1])
+            return self._integrate(mf, piece.params, t0, y0, yp0, times, self.tries[:1])
         except ReadingFailed:
             pass
-        _, _, t0, y0, yp0 = self._anchor(iv, position, own=False)
-        return self._integrate(mf, p, t0, y0, yp0, times)
+        _, _, t0, y0, yp0, _ = self._row_state(*row, own=False)
+        return self._integrate(mf, piece.params, t0, y0, yp0, times)
+
+    def _earlier(self, first: float, hi: float, own: bool = True):
+        """`_anchor`'s tuple of the latest state at or before `first` in the smooth stretch that holds it (ending at
+        `hi`): an output row of the run's segment there, else the state that segment started from
+        (`Trajectory.starts`, after the event that opened it); None where the run kept no segment starts (the
+        compiled diffrax run)."""
+        starts = getattr(self.traj, "starts", None)
+        if not starts:
+            return None
+        if self._segments is None:
+            self._segments = np.array([float(p.t[0]) for p in starts])
+        ts = self._segments
+        eps = 1e-12 * max(1.0, abs(first))
+        # the last segment started at or before `first` (of several at one instant, the one the run went on from),
+        # not one started at the stretch's end (after its closing event)
+        s = int(np.searchsorted(ts, min(first + eps, hi - eps), side="right")) - 1
+        if s < 0:
+            return None
+        start = starts[s]
+        t_rows, rows = self._row_order()
+        i = int(np.searchsorted(t_rows, first + eps, side="right")) - 1
+        if i >= 0 and t_rows[i] > ts[s]:          # an output row of that segment, nearer than its start
+            try:
+                return self._row_state(int(rows[i][0]), int(rows[i][1]), own)
+            except ReadingFailed:
+                pass
+        return start, self.traj.model.modes[start.mode], float(ts[s]), start.y[0], start.yp[0], None
+
+    def _row_order(self):
+        """Every piece's output rows in time order: (times, (piece, row) of each)."""
+        if self._rows is None:
+            pieces = self.traj.pieces
+            all_t = np.concatenate([p.t for p in pieces])
+            order = np.argsort(all_t, kind="stable")
+            kr = np.stack([np.concatenate([np.full(len(p.t), k) for k, p in enumerate(pieces)]),
+                           np.concatenate([np.arange(len(p.t)) for p in pieces])], axis=1)
+            self._rows = (all_t[order], kr[order])
+        return self._rows
 
     def _start(self, k: int, r: int):
         """The consistent (y, y') at row r of piece k (the compiled diffrax run keeps states only), kept."""

@@ -57,6 +57,9 @@ class Trajectory:
     stats: dict
     failure: dict | None = None
     warnings: list[str] = field(default_factory=list)
+    #: the consistent state each segment of the run started from (one row each, in time order; after an event, the
+    #: state after it): where a reading of the continuous solution starts, forward, when no output row precedes it
+    starts: list[Piece] = field(default_factory=list)
 
 
 def parameter_tuple(model: DerivedModel, values: dict[str, float]) -> tuple:
@@ -180,6 +183,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     model, values, mode, t_out, mf, p, y, yp, offset = (start.model, start.values, start.mode, start.t_out,
                                                          start.mf, start.p, start.y, start.yp, start.offset)
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
+    starts: list[Piece] = []
     events: list[dict] = []
     stats = new_stats(backend.name, backend.solver, start.derive_time, unavailable=backend.unavailable)
     stats["notes"].update(backend.notes)
@@ -198,6 +202,8 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
             events.append(row)
             stats["restarts"] += 1
         stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
+        starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float)[None, :],
+                            np.array(yp, dtype=float)[None, :], offset))
         seg = yield Request(model, mode, mf, p, t, y, yp, t_out[(t_out > t) & (t_out <= stop)], stop, first_step)
         stats["segments"] += 1
         for key, count in seg.counts.items():
@@ -260,7 +266,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         mf = model.modes[mode]
         first_step = RESTART_STEP_FACTOR * seg.next_step
     stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
-    return Trajectory(model, pieces, events, stats, failure, warnings)
+    return Trajectory(model, pieces, events, stats, failure, warnings, starts)
 
 
 def reached(knots: list, t: float) -> bool:

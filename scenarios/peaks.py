@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, intervals_of, plan, read_all
+from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, intervals_of, plan, read_all,
+                                      with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -225,10 +226,12 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events) if read is not None else []
-    plans, requests = [], []
+    plans, requests, spans = [], [], []
     for lo, hi, label in windows:
         intervals = _intervals(t[:n], breaks, lo, hi, kinds[label], read) if read is not None and readable else []
-        plans.append(plan(t[:n], values, intervals) if intervals else None)
+        spans.append(intervals)
+        # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`)
+        plans.append(plan(*with_rowless(t[:n], values, intervals, read)) if intervals else None)
         requests += plans[-1].requests if plans[-1] is not None else []
     turn = means_asked = None
     if regime is not None and read is not None:
@@ -236,7 +239,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         means_asked = _turn_mean_requests(turn)
     # a dense output's readings cost no integration: the growth toward every event a bracket reaches (what the
     # singular-approach check may read) is read in the same pass; other readers read it once the extrema are known
-    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, values, h)]
+    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, p.values, h)]
              if how == HOW_DENSE else [])
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
@@ -253,13 +256,12 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # read together (already read on a dense output)
     if read is not None:
         read.prefetch([r for p, got in zip(plans, located) if p is not None
-                       for c, e in got.items() for r in _first_approaches(c, values[c], e, p.intervals, h)])
+                       for c, e in got.items() for r in _first_approaches(c, p.values[c], e, p.intervals, h)])
     thermal, treader = [c for c in present if c not in readable], None
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
         treader = thermal_reader(source, events, float(t[-1]), read if source.method == "closed-form" else None)
-    for (lo, hi, label), p, got in zip(windows, plans, located):
-        intervals = p.intervals if p is not None else []
+    for (lo, hi, label), got, intervals in zip(windows, located, spans):
         heat = {}
         if treader is not None:       # the thermal columns over the whole table (a cycle-averaged run's continues)
             from mechsim.scenarios.thermal_peaks import locate_thermal
