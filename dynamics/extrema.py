@@ -534,26 +534,30 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
     return out
 
 
-#: readings over an interval that holds no output row (its ends included): the rows its extrema are located from
+#: an interval with fewer output rows than this is also read at ROWLESS_READINGS instants over it (its ends included)
+SPARSE_ROWS = 3
 ROWLESS_READINGS = 9
 
 
 def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader
                  ) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
-    """(t, values, intervals) for `locate` where some smooth intervals hold no output row (a stretch between events
-    shorter than the output step, e.g. a contact episode): each such interval read at ROWLESS_READINGS instants
-    evenly over [lo, hi], its ends the one-sided limits at its events, and the readings appended to the table as
-    its rows (their anchors (-1, -1): a reader starts from the state at the interval's opening event), so that its
-    extrema are candidates as any interval's. The given intervals are not changed (copies get the rows); an
-    interval whose reading fails stays without rows. Without such intervals, the arguments themselves."""
-    empty = [k for k, iv in enumerate(intervals) if not len(iv.rows) and iv.hi > iv.lo]
-    if not empty:
+    """(t, values, intervals) for `locate` where some smooth intervals hold fewer than SPARSE_ROWS output rows (a
+    stretch between events shorter than a few output steps, e.g. a contact episode): each such interval read at
+    ROWLESS_READINGS instants evenly over [lo, hi], its ends the one-sided limits at its events, and the readings
+    appended to the table as rows of it (their anchors (-1, -1): a reader starts from the latest state the run holds
+    before them), so that its extrema are candidates ranked by the rows' parabola estimates as any interval's (a
+    lone row's estimate is its value, which says nothing of the interval's peak). The given intervals are not
+    changed (copies get the rows); an interval whose reading fails keeps its own. Without such intervals, the
+    arguments themselves."""
+    sparse = [k for k, iv in enumerate(intervals) if len(iv.rows) < SPARSE_ROWS and iv.hi > iv.lo]
+    if not sparse:
         return t, values, intervals
-    requests = [(intervals[k], 0, np.linspace(intervals[k].lo, intervals[k].hi, ROWLESS_READINGS)) for k in empty]
+    t = np.asarray(t, dtype=float)
+    requests = [(intervals[k], 0, np.linspace(intervals[k].lo, intervals[k].hi, ROWLESS_READINGS)) for k in sparse]
     many = getattr(read, "read_many", None)
     tables = many(requests) if many is not None else [None] * len(requests)
     out, t_new, v_new, n = list(intervals), [], {c: [] for c in values}, len(t)
-    for k, request, table in zip(empty, requests, tables):
+    for k, request, table in zip(sparse, requests, tables):
         if table is None:
             try:
                 table = read(*request)
@@ -564,12 +568,16 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
         for c in values:
             got = table.get(c)
             v_new[c].append(np.full(len(times), np.nan) if got is None else np.asarray(got, dtype=float))
-        out[k] = Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, np.arange(n, n + len(times)),
-                          np.full((len(times), 2), -1))
+        own = np.asarray(iv.rows, dtype=int)
+        rows = np.r_[own, np.arange(n, n + len(times))]
+        order = np.argsort(np.r_[t[own], times], kind="stable")
+        anchors = np.vstack([np.asarray(iv.anchors, dtype=int).reshape(len(own), -1) if len(iv.anchors) else
+                             np.full((len(own), 2), -1), np.full((len(times), 2), -1)])
+        out[k] = Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, rows[order], anchors[order])
         n += len(times)
     if not t_new:
         return t, values, intervals
-    return (np.concatenate([np.asarray(t, dtype=float)] + t_new),
+    return (np.concatenate([t] + t_new),
             {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()}, out)
 
 
