@@ -7,8 +7,10 @@ A column F(t) of the result table is smooth between events. Its maximum (and min
    interval's ends, so that a maximum at an event is found as the one-sided limit there); the candidates are
    ranked by the vertex of the parabola through the row and its neighbours and the best few refined;
 2. a `reader` evaluates every column of the table at any instants of one smooth interval: for a DAE run by
-   re-integrating the mode from an output row next to the candidate, forward and backward, at a tenth of the
-   run's tolerances (`TrajectoryReader`); for a closed-form run by the closed form itself;
+   re-integrating the mode forward from the latest state the run holds before them (an output row, or the state
+   its segment started from after the interval's event) at a tenth of the run's tolerances (`TrajectoryReader`);
+   for a closed-form run by the closed form itself; an interval with fewer than three rows is also read over its
+   whole length, the readings its candidates too (`with_rowless`);
 3. in the bracket, one pass of a grid of readings; the polynomial through the seven readings around the best one
    gives t* and the value (and every column there). At an interval's end the extremum is the one-sided limit
    (the reading at the event instant from that side).
@@ -582,9 +584,10 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
 
 
 class TrajectoryReader:
-    """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated from the state
-    at an output row (forward and backward) by IDA at `tighten` times the run's tolerances, its rows read out as
-    the run's own (`tables.timeseries`). The anchors of an interval are (piece, row) of its table rows.
+    """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated forward from the
+    latest state the run holds before them (`_anchor`: an output row, or the state a segment started from) by IDA at
+    `tighten` times the run's tolerances, its rows read out as the run's own (`tables.timeseries`). The anchors of an
+    interval are (piece, row) of its table rows.
 
     An index-1 IDA run's row is IDA's own (y, y'), the state its next steps would have continued from: a reading
     starts there as it is, so that it continues the run's own solution (a projection onto the constraints first
