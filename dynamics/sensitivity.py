@@ -12,16 +12,28 @@ event time's derivative and the reset map R (re-initialisation in the new mode) 
     dtau/dtheta = -(g_z S- + g_p P) / (g_t + g_z f-),
     S+ = R_z (S- + f- dtau/dtheta) + R_t dtau/dtheta + R_p P - f+ dtau/dtheta
 
-(Hiskens & Pai 2000, "Trajectory sensitivity analysis of hybrid systems", IEEE TCAS-I 47(2), eqs. (14)-(17); R_t
-is there because a prescribed drive's constraint depends on t, and P is the parameters' derivative after the
-event, which moves with the event time where a transition re-bases a prescribed drive's reference).
+(Hiskens & Pai 2000, "Trajectory sensitivity analysis of hybrid systems", IEEE TCAS-I 47(2), eqs. (14)-(17); the
+jump condition of Rozenvasser 1967 and Galan, Feehery & Barton 1999, Appl. Numer. Math. 31, 17-47; R_t is there
+because a prescribed drive's constraint depends on t, and P is the parameters' derivative after the event, which
+moves with the event time where a transition re-bases a prescribed drive's reference).
 R is the project's consistent re-initialisation (dynamics/consistent.py): positions projected onto Phi = 0 with
-minimum-norm corrections, velocities projected in the kinetic-energy metric (the plastic impact law; an impact
-with restitution whose rebound the new mode absorbs ends at the same velocities), work and thermal states kept.
-It is the same `consistent.reinitialise` the loop and the compiled run call, traced by jax with one Newton step
-(at a consistent point that step's derivative is the converged projection's); every restart state it gives is
-checked against the one `apply_transition` computes. The per-mode pieces (rates, guards, KKT solve, constraint
-parts) are the compiled run's `jax_model`; docs/architecture.md, "The sensitivity pass", lists what is shared.
+minimum-norm corrections, velocities by Newton's impact law in the kinetic-energy metric, work and thermal states
+kept. Without an impact the law is plastic (a projection; an impact with restitution whose rebound the new mode
+absorbs ends at the same velocities); an impact on another mode's constraints (`Transition.contact`: a pin that
+rebounds off the flank it struck into free flight) applies the law with its restitution e there first,
+v+ = v- - (1 + e) M^-1 G^T (G M^-1 G^T)^-1 (G v- + Phi_t), e read from the parameter the transition names
+(`Transition.restitution_parameter`) so that e is differentiated too; the impulse on the struck constraint is
+differentiated with it. It is the same `consistent.reinitialise` the loop and the compiled run call, traced by jax
+with one Newton step (at a consistent point that step's derivative is the converged projection's); every restart
+state and impulse it gives is checked against the ones `apply_transition` computes. The per-mode pieces (rates,
+guards, KKT solve, constraint parts) are the compiled run's `jax_model`; docs/architecture.md, "The sensitivity
+pass", lists what is shared.
+
+The derivatives hold while the event sequence does not change. Each event reports the change of every design value
+that would change it (`EventSensitivity.grazing`: the guard's crossing turning tangential, from its local quadratic
+g ~ g' (t - tau) + g'' (t - tau)^2 / 2; `rule_change`: another of the guard's transition rules applying, e.g. a
+rebound turning plastic at the bounce speed); scenarios/studies/sensitivity.py warns where one lies within the
+stated change.
 
 The mode sequence, event times and discrete updates come from a finished run (its events table) and from the
 project's own transition logic (`apply_transition`); this module adds the derivatives. Not covered (raises
@@ -101,6 +113,16 @@ class EventSensitivity:
     dt: np.ndarray
     z: np.ndarray
     dz: np.ndarray
+    #: the change of each design value (signed, in the seed's units) that makes the guard's crossing tangential
+    #: (grazing: beyond it the event is gone, the sequence changes) from its local quadratic, inf where the
+    #: crossing cannot turn back (`_event_fn`)
+    grazing: np.ndarray | None = None
+    #: the change of each design value (signed, seed units) that makes another of the guard's rules apply
+    #: (`_margins_fn`: a rebound turning plastic below the bounce speed), inf where none can
+    rule_change: np.ndarray | None = None
+    #: an impact's impulse on the struck constraint (the events table's impulse_N_s) and its derivative
+    impulse: float | None = None
+    dimpulse: np.ndarray | None = None
 
 
 @dataclass
@@ -133,14 +155,21 @@ class _ModePieces:
         self.readout_names = list(mf.readout_names)
         self._readouts = lambdify([t, q, v, a_mech, lam, x, params], s["readout_exprs"], "jax")
 
-    def project(self, t, q, v, p):
+    def project(self, t, q, v, p, restitution=0.0):
         """The re-initialisation of every path (`consistent.reinitialise`) with one minimum-norm Newton step onto
         Phi = 0: at a point with Phi = 0 the step's derivative is the exact derivative of the converged projection
-        (the terms it drops carry a factor Phi)."""
+        (the terms it drops carry a factor Phi). restitution: Newton's impact law on these constraints (a traced
+        number: its derivative is the law's e-derivative)."""
         if not self.m:
             return q, v
         return reinitialise(lambda qq, vv: self.jmode.constraint_parts(t, qq, vv, p) + (None,), q, v, xp=jnp,
-                            steps=1)
+                            steps=1, restitution=restitution)
+
+    def impulse(self, t, q, v_before, v_after, p):
+        """The impulse on this mode's constraints that takes v_before to v_after (M (v- - v+) = G^T P, so
+        P = (G M^-1 G^T)^-1 G (v- - v+); `consistent.project_velocities` reports it so)."""
+        M, G, _, _ = self.jmode.constraint_parts(t, q, v_after, p)
+        return jnp.linalg.solve(G @ jnp.linalg.solve(M, G.T), G @ (v_before - v_after))
 
     def hold(self, t, q, v, p, i: int):
         """One Newton step on Phi = 0 and on G v + Phi_t = 0 in every coordinate but i (held, as the mechanism's
@@ -223,7 +252,7 @@ class _Tools:
         # from the solve (the seconds `_compiled` returns)
         self._examples = {"event": (np.int32(0), np.int32(0), 0.0, z, S, p, P),
                           "reset": (0.0, z, np.zeros(nq), p, S, P, np.zeros(n)),
-                          "sample": (0.0, z, S, p, P, np.zeros(nq))}
+                          "sample": (0.0, z, S, p, P, np.zeros(nq)), "margins": (z, S, p, P)}
         self._compiled_fns: dict = {}
 
     def _compiled(self, key: tuple, make) -> tuple:
@@ -246,19 +275,37 @@ class _Tools:
         """The event rule of every mode (mode and guard are traced): `_event_fn`."""
         return self._compiled(("event",), lambda: _event_fn(self.jmod))
 
-    def reset(self, name: str, hold: int | None = None):
-        """The re-initialisation in mode `name` (with `hold`: the initial state's, `_reset_fn`)."""
-        return self._compiled(("reset", name, hold), lambda: self._reset_fn(name, self.piece(name), hold))
+    def reset(self, name: str, hold: int | None = None, impact: tuple | None = None):
+        """The re-initialisation in mode `name` (with `hold`: the initial state's; with `impact`, an impact law
+        first, `_reset_fn`)."""
+        return self._compiled(("reset", name, hold, impact), lambda: self._reset_fn(name, self.piece(name), hold,
+                                                                                   impact))
+
+    def rule_margins(self, mode: str, guard: str):
+        """The `when` values of the rules of (mode, guard) that have one, with their derivatives along the event
+        (`_margins_fn`), or None where no rule has one (the choice of rule cannot change)."""
+        rules = (self.mech.transition_rules() or {}).get((mode, guard), ())
+        whens = tuple(r.when for r in rules if r.when is not None and not r.numeric)
+        if not whens:
+            return None
+        return self._compiled(("margins", mode, guard), lambda: _margins_fn(self.jmod, self.model, whens))
 
     def sample(self, name: str):
         """The read-outs of mode `name` with their gradients (`_sample_fn`)."""
         return self._compiled(("sample", name), lambda: self._sample_fn(name, self.piece(name)))
 
-    def _reset_fn(self, name, pc, hold: int | None = None):
-        """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+)) of the re-initialisation in mode `name` at time t (the initial
-        state's: with `hold`, the guess first completed with that coordinate held, `_ModePieces.hold`)."""
+    def _reset_fn(self, name, pc, hold: int | None = None, impact: tuple | None = None):
+        """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+), P_1, dP_1) of the re-initialisation in mode `name` at time t
+        (the initial state's: with `hold`, the guess first completed with that coordinate held, `_ModePieces.hold`).
+
+        impact: None, or (contact, e_index, e) of an impact (`Transition.contact`, `Transition.restitution`): where
+        contact is another mode, Newton's law with restitution e (the parameter number e_index where it is one, so
+        that e is differentiated; else the number e) on that mode's constraints comes first, then the projection
+        onto the new mode's (`transitions.apply_transition`). P_1 is the impulse on the struck mode's first
+        constraint (the events table's impulse_N_s; 0 without an impact), dP_1 its derivative."""
         nq = self.jmod.nq
         jm = self.jmod.modes[self.jmod.index(name)]
+        struck = self.piece(impact[0]) if impact is not None and impact[0] != name else None
 
         def reset(t, z, shift, p, dz, P, dt):
             # R depends on t through rheonomic constraints (a prescribed drive): R_t dtau is part of the jump
@@ -266,11 +313,19 @@ class _Tools:
                 qq, vv = zz[:nq] - shift, zz[nq:2 * nq]
                 if hold is not None:
                     qq, vv = pc.hold(tt, qq, vv, pp, hold)
-                qq, vv = pc.project(tt, qq, vv, pp)
-                return jnp.concatenate([qq, vv, zz[2 * nq:]])
-            z_new, dz_new = jax.vmap(lambda c, a, b: jax.jvp(r, (t, z, p), (c, a, b)), in_axes=(0, 1, 1),
-                                     out_axes=(None, 1))(dt, dz, P)
-            return z_new, dz_new, jm.rates(t, z_new, p)
+                impulse = jnp.zeros(())
+                if struck is not None:
+                    e = pp[impact[1]] if impact[1] is not None else impact[2]
+                    q_hit, v_hit = struck.project(tt, qq, vv, pp, restitution=e)
+                    impulse = struck.impulse(tt, q_hit, vv, v_hit, pp)[0]
+                    qq, vv = q_hit, v_hit
+                q_new, v_new = pc.project(tt, qq, vv, pp)
+                if impact is not None and struck is None:
+                    impulse = pc.impulse(tt, q_new, vv, v_new, pp)[0]
+                return jnp.concatenate([q_new, v_new, zz[2 * nq:]]), impulse
+            (z_new, imp), (dz_new, dimp) = jax.vmap(lambda c, a, b: jax.jvp(r, (t, z, p), (c, a, b)),
+                                                    in_axes=(0, 1, 1), out_axes=((None, None), (1, 0)))(dt, dz, P)
+            return z_new, dz_new, jm.rates(t, z_new, p), imp, dimp
         return jax.jit(reset)
 
     def _sample_fn(self, name, pc):
@@ -352,7 +407,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     if seed.piece_dp is not None:
         P = _pieces_set(P, names, seed.piece_dp(values))
     initial = compiled(tools.reset(mode, seed.hold))
-    z_init, S, _ = (np.asarray(x) for x in initial(t0, guess, offset, p, dguess, P, np.zeros(n)))
+    z_init, S, _, _, _ = (np.asarray(x) for x in initial(t0, guess, offset, p, dguess, P, np.zeros(n)))
     _check_restart(z_init[:2 * nq], z[:2 * nq], "the initial state")
 
     samples_t = np.sort(np.asarray(list(sample_times), float))
@@ -398,8 +453,8 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
                                          f"'{row['from_mode']}', the path is in '{mode}'")
         j = list(mf.guard_names).index(row["guard"])
         event = compiled(tools.event())
-        t, z, dtau, dz, gdot, a_end, lam_end = (np.asarray(x) for x in event(np.int32(k), np.int32(j), float(t),
-                                                                             z, S, p, P))
+        t, z, dtau, dz, gdot, a_end, lam_end, graze = (np.asarray(x) for x in event(np.int32(k), np.int32(j),
+                                                                                    float(t), z, S, p, P))
         t = float(t)
         if not (np.isfinite(gdot) and abs(gdot) > 0):
             raise SensitivityUnavailable(f"guard '{row['guard']}' reaches zero tangentially at t = {t:.6g} s "
@@ -422,14 +477,40 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
         if traced:
             raise SensitivityUnavailable(f"the transition '{row['kind']}' at t = {t:.6g} s recomputes "
                                          f"{', '.join(traced)}, whose derivative is not traced")
-        out_events.append(EventSensitivity(t, row["kind"], row["guard"], mode, res.mode, dtau[:n_used], z.copy(),
-                                           dz[:, :n_used]))
+        rule_change = np.full(n_used, np.inf)
+        margins = tools.rule_margins(mode, row["guard"])
+        if margins is not None:
+            w, dw = (np.asarray(x) for x in compiled(margins)(z, dz, p, P))
+            # the rules up to the one taken (the first with w > 0) decide: the change that brings one to zero
+            upto = int(np.argmax(w > 0)) + 1 if np.any(w > 0) else len(w)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                steps = np.where(dw[:upto, :n_used] != 0, -w[:upto, None] / dw[:upto, :n_used], np.inf)
+            rule_change = steps[np.argmin(np.abs(steps), axis=0), np.arange(n_used)]
+        tr = res.transition
+        impact = None
+        if tr is not None and tr.restitution is not None and tr.contact is not None:
+            names_ix = {nm: i for i, nm in enumerate(names)}
+            e_index = names_ix[tr.restitution_parameter] if tr.restitution_parameter else None
+            if e_index is not None and float(p[e_index]) != float(tr.restitution):
+                raise SensitivityUnavailable(f"the impact at t = {t:.6g} s has restitution {tr.restitution:g}, its "
+                                             f"parameter '{tr.restitution_parameter}' {float(p[e_index]):g}")
+            impact = (tr.contact, e_index, 0.0 if e_index is not None else float(tr.restitution))
         shift = np.asarray(res.offset, float) - offset
         new_mode, p_new = res.mode, np.asarray(res.p)
-        reset = compiled(tools.reset(new_mode))
-        z_new, dz_new, f_new = (np.asarray(x) for x in reset(t, z, shift, p_new, dz, P, dtau))
+        reset = compiled(tools.reset(new_mode, impact=impact))
+        z_new, dz_new, f_new, imp, dimp = (np.asarray(x) for x in reset(t, z, shift, p_new, dz, P, dtau))
         z_ref = mode_z(model.modes[new_mode], res.y)
         _check_restart(z_new, z_ref, f"the restart after '{row['kind']}' at t = {t:.6g} s")
+        impulse = None
+        if impact is not None:
+            impulse = float(imp)
+            ref = res.rows[-1].get("impulse_N_s")
+            if ref is not None and not abs(impulse - ref) <= 1e-8 * max(abs(ref), 1e-300) + 1e-15:
+                raise SensitivityUnavailable(f"the impact at t = {t:.6g} s: the differentiated impulse {impulse:.9g} "
+                                             f"differs from the project's {ref:.9g}")
+        out_events.append(EventSensitivity(t, row["kind"], row["guard"], mode, res.mode, dtau[:n_used], z.copy(),
+                                           dz[:, :n_used], graze[:n_used], rule_change, impulse,
+                                           None if impact is None else dimp[:n_used]))
         S = dz_new - np.outer(f_new, dtau)
         z = z_ref
         mode, values, p, offset = new_mode, res.values, p_new, np.asarray(res.offset, float)
@@ -471,6 +552,22 @@ def _check_restart(mine: np.ndarray, ref: np.ndarray, what: str) -> None:
                                      f"re-initialisation (difference {np.max(np.abs(mine - ref)):.2e})")
 
 
+def _margins_fn(jmod, model, whens: tuple):
+    """(w, dw) of the rules' `when` functions at the event state z with their derivatives along the moving event,
+    dw = w_z dz + w_p P: the rule that applies is the first with w > 0, so where a w reaches zero within a change
+    of the design values another rule applies there (a rebound becoming a plastic impact at the bounce speed)."""
+    from mechsim.dynamics.backends.jax_transitions import ByName
+    nq = jmod.nq
+    index = {n: i for i, n in enumerate(model.parameter_names)}
+
+    def margins(z, dz, p, P):
+        def w(zz, pp):
+            named = ByName(pp, index)
+            return jnp.stack([jnp.asarray(f(zz[:nq], zz[nq:2 * nq], named, jnp), jnp.float64) for f in whens])
+        return jax.vmap(lambda a, b: jax.jvp(w, (z, p), (a, b)), in_axes=(1, 1), out_axes=(None, 1))(dz, P)
+    return jax.jit(margins)
+
+
 def _event_fn(jmod):
     """Event time refined by one Newton step on the guard, its derivative by the implicit-function rule
     (Hiskens & Pai 2000, eq. (14)), and the state's total derivative at the moving event, S + f dtau (jitted;
@@ -487,6 +584,14 @@ def _event_fn(jmod):
         gdot = jax.jvp(lambda tt, zz: g(tt, zz, p), (t, z), (jnp.ones_like(t), f))[1]
         dg = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: g(t, zz, pp), (z, p), (s, dp))[1], in_axes=(1, 1))(S, P)
         dtau = -dg / gdot
+
+        def rate(tt, zz):
+            return jax.jvp(lambda t_, z_: g(t_, z_, p), (tt, zz), (jnp.ones_like(tt), jmod.rates(k, tt, zz, p)))[1]
+        gddot = jax.jvp(rate, (t, z), (jnp.ones_like(t), f))[1]
+        # the guard near tau: g ~ gdot (t - tau) + gddot (t - tau)^2 / 2, turning back at gdot^2 / (2 |gddot|) past
+        # zero where gdot gddot < 0; a change of the design values that moves g by that much makes the crossing
+        # tangential (grazing), and beyond it the event is gone
+        graze = jnp.where(gdot * gddot < 0, -jnp.sign(gdot) * gdot ** 2 / (2 * jnp.abs(gddot)) / dg, jnp.inf)
         _, a, lam, _ = jmod.evaluate(k, t, z, p)
-        return t, z, dtau, S + jnp.outer(f, dtau), gdot, a, lam
+        return t, z, dtau, S + jnp.outer(f, dtau), gdot, a, lam, graze
     return jax.jit(event)

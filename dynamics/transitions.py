@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mechsim.mechanisms.base import Mechanism
+from mechsim.mechanisms.base import Mechanism, Transition
 
 from mechsim.dynamics.consistent import consistent_state, project_positions, project_velocities
 from mechsim.dynamics.model import DerivedModel
@@ -32,6 +32,7 @@ class Outcome:
     rows: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     offset: np.ndarray | None = None    # the coordinates' re-based offset after the transition (see `rebased`)
+    transition: Transition | None = None    # the mechanism's transition taken (its impact law: the sensitivity pass)
 
 
 def _where(model: DerivedModel, q) -> dict:
@@ -104,7 +105,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
                **{f"{c}_q": float(val) for c, val in zip(model.coordinates, q + offset)})
     if tr.record is not None:
         row.update(tr.record, **{f"work_{n}_J": float(w) for n, w in zip(model.work_names, y_end[ix["work"]])})
-    out = Outcome(mode, values, p, offset=offset)
+    out = Outcome(mode, values, p, offset=offset, transition=tr)
     if tr.message:
         out.warnings.append(f"t = {t:.6g} s: {tr.message}")
     if tr.stop:

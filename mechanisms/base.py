@@ -200,6 +200,8 @@ class Transition:
         impact that rebounds into a mode free of them, e.g. a pin leaving the flank it struck); None: the new mode.
         With `contact` set the events row also carries the impulse on that mode's first constraint (`impulse_N_s`,
         signed as its multiplier; N s where that constraint is a length) and no rebound is absorbed.
+    restitution_parameter: the parameter whose value `restitution` is (None: a fixed number, e.g. 0 for a plastic
+        impact); the sensitivity pass differentiates the impact law by it (dynamics/sensitivity.py).
     """
 
     mode: str
@@ -213,6 +215,7 @@ class Transition:
     contact: str | None = None
     #: readings at the guard's root added to the events row (name -> number), with the work states there
     record: Mapping[str, float] | None = None
+    restitution_parameter: str | None = None
 
 
 @dataclass(frozen=True)
@@ -234,6 +237,7 @@ class TransitionRule:
         round-off); e in [0, 1] = an impact (`Transition`). Applied by the Python loop only: the compiled run
         hands such a rule back to it.
     contact: with `restitution`, the mode whose constraints the impact acts on (`Transition.contact`).
+    restitution_parameter: the parameter whose value `restitution` is (`Transition.restitution_parameter`).
     stop, message, hint: templates (`str.format`) of the reason to stop here (the rule is then a stop: the run
         ends, handed back to the Python loop by the compiled run), of a note for the events table, and of what
         the user can do about a stop. Placeholders: `mode` (the mode the guard fired in) and the keys of
@@ -250,6 +254,7 @@ class TransitionRule:
     hint: str | None = None
     fields: Callable | None = None
     contact: str | None = None
+    restitution_parameter: str | None = None
 
     #: the rule reads the scenario's numbers (a per-station load, `Geneva.station_torque`), not only p: the
     #: compiled run hands it back to the Python loop, which evaluates it with numpy
@@ -442,7 +447,8 @@ class Mechanism(ABC):
                 name: float(x) for name, x in rule.record(q, v, values).items()}
             return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
                               kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
-                              contact=rule.contact, record=record)
+                              contact=rule.contact, record=record,
+                              restitution_parameter=rule.restitution_parameter)
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def schedule(self, t_end: float) -> list[Breakpoint]:

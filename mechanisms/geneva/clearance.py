@@ -52,6 +52,8 @@ class GenevaClearance(Geneva):
     refused_formulations = {"index3": (
         "cannot hold the rigid pin-flank impacts: IDA's index-3 Newton matrix, conditioned like h^-3, fails at the "
         "first restart onto a flank (docs/geneva.md 'Clearance and impacts'); use 'index2' or 'index1'")}
+    #: the traced values include the clearance and the restitution (docs/sensitivity.md, "Impacts")
+    sensitivity_map = "mechsim.mechanisms.geneva.sensitivity:CLEARANCE_MAP"
 
     def __init__(self, geometry, crank_inertia, wheel_inertia, wheel_torque=0.0, friction=0.0, crank_damping=0.0,
                  wheel_damping=0.0, *, slot_clearance: float = 0.0, restitution: float = 0.0,
@@ -221,7 +223,7 @@ class GenevaClearance(Geneva):
             table[("free", guard)] = (
                 TransitionRule("free", lambda q, v, p, xp, f=f: {"flank": f}, kind="impact",
                                when=lambda q, v, p, xp, f=f: self._rebound_speed(q, v, p, xp, f) - p["bounce_speed"],
-                               restitution=self.restitution, contact="engaged"),
+                               restitution=self.restitution, contact="engaged", restitution_parameter="restitution"),
                 TransitionRule("engaged", lambda q, v, p, xp, f=f: {"flank": f, "slide": self._slide_after(
                     q, v, p, xp, f)}, kind="impact", restitution=0.0, contact="engaged",
                     when=lambda q, v, p, xp, f=f: self._pressing(q, v, p, xp, f)),

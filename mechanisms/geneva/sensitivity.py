@@ -3,6 +3,8 @@ sensitivities (docs/sensitivity.md, "Values traced", "Temperatures"): its `Param
 mechanism by scenarios/studies/sensitivity_map.py."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from mechsim.mechanisms.parameter_map import ParameterMap
@@ -65,3 +67,16 @@ MAP = ParameterMap(
     contact_columns=("crank_speed_rad_s", "wheel_speed_rad_s", "crank_accel_rad_s2", "pin_sliding_speed_m_s",
                      "pin_distance_m", "contact_force_N", "slip_speed_m_s"),
     contact_row=geneva_contact_row, contact_starts=("entry", "flank switch"))
+
+
+def clearance_parameters(x: dict, si: dict, mech) -> dict:
+    """The Geneva with slot clearance (clearance.py): the exact-fit model's parameters, the clearance c_s and the
+    restitution e entering as they are."""
+    return dict(geneva_parameters(x, si, mech), clearance=x["mechanism.slot_clearance"],
+                restitution=x["contact.restitution"])
+
+
+#: the Geneva with slot clearance: its impacts' law is differentiated too (dynamics/sensitivity.py), and the peak
+#: impulse of its impacts is a quantity (docs/sensitivity.md, "Impacts")
+CLEARANCE_MAP = replace(MAP, keys=MAP.keys + ("mechanism.slot_clearance", "contact.restitution"),
+                        parameters=clearance_parameters, peaks=MAP.peaks + ("peak_impulse_N_s",))

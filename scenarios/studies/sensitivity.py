@@ -326,6 +326,13 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             note = _event_crosses_row(q, wrt, relative, first.t, path.events, change)
             if note:
                 warnings.append(note)
+        elif q == IMPULSE:
+            got = _peak_impulse(q, path.events, wrt, relative, change, warnings)
+            if got is None:
+                warnings.append(f"{q}: the run has no impact")
+                continue
+            results[q] = got
+            traced_values[q] = got[0]
         else:
             got = _cycle_quantity(q, path.events, pmap, model)
             if got is None:
@@ -338,6 +345,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             # index need work states at the events, which the run's tables do not hold: the traced pass's)
             results[q] = got if own is None else (own,) + tuple(got[1:])
             traced_values[q] = got[0]
+    warnings += _sequence_warnings(path.events, wrt, relative, change)
     rows = []
     for q, (y, g, at) in results.items():
         base = traced_values.get(q, y)       # the elasticity is the traced function's own, on its own value
@@ -360,6 +368,57 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
               "sensitivity_per_run": (sens_wall - path.stats["compile_time_s"]) / run_wall if run_wall > 0 else None,
               "sensitivity_steps": path.stats["steps"], "values": len(wrt)})
     return table
+
+
+#: the largest impulse of the run's impacts (a rigid contact with clearance: the events table's impulse_N_s)
+IMPULSE = "peak_impulse_N_s"
+
+
+def _amount(key: str, step: float, rel: bool) -> str:
+    return f"{key} {step * 100:+.2g}%" if rel else f"{key} {step:+.2g} (absolute)"
+
+
+def _peak_impulse(q: str, events, wrt: list[str], relative: list[bool], change: float, warnings: list[str]):
+    """(value, gradient, time) of the largest |impulse| of the traced impacts (the impulse P = (1 + e) m_eff v_n of
+    the struck flank, differentiated through the impact law, dynamics/sensitivity.py), or None without impacts.
+    The maximum over the impacts is differentiated as the largest one's (the envelope rule of a maximum over a
+    discrete set); a warning where another impact's impulse reaches it within the stated change."""
+    hits = [e for e in events if e.impulse is not None]
+    if not hits:
+        return None
+    top = max(hits, key=lambda e: abs(e.impulse))
+    y, g = abs(top.impulse), np.sign(top.impulse) * np.asarray(top.dimpulse, float)
+    rel = dict(zip(wrt, relative))
+    swap = []
+    for e in hits:
+        if e is top:
+            continue
+        rate = np.sign(e.impulse) * np.asarray(e.dimpulse, float) - g
+        for key, r in zip(wrt, rate):
+            if r != 0 and (y - abs(e.impulse)) / abs(r) < change:
+                swap.append(_amount(key, (y - abs(e.impulse)) / r, rel[key]) + f" (to t = {e.t:.6g} s)")
+    if swap:
+        warnings.append(f"{q}: the impact at t = {top.t:.6g} s is the largest; another takes over within the stated "
+                        "change, and the derivative jumps: " + ", ".join(swap))
+    return float(top.impulse if top.impulse >= 0 else -top.impulse), g, top.t
+
+
+def _sequence_warnings(events, wrt: list[str], relative: list[bool], change: float) -> list[str]:
+    """Warnings where the event sequence the derivatives follow changes within the stated change of a value
+    (docs/sensitivity.md, "Impacts"): an event near grazing (its guard crossing zero almost tangentially, so that
+    the event vanishes: `EventSensitivity.grazing`) or a transition whose rule changes (a rebound turning plastic
+    at the bounce speed: `EventSensitivity.rule_change`). Beyond that change the derivative does not hold."""
+    rel = dict(zip(wrt, relative))
+    out = []
+    for e in events:
+        for what, steps in (("grazes (the event vanishes)", e.grazing), ("changes its rule", e.rule_change)):
+            if steps is None:
+                continue
+            near = [_amount(key, d, rel[key]) for key, d in zip(wrt, map(float, steps)) if abs(d) < change]
+            if near:
+                out.append(f"'{e.kind}' at t = {e.t:.6g} s {what} within the stated change, where the event sequence "
+                           f"changes and the derivatives hold only up to there: {', '.join(near)}")
+    return out
 
 
 def run_event_quantities(events, engage: str, release: str) -> dict:
