@@ -331,7 +331,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             if got is None:
                 warnings.append(f"{q}: the run has no impact")
                 continue
-            results[q] = got
+            # the value is the run's own (summary.json impacts), the elasticity the traced pass's
+            own = (result.summary.get("impacts") or {}).get(IMPULSE)
+            results[q] = (got[0] if own is None else float(own),) + tuple(got[1:])
             traced_values[q] = got[0]
         else:
             got = _cycle_quantity(q, path.events, pmap, model)
