@@ -135,3 +135,23 @@ def test_sequence_change_is_predicted():
     # no warning where the stated change stays inside
     quiet = sensitivity(mechsim.load(NAME, set=SENS), ["contact.restitution"], [IMPULSE], change=0.02)
     assert not [w for w in quiet.attrs["warnings"] if "changes its rule" in w]
+
+
+def test_grazing_separation_is_predicted():
+    """Late in the first index the light wheel overruns the pin: the normal force falls through zero (a separation,
+    then the pin crosses the gap and strikes the driving flank again). It falls ever more slowly there, so a heavier
+    load keeps the pin on the flank: the separation grazes and vanishes, with the impacts after it. The pass's
+    estimate from the normal force's local quadratic (2.6 % more wheel torque) is warned within a 5 % stated change;
+    the runs keep the separation at 0.9 times that change and lose it at 1.5 times (measured: between 1.15 and 1.2,
+    the first-order estimate errs on the early side)."""
+    sets = ["duration=0.5 s", "solver.rtol=1e-10", "solver.atol=1e-12"]
+    table = sensitivity(mechsim.load(NAME, set=sets), ["load.wheel_torque"], [IMPULSE], change=0.05)
+    notes = [w for w in table.attrs["warnings"] if w.startswith("'separation'")]
+    assert len(notes) == 1 and "grazes" in notes[0], table.attrs["warnings"]
+    step = float(notes[0].rsplit("load.wheel_torque ", 1)[1].rstrip("%")) / 100
+    assert 0.02 < step < 0.03
+
+    def separates(factor):
+        r = _run(sets + [f"load.wheel_torque={0.5 * (1 + factor * step)!r} N*m"])
+        return "separation" in set(r.events["kind"])
+    assert separates(0.9) and not separates(1.5)
