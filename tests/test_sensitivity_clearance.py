@@ -155,3 +155,16 @@ def test_grazing_separation_is_predicted():
         r = _run(sets + [f"load.wheel_torque={0.5 * (1 + factor * step)!r} N*m"])
         return "separation" in set(r.events["kind"])
     assert separates(0.9) and not separates(1.5)
+
+
+def test_impact_heat_is_not_traced():
+    """The impacts' heat is added to the thermal network after the run: its temperatures are refused by name, and
+    the default quantities leave them out."""
+    from mechsim.scenarios.studies.sensitivity_map import traced_quantities
+    from mechsim.scenarios.units import ScenarioError
+    sc = mechsim.load(NAME, set=SENS + ["thermal.model=lumped"])
+    with pytest.raises(ScenarioError, match="--of.*impacts' heat"):
+        sensitivity(sc, ["contact.restitution"], ["peak_temp_contact_C"])
+    plan = runner.plan(sc)
+    assert IMPULSE in traced_quantities(plan, plan.mechanism.parameter_map())
+    assert "peak_temp_contact_C" not in traced_quantities(plan, plan.mechanism.parameter_map())

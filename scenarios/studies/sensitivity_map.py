@@ -439,6 +439,9 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
         if q in THERMAL_PEAKS and plan.thermal is None:
             raise ScenarioError("--of", f"{q}: this scenario has no thermal model (set thermal.model = 'lumped' or "
                                 "'flash')")
+        if q in THERMAL_PEAKS and getattr(plan.mechanism, "impacts", False):
+            raise ScenarioError("--of", f"{q}: the impacts' heat enters the thermal network after the run "
+                                "(thermal/plan.py) and is not traced; the mechanical quantities are")
         if q not in known:
             raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}")
     return pmap
@@ -452,5 +455,7 @@ def _lookup_or_none(si: dict, key: str):
 
 
 def traced_quantities(plan, pmap: ParameterMap) -> tuple[str, ...]:
-    thermal = tuple(THERMAL_PEAKS) if plan.thermal is not None else ()
+    """The quantities traced on this plan: the thermal peaks where a thermal model runs and no impact heats it
+    (the impacts' heat is added to the network after the run, not traced)."""
+    thermal = tuple(THERMAL_PEAKS) if plan.thermal is not None and not getattr(plan.mechanism, "impacts", False) else ()
     return pmap.peaks + thermal + cycle_quantities(pmap)
