@@ -402,7 +402,7 @@ def _peak_impulse(q: str, events, wrt: list[str], relative: list[bool], change: 
     if swap:
         warnings.append(f"{q}: the impact at t = {top.t:.6g} s is the largest; another takes over within the stated "
                         "change, and the derivative jumps: " + ", ".join(swap))
-    return float(top.impulse if top.impulse >= 0 else -top.impulse), g, top.t
+    return float(y), g, top.t
 
 
 def _sequence_warnings(events, wrt: list[str], relative: list[bool], change: float) -> list[str]:
