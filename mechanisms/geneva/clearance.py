@@ -368,7 +368,7 @@ class GenevaClearance(Geneva):
             table[("play", guard)] = (
                 TransitionRule("play", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact",
                                when=lambda q, v, p, xp: p["restitution"] * p["r"] * xp.abs(v[1]) - p["bounce_speed"],
-                               restitution=self.restitution, contact="dwell"),
+                               restitution=self.restitution, contact="dwell", restitution_parameter="restitution"),
                 TransitionRule("dwell", lambda q, v, p, xp, e=e: {"lock_end": e}, kind="lock impact",
                                restitution=0.0, contact="dwell",
                                when=lambda q, v, p, xp, e=e: self._lock_pressing(p, e)),

@@ -79,4 +79,5 @@ def clearance_parameters(x: dict, si: dict, mech) -> dict:
 #: the Geneva with slot clearance: its impacts' law is differentiated too (dynamics/sensitivity.py), and the peak
 #: impulse of its impacts is a quantity (docs/sensitivity.md, "Impacts")
 CLEARANCE_MAP = replace(MAP, keys=MAP.keys + ("mechanism.slot_clearance", "contact.restitution"),
-                        parameters=clearance_parameters, peaks=MAP.peaks + ("peak_impulse_N_s",))
+                        parameters=clearance_parameters, peaks=MAP.peaks + ("peak_impulse_N_s",),
+                        discrete=MAP.discrete | {"lock_end"})
