@@ -86,6 +86,28 @@ def _located(peaks: dict, column: str) -> dict | None:
     return e
 
 
+def _closed_form_thermal(run_plan, located: dict) -> dict:
+    """The thermal peaks of `located` (the DAE pass's own, with the speed as a constraint) with the value and instant
+    the closed-form run reports (scenarios/thermal_peaks.py `ClosedFormThermalReader`): the two solve the same
+    motion and network, so their located extrema differ by the integrations' tolerances. The derivative is the DAE
+    pass's at its own t* (the envelope rule, dT*/dp = dT/dp at t*); t* moves with that tolerance, which moves dT/dp
+    only to second order (dT/dt = 0 there). A peak the closed-form run does not locate on the same side is left
+    as it is (the DAE pass's value)."""
+    from mechsim.scenarios import runner
+    wanted = {q: e for q, e in located.items() if q in THERMAL_PEAKS}
+    if not wanted:
+        return {}
+    own = runner.execute(run_plan)
+    peaks = own.summary.get("peaks", {}) if own.failure is None else {}
+    out = {}
+    for q, e in wanted.items():
+        mine = _located(peaks, THERMAL_PEAKS[q])
+        if mine is None or mine.get("unbounded") or (mine["value"] >= 0) != (e["value"] >= 0):
+            continue
+        out[q] = {**e, "value": mine["value"], "t_s": mine["t_s"]}
+    return out
+
+
 def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[float, np.ndarray, float]:
     """(value, gradient, the traced pass's value) of a located extremum F* = F(t*, p) (docs/sensitivity.md,
     "Peaks"). Interior: dF/dt = 0 at t*, so dF*/dp is the gradient of F at the fixed instant t* (the envelope rule).
@@ -225,14 +247,17 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         return df[peak_columns[q]].to_numpy(float)
     located = {q: e for q in of if q in PEAKS and (e := _located(result.summary.get("peaks", {}), PEAKS[q]))}
     # the thermal peaks located on the run's continuous solution: with cycle averaging the run itself (its hour
-    # continues the window the derivatives trace); at a prescribed speed the closed-form run's rows (not located)
+    # continues the window the derivatives trace); at a prescribed speed (resolved) the DAE pass's own located
+    # peak, its value replaced by the closed-form run's (`_closed_form_thermal`); a closed-form cycle: the turn's rows
     thermal_peaks = result.summary.get("peaks", {})
     if cycle and run_plan.method == "dae" and any(q in THERMAL_PEAKS for q in of):
         whole = runner.execute(run_plan)
         thermal_peaks = whole.summary.get("peaks", {}) if whole.failure is None else {}
-    if run_plan.method == "dae":
+    if run_plan.method == "dae" or not cycle:
         located.update({q: e for q in of if q in THERMAL_PEAKS
                         and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
+    if run_plan.method == "closed-form" and not cycle:
+        located.update(_closed_form_thermal(run_plan, located))
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
                  and q not in located and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
     sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows}
