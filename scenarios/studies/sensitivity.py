@@ -10,8 +10,10 @@ Quantities (the run's reported numbers, so that a finite difference of `mechsim 
 - peaks: the mechanical ones located in continuous time, summary.json's `peaks.<column>.abs_max` (signed value):
   dF/dt = 0 at an interior extremum t*, so the derivative is dF/dp at the fixed instant t* (the envelope rule),
   plus F' dtau/dp at an event's one-sided limit (`_located_derivative`, docs/theory.md §K5); one that grows without
-  bound has none (a warning). The thermal ones are computed after the run from the rows: the largest |value| over
-  the output rows, whose derivative is the arg-max row's (the envelope rule of a maximum over a fixed set). A warning
+  bound has none (a warning). The thermal ones are located too, by the same rule (at a prescribed speed the closed
+  form's located value with the DAE pass's derivative at its own t*, `_closed_form_thermal`); a closed-form cycle's
+  are the periodic turn's rows: the largest |value| over the output rows, whose derivative is the arg-max row's (the
+  envelope rule of a maximum over a fixed set). A warning
   names the change of a value at which another row becomes the maximum (a neighbouring row, or the same peak of
   another cycle, within PEAK_MARGIN), or at which an event next to the row or instant reaches it, where that change
   is smaller than the stated one: there the maximum has a kink.
