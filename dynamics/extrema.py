@@ -152,29 +152,38 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
     interval's first row, else its first row. Values within round-off of each other are ties, and a tie goes to
     the earliest (which dwell's zero speed holds the extremum must not hinge on the BLAS's rounding)."""
     f = np.asarray(f, dtype=float)[None, :]
-    return _candidates(t, f, np.array([sense]), _ties(f), intervals, limit, layout)[0]
+    return _candidates(t, f, _ties(f), intervals, limit, layout)[0 if sense > 0 else 1]
 
 
-def _candidates(t: np.ndarray, F: np.ndarray, senses: np.ndarray, ties: np.ndarray, intervals: list[Interval],
+def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
                 limit: int = CANDIDATES, layout: tuple | None = None) -> list[list[tuple]]:
-    """`candidates` of every series F[m] (over the table's rows) in the sense senses[m], its tie ties[m]: the
-    comparisons of all series at once, elementwise as for one."""
+    """`candidates` of every series F[c] (over the table's rows) in both senses, its tie ties[c]: [c max, c min,
+    ...]. The row-against-neighbour comparisons are made once for both senses on the rows' differences (a >= b
+    exactly where a - b >= 0; the negated series' differences are the differences negated, exactly)."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
-        return [[] for _ in range(len(F))]
+        return [[] for _ in range(2 * len(F))]
     rows, k_of, n_of, pos, first, last = layout
-    ti, fi = t[rows], senses[:, None] * F[:, rows]
-    ok = np.isfinite(fi)
-    fi[~ok] = -np.inf
-    left, right = np.empty_like(fi), np.empty_like(fi)      # each row's neighbours in its interval
-    left[:, 0], left[:, 1:], right[:, -1], right[:, :-1] = -np.inf, fi[:, :-1], -np.inf, fi[:, 1:]
-    left[:, first], right[:, last] = -np.inf, -np.inf
-    tie = ties[:, None]
+    ti, G = t[rows], F[:, rows]
+    ok = np.isfinite(G)
+    fi = np.empty((2 * len(G), G.shape[1]))             # the series in each sense: [c max, c min, ...]
+    fi[0::2], fi[1::2] = G, -G
+    fi[np.repeat(~ok, 2, axis=0)] = -np.inf
+    tie, ties = ties[:, None], np.repeat(ties, 2)
+    # a neighbour in the row's interval with a finite value (else it counts as -inf: below any finite row)
+    has_l, has_r = np.zeros_like(ok), np.zeros_like(ok)
+    has_l[:, 1:], has_r[:, :-1] = ok[:, :-1], ok[:, 1:]
+    has_l[:, first], has_r[:, last] = False, False
+    d = np.zeros((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
     with np.errstate(invalid="ignore"):
-        flat = (((np.abs(fi - left) <= tie) | first) & ((np.abs(fi - right) <= tie) | last) & (n_of > 1) & ok)
-    peak = ((fi >= left) & (fi >= right) & ok) | flat
-    smooth = peak & ~flat
+        d[:, 1:-1] = G[:, 1:] - G[:, :-1]
+        dl, dr = d[:, :-1], d[:, 1:]
+        flat = ((has_l & (np.abs(dl) <= tie)) | first) & ((has_r & (np.abs(dr) <= tie)) | last) & (n_of > 1) & ok
+        smooth = np.empty(fi.shape, dtype=bool)
+        smooth[0::2] = (~has_l | (dl >= 0)) & (~has_r | (dr <= 0)) & ok & ~flat
+        smooth[1::2] = (~has_l | (dl <= 0)) & (~has_r | (dr >= 0)) & ok & ~flat
+    flat = np.repeat(flat, 2, axis=0)
     lower = fi.max(axis=1)                          # the best peak's: the largest row is a peak
     level = np.where(flat, fi, -np.inf).max(axis=1)
     any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
@@ -283,8 +292,7 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
     names = list(values)
     F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
     col_ties = _ties(F)
-    found = _candidates(t, np.repeat(F, 2, axis=0), np.tile([1.0, -1.0], len(names)), np.repeat(col_ties, 2),
-                        intervals, limit, layout)
+    found = _candidates(t, F, col_ties, intervals, limit, layout)
     for n, col in enumerate(names):
         f = F[n]
         ties[col] = tie = float(col_ties[n])
