@@ -321,10 +321,10 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
             clusters[-1].append(j)
         else:
             clusters.append([j])
-    plans = [_grids(group) for group in clusters]
-    requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), p[1]) for g, p in zip(clusters, plans)]
+    grids, instants = _grids(clusters)
+    requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(clusters, instants)]
     requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
-    return Plan(t, values, intervals, jobs, ties, clusters, [p[0] for p in plans], starts, requests)
+    return Plan(t, values, intervals, jobs, ties, clusters, grids, starts, requests)
 
 
 def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader, table: dict | None = None) -> None:
@@ -446,14 +446,31 @@ def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x, _stencil_weights(x)
 
 
-def _grids(group: list[_Job]) -> tuple[list[np.ndarray], np.ndarray]:
-    """Each job's readings over its bracket (FIRST_GRID, as np.linspace spaces them), and the instants the group
-    reads: those and the jobs' own rows (so that the result is never below the row)."""
-    lo, hi = np.array([j.lo for j in group]), np.array([j.hi for j in group])
+def _grids(clusters: list[list[_Job]]) -> tuple[list[list[np.ndarray]], list[np.ndarray]]:
+    """Each cluster's jobs' readings over their brackets (FIRST_GRID, as np.linspace spaces them), and the
+    instants each cluster reads: those and the jobs' own rows (so that the result is never below the row), in
+    order without repeats (as np.unique gives them); all clusters' grids computed at once."""
+    jobs = [j for group in clusters for j in group]
+    if not jobs:
+        return [], []
+    lo, hi = np.array([j.lo for j in jobs]), np.array([j.hi for j in jobs])
     grid = np.arange(FIRST_GRID) * ((hi - lo) / (FIRST_GRID - 1))[:, None] + lo[:, None]
     grid[:, -1] = hi
-    grids = [g if j.hi > j.lo else np.array([j.lo]) for j, g in zip(group, grid)]
-    return grids, np.unique(np.concatenate(grids + [np.array([j.t_row for j in group])]))
+    wide = hi > lo
+    sizes = np.array([len(group) for group in clusters])
+    cid = np.repeat(np.arange(len(clusters)), sizes)
+    # every cluster's instants: its wide brackets' grids, its point brackets' one instant, its jobs' rows
+    vals = np.concatenate([grid[wide].ravel(), lo[~wide], [j.t_row for j in jobs]])
+    of = np.concatenate([np.repeat(cid[wide], FIRST_GRID), cid[~wide], cid])
+    order = np.lexsort((vals, of))
+    vals, of = vals[order], of[order]
+    new = np.ones(len(vals), dtype=bool)
+    new[1:] = (vals[1:] != vals[:-1]) | (of[1:] != of[:-1])
+    vals, of = vals[new], of[new]
+    cuts = np.searchsorted(of, np.arange(1, len(clusters)))
+    rows = [g if w else np.array([j.lo]) for j, g, w in zip(jobs, grid, wide.tolist())]
+    starts = np.r_[0, np.cumsum(sizes)]
+    return [rows[a:b] for a, b in zip(starts[:-1], starts[1:])], np.split(vals, cuts)
 
 
 def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) -> None:

@@ -283,7 +283,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             else:
                 if label == "periodic":
                     a, b = regime["last_turn"]
-                    entry["periodic"] = {"mean": means.get(c, turn_mean(t[:n], f[:n], a, b)),
+                    entry["periodic"] = {"mean": means[c] if c in means else turn_mean(t[:n], f[:n], a, b),
                                          "mean_over": [a, b]}
                 out[c] = entry
     return out, regime
