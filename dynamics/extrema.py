@@ -553,12 +553,14 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
                 merged[-1] = (b, merged[-1][1] + " + " + k)
             continue
         merged.append((b, k))
-    out = []
-    for (lo, lk), (hi, hk) in zip(merged[:-1], merged[1:]):
-        first = np.searchsorted(t, lo, side="right" if lo > t_start else "left")
-        last = np.searchsorted(t, hi, side="right")
-        out.append(Interval(lo, hi, lk, hk, np.arange(first, last)))
-    return out
+    if len(merged) < 2:
+        return []
+    ends = np.array([b for b, _ in merged], dtype=float)
+    first = np.searchsorted(t, ends[:-1], side="right").tolist()
+    first[0] = int(np.searchsorted(t, merged[0][0], side="right" if merged[0][0] > t_start else "left"))
+    last = np.searchsorted(t, ends[1:], side="right").tolist()
+    return [Interval(lo, hi, lk, hk, np.arange(a, b))
+            for (lo, lk), (hi, hk), a, b in zip(merged[:-1], merged[1:], first, last)]
 
 
 #: an interval with fewer output rows than this is also read at ROWLESS_READINGS instants over it (its ends included)
@@ -644,14 +646,17 @@ class TrajectoryReader:
         if self._anchors is not None and np.array_equal(self._anchors[0], t_rows):
             return self._anchors[1]
         pieces = self.traj.pieces
+        sizes = np.array([len(p.t) for p in pieces], dtype=int)
         all_t = np.concatenate([p.t for p in pieces])
-        all_k = np.concatenate([np.full(len(p.t), k) for k, p in enumerate(pieces)])
-        all_r = np.concatenate([np.arange(len(p.t)) for p in pieces])
-        order = np.argsort(all_t, kind="stable")
-        st = all_t[order]
-        at = np.searchsorted(st, t_rows, side="right") - 1
-        hit = (at >= 0) & (st[np.clip(at, 0, None)] == t_rows)
-        ks, rs = all_k[order][np.clip(at, 0, None)], all_r[order][np.clip(at, 0, None)]
+        all_k = np.repeat(np.arange(len(pieces)), sizes)
+        all_r = np.arange(len(all_t)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+        if np.any(all_t[1:] < all_t[:-1]):        # not in time order already (as the pieces come): sorted, stably
+            order = np.argsort(all_t, kind="stable")
+            all_t, all_k, all_r = all_t[order], all_k[order], all_r[order]
+        last = np.searchsorted(all_t, t_rows, side="right") - 1
+        at = np.clip(last, 0, None)
+        hit = (last >= 0) & (all_t[at] == t_rows)
+        ks, rs = all_k[at], all_r[at]
         out = np.where(hit[:, None], np.stack([ks, rs], axis=1), -1)
         self._anchors = (t_rows, out)
         return out
