@@ -434,8 +434,9 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     return rows
 
 
-#: instants one call of the dense reading takes (padded)
-DENSE_BATCH = 256
+#: instants one call of the dense reading takes (padded): a call's cost is nearly all fixed, so one call holds the
+#: whole pass of readings of a run's located peaks
+DENSE_BATCH = 1024
 
 
 def make_dense(o, record: StepRecord) -> Callable:
