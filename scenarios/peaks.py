@@ -321,7 +321,7 @@ class _Readings:
 def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates) -> dict:
     """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window)."""
     entry: dict = {}
-    rows = np.flatnonzero(inside & np.isfinite(f))
+    rows = None                     # the rows inside the window with a value: read where a column is not located
     for name, pick in (("max", np.argmax), ("min", np.argmin)):
         e = got.get(name)
         if e is not None:
@@ -330,7 +330,10 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             entry[name] = _entry(e.value, e.t, angle, e.where, e.sampled, e.limit)
             if "window_t_s" in e.row:     # after a cycle-averaged window: the instant of the turn it repeats
                 entry[name]["window_t_s"] = float(e.row["window_t_s"])
-        elif len(rows):
+            continue
+        if rows is None:
+            rows = np.flatnonzero(inside & np.isfinite(f))
+        if len(rows):
             i = int(rows[pick(f[rows])])
             entry[name] = _entry(f[i], t[i], angles[i], "output row")
         else:
