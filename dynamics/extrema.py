@@ -616,12 +616,13 @@ class TrajectoryReader:
     `tighten` times the run's tolerances, its rows read out as the run's own (`tables.timeseries`). The anchors of an
     interval are (piece, row) of its table rows.
 
-    An index-1 IDA run's row is IDA's own (y, y'), the state its next steps would have continued from: a reading
-    starts there as it is, so that it continues the run's own solution (a projection onto the constraints first
-    moves the start by the run's drift, within its tolerance, and costs a Gauss-Newton and KKT solve per row).
-    Other rows are made consistent first (`consistent.consistent_state`): diffrax's, the index-2/3 forms' (their
-    position and velocity constraints hold to the run's tolerance only, a jump IDA's error test at the tighter
-    tolerances rejects), and an index-1 row IDA fails from at the tighter tolerances."""
+    An index-1 IDA run's row, and an index-2 one read on the compiled callbacks, is IDA's own (y, y'), the state
+    its next steps would have continued from: a reading starts there as it is, so that it continues the run's own
+    solution (a projection onto the constraints first moves the start by the run's drift, within its tolerance, and
+    costs a Gauss-Newton and KKT solve per row). Other rows are made consistent first
+    (`consistent.consistent_state`): diffrax's, the index-3 form's, the index-2 form's on scikit-sundae, and a row
+    IDA fails from at the tighter tolerances (its constraints hold to the run's tolerance only, a jump IDA's error
+    test at the tighter tolerances can reject)."""
 
     def __init__(self, traj, angle_coordinates: tuple[int, ...], settings, tighten: float = 1e-1):
         import dataclasses
@@ -630,10 +631,15 @@ class TrajectoryReader:
         own = dataclasses.replace(settings, multiplier_atol=settings.lam_atol, events=False)
         #: the tighter tolerances first, the run's own where IDA cannot meet those
         self.tries = (dataclasses.replace(own, rtol=rtol, atol=settings.atol * rtol / settings.rtol), own)
-        #: an index-1 IDA run's rows are IDA's own states (y, y'): a reading starts from them as they are
-        self._own_rows = settings.backend in ("auto", "ida", "ida-compiled") and settings.formulation == "index1"
+        #: an index-1/2 IDA run's rows are IDA's own states (y, y'): a reading starts from them as they are (index-2
+        #: on the compiled readings only: IDA fails from some of its rows at the tighter tolerances, and the
+        #: scikit-sundae binding prints each failure on stdout)
+        self._own_rows = (settings.backend in ("auto", "ida", "ida-compiled")
+                          and settings.formulation in ("index1", "index2"))
+        self._own_compiled_only = settings.formulation == "index2"
         self.reintegrations = self.dense_readings = 0
         self._starts: dict = {}
+        self._own_failed: set = set()        # (piece, row) whose own state IDA failed from
         self._solvers: dict = {}
         self._compiled: list | None = None       # per try: the compiled IDA backend (a compiled run's readings)
         self._anchors = None
@@ -745,7 +751,7 @@ class TrajectoryReader:
         no row there), the latest state the run holds at or before `first` (`_earlier`), so that every reading runs
         forward in time: backward, a damped stiff mode (a compliant contact) is unstable. The row itself only where
         the run holds no earlier state (its segments' starts not kept). A row's state is `_row_state`'s; `row` is
-        (piece, row) where it is an index-1 IDA run's own (y, y'), else None (a consistent state)."""
+        (piece, row) where it is an IDA run's own (y, y'), else None (a consistent state)."""
         k, r = (int(x) for x in iv.anchors[position]) if 0 <= position < len(iv.anchors) else (-1, -1)
         if first is not None and (k < 0 or first < float(self.traj.pieces[k].t[r])):
             got = self._earlier(first, iv.hi, own)
@@ -756,11 +762,11 @@ class TrajectoryReader:
         return self._row_state(k, r, own)
 
     def _row_state(self, k: int, r: int, own: bool = True):
-        """`_anchor`'s tuple at row r of piece k: an index-1 IDA run's own (y, y') there (own=True), else the
-        consistent state made from its positions and speeds (`_start`)."""
+        """`_anchor`'s tuple at row r of piece k: the run's own (y, y') there where `_owns` says so (own=True),
+        else the consistent state made from its positions and speeds (`_start`)."""
         piece = self.traj.pieces[k]
         t0 = float(piece.t[r])
-        if own and self._own_rows and piece.yp is not None:
+        if own and self._owns(piece):
             return piece, self.traj.model.modes[piece.mode], t0, piece.y[r], piece.yp[r], (k, r)
         try:
             y0, yp0 = self._start(k, r)
@@ -770,14 +776,16 @@ class TrajectoryReader:
 
     def _from_row(self, anchor: tuple, times):
         """`_integrate` from an `_anchor` state. From the run's own (y, y') at the tighter tolerances only: where IDA
-        fails from it there, the reading starts from the consistent state made at that row (both tries)."""
+        fails from it there, the reading starts from the consistent state made at that row (both tries), and so do the
+        later readings from that row (kept)."""
         piece, mf, t0, y0, yp0, row = anchor
         if row is None:
             return self._integrate(mf, piece.params, t0, y0, yp0, times)
-        try:
-            return self._integrate(mf, piece.params, t0, y0, yp0, times, self.tries[:1])
-        except ReadingFailed:
-            pass
+        if row not in self._own_failed:
+            try:
+                return self._integrate(mf, piece.params, t0, y0, yp0, times, self.tries[:1])
+            except ReadingFailed:
+                self._own_failed.add(row)
         _, _, t0, y0, yp0, _ = self._row_state(*row, own=False)
         return self._integrate(mf, piece.params, t0, y0, yp0, times)
 
@@ -818,6 +826,11 @@ class TrajectoryReader:
                            np.concatenate([np.arange(len(p.t)) for p in pieces])], axis=1)
             self._rows = (all_t[order], kr[order])
         return self._rows
+
+    def _owns(self, piece) -> bool:
+        """Whether readings from this piece's rows start from the run's own (y, y') (`_own_rows`)."""
+        return (self._own_rows and piece.yp is not None
+                and (not self._own_compiled_only or self._compiled_tries()))
 
     def _start(self, k: int, r: int):
         """The consistent (y, y') at row r of piece k (the compiled diffrax run keeps states only), kept."""
