@@ -2,7 +2,8 @@
 
 Case A (`peer_bench.CASE_A`, 5 s, 1 ms outputs, figures off) on diffrax (rtol 1e-5) and ida-compiled, ida and
 the default backend (`auto`: ida-compiled once its callbacks are cached), index-1 at rtol 1e-7, all near 1e-6 rad
-of crank-angle error, and the CasADi IDAS peer of `peer_bench` at rtol 1e-6
+of crank-angle error, the scenario's own solver settings (`default idx2`: auto, index-2 at rtol 1e-8), and the
+CasADi IDAS peer of `peer_bench` at rtol 1e-6
 (5.6e-7 rad). Interleaved rounds (order rotated each round), process CPU time, medians. Each run is split into
 the integration (`hybrid.simulate`, its process CPU) and the rest: tables, invariant checks and summary.
 
@@ -27,6 +28,7 @@ BACKENDS = {
     "ida": (('solver.backend="ida"', 'solver.formulation="index1"', "solver.rtol=1e-7", "solver.atol=1e-9"),
             "ida-index1", 1e-7),
     "default": (('solver.formulation="index1"', "solver.rtol=1e-7", "solver.atol=1e-9"), "ida-compiled-index1", 1e-7),
+    "default idx2": ((), "ida-compiled-index2", 1e-8),
 }
 
 
