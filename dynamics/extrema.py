@@ -578,7 +578,9 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
     lone row's estimate is its value, which says nothing of the interval's peak). The given intervals are not
     changed (copies get the rows); an interval whose reading fails keeps its own. Without such intervals, the
     arguments themselves."""
-    sparse = [k for k, iv in enumerate(intervals) if len(iv.rows) < SPARSE_ROWS and iv.hi > iv.lo]
+    # (an interval within round-off of an instant has nothing between its ends' one-sided limits to read)
+    sparse = [k for k, iv in enumerate(intervals)
+              if len(iv.rows) < SPARSE_ROWS and iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))]
     if not sparse:
         return t, values, intervals
     t = np.asarray(t, dtype=float)
@@ -691,6 +693,9 @@ class TrajectoryReader:
             ys.append(yy)
             yps.append(yyp)
         t = np.concatenate(ts)
+        if len(t) != len(times):          # every caller indexes the reading by the instants it asked for
+            raise ReadingFailed(f"re-integration between rows gave {len(t)} of {len(times)} instants "
+                                f"({float(np.min(times)):.9g} to {float(np.max(times)):.9g} s)")
         order = np.argsort(t, kind="stable")
         return Piece(piece.mode, piece.params, t[order], np.concatenate(ys)[order], np.concatenate(yps)[order],
                      piece.offset)

@@ -162,6 +162,8 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     interval's rows with the one-sided limits read at its ends (`tables`, the readings of `_turn_mean_requests`),
     so that a jump at an event costs nothing: the error is O(h^2 F'') of the output step h."""
     names = list(values)
+    if not names:
+        return {}
     V = np.array([values[c] for c in names]).reshape(len(names), -1)
     total = np.zeros(len(names))
     for n, iv in enumerate(intervals):
