@@ -32,8 +32,8 @@ import pandas as pd
 
 from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
                                                          cycle_temperatures, cycle_window, event_crosses_turn_row,
-                                                         switch_correction, period_gradient, repetition_crosses_end,
-                                                         repetition_trend, turn_peak)
+                                                         event_row_trend, switch_correction, period_gradient,
+                                                         repetition_crosses_end, repetition_trend, turn_peak)
 from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request,
                                                        make_seed, scenario_value, traced_quantities)
 from mechsim.scenarios.studies.sensitivity_rows import row_state_columns, thermal_samples
@@ -313,7 +313,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 note = repetition_crosses_end(q, wrt, relative, turn, located[q]["sample_t_s"], dP, change)
                 if note:
                     warnings.append(note)
-                trends[q] = g + repetition_trend(turn, located[q]["sample_t_s"], dP)
+                trends[q] = (g + repetition_trend(turn, located[q]["sample_t_s"], dP)
+                             + event_row_trend(plan, turn, located[q]["sample_t_s"], path.events))
         elif q in peak_columns:
             column = peak_columns[q]
             if q not in peak_rows:

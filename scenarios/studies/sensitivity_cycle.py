@@ -36,7 +36,8 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
     monotonically from ambient, so a row's last repetition is its hottest and the largest of these is the run's
     reported peak. None without a full turn. Keys: rows (indices into df), t_s, temp_contact_C, temp_flash_rise_K,
     temp_contact_previous_C (one repetition earlier: the jump where a row's last repetition leaves the run),
-    layout, period, duration, bulk."""
+    layout, period, duration, bulk, share (the inner rows' Blok share), row_inputs (every row's network input, rows x
+    inputs; None without bulk states)."""
     from mechsim.thermal.contact_row import KELVIN
     from mechsim.thermal.cycle_exact import TurnLayout, turn_bulk, turn_ends
     setup, mech = plan.thermal.setup, plan.mechanism
@@ -51,6 +52,7 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
     share = df["heat_share_pin"].to_numpy(float)[inner]
     a, b = turn_ends(data["t_edges"], data["targets"], angle[edges])
     bulk = previous = None
+    u = None
     if setup.system is None:
         base_pin = base_wheel = setup.temp_ambient
         contact_previous = share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN
@@ -71,7 +73,7 @@ def cycle_temperatures(plan, df: pd.DataFrame) -> dict | None:
         base_pin, base_wheel = bulk[:, pin], bulk[:, wheel]
         contact_previous = share * previous[:, pin] + (1.0 - share) * previous[:, wheel] + flash - KELVIN
     return {"rows": inner, "t_s": t[inner] + layout.periods * (b - a), "period": float(b - a), "layout": layout,
-            "t_start": float(a),
+            "t_start": float(a), "share": share, "row_inputs": u,
             "duration": duration, "temp_flash_rise_K": flash, "bulk": bulk,
             "temp_contact_C": share * base_pin + (1.0 - share) * base_wheel + flash - KELVIN,
             "temp_contact_previous_C": contact_previous}
@@ -241,6 +243,31 @@ def repetition_trend(turn: dict, t_row: float, period_grad: np.ndarray) -> np.nd
     m, P = float(layout.periods[k]), float(turn["period"])
     jump = float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k])
     return -jump * m * np.asarray(period_grad, dtype=float) / P
+
+
+def event_row_trend(plan, turn: dict, t_row: float, events) -> np.ndarray:
+    """The trend of the cycle-averaged run's peak across the output rows the turn's events cross, less its
+    derivative, per scaled value (docs/sensitivity.md, "A thermal sizing"). The run's turn input is linear between
+    its output rows (a motor drive's DAE window), so where it jumps at an event (a Geneva's entry and exit) the input
+    integral at fixed row modes does not follow the event, and each time the event crosses a row that row changes
+    mode and the bulk jumps by about one row's heat: a sawtooth whose teeth have the derivative's slope and whose
+    trend is the exact input's, the translated jump du dt_e through `switch_kernel` (the mean over the event's place
+    in its row interval of `switch_correction`'s D is du; a kink such as the slip reversal has du = 0, its D averages
+    to zero). du = u(t_e-) - u(t_e+), each side extrapolated linearly from the two rows on that side. events: the
+    traced path's (t, dt per scaled value)."""
+    u, t = turn["row_inputs"], turn["layout"].t
+    a, P = float(turn["t_start"]), float(turn["period"])
+    out = 0.0
+    for e in events:
+        if not a < e.t < a + P:
+            continue
+        i = int(np.searchsorted(t, e.t, side="right") - 1)
+        if i < 1 or i + 2 >= len(t):
+            continue
+        left = u[i] + (u[i] - u[i - 1]) * (e.t - t[i]) / (t[i] - t[i - 1])
+        right = u[i + 1] + (u[i + 1] - u[i + 2]) * (t[i + 1] - e.t) / (t[i + 2] - t[i + 1])
+        out = out + float(switch_kernel(plan, turn, t_row, e.t) @ (left - right)) * np.asarray(e.dt, float)
+    return np.asarray(out)
 
 
 _CYCLE_FNS: dict = {}
