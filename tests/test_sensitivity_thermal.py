@@ -289,6 +289,42 @@ def test_last_repetition_crossing_the_end_is_warned(cycle_table):
     assert need < 0.5 and f"{key} {need * 100:.2g}%" in notes[0], (need, notes[0])
 
 
+def test_trend_across_event_rows_matches_differences_over_teeth(cycle_table):
+    """The run's turn input is linear between output rows, so each time an event where it jumps (the entry, the exit)
+    crosses a row, the bulk jumps by about one row's heat: the peak is a sawtooth in any value that moves the events,
+    its teeth with the derivative's slope. The trend `mechsim size` uses (table attrs "trend") adds that of the exact
+    input (`event_row_trend`) and that of the repetitions (`repetition_trend`, -dT_P m dP/P: a row's last repetition
+    crossing the run's end). Central differences of the run's located peak in the stall torque (steps +-2 %: the
+    entry moves past about 28 output rows in all, while the peak's row keeps its last repetition, asserted) see
+    the first and not the second: they must equal the trend less the repetitions' term (m, dT_P from the turn, dP
+    from the same runs' periods), within the teeth's share of the difference (at most the events' trend terms,
+    5 % of the value, over the rows crossed: 2e-3) and its truncation (1e-3), while the derivative alone is 5 %
+    off them."""
+    key, p, h = "drive.stall_torque", 40.0, 2e-2
+    part = cycle_table[(cycle_table["quantity"] == "peak_temp_contact_C") & (cycle_table["wrt"] == key)].iloc[0]
+    trend = cycle_table.attrs["trend"]["peak_temp_contact_C"][key]
+    runs = {s: _cycle_run(FD + [f"{key}={p * (1 + s * h)!r} N*m"]) for s in (1, -1)}
+    peaks = {s: located_peak(r, "temp_contact_C") for s, r in runs.items()}
+    periods = {s: r.summary["thermal"]["cycle"]["period_s"] for s, r in runs.items()}
+
+    def entry(result):
+        ev, until = result.events, result.summary["thermal"]["cycle"]["mechanics_simulated_until_s"]
+        return float(ev.loc[(ev["kind"] == "entry") & (ev["t_s"] <= until), "t_s"].iloc[-1])
+    assert abs(entry(runs[1]) - entry(runs[-1])) > 25 * 1e-3        # many teeth (output step 1 ms)
+    for s in (1, -1):        # the peak in the last turn, moved smoothly: its row's last repetition stays in the run
+        assert 60.0 - periods[s] < peaks[s]["t_s"] <= 60.0
+        assert abs(peaks[s]["t_s"] - part["t_s"]) < 0.25 * periods[s]
+    fd = (peaks[1]["value"] - peaks[-1]["value"]) / (2 * h * p)
+    _, _, turn = _cycle_window(FD)
+    k = int(np.argmin(np.abs(turn["t_s"] - part["t_s"])))
+    m, jump = turn["layout"].periods[k], turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k]
+    repetitions = -jump * m * (periods[1] - periods[-1]) / (2 * h * p) / turn["period"]
+    print(f"derivative {part['derivative']:.7g}, trend {trend:.7g} (repetitions {repetitions:.3g}), "
+          f"differences {fd:.7g}")
+    assert trend - repetitions == pytest.approx(fd, rel=5e-3)
+    assert abs(part["derivative"] - fd) > 0.03 * fd
+
+
 def test_shipped_lc1_design_is_a_kkt_point():
     """The seed's load case 1 design as `mechsim size` wrote it (docs/lc1_sizing_design.toml, docs/sensitivity.md "A
     thermal sizing"): minimise the crank radius r over (r, stall torque) subject to the peak contact temperature
