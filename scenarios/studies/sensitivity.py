@@ -288,7 +288,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
 
     results: dict[str, tuple[float, np.ndarray]] = {}
     traced_values: dict[str, float] = {}     # the traced pass's own value of each quantity
-    trends: dict[str, np.ndarray] = {}       # the slope of the peak's trend across repetitions (`repetition_trend`)
+    # the slope of the peak's trend across repetitions and event-row crossings (`repetition_trend`, `event_row_trend`)
+    trends: dict[str, np.ndarray] = {}
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
         if q in located and located[q].get("unbounded"):

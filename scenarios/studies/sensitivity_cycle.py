@@ -258,7 +258,7 @@ def event_row_trend(plan, turn: dict, t_row: float, events) -> np.ndarray:
     u, t = turn["row_inputs"], turn["layout"].t
     a, P = float(turn["t_start"]), float(turn["period"])
     out = 0.0
-    for e in events:
+    for e in events if u is not None else ():
         if not a < e.t < a + P:
             continue
         i = int(np.searchsorted(t, e.t, side="right") - 1)

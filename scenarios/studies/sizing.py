@@ -169,7 +169,8 @@ class Problem:
                                    + (f": {why[0]}" if why else ""))
             y = float(part["value"].iloc[0])
             g = np.array([float(part[part["wrt"] == k]["derivative"].iloc[0]) for k in self.keys])
-            # a cycle-averaged run's peak after the hour is a sawtooth in the period (`repetition_trend`): its trend
+            # a cycle-averaged run's peak after the hour is a sawtooth in the period (`repetition_trend`) and in
+            # the turn's events' places among the output rows (`event_row_trend`): its trend
             trend = table.attrs.get("trend", {}).get(q)
             if trend is not None:
                 g = np.array([trend[k] for k in self.keys])
