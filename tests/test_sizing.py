@@ -365,3 +365,49 @@ def test_list_entry_requests_are_refused_in_one_line(text, fragment):
     from mechsim.scenarios.studies.sizing import parse_bound
     with pytest.raises(ScenarioError, match=fragment):
         parse_bound(text, mechsim.load("chain-mech1-kinematic").si)
+
+
+class _Sawtooth:
+    """One limit q(u) <= L on a sawtooth in u0 (teeth of slope 0.5 and width W, each step up 0.5 W: a trend of
+    slope 1, as a cycle-averaged peak's across repetitions), smooth in u1; the optimiser sees the trend, the local
+    derivative is the tooth's. Stands in for `Problem` in `_restore` (violation, c_aimed, c_jac, record)."""
+    W = 1e-3
+
+    def __init__(self, u_start, outside):
+        self.L = self.q(u_start) / (1.0 + outside)
+        self.rows = []
+
+    def q(self, u):
+        return 0.5 * u[0] + 0.5 * self.W * np.floor(u[0] / self.W) + 0.2 * u[1]
+
+    def c(self, u):
+        return np.array([(self.L - self.q(u)) / self.L])
+
+    def c_aimed(self, u):
+        from mechsim.scenarios.studies.sizing import FEASIBLE
+        return self.c(u) - FEASIBLE
+
+    def c_jac(self, u, local=False):
+        return -np.array([[0.5 if local else 1.0, 0.2]]) / self.L
+
+    def violation(self, u):
+        return float(max(0.0, -self.c(u)[0]))
+
+    def record(self, u):
+        self.rows.append(np.array(u))
+
+
+def test_a_design_just_outside_a_sawtooth_limit_is_moved_onto_it():
+    """Where the optimiser ends just outside a limit (5e-8 of it: SLSQP stops on its objective tolerance, its steps
+    taken with a cycle-averaged peak's trend, whose slope is not the teeth's), `_restore` moves the design onto the
+    limit with the local derivative in one Newton step (exact on the linear tooth); the trend's step would leave
+    half the aimed residual outside."""
+    from mechsim.scenarios.studies.sizing import FEASIBLE, _restore
+    u0 = np.array([0.6005, 0.3])          # mid-tooth
+    problem = _Sawtooth(u0, 5e-8)
+    assert problem.violation(u0) > FEASIBLE
+    u = _restore(problem, u0)
+    assert problem.violation(u) == 0.0 and problem.c(u)[0] == pytest.approx(FEASIBLE, rel=1e-6)
+    assert len(problem.rows) == 1
+    step = np.linalg.lstsq(problem.c_jac(u0), -problem.c_aimed(u0), rcond=None)[0]
+    assert problem.violation(u0 + step) > FEASIBLE

@@ -43,6 +43,8 @@ MAX_SLOT_CHOICES = 12
 MAX_RESOLVES = 3
 #: the part of the excess added to it when a limit is tightened (`tightening`)
 EXCESS_MARGIN = 0.1
+#: Newton steps onto the limits at most, where the optimiser ends just outside them (`_restore`)
+RESTORE_STEPS = 3
 
 
 class SizingFailed(RuntimeError):
@@ -62,6 +64,8 @@ class Evaluation:
     grads: dict
     warnings: list
     wall: float
+    #: the quantities' own derivatives where `grads` holds a trend (a cycle-averaged peak's), else `grads`
+    local_grads: dict | None = None
 
 
 @dataclass
@@ -160,7 +164,7 @@ class Problem:
             raise SizingFailed(f"the design {self.describe(x)} cannot be evaluated: {exc}") from None
         except ValueError as exc:       # SensitivityUnavailable: no derivative at this design
             raise SizingFailed(f"no derivatives at the design {self.describe(x)}: {exc}") from None
-        values, grads = {}, {}
+        values, grads, local = {}, {}, {}
         for q in self.quantities:
             part = table[table["quantity"] == q]
             if part.empty:
@@ -172,15 +176,17 @@ class Problem:
             # a cycle-averaged run's peak after the hour is a sawtooth in the period (`repetition_trend`) and in
             # the turn's events' places among the output rows (`event_row_trend`): its trend
             trend = table.attrs.get("trend", {}).get(q)
+            sign = np.sign(y) if q.startswith("peak_") and y != 0 else 1.0   # peaks: magnitudes
+            local[q] = sign * g
             if trend is not None:
                 g = np.array([trend[k] for k in self.keys])
-            sign = np.sign(y) if q.startswith("peak_") and y != 0 else 1.0   # peaks: magnitudes
             values[q], grads[q] = sign * y, sign * g
         if self.objective in self.keys:
             j = self.keys.index(self.objective)
             values[self.objective], grads[self.objective] = float(x[j]), np.eye(len(x))[j]
+            local[self.objective] = grads[self.objective]
         ev = Evaluation(x, values, grads, list(table.attrs["warnings"]) if table is not None else [],
-                        time.perf_counter() - wall)
+                        time.perf_counter() - wall, local)
         self.cache[key] = ev
         self.evaluations += 1
         return ev
@@ -205,9 +211,11 @@ class Problem:
         tolerance; the cost, by the shadow price, is FEASIBLE |limit| of the limit)."""
         return self.c(u) - FEASIBLE
 
-    def c_jac(self, u) -> np.ndarray:
+    def c_jac(self, u, local: bool = False) -> np.ndarray:
+        """The limits' gradients (the trends where a quantity has one; with `local`, its own derivatives)."""
         ev = self.evaluate(u)
-        rows = [(-1.0 if lim.sense == "<=" else 1.0) * ev.grads[lim.quantity] * self.span / lim.scale
+        grads = ev.local_grads if local and ev.local_grads is not None else ev.grads
+        rows = [(-1.0 if lim.sense == "<=" else 1.0) * grads[lim.quantity] * self.span / lim.scale
                 for lim in self.limits]
         return np.array(rows).reshape(len(self.limits), len(self.keys))
 
@@ -284,6 +292,25 @@ def _optimise(problem: Problem, u0: np.ndarray, method: str, tolerance: float, m
                              bounds=optimize.Bounds(np.zeros(len(u0)), np.ones(len(u0))), constraints=cons,
                              callback=lambda xk, state: problem.record(xk),
                              options={"gtol": tolerance, "xtol": tolerance, "maxiter": max_iterations})
+
+
+def _restore(problem: Problem, u: np.ndarray) -> np.ndarray:
+    """u moved onto the limits where the optimiser ends just outside them (by more than FEASIBLE, at most ACTIVE):
+    Newton steps, least-norm within the bounds, on the broken and active limits aimed at (`Problem.c_aimed`), with
+    the quantities' own derivatives. A cycle-averaged peak is a sawtooth whose teeth have the derivative's slope
+    while the optimiser follows its trend (`Problem.evaluate`), so its last step leaves about the slopes' relative
+    difference of itself (a few percent) outside; a correction that small stays on its tooth. At most
+    RESTORE_STEPS runs; the result is judged as the optimiser's own (`_solve`)."""
+    for _ in range(RESTORE_STEPS):
+        violation = problem.violation(u)
+        if not FEASIBLE < violation <= ACTIVE:
+            break
+        c = problem.c_aimed(u)
+        near = c <= ACTIVE
+        du = np.linalg.lstsq(problem.c_jac(u, local=True)[near], -c[near], rcond=None)[0]
+        u = np.clip(u + du, 0.0, 1.0)
+        problem.record(u)
+    return u
 
 
 def size(scenario, vary: list[str], minimize: str, subject_to: list[str] | None = None, *,
@@ -494,7 +521,7 @@ def _solve(problem: Problem, method: str, tolerance: float, max_iterations: int,
     first = problem.evaluate(u0)
     problem.f_scale = abs(first.values[problem.objective]) or 1.0
     res = _optimise(problem, u0, method, tolerance, max_iterations)
-    u = np.clip(res.x, 0.0, 1.0)
+    u = _restore(problem, np.clip(res.x, 0.0, 1.0))
     ev = problem.evaluate(u)
     if problem.rows and not np.allclose([problem.rows[-1][b.column] for b in problem.bounds], ev.x, rtol=0,
                                         atol=0):
