@@ -146,6 +146,24 @@ def value_setting(si: dict, key: str, value: float, unit: str) -> str:
     return f"{name}={text(entries)}"
 
 
+def locating(plan, columns=()):
+    """The runner's plan whose run locates the peaks of only the mechanism's `columns` (and, as ever, the thermal
+    model's): for finite differences that read a few peaks. Each column's extrema are located on their own
+    (scenarios/peaks.py), so those read are the full run's, bit for bit; what is skipped is locating the others and
+    reading their approaches to the events, most of a run's time at rtol 1e-12. The timeseries and events are the
+    run's."""
+    import dataclasses
+    mech = copy.copy(plan.mechanism)
+    mech.peak_columns = tuple(c for c in mech.peak_columns if c in columns)
+    return dataclasses.replace(plan, mechanism=mech)
+
+
+def run_locating(scenario, columns=()):
+    """`mechsim.run(scenario)` (a loaded Scenario) locating the peaks of only the mechanism's `columns` (`locating`)."""
+    from mechsim.scenarios import runner
+    return runner.execute(locating(runner.plan(scenario), columns))
+
+
 def located_peak(result, column: str, side: str | None = None) -> float:
     """The run's located peak of `column` as `mechsim sensitivity` reports it: the extremum of larger magnitude
     (summary.json peaks, `abs_max`), signed (docs/theory.md §K5); side 'max' or 'min' picks one (where the two are
@@ -166,7 +184,7 @@ def peaks_match_finite_differences(name: str, table, wrt: list, fd_sets: list, s
     sides = {q: "max" if table.loc[table["quantity"] == q, "value"].iloc[0] >= 0 else "min" for q in peaks}
 
     def at_rows(sets):
-        r = mechsim.run(mechsim.load(name, set=sets))
+        r = run_locating(mechsim.load(name, set=sets), [PEAKS[q] for q in peaks])
         assert r.failure is None, r.failure.message()
         return {q: located_peak(r, PEAKS[q], sides[q]) for q in peaks}
     ref0 = at_rows(fd_sets)

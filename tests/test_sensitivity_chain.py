@@ -14,7 +14,7 @@ import pytest
 
 import mechsim
 from conftest import (assert_matches_finite_differences, located_peak, peaks_match_finite_differences,
-                      richardson_central, value_setting)
+                      richardson_central, run_locating, value_setting)
 from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 NAME = "chain-mech1-torque"
@@ -28,8 +28,9 @@ H = {"drive.torque": 5e-5, "load.crank_torque": 2e-4, "mechanism.chain_mass": 1e
 ELASTICITY_FLOOR = 1e-6
 
 
-def _run(sets):
-    r = mechsim.run(mechsim.load(NAME, set=sets))
+def _run(sets, peaks):
+    """The run the finite differences read, the located peaks of only the quantities `peaks` (`run_locating`)."""
+    r = run_locating(mechsim.load(NAME, set=sets), [PEAKS[q] for q in peaks])
     assert r.failure is None, r.failure.message()
     return r
 
@@ -62,9 +63,9 @@ def test_chain_matches_finite_differences():
     # the coupler force grows without bound toward each crank stop (docs/theory.md §K5): no peak, no derivative
     assert "peak_coupler_force_N" not in set(table["quantity"])
     assert any("peak_coupler_force_N" in w and "without bound" in w for w in table.attrs["warnings"])
-    nominal = _run(FD)
-    df = nominal.timeseries
     peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
+    nominal = _run(FD, peaks)
+    df = nominal.timeseries
     rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
     ref0 = quantities(nominal, rows)
     assert set(ref0) == set(table["quantity"])
@@ -72,7 +73,8 @@ def test_chain_matches_finite_differences():
     for key in WRT:
         part = table[table["wrt"] == key].set_index("quantity")
         p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
-        fd = richardson_central(lambda value: quantities(_run(FD + [f"{key}={value!r} {unit}"]), rows), p, H[key])
+        fd = richardson_central(lambda value: quantities(_run(FD + [f"{key}={value!r} {unit}"], peaks), rows), p,
+                                H[key])
         # the coupler-force peak next to the stop amplifies the solution's error ~1e3-fold (its elasticities):
         # the value at rtol 1e-10 is ~1e-7..1e-6 from the rtol-1e-12 run's (measured 8e-7)
         assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
@@ -101,10 +103,10 @@ def test_chain_geometry_matches_finite_differences():
     base = SETS + GEOMETRY
     scenario = mechsim.load(NAME, set=base + ["solver.rtol=1e-10", "solver.atol=1e-12"])
     table = sensitivity(scenario, WRT_GEOMETRY)
-    nominal = _run(base + FD[len(SETS):])
+    peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
+    nominal = _run(base + FD[len(SETS):], peaks)
     assert (nominal.events["kind"] == "rebound absorbed").sum() >= 2
     df = nominal.timeseries
-    peaks = [q for q in dict.fromkeys(table["quantity"]) if q in PEAKS]
     rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in peaks}
     ref0 = quantities(nominal, rows)
     si = scenario.si
@@ -114,7 +116,7 @@ def test_chain_geometry_matches_finite_differences():
         p, unit = float(part["parameter"].iloc[0]), part["wrt_unit"].iloc[0]
 
         def moved(value):
-            return quantities(_run(base + FD[len(SETS):] + [value_setting(si, key, value, unit)]), rows)
+            return quantities(_run(base + FD[len(SETS):] + [value_setting(si, key, value, unit)], peaks), rows)
         fd = richardson_central(moved, p, H_GEOMETRY[key])
         assert_matches_finite_differences(part, ref0, fd, p, key, 1e-5, ELASTICITY_FLOOR, worst)
     print("chain geometry: largest relative deviation from the finite differences:",
