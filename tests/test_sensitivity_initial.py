@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from conftest import located_peak
+from conftest import located_peak, run_locating
 from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 FD_SOLVER = ["solver.rtol=1e-12", "solver.atol=1e-14"]
@@ -38,8 +38,8 @@ def _richardson_absolute(evaluate, p: float, h: float) -> dict:
 
 def _read(name: str, sets: list[str], rows: dict, index: bool, r=None) -> dict:
     """The peaks at the nominal rows and, where asked, the last index time (entry to exit) of an IDA run (given, or
-    run here)."""
-    r = r if r is not None else mechsim.run(mechsim.load(name, set=sets))
+    run here locating only those peaks: `run_locating`)."""
+    r = r if r is not None else run_locating(mechsim.load(name, set=sets), [PEAKS[q] for q in rows])
     assert r.failure is None, r.failure.message()
     out = {q: located_peak(r, PEAKS[q]) for q in rows}
     if index:
@@ -52,7 +52,8 @@ def _read(name: str, sets: list[str], rows: dict, index: bool, r=None) -> dict:
 
 def _check(table, name: str, sets: list[str], steps: dict, setting, index: bool = False) -> dict:
     """Every (quantity, value) of the table against the finite differences; the largest relative deviations."""
-    nominal = mechsim.run(mechsim.load(name, set=sets + FD_SOLVER))
+    nominal = run_locating(mechsim.load(name, set=sets + FD_SOLVER),
+                           [c for q, c in PEAKS.items() if q in set(table["quantity"])])
     df = nominal.timeseries
     rows = {q: int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in set(table["quantity"]) if q in PEAKS}
     ref0 = _read(name, sets + FD_SOLVER, rows, index, nominal)
