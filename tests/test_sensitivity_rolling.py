@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 import mechsim
-from conftest import peaks_match_finite_differences, run_locating
+from conftest import peaks_match_finite_differences
 from mechsim.scenarios.studies.sensitivity import PEAKS, sensitivity
 
 NAME = "rolling-a-torque"
@@ -53,7 +53,7 @@ H_EVENTS = {"mechanism.crank_length": 4e-5, "mechanism.disc_radius": 1.5e-5, "me
 def test_rolling_pair_geometry_through_dead_points():
     table = sensitivity(mechsim.load(EVENTS), WRT_EVENTS)          # the scenario's own rtol 1e-10
     fd_sets = ["solver.rtol=1e-12", "solver.atol=1e-13"]
-    nominal = run_locating(mechsim.load(EVENTS, set=fd_sets))       # its events and table: no peak read here
+    nominal = mechsim.run(mechsim.load(EVENTS, set=fd_sets))
     assert list(nominal.events["kind"]) == ["dead point", "dead point"]
     df = nominal.timeseries
     rows = [int(np.nanargmax(np.abs(df[PEAKS[q]].to_numpy(float)))) for q in set(table["quantity"])]

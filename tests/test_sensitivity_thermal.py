@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from conftest import assert_matches_finite_differences, locating, richardson_central, run_locating
+from conftest import assert_matches_finite_differences, richardson_central, run_locating
 from mechsim.scenarios.units import ScenarioError
 from mechsim.scenarios import runner
 from mechsim.scenarios.studies.sensitivity import THERMAL_PEAKS, cycle_temperatures, cycle_window, sensitivity
@@ -167,19 +167,18 @@ def _cycle_window(sets):
         _WINDOW.append(runner.settled(runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS)))
                        .thermal.mechanics_duration)
     plan = dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, mechanics_duration=_WINDOW[0]))
-    result = runner.execute(cycle_window(locating(plan)))      # its table only: no peak is read
+    result = runner.execute(cycle_window(plan))
     assert result.failure is None
     return plan, result, cycle_temperatures(plan, result.timeseries)
 
 
 def _cycle_run(sets):
-    """The whole cycle-averaged run (its window the sensitivity's, `_cycle_window`), for its located thermal peaks
-    (the mechanics' are not read: `conftest.run_locating`)."""
+    """The whole cycle-averaged run (its window the sensitivity's, `_cycle_window`), for its located peaks."""
     plan = runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + sets))
     if not _WINDOW:
         _cycle_window([])
     plan = dataclasses.replace(plan, thermal=dataclasses.replace(plan.thermal, mechanics_duration=_WINDOW[0]))
-    result = runner.execute(locating(plan))
+    result = runner.execute(plan)
     assert result.failure is None
     return result
 
