@@ -106,12 +106,8 @@ def gap_figure(timeseries, impacts: pd.DataFrame, clearance: float, force: bool 
         rows = (turn == k) & ~np.isin(mode, ("dwell", "play"))
         if np.count_nonzero(rows) > 1:
             ax.plot(angle[rows], offset[rows], lw=1.2, label=f"turn {int(k)}")
-    half = clearance / 2 * 1e3
-    for y, name in ((half, "driving flank"), (-half, "trailing flank")):
-        ax.axhline(y, color="0.3", lw=0.8, ls="--")
-        ax.annotate(name, (0.01, y), xycoords=("axes fraction", "data"), va="bottom", fontsize=8, color="0.3")
+    _ends(ax, clearance / 2 * 1e3, ("driving flank", "trailing flank"))
     ax.set_ylabel("pin centre offset from the slot's\ncentre line (mm)")
-    ax.set_ylim(-1.35 * half, 1.35 * half)
     ax.set_title(f"Geneva with slot clearance {clearance * 1e3:g} mm: the pin in its slot over a crank turn")
     if len(ax.get_lines()) > 2:
         ax.legend(fontsize=8, loc="lower right")
@@ -148,11 +144,7 @@ def lock_figure(timeseries, lock_impacts: pd.DataFrame, play: float, pitch: floa
         rows = dwell & (start == k)
         if np.count_nonzero(rows) > 1:
             ax.plot(since[rows], offset[rows], lw=1.2, label=f"dwell {int(k) + 1}")
-    half = play / 2 * 1e3
-    for y, name in ((half, "leading end"), (-half, "trailing end")):
-        ax.axhline(y, color="0.3", lw=0.8, ls="--")
-        ax.annotate(name, (0.01, y), xycoords=("axes fraction", "data"), va="bottom", fontsize=8, color="0.3")
-    ax.set_ylim(-1.35 * half, 1.35 * half)
+    _ends(ax, play / 2 * 1e3, ("leading end", "trailing end"))
     ax.set_ylabel("wheel offset from its nominal\ndwell angle (mrad)")
     ax.set_title(f"Geneva with lock play {play * 1e3:g} mrad: the wheel in its locking arc during the dwell")
     if len(ax.get_lines()) > 2:
@@ -169,3 +161,11 @@ def lock_figure(timeseries, lock_impacts: pd.DataFrame, play: float, pitch: floa
     bx.set_ylabel("lock impact impulse |J| at the\ncrank radius (mN s)")
     bx.set_xlabel("crank angle since the pin left the slot (deg)")
     return fig
+
+
+def _ends(ax, half: float, names: tuple[str, str]) -> None:
+    """The two ends of a gap or play at +-half, dashed and named, with the axis a little wider than the gap."""
+    for y, name in ((half, names[0]), (-half, names[1])):
+        ax.axhline(y, color="0.3", lw=0.8, ls="--")
+        ax.annotate(name, (0.01, y), xycoords=("axes fraction", "data"), va="bottom", fontsize=8, color="0.3")
+    ax.set_ylim(-1.35 * half, 1.35 * half)
