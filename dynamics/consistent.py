@@ -37,6 +37,43 @@ def _min_norm(G, r, xp, pad):
     return G.T @ xp.linalg.solve(K, r)
 
 
+def _gauss_newton(positions, q, xp, steps: int, until_roundoff: bool):
+    """`reinitialise`'s position steps q -= G^+ Phi; positions(q) -> (G, Phi, pad). Returns (q, G at q) where the
+    steps stop on round-off (G evaluated there already: the velocity step reuses it), else (q, None)."""
+    if not until_roundoff:
+        for _ in range(steps):
+            G, phi, pad = positions(q)
+            q = q - _min_norm(G, phi, xp, pad)
+        return q, None
+    G, phi, pad = positions(q)
+    best = float(np.max(np.abs(phi)))
+    for _ in range(steps):
+        if best == 0.0:
+            break
+        trial = q - _min_norm(G, phi, xp, pad)
+        G_trial, phi_trial, _ = positions(trial)
+        r = float(np.max(np.abs(phi_trial)))
+        if not r < best:
+            break
+        q, G, phi, previous, best = trial, G_trial, phi_trial, best, r
+        if r > 0.5 * previous:
+            break
+    if not best <= 1e-9:
+        raise ValueError(f"constraint residual {best:.3e} after projection")
+    return q, G
+
+
+def _impact_law(M, G, rel, v, restitution, xp, pad):
+    """(v+, P): Newton's impact law v+ = v - M^-1 G^T P with the impulse P = (G M^-1 G^T)^-1 (1 + e) rel
+    (`reinitialise`); pad as in `_min_norm`."""
+    Minv_Gt = xp.linalg.solve(M, G.T)
+    K = G @ Minv_Gt
+    if pad is not None:
+        K = K + xp.diag(pad.astype(K.dtype))
+    impulse = xp.linalg.solve(K, (1.0 + restitution) * rel)
+    return v - Minv_Gt @ impulse, impulse
+
+
 def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, until_roundoff: bool = False):
     """(q, v) made consistent with a mode's constraints, for numpy and JAX alike (`xp`): every path's
     re-initialisation (`consistent_state`; the compiled diffrax run, dynamics/backends/diffrax_run.py; the sensitivity
@@ -55,78 +92,73 @@ def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, 
     to them (1.75e-12 m at 175 rad) is enough for IDA's index-2 first step to fail at a restart, docs/stability.md
     'Restarts'); ValueError when max|Phi| is still above 1e-9 then.
     """
-    if until_roundoff:
-        _, G, phi, _, pad = parts(q, v)
-        best = float(np.max(np.abs(phi)))
-        for _ in range(steps):
-            if best == 0.0:
-                break
-            trial = q - _min_norm(G, phi, xp, pad)
-            _, G_trial, phi_trial, _, _ = parts(trial, v)
-            r = float(np.max(np.abs(phi_trial)))
-            if not r < best:
-                break
-            q, G, phi, previous, best = trial, G_trial, phi_trial, best, r
-            if r > 0.5 * previous:
-                break
-        if not best <= 1e-9:
-            raise ValueError(f"constraint residual {best:.3e} after projection")
-    else:
-        for _ in range(steps):
-            _, G, phi, _, pad = parts(q, v)
-            q = q - _min_norm(G, phi, xp, pad)
+    def positions(qq):
+        _, G, phi, _, pad = parts(qq, v)
+        return G, phi, pad
+    q, _ = _gauss_newton(positions, q, xp, steps, until_roundoff)
     M, G, _, rel, pad = parts(q, v)
-    Minv_Gt = xp.linalg.solve(M, G.T)
-    K = G @ Minv_Gt
-    if pad is not None:
-        K = K + xp.diag(pad.astype(K.dtype))
-    return q, v - Minv_Gt @ xp.linalg.solve(K, (1.0 + restitution) * rel)
+    return q, _impact_law(M, G, rel, v, restitution, xp, pad)[0]
 
 
-def _parts(mf: ModeFunctions, t: float, p: tuple):
-    """`reinitialise`'s parts(q, v) of a mode's numpy functions."""
-    def parts(q, v):
-        return (np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float)),
-                np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float)),
-                np.atleast_1d(np.asarray(mf.phi(t, q, p), dtype=float).ravel()),
-                np.atleast_1d(np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel()), None)
-    return parts
+def _mass(mf: ModeFunctions, q, p) -> np.ndarray:
+    return np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
+
+
+def _G(mf: ModeFunctions, t: float, q, p) -> np.ndarray:
+    return np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
+
+
+def _projected_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_iter: int = 30):
+    """(q projected onto Phi(t, q) = 0 to round-off, G there or None) (`reinitialise`'s steps, until_roundoff),
+    evaluating only what the steps use (G and Phi)."""
+    q = np.array(q, dtype=float)
+    if mf.m == 0:
+        return q, None
+
+    def positions(qq):
+        return _G(mf, t, qq, p), np.atleast_1d(np.asarray(mf.phi(t, qq, p), dtype=float).ravel()), None
+    try:
+        return _gauss_newton(positions, q, np, max_iter, until_roundoff=True)
+    except ValueError as exc:
+        raise ValueError(f"mode {mf.name!r} cannot assemble: {exc}") from None
 
 
 def project_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_iter: int = 30) -> np.ndarray:
     """q projected onto Phi(t, q) = 0 to round-off (`reinitialise`, until_roundoff)."""
-    q = np.array(q, dtype=float)
+    return _projected_positions(mf, t, q, p, max_iter)[0]
+
+
+def _projected_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, p: tuple, restitution: float,
+                          G: np.ndarray | None = None):
+    """(v+, Impact, M, G) of `project_velocities`, with M(q) and G(q) for what follows at the same q (G given:
+    evaluated there already)."""
+    M = _mass(mf, q, p)
+    e_before = 0.5 * float(v @ M @ v)
     if mf.m == 0:
-        return q
-    try:
-        return reinitialise(_parts(mf, t, p), q, np.zeros_like(q), steps=max_iter, until_roundoff=True)[0]
-    except ValueError as exc:
-        raise ValueError(f"mode {mf.name!r} cannot assemble: {exc}") from None
+        return v, Impact(e_before, e_before), M, G
+    G = _G(mf, t, q, p) if G is None else G
+    rel = np.atleast_1d(np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel())
+    v_new, impulse = _impact_law(M, G, rel, v, restitution, np, None)
+    return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new), impulse), M, G
 
 
 def project_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, p: tuple,
                        restitution: float = 0.0) -> tuple[np.ndarray, Impact]:
     """Newton's impact law with coefficient e at positions q (`reinitialise` without position steps) and the
-    kinetic energy before and after."""
-    M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
-    e_before = 0.5 * float(v @ M @ v)
-    if mf.m == 0:
-        return v, Impact(e_before, e_before)
-    _, v_new = reinitialise(_parts(mf, t, p), q, v, steps=0, restitution=restitution)
-    G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
-    impulse = np.linalg.lstsq(G.T, M @ (v - v_new), rcond=None)[0]
-    return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new), impulse)
+    kinetic energy before and after; the impulse is the law's own (G M^-1 G^T)^-1 (1 + e) (G v + Phi_t)."""
+    return _projected_velocities(mf, t, q, v, p, restitution)[:2]
 
 
-def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Accelerations and multipliers from the KKT system of the mode (`kkt.solve`)."""
-    M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
+def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple,
+                  M: np.ndarray | None = None, G: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Accelerations and multipliers from the KKT system of the mode (`kkt.solve`); M(q) and G(t, q) where the
+    caller has them at this q already."""
+    M = _mass(mf, q, p) if M is None else M
     nq = len(q)
     Q0 = np.asarray(mf.force0(t, q, v, x, p), dtype=float).ravel()
     if mf.m == 0:
         return kkt.solve(M, np.zeros((0, nq)), np.zeros((nq, 0)), Q0, np.zeros(0))
-    G = np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
+    G = _G(mf, t, q, p) if G is None else G
     Ql = np.asarray(mf.force_lam(t, q, v, x, p), dtype=float).reshape(nq, mf.m)
     gamma = np.asarray(mf.gamma(t, q, v, p), dtype=float).ravel()
     return kkt.solve(M, G, Ql, Q0, -gamma)
@@ -141,15 +173,15 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
     multipliers solve the mode's own v and constraint rows, Baumgarte terms included (`_rows_off_manifold`).
     """
     if project:
-        q = project_positions(mf, t, q, p)
-        v, impact = project_velocities(mf, t, q, np.asarray(v, dtype=float), p,
-                                       0.0 if restitution is None else restitution)
+        q, G = _projected_positions(mf, t, q, p)
+        v, impact, M, G = _projected_velocities(mf, t, q, np.asarray(v, dtype=float), p,
+                                                0.0 if restitution is None else restitution, G)
     else:
         q, v = np.array(q, dtype=float), np.array(v, dtype=float)
-        M = np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
+        M, G = _mass(mf, q, p), None
         energy = 0.5 * float(v @ M @ v)
         impact = Impact(energy, energy)
-    a, lam = accelerations(mf, t, q, v, ext, p)
+    a, lam = accelerations(mf, t, q, v, ext, p, M, G)
     ix = mf.index
     y = np.zeros(mf.ny)
     yp = np.zeros(mf.ny)
@@ -159,15 +191,14 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
     if not project:
         _rows_off_manifold(mf, t, y, yp, p)
     # rows of work and extension states are linear in their own y': F = A yp_block + b
-    block = np.r_[ix["work"].start:ix["ext"].stop]
-    if len(block):
+    block = slice(ix["work"].start, ix["ext"].stop)
+    if block.stop > block.start:
         res = np.zeros(mf.ny)
         mf.residual(t, y, yp, res, p)
         J1, J0 = np.zeros((mf.ny, mf.ny)), np.zeros((mf.ny, mf.ny))
         mf.jacobian(t, y, yp, res, 1.0, J1, p)
         mf.jacobian(t, y, yp, res, 0.0, J0, p)
-        A = (J1 - J0)[np.ix_(block, block)]
-        yp[block] = -np.linalg.solve(A, res[block])
+        yp[block] = -np.linalg.solve(J1[block, block] - J0[block, block], res[block])
     return y, yp, impact
 
 
