@@ -910,4 +910,6 @@ class TrajectoryReader:
             rows_t.append(np.asarray(sol.t)[keep])
             rows_y.append(np.asarray(sol.y)[keep])
             rows_yp.append(np.asarray(sol.yp)[keep])
+        if len(rows_t) == 1:          # one block (the usual reading): as it is, not copied
+            return rows_t[0], rows_y[0], rows_yp[0]
         return np.concatenate(rows_t), np.vstack(rows_y), np.vstack(rows_yp)

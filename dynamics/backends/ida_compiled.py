@@ -104,8 +104,9 @@ class IdaCompiledBackend(Backend):
         from mechsim.dynamics.backends.native import advance      # numba: imported where it is used
         self._advance = advance
         self.lib = sundials()
-        self._memories: dict[int, tuple[object, _Memory]] = {}
+        self._memories = _kept_memories(settings, self.lib)
         self._tret = np.zeros(1)
+        self._tret_address = self._tret.ctypes.data
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
 
     def hint(self, code: FailureCode) -> str:
@@ -140,6 +141,7 @@ class IdaCompiledBackend(Backend):
         check(lib.IDASetMaxOrd(m.mem, MAX_ORDER), "IDASetMaxOrd")
         check(lib.IDASetMaxNumSteps(m.mem, s.max_steps), "IDASetMaxNumSteps")
         check(lib.IDASetId(m.mem, id_nv), "IDASetId")
+        check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")    # m.p is written in place per segment
         m.n_guards = len(mf.guard_names) if s.events else 0
         if m.n_guards:
             check(lib.IDARootInit(m.mem, m.n_guards, compiled.guards), "IDARootInit")
@@ -157,22 +159,9 @@ class IdaCompiledBackend(Backend):
             raise RuntimeError(f"{what} failed with flag {flag}")
 
     def close(self) -> None:
-        """Free every IDA memory (also done when the backend is garbage-collected)."""
-        lib = self.lib
-        for _, m in self._memories.values():
-            box = ctypes.c_size_t(m.mem)
-            lib.IDAFree(ctypes.addressof(box))
-            lib.SUNLinSolFree(m.linear_solver)
-            lib.SUNMatDestroy(m.matrix)
-            for v in m.owned_vectors:
-                lib.N_VDestroy(v)
-        self._memories.clear()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:   # interpreter shutdown: the libraries may be gone already
-            pass
+        """Let go of this backend's IDA memories (freed once neither another backend of the thread with these
+        settings nor the thread's cache holds them, `_kept_memories`)."""
+        self._memories = _Memories(self.lib)
 
     # -- one segment -------------------------------------------------------------------------------------------
     def _begin(self, mf, p, t0: float, y0, yp0, first_step: float, t_end: float, counts: dict) -> _Memory:
@@ -184,7 +173,6 @@ class IdaCompiledBackend(Backend):
         m.yp[:] = yp0
         m.p[:] = p
         self._check(lib.IDAReInit(m.mem, t0, m.yy_nv, m.yp_nv), "IDAReInit")
-        self._check(lib.IDASetUserData(m.mem, m.p.ctypes.data), "IDASetUserData")
         self._check(lib.IDASetInitStep(m.mem, first_step), "IDASetInitStep")
         self._check(lib.IDASetStopTime(m.mem, t_end), "IDASetStopTime")
         return m
@@ -197,7 +185,7 @@ class IdaCompiledBackend(Backend):
         t_out = np.ascontiguousarray(t_out, dtype=float)
         rows_t = np.empty(len(t_out))
         rows_y, rows_yp = np.empty((len(t_out), mf.ny)), np.empty((len(t_out), mf.ny))
-        flag, k = self._advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp,
+        flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp,
                                 self._tret, rows_t, rows_y, rows_yp)
         return (rows_t, rows_y, rows_yp) if int(flag) >= 0 and int(k) == len(t_out) else None
 
@@ -213,7 +201,7 @@ class IdaCompiledBackend(Backend):
         t_out = np.ascontiguousarray(t_out, dtype=float)
         rows_t = np.empty(len(t_out))
         rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
-        flag, k = self._advance(self._solve, m.mem, t_out, self._tret.ctypes.data, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
+        flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
                                rows_t, rows_y, rows_yp)
         flag, k = int(flag), int(k)
         counts.update(self._counters(m.mem))
@@ -255,26 +243,57 @@ class IdaCompiledBackend(Backend):
                     jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))
 
 
-#: the backends `reusable` hands out, per thread (an IDA memory serves one integration at a time), by settings
-_REUSABLE = threading.local()
+class _Memories(dict):
+    """The IDA memories of one thread and settings, id(mf) -> (mf, _Memory); freed with the last reference."""
+
+    def __init__(self, lib):
+        super().__init__()
+        self.lib = lib
+
+    def free(self) -> None:
+        lib = self.lib
+        for _, m in self.values():
+            box = ctypes.c_size_t(m.mem)
+            lib.IDAFree(ctypes.addressof(box))
+            lib.SUNLinSolFree(m.linear_solver)
+            lib.SUNMatDestroy(m.matrix)
+            for v in m.owned_vectors:
+                lib.N_VDestroy(v)
+        self.clear()
+
+    def __del__(self):
+        try:
+            self.free()
+        except Exception:   # interpreter shutdown: the libraries may be gone already
+            pass
+
+
+#: per thread (an IDA memory serves one segment at a time), by settings: the IDA memories the thread's backends share
+_KEPT = threading.local()
 #: settings kept per thread (the oldest is dropped beyond this)
 REUSABLE_SETTINGS = 8
 
 
-def reusable(settings: SolverSettings) -> Backend:
-    """An `IdaCompiledBackend` for these settings kept for the thread's later calls: what integrates many short
-    segments for run after run (the located peaks' readings) creates each mode's IDA memory once and re-initialises
-    it at every segment, as one run does."""
-    kept = getattr(_REUSABLE, "backends", None)
+def _kept_memories(settings: SolverSettings, lib) -> _Memories:
+    """The thread's IDA memories for these settings, shared by its backends: each mode's memory is created once per
+    thread and re-initialised at every segment (IDAReInit: no state of an earlier segment carries over), run after
+    run as within one run. The latest REUSABLE_SETTINGS settings are kept."""
+    kept = getattr(_KEPT, "memories", None)
     if kept is None:
-        kept = _REUSABLE.backends = {}
-    backend = kept.pop(settings, None)
-    if backend is None:
-        backend = IdaCompiledBackend(settings)
+        kept = _KEPT.memories = {}
+    memories = kept.pop(settings, None)
+    if memories is None:
+        memories = _Memories(lib)
         while len(kept) >= REUSABLE_SETTINGS:
             kept.pop(next(iter(kept)))
-    kept[settings] = backend                    # the newest last
-    return backend
+    kept[settings] = memories                    # the newest last
+    return memories
+
+
+def reusable(settings: SolverSettings) -> Backend:
+    """An `IdaCompiledBackend` for these settings, for what integrates many short segments run after run (the located
+    peaks' readings): its modes' IDA memories are the thread's, kept (`_kept_memories`)."""
+    return IdaCompiledBackend(settings)
 
 
 def runs_compiled(settings: SolverSettings, model) -> bool:
