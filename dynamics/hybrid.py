@@ -132,10 +132,33 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
     work0 = np.zeros(len(model.work_names))
     x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
     try:
-        y, yp, _ = consistent_state(mf, t0, q_init, init.v, work0, x0, p)
+        y, yp = initial_state(mf, t0, q_init, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
     return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset, knots)
+
+
+#: the consistent initial states of the latest runs, by mode and inputs (`initial_state`)
+_INITIAL: dict = {}
+#: runs whose initial states are kept
+INITIAL_KEPT = 16
+
+
+def initial_state(mf, t0: float, q, v, work, ext, p: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """`consistent_state`'s (y, y') at a run's start, kept for the latest INITIAL_KEPT (mode, inputs): a scenario run
+    again (a warm run, a sweep's repeated point) starts from the same state without projecting it again. Copies:
+    the caller owns what it gets."""
+    arrays = tuple(np.asarray(a, dtype=float) for a in (q, v, work, ext))
+    key = (id(mf), float(t0), p) + tuple((a.shape, a.tobytes()) for a in arrays)
+    hit = _INITIAL.get(key)
+    if hit is None or hit[0] is not mf:
+        y, yp, _ = consistent_state(mf, t0, *arrays, p)
+        hit = (mf, y, yp)
+        _INITIAL.pop(key, None)
+        while len(_INITIAL) >= INITIAL_KEPT:
+            _INITIAL.pop(next(iter(_INITIAL)))
+        _INITIAL[key] = hit
+    return hit[1].copy(), hit[2].copy()
 
 
 def simulate(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: float, dt_out: float,
