@@ -139,6 +139,20 @@ def test_runs_agree_with_the_scikit_sundae_backend(both):
     assert sb["steps"] == sb["accepted_steps"] + sb["rejected_steps"]
 
 
+def test_a_run_on_kept_ida_memories_is_the_computation_on_fresh_ones(both):
+    """A thread's backends of one settings share each mode's IDA memory, re-initialised (IDAReInit) at every segment:
+    a run on memories earlier runs used gives the rows and events of a run on fresh ones (a new thread's) to the last
+    bit, so nothing of an earlier segment or run carries over into a run."""
+    from concurrent.futures import ThreadPoolExecutor
+    case, _, _, _, _ = both
+    name, sets = CASES[case]
+    with ThreadPoolExecutor(1) as pool:
+        fresh = pool.submit(lambda: run(name, sets, "ida-compiled")[0]).result()
+    again = run(name, sets, "ida-compiled")[0]
+    pd.testing.assert_frame_equal(again.timeseries, fresh.timeseries, check_exact=True)
+    pd.testing.assert_frame_equal(again.events, fresh.events, check_exact=True)
+
+
 def test_step_budget_failure_keeps_what_ran_like_the_ida_backend():
     """Too small a step budget: both IDA backends stop with MAX_STEPS at the same instant, keep the rows
     before it, and name IDA's flag."""
