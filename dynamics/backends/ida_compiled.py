@@ -270,8 +270,9 @@ class _Memories(dict):
 
 #: per thread (an IDA memory serves one segment at a time), by settings: the IDA memories the thread's backends share
 _KEPT = threading.local()
-#: settings kept per thread (the oldest is dropped beyond this)
-REUSABLE_SETTINGS = 8
+#: settings kept per thread (the oldest is dropped beyond this): a run, its located peaks' two tolerance tries and a
+#: benchmark's or study's few variants each hold one
+REUSABLE_SETTINGS = 32
 
 
 def _kept_memories(settings: SolverSettings, lib) -> _Memories:
