@@ -132,19 +132,19 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
     work0 = np.zeros(len(model.work_names))
     x0 = np.zeros(len(model.extension_names)) if ext_initial is None else np.asarray(ext_initial, float)
     try:
-        y, yp = initial_state(mf, t0, q_init, init.v, work0, x0, p)
+        y, yp = consistent_start(mf, t0, q_init, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
     return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset, knots)
 
 
-#: the consistent initial states of the latest runs, by mode and inputs (`initial_state`)
+#: the consistent initial states of the latest runs, by mode and inputs (`consistent_start`)
 _INITIAL: dict = {}
 #: runs whose initial states are kept
 INITIAL_KEPT = 16
 
 
-def initial_state(mf, t0: float, q, v, work, ext, p: tuple) -> tuple[np.ndarray, np.ndarray]:
+def consistent_start(mf, t0: float, q, v, work, ext, p: tuple) -> tuple[np.ndarray, np.ndarray]:
     """`consistent_state`'s (y, y') at a run's start, kept for the latest INITIAL_KEPT (mode, inputs): a scenario run
     again (a warm run, a sweep's repeated point) starts from the same state without projecting it again. Copies:
     the caller owns what it gets."""
