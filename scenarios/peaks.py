@@ -498,9 +498,10 @@ def _impulse(reader, intervals: list[Interval], k: int, coordinates) -> tuple[di
 def singular_approaches(column: str, f: np.ndarray, side: str, sense: float, intervals: list[Interval], read,
                         h: float, events: pd.DataFrame, coordinates, first: int) -> list[dict]:
     """Every event the column's `sense` (+1 max, -1 min) grows without bound toward, on `side` of it: the event's
-    time and kind, the growth exponent, the impulse it delivers and the energy it loses (the events table). The
-    extremum's own interval `first` is read first; only if its approach is unbounded are the others read."""
-    found = []
+    time and kind, the growth exponent, the impulse it delivers and the energy it loses (the events table), in time
+    order. The extremum's own interval `first` is read first; only if its approach is unbounded are the others read.
+    The impulse is the earliest event's: which event holds the located extremum depends on the output rows."""
+    found, where = [], []
     order = [first] + [k for k in range(len(intervals)) if k != first]
     for k in order:
         iv = intervals[k]
@@ -518,19 +519,21 @@ def singular_approaches(column: str, f: np.ndarray, side: str, sense: float, int
         at = events["t_s"].to_numpy(float) == t_e if len(events) else np.zeros(0, bool)
         lost = float(np.nansum(events.loc[at, "energy_lost_J"].to_numpy(float))) if "energy_lost_J" in events \
             else None
-        from mechsim.dynamics.extrema import ReadingFailed
-        record = {"t_s": t_e, "events": re.findall(r"event '([^']*)'", kind) or [kind], "side": side,
-                  "growth_exponent": a, "impulse": None, "energy_lost_J": lost}
-        if not found:                          # the impulse of the first (a stop of a periodic motion repeats it)
-            try:
-                got = _impulse(read, intervals, k if side == "before" else k - 1, coordinates)
-            except ReadingFailed:
-                got = None
-            if got is not None:
-                record["impulse"], record["speeds_before"], record["speeds_after"] = got
-        found.append(record)
+        found.append({"t_s": t_e, "events": re.findall(r"event '([^']*)'", kind) or [kind], "side": side,
+                      "growth_exponent": a, "impulse": None, "energy_lost_J": lost})
+        where.append(k)
         if len(found) >= SINGULAR_EVENTS:
             break
+    if found:                                  # the impulse of the earliest (a stop of a periodic motion repeats it)
+        from mechsim.dynamics.extrema import ReadingFailed
+        by_time = sorted(range(len(found)), key=lambda i: found[i]["t_s"])
+        found, k = [found[i] for i in by_time], where[by_time[0]]
+        try:
+            got = _impulse(read, intervals, k if side == "before" else k - 1, coordinates)
+        except ReadingFailed:
+            got = None
+        if got is not None:
+            found[0]["impulse"], found[0]["speeds_before"], found[0]["speeds_after"] = got
     return found
 
 

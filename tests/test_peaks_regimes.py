@@ -65,6 +65,13 @@ def test_coupler_force_toward_the_crank_stop_is_unbounded_not_a_row():
     v_minus, v_plus = np.array(first["speeds_before"]), np.array(first["speeds_after"])
     impulse = np.array(list(first["impulse"].values()))
     assert 0.5 * (v_plus + v_minus) @ impulse == pytest.approx(-lost, rel=1e-5)
+    # the stops in time order, the impulse the earliest's: not the stop whose nearest row happened to hold the
+    # largest force (it was the stop at 11.0, 15.0 or 26.8 s at 1, 7 or 10 ms rows, its impulse 2.8e-4 apart)
+    assert [s["t_s"] for s in stops] == sorted(s["t_s"] for s in stops)
+    assert first["t_s"] == r.events.loc[r.events["kind"] == "stop impact", "t_s"].min() == force["max"]["t_s"]
+    other = runs["7 ms"].summary["peaks"]["coupler_force_N"]["singular"][0]
+    assert other["t_s"] == pytest.approx(first["t_s"], abs=1e-6)
+    np.testing.assert_allclose(list(other["impulse"].values()), impulse, rtol=0, atol=1e-6 * np.abs(impulse).max())
     assert any("coupler_force_N grows without bound" in w for w in r.summary["warnings"])
     assert runs["7 ms"].summary["peaks"]["coupler_force_N"]["max"]["value"] is None
     # what is bounded stays located: the crank speed's maximum does not move with the output step
