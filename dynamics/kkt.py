@@ -8,7 +8,7 @@ Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/
 with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
 c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
 Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
-(every output row at once, numpy), `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read
+(every output row at once, numpy: a long stack eliminated a column of all systems at a time, `_stacked`), `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read
 a or lam, solved symbolically with sympy).
 """
 from __future__ import annotations
@@ -38,7 +38,13 @@ def unrolled_solve(K, b, xp, spd_block: int = 0):
     code"); the pivots that remain are chosen by comparisons and `where`, as argmax would (first largest).
     Works on jax.numpy and numpy scalars alike."""
     n = K.shape[-1]
-    A = [[K[i, j] for j in range(n)] + [b[i]] for i in range(n)]      # scalars: every operation elementwise
+    return _eliminate([[K[i, j] for j in range(n)] + [b[i]] for i in range(n)], xp, spd_block)
+
+
+def _eliminate(A, xp, spd_block: int):
+    """`unrolled_solve` on the augmented matrix [K | b] given as rows of entries (scalars, or arrays over a stack
+    of systems: every operation is elementwise); returns x stacked on the first axis."""
+    n = len(A)
     for j in range(n):
         if spd_block <= j:
             for r in range(j + 1, n):     # partial pivoting: the first largest |A[r][j]|, r >= j, to row j
@@ -86,6 +92,10 @@ def solve(M, G, Ql, Q0, c, xp=np):
     """(a, lam) for one system or a stack of them (leading axes): M (..., nq, nq), G (..., m, nq),
     Ql (..., nq, m), Q0 (..., nq), c (..., m); xp is numpy or jax.numpy."""
     nq, m = M.shape[-1], G.shape[-2]
+    if xp is np and M.ndim == 3 and nq + m <= UNROLLED_MAX and len(M) >= STACK_MIN + STACK_ROWS * (nq + m) ** 2:
+        solved = _stacked(M, G, Ql, Q0, c)
+        if solved is not None:
+            return solved
     if m == 0:
         return _linear_solve(M, Q0, xp, spd_block=nq), xp.zeros(Q0.shape[:-1] + (0,))
     top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
@@ -93,6 +103,28 @@ def solve(M, G, Ql, Q0, c, xp=np):
     K = xp.concatenate([top, bottom], axis=-2)
     sol = _linear_solve(K, xp.concatenate([Q0, c], axis=-1), xp, spd_block=nq)   # M: mass matrix, SPD
     return sol[..., :nq], sol[..., nq:]
+
+
+#: a numpy stack of at least STACK_MIN + STACK_ROWS * n**2 systems of size n <= UNROLLED_MAX is solved by `_stacked`
+STACK_MIN, STACK_ROWS = 64, 12
+
+
+def _stacked(M, G, Ql, Q0, c):
+    """`solve` on a numpy stack of systems (leading axis): the elimination of `unrolled_solve` (mass-matrix block
+    without pivoting, constraint block with partial pivoting), each operation on one entry of every system at
+    once, read from the blocks without assembling K. numpy.linalg.solve loops over the stack one small LAPACK
+    call per system, which costs more than the few elementwise operations on whole columns once the stack holds
+    more than about STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a
+    solution is not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
+    nq, m = M.shape[-1], G.shape[-2]
+    A = [[M[:, i, j] for j in range(nq)] + [G[:, k, i] - Ql[:, i, k] for k in range(m)] + [Q0[:, i]]
+         for i in range(nq)]
+    A += [[G[:, k, j] for j in range(nq)] + [0.0] * m + [c[:, k]] for k in range(m)]
+    with np.errstate(all="ignore"):          # a zero pivot: not finite, answered below
+        x = _eliminate(A, np, nq)
+    if not np.isfinite(x).all():
+        return None
+    return x[:nq].T, x[nq:].T
 
 
 def solve_symbolic(M, G, Ql, Q0, c):

@@ -104,6 +104,21 @@ def _kkt(mf, t, q, v, x, p):
     return (M,) + kkt.solve(M, G, Ql, Q0, -gamma)
 
 
+def _quadratic_form(v: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """v_r^T M_r v_r of every row r: numpy.einsum("ri,rij,rj->r"), whose sum over many rows takes the terms
+    (v_i M_ij) v_j in order of i, then j; that sum a column at a time (the same values to the last bit, several
+    times faster on a few coordinates). A short stack goes to einsum itself (on one row it orders the sum
+    otherwise)."""
+    if len(v) < 64:
+        return np.einsum("ri,rij,rj->r", v, M, v)
+    total = None
+    for i in range(v.shape[1]):
+        for j in range(v.shape[1]):
+            term = v[:, i] * M[:, i, j] * v[:, j]
+            total = term if total is None else total + term
+    return total
+
+
 def _mode_params(pieces) -> tuple:
     """The parameters of a mode's pieces, row-aligned with their stacked rows: a value every piece shares as
     that scalar, one that changes from piece to piece (a re-based drive angle, a restart time) as a per-row array,
@@ -182,7 +197,7 @@ def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.nd
     for name, val in zip(mf.readout_names, values):
         block[at[name]] = val                          # a scalar read-out broadcasts over the rows
     c_ke = at["kinetic_energy_J"]
-    block[c_ke] = 0.5 * np.einsum("ri,rij,rj->r", v, M, v)       # 1/2 v^T M v with the KKT's M
+    block[c_ke] = 0.5 * _quadratic_form(v, M)                     # 1/2 v^T M v with the KKT's M
     c_ext = c_ke + 1 + len(model.work_names)
     block[c_ke + 1:c_ext] = y[:, ix["work"]].T
     if residual:
@@ -234,8 +249,26 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     # the mode names typed once, on one entry per piece (not pandas' string inference on every row), then taken
     # row by row: the column pandas would infer from the names repeated
     modes = pd.Series(np.asarray([pc.mode for pc in pieces], dtype=object)).array
-    df = pd.DataFrame(out.T, columns=names, copy=False)    # the block as the frame's float block: no copy
-    df.insert(1, "mode", modes.take(piece_of_row))
+    return _frame(out, names, modes.take(piece_of_row))
+
+
+#: pandas' constructor of a frame from its blocks (pandas.api.internals, pandas 3); without it, `_frame` inserts
+_FROM_BLOCKS = getattr(getattr(pd.api, "internals", None), "create_dataframe_from_blocks", None)
+
+
+def _frame(out: np.ndarray, names: list[str], modes) -> pd.DataFrame:
+    """The frame of the float block `out` (len(names), rows) with the column "mode" in second place: the block as
+    the frame's float block (no copy) and the modes as its string block, put together at once; the same frame as
+    pd.DataFrame(out.T, columns=names, copy=False) with "mode" inserted, which that does where pandas lacks the
+    block constructor (an insert costs more than the rest of the frame: it rebuilds the column index's engine)."""
+    if _FROM_BLOCKS is not None:
+        try:
+            return _FROM_BLOCKS([(out, np.r_[0, 2:len(names) + 1]), (modes, np.array([1]))],
+                                index=pd.RangeIndex(out.shape[1]), columns=pd.Index([names[0], "mode", *names[1:]]))
+        except Exception:      # noqa: BLE001  (a changed internal: the public construction below is the reference)
+            pass
+    df = pd.DataFrame(out.T, columns=names, copy=False)
+    df.insert(1, "mode", modes)
     return df
 
 

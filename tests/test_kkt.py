@@ -82,3 +82,42 @@ def test_unrolled_solve_of_the_compiled_run_matches_lapack(nq, m):
             x, xj = np.r_[a, lam], np.r_[np.asarray(aj), np.asarray(lamj)]
             bound = 100 * np.linalg.cond(K) * eps * np.abs(x).max()
             assert np.abs(xj - x).max() <= bound, (nq, m, scale_m, scale_g)
+
+
+@pytest.mark.parametrize("nq, m", [(1, 0), (2, 0), (2, 1), (3, 2), (4, 3)])
+def test_long_stack_by_columns_matches_lapack_system_by_system(nq, m):
+    """A stack long enough for the column-wise elimination (`kkt._stacked`, the output rows of a run) against
+    LAPACK on each system alone, to each system's conditioning; badly scaled blocks too."""
+    rng = np.random.default_rng(5 + nq + m)
+    eps = np.finfo(float).eps
+    rows = kkt.STACK_MIN + kkt.STACK_ROWS * (nq + m) ** 2
+    for scale_m, scale_g in ((1.0, 1.0), (1e-3, 1e2), (1e2, 1e-2)):
+        systems = [system(rng, nq, m) for _ in range(rows)]
+        systems = [(scale_m * M, scale_g * G, scale_g * Ql, Q0, c) for M, G, Ql, Q0, c in systems]
+        a, lam = kkt.solve(*(np.stack(parts) for parts in zip(*systems)))
+        assert a.shape == (rows, nq) and lam.shape == (rows, m)
+        for j in range(0, rows, 7):
+            M, G, Ql, Q0, c = systems[j]
+            K = kkt_matrix(M, G, Ql) if m else M
+            x = np.linalg.solve(K, np.r_[Q0, c])
+            bound = 100 * np.linalg.cond(K) * eps * np.abs(x).max()
+            assert np.abs(np.r_[a[j], lam[j]] - x).max() <= bound, (nq, m, j)
+
+
+def test_long_stack_with_a_singular_or_nan_system_answers_as_lapack():
+    """A stack whose column-wise elimination is not finite goes to LAPACK whole: a singular system raises as
+    numpy.linalg.solve does; a NaN entry gives LAPACK's answer for the whole stack."""
+    rng = np.random.default_rng(9)
+    rows = kkt.STACK_MIN + kkt.STACK_ROWS * 9
+    M, G, Ql, Q0, c = (np.stack(parts) for parts in zip(*[system(rng, 2, 1) for _ in range(rows)]))
+    G_singular = G.copy()
+    G_singular[3] = 0.0                            # no constraint direction: K singular
+    with pytest.raises(np.linalg.LinAlgError):
+        kkt.solve(M, G_singular, np.zeros_like(Ql), Q0, c)
+    Q0_nan = Q0.copy()
+    Q0_nan[5, 0] = np.nan
+    a, lam = kkt.solve(M, G, Ql, Q0_nan, c)
+    K = np.concatenate([np.concatenate([M, np.swapaxes(G, 1, 2) - Ql], -1),
+                        np.concatenate([G, np.zeros((rows, 1, 1))], -1)], -2)
+    x = np.linalg.solve(K, np.concatenate([Q0_nan, c], -1)[..., None])[..., 0]
+    np.testing.assert_array_equal(np.c_[a, lam], x)
