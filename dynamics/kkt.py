@@ -8,8 +8,9 @@ Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/
 with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
 c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
 Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
-(every output row at once, numpy: a long stack eliminated a column of all systems at a time, `_stacked`), `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read
-a or lam, solved symbolically with sympy).
+(every output row at once, numpy; a long stack eliminated one entry of all its systems at a time, `_stacked`),
+`jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read a or lam, solved symbolically with
+sympy).
 """
 from __future__ import annotations
 
