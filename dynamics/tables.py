@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -127,9 +128,16 @@ def _mode_params(pieces) -> tuple:
     if all(p.params == first for p in pieces[1:]):
         return first
     counts = [len(p.t) for p in pieces]
-    return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
-                 else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
-                 for j in range(len(first)))
+    try:                                # pieces x parameters, compared a parameter at a time over all pieces
+        table = np.array([p.params for p in pieces], dtype=float)
+    except (TypeError, ValueError):
+        table = None
+    if table is None or table.shape != (len(pieces), len(first)):
+        return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
+                     else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
+                     for j in range(len(first)))
+    same = (table == table[0]).all(axis=0)
+    return tuple(first[j] if same[j] else np.repeat(table[:, j], counts) for j in range(len(first)))
 
 
 def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple) -> np.ndarray:
@@ -170,6 +178,20 @@ def _layout(model, angle_coordinates: tuple[int, ...], modes: list[str], residua
     return names + list(dict.fromkeys(nm for nm in later if nm not in names))
 
 
+def _unwrapped(out: np.ndarray, q: np.ndarray, pieces) -> None:
+    """The positions unwrapped into out (coordinates, rows): q is in each piece's re-based frame, plus the piece's
+    offset where it has one (`Piece.coordinates`, for all pieces at once; the same sums)."""
+    out[...] = q.T
+    offsets = [pc.offset for pc in pieces]
+    if all(o is None for o in offsets):
+        return
+    counts = [len(pc.t) for pc in pieces]
+    shifted = np.repeat([o is not None for o in offsets], counts)
+    shift = np.repeat(np.array([np.zeros(q.shape[1]) if o is None else o for o in offsets], dtype=float), counts,
+                      axis=0)
+    np.add(out, shift.T, out=out, where=shifted)
+
+
 def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.ndarray:
     """The columns `names` over the rows of one mode's pieces, stacked, as (len(names), rows): read-outs, the
     KKT solution, kinetic energy and constraint residual evaluated once on all rows (parameters that differ
@@ -189,10 +211,7 @@ def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.nd
     M, a, lam = _kkt(mf, t, q, v, x, p)
     block[2:1 + 3 * ncoord:3] = v.T
     block[3:1 + 3 * ncoord:3] = a.T
-    offset = 0
-    for pc in pieces:                                  # positions unwrapped: q is in each piece's re-based frame
-        block[1:1 + 3 * ncoord:3, offset:offset + len(pc.t)] = pc.coordinates(ix["q"]).T
-        offset += len(pc.t)
+    _unwrapped(block[1:1 + 3 * ncoord:3], q, pieces)
     values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, p)
     for name, val in zip(mf.readout_names, values):
         block[at[name]] = val                          # a scalar read-out broadcasts over the rows
@@ -246,10 +265,24 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     keep = _kept_rows(out[0])
     if keep is not None:
         out, piece_of_row = out[:, keep], piece_of_row[keep]
-    # the mode names typed once, on one entry per piece (not pandas' string inference on every row), then taken
-    # row by row: the column pandas would infer from the names repeated
-    modes = pd.Series(np.asarray([pc.mode for pc in pieces], dtype=object)).array
-    return _frame(out, names, modes.take(piece_of_row))
+    # the mode names typed once (not pandas' string inference on every row), then taken row by row: the column
+    # pandas would infer from the names repeated
+    code = {mode: i for i, mode in enumerate(by_mode)}
+    piece_mode = np.array([code[pc.mode] for pc in pieces], dtype=np.intp)
+    return _frame(out, names, _typed_names(tuple(by_mode)).take(piece_mode[piece_of_row]))
+
+
+@lru_cache(maxsize=64)
+def _typed_names(names: tuple[str, ...]):
+    """The names as the array pandas infers for them in a column (its string dtype), inferred once per set."""
+    return pd.Series(np.asarray(names, dtype=object)).array
+
+
+@lru_cache(maxsize=64)
+def _frame_columns(names: tuple[str, ...]) -> pd.Index:
+    """The table's column index: `names` with "mode" in second place (built once per layout; `_frame` hands
+    each frame its own shallow copy)."""
+    return pd.Index([names[0], "mode", *names[1:]])
 
 
 #: pandas' constructor of a frame from its blocks (pandas.api.internals, pandas 3); without it, `_frame` inserts
@@ -264,7 +297,7 @@ def _frame(out: np.ndarray, names: list[str], modes) -> pd.DataFrame:
     if _FROM_BLOCKS is not None:
         try:
             return _FROM_BLOCKS([(out, np.r_[0, 2:len(names) + 1]), (modes, np.array([1]))],
-                                index=pd.RangeIndex(out.shape[1]), columns=pd.Index([names[0], "mode", *names[1:]]))
+                                index=pd.RangeIndex(out.shape[1]), columns=_frame_columns(tuple(names)).copy())
         except Exception:      # noqa: BLE001  (a changed internal: the public construction below is the reference)
             pass
     df = pd.DataFrame(out.T, columns=names, copy=False)

@@ -416,11 +416,24 @@ class Mechanism(ABC):
         return None
 
     def transition_rules(self) -> dict[tuple[str, str], tuple[TransitionRule, ...]] | None:
-        """`transitions()` with every entry as a tuple of rules."""
+        """`transitions()` with every entry as a tuple of rules; built at the first call and kept (a mechanism's
+        description is fixed once it is built, and the hybrid loop asks at every event). Read it, don't change it."""
+        try:
+            return self.__dict__["_transition_rules"]
+        except KeyError:
+            pass
         table = self.transitions()
-        if table is None:
-            return None
-        return {key: (entry,) if isinstance(entry, TransitionRule) else tuple(entry) for key, entry in table.items()}
+        rules = None if table is None else {
+            key: (entry,) if isinstance(entry, TransitionRule) else tuple(entry) for key, entry in table.items()}
+        self.__dict__["_transition_rules"] = rules
+        return rules
+
+    def __getstate__(self) -> dict:
+        """The mechanism to pickle or copy: without the kept `transition_rules` (functions that need not pickle;
+        built again on first use)."""
+        state = self.__dict__.copy()
+        state.pop("_transition_rules", None)
+        return state
 
     def on_guard(self, mode: str, guard: str, values: Mapping[str, float], t: float,
                  q: np.ndarray, v: np.ndarray) -> Transition:
