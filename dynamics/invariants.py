@@ -109,16 +109,21 @@ def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=N
     w = _matrix(df, work_names) if works is None else works
     ke = np.asarray(df["kinetic_energy_J"], dtype=float)
     lost = np.zeros(len(t))
-    if events is not None and len(events) and "energy_lost_J" in events:
-        te = events["t_s"].to_numpy(float)
-        el = events["energy_lost_J"].to_numpy(float)
+    ev = None if events is None else _columns(events)
+    if ev is not None and len(ev.frame) and "energy_lost_J" in ev:
+        te, el = event_floats(ev, "t_s"), event_floats(ev, "energy_lost_J")
         el = np.where(np.isnan(el), 0.0, el)                   # an event without a loss loses nothing
         order = np.argsort(te)
-        te, cum = te[order], np.cumsum(el[order])
-        k = np.searchsorted(te, t, side="right") - 1            # impacts at or before each row, after the start
-        k0 = np.searchsorted(te, t[0], side="right") - 1
-        lost = np.where(k >= 0, cum[np.clip(k, 0, None)], 0.0) - (cum[k0] if k0 >= 0 else 0.0)
+        te, cum = te[order], np.concatenate([[0.0], np.cumsum(el[order])])     # cum[k]: the first k impacts' loss
+        k = np.searchsorted(te, t, side="right")               # impacts at or before each row, after the start
+        lost = cum[k] - cum[k[0]]
     return (w - w[0]).sum(axis=1) - (ke - ke[0]) - lost
+
+
+def event_floats(events: TableColumns, name: str) -> np.ndarray:
+    """events[name].to_numpy(float): the column's own array where it is float already (read once)."""
+    values = events[name]
+    return values if values.dtype == np.float64 else events.frame[name].to_numpy(float)
 
 
 def _energy(df, events, rtol, atol, exact, names=None):

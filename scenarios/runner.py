@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.invariants import first_violation
+from mechsim.dynamics.invariants import event_floats, first_violation
 from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.stats import new_stats
@@ -111,9 +111,9 @@ def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: T
 def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None) -> dict:
     """Drive work = d(kinetic energy) - (load + friction + damping work) + energy lost in impacts (events table;
     all works signed into the system). cols: the table's TableColumns, if at hand."""
-    if "work_drive_J" not in df or len(df) < 2:
-        return {}
     cols = TableColumns(df) if cols is None else cols
+    if "work_drive_J" not in cols or len(df) < 2:
+        return {}
 
     def change(column: str) -> float:
         values = np.asarray(cols[column], dtype=float)
@@ -122,20 +122,27 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
     works = {c[5:-2]: change(c) for c in cols.names if c.startswith("work_") and c.endswith("_J")}
     dke = change("kinetic_energy_J")
     lost = 0.0
-    if events is not None and "energy_lost_J" in events and len(events):
+    ev = None if events is None else TableColumns(events)
+    if ev is not None and "energy_lost_J" in ev and len(events):
         t = np.asarray(cols["t_s"], dtype=float)
         t0, t1 = float(t[0]), float(t[-1])
-        te, el = events["t_s"].to_numpy(float), events["energy_lost_J"]
+        te, el = event_floats(ev, "t_s"), ev["energy_lost_J"]
         inside = (te > t0) & (te <= t1)
         if el.dtype == np.float64:      # as pandas' fillna(0.0).sum() sums it (nanops.nansum: NaN -> 0, ndarray.sum)
-            picked = el.to_numpy()[inside]
+            picked = el[inside]
             lost = float(np.where(np.isnan(picked), 0.0, picked).sum())
         else:
-            lost = float(el[inside].fillna(0.0).sum())
+            lost = float(events["energy_lost_J"][inside].fillna(0.0).sum())
     closure = sum(works.values()) - dke - lost
     scale = max(abs(works.get("drive", 0.0)), 1e-300)
     return {"work_J": works, "kinetic_energy_change_J": dke, "impact_losses_J": lost, "closure_error_J": closure,
             "closure_error_relative": closure / scale}
+
+
+def _largest_magnitude(values) -> float:
+    """The largest |value| of a column with NaN skipped (NaN where every entry is NaN), as pandas'
+    Series.abs().max() gives it, read from the column's array."""
+    return float(np.fmax.reduce(np.abs(np.asarray(values, dtype=float))))
 
 
 def event_counts(events: pd.DataFrame) -> dict[str, int]:
@@ -339,7 +346,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "events": event_counts(events),
         "validity": valid,
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
-        "max_constraint_residual_m": float(df["constraint_residual_m"].abs().max()) if len(df) else 0.0,
+        "max_constraint_residual_m": _largest_magnitude(cols["constraint_residual_m"]) if len(df) else 0.0,
         "warnings": warnings,
         "warning_groups": group_warnings(warnings),
         "success": failure is None,
