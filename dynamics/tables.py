@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -265,24 +264,16 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     keep = _kept_rows(out[0])
     if keep is not None:
         out, piece_of_row = out[:, keep], piece_of_row[keep]
-    # the mode names typed once (not pandas' string inference on every row), then taken row by row: the column
-    # pandas would infer from the names repeated
+    # the mode names typed once each (not pandas' string inference on every row), then taken row by row: the
+    # column pandas would infer from the names repeated
     code = {mode: i for i, mode in enumerate(by_mode)}
     piece_mode = np.array([code[pc.mode] for pc in pieces], dtype=np.intp)
     return _frame(out, names, _typed_names(tuple(by_mode)).take(piece_mode[piece_of_row]))
 
 
-@lru_cache(maxsize=64)
 def _typed_names(names: tuple[str, ...]):
-    """The names as the array pandas infers for them in a column (its string dtype), inferred once per set."""
+    """The names as the array pandas infers for them in a column (its string dtype)."""
     return pd.Series(np.asarray(names, dtype=object)).array
-
-
-@lru_cache(maxsize=64)
-def _frame_columns(names: tuple[str, ...]) -> pd.Index:
-    """The table's column index: `names` with "mode" in second place (built once per layout; `_frame` hands
-    each frame its own shallow copy)."""
-    return pd.Index([names[0], "mode", *names[1:]])
 
 
 #: pandas' constructor of a frame from its blocks (pandas.api.internals, pandas 3); without it, `_frame` inserts
@@ -293,16 +284,46 @@ def _frame(out: np.ndarray, names: list[str], modes) -> pd.DataFrame:
     """The frame of the float block `out` (len(names), rows) with the column "mode" in second place: the block as
     the frame's float block (no copy) and the modes as its string block, put together at once; the same frame as
     pd.DataFrame(out.T, columns=names, copy=False) with "mode" inserted, which that does where pandas lacks the
-    block constructor (an insert costs more than the rest of the frame: it rebuilds the column index's engine)."""
-    if _FROM_BLOCKS is not None:
+    block constructor or infers no string dtype (an insert costs more than the rest of the frame: it rebuilds the
+    column index's engine)."""
+    if _FROM_BLOCKS is not None and isinstance(modes.dtype, pd.StringDtype):     # a string (extension) block
         try:
-            return _FROM_BLOCKS([(out, np.r_[0, 2:len(names) + 1]), (modes, np.array([1]))],
-                                index=pd.RangeIndex(out.shape[1]), columns=_frame_columns(tuple(names)).copy())
+            place = np.arange(1, len(names) + 1)               # 0, 2, 3, ...: "mode" is column 1
+            place[0] = 0
+            return _FROM_BLOCKS([(out, place), (modes, np.array([1]))],
+                                index=pd.RangeIndex(out.shape[1]), columns=pd.Index([names[0], "mode", *names[1:]]))
         except Exception:      # noqa: BLE001  (a changed internal: the public construction below is the reference)
             pass
     df = pd.DataFrame(out.T, columns=names, copy=False)
     df.insert(1, "mode", modes)
     return df
+
+
+def _records_frame(records: list[dict]) -> pd.DataFrame:
+    """pd.DataFrame(records). Where every record has the same keys in the same order and each column holds only
+    floats or only strings (Python's own types), the frame pandas infers is known: one float block of the float
+    columns and a string block per string column; it is built from those blocks at once (pandas' inference on a
+    list of records, column by column, costs more than the rest of the events table). Otherwise pandas builds it."""
+    keys = list(records[0])
+    kinds = [type(value) for value in records[0].values()]
+    if _FROM_BLOCKS is None or any(k is not float and k is not str for k in kinds) or any(
+            list(r) != keys or [type(value) for value in r.values()] != kinds for r in records[1:]):
+        return pd.DataFrame(records)
+    floats = [j for j, k in enumerate(kinds) if k is float]
+    texts = [j for j, k in enumerate(kinds) if k is str]
+    n = len(records)
+    rows = [list(r.values()) for r in records]
+    blocks = [(np.array([[row[j] for row in rows] for j in floats], dtype=float).reshape(len(floats), n),
+               np.array(floats, dtype=np.intp))] if floats else []
+    if texts:      # every string column typed in one inference, then cut into its columns
+        typed = pd.Series(np.asarray([row[j] for j in texts for row in rows], dtype=object)).array
+        if not isinstance(typed.dtype, pd.StringDtype):
+            return pd.DataFrame(records)
+        blocks += [(typed[i * n:(i + 1) * n], np.array([j], dtype=np.intp)) for i, j in enumerate(texts)]
+    try:
+        return _FROM_BLOCKS(blocks, index=pd.RangeIndex(n), columns=pd.Index(keys))
+    except Exception:      # noqa: BLE001  (a changed internal: pandas' own construction is the reference)
+        return pd.DataFrame(records)
 
 
 def events_table(traj: Trajectory) -> pd.DataFrame:
@@ -316,7 +337,7 @@ def events_table(traj: Trajectory) -> pd.DataFrame:
         # the loss added to each record: one frame built, no column inserted afterwards
         # an impact may state its own loss (with a prescribed motion the kinetic energy's change is not all lost:
         # transitions.impact_split)
-        return pd.DataFrame([{**e, "energy_lost_J": e.get("energy_lost_J", e[before] - e[after])} for e in events])
+        return _records_frame([{**e, "energy_lost_J": e.get("energy_lost_J", e[before] - e[after])} for e in events])
     df = pd.DataFrame(events)
     own = df["energy_lost_J"] if "energy_lost_J" in df else None
     df["energy_lost_J"] = df[before] - df[after]

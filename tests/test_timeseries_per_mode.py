@@ -105,3 +105,23 @@ def test_per_mode_table_equals_per_piece_table(case, monkeypatch):
         np.testing.assert_allclose(got[c].to_numpy(float), w, rtol=0, atol=1e-13 * scale, err_msg=c)
     if traj.events:                 # the events table, its loss column made with the records: the same frame
         pd.testing.assert_frame_equal(events_table(traj), _reference_events(traj), check_exact=True)
+
+
+@pytest.mark.parametrize("records", [
+    [{"t_s": 0.1, "kind": "entry", "x": 1.0}, {"t_s": 0.2, "kind": "exit", "x": float("nan")}],
+    [{"t_s": 0.1, "kind": "", "message": "2020-01-01", "x": -0.0}],
+    [{"only": 1.0}, {"only": 2.0}],
+    [{"only": "text"}],
+    [{"t_s": 0.1, "kind": "a"}, {"kind": "b", "t_s": 0.2}],           # keys in another order
+    [{"t_s": 0.1, "kind": "a"}, {"t_s": 0.2}],                          # a key missing
+    [{"t_s": 0.1, "kind": None}], [{"t_s": 1, "kind": "a"}], [{"t_s": True, "kind": "a"}],
+    [{"t_s": np.float64(0.1), "kind": "a"}],
+])
+def test_events_frame_from_its_blocks_is_pandas_frame_of_the_records(records):
+    """The events table's frame built from its blocks where the records allow it (same keys, floats or strings
+    only) is the frame pandas builds from the records: columns, dtypes, blocks and values."""
+    from mechsim.dynamics.tables import _records_frame
+    got, want = _records_frame(records), pd.DataFrame(records)
+    pd.testing.assert_frame_equal(got, want, check_exact=True)
+    assert got.columns.dtype == want.columns.dtype
+    assert [type(b).__name__ for b in got._mgr.blocks] == [type(b).__name__ for b in want._mgr.blocks]
