@@ -49,9 +49,9 @@ def _eliminate(A, xp, spd_block: int):
     for j in range(n):
         if spd_block <= j:
             for r in range(j + 1, n):     # partial pivoting: the first largest |A[r][j]|, r >= j, to row j
-                take = xp.abs(A[r][j]) > xp.abs(A[j][j])
-                A[j], A[r] = ([xp.where(take, x, y) for x, y in zip(A[r], A[j])],
-                              [xp.where(take, y, x) for x, y in zip(A[r], A[j])])
+                take = xp.abs(A[r][j]) > xp.abs(A[j][j])      # (columns left of j are read no more: kept)
+                A[j], A[r] = (A[j][:j] + [xp.where(take, x, y) for x, y in zip(A[r][j:], A[j][j:])],
+                              A[r][:j] + [xp.where(take, y, x) for x, y in zip(A[r][j:], A[j][j:])])
         for r in range(j + 1, n):
             factor = A[r][j] / A[j][j]
             A[r] = A[r][:j + 1] + [A[r][col] - factor * A[j][col] for col in range(j + 1, n + 1)]
@@ -107,22 +107,25 @@ def solve(M, G, Ql, Q0, c, xp=np):
 
 
 #: a numpy stack of at least STACK_MIN + STACK_ROWS * n**2 systems of size n <= UNROLLED_MAX is solved by `_stacked`
-STACK_MIN, STACK_ROWS = 64, 12
+STACK_MIN, STACK_ROWS = 64, 40
 
 
 def _stacked(M, G, Ql, Q0, c):
-    """`solve` on a numpy stack of systems (leading axis): the elimination of `unrolled_solve` (mass-matrix block
-    without pivoting, constraint block with partial pivoting), each operation on one entry of every system at
-    once, read from the blocks without assembling K. numpy.linalg.solve loops over the stack one small LAPACK
-    call per system, which costs more than the few elementwise operations on whole columns once the stack holds
-    more than about STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a
-    solution is not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
+    """`solve` on a numpy stack of systems (leading axis): the elimination of `unrolled_solve` with partial
+    pivoting in every column, as LAPACK's getrf pivots (the first largest in the column), each operation on one
+    entry of every system at once, read from the blocks without assembling K. With LAPACK's pivots a row that fixes
+    one coordinate (a prescribed drive's speed constraint) is eliminated as LAPACK eliminates it, so that
+    coordinate's acceleration comes out zero where LAPACK's does; the mass block unpivoted would not (a round-off
+    residue instead). numpy.linalg.solve loops over the stack, one small LAPACK call per system, which costs more
+    than these elementwise operations on whole columns once the stack holds more than about
+    STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a solution is
+    not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
     nq, m = M.shape[-1], G.shape[-2]
     A = [[M[:, i, j] for j in range(nq)] + [G[:, k, i] - Ql[:, i, k] for k in range(m)] + [Q0[:, i]]
          for i in range(nq)]
     A += [[G[:, k, j] for j in range(nq)] + [0.0] * m + [c[:, k]] for k in range(m)]
     with np.errstate(all="ignore"):          # a zero pivot: not finite, answered below
-        x = _eliminate(A, np, nq)
+        x = _eliminate(A, np, 0)
     if not np.isfinite(x).all():
         return None
     return x[:nq].T, x[nq:].T
