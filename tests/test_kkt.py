@@ -121,3 +121,24 @@ def test_long_stack_with_a_singular_or_nan_system_answers_as_lapack():
                         np.concatenate([G, np.zeros((rows, 1, 1))], -1)], -2)
     x = np.linalg.solve(K, np.concatenate([Q0_nan, c], -1)[..., None])[..., 0]
     np.testing.assert_array_equal(np.c_[a, lam], x)
+
+
+def test_long_stack_keeps_a_prescribed_coordinate_at_zero_acceleration():
+    """A prescribed drive's speed row (a = 0 for the driven coordinate) in a long stack: pivoted as LAPACK pivots
+    it (the largest entry of its column against the small inertias), that acceleration is exactly zero, as
+    LAPACK's; the other unknowns agree to the systems' conditioning."""
+    rng = np.random.default_rng(13)
+    rows = kkt.STACK_MIN + kkt.STACK_ROWS * 16
+    parts = []
+    for _ in range(rows):
+        M, G, Ql, Q0, c = system(rng, 2, 1)
+        G2 = np.vstack([0.1 * G, [1.0, 0.0]])                 # the speed constraint on coordinate 0
+        parts.append((1e-3 * M, G2, np.hstack([0.1 * Ql, np.zeros((2, 1))]), Q0, np.r_[c, 0.0]))
+    a, lam = kkt.solve(*(np.stack(p) for p in zip(*parts)))
+    assert np.all(a[:, 0] == 0.0)
+    for j in range(0, rows, 11):
+        M, G, Ql, Q0, c = parts[j]
+        x = np.linalg.solve(kkt_matrix(M, G, Ql), np.r_[Q0, c])
+        assert x[0] == 0.0
+        bound = 100 * np.linalg.cond(kkt_matrix(M, G, Ql)) * np.finfo(float).eps * np.abs(x).max()
+        assert np.abs(np.r_[a[j], lam[j]] - x).max() <= bound
