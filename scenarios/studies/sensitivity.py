@@ -11,9 +11,10 @@ Quantities (the run's reported numbers, so that a finite difference of `mechsim 
   dF/dt = 0 at an interior extremum t*, so the derivative is dF/dp at the fixed instant t* (the envelope rule),
   plus F' dtau/dp at an event's one-sided limit (`_located_derivative`, docs/theory.md §K5); one that grows without
   bound has none (a warning). The thermal ones are located too, by the same rule (at a prescribed speed the closed
-  form's located value with the DAE pass's derivative at its own t*, `_closed_form_thermal`); a closed-form cycle's
-  are the periodic turn's rows: the largest |value| over the output rows, whose derivative is the arg-max row's (the
-  envelope rule of a maximum over a fixed set). A warning
+  form's located value with the DAE pass's derivative at its own t*, `_closed_form_thermal`; a cycle-averaged run's,
+  the run's own located value, the derivative at its instant's phase in the window). A column the run does not
+  locate: the largest |value| over the output rows, whose derivative is the arg-max row's (the envelope rule of a
+  maximum over a fixed set). A warning
   names the change of a value at which another row becomes the maximum (a neighbouring row, or the same peak of
   another cycle, within PEAK_MARGIN), or at which an event next to the row or instant reaches it, where that change
   is smaller than the stated one: there the maximum has a kink.
@@ -249,15 +250,14 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         return df[peak_columns[q]].to_numpy(float)
     located = {q: e for q in of if q in PEAKS and (e := _located(result.summary.get("peaks", {}), PEAKS[q]))}
     # the thermal peaks located on the run's continuous solution: with cycle averaging the run itself (its hour
-    # continues the window the derivatives trace); at a prescribed speed (resolved) the DAE pass's own located
-    # peak, its value replaced by the closed-form run's (`_closed_form_thermal`); a closed-form cycle: the turn's rows
+    # continues the window the derivatives trace; at a prescribed speed the closed form's); at a prescribed speed
+    # (resolved) the DAE pass's own located peak, its value replaced by the closed-form run's (`_closed_form_thermal`)
     thermal_peaks = result.summary.get("peaks", {})
-    if cycle and run_plan.method == "dae" and any(q in THERMAL_PEAKS for q in of):
+    if cycle and any(q in THERMAL_PEAKS for q in of):
         whole = runner.execute(run_plan)
         thermal_peaks = whole.summary.get("peaks", {}) if whole.failure is None else {}
-    if run_plan.method == "dae" or not cycle:
-        located.update({q: e for q in of if q in THERMAL_PEAKS
-                        and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
+    located.update({q: e for q in of if q in THERMAL_PEAKS
+                    and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
     if run_plan.method == "closed-form" and not cycle:
         located.update(_closed_form_thermal(run_plan, located))
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
@@ -310,12 +310,27 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 if note:
                     warnings.append(note)
             if turn is not None and q == "peak_temp_contact_C" and ext is not None:
+                t_w = located[q]["sample_t_s"]
                 dP = period_gradient(turn, by_time)
-                note = repetition_crosses_end(q, wrt, relative, turn, located[q]["sample_t_s"], dP, change)
+                rows_trend = 0.0
+                if "traced_temp_contact_C" in turn:
+                    # a closed-form run's input is exact, the traced turn's linear between rows: what the events'
+                    # motion moves in the former (`switch_correction`, at the peak's instant and share); no row
+                    # sawtooth (the exact input follows the events)
+                    share = float(np.interp(t_w, turn["layout"].t[turn["rows"]], turn["share"]))
+                    g = g + switch_correction(run_plan, turn, t_w, path.events, at=(located[q]["t_s"], share))
+                    results[q] = (y, g, located[q]["t_s"])
+                    warnings.append(f"{q}: the value is the closed-form run's located peak; the derivative is the "
+                                    "traced pass's at its instant with the turn's heat input linear between output "
+                                    f"rows (the DAE window, whose value differs by {traced - y:+.2g} K) plus what "
+                                    "the events' motion moves in the run's exact input (docs/sensitivity.md, "
+                                    "\"Cycle averaging\")")
+                else:
+                    rows_trend = event_row_trend(plan, turn, t_w, path.events)
+                note = repetition_crosses_end(q, wrt, relative, turn, t_w, dP, change)
                 if note:
                     warnings.append(note)
-                trends[q] = (g + repetition_trend(turn, located[q]["sample_t_s"], dP)
-                             + event_row_trend(plan, turn, located[q]["sample_t_s"], path.events))
+                trends[q] = g + repetition_trend(turn, t_w, dP) + rows_trend
         elif q in peak_columns:
             column = peak_columns[q]
             if q not in peak_rows:

@@ -120,20 +120,22 @@ def closed_form_turn(plan, turn: dict) -> dict:
     return out
 
 
-def switch_kernel(plan, turn: dict, t_row: float, t_e: float) -> np.ndarray:
+def switch_kernel(plan, turn: dict, t_row: float, t_e: float, at: tuple[float, float] | None = None) -> np.ndarray:
     """d(contact temperature of the turn's row at t_row, at its last repetition T = t_k + m_k P) / d(heat input
     impulse at t_e), per network input (K/J): the ripple's response to delta(t - t_e) - 1/P (the ripple is the
     response to the input less its period mean, thermal/cycle.py `bulk_response`). In modal coordinates
     y = V^-1 C^-1 B e_j of A = -C^-1 K the periodic response is y (e^(x r)/(1 - e^x) + 1/x), x = lambda P,
     r = ((t - t_e) mod P)/P; the ripple at T is that at T less e^(lambda T) times that at 0; the contact
     temperature weighs the pin's and the wheel's bulk by the row's Blok share (docs/sensitivity.md, "Cycle
-    averaging")."""
+    averaging"). `at` = (T, share): an instant between the rows (a located peak's) and its share instead of the row's."""
     from mechsim.thermal.cycle_exact import modes
     system = plan.thermal.setup.system
     C, K, B = np.asarray(system.capacity), np.asarray(system.dense_conductance()), np.asarray(system.input_matrix)
     lam, V, Vinv = modes(C, K)
     k = int(np.argmin(np.abs(turn["layout"].t[turn["rows"]] - t_row)))
     T, P, share = float(turn["t_s"][k]), float(turn["period"]), float(turn["share"][k])
+    if at is not None:
+        T, share = map(float, at)
     names = list(system.state_names)
     weight = np.zeros(system.size)
     weight[names.index("temp_bulk_pin_K")], weight[names.index("temp_bulk_wheel_K")] = share, 1.0 - share
@@ -146,7 +148,8 @@ def switch_kernel(plan, turn: dict, t_row: float, t_e: float) -> np.ndarray:
     return weight @ (V @ ((periodic(T) - np.exp(lam * T) * periodic(0.0))[:, None] * y))
 
 
-def switch_correction(plan, turn: dict, t_row: float, events, delta: float = 1e-6) -> np.ndarray:
+def switch_correction(plan, turn: dict, t_row: float, events, delta: float = 1e-6,
+                      at: tuple[float, float] | None = None) -> np.ndarray:
     """The derivative the turn's input linear between rows leaves out, per scaled value, of the contact temperature
     of the turn's row at t_row, where the run's input is exact (`closed_form_turn`), as the events of the turn move:
     at an entry or exit the run's input jumps, at a slip reversal its slope does (|slip speed|), and the run
@@ -158,7 +161,7 @@ def switch_correction(plan, turn: dict, t_row: float, events, delta: float = 1e-
     zero to O(h^3) where the input is smooth). The slopes are the run's input's one-sided differences (step
     `delta`) away from the event. Left out: the change of the input's shape at a fixed distance from the event,
     on the part of the interval the two integrate differently (docs/sensitivity.md, "Cycle averaging").
-    events: the traced path's (t, dt per scaled value)."""
+    events: the traced path's (t, dt per scaled value); `at` as `switch_kernel`'s."""
     layout = turn["layout"]
     a, P = float(turn["t_start"]), float(turn["period"])
     n_in = np.asarray(plan.thermal.setup.system.input_matrix).shape[1]
@@ -173,7 +176,7 @@ def switch_correction(plan, turn: dict, t_row: float, events, delta: float = 1e-
         t0, t1 = float(layout.t[i]), float(layout.t[i + 1])
         v = u([t0 - delta, t0, t1, t1 + delta])
         D = v[:, 1] - v[:, 2] + 0.5 * (t1 - t0) * ((v[:, 1] - v[:, 0]) + (v[:, 3] - v[:, 2])) / delta
-        out = out + float(switch_kernel(plan, turn, t_row, e.t) @ D) * np.asarray(e.dt, float)
+        out = out + float(switch_kernel(plan, turn, t_row, e.t, at) @ D) * np.asarray(e.dt, float)
     return np.asarray(out)
 
 
