@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import Extremum, Interval, ReadingFailed, TrajectoryReader, intervals_of, tie_of
+from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of, tie_of
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
                "(the network's states in the same DAE) and the thermal formulas evaluated there")
@@ -318,8 +318,9 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for the thermal columns over [lo, hi] of the table, between its events (a cycle-averaged run's repeated ones
     included) and the heat input's own switches where the reader knows them (`kinks`), on the intervals that may
     hold the extremum (`_promising`), then against the one-sided limits at the intervals' ends that may beat it
-    (`_limits`)."""
+    (scenarios/peaks.py `end_limits`)."""
     from mechsim.dynamics.extrema import locate
+    from mechsim.scenarios.peaks import end_limits
     breaks = _breaks(events)
     kinks = getattr(reader, "kinks", None)
     if kinks is not None:         # the heat input's own switches that are no event (within round-off of none)
@@ -333,57 +334,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
         own = _promising(f, intervals)
         got = locate(t, {c: f}, own, reader).get(c, {})
         for name, sense in (("max", 1.0), ("min", -1.0)):
-            found = _limits(got.get(name), c, sense, t, f, own, intervals, reader, tie_of(f))
+            found = end_limits(got.get(name), c, sense, t, f, own, intervals, reader, tie_of(f))
             if found is not None:
                 got[name] = found
         out[c] = (got, own)
     return out
-
-
-def _limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: np.ndarray, own: list[Interval],
-            intervals: list[Interval], reader, tie: float) -> Extremum | None:
-    """The extremum `e` against the one-sided limits at the intervals' ends that may beat it: `locate` ranks an
-    interval's end by its row next to it, but a column that falls toward a break on one side and jumps or kinks
-    there (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the share jumps) has
-    its limit up to one row step beyond that row, and the side whose row is the better one need not hold the better
-    limit. Each end whose linear extrapolation from its two rows, plus their second difference for margin (the
-    extrapolation's error over a step), beats `e` is read there (the PROMISING best guesses of them); the best
-    limit that beats `e` is returned (`e` where none does). An end read that `own` lacks is appended to it (the
-    entry's later checks index the intervals searched)."""
-    ends = []
-    for k, iv in enumerate(intervals):
-        if len(iv.rows) < 2:
-            continue
-        for side, near, te in (("after", iv.rows[:3], iv.lo), ("before", iv.rows[-1:-4:-1], iv.hi)):
-            r0, r1 = near[0], near[1]
-            step = f[r0] - f[r1]
-            if not np.isfinite(step) or t[r1] == t[r0]:
-                continue
-            guess = sense * (f[r0] + step * (t[r0] - te) / (t[r1] - t[r0]))
-            # the extrapolation's error over (at most) one step: its second difference, else the step itself
-            curve = abs(step - (f[r1] - f[near[2]])) if len(near) > 2 else abs(step)
-            ends.append((guess, guess + (curve if np.isfinite(curve) else abs(step)), k, side, te))
-    floor = -np.inf if e is None else sense * e.value + tie
-    best = e
-    # the best guesses first (those whose margin reaches the extremum; the earliest of equal guesses)
-    for _, _, k, side, te in sorted((x for x in ends if x[1] > floor), key=lambda x: (-x[0], x[4]))[:PROMISING]:
-        iv = intervals[k]
-        if best is not None and te == best.t and best.limit == side:
-            continue
-        try:
-            table = reader(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([te]))
-        except ReadingFailed:
-            continue
-        value = float(np.asarray(table[column], float)[0])
-        if not np.isfinite(value) or (best is not None and sense * (value - best.value) <= tie):
-            continue
-        at = next((i for i, x in enumerate(own) if x is iv), None)
-        if at is None:
-            own.append(iv)
-            at = len(own) - 1
-        kind = iv.lo_kind if side == "after" else iv.hi_kind
-        row = {c: np.asarray(v)[0] for c, v in table.items()}
-        sampled = f[iv.rows[0] if side == "after" else iv.rows[-1]]
-        best = Extremum(value, te, f"{kind} (limit from {side})", row, sense * float(sense * sampled), side, side,
-                        at, False)
-    return best
