@@ -87,6 +87,9 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
     fn, path.stats["row_compile_time_s"] = _row_jacobian(pmap, distribution, wall)
     path.stats["compile_time_s"] += path.stats["row_compile_time_s"]
     t_all = df["t_s"].to_numpy(float)
+    # the rows in contact: a sample next to an exit (a peak's one-sided limit) is checked on the row of its own
+    # contact, not on the dwell's row after it (no contact temperature there)
+    contact = np.flatnonzero(np.isfinite(df["temp_contact_C"].to_numpy(float)))
     for s in samples:
         prior = [e for e in starts if e.t <= s.t + 1e-12]
         if not prior:
@@ -94,7 +97,8 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
                                          "since its start is not traced (start the run in a dwell)")
         start = prior[-1]
         n = len(start.dt)
-        row = int(np.argmin(np.abs(t_all - s.t)))
+        near = contact if len(contact) else np.arange(len(t_all))
+        row = int(near[np.argmin(np.abs(t_all[near] - s.t))])
         if setup.system is not None:
             names = ("temp_bulk_pin_K", _wall_state(plan, df, row) if wall else "temp_bulk_wheel_K")
             base = [s.values[c] for c in names]
