@@ -612,6 +612,79 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
             {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()}, out)
 
 
+#: one-sided limits read per column and sense at most (`end_limits`): the best guesses
+LIMITS = 8
+
+
+def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray, intervals: list[Interval],
+                 tie: float) -> list[tuple[int, str, float]]:
+    """(interval, side, instant) of the intervals' ends whose one-sided limit may beat `e` (`end_limits`), the
+    LIMITS best guesses first (the earliest of equal ones)."""
+    ends = []
+    for k, iv in enumerate(intervals):
+        if len(iv.rows) >= 2:
+            ends += [(k, "after", iv.lo, iv.rows[:3]), (k, "before", iv.hi, iv.rows[-1:-4:-1])]
+    if not ends:
+        return []
+    near = np.array([np.r_[r, r[1]][:3] for *_, r in ends], dtype=int)     # two rows: the step's own curve
+    te = np.array([x[2] for x in ends], dtype=float)
+    f0, f1, f2 = f[near[:, 0]], f[near[:, 1]], f[near[:, 2]]
+    t0, t1 = t[near[:, 0]], t[near[:, 1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        step = f0 - f1
+        guess = sense * (f0 + step * (t0 - te) / (t1 - t0))
+        # the extrapolation's error over (at most) one step: its second difference, else the step itself
+        curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
+        curve = np.where(np.isfinite(curve), curve, np.abs(step))
+        floor = -np.inf if e is None else sense * e.value + tie
+        able = np.isfinite(step) & (t1 != t0) & np.isfinite(guess) & (guess + curve > floor)
+    order = sorted(np.flatnonzero(able).tolist(), key=lambda i: (-guess[i], te[i]))[:LIMITS]
+    return [(ends[i][0], ends[i][1], float(te[i])) for i in order]
+
+
+def end_limit_requests(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray, intervals: list[Interval],
+                       tie: float) -> list[tuple]:
+    """The readings `end_limits` may take (interval, position, [instant]), to be read ahead in one pass."""
+    return [(intervals[k], 0 if side == "after" else len(intervals[k].rows) - 1, np.array([te]))
+            for k, side, te in _end_guesses(e, sense, t, f, intervals, tie)]
+
+
+def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: np.ndarray, own: list[Interval],
+               intervals: list[Interval], reader, tie: float) -> Extremum | None:
+    """The extremum `e` against the one-sided limits at the intervals' ends that may beat it (docs/theory.md §K5):
+    `locate` ranks an interval's end by its row next to it, but a column whose value or derivative
+    jumps at an event (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the heat
+    share jumps; a force at an entry) has its limit up to one row step beyond that row, and the side whose row is
+    the better one need not hold the better limit, nor need that row be the column's best. Each end whose linear
+    extrapolation from its two rows, plus their second difference for margin (the extrapolation's error over a
+    step), beats `e` is read there (the LIMITS best guesses of them); the best limit that beats `e` by more than the
+    tie is returned (`e` where none does). An end read that `own` lacks is appended to it (the entry's later
+    checks index the intervals searched)."""
+    best = e
+    for k, side, te in _end_guesses(e, sense, t, f, intervals, tie):
+        iv = intervals[k]
+        if best is not None and te == best.t and best.limit == side:
+            continue
+        try:
+            table = reader(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([te]))
+        except ReadingFailed:
+            continue
+        if column not in table:
+            continue
+        value = float(np.asarray(table[column], float)[0])
+        if not np.isfinite(value) or (best is not None and sense * (value - best.value) <= tie):
+            continue
+        at = next((i for i, x in enumerate(own) if x is iv), None)
+        if at is None:
+            own.append(iv)
+            at = len(own) - 1
+        kind = iv.lo_kind if side == "after" else iv.hi_kind
+        row = {c: np.asarray(v)[0] for c, v in table.items()}
+        sampled = f[iv.rows[0] if side == "after" else iv.rows[-1]]
+        best = Extremum(value, te, f"{kind} (limit from {side})", row, float(sampled), side, side, at, False)
+    return best
+
+
 class TrajectoryReader:
     """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated forward from the
     latest state the run holds before them (`_anchor`: an output row, or the state a segment started from) by IDA at

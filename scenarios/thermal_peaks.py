@@ -318,9 +318,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for the thermal columns over [lo, hi] of the table, between its events (a cycle-averaged run's repeated ones
     included) and the heat input's own switches where the reader knows them (`kinks`), on the intervals that may
     hold the extremum (`_promising`), then against the one-sided limits at the intervals' ends that may beat it
-    (scenarios/peaks.py `end_limits`)."""
-    from mechsim.dynamics.extrema import locate
-    from mechsim.scenarios.peaks import end_limits
+    (`dynamics/extrema.py` `end_limits`)."""
+    from mechsim.dynamics.extrema import end_limits, locate
     breaks = _breaks(events)
     kinks = getattr(reader, "kinks", None)
     if kinks is not None:         # the heat input's own switches that are no event (within round-off of none)

@@ -1,5 +1,5 @@
 """Extrema at an event where the column's value or slope jumps (docs/theory.md §K5): the one-sided limit there is
-read (scenarios/peaks.py `end_limits`), not ranked by the output row next to it, so the reported number does not
+read (dynamics/extrema.py `end_limits`), not ranked by the output row next to it, so the reported number does not
 move with the output step.
 
 - The internal Geneva with its motor (1.5 s: one slip reversal in each of two engagements): the contact
