@@ -543,7 +543,9 @@ def report(
 def sensitivity(
     scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
     wrt: str = typer.Option(..., "--wrt", help="scenario values to differentiate by: section.key[,section.key...]"),
-    of: Optional[str] = typer.Option(None, "--of", help="quantities (default all): peak_drive_torque_N_m,..."),
+    of: Optional[str] = typer.Option(None, "--of", help="quantities (default all peak_*, cycle ones): peak_<col> "
+                                "(largest magnitude), max_<col>, min_<col>, startup_max_<col>, startup_min_<col>, "
+                                "index_time_s, ..."),
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),
     change: float = typer.Option(0.01, "--change", help="relative change of each value for the quantity_change column"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="output folder (default: results/sensitivity-<name>)"),
@@ -607,8 +609,9 @@ def size(
     scenario: str = typer.Argument(..., help="built-in scenario name or path to a TOML file"),
     vary: List[str] = typer.Option(..., "--vary", help="a value to size and its bounds: section.key=LOW:HIGH "
                                    "[unit], e.g. mechanism.crank_radius=40:120 mm (repeatable)"),
-    minimize: str = typer.Option(..., "--minimize", help="a quantity (peak_contact_force_N, index_time_s, ...) "
-                                 "or one of the --vary keys"),
+    minimize: str = typer.Option(..., "--minimize", help="a quantity (peak_contact_force_N: largest magnitude; "
+                                 "max_contact_force_N, min_<col>, startup_max_<col>, index_time_s, ...) or one of the "
+                                 "--vary keys"),
     subject_to: List[str] = typer.Option([], "--subject-to", help="a limit: \"QUANTITY <= VALUE\" or >=, VALUE in "
                                          "the quantity's unit (repeatable)"),
     set_: List[str] = typer.Option([], "--set", help="override a value: section.key=value (repeatable)"),

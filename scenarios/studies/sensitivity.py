@@ -7,7 +7,9 @@ formulas the mechanism evaluates, checked against the mechanism at the scenario'
 the table, the tornado chart and the summary entry (docs/sensitivity.md).
 
 Quantities (the run's reported numbers, so that a finite difference of `mechsim run` checks them):
-- peaks: the mechanical ones located in continuous time, summary.json's `peaks.<column>.abs_max` (signed value):
+- peaks: the mechanical ones located in continuous time, summary.json's `peaks.<column>.abs_max` (signed value;
+  `max_<column>`, `min_<column>` name its max or min, `startup_max_<column>`, `startup_min_<column>` the start-up's
+  of a run that settles, `named_peak`):
   dF/dt = 0 at an interior extremum t*, so the derivative is dF/dp at the fixed instant t* (the envelope rule),
   plus F' dtau/dp at an event's one-sided limit (`_located_derivative`, docs/theory.md §K5); one that grows without
   bound has none (a warning). The thermal ones are located too, by the same rule (at a prescribed speed the closed
@@ -36,7 +38,8 @@ from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_f
                                                          event_row_trend, switch_correction, period_gradient,
                                                          repetition_crosses_end, repetition_trend, turn_peak)
 from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request,
-                                                       make_seed, scenario_value, traced_quantities)
+                                                       extremum, make_seed, named_peak, scenario_value,
+                                                       traced_quantities)
 from mechsim.scenarios.studies.sensitivity_rows import row_state_columns, thermal_samples
 from mechsim.scenarios.units import ScenarioError
 
@@ -65,17 +68,24 @@ def _peak_rows(values: np.ndarray) -> list[int]:
 EVENT_OFFSET_S = 1e-6
 
 
-def _located(peaks: dict, column: str) -> dict | None:
-    """The run's located extremum of largest magnitude of `column` (summary.json peaks, `abs_max`) with the sample
-    times its derivative needs (t*, or at an event two instants inside the interval of the limit), or None where
-    the column was not located (a column computed after the run: its output rows are differentiated)."""
+def _located(peaks: dict, column: str, side: str | None = None) -> dict | None:
+    """The run's located extremum of `column` (summary.json peaks) with the sample times its derivative needs (t*,
+    or at an event two instants inside the interval of the limit), or None where the column was not located (a
+    column computed after the run: its output rows are differentiated) or has no such extremum. side: None, the one
+    of largest magnitude (`abs_max`); 'max' or 'min'; 'startup_max' or 'startup_min', the start-up's (`startup`,
+    held where the run settles)."""
     entry = peaks.get(column)
     if not entry or not entry.get("how", "").startswith("located"):
         return None
-    side = entry["abs_max"]["side"]
-    e = dict(entry[side])
-    other = entry["min" if side == "max" else "max"]["value"]
-    e["other_magnitude"] = abs(other) if other is not None else None
+    if side is None:
+        side = entry["abs_max"]["side"]
+        other = entry["min" if side == "max" else "max"]["value"]
+        e = dict(entry[side], other_magnitude=abs(other) if other is not None else None)
+    else:
+        found = extremum(entry, side)
+        if found is None:
+            return None
+        e = dict(found, other_magnitude=None)
     # after a cycle-averaged window the instant of the periodic turn it repeats (scenarios/thermal_peaks.py): the
     # traced pass runs the window, and the periodic turn's instant is held fixed (the envelope rule on its phase)
     t = e["sample_t_s"] = e.get("window_t_s", e["t_s"])
@@ -235,7 +245,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     model = prepare(mech, drive, settings, t_end, si["output_step"], angle0, speed0, ext, ext_initial).model
     seed, scales, flash = make_seed(plan, model, wrt, pmap)
 
-    peak_columns = {**PEAKS, **THERMAL_PEAKS}
+    named = {q: side for q in of if (side := named_peak(q))}
+    peak_columns = {**PEAKS, **THERMAL_PEAKS, **{q: column for q, (column, _) in named.items()}}
     turn = cycle_temperatures(plan, df) if cycle else None
     if cycle and turn is None:
         raise ScenarioError("thermal.averaging", "the mechanics window holds no full crank turn to average")
@@ -248,7 +259,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
             y[turn["rows"]] = turn[THERMAL_PEAKS[q]]
             return y
         return df[peak_columns[q]].to_numpy(float)
-    located = {q: e for q in of if q in PEAKS and (e := _located(result.summary.get("peaks", {}), PEAKS[q]))}
+    sides = {q: named[q][1] if q in named else None for q in of if q in PEAKS or q in named}
+    located = {q: e for q, side in sides.items() if (e := _located(result.summary.get("peaks", {}), peak_columns[q],
+                                                                   side))}
     # the thermal peaks located on the run's continuous solution: with cycle averaging the run itself (its hour
     # continues the window the derivatives trace; at a prescribed speed the closed form's); at a prescribed speed
     # (resolved) the DAE pass's own located peak, its value replaced by the closed-form run's (`_closed_form_thermal`)
@@ -261,13 +274,13 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if run_plan.method == "closed-form" and not cycle:
         located.update(_closed_form_thermal(run_plan, located))
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
-                 and q not in located and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
+                 and q not in located and q not in named and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
     sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows}
                           | {t for e in located.values() for t in e["samples"]})
     thermal_times = sorted({float(df["t_s"].iloc[i]) for q, rows in peak_rows.items() if q in THERMAL_PEAKS
                             for i in rows} | {t for q, e in located.items() if q in THERMAL_PEAKS
                                               for t in e["samples"]})
-    columns = {PEAKS[q] for q in [*peak_rows, *located] if q in PEAKS} | {"work_drive_J"}
+    columns = {peak_columns[q] for q in [*peak_rows, *located] if q not in THERMAL_PEAKS} | {"work_drive_J"}
     if thermal_times:
         # with bulk states, the columns of the cycle bulk too (read only with cycle averaging), so that both
         # averagings share one compiled set of read-outs
@@ -293,7 +306,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
         if q in located and located[q].get("unbounded"):
-            warnings.append(f"{q}: {PEAKS[q]} grows without bound toward an event (t = {located[q]['t_s']:.6g} s; "
+            warnings.append(f"{q}: {peak_columns[q]} grows without bound toward an event (t = {located[q]['t_s']:.6g} s; "
                             "summary.json peaks): no peak, so no derivative")
         elif q in located:
             y, g, traced = _located_derivative(located[q], peak_columns[q], by_time, path.events)
@@ -331,6 +344,13 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 if note:
                     warnings.append(note)
                 trends[q] = g + repetition_trend(turn, t_w, dP) + rows_trend
+        elif q in named:
+            column, side = named[q]
+            entry = result.summary.get("peaks", {}).get(column)
+            warnings.append(f"{q}: this run has no column {column}" if entry is None else
+                            f"{q}: the run does not settle into a periodic regime after a start-up (summary.json "
+                            "regime), so it has no start-up apart from its headline peaks" if side.startswith("startup")
+                            else f"{q}: {column} is not located on this run (summary.json peaks.{column}.how)")
         elif q in peak_columns:
             column = peak_columns[q]
             if q not in peak_rows:

@@ -34,6 +34,31 @@ CYCLE = ("index_time_s", "cycle_time_s", "energy_per_cycle_J")
 #: the frictional heat of the last complete index: minus the friction work (a work state) from engage to release
 HEAT = "heat_per_index_J"
 QUANTITIES = tuple(PEAKS) + tuple(THERMAL_PEAKS) + CYCLE + (HEAT,)
+#: the quantities that name one extremum of a mechanical peak column (summary.json peaks.<column>), by prefix: the
+#: located maximum and minimum (the headline: the periodic regime's where the run settles), and the start-up's
+#: (`peaks.<column>.startup`, held only where the run settles); `peak_<column>` is the one of larger magnitude
+SIDES = {"max_": "max", "min_": "min", "startup_max_": "startup_max", "startup_min_": "startup_min"}
+
+
+def named_peak(q: str) -> tuple[str, str] | None:
+    """(column, side) of a quantity that names one extremum of a mechanical peak column (`SIDES`: 'max', 'min',
+    'startup_max', 'startup_min'), or None."""
+    for prefix, side in SIDES.items():
+        if q.startswith(prefix) and q[len(prefix):] in PEAKS.values():
+            return q[len(prefix):], side
+    return None
+
+
+def extremum(entry: dict, side: str) -> dict | None:
+    """The extremum `side` ('max', 'min', 'startup_max', 'startup_min') of a summary.json peaks entry, or None where
+    the entry has none (a start-up is held only where the run settles)."""
+    regime, _, side = side.rpartition("_")
+    return (entry.get(regime) or {} if regime else entry).get(side)
+
+
+def named_quantities(peaks: tuple[str, ...]) -> tuple[str, ...]:
+    """The named extrema (`SIDES`) of the columns of the peak quantities `peaks` (PEAKS' names)."""
+    return tuple(prefix + PEAKS[q] for prefix in SIDES for q in peaks if q in PEAKS)
 
 
 def cycle_quantities(pmap: ParameterMap) -> tuple[str, ...]:
@@ -435,6 +460,7 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
     if len(set(wrt)) != len(wrt):
         raise ScenarioError("--wrt", "a key is named twice")
     known = traced_quantities(plan, pmap)
+    named = named_quantities(pmap.peaks)
     for q in of:
         if q in THERMAL_PEAKS and plan.thermal is None:
             raise ScenarioError("--of", f"{q}: this scenario has no thermal model (set thermal.model = 'lumped' or "
@@ -442,8 +468,10 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
         if q in THERMAL_PEAKS and getattr(plan.mechanism, "impacts", False):
             raise ScenarioError("--of", f"{q}: the impacts' heat enters the thermal network after the run "
                                 "(thermal/plan.py) and is not traced; the mechanical quantities are")
-        if q not in known:
-            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}")
+        if q not in known and q not in named:
+            columns = ", ".join(PEAKS[p] for p in pmap.peaks if p in PEAKS)
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}; or "
+                                f"{'/'.join(SIDES)}<column> of the columns {columns}")
     return pmap
 
 

@@ -20,14 +20,18 @@ def design_run(design) -> dict:
 
 def run_quantities(result, engage: str, release: str) -> dict:
     """The headline quantities a run reports itself: each peak's magnitude from summary.json `peaks` (the `abs_max`
-    of the column docs/sensitivity.md names), the index time (the last release and the engage before it) and the
+    of the column docs/sensitivity.md names; the named extrema `max_<column>`, ... their signed values), the index time (the last release and the engage before it) and the
     cycle time (the last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
     heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
     failure, or None."""
     from mechsim.scenarios.studies.sensitivity import run_event_quantities
-    from mechsim.scenarios.studies.sensitivity_map import PEAKS, THERMAL_PEAKS
+    from mechsim.scenarios.studies.sensitivity_map import PEAKS, SIDES, THERMAL_PEAKS, extremum
     peaks = result.summary.get("peaks", {})
     out = {q: (peaks[c]["abs_max"]["value"] if c in peaks else None) for q, c in {**PEAKS, **THERMAL_PEAKS}.items()}
+    for prefix, side in SIDES.items():          # the named extrema (signed): max_, min_, startup_max_, startup_min_
+        for c in PEAKS.values():
+            found = extremum(peaks[c], side) if c in peaks else None
+            out[prefix + c] = found["value"] if found is not None else None
     out.update(run_event_quantities(result.events, engage, release))
     out["_failure"] = result.failure.message() if result.failure is not None else None
     return out

@@ -112,11 +112,13 @@ AGGREGATES = ("auto", "max", "min", "mean")
 
 def aggregate_for(value: str, choice: str = "auto") -> str:
     """The aggregate of `value` over hidden parameters: `choice` unless "auto", which takes the max of a maximum
-    (peak_max_*), the min of a minimum (peak_min_*), the share of successes, else the mean."""
+    (peak_max_*, startup_peak_max_*), the min of a minimum (peak_min_*, startup_peak_min_*), the share of
+    successes, else the mean."""
     if choice != "auto":
         return choice
     if value == "success":
         return "mean"
+    value = value.removeprefix("startup_")
     return "min" if value.startswith("peak_min_") else "max" if value.startswith("peak_") else "mean"
 
 

@@ -103,10 +103,14 @@ def summary_row(summary: dict) -> dict:
     for k in ("drive", "method", "backend", "formulation", "thermal"):
         row[f"model_{k}"] = model.get(k)
     for col, pk in summary.get("peaks", {}).items():
-        for side in ("max", "min"):        # the located maximum and minimum (summary.json peaks), signed
-            row[f"peak_{side}_{col}"] = pk[side]["value"]
-            row[f"peak_{side}_{col}_at_t_s"] = pk[side]["t_s"]
-            row[f"peak_{side}_{col}_at_drive_angle_deg"] = pk[side]["drive_angle_wrapped_deg"]
+        # the located maximum and minimum (summary.json peaks), signed: the headline (the periodic regime's where
+        # the run settles) and, where it settles, the start-up's (`startup`)
+        for prefix, sides in (("", pk), ("startup_", pk.get("startup") or {})):
+            for side in ("max", "min"):
+                if side in sides:
+                    row[f"{prefix}peak_{side}_{col}"] = sides[side]["value"]
+                    row[f"{prefix}peak_{side}_{col}_at_t_s"] = sides[side]["t_s"]
+                    row[f"{prefix}peak_{side}_{col}_at_drive_angle_deg"] = sides[side]["drive_angle_wrapped_deg"]
     energy = summary.get("energy") or {}
     for name, w in (energy.get("work_J") or {}).items():
         row[f"work_{name}_J"] = w
