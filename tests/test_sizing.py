@@ -411,3 +411,18 @@ def test_a_design_just_outside_a_sawtooth_limit_is_moved_onto_it():
     assert len(problem.rows) == 1
     step = np.linalg.lstsq(problem.c_jac(u0), -problem.c_aimed(u0), rcond=None)[0]
     assert problem.violation(u0 + step) > FEASIBLE
+
+
+def test_a_sizing_limit_may_name_the_maximum(scenario_file):
+    """The module's problem with the limit on the contact force's maximum by name (`max_contact_force_N`, summary.json
+    peaks.contact_force_N.max; docs/sensitivity.md "Quantities"): the force does not change sign, so its max is its
+    peak, and at the scenario's 6 rad/s the smallest crank radius is r = J2 w^2 Phi_4 / N_max; the design's own run
+    reports the same max at the limit."""
+    result = mechsim.size(scenario_file, vary=["mechanism.crank_radius=30:120 mm"], minimize="mechanism.crank_radius",
+                          subject_to=[f"max_contact_force_N <= {N_MAX}"])
+    _, w, r = closed_form()
+    r = r * (6.0 / w) ** 2                  # the closed form's radius at the scenario's 6 rad/s (N ~ w^2 / r)
+    assert result.objective_value == pytest.approx(r, rel=1e-6)
+    (check,) = result.summary["verification"]["limits"]
+    assert check["quantity"] == "max_contact_force_N" and check["holds"]
+    assert check["run_value"] == pytest.approx(N_MAX, rel=1e-6)
