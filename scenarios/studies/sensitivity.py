@@ -533,7 +533,8 @@ def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
 
 
 def tornado_figure(table: pd.DataFrame):
-    """One panel per quantity: horizontal bars of the elasticities (p/y) dy/dp, largest on top."""
+    """One panel per quantity: horizontal bars of the elasticities (p/y) dy/dp, largest on top, coloured by the sign
+    of dy/dp (for a negative quantity, a minimum, the elasticity's sign is the other)."""
     from matplotlib.figure import Figure
     quantities = list(dict.fromkeys(table["quantity"]))
     fig = Figure(figsize=(8, 1.2 + 0.45 * len(table)), constrained_layout=True)
@@ -543,7 +544,7 @@ def tornado_figure(table: pd.DataFrame):
         part = table[table["quantity"] == q].copy()
         part = part.iloc[np.argsort(np.abs(part["elasticity"].fillna(0).to_numpy()))]
         e = part["elasticity"].to_numpy(float)
-        bars = ax.barh(part["wrt"], e, color=["C3" if v > 0 else "C0" for v in e])
+        bars = ax.barh(part["wrt"], e, color=["C3" if d > 0 else "C0" for d in part["derivative"].to_numpy(float)])
         ax.bar_label(bars, labels=[f"{v:.3g}" for v in e], fontsize=7, padding=2)
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_title(f"{q} = {part['value'].iloc[0]:.6g}", fontsize=9, loc="left")
@@ -551,7 +552,7 @@ def tornado_figure(table: pd.DataFrame):
         lim = max(1e-12, float(np.nanmax(np.abs(e)))) * 1.15
         ax.set_xlim(-lim, lim)
     axes[-1].set_xlabel("elasticity (p/y) dy/dp: % change of the quantity per % change of the value\n"
-                        "(red: the value raises the quantity, blue: it lowers it)")
+                        "(red: raising the value raises the quantity, blue: it lowers it)")
     fig.suptitle(f"{table.attrs.get('scenario', '')}: design sensitivities", fontsize=10)
     return fig
 
