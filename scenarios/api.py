@@ -334,7 +334,9 @@ def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: s
     sensitivities' wall time).
 
     wrt: "section.key" names (a list or one comma-separated string), e.g. ["load.wheel_torque", "contact.friction"];
-    of: quantities (default: all), e.g. "peak_contact_force_N,index_time_s". Raises ScenarioError on a key or
+    of: quantities (default: all), e.g. "peak_contact_force_N,index_time_s"; by name also "max_<column>",
+    "min_<column>" (the located max / min) and "startup_max_<column>", "startup_min_<column>" (the start-up's, where
+    the run settles), `peak_<column>` being the one of larger magnitude (docs/sensitivity.md, "Quantities"). Raises ScenarioError on a key or
     quantity that is not traced, and `SensitivityUnavailable` (a ValueError) where the derivative does not exist on
     this run (a grazing event, a transition that recomputes a traced value)."""
     from mechsim.scenarios.studies.sensitivity import sensitivity as sensitivity_table
@@ -361,7 +363,7 @@ def size(scenario: Scenario | str | Path, vary: str | Iterable[str] | Mapping[st
     d objective / d limit), `.bounds`, `.history` (the convergence table), `.summary`, `.save(folder)`.
 
     vary: ["section.key=LOW:HIGH unit", ...] or {"section.key": "LOW:HIGH unit"}; `mechanism.slots=3:6` enumerates
-    the slot counts. subject_to: ["peak_contact_force_N <= 500", ...]. Raises ScenarioError on a bad request and
+    the slot counts. subject_to: ["peak_contact_force_N <= 500", "min_drive_torque_N_m >= 0", ...]. Raises ScenarioError on a bad request and
     `mechsim.scenarios.studies.sizing.SizingFailed` (a RuntimeError, `.result` holding what ran) without a feasible
     optimum."""
     from mechsim.scenarios.studies.sizing import size as size_design
