@@ -363,9 +363,9 @@ def size(scenario: Scenario | str | Path, vary: str | Iterable[str] | Mapping[st
     d objective / d limit), `.bounds`, `.history` (the convergence table), `.summary`, `.save(folder)`.
 
     vary: ["section.key=LOW:HIGH unit", ...] or {"section.key": "LOW:HIGH unit"}; `mechanism.slots=3:6` enumerates
-    the slot counts. subject_to: ["peak_contact_force_N <= 500", "min_drive_torque_N_m >= 0", ...]. Raises ScenarioError on a bad request and
-    `mechsim.scenarios.studies.sizing.SizingFailed` (a RuntimeError, `.result` holding what ran) without a feasible
-    optimum."""
+    the slot counts. subject_to: ["peak_contact_force_N <= 500", "min_drive_torque_N_m >= 0", ...]. Raises
+    ScenarioError on a bad request and `mechsim.scenarios.studies.sizing.SizingFailed` (a RuntimeError, `.result`
+    holding what ran) without a feasible optimum."""
     from mechsim.scenarios.studies.sizing import size as size_design
     if not isinstance(scenario, Scenario):
         scenario = load(scenario, set)

@@ -306,8 +306,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     relative = [scenario_value(plan, key) != 0.0 for key in wrt]
     for q in of:
         if q in located and located[q].get("unbounded"):
-            warnings.append(f"{q}: {peak_columns[q]} grows without bound toward an event (t = {located[q]['t_s']:.6g} s; "
-                            "summary.json peaks): no peak, so no derivative")
+            warnings.append(f"{q}: {peak_columns[q]} grows without bound toward an event (t = "
+                            f"{located[q]['t_s']:.6g} s; summary.json peaks): no peak, so no derivative")
         elif q in located:
             y, g, traced = _located_derivative(located[q], peak_columns[q], by_time, path.events)
             other = located[q]["other_magnitude"]
