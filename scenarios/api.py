@@ -336,9 +336,10 @@ def sensitivity(scenario: Scenario | str | Path, wrt: str | Iterable[str], of: s
     wrt: "section.key" names (a list or one comma-separated string), e.g. ["load.wheel_torque", "contact.friction"];
     of: quantities (default: all), e.g. "peak_contact_force_N,index_time_s"; by name also "max_<column>",
     "min_<column>" (the located max / min) and "startup_max_<column>", "startup_min_<column>" (the start-up's, where
-    the run settles), `peak_<column>` being the one of larger magnitude (docs/sensitivity.md, "Quantities"). Raises ScenarioError on a key or
-    quantity that is not traced, and `SensitivityUnavailable` (a ValueError) where the derivative does not exist on
-    this run (a grazing event, a transition that recomputes a traced value)."""
+    the run settles), `peak_<column>` being the one of larger magnitude (docs/sensitivity.md, "Quantities").
+    Raises ScenarioError on a key or quantity that is not traced (naming the valid ones), and
+    `SensitivityUnavailable` (a ValueError) where the derivative does not exist on this run (a grazing event, a
+    transition that recomputes a traced value)."""
     from mechsim.scenarios.studies.sensitivity import sensitivity as sensitivity_table
     if not isinstance(scenario, Scenario):
         scenario = load(scenario, set)

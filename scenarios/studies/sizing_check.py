@@ -20,10 +20,11 @@ def design_run(design) -> dict:
 
 def run_quantities(result, engage: str, release: str) -> dict:
     """The headline quantities a run reports itself: each peak's magnitude from summary.json `peaks` (the `abs_max`
-    of the column docs/sensitivity.md names; the named extrema `max_<column>`, ... their signed values), the index time (the last release and the engage before it) and the
-    cycle time (the last two engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the
-    heat per index: work states at events, which the run's tables do not hold) are None. "_failure": the run's
-    failure, or None."""
+    of the column docs/sensitivity.md names; the named extrema `max_<column>`, ... their signed values, None where
+    the run has none), the index time (the last release and the engage before it) and the cycle time (the last two
+    engages) from its events table, as the sensitivities define them. Others (the energy per cycle, the heat per
+    index: work states at events, which the run's tables do not hold) are None. "_failure": the run's failure, or
+    None."""
     from mechsim.scenarios.studies.sensitivity import run_event_quantities
     from mechsim.scenarios.studies.sensitivity_map import PEAKS, SIDES, THERMAL_PEAKS, extremum
     peaks = result.summary.get("peaks", {})
