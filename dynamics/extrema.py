@@ -97,9 +97,9 @@ class _Job:
 
 
 def _estimates(t: np.ndarray, f: np.ndarray, m: np.ndarray, i: np.ndarray) -> np.ndarray:
-    """The peak value of the parabola through rows i of series f[m] and their neighbours (each row's value where
-    the parabola opens upwards); 0 < i < len(t) - 1."""
-    f0, f1, f2 = f[m, i - 1], f[m, i], f[m, i + 1]
+    """The peak value of the parabola through rows i of series f(m, rows) and their neighbours (each row's value
+    where the parabola opens upwards); 0 < i < len(t) - 1. f: the series' values at (series, rows) as arrays."""
+    f0, f1, f2 = f(m, i - 1), f(m, i), f(m, i + 1)
     h0, h1 = t[i] - t[i - 1], t[i + 1] - t[i]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         d2 = 2.0 * ((f2 - f1) / h1 - (f1 - f0) / h0) / (h0 + h1)
@@ -159,7 +159,8 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
                 limit: int = CANDIDATES, layout: tuple | None = None) -> list[list[tuple]]:
     """`candidates` of every series F[c] (over the table's rows) in both senses, its tie ties[c]: [c max, c min,
     ...]. The row-against-neighbour comparisons are made once for both senses on the rows' differences (a >= b
-    exactly where a - b >= 0; the negated series' differences are the differences negated, exactly)."""
+    exactly where a - b >= 0; the negated series' differences are the differences negated, exactly), and the
+    series in the minimum's sense (-F, -inf where F is not finite) is formed only where read."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
@@ -167,49 +168,66 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     rows, k_of, n_of, pos, first, last = layout
     ti, G = t[rows], F[:, rows]
     ok = np.isfinite(G)
-    fi = np.empty((2 * len(G), G.shape[1]))             # the series in each sense: [c max, c min, ...]
-    fi[0::2], fi[1::2] = G, -G
-    fi[np.repeat(~ok, 2, axis=0)] = -np.inf
+    finite = bool(ok.all())
+
+    def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
+        """Series m (2c: F[c], 2c + 1: -F[c]; -inf where not finite) at rows i."""
+        g = G[m >> 1, i]
+        return np.where(np.isfinite(g), np.where(m & 1, -g, g), -np.inf)
+
     tie, ties = ties[:, None], np.repeat(ties, 2)
     # a neighbour in the row's interval with a finite value (else it counts as -inf: below any finite row)
-    has_l, has_r = np.zeros_like(ok), np.zeros_like(ok)
-    has_l[:, 1:], has_r[:, :-1] = ok[:, :-1], ok[:, 1:]
-    has_l[:, first], has_r[:, last] = False, False
+    if finite:
+        has_l, has_r = ~first, ~last
+    else:
+        has_l, has_r = np.zeros_like(ok), np.zeros_like(ok)
+        has_l[:, 1:], has_r[:, :-1] = ok[:, :-1], ok[:, 1:]
+        has_l[:, first], has_r[:, last] = False, False
     d = np.zeros((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
     with np.errstate(invalid="ignore"):
         d[:, 1:-1] = G[:, 1:] - G[:, :-1]
-        dl, dr = d[:, :-1], d[:, 1:]
-        flat = ((has_l & (np.abs(dl) <= tie)) | first) & ((has_r & (np.abs(dr) <= tie)) | last) & (n_of > 1) & ok
-        smooth = np.empty(fi.shape, dtype=bool)
-        smooth[0::2] = (~has_l | (dl >= 0)) & (~has_r | (dr <= 0)) & ok & ~flat
-        smooth[1::2] = (~has_l | (dl <= 0)) & (~has_r | (dr >= 0)) & ok & ~flat
-    flat = np.repeat(flat, 2, axis=0)
-    lower = fi.max(axis=1)                          # the best peak's: the largest row is a peak
-    level = np.where(flat, fi, -np.inf).max(axis=1)
+        small, up, down = np.abs(d) <= tie, d >= 0, d <= 0
+    flat = ((has_l & small[:, :-1]) | first) & ((has_r & small[:, 1:]) | last) & (n_of > 1)
+    no_l, no_r = ~has_l, ~has_r
+    smooth = np.empty((len(G), 2, G.shape[1]), dtype=bool)        # [c, sense, row]
+    smooth[:, 0] = (no_l | up[:, :-1]) & (no_r | down[:, 1:]) & ~flat
+    smooth[:, 1] = (no_l | down[:, :-1]) & (no_r | up[:, 1:]) & ~flat
+    if not finite:
+        flat &= ok
+        smooth &= ok[:, None]
+    with np.errstate(invalid="ignore"):
+        lower = np.empty(2 * len(G))                # the best peak's: the largest row is a peak
+        level = np.empty(2 * len(G))
+        lower[0::2] = np.where(ok, G, -np.inf).max(axis=1) if not finite else G.max(axis=1)
+        lower[1::2] = -(np.where(ok, G, np.inf).min(axis=1) if not finite else G.min(axis=1))
+        level[0::2] = np.where(flat, G, -np.inf).max(axis=1)
+        level[1::2] = -np.where(flat, G, np.inf).min(axis=1)
     any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
-    ms, ii = np.nonzero(smooth)                     # the estimates where they are compared: the smooth peaks
-    est = fi[ms, ii]
+    ms, ii = np.nonzero(smooth.reshape(2 * len(G), -1))   # the estimates where they are compared: the smooth peaks
+    row = fi(ms, ii)
+    est = row.copy()
     inner = ~(first[ii] | last[ii])
     est[inner] = _estimates(ti, fi, ms[inner], ii[inner])
     with np.errstate(invalid="ignore"):
-        kept = 2 * est - fi[ms, ii] >= (lower - ties)[ms]
+        kept = 2 * est - row >= (lower - ties)[ms]
     ms, ii, est = ms[kept], ii[kept], est[kept]
-    best = np.full(len(fi), -np.inf)
+    best = np.full(2 * len(G), -np.inf)
     np.maximum.at(best, ms, est)
     rank = np.where(est >= best[ms] - ties[ms], best[ms], est)
     order = np.lexsort((ti[ii], -rank, ms))         # each series' by estimate, ties to the earliest
     ms, ii, est = ms[order], ii[order], est[order]
     nth = np.arange(len(ms)) - np.searchsorted(ms, ms)
     chosen = nth < limit
-    out: list[list[tuple]] = [[] for _ in range(len(fi))]
+    out: list[list[tuple]] = [[] for _ in range(2 * len(G))]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - ties))
-    earliest = np.argmax(flat[constant] & (fi[constant] >= (level - ties)[constant, None]), axis=1)
-    for m, i in zip(constant.tolist(), earliest.tolist()):
+    for m in np.flatnonzero(any_flat & any_peak & (level >= lower - ties)).tolist():
+        c = m >> 1
+        with np.errstate(invalid="ignore"):
+            i = int(np.argmax(flat[c] & ((-G[c] if m & 1 else G[c]) >= level[m] - ties[m])))
         k = int(k_of[i])
         at = float(intervals[k].lo) if first[i] else float(ti[i])
-        out[m].append((float(fi[m, i]), k, int(pos[i]), at, at, True))
+        out[m].append((float(fi(np.array([m]), np.array([i]))[0]), k, int(pos[i]), at, at, True))
     for m, i, value in zip(ms[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
         iv = intervals[int(k_of[i])]
         lo = float(iv.lo) if first[i] else float(ti[i - 1])
@@ -685,6 +703,29 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     return best
 
 
+class _Part(Mapping):
+    """Rows a:b of a table read for several requests at once (a mapping of column arrays), each column sliced
+    when first read (a reading's user reads a few of its columns)."""
+
+    def __init__(self, table: dict, a: int, b: int):
+        self._table, self._a, self._b, self._got = table, a, b, {}
+
+    def __getitem__(self, c):
+        got = self._got.get(c)
+        if got is None:
+            got = self._got[c] = self._table[c][self._a:self._b]
+        return got
+
+    def __iter__(self):
+        return iter(self._table)
+
+    def __len__(self):
+        return len(self._table)
+
+    def __contains__(self, c):
+        return c in self._table
+
+
 class TrajectoryReader:
     """Every table column of a DAE run at any instants of a smooth interval: the mode re-integrated forward from the
     latest state the run holds before them (`_anchor`: an output row, or the state a segment started from) by IDA at
@@ -808,7 +849,7 @@ class TrajectoryReader:
             a = 0
             for r in rs:
                 n = len(got[r][3])
-                out[r] = {c: v[a:a + n] for c, v in table.items()}
+                out[r] = _Part(table, a, a + n)
                 a += n
         self.dense_readings += len(groups) if dense is not None else 0
         return out
