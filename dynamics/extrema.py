@@ -496,29 +496,27 @@ def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) ->
     anchor row), all jobs together: the polynomial through the STENCIL readings around the best one gives t* and
     the value, and every column there (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far
     below the tolerance); at an interval's end the one-sided limit there."""
-    jobs, tables, G, P, F, n_g, ivs, R, FR, TR = [], [], [], [], [], [], [], [], [], []
+    jobs, tables, G, A, columns, n_g, ivs, TR = [], [], [], [], [], [], [], []
     for iv, group, grids, table in ready:
         tt = np.asarray(table["t_s"], dtype=float)
         # a bracket of one instant: its reading repeated
         g = np.array([x if len(x) == FIRST_GRID else np.full(FIRST_GRID, x[-1]) for x in grids])
-        pos = np.minimum(tt.searchsorted(g), len(tt) - 1)
-        r = np.minimum(tt.searchsorted([j.t_row for j in group]), len(tt) - 1)
-        for n, j in enumerate(group):
-            column = np.asarray(table[j.column], dtype=float)
-            F.append(j.sense * column[pos[n]])
-            FR.append(j.sense * column[r[n]])
+        # each job's grid and row (last) among the cluster's readings, in one search
+        at = np.minimum(tt.searchsorted(np.c_[g, [j.t_row for j in group]]), len(tt) - 1)
+        for k, j in enumerate(group):
+            columns.append(np.asarray(table[j.column], dtype=float)[at[k]])
         jobs += group
         tables += [table] * len(group)
         ivs += [iv] * len(group)
         n_g += [len(x) for x in grids]
         G.append(g)
-        P.append(pos)
-        R.append(r)
-        TR.append(tt[r])
+        A.append(at)
+        TR.append(tt[at[:, -1]])
     if not jobs:
         return
-    G, P, R, TR = (np.concatenate(a) for a in (G, P, R, TR))
-    F, FR, n_g = np.array(F), np.array(FR), np.array(n_g)
+    G, A, TR = (np.concatenate(a) for a in (G, A, TR))
+    F = np.array(columns) * np.array([j.sense for j in jobs])[:, None]
+    P, R, F, FR, n_g = A[:, :-1], A[:, -1], F[:, :-1], F[:, -1], np.array(n_g)
     sense_tie = np.array([j.tie for j in jobs])
     every = np.arange(len(jobs))
     held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row
@@ -543,21 +541,23 @@ def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) ->
         x[poly], W[poly] = _poly_max(part[poly], (b - c0)[poly])
         value[poly] = [w @ f for w, f in zip(W[poly], part[poly])]       # as one job's dot product
     better = poly & (value >= best_f)
+    t_star = (G[every, c0] + x * (G[:, 1] - G[:, 0])).tolist()
+    value, best_f, best_t = value.tolist(), best_f.tolist(), best_t.tolist()
+    best_pos, c0, better, end, at_lo, at_hi = (a.tolist() for a in (best_pos, c0, better, end, at_lo, at_hi))
     for m in np.flatnonzero(held).tolist():
-        j, iv = jobs[m], ivs[m]
+        j = jobs[m]
         if better[m]:
-            j.best_f, j.where = float(value[m]), "interior"
-            j.best_t = float(G[m, c0[m]] + x[m] * (G[m, 1] - G[m, 0]))
+            j.best_f, j.where, j.best_t = value[m], "interior", t_star[m]
             j.best_row = _Row(tables[m], P[m, c0[m]:c0[m] + STENCIL], W[m])
             j.best_row["t_s"] = j.best_t
             continue
-        j.best_f, j.best_t = float(best_f[m]), float(best_t[m])
-        j.best_row = _Row(tables[m], int(best_pos[m]), None)
+        j.best_f, j.best_t = best_f[m], best_t[m]
+        j.best_row = _Row(tables[m], best_pos[m], None)
         if end[m]:
+            iv = ivs[m]
             j.where = (f"{iv.lo_kind} (limit from after)" if at_lo[m] else f"{iv.hi_kind} (limit from before)"
                        if at_hi[m] else "output row")
             j.limit = "after" if at_lo[m] else "before" if at_hi[m] else None
-
 
 def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float, t_end: float,
                  start_kind: str = "start", end_kind: str = "end") -> list[Interval]:
