@@ -463,6 +463,7 @@ class DenseOutput:
         self.segments: list[tuple] = []       # (t start, t end, call, segment, mode, parameters, offset)
         self.buffers: list = []
         self._table = None                    # the segments and their taken steps as arrays, on the host
+        self._seg = None                      # the segment of each of those steps
 
     def add_call(self, st, t0: float, t1: float, ev_t, modes, params, offset) -> None:
         c = len(self.buffers)
@@ -497,7 +498,13 @@ class DenseOutput:
             rec, seg = rec[order], seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
             self._table = (lo, hi, group, rec, rec[:, ST_T0], rec[:, ST_ACC], at)
+            self._seg = seg
         return self._table
+
+    def _step_segments(self) -> np.ndarray:
+        """The segment (index in `segments`) of each taken step of `_tables`, in its order."""
+        self._tables()
+        return self._seg
 
     def _fn(self):
         key = ("dense", DENSE_BATCH)
@@ -530,24 +537,27 @@ class DenseOutput:
         ts = np.concatenate([np.asarray(r[0], dtype=float) for r in requests])
         hold = inside[rid] & (ts[:, None] >= s_lo) & (ts[:, None] <= s_hi)  # instants x segments
         seg = np.argmax(hold, axis=1)                                       # the first segment that holds each
-        j = np.zeros(len(ts), dtype=int)
-        for g in np.unique(seg).tolist():
-            mine = np.flatnonzero(seg == g)
-            a, b = int(at[g]), int(at[g + 1])
-            if b > a:
-                j[mine] = a + np.minimum(np.searchsorted(acc[a:b], ts[mine], side="left"), b - a - 1)
-        good = hold.any(axis=1) & (at[seg + 1] > at[seg]) & (t0[j] <= ts) & (ts <= acc[j])
+        a, b = at[seg], at[seg + 1]
+        # the step of each instant's segment whose t_acc is the first at or after it (the segment's last where none):
+        # its segment's steps before it, counted in one stable sort of the steps and instants by (segment, time)
+        # with an instant before a step of equal time (a search on the left of each segment's t_acc)
+        n_rec = len(acc)
+        key_seg = np.concatenate([self._step_segments(), seg])
+        order = np.lexsort((np.r_[np.ones(n_rec, bool), np.zeros(len(ts), bool)], np.concatenate([acc, ts]), key_seg))
+        before = np.cumsum(order < n_rec) - (order < n_rec)      # steps ahead of each entry in that order
+        steps = np.empty(len(order), dtype=int)
+        steps[order] = before
+        j = np.where(b > a, np.minimum(steps[n_rec:], b - 1), 0)
+        good = hold.any(axis=1) & (b > a) & (t0[j] <= ts) & (ts <= acc[j])
         ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
         read = ok[rid]
         z = np.empty((int(read.sum()), self.entry.jmod.nz))
-        records, tt = rec[j[read]], ts[read]
-        for a in range(0, len(tt), DENSE_BATCH):
-            n = min(DENSE_BATCH, len(tt) - a)
-            rows = np.repeat(records[a + n - 1:a + n], DENSE_BATCH, axis=0)
-            tb = np.full(DENSE_BATCH, tt[a + n - 1])
-            rows[:n], tb[:n] = records[a:a + n], tt[a:a + n]
-            z[a:a + n] = np.asarray(self._fn()(rows, tb))[:n]
-        starts = np.cumsum(np.r_[0, sizes[ok]])
+        steps, tt = j[read], ts[read]
+        for c in range(0, len(tt), DENSE_BATCH):
+            n = min(DENSE_BATCH, len(tt) - c)
+            pad = np.minimum(np.arange(c, c + DENSE_BATCH), c + n - 1)      # the last instant repeated
+            z[c:c + n] = np.asarray(self._fn()(rec[steps[pad]], tt[pad]))[:n]
+        starts = np.concatenate([[0], np.cumsum(sizes[ok])])
         kept = np.flatnonzero(ok)
         by_mode: dict[str, list[int]] = {}
         for n, r in enumerate(kept.tolist()):
