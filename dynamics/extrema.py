@@ -117,6 +117,8 @@ def _ties(F: np.ndarray) -> np.ndarray:
     """`tie_of` of each row of F."""
     if not F.shape[-1]:
         return np.zeros(len(F))
+    if np.isfinite(F).all():            # the largest magnitude is the larger of the largest and the negated least
+        return TIE_ROUNDOFF * np.abs(np.maximum(F.max(axis=-1), -F.min(axis=-1)))
     with np.errstate(invalid="ignore"):
         return TIE_ROUNDOFF * np.where(np.isfinite(F), np.abs(F), 0.0).max(axis=-1)
 
@@ -166,7 +168,10 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     if layout is None:
         return [[] for _ in range(2 * len(F))]
     rows, k_of, n_of, pos, first, last = layout
-    ti, G = t[rows], F[:, rows]
+    if rows[-1] - rows[0] == len(rows) - 1 and np.all(rows[1:] > rows[:-1]):     # a run of rows: views
+        ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
+    else:
+        ti, G = t[rows], F[:, rows]
     ok = np.isfinite(G)
     finite = bool(ok.all())
 

@@ -142,7 +142,11 @@ def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: fl
     if isinstance(read, TrajectoryReader):
         anchors = read.anchors(t)
         held = anchors[:, 0] >= 0
+        every = bool(held.all())
         for iv in intervals:
+            if every and len(iv.rows) and iv.rows[-1] - iv.rows[0] == len(iv.rows) - 1:    # a run of rows: a view
+                iv.anchors = anchors[iv.rows[0]:iv.rows[-1] + 1]
+                continue
             keep = iv.rows[held[iv.rows]]
             iv.rows, iv.anchors = keep, anchors[keep]
     return intervals
