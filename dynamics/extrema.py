@@ -490,10 +490,11 @@ def _grids(clusters: list[list[_Job]]) -> tuple[list[list[np.ndarray]], list[np.
     new = np.ones(len(vals), dtype=bool)
     new[1:] = (vals[1:] != vals[:-1]) | (of[1:] != of[:-1])
     vals, of = vals[new], of[new]
-    cuts = np.searchsorted(of, np.arange(1, len(clusters)))
+    cuts = [0, *np.searchsorted(of, np.arange(1, len(clusters))).tolist(), len(vals)]
     rows = [g if w else np.array([j.lo]) for j, g, w in zip(jobs, grid, wide.tolist())]
-    starts = np.r_[0, np.cumsum(sizes)]
-    return [rows[a:b] for a, b in zip(starts[:-1], starts[1:])], np.split(vals, cuts)
+    starts = [0, *np.cumsum(sizes).tolist()]
+    return ([rows[a:b] for a, b in zip(starts[:-1], starts[1:])],
+            [vals[a:b] for a, b in zip(cuts[:-1], cuts[1:])])
 
 
 def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) -> None:
