@@ -469,21 +469,26 @@ def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x, _stencil_weights(x)
 
 
-def _grids(clusters: list[list[_Job]]) -> tuple[list[list[np.ndarray]], list[np.ndarray]]:
-    """Each cluster's jobs' readings over their brackets (FIRST_GRID, as np.linspace spaces them), and the
+def _grids(clusters: list[list[_Job]]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each cluster's jobs' readings over their brackets (FIRST_GRID, as np.linspace spaces them; a bracket of one
+    instant: that instant repeated), each job's row after them (a row of FIRST_GRID + 1 instants per job), and the
     instants each cluster reads: those and the jobs' own rows (so that the result is never below the row), in
     order without repeats (as np.unique gives them); all clusters' grids computed at once."""
     jobs = [j for group in clusters for j in group]
     if not jobs:
         return [], []
     lo, hi = np.array([j.lo for j in jobs]), np.array([j.hi for j in jobs])
-    grid = np.arange(FIRST_GRID) * ((hi - lo) / (FIRST_GRID - 1))[:, None] + lo[:, None]
-    grid[:, -1] = hi
+    t_row = np.array([j.t_row for j in jobs])
+    grid = np.empty((len(jobs), FIRST_GRID + 1))
+    grid[:, :FIRST_GRID] = np.arange(FIRST_GRID) * ((hi - lo) / (FIRST_GRID - 1))[:, None] + lo[:, None]
+    grid[:, FIRST_GRID - 1] = hi
     wide = hi > lo
+    grid[~wide, :FIRST_GRID] = lo[~wide, None]
+    grid[:, FIRST_GRID] = t_row
     sizes = np.array([len(group) for group in clusters])
     cid = np.repeat(np.arange(len(clusters)), sizes)
     # every cluster's instants: its wide brackets' grids, its point brackets' one instant, its jobs' rows
-    vals = np.concatenate([grid[wide].ravel(), lo[~wide], [j.t_row for j in jobs]])
+    vals = np.concatenate([grid[wide, :FIRST_GRID].ravel(), lo[~wide], t_row])
     of = np.concatenate([np.repeat(cid[wide], FIRST_GRID), cid[~wide], cid])
     order = np.lexsort((vals, of))
     vals, of = vals[order], of[order]
@@ -491,13 +496,12 @@ def _grids(clusters: list[list[_Job]]) -> tuple[list[list[np.ndarray]], list[np.
     new[1:] = (vals[1:] != vals[:-1]) | (of[1:] != of[:-1])
     vals, of = vals[new], of[new]
     cuts = [0, *np.searchsorted(of, np.arange(1, len(clusters))).tolist(), len(vals)]
-    rows = [g if w else np.array([j.lo]) for j, g, w in zip(jobs, grid, wide.tolist())]
     starts = [0, *np.cumsum(sizes).tolist()]
-    return ([rows[a:b] for a, b in zip(starts[:-1], starts[1:])],
+    return ([grid[a:b] for a, b in zip(starts[:-1], starts[1:])],
             [vals[a:b] for a, b in zip(cuts[:-1], cuts[1:])])
 
 
-def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) -> None:
+def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     """Each job's maximum in its bracket from one pass of readings (`_grids`, each group's table read from one
     anchor row), all jobs together: the polynomial through the STENCIL readings around the best one gives t* and
     the value, and every column there (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far
@@ -505,24 +509,22 @@ def _refine(ready: list[tuple[Interval, list[_Job], list[np.ndarray], dict]]) ->
     jobs, tables, G, A, columns, n_g, ivs, TR = [], [], [], [], [], [], [], []
     for iv, group, grids, table in ready:
         tt = np.asarray(table["t_s"], dtype=float)
-        # a bracket of one instant: its reading repeated
-        g = np.array([x if len(x) == FIRST_GRID else np.full(FIRST_GRID, x[-1]) for x in grids])
         # each job's grid and row (last) among the cluster's readings, in one search
-        at = np.minimum(tt.searchsorted(np.c_[g, [j.t_row for j in group]]), len(tt) - 1)
+        at = np.minimum(tt.searchsorted(grids), len(tt) - 1)
         for k, j in enumerate(group):
             columns.append(np.asarray(table[j.column], dtype=float)[at[k]])
         jobs += group
         tables += [table] * len(group)
         ivs += [iv] * len(group)
-        n_g += [len(x) for x in grids]
-        G.append(g)
+        G.append(grids)
         A.append(at)
         TR.append(tt[at[:, -1]])
     if not jobs:
         return
     G, A, TR = (np.concatenate(a) for a in (G, A, TR))
     F = np.array(columns) * np.array([j.sense for j in jobs])[:, None]
-    P, R, F, FR, n_g = A[:, :-1], A[:, -1], F[:, :-1], F[:, -1], np.array(n_g)
+    G, P, R, F, FR = G[:, :-1], A[:, :-1], A[:, -1], F[:, :-1], F[:, -1]
+    n_g = np.where([j.hi > j.lo for j in jobs], FIRST_GRID, 1)       # a bracket of one instant: one reading
     sense_tie = np.array([j.tie for j in jobs])
     every = np.arange(len(jobs))
     held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row
