@@ -178,7 +178,8 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
         """Series m (2c: F[c], 2c + 1: -F[c]; -inf where not finite) at rows i."""
         g = G[m >> 1, i]
-        return np.where(np.isfinite(g), np.where(m & 1, -g, g), -np.inf)
+        signed = np.where(m & 1, -g, g)
+        return signed if finite else np.where(np.isfinite(g), signed, -np.inf)
 
     tie, ties = ties[:, None], np.repeat(ties, 2)
     # a neighbour in the row's interval with a finite value (else it counts as -inf: below any finite row)
@@ -226,13 +227,15 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     out: list[list[tuple]] = [[] for _ in range(2 * len(G))]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    for m in np.flatnonzero(any_flat & any_peak & (level >= lower - ties)).tolist():
-        c = m >> 1
-        with np.errstate(invalid="ignore"):
-            i = int(np.argmax(flat[c] & ((-G[c] if m & 1 else G[c]) >= level[m] - ties[m])))
+    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - ties))
+    c = constant >> 1
+    with np.errstate(invalid="ignore"):
+        signed = np.where((constant & 1)[:, None], -G[c], G[c])
+        earliest = np.argmax(flat[c] & (signed >= (level - ties)[constant, None]), axis=1)
+    for m, i, value in zip(constant.tolist(), earliest.tolist(), fi(constant, earliest).tolist()):
         k = int(k_of[i])
         at = float(intervals[k].lo) if first[i] else float(ti[i])
-        out[m].append((float(fi(np.array([m]), np.array([i]))[0]), k, int(pos[i]), at, at, True))
+        out[m].append((value, k, int(pos[i]), at, at, True))
     for m, i, value in zip(ms[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
         iv = intervals[int(k_of[i])]
         lo = float(iv.lo) if first[i] else float(ti[i - 1])

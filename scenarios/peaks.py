@@ -172,11 +172,11 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     total = np.zeros(len(names))
     for n, iv in enumerate(intervals):
         first, last = tables[2 * n], tables[2 * n + 1]
-        tt = np.r_[iv.lo, t[iv.rows], iv.hi]
+        tt = np.concatenate([[iv.lo], t[iv.rows], [iv.hi]])
         ff = np.empty((len(names), len(tt)))
-        ff[:, 0] = [np.asarray(first[c], float)[0] for c in names]
+        ff[:, 0] = [first[c][0] for c in names]
         ff[:, 1:-1] = V[:, iv.rows]
-        ff[:, -1] = [np.asarray(last[c], float)[0] for c in names]
+        ff[:, -1] = [last[c][0] for c in names]
         total += np.sum(0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt), axis=1)
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
