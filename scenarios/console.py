@@ -2,7 +2,7 @@
 
 A run's warnings are strings "t = <time> s: <message>" (or a plain message); their kind is the message up to
 its first colon with the numbers taken out, so 52 flank switches make one line with the count and the first
-and last time. SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
+and last time (the line keeps the numbers every message shares, such as a formula's "= 0"). SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
 points those at a temporary file for the length of a run while Python's own streams keep the terminal.
 """
 from __future__ import annotations
@@ -23,13 +23,18 @@ _NUMBER = re.compile(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
 def warning_kind(message: str) -> str:
     """The kind of a warning: its text without the time prefix, up to the first ': ' that ends at least four
     words, numbers as '#'."""
+    return _NUMBER.sub("#", _head(message)).strip()
+
+
+def _head(message: str) -> str:
+    """A warning's text without the time prefix, up to the first ': ' that ends at least four words."""
     parts = _TIME.sub("", message).split(": ")
     head = parts[0]
     for part in parts[1:]:          # a short tag ("thermal: ...") is no kind of its own: take the next clause
         if len(head.split()) >= 4:
             break
         head += ": " + part
-    return _NUMBER.sub("#", head).strip()
+    return head
 
 
 def warning_time(message: str) -> float | None:
@@ -40,16 +45,29 @@ def warning_time(message: str) -> float | None:
 
 def group_warnings(messages: list[str]) -> list[dict]:
     """One dict per kind, in order of first appearance: kind, count, first and last time (s, None if the
-    warnings carry none) and the first message in full."""
+    warnings carry none) and the first message in full. The kind shown keeps the numbers that are the same in
+    every message of the group (a formula's "= 0", a limit) and writes only those that differ as '#'."""
     groups: dict[str, dict] = {}
+    numbers: dict[str, tuple[str, list[str], list[bool]]] = {}     # key -> (first head, its numbers, differ)
     for message in messages:
-        kind = warning_kind(message)
+        key = warning_kind(message)
         t = warning_time(message)
-        g = groups.setdefault(kind, dict(kind=kind, count=0, first_t_s=t, last_t_s=t, first=message))
+        g = groups.setdefault(key, dict(kind=key, count=0, first_t_s=t, last_t_s=t, first=message))
+        head = _head(message)
+        found = _NUMBER.findall(head)
+        if key not in numbers:
+            numbers[key] = (head, found, [False] * len(found))
+        else:
+            _, values, differ = numbers[key]
+            for i, value in enumerate(found):
+                differ[i] = differ[i] or value != values[i]
         g["count"] += 1
         if t is not None:
             g["first_t_s"] = t if g["first_t_s"] is None else min(g["first_t_s"], t)
             g["last_t_s"] = t if g["last_t_s"] is None else max(g["last_t_s"], t)
+    for key, (head, _, differ) in numbers.items():
+        flags = iter(differ)
+        groups[key]["kind"] = _NUMBER.sub(lambda m: "#" if next(flags) else m.group(0), head).strip()
     return list(groups.values())
 
 

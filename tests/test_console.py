@@ -20,7 +20,18 @@ def test_warnings_group_by_kind_with_count_and_time_span():
     line = group_line(groups[0])
     assert "\n" not in line and line.startswith("warning: 3 x normal force changed sign") and "4.2 s" in line
     assert group_line(groups[1]) == f"warning: {msgs[3]}"
-    assert groups[1]["kind"] == "thermal: the pin's Biot number h(V/A)/k = # >= #, so it is not lumped"
+    assert groups[1]["kind"] == "thermal: the pin's Biot number h(V/A)/k = 0.2 >= 0.1, so it is not lumped"
+
+
+def test_grouped_warning_keeps_the_numbers_its_messages_share():
+    """A formula's "= 0" is the same in every message: the grouped line keeps it; the measured angles become '#'."""
+    msgs = [f"t = {t} s: dead point of the crank input (coupler line through the contact point (w . B' = 0)) at "
+            f"crank angle {a} rad: the crank reverses" for t, a in ((2.177, 0.0584047), (3.279, 0.0611))]
+    groups = group_warnings(msgs)
+    assert len(groups) == 1
+    assert groups[0]["kind"] == ("dead point of the crank input (coupler line through the contact point "
+                                 "(w . B' = 0)) at crank angle # rad")
+    assert group_line(groups[0]).startswith(f"warning: 2 x {groups[0]['kind']} between t = 2.177 s and 3.279 s")
 
 
 def test_native_output_is_captured_not_printed(capfd):
