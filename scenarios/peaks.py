@@ -393,8 +393,9 @@ def console_lines(summary: dict) -> list[str]:
     regime = summary.get("regime")
     if regime:
         out.append(f"periodic from t = {regime['from_t_s']:.6g} s after {regime['startup_turns']} start-up turn(s) "
-                   f"(period {regime['period_s']:.6g} s, turns equal to {regime['turn_spread']:.1g}); the peaks are "
-                   "the periodic regime's, the start-up's are beside them in summary.json")
+                   f"(period {regime['period_s']:.6g} s; every turn since equals the last in duration and start speed to "
+                   f"{PERIODIC_RTOL:g}, the durations to {regime['turn_spread']:.1g}); the peaks are the periodic regime's, "
+                   "the start-up's are beside them in summary.json")
     return ([line] if line else []) + out
 
 

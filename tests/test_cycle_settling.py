@@ -85,7 +85,11 @@ def test_heavy_crank_falls_back_to_resolved_and_says_why():
     auto = slow_start("20 kg*m^2", "auto")
     th = auto.summary["thermal"]
     assert auto.success and th["averaging"] == "resolved" and "cycle" not in th
-    assert "not periodic within the turns allotted" in th["averaging_why"]
+    assert "do not repeat closely enough for averaging within the window allotted" in th["averaging_why"]
+    # the criterion it failed, stated against its bound (the peaks' periodic regime is a looser one, docs/thermal.md)
+    error = th["windows_tried"][-1]["averaging_error_estimate"]
+    assert (f"the averaging error {error:.2g} of the temperature rise exceeds the {AVERAGING_TOLERANCE:g} allowed"
+            in th["averaging_why"])
     assert [w for w in auto.summary["warnings"] if "fell back to the resolved run" in w] == [
         "thermal: cycle averaging fell back to the resolved run: " + th["averaging_why"].split("; but ")[1]]
     last = th["windows_tried"][-1]

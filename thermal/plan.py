@@ -463,9 +463,13 @@ class ThermalPlan:
                       f", not decaying ({per.rate:.3g} per turn)")
         outlook = (f"about {needed} turns ({window:.4g} s) would be needed" if needed is not None else
                    "its trend does not yet tell when they will repeat")
-        why = (f"the mechanics is not periodic within the turns allotted (up to {WINDOW_SHARE:g} of the duration, "
-               f"{allotted:.4g} s): {state} (averaging error {estimate:.2g} of the rise, tolerance "
-               f"{AVERAGING_TOLERANCE:g}), {outlook}; so the whole run is resolved")
+        short = ([f"the averaging error {estimate:.2g} of the temperature rise exceeds the {AVERAGING_TOLERANCE:g} "
+                  "allowed"] if not estimate <= AVERAGING_TOLERANCE else []) + (
+                 [f"the last turn's distance {per.error:.2g} from the periodic motion exceeds the "
+                  f"{PERIODICITY_TOLERANCE:g} allowed"] if not per.error <= PERIODICITY_TOLERANCE else [])
+        why = (f"the crank turns do not repeat closely enough for averaging within the window allotted (up to "
+               f"{WINDOW_SHARE:g} of the duration, {allotted:.4g} s): {' and '.join(short)}; {state}, {outlook}; so "
+               "the whole run is resolved")
         return dataclasses.replace(self, averaging="resolved", averaging_why=self.averaging_why + "; but " + why,
                                    mechanics_duration=duration, tried=tried, fallback=why,
                                    warnings=self.warnings + ["thermal: cycle averaging fell back to the resolved run: "
