@@ -127,12 +127,15 @@ class EventSensitivity:
 
 @dataclass
 class Sample:
-    """Requested columns at one output time: values and their gradients (n,) at that fixed time."""
+    """Requested columns at one output time: values, their gradients (n,) at that fixed time and their rates of
+    change in time along the path (the total d/dt: what a sample whose instant moves with the design adds, rate
+    times the instant's derivative)."""
 
     t: float
     mode: str
     values: dict
     grads: dict
+    rates: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -350,8 +353,11 @@ class _Tools:
             return jnp.stack([jnp.asarray(cols[c] if c in cols else jnp.nan, jnp.float64) for c in columns])
 
         def sample(t, z, S, p, P, offset):
-            return jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: everything(t, zz, pp, offset), (z, p), (s, dp)),
-                            in_axes=(1, 1), out_axes=(None, 1))(S, P)
+            values, grads = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: everything(t, zz, pp, offset), (z, p),
+                                                           (s, dp)), in_axes=(1, 1), out_axes=(None, 1))(S, P)
+            rates = jax.jvp(lambda tt, zz: everything(tt, zz, p, offset), (t, z),
+                            (jnp.ones_like(t), jm.rates(t, z, p)))[1]
+            return values, grads, rates
         return jax.jit(sample)
 
 
@@ -416,8 +422,9 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     rows = [e for e in events if e.get("kind") != "rebound absorbed"]
     t = t0
     for ts_j in samples_t[samples_t == t0]:
-        vals, grads = (np.asarray(x) for x in compiled(tools.sample(mode))(t0, z, S, p, P, offset))
-        samples.append(Sample(t0, mode, dict(zip(columns, map(float, vals))), dict(zip(columns, grads[:, :n_used]))))
+        vals, grads, rates = (np.asarray(x) for x in compiled(tools.sample(mode))(t0, z, S, p, P, offset))
+        samples.append(Sample(t0, mode, dict(zip(columns, map(float, vals))), dict(zip(columns, grads[:, :n_used])),
+                              dict(zip(columns, map(float, rates)))))
     for i in range(len(rows) + 1):
         t1 = float(rows[i]["t_s"]) if i < len(rows) else t_end
         k = jmod.index(mode)
@@ -437,9 +444,10 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
                                              f"t = {t:.6g} s: {result_message(out['result'])}")
             sample = compiled(tools.sample(mode)) if len(chunk) else None
             for j, ts_j in enumerate(chunk):
-                vals, grads = (np.asarray(x) for x in sample(float(ts_j), out["z"][j], out["S"][j], p, P, offset))
+                vals, grads, rates = (np.asarray(x) for x in sample(float(ts_j), out["z"][j], out["S"][j], p, P,
+                                                                    offset))
                 samples.append(Sample(float(ts_j), mode, dict(zip(columns, map(float, vals))),
-                                      dict(zip(columns, grads[:, :n_used]))))
+                                      dict(zip(columns, grads[:, :n_used])), dict(zip(columns, map(float, rates)))))
             t, z, S = float(stop), np.asarray(out["z1"]), np.asarray(out["S1"])
             inside = inside[len(chunk):]
             if stop == t1:

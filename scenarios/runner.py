@@ -287,6 +287,20 @@ def settled(the_plan: Plan) -> Plan:
     return _settled(the_plan, None, None)[0]
 
 
+def read_window(the_plan: Plan):
+    """(thermal plan with its `WindowReadings`, the mechanics window's table) of a settled cycle-averaged DAE plan
+    (`settled`): the window integrated as `execute` integrates it and read on its solution as the cycle averaging
+    reads it, for the design sensitivities' traced turn (scenarios/studies/sensitivity_cycle.py); None where the
+    run fails or its window cannot be read."""
+    from mechsim.scenarios.thermal_peaks import window_readings
+    thermal = the_plan.thermal
+    df, events, _, _, failure, traj = _mechanics(the_plan, thermal.mechanics_duration, None, None)
+    if failure is not None or traj is None:
+        return None
+    dense = window_readings(thermal, traj, df, events, the_plan.mechanism, the_plan.settings)
+    return None if dense is None else (dataclasses.replace(thermal, dense=dense), df)
+
+
 def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             integrate: Callable | None = None) -> Result:
     """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
@@ -294,7 +308,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
-    if thermal is not None and thermal.read_turn and thermal.averaging == "cycle" and traj is not None \
+    if thermal is not None and thermal.averaging == "cycle" and traj is not None \
             and failure is None:       # the cycle averaging reads the periodic turn on the window's solution
         from mechsim.scenarios.thermal_peaks import window_readings
         thermal = dataclasses.replace(thermal, dense=window_readings(thermal, traj, df, events, mech, settings))

@@ -1,5 +1,8 @@
-"""Cycle-averaged bulk temperatures at the periodic turn's own output rows, in closed form and array-neutral
-(numpy or jax.numpy), so that jax can differentiate them for the design sensitivities (docs/sensitivity.md).
+"""Cycle-averaged bulk temperatures in closed form and array-neutral (numpy or jax.numpy), so that jax can
+differentiate them for the design sensitivities (docs/sensitivity.md): `dense_turn_bulk` for a turn read on the
+window's solution (a DAE run's, its input polynomial on pieces fixed by the turn and its events), `turn_bulk` for a
+turn read on its output rows (its input linear between them, as a closed-form cycle's derivatives trace it). The
+rest of this docstring describes the latter; `dense_turn_bulk` says what it changes.
 
 The model is thermal/cycle.py's (docs/theory.md §G5): the last full crank turn [a, b) of the mechanics (its ends
 where the drive angle passes angle0 + 2 pi m, linearly interpolated between output rows, `turn_boundaries`) gives
@@ -23,6 +26,7 @@ so that the periodic turn's peak is the run's (docs/sensitivity.md, "Cycle avera
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -197,3 +201,76 @@ def turn_bulk(data: dict, angle_edges, gen_edges, pin_edges, u_edges, u_inner, n
     since = t_inner + data["periods"] * P - a
     mean = mean_response(lam, V, Vinv, C, s, B, u_bar, T_a - V @ Tp[0], since, xp)
     return mean + Tp[1:-1] @ V.T, means
+
+
+def phis(x, count: int, xp=np) -> list:
+    """[phi_1(x), ..., phi_count(x)], phi_k(x) = sum_m x^m / (m + k)! = int_0^1 e^{x (1 - s)} s^(k-1)/(k-1)! ds: by
+    their series below SERIES_BELOW, else phi_1 = (e^x - 1)/x and phi_(k+1) = (phi_k - 1/k!)/x (Hochbruck &
+    Ostermann 2010, "Exponential integrators", Acta Numerica 19, eq. (2.10))."""
+    small = xp.abs(x) < SERIES_BELOW
+    safe = xp.where(small, 1.0, x)
+    out, closed, fact = [], xp.expm1(safe) / safe, 1.0
+    for k in range(1, count + 1):
+        series, term = 0.0, 1.0
+        for m in range(14):
+            term_k = term / math.factorial(m + k)
+            series = series + term_k * x ** m if m else series + term_k
+        out.append(xp.where(small, series, closed))
+        fact *= k
+        closed = (closed - 1.0 / fact) / safe
+    return out
+
+
+def lagrange_monomials(nodes: np.ndarray) -> np.ndarray:
+    """L with l_i(s) = sum_j L[i, j] s^j the Lagrange basis through `nodes` (l_i(nodes[k]) = delta_ik)."""
+    return np.linalg.inv(np.vander(np.asarray(nodes, float), increasing=True).T)
+
+
+def dense_turn_bulk(x: dict, data: dict, network: dict, u_nodes, xp=np):
+    """Network states (rows = the instants data["times"] of the periodic turn, each at data["periods"] whole periods
+    later) of the cycle-averaged solution whose turn input is read on the window's solution (thermal/plan.py
+    `ThermalPlan._read_input`): polynomial through its values at the Gauss-Legendre nodes (data["nodes"] on [0, 1]) of
+    each piece between x["edges"] (the pieces fixed by the turn and its events, `input_pieces`), and the turn's means.
+
+    x: ends [a, b] (where the drive passes its start angle), gen, pin (the generated and pin energies there), start
+    (the network's states at a), edges (the pieces' ends in time, padded at b by zero-length pieces); u_nodes (pieces
+    x nodes x inputs): the input there; network: capacity C, conductance K (dense), source s, input_matrix B.
+
+    As `turn_bulk`, T = M + T_p with the mean curve M from T(a) - T_p(a) under the cycle-mean input, exact in the
+    modes, and the ripple T_p the periodic response to u - mean(u): for a piece of length h with modal input
+    sum_j c_j s^j (s in [0, 1]) the zero-state response after theta h is h sum_j c_j j! theta^(j+1) phi_(j+1)(lambda h
+    theta) (`phis`), so the ripple is exact for the polynomial input and the mean is its Gauss-Legendre sum, as
+    thermal/cycle.py `bulk_response` integrates the same input to its quadrature error."""
+    a, b = x["ends"][0], x["ends"][1]
+    gen, pin = x["gen"], x["pin"]
+    P = b - a
+    energy = gen[1] - gen[0]
+    Q, gamma = energy / P, (pin[1] - pin[0]) / energy
+    u_bar = xp.stack([gamma * Q, (1.0 - gamma) * Q])
+    C, K, s, B = network["capacity"], network["conductance"], network["source"], network["input_matrix"]
+    lam, V, Vinv = modes(C, K, xp)
+    sigma = x["edges"] - a
+    h = sigma[1:] - sigma[:-1]
+    weights = xp.asarray(data["weights"])
+    mean_u = xp.sum(h[:, None] * xp.einsum("i,kim->km", weights, u_nodes), axis=0) / P
+    g = (u_nodes - mean_u[None, None, :]) @ (Vinv @ (B / C[:, None])).T                # pieces x nodes x modes
+    c = xp.einsum("ij,kin->kjn", xp.asarray(data["lagrange"]), g)                        # monomial coefficients
+    count = c.shape[1]
+    factorial = [float(math.factorial(j)) for j in range(count)]
+    xs = lam[None, :] * h[:, None]
+    ph = phis(xs, count, xp)
+    f = h[:, None] * sum(c[:, j, :] * factorial[j] * ph[j] for j in range(count))
+    weights_end = xp.exp(lam[None, :] * (P - sigma[1:, None]))
+    Z = xp.concatenate([xp.zeros((1, lam.shape[0])),
+                        xp.exp(lam[None, :] * (sigma[1:, None] - P)) * xp.cumsum(weights_end * f, axis=0)], axis=0)
+    z = xp.exp(lam[None, :] * sigma[:, None]) * (Z[-1] / (-xp.expm1(lam * P)))[None, :] + Z
+    k = xp.asarray(data["piece"])
+    hk = h[k]
+    theta = (data["times"] - a - sigma[k]) / hk
+    xt = lam[None, :] * (hk * theta)[:, None]
+    pt = phis(xt, count, xp)
+    ripple = xp.exp(xt) * z[k] + hk[:, None] * sum(
+        c[k, j, :] * factorial[j] * theta[:, None] ** (j + 1) * pt[j] for j in range(count))
+    since = data["times"] + data["periods"] * P - a
+    mean = mean_response(lam, V, Vinv, C, s, B, u_bar, x["start"] - V @ z[0], since, xp)
+    return mean + ripple @ V.T, {"t_start": a, "period": P, "heat_mean": Q, "share_mean": gamma}

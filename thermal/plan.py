@@ -75,6 +75,27 @@ class WindowReadings:
     #: what was read of the turn, by what it was read for (finish and the located peaks read the same turn)
     memo: dict = field(default_factory=dict)
 
+def input_pieces(a: float, P: float, breaks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(edges, lo, hi) of the pieces the periodic turn [a, a + P) reads its heat input on (`ThermalPlan._read_input`):
+    the turn cut at the breaks inside it (the window's events), each stretch [lo, hi] between cuts split evenly
+    into ceil((hi - lo) INPUT_PIECES / P) pieces. edges: the pieces' ends in time; lo, hi: for each edge, the ends
+    of its stretch, edge = lo + w (hi - lo) with w fixed by the split (the design sensitivities move the edges with
+    the cuts so)."""
+    cuts = np.unique(np.r_[a, [b for b in breaks if a < b < a + P], a + P])
+    parts = [np.linspace(lo, hi, max(1, int(np.ceil((hi - lo) * INPUT_PIECES / P))) + 1)
+             for lo, hi in zip(cuts[:-1], cuts[1:])]
+    edges = np.concatenate([parts[0]] + [p[1:] for p in parts[1:]])
+    lo = np.concatenate([[cuts[0]]] + [np.full(len(p) - 1, c) for p, c in zip(parts, cuts[:-1])])
+    hi = np.concatenate([[cuts[1]]] + [np.full(len(p) - 1, c) for p, c in zip(parts, cuts[1:])])
+    return edges, lo, hi
+
+
+def input_nodes() -> np.ndarray:
+    """The INPUT_NODES Gauss-Legendre nodes on [0, 1] at which each piece of the periodic turn reads its input."""
+    x, _ = np.polynomial.legendre.leggauss(INPUT_NODES)
+    return 0.5 * (x + 1.0)
+
+
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
     as assigning them one at a time would, but in one step (each insertion into a frame has a cost of its own)."""
@@ -129,13 +150,10 @@ class ThermalPlan:
     warnings: list[str] = field(default_factory=list)
     tried: tuple = ()          # the earlier mechanics windows of cycle mode, each with its periodicity (`extend`)
     fallback: str = ""         # why cycle averaging fell back to the resolved run (`extend`)
-    #: a DAE window's `WindowReadings` (set by the runner once the window has run, where `read_turn`; a closed form
-    #: reads its own)
+    #: a DAE window's `WindowReadings`, set by the runner once a cycle-averaged window has run (a closed form reads
+    #: its own); without them (a window that could not be read, or before it ran: `extend`'s estimate) the turn is
+    #: read linear between the window's rows
     dense: WindowReadings | None = None
-    #: whether a DAE window's periodic turn is read on its solution (`dense`) rather than linear between its rows:
-    #: off while the design sensitivities trace the rows' input (thermal/cycle_exact.py), so that what they
-    #: differentiate is what the run reports (docs/thermal.md, "Reported temperatures")
-    read_turn: bool = False
 
     @property
     def extension(self):
@@ -661,13 +679,10 @@ class ThermalPlan:
         rows; the quadratures of the mean and the ripple split at their ends (thermal/cycle.py `bulk_response`)."""
         if ("input", a, P) in readings.memo:
             return readings.memo[("input", a, P)]
-        cuts = np.unique(np.r_[a, [b for b in readings.breaks if a < b < a + P], a + P])
-        edges = np.unique(np.concatenate([np.linspace(lo, hi, max(1, int(np.ceil((hi - lo) * INPUT_PIECES / P))) + 1)
-                                          for lo, hi in zip(cuts[:-1], cuts[1:])])) - a
+        edges = input_pieces(a, P, readings.breaks)[0] - a
         h = np.diff(edges)
-        x, _ = np.polynomial.legendre.leggauss(INPUT_NODES)
-        x = 0.5 * (x + 1.0)
-        frame = readings.read(a + (edges[:-1, None] + h[:, None] * x[None, :]).ravel())
+        x = input_nodes()
+        frame = readings.memo[("frame", a, P)] = readings.read(a + (edges[:-1, None] + h[:, None] * x[None, :]).ravel())
         u, _, _ = self.setup.extension.inputs_numeric(self.mech.contact_state(frame))
         u = u.reshape(len(u), len(h), INPUT_NODES)
         # Lagrange basis through the nodes: weights[j] = 1 / prod_{m != j} (x_j - x_m)

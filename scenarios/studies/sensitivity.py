@@ -34,9 +34,11 @@ import numpy as np
 import pandas as pd
 
 from mechsim.scenarios.studies.sensitivity_cycle import (CYCLE_COLUMNS, closed_form_turn, cycle_bulk_samples,
-                                                         cycle_temperatures, cycle_window, event_crosses_turn_row,
+                                                         cycle_temperatures, cycle_window, dense_bulk_samples,
+                                                         dense_jump, dense_turn, event_crosses_turn_row,
                                                          event_row_trend, switch_correction, period_gradient,
-                                                         repetition_crosses_end, repetition_trend, turn_peak)
+                                                         repetition_crosses_end, repetition_trend, row_repetition,
+                                                         turn_peak)
 from mechsim.scenarios.studies.sensitivity_map import (HEAT, PEAKS, THERMAL_PEAKS, ParameterMap, check_request,
                                                        extremum, make_seed, named_peak, scenario_value,
                                                        traced_quantities)
@@ -247,8 +249,11 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
 
     named = {q: side for q in of if (side := named_peak(q))}
     peak_columns = {**PEAKS, **THERMAL_PEAKS, **{q: column for q, (column, _) in named.items()}}
-    turn = cycle_temperatures(plan, df) if cycle else None
-    if cycle and turn is None:
+    # a DAE run reads its periodic turn on the window's solution, and so does the traced bulk (`dense_turn`); a
+    # closed form's turn is traced on the window's rows (`cycle_temperatures`)
+    dense = dense_turn(run_plan) if cycle and run_plan.method == "dae" and ext is not None else None
+    turn = cycle_temperatures(plan, df) if cycle and dense is None else None
+    if cycle and turn is None and dense is None:
         raise ScenarioError("thermal.averaging", "the mechanics window holds no full crank turn to average")
     if turn is not None and run_plan.method == "closed-form":
         turn = closed_form_turn(run_plan, turn)
@@ -289,12 +294,21 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if turn is not None and thermal_times and ext is not None:
         # the cycle-averaged bulk depends on every row of the turn (its input) and on the rows at its ends
         sample_times = sorted(set(sample_times) | {float(x) for x in df["t_s"].to_numpy(float)[turn["layout"].rows]})
+    # the located peaks after the window: their instant in the periodic turn, and the whole periods after it
+    repeats = {t: round((e["t_s"] - e["sample_t_s"]) / dense["period"]) for q, e in located.items()
+               if q in THERMAL_PEAKS for t in e["samples"]} if dense is not None else {}
+    repeats = {t: m for t, m in repeats.items() if m > 0}
+    if repeats:       # the bulk there depends on the turn's ends and on its input at every node
+        sample_times = sorted(set(sample_times) | set(dense["sample_times"]))
     wall = time.perf_counter()
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
                               t_end, si["output_step"], angle0, speed0, ext, ext_initial)
     by_time = {s.t: s for s in path.samples}
     if turn is not None and thermal_times and ext is not None:       # (the flash model's base is the ambient)
         cycle_bulk_samples(plan, df, turn, by_time, seed, model, [by_time[t] for t in thermal_times], path.stats)
+    if repeats:
+        dense_bulk_samples(plan, dense, by_time, seed, model, [by_time[t] for t in repeats], repeats, path.events,
+                           path.stats)
     if thermal_times:
         thermal_samples(plan, df, events, path, [by_time[t] for t in thermal_times], flash)
     sens_wall = time.perf_counter() - wall
@@ -340,10 +354,19 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                                     "\"Cycle averaging\")")
                 else:
                     rows_trend = event_row_trend(plan, turn, t_w, path.events)
-                note = repetition_crosses_end(q, wrt, relative, turn, t_w, dP, change)
+                m, P, at, jump = row_repetition(turn, t_w)
+                note = repetition_crosses_end(q, wrt, relative, m, P, at, jump, turn["duration"], dP, change)
                 if note:
                     warnings.append(note)
-                trends[q] = g + repetition_trend(turn, t_w, dP) + rows_trend
+                trends[q] = g + repetition_trend(m, P, jump, dP) + rows_trend
+            if q == "peak_temp_contact_C" and located[q]["samples"][0] in repeats:
+                e = located[q]
+                m, P, dP = repeats[e["samples"][0]], dense["period"], dense["period_grad"]
+                jump = dense_jump(dense, by_time[e["samples"][0]])
+                note = repetition_crosses_end(q, wrt, relative, m, P, e["t_s"], jump, dense["duration"], dP, change)
+                if note:
+                    warnings.append(note)
+                trends[q] = g + repetition_trend(m, P, jump, dP)
         elif q in named:
             column, side = named[q]
             entry = result.summary.get("peaks", {}).get(column)
@@ -379,8 +402,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
                 if note and q == "peak_temp_contact_C" and ext is not None and "traced_temp_contact_C" not in turn:
                     warnings.append(note)
                 if q == "peak_temp_contact_C" and ext is not None:
-                    note = repetition_crosses_end(q, wrt, relative, turn, first.t, period_gradient(turn, by_time),
-                                                  change)
+                    m, P, at, jump = row_repetition(turn, first.t)
+                    note = repetition_crosses_end(q, wrt, relative, m, P, at, jump, turn["duration"],
+                                                  period_gradient(turn, by_time), change)
                     if note:
                         warnings.append(note)
             if len(rows) > 1:

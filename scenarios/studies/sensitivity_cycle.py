@@ -1,5 +1,7 @@
-"""Cycle averaging (thermal.averaging = "cycle") for the design sensitivities: the periodic turn's temperatures
-at their last time in the run and the traced cycle-averaged bulk (docs/sensitivity.md, "Cycle averaging")."""
+"""Cycle averaging (thermal.averaging = "cycle") for the design sensitivities: the traced cycle-averaged bulk of a
+DAE run's turn read on its window's solution (`dense_turn`, `dense_bulk_samples`), and at a prescribed speed the
+periodic turn's rows at their last time in the run (`cycle_temperatures`, `cycle_bulk_samples`)
+(docs/sensitivity.md, "Cycle averaging")."""
 from __future__ import annotations
 
 import dataclasses
@@ -206,17 +208,23 @@ def period_gradient(turn: dict, by_time: dict) -> np.ndarray:
     return ends[1] - ends[0]
 
 
-def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], turn: dict, t_row: float,
-                           period_grad: np.ndarray, change: float):
-    """A warning where the last repetition t_k + m_k P of the peak's row crosses the run's end within the stated
-    change of a value (d(t_k + m_k P) = m_k dP: t_k is a fixed output row): there the row's last repetition leaves
-    the run (or one more enters), m_k changes and the value jumps by one period's rise of the bulk (the difference
-    to the row's previous repetition, stated); the derivative is that of the row at fixed m_k."""
+def row_repetition(turn: dict, t_row: float) -> tuple[int, float, float, float]:
+    """(m, P, time, jump) of the periodic turn's row at t_row (`cycle_temperatures`): its whole periods to its last
+    repetition in the run, the period, that repetition's time, and the contact temperature's rise from the previous
+    repetition (one period's rise of the bulk)."""
     layout = turn["layout"]
     k = int(np.argmin(np.abs(layout.t[turn["rows"]] - t_row)))
-    m, P = int(layout.periods[k]), turn["period"]
-    time = float(turn["t_s"][k])
-    leave, enter = turn["duration"] - time, time + P - turn["duration"]      # both >= 0
+    return (int(layout.periods[k]), float(turn["period"]), float(turn["t_s"][k]),
+            float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k]))
+
+
+def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], m: int, P: float, time: float, jump: float,
+                           duration: float, period_grad: np.ndarray, change: float):
+    """A warning where the peak's instant t_w + m P (t_w held in the periodic turn, m whole periods after it, P the
+    period) crosses the run's end within the stated change of a value (d(t_w + m P) = m dP): there the last repetition
+    leaves the run (or one more enters), m changes and the value jumps by one period's rise of the bulk (`jump`, the
+    difference to the previous repetition, stated); the derivative is that at a fixed m."""
+    leave, enter = duration - time, time + P - duration      # both >= 0
     found = {}
     for key, d in zip(wrt, period_grad):
         if d != 0:
@@ -226,25 +234,20 @@ def repetition_crosses_end(q: str, wrt: list[str], relative: list[bool], turn: d
     if not found:
         return None
     rel = dict(zip(wrt, relative))
-    jump = float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k])
-    return (f"{q}: the last repetition of its row in the run (t = {time:.6g} s, {leave:.3g} s before the end) "
+    return (f"{q}: the last repetition of its instant in the run (t = {time:.6g} s, {leave:.3g} s before the end) "
             f"crosses the run's end within the stated change, where the value jumps by about {jump:.2g} K (one "
-            "period's rise of the bulk; the derivative is that of the row at a fixed repetition): "
+            "period's rise of the bulk; the derivative is that at a fixed repetition): "
             + ", ".join(f"{key} " + (f"{d * 100:.2g}%" if rel[key] else f"{d:.2g} (absolute)")
                         for key, d in found.items()))
 
 
-def repetition_trend(turn: dict, t_row: float, period_grad: np.ndarray) -> np.ndarray:
+def repetition_trend(m: int, P: float, jump: float, period_grad: np.ndarray) -> np.ndarray:
     """The trend of the cycle-averaged run's peak across repetitions less its derivative, per scaled value
     (docs/sensitivity.md, "A thermal sizing"): the peak rides on the bulk's rise at its last repetition
     t_w + m P <= duration, which a change dP of the period moves by m dP; each time it crosses the run's end one
-    repetition more (or less) is in the run and the peak jumps by the bulk's rise over a period, dT_P (the row's
-    value less its previous repetition's). So the peak is a sawtooth in any value that moves the period, whose teeth
-    have the derivative's slope and whose trend adds -dT_P m dP / P: what a change of more than a few teeth sees."""
-    layout = turn["layout"]
-    k = int(np.argmin(np.abs(layout.t[turn["rows"]] - t_row)))
-    m, P = float(layout.periods[k]), float(turn["period"])
-    jump = float(turn["temp_contact_C"][k] - turn["temp_contact_previous_C"][k])
+    repetition more (or less) is in the run and the peak jumps by the bulk's rise over a period, dT_P (`jump`). So the
+    peak is a sawtooth in any value that moves the period, whose teeth have the derivative's slope and whose trend
+    adds -dT_P m dP / P: what a change of more than a few teeth sees."""
     return -jump * m * np.asarray(period_grad, dtype=float) / P
 
 
@@ -276,6 +279,21 @@ def event_row_trend(plan, turn: dict, t_row: float, events) -> np.ndarray:
 _CYCLE_FNS: dict = {}
 
 
+def _input_fn(ext, distribution: str, pmap):
+    """(x, cols, engaged) -> the network's inputs (rows x inputs) from the mechanism's contact columns and the heat
+    rate at each row (`ParameterMap.contact_row`, thermal/coupling.py `heat_inputs`), zero where not engaged."""
+    import jax.numpy as jnp
+
+    from mechsim.thermal.coupling import heat_inputs
+    nc = len(pmap.contact_columns)
+
+    def inputs(x, cols, engaged):
+        contact = {**pmap.contact_row([cols[:, i] for i in range(nc)], x["R"], jnp), "heat_rate": cols[:, nc]}
+        u, _, _ = heat_inputs(contact, x.__getitem__, ext.inputs, distribution, jnp)
+        return jnp.where(engaged[:, None], jnp.stack(u, axis=1), 0.0)
+    return inputs
+
+
 def _cycle_bulk_fn(ext, distribution: str, pmap):
     """(x, data) -> (bulk, its jvp along the columns of dx) of the cycle-averaged bulk as a function of the traced
     values x (thermal/cycle_exact.py `turn_bulk`, the heat input of each row by thermal/coupling.py `heat_inputs`),
@@ -284,19 +302,13 @@ def _cycle_bulk_fn(ext, distribution: str, pmap):
     import jax
     import jax.numpy as jnp
 
-    from mechsim.thermal.coupling import heat_inputs
     from mechsim.thermal.cycle_exact import turn_bulk
     B = np.asarray(ext.system.input_matrix)
     key = (ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
-    nc = len(pmap.contact_columns)
     fn = _CYCLE_FNS.get(key)
     if fn is not None:
         return fn, False
-
-    def inputs(x, cols, engaged):
-        contact = {**pmap.contact_row([cols[:, i] for i in range(nc)], x["R"], jnp), "heat_rate": cols[:, nc]}
-        u, _, _ = heat_inputs(contact, x.__getitem__, ext.inputs, distribution, jnp)
-        return jnp.where(engaged[:, None], jnp.stack(u, axis=1), 0.0)
+    inputs = _input_fn(ext, distribution, pmap)
 
     def bulk(x, data):
         network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
@@ -310,6 +322,35 @@ def _cycle_bulk_fn(ext, distribution: str, pmap):
     return fn, True
 
 
+def _network_parameters(plan, seed, model, n: int, primal: dict, tangent: dict) -> None:
+    """Add to primal/tangent (n tangents, padded) the heat share's parameters, the contact radius R and the network's
+    capacity, conductance and source from the model's parameters, checked to be the run's network."""
+    from mechsim.dynamics.sensitivity import SensitivityUnavailable
+    from mechsim.thermal.coupling import SHARE_PARAMETERS
+    ext = plan.thermal.setup.extension
+    sysm = ext.system
+    names = list(model.parameter_names)
+    values = {**plan.mechanism.parameter_values(), **ext.parameter_values()}
+
+    def parameter(name):
+        return values[name], np.pad(seed.dp[names.index(name)], (0, n - seed.n))
+    for name in SHARE_PARAMETERS + ("R",):
+        primal[name], tangent[name] = parameter(name)
+    size = sysm.size
+    for key, prefix, shape in (("capacity", "th_C_", (size,)), ("conductance", "th_K_", (size, size)),
+                               ("source", "th_s_", (size,))):
+        x, dx = np.zeros(shape), np.zeros(shape + (n,))
+        for idx in np.ndindex(*shape):
+            name = prefix + "_".join(map(str, idx))
+            if name in values:
+                x[idx], dx[idx] = parameter(name)
+        primal[key], tangent[key] = x, dx
+    reference = _network(sysm)
+    for key in ("capacity", "conductance", "source"):
+        if not np.allclose(primal[key], reference[key], rtol=1e-13, atol=0.0):
+            raise SensitivityUnavailable(f"the network's {key} from the model's parameters is not the run's")
+
+
 def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, model, samples: list,
                         stats: dict) -> None:
     """Replace the bulk temperatures (values, gradients) of the samples at the turn's rows by the cycle-averaged ones:
@@ -321,7 +362,6 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
 
     from mechsim.dynamics.sensitivity import COLUMNS, SensitivityUnavailable
     from mechsim.thermal.contact_row import KELVIN
-    from mechsim.thermal.coupling import SHARE_PARAMETERS
     setup = plan.thermal.setup
     ext, sysm, layout = setup.extension, setup.system, turn["layout"]
     t = layout.t
@@ -330,12 +370,6 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
     n_used = seed.n
     n = COLUMNS * -(-n_used // COLUMNS)
     engaged = df["mode"].to_numpy() == "engaged"
-    names = list(model.parameter_names)
-    values = {**plan.mechanism.parameter_values(), **ext.parameter_values()}
-
-    def parameter(name):
-        return values[name], np.pad(seed.dp[names.index(name)], (0, n - n_used))
-
     def columns(cols, rows, contact=True):
         """The run's columns (primal) and the samples' gradients (tangent, rows x columns x n) at `rows`; with
         `contact`, rows without contact get 1 and no gradient (their heat input is masked to zero)."""
@@ -362,21 +396,7 @@ def cycle_bulk_samples(plan, df: pd.DataFrame, turn: dict, by_time: dict, seed, 
         tangent["start"][r, :, :n_used] = [by_time[float(t[i])].grads[name] for name in sysm.state_names]
     primal["cols_edges"], tangent["cols_edges"] = columns(inputs, edges)
     primal["cols_inner"], tangent["cols_inner"] = columns(inputs, layout.padded)
-    for name in SHARE_PARAMETERS + ("R",):
-        primal[name], tangent[name] = parameter(name)
-    size = sysm.size
-    for key, prefix, shape in (("capacity", "th_C_", (size,)), ("conductance", "th_K_", (size, size)),
-                               ("source", "th_s_", (size,))):
-        x, dx = np.zeros(shape), np.zeros(shape + (n,))
-        for idx in np.ndindex(*shape):
-            name = prefix + "_".join(map(str, idx))
-            if name in values:
-                x[idx], dx[idx] = parameter(name)
-        primal[key], tangent[key] = x, dx
-    reference = _network(sysm)
-    for key in ("capacity", "conductance", "source"):
-        if not np.allclose(primal[key], reference[key], rtol=1e-13, atol=0.0):
-            raise SensitivityUnavailable(f"the network's {key} from the model's parameters is not the run's")
+    _network_parameters(plan, seed, model, n, primal, tangent)
     data = {**layout.data(), "engaged_edges": engaged[edges], "engaged_inner": engaged[layout.padded]}
     x = {k: jnp.asarray(v, jnp.float64) for k, v in primal.items()}
     dx = {k: jnp.moveaxis(jnp.asarray(v, jnp.float64), -1, 0) for k, v in tangent.items()}
@@ -424,3 +444,179 @@ def event_crosses_turn_row(q: str, wrt: list[str], relative: list[bool], turn: d
             "heat input (linear between rows) and with it the cycle-averaged bulk jump by about one row's heat: "
             + ", ".join(f"{key} " + (f"{d * 100:.2g}%" if rel[key] else f"{d:.2g} (absolute)")
                         + f" ('{kind}' at t = {te:.6g} s)" for key, (d, kind, te) in found.items()))
+
+
+# ------------------------------------------------------------------------------ the turn read on the solution
+#: the traced turn's pieces are padded to a multiple of this (zero-length pieces at its end), its instants to a
+#: multiple of SAMPLES_PAD, so that one compilation serves the designs near one another
+PIECES_PAD = 256
+SAMPLES_PAD = 8
+
+
+def dense_turn(run_plan) -> dict | None:
+    """The periodic turn of a cycle-averaged DAE run as the run reads it on its window's solution (thermal/plan.py
+    `ThermalPlan._read_input`, docs/sensitivity.md "Cycle averaging"): its ends a, b where the drive passes its start
+    angle, the pieces its heat input is read on (fixed by the turn and its events, `input_pieces`) with their
+    Gauss-Legendre nodes, and the window's columns read there and at the ends (the primal values of the traced
+    bulk: the run's own). None where the window cannot be read or holds no full turn. `sample_times`: the instants
+    the sensitivity pass must sample (the ends, then every node)."""
+    from mechsim.scenarios import runner
+    from mechsim.thermal.plan import input_nodes, input_pieces
+    got = runner.read_window(run_plan)
+    if got is None:
+        return None
+    thermal, window = got
+    solution = thermal.cycle_solution(window)
+    if solution is None or "input" not in solution:
+        return None
+    a, P = solution["means"].t_start, solution["means"].period
+    readings = thermal.dense
+    edges, lo, hi = input_pieces(a, P, readings.breaks)
+    x = input_nodes()
+    rel = edges - a
+    nodes = a + (rel[:-1, None] + np.diff(rel)[:, None] * x[None, :])        # as `_read_input` reads them
+    ends = np.array([a, a + P])
+    return {"thermal": thermal, "solution": solution, "t_start": a, "period": P, "edges": edges, "lo": lo, "hi": hi,
+            "node_offsets": x, "nodes": nodes, "frame": readings.memo[("frame", a, P)],
+            "ends_frame": readings.read(ends), "duration": float(run_plan.scenario.si["duration"]),
+            "sample_times": [float(t) for t in ends] + [float(t) for t in nodes.ravel()]}
+
+
+def _dense_bulk_fn(ext, distribution: str, pmap):
+    """(x, dx, data) -> (bulk, its jvp along the leading axis of dx) of `dense_turn_bulk` (thermal/cycle_exact.py)
+    with the input from the contact columns at the nodes (`_input_fn`), jitted once per network, distribution and
+    contact row."""
+    import jax
+    import jax.numpy as jnp
+
+    from mechsim.thermal.cycle_exact import dense_turn_bulk
+    B = np.asarray(ext.system.input_matrix)
+    key = ("dense", ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
+    fn = _CYCLE_FNS.get(key)
+    if fn is not None:
+        return fn, False
+    inputs = _input_fn(ext, distribution, pmap)
+
+    def bulk(x, data):
+        network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
+                   "input_matrix": jnp.asarray(B)}
+        pieces, nodes = data["piece_shape"].shape
+        u = inputs(x, x["cols"], data["engaged"]).reshape(pieces, nodes, -1)
+        return dense_turn_bulk(x, data, network, u, jnp)[0]
+
+    def both(x, dx, data):
+        return bulk(x, data), jax.vmap(lambda d: jax.jvp(lambda y: bulk(y, data), (x,), (d,))[1])(dx)
+    fn = _CYCLE_FNS[key] = jax.jit(both)
+    return fn, True
+
+
+def dense_bulk_samples(plan, turn: dict, by_time: dict, seed, model, samples: list, periods: dict, events,
+                       stats: dict) -> None:
+    """Replace the bulk temperatures (values, gradients) of `samples` (instants t_w of the periodic turn, each
+    standing for t_w + m P, m = periods[t_w]) by the cycle-averaged bulk of the turn read on the solution
+    (`dense_turn`, thermal/cycle_exact.py `dense_turn_bulk`), pushed forward (jvp) along the total derivatives of what
+    it is made of: the turn's ends, da = -dphi(a)/phi'(a) (the implicit-function rule on the drive angle, read on
+    the traced path at a); the energies and the network's states there, dX(a) = X_p(a) + X'(a) da; the pieces'
+    ends, each fixed between two cuts (the turn's ends and its events, whose times' derivatives the path gives) so
+    moving with them; the contact columns at every node, moving with its piece, X_p + X' dt_node; and the network's
+    and heat share's parameters. The primal values are the run's own readings; the jax evaluation must give the
+    run's cycle-averaged bulk (`ThermalPlan.cycle_states`) at t_w + m P (to 1e-9 relative)."""
+    import jax.numpy as jnp
+
+    from mechsim.dynamics.sensitivity import COLUMNS, SensitivityUnavailable
+    from mechsim.thermal.cycle_exact import lagrange_monomials
+    setup = plan.thermal.setup
+    ext, sysm = setup.extension, setup.system
+    n_used = seed.n
+    n = COLUMNS * -(-n_used // COLUMNS)
+    a, P = turn["t_start"], turn["period"]
+
+    def grad(s, c):
+        return np.pad(np.asarray(s.grads[c], float), (0, n - n_used))
+    ends = [by_time[t] for t in turn["sample_times"][:2]]
+    d_ends = [-grad(s, "crank_angle_rad") / s.rates["crank_angle_rad"] for s in ends]
+    # the cuts' derivatives: the turn's ends and the events between them (the traced path's, matched by time)
+    cuts = {a: d_ends[0], a + P: d_ends[1]}
+    for c in np.unique(np.concatenate([turn["lo"], turn["hi"]])):
+        if float(c) in cuts:
+            continue
+        e = min(events, key=lambda ev: abs(ev.t - c), default=None)
+        if e is None or abs(e.t - c) > 1e-6 * P:
+            raise SensitivityUnavailable(f"no traced event at the turn's break t = {c:.9g} s")
+        cuts[float(c)] = np.pad(np.asarray(e.dt, float), (0, n - n_used))
+    edges, lo, hi = turn["edges"], turn["lo"], turn["hi"]
+    w = ((edges - lo) / (hi - lo))[:, None]
+    d_edges = np.array([cuts[float(x)] for x in lo]) * (1 - w) + np.array([cuts[float(x)] for x in hi]) * w
+    xo = turn["node_offsets"][None, :, None]
+    d_nodes = (d_edges[:-1, None, :] * (1 - xo) + d_edges[1:, None, :] * xo).reshape(-1, n)
+    pmap = plan.mechanism.parameter_map()
+    names = pmap.contact_columns + ("friction_power_W",)
+    frame = turn["frame"]
+    node_t = turn["sample_times"][2:]
+    cols = frame[list(names)].to_numpy(float)
+    d_cols = np.zeros(cols.shape + (n,))
+    for r, t in enumerate(node_t):
+        s = by_time[t]
+        d_cols[r] = [grad(s, c) + s.rates[c] * d_nodes[r] for c in names]
+    engaged = frame["mode"].to_numpy() == "engaged"
+    primal, tangent = {"ends": np.array([a, a + P]), "cols": np.where(engaged[:, None], cols, 1.0)}, {}
+    tangent["ends"] = np.array(d_ends)
+    tangent["cols"] = np.where(engaged[:, None, None], d_cols, 0.0)
+    at_ends = turn["ends_frame"]
+    for key, col in (("gen", "heat_generated_J"), ("pin", "heat_pin_J")):
+        primal[key] = at_ends[col].to_numpy(float)
+        tangent[key] = np.array([grad(s, col) + s.rates[col] * d for s, d in zip(ends, d_ends)])
+    state_names = list(sysm.state_names)
+    primal["start"] = at_ends[state_names].to_numpy(float)[0]
+    tangent["start"] = np.array([grad(ends[0], c) + ends[0].rates[c] * d_ends[0] for c in state_names])
+    primal["edges"], tangent["edges"] = edges, d_edges
+    _network_parameters(plan, seed, model, n, primal, tangent)
+    # padding: zero-length pieces at b, the instants repeated
+    pieces, nodes = turn["nodes"].shape
+    extra = PIECES_PAD * -(-pieces // PIECES_PAD) - pieces
+    primal["edges"] = np.concatenate([edges, np.full(extra, edges[-1])])
+    tangent["edges"] = np.concatenate([d_edges, np.repeat(d_edges[-1:], extra, axis=0)])
+    primal["cols"] = np.concatenate([primal["cols"], np.ones((extra * nodes, cols.shape[1]))])
+    tangent["cols"] = np.concatenate([tangent["cols"], np.zeros((extra * nodes,) + d_cols.shape[1:])])
+    times = np.array([s.t for s in samples], float)
+    m = np.array([periods[s.t] for s in samples], float)
+    count = SAMPLES_PAD * -(-len(times) // SAMPLES_PAD)
+    data = {"weights": np.polynomial.legendre.leggauss(nodes)[1] / 2,
+            "lagrange": lagrange_monomials(turn["node_offsets"]),
+            "piece": np.clip(np.searchsorted(edges, np.resize(times, count), side="right") - 1, 0, pieces - 1),
+            "times": np.resize(times, count), "periods": np.resize(m, count),
+            "engaged": np.concatenate([engaged, np.zeros(extra * nodes, bool)]),
+            "piece_shape": np.zeros((pieces + extra, nodes))}
+    x = {k: jnp.asarray(v, jnp.float64) for k, v in primal.items()}
+    dx = {k: jnp.moveaxis(jnp.asarray(v, jnp.float64), -1, 0) for k, v in tangent.items()}
+    fn, fresh = _dense_bulk_fn(ext, setup.section["distribution"], pmap)
+    wall = time.perf_counter()
+    value, grads = fn(x, dx, {k: jnp.asarray(v) for k, v in data.items()})
+    if fresh:
+        stats["compile_time_s"] += time.perf_counter() - wall
+    value, grads = np.asarray(value)[:len(times)], np.asarray(grads)[:n_used, :len(times)]
+    run = plan.thermal.cycle_states(turn["solution"], times + m * P)
+    if not np.all(np.abs(value - run) <= 1e-9 * np.maximum(1.0, np.abs(run))):
+        raise SensitivityUnavailable("the traced cycle-averaged bulk is not the run's "
+                                     f"(difference {np.max(np.abs(value - run)):.2e} K)")
+    previous = plan.thermal.cycle_states(turn["solution"], times + (m - 1) * P)
+    turn["period_grad"] = (d_ends[1] - d_ends[0])[:n_used]
+    turn.setdefault("rises", {})
+    for k, s in enumerate(samples):
+        rise = {}
+        for name in ("temp_bulk_pin_K", "temp_bulk_wheel_K"):
+            j = state_names.index(name)
+            s.values[name], s.grads[name] = float(value[k, j]), grads[:, k, j]
+            rise[name] = float(value[k, j] - previous[k, j])
+        turn["rises"][s.t] = rise
+
+
+def dense_jump(turn: dict, sample) -> float:
+    """The contact temperature's rise from the previous repetition of the periodic turn's instant `sample` (traced,
+    with its bulk from `dense_bulk_samples` and its contact temperature from the row's formulas): the bulk's rise over
+    one period weighted by the Blok share, T_c = gamma T_pin + (1 - gamma) T_wheel + dT_flash (thermal/plan.py)."""
+    from mechsim.thermal.contact_row import KELVIN
+    pin, wheel = sample.values["temp_bulk_pin_K"], sample.values["temp_bulk_wheel_K"]
+    gamma = (sample.values["temp_contact_C"] + KELVIN - sample.values["temp_flash_rise_K"] - wheel) / (pin - wheel)
+    rise = turn["rises"][sample.t]
+    return float(gamma * rise["temp_bulk_pin_K"] + (1.0 - gamma) * rise["temp_bulk_wheel_K"])
