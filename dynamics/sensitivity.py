@@ -246,8 +246,9 @@ class _Tools:
     first needs them (a run need not visit every mode: chain-mech1-torque for 12 s enters 3 of its 4), so a pass
     compiles only what its own path uses and a later pass of the same model only what is new to it."""
 
-    def __init__(self, mech, model, jmod, columns: tuple, n: int):
+    def __init__(self, mech, model, jmod, columns: tuple, n: int, rates: bool = False):
         self.mech, self.model, self.jmod, self.columns, self.n = mech, model, jmod, columns, n
+        self.rates = rates
         self._pieces: dict = {}
         nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
         z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
@@ -355,25 +356,29 @@ class _Tools:
         def sample(t, z, S, p, P, offset):
             values, grads = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: everything(t, zz, pp, offset), (z, p),
                                                            (s, dp)), in_axes=(1, 1), out_axes=(None, 1))(S, P)
+            if not self.rates:
+                return values, grads, jnp.full_like(values, jnp.nan)
             rates = jax.jvp(lambda tt, zz: everything(tt, zz, p, offset), (t, z),
                             (jnp.ones_like(t), jm.rates(t, z, p)))[1]
             return values, grads, rates
         return jax.jit(sample)
 
 
-def _tools(mech, model, jmod, columns: tuple, n: int) -> _Tools:
+def _tools(mech, model, jmod, columns: tuple, n: int, rates: bool = False) -> _Tools:
     """The model's jitted tools (each piece compiled on its first use, `_Tools`)."""
-    return program("sensitivity_tools", model, (columns, n), lambda: _Tools(mech, model, jmod, columns, n))[0]
+    return program("sensitivity_tools", model, (columns, n) + (("rates",) if rates else ()),
+                   lambda: _Tools(mech, model, jmod, columns, n, rates))[0]
 
 
 def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sample_times, columns,
                        t_end: float, dt_out: float, angle0: float, speed0: float, ext=None, ext_initial=None,
-                       t0: float = 0.0, solver: str = "Dopri8") -> PathSensitivity:
+                       t0: float = 0.0, solver: str = "Dopri8", rates: bool = False) -> PathSensitivity:
     """Integrate z and S = dz/dtheta along the mode sequence of a finished run.
 
     events: the run's events-table rows (t_s, from_mode, to_mode, kind, guard), in order; the run must have
     reached t_end. sample_times: output times at which `columns` (coordinate columns like `wheel_accel_rad_s2`,
-    mode read-outs like `contact_force_N`, work columns `work_<name>_J`) are evaluated with their gradients.
+    mode read-outs like `contact_force_N`, work columns `work_<name>_J`) are evaluated with their gradients, and
+    with `rates` their rates of change in time too (`Sample.rates`; NaN without: one jvp more per sample).
     Tolerances are the run's (settings.rtol, settings.atol), applied to z and S alike.
     """
     wall0, cpu0 = _time.perf_counter(), _time.process_time()
@@ -383,7 +388,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     columns = tuple(columns)
     n_used = seed.n
     n = COLUMNS * -(-n_used // COLUMNS)      # padded with zero columns: one compilation serves 1..COLUMNS values
-    tools = _tools(mech, model, jmod, columns, n)
+    tools = _tools(mech, model, jmod, columns, n, rates)
     nq, nz = jmod.nq, jmod.nz
     P = _padded(seed.dp, n)
     # the statistics every path reports (dynamics/stats.py), with the pass's wall and CPU time beside them

@@ -302,7 +302,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
         sample_times = sorted(set(sample_times) | set(dense["sample_times"]))
     wall = time.perf_counter()
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
-                              t_end, si["output_step"], angle0, speed0, ext, ext_initial)
+                              t_end, si["output_step"], angle0, speed0, ext, ext_initial, rates=bool(repeats))
     by_time = {s.t: s for s in path.samples}
     if turn is not None and thermal_times and ext is not None:       # (the flash model's base is the ambient)
         cycle_bulk_samples(plan, df, turn, by_time, seed, model, [by_time[t] for t in thermal_times], path.stats)
