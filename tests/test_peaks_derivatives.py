@@ -4,7 +4,7 @@ check is central differences of the runs' located peaks, which no output row can
 import pytest
 
 import mechsim
-from conftest import located_peak
+from conftest import located_peak, run_locating
 from mechsim.scenarios.studies.sensitivity import sensitivity
 
 #: the issue's case (7.5 N*m load, rtol 1e-10); its contact force peaks at t = 0.42 s, so 0.6 s holds it
@@ -13,8 +13,9 @@ FD_SETS = ["duration=0.6 s", "output_step=4 ms", "solver.rtol=1e-12", "solver.at
 
 
 def _peak(torque: float, friction: float) -> float:
-    r = mechsim.run(mechsim.load("geneva-motor", set=FD_SETS + [f'load.wheel_torque="{torque!r} N*m"',
-                                                                 f"contact.friction={friction!r}"]))
+    """The run's located peak of the contact force (the only peak located: `run_locating`)."""
+    r = run_locating(mechsim.load("geneva-motor", set=FD_SETS + [f'load.wheel_torque="{torque!r} N*m"',
+                                                                  f"contact.friction={friction!r}"]), ["contact_force_N"])
     assert r.failure is None
     return located_peak(r, "contact_force_N")
 
