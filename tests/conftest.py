@@ -148,11 +148,14 @@ def value_setting(si: dict, key: str, value: float, unit: str) -> str:
 
 def locating(plan, columns=()):
     """The runner's plan whose run locates the peaks of only the mechanism's `columns` (and, as ever, the thermal
-    model's): for finite differences that read a few peaks (`mechsim.sensitivity` runs its nominal so,
-    scenarios/studies/sensitivity.py `locating`). Those read are the full run's, bit for bit; the timeseries and
-    events are the run's."""
-    from mechsim.scenarios.studies.sensitivity import locating as product_locating
-    return product_locating(plan, columns)
+    model's): for finite differences that read a few peaks. Each column's extrema are located on their own
+    (scenarios/peaks.py), so those read are the full run's, bit for bit; what is skipped is locating the others and
+    reading their approaches to the events, most of a run's time at rtol 1e-12. The timeseries and events are the
+    run's."""
+    import dataclasses
+    mech = copy.copy(plan.mechanism)
+    mech.peak_columns = tuple(c for c in mech.peak_columns if c in columns)
+    return dataclasses.replace(plan, mechanism=mech)
 
 
 def run_locating(scenario, columns=()):

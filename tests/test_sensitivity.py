@@ -113,24 +113,6 @@ def test_geneva_matches_finite_differences(tables, name):
     print(name, "largest relative deviation from the finite differences:", {q: f"{e:.1e}" for q, e in worst.items()})
 
 
-def test_a_requested_peak_is_the_runs_located_peak(tables):
-    """The nominal run of `sensitivity` locates the peaks of the requested quantities only (scenarios/studies/
-    sensitivity.py `locating`): each column's extrema are located on their own, so a requested peak's value and
-    instant are those of the run that locates every column (`mechsim.run`) and of the table of every quantity,
-    bit for bit."""
-    sets, wrt = CASES["geneva-torque"]
-    sc = mechsim.load("geneva-torque", set=sets + BASE[1:])
-    q, column = "peak_wheel_accel_rad_s2", PEAKS["peak_wheel_accel_rad_s2"]
-    one = sensitivity(sc, wrt, [q])
-    assert set(one["quantity"]) == {q}
-    every = tables["geneva-torque"].set_index("quantity").loc[q]
-    full = mechsim.run(sc)
-    entry = full.summary["peaks"][column]
-    peak = entry[entry["abs_max"]["side"]]
-    for row in (one.iloc[0], every.iloc[0]):
-        assert row["value"] == peak["value"] and row["t_s"] == peak["t_s"]
-
-
 def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
     import json
 

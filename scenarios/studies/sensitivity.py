@@ -101,17 +101,6 @@ def _located(peaks: dict, column: str, side: str | None = None) -> dict | None:
     return e
 
 
-def locating(plan, columns=()):
-    """The plan whose run locates the peaks of only the mechanism's `columns` (and, as ever, the thermal model's):
-    each column's extrema are located on their own (scenarios/peaks.py), so those located are the full run's; what is
-    skipped is locating the others, most of a run's time at a tight tolerance. The timeseries and events are the
-    run's."""
-    import copy
-    mech = copy.copy(plan.mechanism)
-    mech.peak_columns = tuple(c for c in mech.peak_columns if c in columns)
-    return dataclasses.replace(plan, mechanism=mech)
-
-
 def _closed_form_thermal(run_plan, located: dict) -> dict:
     """The thermal peaks of `located` (the DAE pass's own, with the speed as a constraint) with the value and instant
     the closed-form run reports (scenarios/thermal_peaks.py `ClosedFormThermalReader`): the two solve the same
@@ -123,7 +112,7 @@ def _closed_form_thermal(run_plan, located: dict) -> dict:
     wanted = {q: e for q, e in located.items() if q in THERMAL_PEAKS}
     if not wanted:
         return {}
-    own = runner.execute(locating(run_plan))
+    own = runner.execute(run_plan)
     peaks = own.summary.get("peaks", {}) if own.failure is None else {}
     out = {}
     for q, e in wanted.items():
@@ -243,8 +232,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     of = list(of) if of else list(traced_quantities(plan, pmap))
     si, mech, drive, settings, thermal = scenario.si, plan.mechanism, plan.drive, plan.settings, plan.thermal
     wall = time.perf_counter()
-    # the run locates the peaks of the requested quantities only (`locating`)
-    result = runner.execute(locating(plan, [PEAKS[q] for q in of if q in PEAKS]))
+    result = runner.execute(plan)
     run_wall = time.perf_counter() - wall
     if result.failure is not None:
         raise ScenarioError("scenario", f"the run failed ({result.failure.message()}): no derivatives of a run that "
@@ -284,7 +272,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     # (resolved) the DAE pass's own located peak, its value replaced by the closed-form run's (`_closed_form_thermal`)
     thermal_peaks = result.summary.get("peaks", {})
     if cycle and any(q in THERMAL_PEAKS for q in of):
-        whole = runner.execute(locating(run_plan))
+        whole = runner.execute(run_plan)
         thermal_peaks = whole.summary.get("peaks", {}) if whole.failure is None else {}
     located.update({q: e for q in of if q in THERMAL_PEAKS
                     and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
