@@ -649,13 +649,16 @@ def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray,
                  tie: float) -> list[tuple[int, str, float]]:
     """(interval, side, instant) of the intervals' ends whose one-sided limit may beat `e` (`end_limits`), the
     LIMITS best guesses first (the earliest of equal ones)."""
-    ends = []
+    ends, near = [], []
     for k, iv in enumerate(intervals):
-        if len(iv.rows) >= 2:
-            ends += [(k, "after", iv.lo, iv.rows[:3]), (k, "before", iv.hi, iv.rows[-1:-4:-1])]
+        r = iv.rows
+        if len(r) >= 2:
+            ends += [(k, "after", iv.lo), (k, "before", iv.hi)]
+            # each end's three nearest rows, inward; two rows: the second repeated (the step's own curve)
+            near += [(r[0], r[1], r[2] if len(r) > 2 else r[1]), (r[-1], r[-2], r[-3] if len(r) > 2 else r[-2])]
     if not ends:
         return []
-    near = np.array([np.r_[r, r[1]][:3] for *_, r in ends], dtype=int)     # two rows: the step's own curve
+    near = np.array(near, dtype=int)
     te = np.array([x[2] for x in ends], dtype=float)
     f0, f1, f2 = f[near[:, 0]], f[near[:, 1]], f[near[:, 2]]
     t0, t1 = t[near[:, 0]], t[near[:, 1]]
