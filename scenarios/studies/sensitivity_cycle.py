@@ -294,17 +294,15 @@ def _input_fn(ext, distribution: str, pmap):
     return inputs
 
 
-def _cycle_bulk_fn(ext, distribution: str, pmap):
-    """(x, data) -> (bulk, its jvp along the columns of dx) of the cycle-averaged bulk as a function of the traced
-    values x (thermal/cycle_exact.py `turn_bulk`, the heat input of each row by thermal/coupling.py `heat_inputs`),
-    jitted once per network, distribution and contact row (the turn's rows are padded, so a new design needs no
-    new one). The columns are the mechanism's contact columns and the heat rate (`_input_columns`)."""
+def _jitted_bulk(kind: str, ext, distribution: str, pmap, bulk_of):
+    """(fn, fresh): fn(x, dx, data) -> (bulk, its jvp along the leading axis of dx) of `bulk_of(x, data, network,
+    inputs)` (inputs: `_input_fn`, the heat input from the contact columns), jitted once per kind, network,
+    distribution and contact row (`_CYCLE_FNS`); fresh says whether it was made now (its first call compiles)."""
     import jax
     import jax.numpy as jnp
 
-    from mechsim.thermal.cycle_exact import turn_bulk
     B = np.asarray(ext.system.input_matrix)
-    key = (ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
+    key = (kind, ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
     fn = _CYCLE_FNS.get(key)
     if fn is not None:
         return fn, False
@@ -313,13 +311,27 @@ def _cycle_bulk_fn(ext, distribution: str, pmap):
     def bulk(x, data):
         network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
                    "input_matrix": jnp.asarray(B)}
-        return turn_bulk(data, x["angle"], x["gen"], x["pin"], inputs(x, x["cols_edges"], data["engaged_edges"]),
-                         inputs(x, x["cols_inner"], data["engaged_inner"]), network, x["start"], jnp)[0]
+        return bulk_of(x, data, network, inputs)
 
     def both(x, dx, data):
         return bulk(x, data), jax.vmap(lambda d: jax.jvp(lambda y: bulk(y, data), (x,), (d,))[1])(dx)
     fn = _CYCLE_FNS[key] = jax.jit(both)
     return fn, True
+
+
+def _cycle_bulk_fn(ext, distribution: str, pmap):
+    """`_jitted_bulk` of the cycle-averaged bulk as a function of the traced values x (thermal/cycle_exact.py
+    `turn_bulk`, the heat input of each row by thermal/coupling.py `heat_inputs`); the turn's rows are padded, so a
+    new design needs no new one. The columns are the mechanism's contact columns and the heat rate
+    (`_input_columns`)."""
+    import jax.numpy as jnp
+
+    from mechsim.thermal.cycle_exact import turn_bulk
+
+    def bulk_of(x, data, network, inputs):
+        return turn_bulk(data, x["angle"], x["gen"], x["pin"], inputs(x, x["cols_edges"], data["engaged_edges"]),
+                         inputs(x, x["cols_inner"], data["engaged_inner"]), network, x["start"], jnp)[0]
+    return _jitted_bulk("rows", ext, distribution, pmap, bulk_of)
 
 
 def _network_parameters(plan, seed, model, n: int, primal: dict, tangent: dict) -> None:
@@ -483,31 +495,17 @@ def dense_turn(run_plan) -> dict | None:
 
 
 def _dense_bulk_fn(ext, distribution: str, pmap):
-    """(x, dx, data) -> (bulk, its jvp along the leading axis of dx) of `dense_turn_bulk` (thermal/cycle_exact.py)
-    with the input from the contact columns at the nodes (`_input_fn`), jitted once per network, distribution and
-    contact row."""
-    import jax
+    """`_jitted_bulk` of `dense_turn_bulk` (thermal/cycle_exact.py) with the input from the contact columns at the
+    nodes."""
     import jax.numpy as jnp
 
     from mechsim.thermal.cycle_exact import dense_turn_bulk
-    B = np.asarray(ext.system.input_matrix)
-    key = ("dense", ext.structure_key(), B.tobytes(), pmap.contact_row, pmap.contact_columns)
-    fn = _CYCLE_FNS.get(key)
-    if fn is not None:
-        return fn, False
-    inputs = _input_fn(ext, distribution, pmap)
 
-    def bulk(x, data):
-        network = {"capacity": x["capacity"], "conductance": x["conductance"], "source": x["source"],
-                   "input_matrix": jnp.asarray(B)}
+    def bulk_of(x, data, network, inputs):
         pieces, nodes = data["piece_shape"].shape
         u = inputs(x, x["cols"], data["engaged"]).reshape(pieces, nodes, -1)
         return dense_turn_bulk(x, data, network, u, jnp)[0]
-
-    def both(x, dx, data):
-        return bulk(x, data), jax.vmap(lambda d: jax.jvp(lambda y: bulk(y, data), (x,), (d,))[1])(dx)
-    fn = _CYCLE_FNS[key] = jax.jit(both)
-    return fn, True
+    return _jitted_bulk("dense", ext, distribution, pmap, bulk_of)
 
 
 def dense_bulk_samples(plan, turn: dict, by_time: dict, seed, model, samples: list, periods: dict, events,
