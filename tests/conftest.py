@@ -207,3 +207,16 @@ jax_cache.share()
 
 def pytest_unconfigure(config):
     jax_cache.remove()
+
+
+def assert_peaks_bracket_rows(runs: dict, columns, rel: float) -> None:
+    """Every run's located max of each column is at least, and its min at most, the column's output rows (a
+    located extremum of the continuous solution is never below a sample of it), up to `rel` of the column's size."""
+    import numpy as np
+    for step, r in runs.items():
+        for col in columns:
+            rows = r.timeseries[col].to_numpy(float)
+            entry = r.summary["peaks"][col]
+            scale = rel * max(1.0, float(np.nanmax(np.abs(rows))))
+            assert entry["max"]["value"] >= np.nanmax(rows) - scale, (col, step)
+            assert entry["min"]["value"] <= np.nanmin(rows) + scale, (col, step)

@@ -7,6 +7,7 @@ import pytest
 
 import mechsim
 from mechsim.scenarios import runner
+from conftest import assert_peaks_bracket_rows
 
 #: the seed's load case 1 with a motor (its speed follows from the dynamics: a DAE run with the bulk states in it)
 MOTOR = ["duration=1.5 s", "drive.type=motor", "drive.stall_torque=40 N*m", "drive.no_load_speed=8 rad/s",
@@ -38,10 +39,4 @@ def test_thermal_peaks_do_not_move_with_the_output_step(runs):
 
 
 def test_thermal_peaks_are_never_below_a_row(runs):
-    for step, r in runs.items():
-        for col in COLUMNS:
-            rows = r.timeseries[col].to_numpy(float)
-            entry = r.summary["peaks"][col]
-            scale = 1e-9 * max(1.0, float(np.nanmax(np.abs(rows))))
-            assert entry["max"]["value"] >= np.nanmax(rows) - scale, (col, step)
-            assert entry["min"]["value"] <= np.nanmin(rows) + scale, (col, step)
+    assert_peaks_bracket_rows(runs, COLUMNS, 1e-9)

@@ -10,6 +10,7 @@ import pytest
 import mechsim
 from mechsim.scenarios import runner
 from mechsim.thermal.exact import ModalNetwork, integrate_closed_form
+from conftest import assert_peaks_bracket_rows
 
 COLUMNS = ("temp_contact_C", "temp_flash_rise_K", "temp_bulk_pin_C", "temp_bulk_wheel_C", "heat_rate_W")
 STEPS = (0.25, 1, 4)
@@ -64,13 +65,7 @@ def test_closed_form_thermal_peaks_do_not_move_with_the_output_step(runs):
 
 
 def test_closed_form_thermal_peaks_are_never_below_a_row(runs):
-    for step, r in runs.items():
-        for col in COLUMNS:
-            rows = r.timeseries[col].to_numpy(float)
-            entry = r.summary["peaks"][col]
-            scale = 1e-12 * max(1.0, float(np.nanmax(np.abs(rows))))
-            assert entry["max"]["value"] >= np.nanmax(rows) - scale, (col, step)
-            assert entry["min"]["value"] <= np.nanmin(rows) + scale, (col, step)
+    assert_peaks_bracket_rows(runs, COLUMNS, 1e-12)
 
 
 def test_flash_model_peaks_are_located_at_a_prescribed_speed():
