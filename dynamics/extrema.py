@@ -752,7 +752,17 @@ class TrajectoryReader:
     costs a Gauss-Newton and KKT solve per row). Other rows are made consistent first
     (`consistent.consistent_state`): diffrax's, the index-3 form's, the index-2 form's on scikit-sundae, and a row
     IDA fails from at the tighter tolerances (its constraints hold to the run's tolerance only, a jump IDA's error
-    test at the tighter tolerances can reject)."""
+    test at the tighter tolerances can reject).
+
+    The tighter try has a step budget of its own (`TIGHT_STEPS`): a reading spans less than about one output step,
+    which the run crossed in a few steps; where IDA at the tighter tolerances needs a thousand steps for it, it is
+    not resolving the solution but stalling at the event the mode ends at (tolerances the residual cannot meet
+    there, which would otherwise cost the whole `max_steps` per reading), and the run's own tolerances read it, as
+    on any failure of the tighter try. A reading asked for again (several columns' limits at one end) is the kept
+    one: the same start, instants and tries give the same states."""
+
+    #: steps the tighter try may take per output instant (the run's own try keeps `settings.max_steps`)
+    TIGHT_STEPS = 1000
 
     def __init__(self, traj, angle_coordinates: tuple[int, ...], settings, tighten: float = 1e-1):
         import dataclasses
@@ -760,7 +770,8 @@ class TrajectoryReader:
         rtol = max(settings.rtol * tighten, 1e-13)
         own = dataclasses.replace(settings, multiplier_atol=settings.lam_atol, events=False)
         #: the tighter tolerances first, the run's own where IDA cannot meet those
-        self.tries = (dataclasses.replace(own, rtol=rtol, atol=settings.atol * rtol / settings.rtol), own)
+        self.tries = (dataclasses.replace(own, rtol=rtol, atol=settings.atol * rtol / settings.rtol,
+                                          max_steps=min(settings.max_steps, self.TIGHT_STEPS)), own)
         #: an index-1/2 IDA run's rows are IDA's own states (y, y'): a reading starts from them as they are (index-2
         #: on the compiled readings only: IDA fails from some of its rows at the tighter tolerances, and the
         #: scikit-sundae binding prints each failure on stdout)
@@ -775,6 +786,7 @@ class TrajectoryReader:
         self._anchors = None
         self._segments = self._rows = None
         self._keep: list = []
+        self._read: dict = {}        # (start, instants) -> `_from_row`'s (t, y, y'), or its ReadingFailed
 
     def anchors(self, t_rows: np.ndarray) -> np.ndarray:
         """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), as
@@ -911,6 +923,21 @@ class TrajectoryReader:
         """`_integrate` from an `_anchor` state. From the run's own (y, y') at the tighter tolerances only: where IDA
         fails from it there, the reading starts from the consistent state made at that row (both tries), and so do the
         later readings from that row (kept)."""
+        piece, mf, t0, y0, yp0, row = anchor
+        times = np.asarray(times, dtype=float)
+        key = ((row,) if row is not None else (id(piece), t0, y0.tobytes(), yp0.tobytes())) + (times.tobytes(),)
+        got = self._read.get(key)
+        if got is None:
+            try:
+                got = self._from_row_once(anchor, times)
+            except ReadingFailed as exc:
+                got = exc
+            self._read[key] = got
+        if isinstance(got, ReadingFailed):
+            raise got
+        return got
+
+    def _from_row_once(self, anchor: tuple, times: np.ndarray):
         piece, mf, t0, y0, yp0, row = anchor
         if row is None:
             return self._integrate(mf, piece.params, t0, y0, yp0, times)
