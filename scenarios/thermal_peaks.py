@@ -52,10 +52,26 @@ def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
                   for t, k in zip(events["t_s"].to_numpy(float), kinds))
 
 
-class ThermalReader:
+class _KeptReadings:
+    """A thermal reader's readings kept for the run: a reading depends only on the interval's ends and the instants
+    (not on the row position, which these readers do not use), and the columns' end limits ask for the same one
+    again (`dynamics/extrema.py` `end_limits`: each column and sense reads the ends that may beat its extremum)."""
+
+    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+        times = np.asarray(times, dtype=float)
+        kept = self.__dict__.setdefault("_kept", {})
+        key = (iv.lo, iv.hi, times.tobytes())
+        got = kept.get(key)
+        if got is None:
+            got = kept[key] = self.read(iv, position, times)
+        return got
+
+
+class ThermalReader(_KeptReadings):
     """Every column of the finished table (mechanical and thermal) at any instants of a smooth interval of it,
     read as module docstring says: `read(interval, position, times)` as `dynamics/extrema.py` readers are (the
-    position is not used: each reading starts from the window's output row nearest its instants)."""
+    position is not used: each reading starts from the window's output row nearest its instants); called, the
+    reading kept (`_KeptReadings`)."""
 
     def __init__(self, thermal, traj, window: pd.DataFrame, events: pd.DataFrame, mech, settings, t_table_end: float):
         self.thermal, self.mech = thermal, mech
@@ -94,8 +110,7 @@ class ThermalReader:
         a, P = self.solution["t_start"], self.solution["period"]
         return np.where(t <= self.t_sim_end, t, a + np.mod(t - a, P))
 
-    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
-        times = np.asarray(times, dtype=float)
+    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         eps = ROUNDOFF * self.scale
         # the window interval of each instant, found from the instant nudged inside `iv` (an instant at iv's end is
         # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
@@ -164,11 +179,12 @@ def window_readings(thermal, traj, window: pd.DataFrame, events: pd.DataFrame, m
         return None
 
 
-class ClosedFormThermalReader:
+class ClosedFormThermalReader(_KeptReadings):
     """Every column of a closed-form run's finished table at any instants of a smooth interval of it (module
     docstring), as `ThermalReader` reads a DAE run's: the closed form's columns (`mechanics`: the run's reader of
-    them, scenarios/peaks.py), the network's states integrated exactly from the window's row at or before each instant
-    (or the cycle-averaged solution after the simulated rows), and the finish's thermal columns there."""
+    them, scenarios/peaks.py, which reads an interval by its ends), the network's states integrated exactly from the
+    window's row at or before each instant (or the cycle-averaged solution after the simulated rows), and the
+    finish's thermal columns there; called, the reading kept (`_KeptReadings`)."""
 
     def __init__(self, thermal, source, window: pd.DataFrame, events: pd.DataFrame, t_table_end: float, mechanics):
         from mechsim.thermal import cycle as cyc
@@ -237,8 +253,7 @@ class ClosedFormThermalReader:
                                              self.thermal.quadrature_piece)
         return out
 
-    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
-        times = np.asarray(times, dtype=float)
+    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         frame = pd.DataFrame({k: np.asarray(v) for k, v in self.mechanics(iv, position, times).items()})
         # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
         eps = 1e-12 * max(1.0, abs(iv.hi))
