@@ -162,12 +162,20 @@ def cycle_table():
 
 
 _WINDOW: list = []
+_WINDOWS: dict = {}
 
 
 def _cycle_window(sets):
     """The plan and its mechanics window's run (the run cycle averaging averages), and the turn's temperatures. The
     window is the one the sensitivity's run settles on (runner.settled), the same for every design compared: its
-    length is a discrete choice, not differentiated."""
+    length is a discrete choice, not differentiated. Kept per settings for the module (the nominal FD window is
+    read by two tests; only read, never changed)."""
+    if tuple(sets) not in _WINDOWS:
+        _WINDOWS[tuple(sets)] = _read_cycle_window(sets)
+    return _WINDOWS[tuple(sets)]
+
+
+def _read_cycle_window(sets):
     plan = runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + sets))
     if not _WINDOW:
         _WINDOW.append(runner.settled(runner.plan(mechsim.load(CYCLE_NAME, set=CYCLE_SETS + SENS)))
