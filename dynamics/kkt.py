@@ -8,7 +8,7 @@ Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/
 with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
 c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
 Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
-(every output row at once, numpy; a long stack eliminated one entry of all its systems at a time, `_stacked`),
+(every output row at once, numpy; a long stack eliminated a row of all its systems at a time, `_stacked`),
 `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read a or lam, solved symbolically with
 sympy).
 """
@@ -112,23 +112,54 @@ STACK_MIN, STACK_ROWS = 64, 40
 
 def _stacked(M, G, Ql, Q0, c):
     """`solve` on a numpy stack of systems (leading axis): the elimination of `unrolled_solve` with partial
-    pivoting in every column, as LAPACK's getrf pivots (the first largest in the column), each operation on one
-    entry of every system at once, read from the blocks without assembling K. With LAPACK's pivots a row that fixes
-    one coordinate (a prescribed drive's speed constraint) is eliminated as LAPACK eliminates it, so that
-    coordinate's acceleration comes out zero where LAPACK's does; the mass block unpivoted would not (a round-off
-    residue instead). numpy.linalg.solve loops over the stack, one small LAPACK call per system, which costs more
-    than these elementwise operations on whole columns once the stack holds more than about
-    STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a solution is
-    not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
+    pivoting in every column, as LAPACK's getrf pivots (the first largest in the column), each operation on whole
+    rows of every system at once (`_eliminate_rows`, on [K | b] copied from the blocks into one array). With
+    LAPACK's pivots a row that fixes one coordinate (a prescribed drive's speed constraint) is eliminated as LAPACK
+    eliminates it, so that coordinate's acceleration comes out zero where LAPACK's does; the mass block unpivoted
+    would not (a round-off residue instead). numpy.linalg.solve loops over the stack, one small LAPACK call per
+    system, which costs more than these elementwise operations on whole columns once the stack holds more than
+    about STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a
+    solution is not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
     nq, m = M.shape[-1], G.shape[-2]
-    A = [[M[:, i, j] for j in range(nq)] + [G[:, k, i] - Ql[:, i, k] for k in range(m)] + [Q0[:, i]]
-         for i in range(nq)]
-    A += [[G[:, k, j] for j in range(nq)] + [0.0] * m + [c[:, k]] for k in range(m)]
+    n = nq + m
+    A = np.empty((n, n + 1, len(M)))          # A[i, j]: entry (i, j) of [K | b] in every system, contiguous
+    A[:nq, :nq] = M.transpose(1, 2, 0)
+    A[:nq, nq:n] = G.transpose(2, 1, 0) - Ql.transpose(1, 2, 0)
+    A[:nq, n] = Q0.T
+    A[nq:, :nq] = G.transpose(1, 2, 0)
+    A[nq:, nq:n] = 0.0
+    A[nq:, n] = c.T
     with np.errstate(all="ignore"):          # a zero pivot: not finite, answered below
-        x = _eliminate(A, np, 0)
+        x = _eliminate_rows(A)
     if not np.isfinite(x).all():
         return None
     return x[:nq].T, x[nq:].T
+
+
+def _eliminate_rows(A: np.ndarray) -> np.ndarray:
+    """`_eliminate` with partial pivoting in every column on a numpy stack held as one array A (n, n + 1, systems):
+    the same operations on the same entries in the same order, so the same values to the last bit, with a row's
+    update (all its columns right of the pivot, all rows below it) done in one operation, and a pivot exchange
+    skipped where no system of the stack exchanges (it would leave every entry as it was), made by copying where every
+    system exchanges."""
+    n = len(A)
+    for j in range(n):
+        for r in range(j + 1, n):
+            take = np.abs(A[r, j]) > np.abs(A[j, j])
+            if take.all():
+                A[[j, r], j:] = A[[r, j], j:]
+            elif take.any():
+                A[j, j:], A[r, j:] = np.where(take, A[r, j:], A[j, j:]), np.where(take, A[j, j:], A[r, j:])
+        if j + 1 < n:
+            factor = A[j + 1:, j] / A[j, j]
+            A[j + 1:, j + 1:] -= factor[:, None, :] * A[j, None, j + 1:]
+    x = np.empty((n, A.shape[2]))
+    for i in reversed(range(n)):
+        acc = A[i, n]
+        for j in range(i + 1, n):
+            acc = acc - A[i, j] * x[j]
+        x[i] = acc / A[i, i]
+    return x
 
 
 def solve_symbolic(M, G, Ql, Q0, c):

@@ -1,6 +1,7 @@
 """Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
@@ -163,10 +164,35 @@ def _kept_rows(t: np.ndarray) -> np.ndarray | None:
     return None if keep.all() else keep
 
 
-def _layout(model, angle_coordinates: tuple[int, ...], modes: list[str], residual: bool = True) -> list[str]:
+#: what is derived once from a model's or a mode's structure (`_kept`): (weak reference to it, the value) by key
+_DERIVED: dict = {}
+
+
+def _kept(owner, key, build):
+    """build(), kept for (owner, key) while owner lives: a table's layout and the rows each part of a mode's block
+    fills follow from the model's structure alone, and deriving them again was a fixed cost of every read-out, most
+    of it on a located peak's few rows. Keyed by identity (the model and its modes are dataclasses: compared by
+    value, not hashable); a weak reference, so a model that goes leaves nothing behind that answers for another."""
+    k = (id(owner), key)
+    hit = _DERIVED.get(k)
+    if hit is not None and hit[0]() is owner:
+        return hit[1]
+    value = build()
+    if len(_DERIVED) >= 512:
+        _DERIVED.clear()
+    _DERIVED[k] = (weakref.ref(owner), value)
+    return value
+
+
+def _layout(model, angle_coordinates: tuple[int, ...], modes: list[str], residual: bool = True) -> tuple[str, ...]:
     """The table's columns: time, coordinates (position, speed, acceleration each), the first mode's read-outs,
     kinetic energy, works, constraint residual, extension states, then a read-out only a later mode has (as
     pandas' concat of per-piece frames put them); "mode" goes in second place."""
+    return _kept(model, ("layout", tuple(angle_coordinates), tuple(modes), residual),
+                 lambda: _derive_layout(model, angle_coordinates, modes, residual))
+
+
+def _derive_layout(model, angle_coordinates, modes, residual) -> tuple[str, ...]:
     names = ["t_s"]
     for i, name in enumerate(model.coordinates):
         names += coordinate_columns(name, i in angle_coordinates)
@@ -174,55 +200,80 @@ def _layout(model, angle_coordinates: tuple[int, ...], modes: list[str], residua
     names += first + ["kinetic_energy_J"] + [f"work_{w}_J" for w in model.work_names] + \
         (["constraint_residual_m"] if residual else []) + list(model.extension_names)
     later = [nm for mode in modes for nm in model.modes[mode].readout_names]
-    return names + list(dict.fromkeys(nm for nm in later if nm not in names))
+    return tuple(names + list(dict.fromkeys(nm for nm in later if nm not in names)))
+
+
+class _Slots:
+    """The rows of a mode's block (`_mode_block`, columns `names`) that each of its parts fills: its read-outs,
+    kinetic energy (works after it), constraint residual, extension states; `missing`, the read-outs of other
+    modes, left NaN (None where there are none)."""
+
+    def __init__(self, model, mf, names: tuple[str, ...], residual: bool):
+        at = {nm: i for i, nm in enumerate(names)}
+        ncoord = len(model.coordinates)
+        fixed = set(names[:1 + 3 * ncoord]) | {"kinetic_energy_J", "constraint_residual_m"} | set(
+            model.extension_names) | {f"work_{w}_J" for w in model.work_names}
+        own = set(mf.readout_names)
+        missing = [i for i, nm in enumerate(names) if nm not in own and nm not in fixed]
+        self.missing = np.array(missing, dtype=np.intp) if missing else None
+        self.readouts = [at[nm] for nm in mf.readout_names]
+        self.ke = at["kinetic_energy_J"]
+        self.works = slice(self.ke + 1, self.ke + 1 + len(model.work_names))
+        self.residual = self.works.stop if residual else None
+        start = self.works.stop + (1 if residual else 0)
+        self.ext = slice(start, start + len(model.extension_names))
+        self.n_mech = mf.m - (1 if model.prescribed else 0)
 
 
 def _unwrapped(out: np.ndarray, q: np.ndarray, pieces) -> None:
     """The positions unwrapped into out (coordinates, rows): q is in each piece's re-based frame, plus the piece's
     offset where it has one (`Piece.coordinates`, for all pieces at once; the same sums)."""
-    out[...] = q.T
     offsets = [pc.offset for pc in pieces]
     if all(o is None for o in offsets):
+        out[...] = q.T
+        return
+    if len(pieces) == 1:
+        np.add(q.T, np.asarray(offsets[0], dtype=float)[:, None], out=out)
         return
     counts = [len(pc.t) for pc in pieces]
-    shifted = np.repeat([o is not None for o in offsets], counts)
     shift = np.repeat(np.array([np.zeros(q.shape[1]) if o is None else o for o in offsets], dtype=float), counts,
                       axis=0)
-    np.add(out, shift.T, out=out, where=shifted)
+    if all(o is not None for o in offsets):
+        np.add(q.T, shift.T, out=out)
+        return
+    out[...] = q.T
+    np.add(out, shift.T, out=out, where=np.repeat([o is not None for o in offsets], counts))
 
 
-def _mode_block(model, pieces, names: list[str], residual: bool = True) -> np.ndarray:
+def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) -> np.ndarray:
     """The columns `names` over the rows of one mode's pieces, stacked, as (len(names), rows): read-outs, the
     KKT solution, kinetic energy and constraint residual evaluated once on all rows (parameters that differ
     between pieces as per-row arrays); a read-out this mode lacks is NaN."""
     mf = model.modes[pieces[0].mode]
     ix, ncoord = mf.index, len(model.coordinates)
-    at = {nm: i for i, nm in enumerate(names)}
+    slots = _kept(mf, ("slots", names, residual), lambda: _Slots(model, mf, names, residual))
     t = np.concatenate([pc.t for pc in pieces])
     y = np.concatenate([pc.y for pc in pieces])
     q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
     p = _mode_params(pieces)
-    fixed = set(names[:1 + 3 * ncoord]) | {"kinetic_energy_J", "constraint_residual_m"} | set(
-        model.extension_names) | {f"work_{w}_J" for w in model.work_names}
-    partial = any(nm not in fixed for nm in set(names) - set(mf.readout_names))    # another mode's read-out
-    block = np.full((len(names), len(t)), np.nan) if partial else np.empty((len(names), len(t)))
+    block = np.empty((len(names), len(t)))
+    if slots.missing is not None:
+        block[slots.missing] = np.nan
     block[0] = t
     M, a, lam = _kkt(mf, t, q, v, x, p)
     block[2:1 + 3 * ncoord:3] = v.T
     block[3:1 + 3 * ncoord:3] = a.T
     _unwrapped(block[1:1 + 3 * ncoord:3], q, pieces)
     values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, p)
-    for name, val in zip(mf.readout_names, values):
-        block[at[name]] = val                          # a scalar read-out broadcasts over the rows
-    c_ke = at["kinetic_energy_J"]
-    block[c_ke] = 0.5 * _quadratic_form(v, M)                     # 1/2 v^T M v with the KKT's M
-    c_ext = c_ke + 1 + len(model.work_names)
-    block[c_ke + 1:c_ext] = y[:, ix["work"]].T
+    for row, val in zip(slots.readouts, values):
+        block[row] = val                               # a scalar read-out broadcasts over the rows
+    block[slots.ke] = 0.5 * _quadratic_form(v, M)                 # 1/2 v^T M v with the KKT's M
+    block[slots.works] = y[:, ix["work"]].T
     if residual:
-        n_mech = mf.m - (1 if model.prescribed else 0)
-        block[c_ext] = np.max(np.abs(_constraint_values(mf, t, q, p)[:, :n_mech]), axis=1) if n_mech > 0 else 0.0
-        c_ext += 1
-    block[c_ext:c_ext + len(model.extension_names)] = x.T
+        n_mech = slots.n_mech
+        block[slots.residual] = np.max(np.abs(_constraint_values(mf, t, q, p)[:, :n_mech]), axis=1) \
+            if n_mech > 0 else 0.0
+    block[slots.ext] = x.T
     return block
 
 
@@ -233,8 +284,10 @@ def piece_columns(model, piece, angle_coordinates: tuple[int, ...], residual: bo
     pieces = piece if isinstance(piece, list) else [piece]
     names = _layout(model, angle_coordinates, [pieces[0].mode], residual)
     block = _mode_block(model, pieces, names, residual)
-    cols = {"t_s": block[0], "mode": np.full(block.shape[1], pieces[0].mode, dtype=object)}
-    cols.update((name, block[i]) for i, name in enumerate(names) if i)
+    mode = np.empty(block.shape[1], dtype=object)
+    mode.fill(pieces[0].mode)                # (np.full converts the name to a numpy string for every row)
+    cols = {"t_s": block[0], "mode": mode}
+    cols.update(zip(names[1:], block[1:]))
     return cols
 
 
@@ -294,7 +347,7 @@ def _frame(out: np.ndarray, names: list[str], modes) -> pd.DataFrame:
                                 index=pd.RangeIndex(out.shape[1]), columns=pd.Index([names[0], "mode", *names[1:]]))
         except Exception:      # noqa: BLE001  (a changed internal: the public construction below is the reference)
             pass
-    df = pd.DataFrame(out.T, columns=names, copy=False)
+    df = pd.DataFrame(out.T, columns=list(names), copy=False)
     df.insert(1, "mode", modes)
     return df
 

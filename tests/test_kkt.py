@@ -142,3 +142,25 @@ def test_long_stack_keeps_a_prescribed_coordinate_at_zero_acceleration():
         assert x[0] == 0.0
         bound = 100 * np.linalg.cond(kkt_matrix(M, G, Ql)) * np.finfo(float).eps * np.abs(x).max()
         assert np.abs(np.r_[a[j], lam[j]] - x).max() <= bound
+
+
+@pytest.mark.parametrize("nq, m", [(1, 0), (2, 1), (3, 2), (4, 3)])
+def test_long_stack_rows_eliminate_as_the_unrolled_elimination(nq, m):
+    """The long stack's elimination on one array (`kkt._eliminate_rows`, whole rows a step) performs the operations
+    of the unrolled elimination (`kkt._eliminate` with pivoting in every column) on every system: the same values to
+    the last bit, where no system, some or all exchange rows at a pivot, and on systems with zero blocks."""
+    rng = np.random.default_rng(17 + nq + m)
+    rows, n = 300, nq + m
+    for case in range(4):
+        A = rng.standard_normal((n, n + 1, rows))
+        if case == 1:       # a dominant diagonal: no exchange
+            A[np.arange(n), np.arange(n)] += 100.0 * np.sign(A[np.arange(n), np.arange(n)])
+        elif case == 2:     # the first column's largest entry in the last row of every system: all exchange
+            A[-1, 0] = 100.0 + np.abs(A[-1, 0])
+        elif case == 3:     # zero blocks, as a KKT matrix has
+            A[nq:, nq:n] = 0.0
+            A[:, 0][rng.random((n, rows)) < 0.3] = 0.0
+        with np.errstate(all="ignore"):        # a zero column gives zero pivots: the same NaN in both
+            expected = kkt._eliminate([[A[i, j].copy() for j in range(n + 1)] for i in range(n)], np, 0)
+            got = kkt._eliminate_rows(A.copy())
+        np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
