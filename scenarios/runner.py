@@ -108,9 +108,10 @@ def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: T
     return located_peaks(df, angle_column, columns, events, cols, source, speed_column)
 
 
-def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None) -> dict:
+def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None,
+                   event_cols: TableColumns | None = None) -> dict:
     """Drive work = d(kinetic energy) - (load + friction + damping work) + energy lost in impacts (events table;
-    all works signed into the system). cols: the table's TableColumns, if at hand."""
+    all works signed into the system). cols, event_cols: the table's and the events' TableColumns, if at hand."""
     cols = TableColumns(df) if cols is None else cols
     if "work_drive_J" not in cols or len(df) < 2:
         return {}
@@ -122,7 +123,7 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
     works = {c[5:-2]: change(c) for c in cols.names if c.startswith("work_") and c.endswith("_J")}
     dke = change("kinetic_energy_J")
     lost = 0.0
-    ev = None if events is None else TableColumns(events)
+    ev = None if events is None else _event_columns(events, event_cols)
     if ev is not None and "energy_lost_J" in ev and len(events):
         t = np.asarray(cols["t_s"], dtype=float)
         t0, t1 = float(t[0]), float(t[-1])
@@ -145,22 +146,31 @@ def _largest_magnitude(values) -> float:
     return float(np.fmax.reduce(np.abs(np.asarray(values, dtype=float))))
 
 
-def event_counts(events: pd.DataFrame) -> dict[str, int]:
+def _event_columns(events: pd.DataFrame, event_cols: TableColumns | None) -> TableColumns:
+    """The events' TableColumns: event_cols where it reads this very frame, else read anew."""
+    return event_cols if event_cols is not None and event_cols.frame is events else TableColumns(events)
+
+
+def event_counts(events: pd.DataFrame, event_cols: TableColumns | None = None) -> dict[str, int]:
     """Events by kind, as {str(kind): count} of events["kind"].value_counts(): most frequent first, ties in the
     order of their first appearance (pandas orders the counts so: first appearance, then a stable sort), missing
-    kinds left out; counted over the column's Python values (cheaper than building a value_counts Series)."""
+    kinds left out; counted over the column's values (cheaper than building a value_counts Series), read by
+    position (`TableColumns`: a read by name would build the column index's hash table first).
+    event_cols: the events' TableColumns, if at hand."""
     if not len(events):
         return {}
-    counts = Counter(k for k in events["kind"].tolist() if k is not None and k == k)
+    counts = Counter(k for k in _event_columns(events, event_cols)["kind"] if k is not None and k == k)
     return {str(k): int(n) for k, n in sorted(counts.items(), key=lambda kv: -kv[1])}
 
 
 def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
-             exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None):
+             exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None,
+             event_cols: TableColumns | None = None):
     """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
     becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept.
-    cols: df's TableColumns, if at hand."""
-    v = first_violation(df if cols is None else cols, events, settings.rtol, settings.atol, exact, columns)
+    cols, event_cols: df's and the events' TableColumns, if at hand."""
+    v = first_violation(df if cols is None else cols, events if event_cols is None else _event_columns(
+        events, event_cols), settings.rtol, settings.atol, exact, columns)
     if v is None or (failure is not None and failure.time <= v.time):
         return df, events, failure
     failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver",
@@ -315,9 +325,11 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     si = scenario.si
     angle_col, speed_col, _ = coordinate_columns(mech.coordinates[mech.drive_coordinate],
                                                  mech.drive_coordinate in mech.angle_coordinates)
-    source = PeakSource(method, traj, mech, drive, settings, si, frozenset(df.columns), thermal, df)
     cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
-    checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols)
+    source = PeakSource(method, traj, mech, drive, settings, si, frozenset(cols.names), thermal, df)
+    event_cols = TableColumns(events)           # the same for the events' columns (the checks, energy, counts)
+    checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols,
+                                        event_cols=event_cols)
     if checked is not df:
         df, cols = checked, TableColumns(checked)
     thermal_summary, thermal_tables = None, {}
@@ -328,7 +340,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         heat = [c for c in ("t_s", "mode", "heat_rate_W", "heat_generated_J", "friction_force_N", "slip_speed_m_s")
                 if c in df]
         cols = TableColumns(df)
-        checked, events, failure = _checked(df, events, failure, settings, columns=heat, cols=cols)
+        checked, events, failure = _checked(df, events, failure, settings, columns=heat, cols=cols,
+                                            event_cols=event_cols)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
     conditions = validity.conditions(mech, thermal)       # the model's validity on every row (scenarios/validity.py)
@@ -356,8 +369,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "geometry": mech.describe(),
         "peaks": peak_summary,
         "regime": regime,
-        "energy": energy_balance(df, events, cols),
-        "events": event_counts(events),
+        "energy": energy_balance(df, events, cols, event_cols),
+        "events": event_counts(events, event_cols),
         "validity": valid,
         "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": _largest_magnitude(cols["constraint_residual_m"]) if len(df) else 0.0,
