@@ -325,8 +325,41 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
 
 
 def _typed_names(names: tuple[str, ...]):
-    """The names as the array pandas infers for them in a column (its string dtype)."""
-    return pd.Series(np.asarray(names, dtype=object)).array
+    """The names as the array pandas infers for them in a column (its string dtype), inferred once per set of names
+    and pandas' string options (`_inferred`); never itself put in a frame (a frame gets its `take`)."""
+    return _inferred(("typed", names), lambda: pd.Series(np.asarray(names, dtype=object)).array)
+
+
+def _columns_index(names: list[str]) -> pd.Index:
+    """pd.Index(names), inferred once per names and pandas' string options (`_inferred`); each frame gets its own
+    shallow copy (an Index's name is settable: frames never share one)."""
+    return _inferred(("index", tuple(names)), lambda: pd.Index(names)).copy()
+
+
+#: what `_inferred` keeps: pandas' inference of a set of names, by the names and pandas' string options
+_INFERRED: dict = {}
+#: pandas' own switch of string inference (a pandas internal, pandas 2.1+); without it nothing inferred is kept
+_USING_STRING_DTYPE = getattr(getattr(pd, "_config", None), "using_string_dtype", None)
+
+
+def _inferred(key: tuple, build):
+    """build(): what pandas infers for a set of names, kept per key and pandas' string options (whether it infers
+    its string dtype, and the storage), so that a change of them infers anew; built every time where the options
+    cannot be read. Inferring was a fixed cost of every table, most of it paid again in each run."""
+    try:
+        options = None if _USING_STRING_DTYPE is None else (bool(_USING_STRING_DTYPE()),
+                                                            pd.get_option("mode.string_storage"))
+    except Exception:      # noqa: BLE001  (a changed internal: inferred every time)
+        options = None
+    if options is None:
+        return build()
+    key += (options,)
+    value = _INFERRED.get(key)
+    if value is None:
+        if len(_INFERRED) >= 512:
+            _INFERRED.clear()
+        value = _INFERRED[key] = build()
+    return value
 
 
 #: pandas' constructor of a frame from its blocks (pandas.api.internals, pandas 3); without it, `_frame` inserts
@@ -343,8 +376,9 @@ def _frame(out: np.ndarray, names: list[str], modes) -> pd.DataFrame:
         try:
             place = np.arange(1, len(names) + 1)               # 0, 2, 3, ...: "mode" is column 1
             place[0] = 0
-            return _FROM_BLOCKS([(out, place), (modes, np.array([1]))],
-                                index=pd.RangeIndex(out.shape[1]), columns=pd.Index([names[0], "mode", *names[1:]]))
+            columns = _columns_index([names[0], "mode", *names[1:]])
+            return _FROM_BLOCKS([(out, place), (modes, np.array([1]))], index=pd.RangeIndex(out.shape[1]),
+                                columns=columns)
         except Exception:      # noqa: BLE001  (a changed internal: the public construction below is the reference)
             pass
     df = pd.DataFrame(out.T, columns=list(names), copy=False)
@@ -374,7 +408,7 @@ def _records_frame(records: list[dict]) -> pd.DataFrame:
             return pd.DataFrame(records)
         blocks += [(typed[i * n:(i + 1) * n], np.array([j], dtype=np.intp)) for i, j in enumerate(texts)]
     try:
-        return _FROM_BLOCKS(blocks, index=pd.RangeIndex(n), columns=pd.Index(keys))
+        return _FROM_BLOCKS(blocks, index=pd.RangeIndex(n), columns=_columns_index(keys))
     except Exception:      # noqa: BLE001  (a changed internal: pandas' own construction is the reference)
         return pd.DataFrame(records)
 

@@ -125,3 +125,26 @@ def test_events_frame_from_its_blocks_is_pandas_frame_of_the_records(records):
     pd.testing.assert_frame_equal(got, want, check_exact=True)
     assert got.columns.dtype == want.columns.dtype
     assert [type(b).__name__ for b in got._mgr.blocks] == [type(b).__name__ for b in want._mgr.blocks]
+
+
+@pytest.mark.parametrize("storage", ["auto", "python"])
+def test_frames_follow_pandas_string_options(storage):
+    """The timeseries' mode names and the frames' column indexes are inferred once per set of names and kept; a
+    change of pandas' string options infers them anew: under each option the tables' dtypes are what pandas infers
+    then, and no two frames share a column index (its name is settable)."""
+    from mechsim.dynamics.tables import _frame, _records_frame, _typed_names
+    names = ["t_s", "x_m"]
+    out = np.arange(6.0).reshape(2, 3)
+    with pd.option_context("mode.string_storage", storage):
+        frames = [_frame(out, names, _typed_names(("dwell", "engaged")).take(np.array([0, 1, 1]))) for _ in range(2)]
+        want = pd.DataFrame({"t_s": out[0], "mode": ["dwell", "engaged", "engaged"], "x_m": out[1]})
+        records = [{"t_s": 0.1, "kind": "entry"}, {"t_s": 0.2, "kind": "exit"}]
+        events = [_records_frame(records) for _ in range(2)]
+        pd.testing.assert_frame_equal(events[0], pd.DataFrame(records), check_exact=True)
+    for got in frames:
+        pd.testing.assert_frame_equal(got, want, check_exact=True)
+        assert got.columns.dtype == want.columns.dtype
+    for a, b in (frames, events):
+        assert a.columns is not b.columns
+        a.columns.name = "renamed"
+        assert b.columns.name is None
