@@ -167,9 +167,13 @@ def state_rows(mf: ModeFunctions, nq: int, z: np.ndarray) -> np.ndarray:
     """Rows y in the IDA layout of the mode from states z = [q, v, work, ext], the multiplier columns (lam, mu)
     NaN: the compiled whole run interpolates states only, and the read-outs solve the KKT system at every row
     from (q, v) (`tables.kkt_rows`); `hybrid.Piece`."""
-    n = len(z)
+    n, width = z.shape
     n_alg = mf.index["mu"].stop - mf.index["lam"].start
-    return np.hstack([z[:, :2 * nq], np.full((n, n_alg), np.nan), z[:, 2 * nq:]])
+    y = np.empty((n, width + n_alg), dtype=np.result_type(z.dtype, float))   # filled in place: cheaper than a hstack
+    y[:, :2 * nq] = z[:, :2 * nq]
+    y[:, 2 * nq:2 * nq + n_alg] = np.nan
+    y[:, 2 * nq + n_alg:] = z[:, 2 * nq:]
+    return y
 
 
 def result_message(code: int) -> str:

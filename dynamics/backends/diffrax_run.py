@@ -404,6 +404,16 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
     return run
 
 
+def interpolator(o, record: StepRecord) -> Callable:
+    """interpolate(row, t) -> z: the state at t from one step record, by the solver's dense output (the one
+    interpolant of the output rows and of the readings between them)."""
+    solver = solver_for(o)
+
+    def interpolate(row, t):
+        return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(t)
+    return interpolate
+
+
 def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     """rows(st, ts) -> dict(rows=z, row_seg); to be jitted (one compilation per output-buffer size: the step
     loop's own does not depend on it).
@@ -414,10 +424,7 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     step's dense output there; row_seg is the segment number it belongs to. One loop in one kernel
     (dynamics/backends/xla_options.py) costs about half of a vectorised `searchsorted` and gather, with the same
     rows to the bit (docs/benchmarks.md)."""
-    solver = solver_for(o)
-
-    def interpolate(row, t):
-        return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(t)
+    interpolate = interpolator(o, record)
 
     def rows(st, ts):
         ends = st[:, ST_ACC]
@@ -434,21 +441,21 @@ def make_rows(o, n_steps: int, record: StepRecord) -> Callable:
     return rows
 
 
-#: instants one call of the dense reading takes (padded): a call's cost is nearly all fixed, so one call holds the
-#: whole pass of readings of a run's located peaks
+#: instants one call of the dense reading holds: the call evaluates only the instants it is given (its cost
+#: follows their number), and one call holds the whole first pass of readings of a run's located peaks
 DENSE_BATCH = 1024
 
 
 def make_dense(o, record: StepRecord) -> Callable:
-    """dense(rows, ts) -> z: the states at instants ts, ts[i] from the step record rows[i], by the same
-    interpolant the output rows come from (`make_rows`)."""
-    solver = solver_for(o)
+    """dense(rows, ts, n) -> z: the states at the instants ts[:n], ts[i] from the step record rows[i], by the
+    interpolant of the output rows (`make_rows`) in one loop in one kernel as theirs (the same states to the
+    bit, a fraction of a vectorised evaluation's cost, and none for the padding); rows and ts past n are not
+    read, z is zero there."""
+    interpolate = interpolator(o, record)
 
-    def interpolate(row, t):
-        return solver.interpolation_cls(t0=row[ST_T0], t1=row[ST_T1], **record.dense(row)).evaluate(t)
-
-    def dense(rows, ts):
-        return jax.vmap(interpolate)(rows, ts)
+    def dense(rows, ts, n):
+        z0 = jnp.zeros((rows.shape[0],) + jax.eval_shape(interpolate, rows[0], ts[0]).shape)
+        return jax.lax.fori_loop(0, n, lambda i, z: z.at[i].set(interpolate(rows[i], ts[i])), z0)
     return dense
 
 
@@ -463,7 +470,6 @@ class DenseOutput:
         self.segments: list[tuple] = []       # (t start, t end, call, segment, mode, parameters, offset)
         self.buffers: list = []
         self._table = None                    # the segments and their taken steps as arrays, on the host
-        self._seg = None                      # the segment of each of those steps
 
     def add_call(self, st, t0: float, t1: float, ev_t, modes, params, offset) -> None:
         c = len(self.buffers)
@@ -474,8 +480,9 @@ class DenseOutput:
         self._table = None
 
     def _tables(self) -> tuple:
-        """(segment starts, ends, mode-and-parameters group of each; the taken steps' records, their t0, t_acc and
-        segment (its index in `segments`), each segment's first and last step + 1), built once."""
+        """(segment starts, ends, mode-and-parameters group of each; the taken steps' records, their t0, t_acc,
+        segment (its index in `segments`), each segment's first and last step + 1, and whether t_acc is sorted over
+        all of them), built once per run."""
         if self._table is None:
             groups: dict = {}
             S = self.segments
@@ -492,25 +499,22 @@ class DenseOutput:
                 taken = h[np.isfinite(h[:, ST_ACC])]
                 recs.append(taken)
                 segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
-            rec = np.concatenate(recs) if recs else np.zeros((0, self.entry.record.width))
-            seg = np.concatenate(segs) if segs else np.zeros(0, int)
-            order = np.argsort(seg, kind="stable")        # each segment's steps together, in time order
-            rec, seg = rec[order], seg[order]
+            rec = recs[0] if len(recs) == 1 else (np.concatenate(recs) if recs
+                                                   else np.zeros((0, self.entry.record.width)))
+            seg = segs[0] if len(segs) == 1 else np.concatenate(segs) if segs else np.zeros(0, int)
+            if np.any(seg[1:] < seg[:-1]):                # each segment's steps together, in time order
+                order = np.argsort(seg, kind="stable")
+                rec, seg = rec[order], seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
-            self._table = (lo, hi, group, rec, rec[:, ST_T0], rec[:, ST_ACC], at)
-            self._seg = seg
+            acc = rec[:, ST_ACC]
+            self._table = (lo, hi, group, rec, rec[:, ST_T0], acc, at, seg, not np.any(acc[1:] < acc[:-1]))
         return self._table
-
-    def _step_segments(self) -> np.ndarray:
-        """The segment (index in `segments`) of each taken step of `_tables`, in its order."""
-        self._tables()
-        return self._seg
 
     def _fn(self):
         key = ("dense", DENSE_BATCH)
         fn = self.entry.rows.get(key)
         if fn is None:
-            example = (np.zeros((DENSE_BATCH, self.entry.record.width)), np.zeros(DENSE_BATCH, np.float64))
+            example = (np.zeros((DENSE_BATCH, self.entry.record.width)), np.zeros(DENSE_BATCH), np.int32(0))
             fn = jax.jit(make_dense(self.o, self.entry.record)).lower(*example).compile()
             self.entry.rows[key] = fn
         return fn
@@ -520,17 +524,16 @@ class DenseOutput:
 
     def read_many(self, requests: list[tuple[np.ndarray, float, float]]) -> list:
         """`read` for each (times, lo, hi), the instants of all evaluated together (one compiled call per
-        DENSE_BATCH instants). Each instant is read on the first segment overlapping (lo, hi) that holds it, by
-        the step of that segment whose [t0, t_acc] holds it (at a segment's first instant, an event's: its first
-        step, the limit after the event)."""
+        DENSE_BATCH instants). Each instant is read on the first segment overlapping (lo, hi) that holds it,
+        by the step of that segment whose [t0, t_acc] holds it (at a segment's first instant, an event's: its
+        first step, the limit after the event)."""
         out: list = [None] * len(requests)
         if not requests or not self.segments:
             return out
-        s_lo, s_hi, group, rec, t0, acc, at = self._tables()
-        lo = np.array([r[1] for r in requests], dtype=float)
-        hi = np.array([r[2] for r in requests], dtype=float)
+        s_lo, s_hi, group, rec, t0, acc, at, step_seg, acc_sorted = self._tables()
+        span = np.array([(r[1], r[2]) for r in requests], dtype=float).reshape(-1, 2)
         sizes = np.array([len(r[0]) for r in requests])
-        inside = (s_lo < hi[:, None]) & (s_hi > lo[:, None])             # requests x segments
+        inside = (s_lo < span[:, 1:]) & (s_hi > span[:, :1])             # requests x segments
         own = np.argmax(inside, axis=1)
         ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own][:, None])).any(axis=1)
         rid = np.repeat(np.arange(len(requests)), sizes)
@@ -538,35 +541,43 @@ class DenseOutput:
         hold = inside[rid] & (ts[:, None] >= s_lo) & (ts[:, None] <= s_hi)  # instants x segments
         seg = np.argmax(hold, axis=1)                                       # the first segment that holds each
         a, b = at[seg], at[seg + 1]
-        # the step of each instant's segment whose t_acc is the first at or after it (the segment's last where none):
-        # its segment's steps before it, counted in one stable sort of the steps and instants by (segment, time)
-        # with an instant before a step of equal time (a search on the left of each segment's t_acc)
-        n_rec = len(acc)
-        key_seg = np.concatenate([self._step_segments(), seg])
-        order = np.lexsort((np.r_[np.ones(n_rec, bool), np.zeros(len(ts), bool)], np.concatenate([acc, ts]), key_seg))
-        before = np.cumsum(order < n_rec) - (order < n_rec)      # steps ahead of each entry in that order
-        steps = np.empty(len(order), dtype=int)
-        steps[order] = before
-        j = np.where(b > a, np.minimum(steps[n_rec:], b - 1), 0)
+        # the step of each instant's segment whose t_acc is the first at or after it (the segment's last where
+        # none): its segment's first step + its steps before the instant (t_acc < t). Where t_acc is sorted over
+        # all steps (the steps of later segments end later), that is one search on the left, kept within the
+        # segment; otherwise one stable sort of the steps and instants by (segment, time) counts them, an instant
+        # before a step of equal time.
+        if acc_sorted:
+            steps = np.minimum(np.maximum(np.searchsorted(acc, ts, side="left"), a), b)
+        else:
+            n_rec = len(acc)
+            key_seg = np.concatenate([step_seg, seg])
+            order = np.lexsort((np.r_[np.ones(n_rec, bool), np.zeros(len(ts), bool)], np.concatenate([acc, ts]),
+                                key_seg))
+            before = np.cumsum(order < n_rec) - (order < n_rec)      # steps ahead of each entry in that order
+            steps = np.empty(len(order), dtype=int)
+            steps[order] = before
+            steps = steps[n_rec:]
+        j = np.where(b > a, np.minimum(steps, b - 1), 0)
         good = hold.any(axis=1) & (b > a) & (t0[j] <= ts) & (ts <= acc[j])
         ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
         read = ok[rid]
-        z = np.empty((int(read.sum()), self.entry.jmod.nz))
         steps, tt = j[read], ts[read]
+        z = np.empty((len(tt), self.entry.jmod.nz))
         for c in range(0, len(tt), DENSE_BATCH):
             n = min(DENSE_BATCH, len(tt) - c)
-            pad = np.minimum(np.arange(c, c + DENSE_BATCH), c + n - 1)      # the last instant repeated
-            z[c:c + n] = np.asarray(self._fn()(rec[steps[pad]], tt[pad]))[:n]
-        starts = np.concatenate([[0], np.cumsum(sizes[ok])])
-        kept = np.flatnonzero(ok)
-        by_mode: dict[str, list[int]] = {}
-        for n, r in enumerate(kept.tolist()):
-            by_mode.setdefault(self.segments[own[r]][4], []).append(n)
-        for mode, ns in by_mode.items():        # the IDA layout, once per mode
-            y = state_rows(self.model.modes[mode], self.nq, z)
-            for n in ns:
-                g = self.segments[own[kept[n]]]
-                out[int(kept[n])] = (g[4], g[5], g[6], y[starts[n]:starts[n + 1]])
+            rows, at_t = np.empty((DENSE_BATCH, rec.shape[1])), np.empty(DENSE_BATCH)   # past n: not read
+            np.take(rec, steps[c:c + n], axis=0, out=rows[:n])
+            at_t[:n] = tt[c:c + n]
+            z[c:c + n] = np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n]
+        starts = np.r_[0, np.cumsum(sizes[ok])].tolist()
+        own_at = own.tolist()
+        ys: dict = {}                           # the IDA layout, once per mode
+        for n, r in enumerate(np.flatnonzero(ok).tolist()):
+            g = self.segments[own_at[r]]
+            y = ys.get(g[4])
+            if y is None:
+                y = ys[g[4]] = state_rows(self.model.modes[g[4]], self.nq, z)
+            out[r] = (g[4], g[5], g[6], y[starts[n]:starts[n + 1]])
         return out
 
 
@@ -669,6 +680,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     jmod, names = entry.jmod, list(model.parameter_names)
     one_layout = len({mf_.index["mu"].stop for mf_ in model.modes.values()}) == 1
     nq = jmod.nq
+    q_columns = [f"{c}_q" for c in model.coordinates]
     stats = new_stats("diffrax", o.solver, start.derive_time,
                       unavailable={"jacobian_evaluations": "not exposed by diffrax"})
     per_step = evaluations_per_step(o)
@@ -713,7 +725,9 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
                 stats["compilations"] += 1
             r = call(rows_fn, row_args) if call else rows_fn(*row_args)
             chunks.append({key: np.asarray(v)[:len(chunk)] for key, v in r.items()})
-        if chunks:
+        if len(chunks) == 1:
+            out.update(chunks[0])
+        elif chunks:
             out.update({key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]})
         else:                   # no output time reached (a failure before the first one)
             out["rows"], out["row_seg"] = np.zeros((0, jmod.nz)), np.zeros(0, np.int32)
@@ -728,25 +742,22 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         dense.add_call(res["st"], t, float(out["t"]), out["ev_t"][:n_ev], modes, params, offset)
         seg = out["row_seg"][:n_out]
         # rows are in segment order: one piece per segment, split where the segment number changes
-        cuts = np.flatnonzero(np.diff(seg)) + 1
+        edges = np.r_[0, np.flatnonzero(np.diff(seg)) + 1, n_out].tolist() if n_out else []
         y_all = state_rows(mf, nq, out["rows"][:n_out]) if one_layout else None   # one layout: all rows at once
-        for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, n_out]):
-            if hi > lo:
-                s = int(seg[lo])
-                y_rows = y_all[lo:hi] if y_all is not None else state_rows(model.modes[modes[s]], nq,
-                                                                            out["rows"][lo:hi])
-                pieces.append(Piece(modes[s], params[s], ts[lo:hi], y_rows, None, offset))
+        for s, lo, hi in zip(seg[edges[:-1]].tolist(), edges[:-1], edges[1:]):
+            y_rows = y_all[lo:hi] if y_all is not None else state_rows(model.modes[modes[s]], nq, out["rows"][lo:hi])
+            pieces.append(Piece(modes[s], params[s], ts[lo:hi], y_rows, None, offset))
+        if n_ev:        # the events' numbers as Python values, all at once
+            ev_t, ev_guard, ev_ke = (out[key][:n_ev].tolist() for key in ("ev_t", "ev_guard", "ev_ke"))
+            ev_q = (out["ev_z"][:n_ev, :nq] + offset).tolist()
         for e in range(n_ev):
-            mf_e, t_e = model.modes[modes[e]], float(out["ev_t"][e])
+            t_e, z_b = ev_t[e], out["ev_z"][e]
             vals = {**values, **dict(zip(names, params[e]))}
-            z_b = out["ev_z"][e]
-            q, v = z_b[:nq], z_b[nq:2 * nq]
-            guard = mf_e.guard_names[int(out["ev_guard"][e])]
-            tr = mech.on_guard(modes[e], guard, vals, t_e, q, v)
+            guard = model.modes[modes[e]].guard_names[ev_guard[e]]
+            tr = mech.on_guard(modes[e], guard, vals, t_e, z_b[:nq], z_b[nq:2 * nq])
             events.append(dict(t_s=t_e, from_mode=modes[e], to_mode=modes[e + 1], kind=tr.kind, guard=guard,
-                               **{f"{c}_q": float(x) for c, x in zip(model.coordinates, q + offset)},
-                               kinetic_energy_before_J=float(out["ev_ke"][e, 0]),
-                               kinetic_energy_after_J=float(out["ev_ke"][e, 1]), message=tr.message or ""))
+                               **dict(zip(q_columns, ev_q[e])), kinetic_energy_before_J=ev_ke[e][0],
+                               kinetic_energy_after_J=ev_ke[e][1], message=tr.message or ""))
             if tr.message:
                 warnings.append(f"t = {t_e:.6g} s: {tr.message}")
             last = (guard, t_e)
