@@ -26,6 +26,7 @@ The compiled loop does not re-base the coordinates (`Mechanism.rebase`); the han
 """
 from __future__ import annotations
 
+import threading
 import time as _time
 from dataclasses import dataclass, replace
 from enum import IntEnum
@@ -459,6 +460,23 @@ def make_dense(o, record: StepRecord) -> Callable:
     return dense
 
 
+_STAGING = threading.local()        # per thread: record width -> the dense reading's input buffers
+
+
+def _staging(width: int) -> tuple[np.ndarray, np.ndarray]:
+    """This thread's input buffers of the dense reading (DENSE_BATCH step records and instants; past the instants
+    of a call, what an earlier call left, never read), 64-byte aligned so that the CPU client reads them in place
+    instead of copying them, and kept from call to call (fresh memory costs its first touch again)."""
+    kept = _STAGING.__dict__.setdefault("buffers", {})
+    if width not in kept:
+        def aligned(n: int) -> np.ndarray:
+            raw = np.empty(n + 8)
+            at = (-raw.ctypes.data % 64) // 8
+            return raw[at:at + n]
+        kept[width] = (aligned(DENSE_BATCH * width).reshape(DENSE_BATCH, width), aligned(DENSE_BATCH))
+    return kept[width]
+
+
 class DenseOutput:
     """A compiled run's states at any instants between its events, from the step buffers its output rows were
     interpolated from (`make_dense`): `read(times, lo, hi)` -> (mode, parameters, offset, y rows in the mode's
@@ -496,7 +514,9 @@ class DenseOutput:
             recs, segs = [], []
             for c, buf in enumerate(self.buffers):
                 h = np.asarray(buf)
-                taken = h[np.isfinite(h[:, ST_ACC])]
+                finite = np.isfinite(h[:, ST_ACC])
+                n = int(np.count_nonzero(finite))
+                taken = h[:n] if finite[:n].all() else h[finite]    # the taken steps lead the buffer: a view
                 recs.append(taken)
                 segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
             rec = recs[0] if len(recs) == 1 else (np.concatenate(recs) if recs
@@ -506,7 +526,7 @@ class DenseOutput:
                 order = np.argsort(seg, kind="stable")
                 rec, seg = rec[order], seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
-            acc = rec[:, ST_ACC]
+            acc = np.ascontiguousarray(rec[:, ST_ACC])
             self._table = (lo, hi, group, rec, rec[:, ST_T0], acc, at, seg, not np.any(acc[1:] < acc[:-1]))
         return self._table
 
@@ -563,12 +583,12 @@ class DenseOutput:
         read = ok[rid]
         steps, tt = j[read], ts[read]
         z = np.empty((len(tt), self.entry.jmod.nz))
+        rows, at_t = _staging(rec.shape[1])
         for c in range(0, len(tt), DENSE_BATCH):
             n = min(DENSE_BATCH, len(tt) - c)
-            rows, at_t = np.empty((DENSE_BATCH, rec.shape[1])), np.empty(DENSE_BATCH)   # past n: not read
-            np.take(rec, steps[c:c + n], axis=0, out=rows[:n])
+            np.take(rec, steps[c:c + n], axis=0, out=rows[:n], mode="clip")      # (in range: unbuffered)
             at_t[:n] = tt[c:c + n]
-            z[c:c + n] = np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n]
+            z[c:c + n] = np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n]   # (waited for: staging free again)
         starts = np.r_[0, np.cumsum(sizes[ok])].tolist()
         own_at = own.tolist()
         ys: dict = {}                           # the IDA layout, once per mode
