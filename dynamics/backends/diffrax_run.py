@@ -460,6 +460,11 @@ def make_dense(o, record: StepRecord) -> Callable:
     return dense
 
 
+def _sorted(x: np.ndarray) -> bool:
+    """Whether x is non-decreasing (False with a NaN in it)."""
+    return bool(np.all(x[1:] >= x[:-1]))
+
+
 _STAGING = threading.local()        # per thread: record width -> the dense reading's input buffers
 
 
@@ -527,7 +532,7 @@ class DenseOutput:
                 rec, seg = rec[order], seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
             acc = np.ascontiguousarray(rec[:, ST_ACC])
-            self._table = (lo, hi, group, rec, rec[:, ST_T0], acc, at, seg, not np.any(acc[1:] < acc[:-1]))
+            self._table = (lo, hi, group, rec, rec[:, ST_T0], acc, at, seg, _sorted(acc))
         return self._table
 
     def _fn(self):
@@ -552,7 +557,8 @@ class DenseOutput:
             return out
         s_lo, s_hi, group, rec, t0, acc, at, step_seg, acc_sorted = self._tables()
         span = np.array([(r[1], r[2]) for r in requests], dtype=float).reshape(-1, 2)
-        sizes = np.array([len(r[0]) for r in requests])
+        lengths = [len(r[0]) for r in requests]
+        sizes = np.array(lengths)
         inside = (s_lo < span[:, 1:]) & (s_hi > span[:, :1])             # requests x segments
         own = np.argmax(inside, axis=1)
         ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own][:, None])).any(axis=1)
@@ -589,15 +595,15 @@ class DenseOutput:
             np.take(rec, steps[c:c + n], axis=0, out=rows[:n], mode="clip")      # (in range: unbuffered)
             at_t[:n] = tt[c:c + n]
             z[c:c + n] = np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n]   # (waited for: staging free again)
-        starts = np.r_[0, np.cumsum(sizes[ok])].tolist()
-        own_at = own.tolist()
+        own_at, start = own.tolist(), 0
         ys: dict = {}                           # the IDA layout, once per mode
-        for n, r in enumerate(np.flatnonzero(ok).tolist()):
+        for r in np.flatnonzero(ok).tolist():
             g = self.segments[own_at[r]]
             y = ys.get(g[4])
             if y is None:
                 y = ys[g[4]] = state_rows(self.model.modes[g[4]], self.nq, z)
-            out[r] = (g[4], g[5], g[6], y[starts[n]:starts[n + 1]])
+            out[r] = (g[4], g[5], g[6], y[start:start + lengths[r]])
+            start += lengths[r]
         return out
 
 
