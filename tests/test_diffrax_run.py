@@ -102,6 +102,25 @@ def test_rows_satisfy_the_mode_residuals(runs):
             assert np.max(np.abs(res)) < 1e-6, (piece.mode, t, res)
 
 
+def test_dense_readings_at_the_rows_are_the_rows(runs):
+    """The run's dense output read at its own output instants, all in one pass (more instants than one call of
+    the dense reading holds), gives the rows themselves: the same step's interpolant, evaluated the same way
+    (`make_rows`, `make_dense`), so a located peak is never below a row."""
+    whole, _, _ = runs
+    dense = whole.dense
+    requests, expected = [], []
+    for a, b, *_ in dense.segments:
+        held = [(p.t[(p.t > a) & (p.t <= b)], p.y[(p.t > a) & (p.t <= b)]) for p in whole.pieces[1:]]
+        t, y = np.concatenate([h[0] for h in held]), np.concatenate([h[1] for h in held])
+        if len(t):
+            requests.append((t, a, b))
+            expected.append(y)
+    assert sum(len(r[0]) for r in requests) > diffrax_run.DENSE_BATCH
+    for (t, _, _), y, got in zip(requests, expected, dense.read_many(requests)):
+        assert got is not None and len(got[3]) == len(t)
+        np.testing.assert_array_equal(got[3], y)
+
+
 def test_calls_resume_where_the_buffers_end(case_a, runs, monkeypatch):
     """With buffers of 128 steps and 3 events the run takes many calls: full step buffers end a call between
     steps, a full event buffer hands the transition to `apply_transition` in Python (which also re-bases the
