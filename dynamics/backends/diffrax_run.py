@@ -560,12 +560,14 @@ class DenseOutput:
         lengths = [len(r[0]) for r in requests]
         sizes = np.array(lengths)
         inside = (s_lo < span[:, 1:]) & (s_hi > span[:, :1])             # requests x segments
-        own = np.argmax(inside, axis=1)
-        ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own][:, None])).any(axis=1)
+        own = inside.argmax(axis=1)
+        ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own, None])).any(axis=1)
         rid = np.repeat(np.arange(len(requests)), sizes)
-        ts = np.concatenate([np.asarray(r[0], dtype=float) for r in requests])
-        hold = inside[rid] & (ts[:, None] >= s_lo) & (ts[:, None] <= s_hi)  # instants x segments
-        seg = np.argmax(hold, axis=1)                                       # the first segment that holds each
+        ts = (np.asarray(requests[0][0], dtype=float) if len(requests) == 1
+              else np.concatenate([np.asarray(r[0], dtype=float) for r in requests]))
+        col = ts[:, None]
+        hold = inside[rid] & (col >= s_lo) & (col <= s_hi)                # instants x segments
+        seg = hold.argmax(axis=1)                                         # the first segment that holds each
         a, b = at[seg], at[seg + 1]
         # the step of each instant's segment whose t_acc is the first at or after it (the segment's last where
         # none): its segment's first step + its steps before the instant (t_acc < t). Where t_acc is sorted over
@@ -583,18 +585,21 @@ class DenseOutput:
             steps = np.empty(len(order), dtype=int)
             steps[order] = before
             steps = steps[n_rec:]
-        j = np.where(b > a, np.minimum(steps, b - 1), 0)
-        good = hold.any(axis=1) & (b > a) & (t0[j] <= ts) & (ts <= acc[j])
-        ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
+        some = b > a
+        j = np.where(some, np.minimum(steps, b - 1), 0)
+        good = hold.any(axis=1) & some & (t0[j] <= ts) & (ts <= acc[j])
+        if not good.all():
+            ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
         read = ok[rid]
-        steps, tt = j[read], ts[read]
-        z = np.empty((len(tt), self.entry.jmod.nz))
+        steps, tt = (j, ts) if read.all() else (j[read], ts[read])
         rows, at_t = _staging(rec.shape[1])
+        parts = []
         for c in range(0, len(tt), DENSE_BATCH):
             n = min(DENSE_BATCH, len(tt) - c)
             np.take(rec, steps[c:c + n], axis=0, out=rows[:n], mode="clip")      # (in range: unbuffered)
             at_t[:n] = tt[c:c + n]
-            z[c:c + n] = np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n]   # (waited for: staging free again)
+            parts.append(np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n])   # (waited for: staging free again)
+        z = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros((0, self.entry.jmod.nz))
         own_at, start = own.tolist(), 0
         ys: dict = {}                           # the IDA layout, once per mode
         for r in np.flatnonzero(ok).tolist():
