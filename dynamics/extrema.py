@@ -649,40 +649,64 @@ def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray,
                  tie: float) -> list[tuple[int, str, float]]:
     """(interval, side, instant) of the intervals' ends whose one-sided limit may beat `e` (`end_limits`), the
     LIMITS best guesses first (the earliest of equal ones)."""
+    return end_guesses(t, {None: f}, intervals, [(None, sense, e)], {None: tie})[0]
+
+
+def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
+                asks: list[tuple[str, float, Extremum | None]], ties: dict[str, float]
+                ) -> list[list[tuple[int, str, float]]]:
+    """`_end_guesses` of each (column, sense, extremum) of `asks` over the same intervals, in one array pass: the
+    ends and their rows are laid out once, each column's extrapolation to them made once for both senses."""
     ends, near = [], []
     for k, iv in enumerate(intervals):
         r = iv.rows
         if len(r) >= 2:
-            ends += [(k, "after", iv.lo), (k, "before", iv.hi)]
+            ends += [(k, "after"), (k, "before")]
             # each end's three nearest rows, inward; two rows: the second repeated (the step's own curve)
             near += [(r[0], r[1], r[2] if len(r) > 2 else r[1]), (r[-1], r[-2], r[-3] if len(r) > 2 else r[-2])]
-    if not ends:
-        return []
+    if not ends or not asks:
+        return [[] for _ in asks]
     near = np.array(near, dtype=int)
-    te = np.array([x[2] for x in ends], dtype=float)
-    f0, f1, f2 = f[near[:, 0]], f[near[:, 1]], f[near[:, 2]]
+    te = np.array([intervals[k].lo if side == "after" else intervals[k].hi for k, side in ends], dtype=float)
+    names = list(dict.fromkeys(c for c, _, _ in asks))
+    of = {c: n for n, c in enumerate(names)}
+    F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), -1)
+    f0, f1, f2 = F[:, near[:, 0]], F[:, near[:, 1]], F[:, near[:, 2]]
     t0, t1 = t[near[:, 0]], t[near[:, 1]]
+    m = np.array([of[c] for c, _, _ in asks])
+    sense = np.array([s for _, s, _ in asks], dtype=float)[:, None]
+    floor = np.array([-np.inf if e is None else s * e.value + ties[c] for c, s, e in asks], dtype=float)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         step = f0 - f1
-        guess = sense * (f0 + step * (t0 - te) / (t1 - t0))
+        line = f0 + step * (t0 - te) / (t1 - t0)
         # the extrapolation's error over (at most) one step: its second difference, else the step itself
         curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
-        floor = -np.inf if e is None else sense * e.value + tie
-        able = np.isfinite(step) & (t1 != t0) & np.isfinite(guess) & (guess + curve > floor)
-    order = sorted(np.flatnonzero(able).tolist(), key=lambda i: (-guess[i], te[i]))[:LIMITS]
-    return [(ends[i][0], ends[i][1], float(te[i])) for i in order]
+        guess = sense * line[m]
+        able = (np.isfinite(step) & (t1 != t0))[m] & np.isfinite(guess) & (guess + curve[m] > floor)
+    # each ask's able ends by guess (largest first), then instant, then position: the best LIMITS of them
+    a, i = np.nonzero(able)
+    order = np.lexsort((te[i], -guess[a, i], a))
+    a, i = a[order], i[order]
+    nth = np.arange(len(a)) - np.searchsorted(a, a)
+    a, i = a[nth < LIMITS].tolist(), i[nth < LIMITS].tolist()
+    out: list[list[tuple[int, str, float]]] = [[] for _ in asks]
+    tes = te.tolist()
+    for n, x in zip(a, i):
+        out[n].append((ends[x][0], ends[x][1], tes[x]))
+    return out
 
 
-def end_limit_requests(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray, intervals: list[Interval],
-                       tie: float) -> list[tuple]:
-    """The readings `end_limits` may take (interval, position, [instant]), to be read ahead in one pass."""
+def end_limit_requests(intervals: list[Interval], guesses: list[tuple[int, str, float]]) -> list[tuple]:
+    """The readings `end_limits` may take (interval, position, [instant]) for its `guesses` (`end_guesses`), to be
+    read ahead in one pass."""
     return [(intervals[k], 0 if side == "after" else len(intervals[k].rows) - 1, np.array([te]))
-            for k, side, te in _end_guesses(e, sense, t, f, intervals, tie)]
+            for k, side, te in guesses]
 
 
 def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: np.ndarray, own: list[Interval],
-               intervals: list[Interval], reader, tie: float) -> Extremum | None:
+               intervals: list[Interval], reader, tie: float,
+               guesses: list[tuple[int, str, float]] | None = None) -> Extremum | None:
     """The extremum `e` against the one-sided limits at the intervals' ends that may beat it (docs/theory.md §K5):
     `locate` ranks an interval's end by its row next to it, but a column whose value or derivative
     jumps at an event (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the heat
@@ -691,9 +715,11 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     extrapolation from its two rows, plus their second difference for margin (the extrapolation's error over a
     step), beats `e` is read there (the LIMITS best guesses of them); the best limit that beats `e` by more than the
     tie is returned (`e` where none does). An end read that `own` lacks is appended to it (the entry's later
-    checks index the intervals searched)."""
+    checks index the intervals searched). `guesses`: those ends where already found (`end_guesses`)."""
     best = e
-    for k, side, te in _end_guesses(e, sense, t, f, intervals, tie):
+    if guesses is None:
+        guesses = _end_guesses(e, sense, t, f, intervals, tie)
+    for k, side, te in guesses:
         iv = intervals[k]
         if best is not None and te == best.t and best.limit == side:
             continue

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_limit_requests,
-                                      end_limits, intervals_of, plan, read_all, with_rowless)
+from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
+                                      end_limit_requests, end_limits, intervals_of, plan, read_all, with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -264,12 +264,15 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     checks = [(p, got, c, name, sense) for p, got in zip(plans, located) if p is not None for c in p.values
               for name, sense in (("max", 1.0), ("min", -1.0))
               if not getattr(got.get(c, {}).get(name), "constant", False)]
+    guesses = []                    # each check's ends to read (`end_guesses`), all of a plan's at once
+    for p, got in zip(plans, located) if read is not None else ():
+        mine = [(c, sense, got.get(c, {}).get(name)) for q, _, c, name, sense in checks if q is p]
+        guesses += end_guesses(p.t, p.values, p.intervals, mine, p.ties) if mine else []
     if read is not None and checks:
-        read.prefetch([r for p, got, c, name, sense in checks
-                       for r in end_limit_requests(got.get(c, {}).get(name), sense, p.t, p.values[c], p.intervals,
-                                                   p.ties[c])])
-    for p, got, c, name, sense in checks if read is not None else ():
-        e = end_limits(got.get(c, {}).get(name), c, sense, p.t, p.values[c], p.intervals, p.intervals, read, p.ties[c])
+        read.prefetch([r for (p, *_), g in zip(checks, guesses) for r in end_limit_requests(p.intervals, g)])
+    for (p, got, c, name, sense), g in zip(checks, guesses):
+        e = end_limits(got.get(c, {}).get(name), c, sense, p.t, p.values[c], p.intervals, p.intervals, read, p.ties[c],
+                       g)
         if e is not None:
             got.setdefault(c, {})[name] = e
     # the growth toward an event where an extremum lies next to one: every window's and column's first approach
