@@ -652,22 +652,26 @@ def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray,
     return end_guesses(t, {None: f}, intervals, [(None, sense, e)], {None: tie})[0]
 
 
+def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
+    """(interval, side, instant) of every end whose one-sided limit `end_limits` may read: both ends of each
+    interval with two rows or more (`_end_guesses` extrapolates from them), in order."""
+    return [(k, side, te) for k, iv in enumerate(intervals) if len(iv.rows) >= 2
+            for side, te in (("after", iv.lo), ("before", iv.hi))]
+
+
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
                 asks: list[tuple[str, float, Extremum | None]], ties: dict[str, float]
                 ) -> list[list[tuple[int, str, float]]]:
     """`_end_guesses` of each (column, sense, extremum) of `asks` over the same intervals, in one array pass: the
     ends and their rows are laid out once, each column's extrapolation to them made once for both senses."""
-    ends, near = [], []
-    for k, iv in enumerate(intervals):
-        r = iv.rows
-        if len(r) >= 2:
-            ends += [(k, "after"), (k, "before")]
-            # each end's three nearest rows, inward; two rows: the second repeated (the step's own curve)
-            near += [(r[0], r[1], r[2] if len(r) > 2 else r[1]), (r[-1], r[-2], r[-3] if len(r) > 2 else r[-2])]
+    ends = every_end(intervals)
     if not ends or not asks:
         return [[] for _ in asks]
-    near = np.array(near, dtype=int)
-    te = np.array([intervals[k].lo if side == "after" else intervals[k].hi for k, side in ends], dtype=float)
+    # each end's three nearest rows, inward; two rows: the second repeated (the step's own curve)
+    near = np.array([(r[0], r[1], r[2] if len(r) > 2 else r[1]) if side == "after" else
+                     (r[-1], r[-2], r[-3] if len(r) > 2 else r[-2]) for r, side in
+                     ((intervals[k].rows, side) for k, side, _ in ends)], dtype=int)
+    te = np.array([x for _, _, x in ends], dtype=float)
     names = list(dict.fromkeys(c for c, _, _ in asks))
     of = {c: n for n, c in enumerate(names)}
     F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), -1)

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
-                                      end_limit_requests, end_limits, intervals_of, plan, read_all, with_rowless)
+                                      end_limit_requests, end_limits, every_end, intervals_of, plan, read_all, with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -243,10 +243,11 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is not None and read is not None:
         turn = _intervals(t[:n], breaks, *regime["last_turn"], ("turn start", "turn end"), read)
         means_asked = _turn_mean_requests(turn)
-    # a dense output's readings cost no integration: the growth toward every event a bracket reaches (what the
-    # singular-approach check may read) is read in the same pass; other readers read it once the extrema are known
-    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, p.values, h)]
-             if how == HOW_DENSE else [])
+    # a dense output's readings cost no integration: the one-sided limits at every interval's ends (what
+    # `end_limits` may read) and the growth toward every event a bracket or such a limit reaches (what the
+    # singular-approach check may read) are read in the same pass; other readers read them once the extrema are known
+    ahead = ([r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))
+              + _possible_approaches(p, p.values, h)] if how == HOW_DENSE else [])
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
     means = {}
@@ -433,13 +434,21 @@ SINGULAR_EVENTS = 50
 
 def _growth_request(iv: Interval, side: str, h: float, decades: int = SINGULAR_DECADES) -> tuple:
     """The reading `_growth` takes, (interval, position, times in order), and the order of its distances."""
-    d = min(h, 0.5 * (iv.hi - iv.lo)) * 10.0 ** -np.arange(decades + 1)
-    if side == "before":
-        times, position = iv.hi - d, len(iv.rows) - 1
-    else:
-        times, position = iv.lo + d, 0
-    order = np.argsort(times)
-    return (iv, position, times[order]), order
+    return _growth_requests([(iv, side)], h, decades)[0]
+
+
+def _growth_requests(ends: list[tuple[Interval, str]], h: float, decades: int = SINGULAR_DECADES) -> list[tuple]:
+    """`_growth_request` of each (interval, side), in one array pass."""
+    if not ends:
+        return []
+    d = np.array([min(h, 0.5 * (iv.hi - iv.lo)) for iv, _ in ends])[:, None] * 10.0 ** -np.arange(decades + 1)
+    before = np.array([side == "before" for _, side in ends])
+    times = np.where(before[:, None], np.array([iv.hi for iv, _ in ends])[:, None] - d,
+                     np.array([iv.lo for iv, _ in ends])[:, None] + d)
+    order = np.argsort(times, axis=1)
+    times = np.take_along_axis(times, order, axis=1)
+    return [((iv, len(iv.rows) - 1 if side == "before" else 0, x), o)
+            for (iv, side), x, o in zip(ends, times, order)]
 
 
 def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, decades: int = SINGULAR_DECADES
@@ -479,16 +488,21 @@ def _edge(e: Extremum | None) -> str | None:
 
 def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tuple]:
     """The readings `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py` `plan`), before its
-    extrema are known: the growth toward each event a bracket reaches, on that side."""
-    out = []
-    for j in p.jobs:
-        if j.done:
-            continue
-        iv = p.intervals[j.interval]
-        for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
-            if reaches and _approached(values[j.column], iv, side, j.sense):
-                out.append(_growth_request(iv, side, h)[0])
-    return out
+    extrema are known: the growth toward each end of an interval where an extremum may lie (a bracket's, or a
+    one-sided limit `end_limits` may take: `every_end`, any interval with two rows or more), on that side, where
+    some column and sense approaches it (`_approached`)."""
+    ends = every_end(p.intervals)
+    if not ends or not values:
+        return []
+    rows = np.array([(r[0], r[1]) if side == "after" else (r[-1], r[-2])
+                     for r, side in ((p.intervals[k].rows, side) for k, side, _ in ends)], dtype=int)
+    F = np.array([np.asarray(f, dtype=float)[rows] for f in values.values()])      # (column, end, near/next)
+    near, next_ = F[:, :, 0], F[:, :, 1]
+    with np.errstate(invalid="ignore"):
+        up = (((near > 0) & (near >= next_)) | ((-near > 0) & (-near >= -next_))).any(axis=0).tolist()
+    asked = [(p.intervals[k], side) for (k, side, _), any_up in zip(ends, up) if any_up
+             and (p.intervals[k].hi_kind if side == "before" else p.intervals[k].lo_kind) not in ("start", "end")]
+    return [r for r, _ in _growth_requests(asked, h)]
 
 
 def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval], h: float) -> list[tuple]:
