@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
-                                      end_limit_requests, end_limits, every_end, intervals_of, plan, read_all, with_rowless)
+                                      end_limit_requests, end_limits, every_end, intervals_of, plan, read_all,
+                                      with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -279,8 +280,9 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # the growth toward an event where an extremum lies next to one: every window's and column's first approach
     # read together (already read on a dense output)
     if read is not None:
-        read.prefetch([r for p, got in zip(plans, located) if p is not None
-                       for c, e in got.items() for r in _first_approaches(c, p.values[c], e, p.intervals, h)])
+        read.prefetch([r for r, _ in _growth_requests([x for p, got in zip(plans, located) if p is not None
+                                                       for c, e in got.items()
+                                                       for x in _first_approaches(c, p.values[c], e, p.intervals)], h)])
     thermal, treader = [c for c in present if c not in readable], None
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
@@ -441,14 +443,13 @@ def _growth_requests(ends: list[tuple[Interval, str]], h: float, decades: int = 
     """`_growth_request` of each (interval, side), in one array pass."""
     if not ends:
         return []
-    d = np.array([min(h, 0.5 * (iv.hi - iv.lo)) for iv, _ in ends])[:, None] * 10.0 ** -np.arange(decades + 1)
-    before = np.array([side == "before" for _, side in ends])
-    times = np.where(before[:, None], np.array([iv.hi for iv, _ in ends])[:, None] - d,
-                     np.array([iv.lo for iv, _ in ends])[:, None] + d)
+    before = [side == "before" for _, side in ends]
+    d = np.multiply.outer([min(h, 0.5 * (iv.hi - iv.lo)) for iv, _ in ends], 10.0 ** -np.arange(decades + 1))
+    times = (np.array([iv.hi if b else iv.lo for (iv, _), b in zip(ends, before)])[:, None]
+             + np.where(before, -1.0, 1.0)[:, None] * d)          # hi - d before the end, lo + d after the start
     order = np.argsort(times, axis=1)
-    times = np.take_along_axis(times, order, axis=1)
-    return [((iv, len(iv.rows) - 1 if side == "before" else 0, x), o)
-            for (iv, side), x, o in zip(ends, times, order)]
+    times = times[np.arange(len(ends))[:, None], order]
+    return [((iv, len(iv.rows) - 1 if b else 0, x), o) for (iv, _), b, x, o in zip(ends, before, times, order)]
 
 
 def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, decades: int = SINGULAR_DECADES
@@ -505,15 +506,15 @@ def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tup
     return [r for r, _ in _growth_requests(asked, h)]
 
 
-def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval], h: float) -> list[tuple]:
-    """The readings `singular_approaches` takes first for the column's located extrema `got` (max, min): the
-    growth toward the event next to each, in its own interval."""
+def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval]) -> list[tuple]:
+    """(interval, side) of the readings `singular_approaches` takes first for the column's located extrema `got`
+    (max, min; `_growth_requests`): the growth toward the event next to each, in its own interval."""
     out = []
     for name, sense in (("max", 1.0), ("min", -1.0)):
         e = got.get(name)
         side = _edge(e)
         if side is not None and _approached(f, intervals[e.interval], side, sense):
-            out.append(_growth_request(intervals[e.interval], side, h)[0])
+            out.append((intervals[e.interval], side))
     return out
 
 
