@@ -649,7 +649,7 @@ def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray,
                  tie: float) -> list[tuple[int, str, float]]:
     """(interval, side, instant) of the intervals' ends whose one-sided limit may beat `e` (`end_limits`), the
     LIMITS best guesses first (the earliest of equal ones)."""
-    return end_guesses(t, {None: f}, intervals, [(None, sense, e)], {None: tie})[0]
+    return end_guesses(t, {None: f}, intervals, [(None, sense, None if e is None else e.value)], {None: tie})[0]
 
 
 def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
@@ -660,10 +660,11 @@ def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
 
 
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
-                asks: list[tuple[str, float, Extremum | None]], ties: dict[str, float]
+                asks: list[tuple[str, float, float | None]], ties: dict[str, float], limit: int | None = LIMITS
                 ) -> list[list[tuple[int, str, float]]]:
-    """`_end_guesses` of each (column, sense, extremum) of `asks` over the same intervals, in one array pass: the
-    ends and their rows are laid out once, each column's extrapolation to them made once for both senses."""
+    """`_end_guesses` of each (column, sense, the extremum's value or None) of `asks` over the same intervals, in
+    one array pass: the ends and their rows are laid out once, each column's extrapolation to them made once for
+    both senses. limit: the best guesses kept per ask (None: every end that may beat the value)."""
     ends = every_end(intervals)
     if not ends or not asks:
         return [[] for _ in asks]
@@ -679,7 +680,7 @@ def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[In
     t0, t1 = t[near[:, 0]], t[near[:, 1]]
     m = np.array([of[c] for c, _, _ in asks])
     sense = np.array([s for _, s, _ in asks], dtype=float)[:, None]
-    floor = np.array([-np.inf if e is None else s * e.value + ties[c] for c, s, e in asks], dtype=float)[:, None]
+    floor = np.array([-np.inf if v is None else s * v + ties[c] for c, s, v in asks], dtype=float)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         step = f0 - f1
         line = f0 + step * (t0 - te) / (t1 - t0)
@@ -688,15 +689,16 @@ def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[In
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
         guess = sense * line[m]
         able = (np.isfinite(step) & (t1 != t0))[m] & np.isfinite(guess) & (guess + curve[m] > floor)
-    # each ask's able ends by guess (largest first), then instant, then position: the best LIMITS of them
+    # each ask's able ends by guess (largest first), then instant, then position: the best `limit` of them
     a, i = np.nonzero(able)
     order = np.lexsort((te[i], -guess[a, i], a))
     a, i = a[order], i[order]
-    nth = np.arange(len(a)) - np.searchsorted(a, a)
-    a, i = a[nth < LIMITS].tolist(), i[nth < LIMITS].tolist()
+    if limit is not None:
+        keep = np.arange(len(a)) - np.searchsorted(a, a) < limit
+        a, i = a[keep], i[keep]
     out: list[list[tuple[int, str, float]]] = [[] for _ in asks]
     tes = te.tolist()
-    for n, x in zip(a, i):
+    for n, x in zip(a.tolist(), i.tolist()):
         out[n].append((ends[x][0], ends[x][1], tes[x]))
     return out
 

@@ -18,8 +18,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
-                                      end_limit_requests, end_limits, every_end, intervals_of, plan, read_all,
-                                      with_rowless)
+                                      end_limit_requests, end_limits, intervals_of, plan, read_all, with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -247,8 +246,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # a dense output's readings cost no integration: the one-sided limits at every interval's ends (what
     # `end_limits` may read) and the growth toward every event a bracket or such a limit reaches (what the
     # singular-approach check may read) are read in the same pass; other readers read them once the extrema are known
-    ahead = ([r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))
-              + _possible_approaches(p, p.values, h)] if how == HOW_DENSE else [])
+    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, p.values, h)]
+             if how == HOW_DENSE else [])
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
     means = {}
@@ -268,7 +267,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
               if not getattr(got.get(c, {}).get(name), "constant", False)]
     guesses = []                    # each check's ends to read (`end_guesses`), all of a plan's at once
     for p, got in zip(plans, located) if read is not None else ():
-        mine = [(c, sense, got.get(c, {}).get(name)) for q, _, c, name, sense in checks if q is p]
+        mine = [(c, sense, getattr(got.get(c, {}).get(name), "value", None))
+                for q, _, c, name, sense in checks if q is p]
         guesses += end_guesses(p.t, p.values, p.intervals, mine, p.ties) if mine else []
     if read is not None and checks:
         read.prefetch([r for (p, *_), g in zip(checks, guesses) for r in end_limit_requests(p.intervals, g)])
@@ -488,22 +488,31 @@ def _edge(e: Extremum | None) -> str | None:
 
 
 def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tuple]:
-    """The readings `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py` `plan`), before its
-    extrema are known: the growth toward each end of an interval where an extremum may lie (a bracket's, or a
-    one-sided limit `end_limits` may take: `every_end`, any interval with two rows or more), on that side, where
-    some column and sense approaches it (`_approached`)."""
-    ends = every_end(p.intervals)
-    if not ends or not values:
-        return []
-    rows = np.array([(r[0], r[1]) if side == "after" else (r[-1], r[-2])
-                     for r, side in ((p.intervals[k].rows, side) for k, side, _ in ends)], dtype=int)
-    F = np.array([np.asarray(f, dtype=float)[rows] for f in values.values()])      # (column, end, near/next)
-    near, next_ = F[:, :, 0], F[:, :, 1]
-    with np.errstate(invalid="ignore"):
-        up = (((near > 0) & (near >= next_)) | ((-near > 0) & (-near >= -next_))).any(axis=0).tolist()
-    asked = [(p.intervals[k], side) for (k, side, _), any_up in zip(ends, up) if any_up
-             and (p.intervals[k].hi_kind if side == "before" else p.intervals[k].lo_kind) not in ("start", "end")]
-    return [r for r, _ in _growth_requests(asked, h)]
+    """The readings `end_limits` and `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py`
+    `plan`), before its extrema are known: the growth toward each event a bracket reaches, on that side; the
+    one-sided limits at the ends whose guesses may beat each column's best row in the window, in each sense (its
+    located extremum is at least that row, but for round-off: a guess beyond these is read once the extrema are
+    known), and the growth toward each of those ends the column approaches (`_approached`)."""
+    asks, ends, out = [], [], []
+    for j in p.jobs:
+        if j.done:
+            continue
+        iv = p.intervals[j.interval]
+        for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
+            if reaches and _approached(values[j.column], iv, side, j.sense):
+                ends.append((iv, side))
+    rows = np.concatenate([iv.rows for iv in p.intervals]).astype(int)
+    for c, f in values.items():
+        f = np.asarray(f, dtype=float)[rows]
+        f = f[np.isfinite(f)]
+        if len(f):
+            asks += [(c, 1.0, float(f.max())), (c, -1.0, float(f.min()))]
+    for (c, sense, _), guesses in zip(asks, end_guesses(p.t, values, p.intervals, asks, p.ties, limit=None)):
+        out += end_limit_requests(p.intervals, guesses)
+        ends += [(p.intervals[k], side) for k, side, _ in guesses
+                 if _approached(values[c], p.intervals[k], side, sense)]
+    return out + [r for r, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends}.values()),
+                                                 h)]
 
 
 def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval]) -> list[tuple]:
