@@ -659,36 +659,63 @@ def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
             for side, te in (("after", iv.lo), ("before", iv.hi))]
 
 
-def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
-                asks: list[tuple[str, float, float | None]], ties: dict[str, float], limit: int | None = LIMITS
-                ) -> list[list[tuple[int, str, float]]]:
-    """`_end_guesses` of each (column, sense, the extremum's value or None) of `asks` over the same intervals, in
-    one array pass: the ends and their rows are laid out once, each column's extrapolation to them made once for
-    both senses. limit: the best guesses kept per ask (None: every end that may beat the value)."""
+@dataclass
+class EndLines:
+    """Each column's linear extrapolation to every interval end from its rows there (`end_guesses`): the ends
+    (`every_end`), their instants te, and per (column, end) the row nearest the end f0 and the next f1, the
+    extrapolated value `line`, its error margin `curve` and whether it can be made (`ok`)."""
+
+    ends: list
+    te: np.ndarray
+    of: dict
+    f0: np.ndarray
+    f1: np.ndarray
+    line: np.ndarray
+    curve: np.ndarray
+    ok: np.ndarray
+
+
+def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]) -> EndLines | None:
+    """`EndLines` of every column of `values` at the intervals' ends; None without ends."""
     ends = every_end(intervals)
-    if not ends or not asks:
-        return [[] for _ in asks]
+    if not ends:
+        return None
     # each end's three nearest rows, inward; two rows: the second repeated (the step's own curve)
     near = np.array([(r[0], r[1], r[2] if len(r) > 2 else r[1]) if side == "after" else
                      (r[-1], r[-2], r[-3] if len(r) > 2 else r[-2]) for r, side in
                      ((intervals[k].rows, side) for k, side, _ in ends)], dtype=int)
     te = np.array([x for _, _, x in ends], dtype=float)
-    names = list(dict.fromkeys(c for c, _, _ in asks))
-    of = {c: n for n, c in enumerate(names)}
+    names = list(values)
     F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), -1)
     f0, f1, f2 = F[:, near[:, 0]], F[:, near[:, 1]], F[:, near[:, 2]]
     t0, t1 = t[near[:, 0]], t[near[:, 1]]
-    m = np.array([of[c] for c, _, _ in asks])
-    sense = np.array([s for _, s, _ in asks], dtype=float)[:, None]
-    floor = np.array([-np.inf if v is None else s * v + ties[c] for c, s, v in asks], dtype=float)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         step = f0 - f1
         line = f0 + step * (t0 - te) / (t1 - t0)
         # the extrapolation's error over (at most) one step: its second difference, else the step itself
         curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
-        guess = sense * line[m]
-        able = (np.isfinite(step) & (t1 != t0))[m] & np.isfinite(guess) & (guess + curve[m] > floor)
+    return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve,
+                    np.isfinite(step) & (t1 != t0))
+
+
+def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
+                asks: list[tuple[str, float, float | None]], ties: dict[str, float], limit: int | None = LIMITS,
+                lines: EndLines | None = None) -> list[list[tuple[int, str, float]]]:
+    """`_end_guesses` of each (column, sense, the extremum's value or None) of `asks` over the same intervals, in
+    one array pass: the ends and each column's extrapolation to them (`end_lines`, or `lines` where made already)
+    made once for both senses. limit: the best guesses kept per ask (None: every end that may beat the value)."""
+    if lines is None and asks:
+        lines = end_lines(t, {c: values[c] for c in dict.fromkeys(c for c, _, _ in asks)}, intervals)
+    if lines is None or not asks:
+        return [[] for _ in asks]
+    ends, te = lines.ends, lines.te
+    m = np.array([lines.of[c] for c, _, _ in asks])
+    sense = np.array([s for _, s, _ in asks], dtype=float)[:, None]
+    floor = np.array([-np.inf if v is None else s * v + ties[c] for c, s, v in asks], dtype=float)[:, None]
+    with np.errstate(invalid="ignore"):
+        guess = sense * lines.line[m]
+        able = lines.ok[m] & np.isfinite(guess) & (guess + lines.curve[m] > floor)
     # each ask's able ends by guess (largest first), then instant, then position: the best `limit` of them
     a, i = np.nonzero(able)
     order = np.lexsort((te[i], -guess[a, i], a))

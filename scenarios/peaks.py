@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
-                                      end_limit_requests, end_limits, intervals_of, plan, read_all, with_rowless)
+                                      end_limit_requests, end_limits, end_lines, intervals_of, plan, read_all,
+                                      with_rowless)
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -246,7 +247,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # a dense output's readings cost no integration: the one-sided limits at every interval's ends (what
     # `end_limits` may read) and the growth toward every event a bracket or such a limit reaches (what the
     # singular-approach check may read) are read in the same pass; other readers read them once the extrema are known
-    ahead = ([r for p in plans if p is not None for r in _possible_approaches(p, p.values, h)]
+    lines = [end_lines(p.t, p.values, p.intervals) if p is not None else None for p in plans]
+    ahead = ([r for p, x in zip(plans, lines) if p is not None for r in _possible_approaches(p, p.values, h, x)]
              if how == HOW_DENSE else [])
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
@@ -266,10 +268,10 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
               for name, sense in (("max", 1.0), ("min", -1.0))
               if not getattr(got.get(c, {}).get(name), "constant", False)]
     guesses = []                    # each check's ends to read (`end_guesses`), all of a plan's at once
-    for p, got in zip(plans, located) if read is not None else ():
+    for p, got, x in zip(plans, located, lines) if read is not None else ():
         mine = [(c, sense, getattr(got.get(c, {}).get(name), "value", None))
                 for q, _, c, name, sense in checks if q is p]
-        guesses += end_guesses(p.t, p.values, p.intervals, mine, p.ties) if mine else []
+        guesses += end_guesses(p.t, p.values, p.intervals, mine, p.ties, lines=x) if mine else []
     if read is not None and checks:
         read.prefetch([r for (p, *_), g in zip(checks, guesses) for r in end_limit_requests(p.intervals, g)])
     for (p, got, c, name, sense), g in zip(checks, guesses):
@@ -487,13 +489,14 @@ def _edge(e: Extremum | None) -> str | None:
     return e.limit if e.limit is not None else e.edge
 
 
-def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tuple]:
+def _possible_approaches(p, values: dict[str, np.ndarray], h: float, lines) -> list[tuple]:
     """The readings `end_limits` and `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py`
-    `plan`), before its extrema are known: the growth toward each event a bracket reaches, on that side; the
-    one-sided limits at the ends whose guesses may beat each column's best row in the window, in each sense (its
-    located extremum is at least that row, but for round-off: a guess beyond these is read once the extrema are
-    known), and the growth toward each of those ends the column approaches (`_approached`)."""
-    asks, ends, out = [], [], []
+    `plan`; `lines`: its `end_lines`), before its extrema are known: the growth toward each event a bracket
+    reaches, on that side; the one-sided limits at the ends whose guesses may beat each column's best row in the
+    window, in each sense (its located extremum is at least that row, but for round-off: a guess beyond these is
+    read once the extrema are known), and the growth toward each of those ends the column approaches
+    (`_approached`, here for every column, sense and end at once)."""
+    ends, out = [], []
     for j in p.jobs:
         if j.done:
             continue
@@ -501,16 +504,26 @@ def _possible_approaches(p, values: dict[str, np.ndarray], h: float) -> list[tup
         for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
             if reaches and _approached(values[j.column], iv, side, j.sense):
                 ends.append((iv, side))
-    rows = np.concatenate([iv.rows for iv in p.intervals]).astype(int)
-    for c, f in values.items():
-        f = np.asarray(f, dtype=float)[rows]
-        f = f[np.isfinite(f)]
-        if len(f):
-            asks += [(c, 1.0, float(f.max())), (c, -1.0, float(f.min()))]
-    for (c, sense, _), guesses in zip(asks, end_guesses(p.t, values, p.intervals, asks, p.ties, limit=None)):
-        out += end_limit_requests(p.intervals, guesses)
-        ends += [(p.intervals[k], side) for k, side, _ in guesses
-                 if _approached(values[c], p.intervals[k], side, sense)]
+    if lines is not None:
+        names = list(lines.of)
+        rows = np.concatenate([iv.rows for iv in p.intervals]).astype(int)
+        G = np.array([np.asarray(values[c], dtype=float)[rows] for c in names]).reshape(len(names), -1)
+        ok = np.isfinite(G)
+        top = np.where(ok, G, -np.inf).max(axis=1).tolist()
+        bottom = np.where(ok, G, np.inf).min(axis=1).tolist()
+        asks = [(c, sense, v) for c, hi, lo in zip(names, top, bottom) if np.isfinite(hi)
+                for sense, v in ((1.0, hi), (-1.0, lo))]
+        event = np.array([(p.intervals[k].hi_kind if side == "before" else p.intervals[k].lo_kind)
+                          not in ("start", "end") for k, side, _ in lines.ends])
+        at = {(k, side): e for e, (k, side, _) in enumerate(lines.ends)}
+        with np.errstate(invalid="ignore"):      # `_approached` of each column (row), sense and end (column)
+            up = [event & (lines.f0 > 0) & (lines.f0 >= lines.f1),
+                  event & (-lines.f0 > 0) & (-lines.f0 >= -lines.f1)]
+        for (c, sense, _), guesses in zip(asks, end_guesses(p.t, values, p.intervals, asks, p.ties, limit=None,
+                                                            lines=lines)):
+            out += end_limit_requests(p.intervals, guesses)
+            near = up[0 if sense > 0 else 1][lines.of[c]]
+            ends += [(p.intervals[k], side) for k, side, _ in guesses if near[at[(k, side)]]]
     return out + [r for r, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends}.values()),
                                                  h)]
 
