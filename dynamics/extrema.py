@@ -686,8 +686,8 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
                      ((intervals[k].rows, side) for k, side, _ in ends)], dtype=int)
     te = np.array([x for _, _, x in ends], dtype=float)
     names = list(values)
-    F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), -1)
-    f0, f1, f2 = F[:, near[:, 0]], F[:, near[:, 1]], F[:, near[:, 2]]
+    F = np.array([np.asarray(values[c], dtype=float)[near] for c in names]).reshape(len(names), len(ends), 3)
+    f0, f1, f2 = F[:, :, 0], F[:, :, 1], F[:, :, 2]
     t0, t1 = t[near[:, 0]], t[near[:, 1]]
     with np.errstate(invalid="ignore", divide="ignore"):
         step = f0 - f1

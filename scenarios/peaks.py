@@ -244,11 +244,11 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is not None and read is not None:
         turn = _intervals(t[:n], breaks, *regime["last_turn"], ("turn start", "turn end"), read)
         means_asked = _turn_mean_requests(turn)
-    # a dense output's readings cost no integration: the one-sided limits at every interval's ends (what
-    # `end_limits` may read) and the growth toward every event a bracket or such a limit reaches (what the
-    # singular-approach check may read) are read in the same pass; other readers read them once the extrema are known
+    # a dense output's readings cost no integration: the one-sided limits `end_limits` may read and the growth toward
+    # the events an extremum may lie next to (what the singular-approach check may read) are read in the same pass
+    # (`_readings_ahead`); other readers read them once the extrema are known
     lines = [end_lines(p.t, p.values, p.intervals) if p is not None else None for p in plans]
-    ahead = ([r for p, x in zip(plans, lines) if p is not None for r in _possible_approaches(p, p.values, h, x)]
+    ahead = ([r for p, x in zip(plans, lines) if p is not None for r in _readings_ahead(p, p.values, h, x)]
              if how == HOW_DENSE else [])
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
@@ -489,7 +489,7 @@ def _edge(e: Extremum | None) -> str | None:
     return e.limit if e.limit is not None else e.edge
 
 
-def _possible_approaches(p, values: dict[str, np.ndarray], h: float, lines) -> list[tuple]:
+def _readings_ahead(p, values: dict[str, np.ndarray], h: float, lines) -> list[tuple]:
     """The readings `end_limits` and `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py`
     `plan`; `lines`: its `end_lines`), before its extrema are known: the growth toward each event a bracket
     reaches, on that side; the one-sided limits at the ends whose guesses may beat each column's best row in the
