@@ -879,10 +879,15 @@ class TrajectoryReader:
     def _reading(self, iv: Interval, position: int, times: np.ndarray):
         """The re-integrated states at `times` (ordered) as a Piece of the row's mode; ReadingFailed if IDA fails."""
         from mechsim.dynamics.hybrid import Piece
-        anchor = self._anchor(iv, position, float(np.min(times)))
+        first = float(times.min())
+        anchor = self._anchor(iv, position, first)
         piece, t0 = anchor[0], anchor[2]
         # every reading starts from the row's own state: a restart from an earlier reading's state (projected back
         # onto the constraints) was cheaper but added its own error, which a finite difference of the peak shows
+        if first >= t0:          # the usual reading: every instant at or after the start, one integration
+            t, y, yp = self._from_row(anchor, times)
+            if len(t) == len(times) and (len(t) == 1 or bool(np.all(t[1:] >= t[:-1]))):       # rows in order
+                return Piece(piece.mode, piece.params, t, y, yp, piece.offset)
         ts, ys, yps = [], [], []
         for part in (times[times < t0][::-1], times[times >= t0]):
             if not len(part):
@@ -1082,10 +1087,13 @@ class TrajectoryReader:
         from mechsim.dynamics.backends.ida import atol_vector
         self.reintegrations += 1
         # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
-        at_start = np.abs(times - t0) <= 1e-12 * max(1.0, abs(t0))
-        out_t = times[~at_start]
+        near = 1e-12 * max(1.0, abs(t0))
+        gap = np.abs(times - t0)
+        at_start, out_t = (gap <= near, None) if gap.min() <= near else (None, times)
+        if at_start is not None:
+            out_t = times[~at_start]
         rows_t, rows_y, rows_yp = [], [], []
-        if at_start.any():
+        if at_start is not None:
             n0 = int(at_start.sum())
             rows_t.append(times[at_start])
             rows_y.append(np.repeat(y0[None, :], n0, axis=0))
