@@ -1082,34 +1082,30 @@ class TrajectoryReader:
     def _integrate(self, mf, p, t0, y0, yp0, times, tries: tuple | None = None):
         """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0), with
         the first of `tries` (default: all the reader's tolerance tries) that IDA meets."""
-        from sksundae.ida import IDA
-
-        from mechsim.dynamics.backends.ida import atol_vector
         self.reintegrations += 1
         # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
         near = 1e-12 * max(1.0, abs(t0))
         gap = np.abs(times - t0)
-        at_start, out_t = (gap <= near, None) if gap.min() <= near else (None, times)
-        if at_start is not None:
-            out_t = times[~at_start]
+        at_start = gap <= near if gap.min() <= near else None
+        out_t = times if at_start is None else times[~at_start]
+        n_tries = len(tries if tries is not None else self.tries)
+        if len(out_t) and self._compiled_tries():       # the instants at t0 in the same arrays (`read`)
+            lead = None if at_start is None else times[at_start]
+            for backend in self._compiled[:n_tries]:
+                got = backend.read(mf, p, t0, y0, yp0, out_t, lead)
+                if got is not None:
+                    return got
+            raise ReadingFailed("re-integration between rows failed: IDA failed on the compiled callbacks")
         rows_t, rows_y, rows_yp = [], [], []
         if at_start is not None:
             n0 = int(at_start.sum())
             rows_t.append(times[at_start])
             rows_y.append(np.repeat(y0[None, :], n0, axis=0))
             rows_yp.append(np.repeat(yp0[None, :], n0, axis=0))
-        n_tries = len(tries if tries is not None else self.tries)
-        if len(out_t) and self._compiled_tries():
-            for backend in self._compiled[:n_tries]:
-                got = backend.read(mf, p, t0, y0, yp0, out_t)
-                if got is not None:
-                    break
-            else:
-                raise ReadingFailed("re-integration between rows failed: IDA failed on the compiled callbacks")
-            rows_t.append(got[0])
-            rows_y.append(got[1])
-            rows_yp.append(got[2])
-        elif len(out_t):
+        if len(out_t):
+            from sksundae.ida import IDA
+
+            from mechsim.dynamics.backends.ida import atol_vector
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])

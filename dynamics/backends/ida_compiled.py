@@ -177,16 +177,20 @@ class IdaCompiledBackend(Backend):
         self._check(lib.IDASetStopTime(m.mem, t_end), "IDASetStopTime")
         return m
 
-    def read(self, mf, p, t0: float, y0, yp0, t_out: np.ndarray) -> tuple | None:
+    def read(self, mf, p, t0: float, y0, yp0, t_out: np.ndarray, at_start: np.ndarray | None = None) -> tuple | None:
         """(t, y, y') at every t_out (ordered away from t0, the last one the stop time) from (y0, y0'), None where IDA
         fails first: `integrate` without its segment's bookkeeping (counters, guards, the end state), for what
-        re-integrates a run's rows many times over (the located peaks' readings)."""
+        re-integrates a run's rows many times over (the located peaks' readings). The instants `at_start` (within
+        round-off of t0) come first, read as (y0, y0') itself, in the same arrays."""
         m = self._begin(mf, p, t0, y0, yp0, 0.0, float(t_out[-1]), {})
         t_out = np.ascontiguousarray(t_out, dtype=float)
-        rows_t = np.empty(len(t_out))
-        rows_y, rows_yp = np.empty((len(t_out), mf.ny)), np.empty((len(t_out), mf.ny))
+        n0 = 0 if at_start is None else len(at_start)
+        rows_t = np.empty(n0 + len(t_out))
+        rows_y, rows_yp = np.empty((len(rows_t), mf.ny)), np.empty((len(rows_t), mf.ny))
+        if n0:
+            rows_t[:n0], rows_y[:n0], rows_yp[:n0] = at_start, y0, yp0
         flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp,
-                                self._tret, rows_t, rows_y, rows_yp)
+                                self._tret, rows_t[n0:], rows_y[n0:], rows_yp[n0:])
         return (rows_t, rows_y, rows_yp) if int(flag) >= 0 and int(k) == len(t_out) else None
 
     def integrate(self, request: Request) -> Segment:
