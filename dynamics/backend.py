@@ -64,6 +64,12 @@ class Request:
     first_step: float = 0.0
 
 
+#: a first step of this fraction of the time left, where a segment starts without a usable step estimate: a failed
+#: segment's restart (`hybrid.recover`: the integrator's own estimate is what failed) and IDA's estimate where it
+#: cannot move t (`backends.ida.resolving_first_step`)
+FRESH_STEP_FRACTION = 1e-6
+
+
 @dataclass
 class Segment:
     """What a backend returns: rows at the requested output times (IDA layout), the end state, how it ended."""

@@ -16,7 +16,7 @@ from mechsim.mechanisms.base import Mechanism
 
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.backend import End, Request, Segment, backend_for
+from mechsim.dynamics.backend import FRESH_STEP_FRACTION, End, Request, Segment, backend_for
 from mechsim.dynamics.model import DerivedModel, StateExtension, derive
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.stats import new_stats
@@ -353,7 +353,8 @@ def recover(mf, p: tuple, seg: Segment, in_row: int, t_end: float):
 
     The integrator's last reached state is re-initialised consistently (positions to round-off, velocities,
     accelerations and multipliers from the KKT system: `consistent_state`) and restarted with a fresh
-    history and a first step of 1e-6 of the remaining time (the integrator's own estimate is what failed).
+    history and a first step of FRESH_STEP_FRACTION of the remaining time (the integrator's own estimate is what
+    failed).
     More than MAX_RECOVERIES failures in a row, a non-finite state or a state that cannot be made consistent
     gives up.
     """
@@ -368,7 +369,7 @@ def recover(mf, p: tuple, seg: Segment, in_row: int, t_end: float):
                                     seg.y_end[ix["ext"]], p)
     except (ValueError, np.linalg.LinAlgError):
         return None
-    return t, y, yp, 1e-6 * (t_end - t)
+    return t, y, yp, FRESH_STEP_FRACTION * (t_end - t)
 
 
 def stepped_over(mf, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray, seg) -> dict | None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from sksundae.ida import IDA
 
-from mechsim.dynamics.backend import Backend, End, Request, Segment
+from mechsim.dynamics.backend import FRESH_STEP_FRACTION, Backend, End, Request, Segment
 from mechsim.dynamics.model import ModeFunctions
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
@@ -71,13 +71,36 @@ def _failed(t, y, yp, t_end, y_end, yp_end, sol, settings) -> Segment:
                    counts=dict(residual_evaluations=sol.nfev, jacobian_evaluations=sol.njev))
 
 
+def resolving_first_step(settings: SolverSettings, atol: np.ndarray, t0: float, y0: np.ndarray, yp0: np.ndarray,
+                         t_first: float, t_end: float) -> float:
+    """IDA's first step: 0 (its own estimate) unless that estimate cannot move t, then FRESH_STEP_FRACTION of
+    the segment's span.
+
+    IDA's estimate is min(0.001 |t_first - t0|, 0.5 / ||y'0||) in its weighted RMS norm, weights
+    1/(rtol |y| + atol) (SUNDIALS IDA guide, IDASolve's initial step). At tight tolerances right after an entry
+    (a wheel at rest, |v| ~ atol, its acceleration jumping) that is below half a unit of round-off of t: t0 + h
+    rounds to t0, and the Newton iteration on differences of y at the round-off level of its positions fails
+    and succeeds by turns until the step budget is spent."""
+    h = 1e-3 * abs(t_first - t0)
+    ypnorm = float(np.sqrt(np.mean((yp0 / (settings.rtol * np.abs(y0) + atol)) ** 2)))
+    if ypnorm * h > 0.5:
+        h = 0.5 / ypnorm
+    return 0.0 if t0 + h != t0 else FRESH_STEP_FRACTION * (t_end - t0)
+
+
 def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray,
                       t_out: np.ndarray, t_end: float, settings: SolverSettings, first_step: float = 0.0) -> Segment:
     """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end.
 
     first_step: IDA's initial step (0: its own estimate)."""
+    atol = atol_vector(mf, settings)
+    tspan = np.concatenate([[t0], t_out[t_out > t0], [] if (len(t_out) and t_out[-1] >= t_end) else [t_end]])
+    if len(tspan) == 2:
+        tspan = np.array([t0, 0.5 * (t0 + t_end), t_end])  # force output at the given times
+    if first_step == 0.0:
+        first_step = resolving_first_step(settings, atol, t0, y0, yp0, tspan[1], t_end)
     opts = dict(first_step=first_step,
-        userdata=p, rtol=settings.rtol, atol=atol_vector(mf, settings), algebraic_idx=mf.algebraic or None,
+        userdata=p, rtol=settings.rtol, atol=atol, algebraic_idx=mf.algebraic or None,
         jacfn=mf.jacobian if settings.jacobian == "exact" else None, max_num_steps=settings.max_steps, linsolver="dense",
     )
     n_ev = len(mf.guard_names) if settings.events else 0
@@ -91,9 +114,6 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
         eventsfn.direction = list(mf.guard_directions)
         opts.update(eventsfn=eventsfn, num_events=n_ev)
     solver = IDA(mf.residual, **opts)
-    tspan = np.concatenate([[t0], t_out[t_out > t0], [] if (len(t_out) and t_out[-1] >= t_end) else [t_end]])
-    if len(tspan) == 2:
-        tspan = np.array([t0, 0.5 * (t0 + t_end), t_end])  # force output at the given times
     sol = solver.solve(tspan, y0, yp0)
     for observe in SOLVE_OBSERVERS:
         observe(solver, sol, len(y0))
