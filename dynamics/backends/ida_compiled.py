@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mechsim.dynamics.backend import Backend, End, Request, Segment
-from mechsim.dynamics.backends.ida import IdaBackend, atol_vector
+from mechsim.dynamics.backends.ida import IdaBackend, atol_vector, resolving_first_step
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.backends.sundials_c import (IDA_ROOT_RETURN, IDA_TOO_MUCH_WORK, SundialsUnavailable,
@@ -73,6 +73,7 @@ class _Memory:
     n_guards: int = 0
     roots: np.ndarray | None = None
     keep: list = field(default_factory=list)
+    atol: np.ndarray | None = None
 
 
 class IdaCompiledBackend(Backend):
@@ -126,6 +127,7 @@ class IdaCompiledBackend(Backend):
         atol, ids = np.ascontiguousarray(atol_vector(mf, s)), np.ones(mf.ny)
         ids[mf.algebraic] = 0.0
         m.keep += [atol, ids]
+        m.atol = atol
         atol_nv, id_nv = lib.vector(atol), lib.vector(ids)
         m.owned_vectors += [m.yy_nv, m.yp_nv, atol_nv, id_nv]
         check = self._check
@@ -164,11 +166,16 @@ class IdaCompiledBackend(Backend):
         self._memories = _Memories(self.lib)
 
     # -- one segment -------------------------------------------------------------------------------------------
-    def _begin(self, mf, p, t0: float, y0, yp0, first_step: float, t_end: float, counts: dict) -> _Memory:
-        """The mode's IDA memory re-initialised at (t0, y0, yp0) with the parameters, first step and stop time."""
+    def _begin(self, mf, p, t0: float, y0, yp0, first_step: float, t_end: float, counts: dict,
+               t_first: float | None = None) -> _Memory:
+        """The mode's IDA memory re-initialised at (t0, y0, yp0) with the parameters, first step and stop time;
+        given the first output instant `t_first`, a first step of 0 is IDA's own estimate only where that moves t
+        (`ida.resolving_first_step`, as the `ida` backend's segments)."""
         lib = self.lib
         hit = self._memories.get(id(mf))
         m = hit[1] if hit is not None and hit[0] is mf else self._first_use(mf, counts, len(p))
+        if first_step == 0.0 and t_first is not None:
+            first_step = resolving_first_step(self.settings, m.atol, t0, y0, yp0, t_first, t_end)
         m.y[:] = y0
         m.yp[:] = yp0
         m.p[:] = p
@@ -196,13 +203,13 @@ class IdaCompiledBackend(Backend):
     def integrate(self, request: Request) -> Segment:
         r, lib = request, self.lib
         counts = {}
-        m = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts)
         ahead = (r.t_out > r.t0) if r.t_end >= r.t0 else (r.t_out < r.t0)      # t_end < t0: backward in time
         t_out = r.t_out[ahead]
         n_req = len(t_out)
         if not (n_req and (t_out[-1] - r.t_end) * (r.t_end - r.t0) >= 0):
             t_out = np.append(t_out, r.t_end)
         t_out = np.ascontiguousarray(t_out, dtype=float)
+        m = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts, t_first=float(t_out[0]))
         rows_t = np.empty(len(t_out))
         rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
         flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
