@@ -209,7 +209,8 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
         level[0::2] = np.where(flat, G, -np.inf).max(axis=1)
         level[1::2] = -np.where(flat, G, np.inf).min(axis=1)
     any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
-    ms, ii = np.nonzero(smooth.reshape(2 * len(G), -1))   # the estimates where they are compared: the smooth peaks
+    # the estimates where they are compared: the smooth peaks (np.nonzero's indices, from the flat ones: far faster)
+    ms, ii = np.divmod(np.flatnonzero(smooth), G.shape[1])
     row = fi(ms, ii)
     est = row.copy()
     inner = ~(first[ii] | last[ii])
@@ -230,7 +231,8 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     constant = np.flatnonzero(any_flat & any_peak & (level >= lower - ties))
     c = constant >> 1
     with np.errstate(invalid="ignore"):
-        signed = np.where((constant & 1)[:, None], -G[c], G[c])
+        Gc = G[c]
+        signed = np.where((constant & 1)[:, None], -Gc, Gc)
         earliest = np.argmax(flat[c] & (signed >= (level - ties)[constant, None]), axis=1)
     for m, i, value in zip(constant.tolist(), earliest.tolist(), fi(constant, earliest).tolist()):
         k = int(k_of[i])
