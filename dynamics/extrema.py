@@ -160,13 +160,21 @@ def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: f
 def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
                 limit: int = CANDIDATES, layout: tuple | None = None) -> list[list[tuple]]:
     """`candidates` of every series F[c] (over the table's rows) in both senses, its tie ties[c]: [c max, c min,
-    ...]. The row-against-neighbour comparisons are made once for both senses on the rows' differences (a >= b
-    exactly where a - b >= 0; the negated series' differences are the differences negated, exactly), and the
-    series in the minimum's sense (-F, -inf where F is not finite) is formed only where read."""
+    ...] (`_candidates_bounds`)."""
+    return _candidates_bounds(t, F, ties, intervals, limit, layout)[0]
+
+
+def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
+                       limit: int = CANDIDATES, layout: tuple | None = None
+                       ) -> tuple[list[list[tuple]], np.ndarray | None]:
+    """(`_candidates`, each series' largest finite row in each sense: [c max, -(c min), ...], -inf where none is
+    finite; None without rows). The row-against-neighbour comparisons are made once for both senses on the rows'
+    differences (a >= b exactly where a - b >= 0; the negated series' differences are the differences negated,
+    exactly), and the series in the minimum's sense (-F, -inf where F is not finite) is formed only where read."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
-        return [[] for _ in range(2 * len(F))]
+        return [[] for _ in range(2 * len(F))], None
     rows, k_of, n_of, pos, first, last = layout
     if rows[-1] - rows[0] == len(rows) - 1 and np.all(rows[1:] > rows[:-1]):     # a run of rows: views
         ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
@@ -243,7 +251,7 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
         lo = float(iv.lo) if first[i] else float(ti[i - 1])
         hi = float(iv.hi) if last[i] else float(ti[i + 1])
         out[m].append((value, int(k_of[i]), int(pos[i]), lo, hi, False))
-    return out
+    return out, lower
 
 
 def locate(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader,
@@ -269,7 +277,8 @@ def read_all(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]) -> 
 class Plan:
     """What `locate` does before any reading: the jobs (each column's and sense's candidates), the brackets read
     together (`clusters`, each job's grid) and the requests: each cluster's readings, then each interval's start
-    where a constant stretch holds its first row (`starts`)."""
+    where a constant stretch holds its first row (`starts`); each column's largest and negated least finite row
+    over the intervals (`bounds`, as `_candidates_bounds` gives them)."""
 
     t: np.ndarray
     values: dict
@@ -280,6 +289,7 @@ class Plan:
     grids: list
     starts: dict
     requests: list
+    bounds: np.ndarray | None = None
 
     def finish(self, tables: list[dict | None], read: Reader) -> dict[str, dict[str, Extremum]]:
         """`locate`'s result from the readings of `requests` (None: read here, alone)."""
@@ -320,7 +330,7 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
     names = list(values)
     F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
     col_ties = _ties(F)
-    found = _candidates(t, F, col_ties, intervals, limit, layout)
+    found, bounds = _candidates_bounds(t, F, col_ties, intervals, limit, layout)
     for n, col in enumerate(names):
         f = F[n]
         ties[col] = tie = float(col_ties[n])
@@ -352,7 +362,7 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
     grids, instants = _grids(clusters)
     requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(clusters, instants)]
     requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
-    return Plan(t, values, intervals, jobs, ties, clusters, grids, starts, requests)
+    return Plan(t, values, intervals, jobs, ties, clusters, grids, starts, requests, bounds)
 
 
 def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader, table: dict | None = None) -> None:
