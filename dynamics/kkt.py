@@ -142,14 +142,19 @@ def _eliminate_rows(A: np.ndarray) -> np.ndarray:
     update (all its columns right of the pivot, all rows below it) done in one operation, and a pivot exchange
     skipped where no system of the stack exchanges (it would leave every entry as it was), made by copying where every
     system exchanges."""
-    n = len(A)
+    n, count = len(A), A.shape[2]
     for j in range(n):
+        pivot = np.abs(A[j, j])                # kept until an exchange changes row j
         for r in range(j + 1, n):
-            take = np.abs(A[r, j]) > np.abs(A[j, j])
-            if take.all():
+            take = np.abs(A[r, j]) > pivot
+            taken = np.count_nonzero(take)
+            if taken == count:
                 A[[j, r], j:] = A[[r, j], j:]
-            elif take.any():
+            elif taken:
                 A[j, j:], A[r, j:] = np.where(take, A[r, j:], A[j, j:]), np.where(take, A[j, j:], A[r, j:])
+            else:
+                continue
+            pivot = np.abs(A[j, j])
         if j + 1 < n:
             factor = A[j + 1:, j] / A[j, j]
             A[j + 1:, j + 1:] -= factor[:, None, :] * A[j, None, j + 1:]
