@@ -440,6 +440,30 @@ class Mechanism(ABC):
         """The transition when `guard` of `mode` fires at state (q, v) with parameter values `values`: the first
         rule of the table (`transitions`) that applies there, evaluated with numpy, its templates filled in. A
         mechanism without a table overrides this."""
+        rule, q, v, fill = self._fired_rule(mode, guard, values, q, v)
+        updates = {} if rule.updates is None else {
+            name: float(x) for name, x in rule.updates(q, v, values, np).items()}
+        record = None if rule.record is None else {
+            name: float(x) for name, x in rule.record(q, v, values).items()}
+        return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
+                          kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
+                          contact=rule.contact, record=record,
+                          restitution_parameter=rule.restitution_parameter)
+
+    def guard_outcome(self, mode: str, guard: str, values: Mapping[str, float], t: float,
+                      q: np.ndarray, v: np.ndarray) -> tuple[str, str | None]:
+        """(kind, message) of `on_guard`'s transition, for a caller that has its updates already (the compiled
+        diffrax run, which applied the same table): the rule chosen and its message filled in as `on_guard` does,
+        its updates and record not evaluated. A mechanism that overrides `on_guard` is asked through it."""
+        if type(self).on_guard is not Mechanism.on_guard:
+            tr = self.on_guard(mode, guard, values, t, q, v)
+            return tr.kind, tr.message
+        rule, _, _, fill = self._fired_rule(mode, guard, values, q, v)
+        return rule.kind, fill(rule.message)
+
+    def _fired_rule(self, mode: str, guard: str, values: Mapping[str, float], q, v):
+        """(rule, q, v, fill) for `on_guard`: the first rule of (mode, guard) whose `when` holds at (q, v) as
+        float arrays, and fill(template) filling a template with the rule's fields (None stays None)."""
         table = self.transition_rules()
         if table is None:
             raise NotImplementedError(f"{self.name} has neither a transition table nor on_guard")
@@ -450,18 +474,11 @@ class Mechanism(ABC):
         for rule in rules:
             if rule.when is not None and not float(rule.when(q, v, values, np)) > 0:
                 continue
-            updates = {} if rule.updates is None else {
-                name: float(x) for name, x in rule.updates(q, v, values, np).items()}
             fields = dict(rule.fields(q, v, values) if rule.fields is not None else {}, mode=mode)
 
             def fill(template):
                 return None if template is None else template.format(**fields)
-            record = None if rule.record is None else {
-                name: float(x) for name, x in rule.record(q, v, values).items()}
-            return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
-                              kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
-                              contact=rule.contact, record=record,
-                              restitution_parameter=rule.restitution_parameter)
+            return rule, q, v, fill
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def schedule(self, t_end: float) -> list[Breakpoint]:

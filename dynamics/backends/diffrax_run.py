@@ -696,7 +696,7 @@ def _failure(model, mode: str, t: float, q, code: FailureCode, o) -> dict:
 
 def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=None, call=None):
     """The run of `hybrid.simulate` as compiled whole-run calls: a `Trajectory` with the segment loop's pieces,
-    events rows (written by `on_guard` from the recorded states) and statistics; None when the mechanism has no
+    events rows (kinds and messages as `on_guard` writes them, from the recorded states) and statistics; None when the mechanism has no
     transition table (the caller falls back to the segment loop). call(fn, args): runs one compiled call and
     fetches its outputs (default: jax.device_get(fn(*args)))."""
     from mechsim.dynamics.hybrid import Piece, Trajectory, at_breakpoint, fire, reached
@@ -785,12 +785,13 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
             t_e, z_b = ev_t[e], out["ev_z"][e]
             vals = {**values, **dict(zip(names, params[e]))}
             guard = model.modes[modes[e]].guard_names[ev_guard[e]]
-            tr = mech.on_guard(modes[e], guard, vals, t_e, z_b[:nq], z_b[nq:2 * nq])
-            events.append(dict(t_s=t_e, from_mode=modes[e], to_mode=modes[e + 1], kind=tr.kind, guard=guard,
+            # (the call applied the transition: its kind and message only, as on_guard's)
+            kind, message = mech.guard_outcome(modes[e], guard, vals, t_e, z_b[:nq], z_b[nq:2 * nq])
+            events.append(dict(t_s=t_e, from_mode=modes[e], to_mode=modes[e + 1], kind=kind, guard=guard,
                                **dict(zip(q_columns, ev_q[e])), kinetic_energy_before_J=ev_ke[e][0],
-                               kinetic_energy_after_J=ev_ke[e][1], message=tr.message or ""))
-            if tr.message:
-                warnings.append(f"t = {t_e:.6g} s: {tr.message}")
+                               kinetic_energy_after_J=ev_ke[e][1], message=message or ""))
+            if message:
+                warnings.append(f"t = {t_e:.6g} s: {message}")
             last = (guard, t_e)
         stats["events"] += n_ev
         stats["restarts"] += n_ev
