@@ -321,7 +321,18 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     # column pandas would infer from the names repeated
     code = {mode: i for i, mode in enumerate(by_mode)}
     piece_mode = np.array([code[pc.mode] for pc in pieces], dtype=np.intp)
-    return _frame(out, names, _typed_names(tuple(by_mode)).take(piece_mode[piece_of_row]))
+    return _frame(out, names, _mode_column(tuple(by_mode), piece_mode, np.diff(starts), piece_of_row, keep))
+
+
+def _mode_column(modes: tuple[str, ...], piece_mode: np.ndarray, counts: np.ndarray, piece_of_row: np.ndarray, keep):
+    """The mode column: the typed names (`_typed_names`) taken row by row. Where every row is kept, the column
+    follows from the pieces' modes and row counts alone, and is kept per those (`_inferred`; a run repeated takes the
+    same column again): each frame gets its own shallow copy of the (immutable) typed array."""
+    def build():
+        return _typed_names(modes).take(piece_mode[piece_of_row])
+    if keep is not None:
+        return build()
+    return _inferred(("mode rows", modes, piece_mode.tobytes(), counts.tobytes()), build).copy()
 
 
 def _typed_names(names: tuple[str, ...]):
