@@ -414,10 +414,16 @@ def _records_frame(records: list[dict]) -> pd.DataFrame:
     blocks = [(np.array([[row[j] for row in rows] for j in floats], dtype=float).reshape(len(floats), n),
                np.array(floats, dtype=np.intp))] if floats else []
     if texts:      # every string column typed in one inference, then cut into its columns
-        typed = pd.Series(np.asarray([row[j] for j in texts for row in rows], dtype=object)).array
-        if not isinstance(typed.dtype, pd.StringDtype):
+        strings = tuple(row[j] for j in texts for row in rows)
+
+        def cut():        # the columns, kept per their strings (`_inferred`): a run repeated has the same events
+            typed = pd.Series(np.asarray(strings, dtype=object)).array
+            return [typed[i * n:(i + 1) * n] for i in range(len(texts))], isinstance(typed.dtype, pd.StringDtype)
+        columns, typed_ok = _inferred(("event strings", len(texts), strings), cut)
+        if not typed_ok:
             return pd.DataFrame(records)
-        blocks += [(typed[i * n:(i + 1) * n], np.array([j], dtype=np.intp)) for i, j in enumerate(texts)]
+        # each frame its own shallow copies of the (immutable) typed arrays
+        blocks += [(column.copy(), np.array([j], dtype=np.intp)) for column, j in zip(columns, texts)]
     try:
         return _FROM_BLOCKS(blocks, index=pd.RangeIndex(n), columns=_columns_index(keys))
     except Exception:      # noqa: BLE001  (a changed internal: pandas' own construction is the reference)
