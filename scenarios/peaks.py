@@ -506,14 +506,9 @@ def _readings_ahead(p, values: dict[str, np.ndarray], h: float, lines) -> list[t
                 ends.append((iv, side))
     if lines is not None:
         names = list(lines.of)
-        if p.bounds is not None and names == list(p.values):      # the plan's: each column's best rows, already
-            top, bottom = p.bounds[0::2].tolist(), (-p.bounds[1::2]).tolist()
-        else:
-            rows = np.concatenate([iv.rows for iv in p.intervals]).astype(int)
-            G = np.array([np.asarray(values[c], dtype=float)[rows] for c in names]).reshape(len(names), -1)
-            ok = np.isfinite(G)
-            top = np.where(ok, G, -np.inf).max(axis=1).tolist()
-            bottom = np.where(ok, G, np.inf).min(axis=1).tolist()
+        # each column's best rows over the plan's intervals, as its candidates found them (`end_lines` are made
+        # on the plan's values and need rows at the ends, so the plan has its bounds)
+        top, bottom = p.bounds[0::2].tolist(), (-p.bounds[1::2]).tolist()
         asks = [(c, sense, v) for c, hi, lo in zip(names, top, bottom) if np.isfinite(hi)
                 for sense, v in ((1.0, hi), (-1.0, lo))]
         event = np.array([(p.intervals[k].hi_kind if side == "before" else p.intervals[k].lo_kind)
