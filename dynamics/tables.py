@@ -321,18 +321,7 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     # column pandas would infer from the names repeated
     code = {mode: i for i, mode in enumerate(by_mode)}
     piece_mode = np.array([code[pc.mode] for pc in pieces], dtype=np.intp)
-    return _frame(out, names, _mode_column(tuple(by_mode), piece_mode, np.diff(starts), piece_of_row, keep))
-
-
-def _mode_column(modes: tuple[str, ...], piece_mode: np.ndarray, counts: np.ndarray, piece_of_row: np.ndarray, keep):
-    """The mode column: the typed names (`_typed_names`) taken row by row. Where every row is kept, the column
-    follows from the pieces' modes and row counts alone, and is kept per those (`_inferred`; a run repeated takes the
-    same column again): each frame gets its own shallow copy of the (immutable) typed array."""
-    def build():
-        return _typed_names(modes).take(piece_mode[piece_of_row])
-    if keep is not None:
-        return build()
-    return _inferred(("mode rows", modes, piece_mode.tobytes(), counts.tobytes()), build).copy()
+    return _frame(out, names, _typed_names(tuple(by_mode)).take(piece_mode[piece_of_row]))
 
 
 def _typed_names(names: tuple[str, ...]):
@@ -356,7 +345,7 @@ _USING_STRING_DTYPE = getattr(getattr(pd, "_config", None), "using_string_dtype"
 def _inferred(key: tuple, build):
     """build(): what pandas infers for a set of names, kept per key and pandas' string options (whether it infers
     its string dtype, and the storage), so that a change of them infers anew; built every time where the options
-    cannot be read. Inferring was a fixed cost of every table, most of it paid again in each run."""
+    cannot be read."""
     try:
         options = None if _USING_STRING_DTYPE is None else (bool(_USING_STRING_DTYPE()),
                                                             pd.get_option("mode.string_storage"))
