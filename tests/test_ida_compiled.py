@@ -271,6 +271,27 @@ def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_d
     assert np.abs(a[:, 1:] - b[:, 1:]).max() <= GLOBAL_FACTOR * (rtol * np.abs(a[:, 1:]).max() + atol)
 
 
+def test_a_model_run_on_ida_compiled_is_the_defaults_compiled_model_in_later_processes(tmp_path):
+    """Where no background compilation can start (here: JAX loaded, so no fork), a process that ran the model on
+    `ida-compiled` leaves it marked ready: the default runs it compiled in a later process, loading everything from
+    the cache, and where it did not (before), the default ran it on `ida`."""
+    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
+    shutil.copytree(cache_dir() / "compiled", tmp_path / "cache" / "compiled", copy_function=shutil.copy2,
+                    ignore=shutil.ignore_patterns("*.ready", "*.failed", ".compile.lock"))
+    env = dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="1")
+    code = ("import sys, jax, mechsim\n"
+            "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
+            "r = mechsim.run('geneva-motor', set={'duration': '0.3 s', 'output.plots': False, "
+            "'solver.backend': sys.argv[1]})\n"
+            "print(r.summary['solver']['backend'], all(cm.loaded_from_cache for cm in loaded_modes()))\n")
+    outputs = []
+    for backend in ("auto", "ida-compiled", "auto"):
+        done = subprocess.run([sys.executable, "-c", code, backend], capture_output=True, text=True, env=env,
+                              timeout=600)
+        outputs.append(done.stdout.split())
+    assert outputs == [["ida", "True"], ["ida-compiled", "True"], ["ida-compiled", "True"]], done.stderr[-2000:]
+
+
 def test_a_compiled_runs_peaks_are_re_integrated_on_its_compiled_callbacks(monkeypatch):
     """The located peaks of an `ida-compiled` run re-integrate on the compiled callbacks (dynamics/extrema.py
     TrajectoryReader): the same IDA algorithm as scikit-sundae's binding, so every located value and instant

@@ -164,6 +164,8 @@ def compiled_mode(mf, folder: Path) -> tuple[CompiledMode, bool]:
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module      # numba's cache resolves the kernels' globals through it
         spec.loader.exec_module(module)
+        if path.parent == folder and module_name(mf):
+            _mark_ready(mf, folder)
         return CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
 
     return programs.program(PROGRAM, mf, (str(folder),), build)
@@ -185,6 +187,19 @@ _STARTED: set = set()
 
 def _advance_marker(folder: Path) -> Path:
     return folder / f"advance_{_cache_key('advance|' + code_fingerprint())}{_READY}"
+
+
+def _mark_ready(mf, folder: Path) -> None:
+    """Mark the mode's callbacks and the segment loop compiled into `folder`'s cache (`ready`), wherever they were
+    compiled: in the background, or in a process that ran `ida-compiled` (so that `auto` runs the model compiled
+    in later processes, also where no background compilation can start)."""
+    from mechsim.dynamics.backends.native import compile_advance
+    compile_advance()                  # loaded or compiled once per process; the loop a run compiles anyway
+    for marker in (folder / f"{module_name(mf)}{_READY}", _advance_marker(folder)):
+        try:
+            marker.touch()
+        except OSError:                # a folder not writable: `auto` stays on `ida`, as without markers
+            pass
 
 
 def ready(modes, folder: Path) -> bool:
@@ -254,13 +269,9 @@ def _compile_detached(modes, folder: Path) -> None:
                     time.sleep(1.0)
             for mf in modes:
                 try:
-                    compiled_mode(mf, folder)
+                    compiled_mode(mf, folder)      # marks the mode and the loop ready (`_mark_ready`)
                 except Exception:
                     (folder / f"{module_name(mf)}{_FAILED}").touch()
                     raise
-                (folder / f"{module_name(mf)}{_READY}").touch()
-            from mechsim.dynamics.backends.native import compile_advance
-            compile_advance()
-            _advance_marker(folder).touch()
     except BaseException:           # a worker's failure must never reach the user's process or terminal
         pass
