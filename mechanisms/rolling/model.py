@@ -31,6 +31,7 @@ torque-driven DAE (G of full rank) passes through, the driven link reversing; a 
 from __future__ import annotations
 
 import math
+import types
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -82,6 +83,53 @@ class Bodies:
 
 def _point(x: float, y: float) -> complex:
     return complex(x, y)
+
+
+def _c_pow(x: float, y):
+    """C's pow, as numpy's float64 scalars and Python floats raise to a power (inf or nan where it has no float)."""
+    try:
+        return math.pow(x, y)
+    except (OverflowError, ValueError):
+        with np.errstate(all="ignore"):
+            return float(np.float64(x) ** y)
+
+
+class _Rows(np.ndarray):
+    """A column of many instants for a model function that was written for one instant's scalars: the same numbers,
+    row for row. Its `**` is C's pow element by element, as on scalars; numpy's own array power rounds differently
+    in the last bit for some values (x*x for x**2, a vectorised pow otherwise)."""
+
+    _pow = np.frompyfunc(_c_pow, 2, 1)
+
+    def __pow__(self, other):
+        return _Rows._pow(np.asarray(self), other).astype(float).view(_Rows)
+
+
+def _row_array(entries):
+    """`numpy.array` for a lambdified model function evaluated on `_Rows`: its nested entries (columns, or
+    numbers that do not depend on the instant) broadcast to the columns' shape, the instants on the last axis."""
+    leaves = []
+
+    def walk(e):
+        if isinstance(e, (list, tuple)):
+            for x in e:
+                walk(x)
+        else:
+            leaves.append(np.shape(e))
+    walk(entries)
+    shape = np.broadcast_shapes(*leaves)
+
+    def fill(e):
+        if isinstance(e, (list, tuple)):
+            return [fill(x) for x in e]
+        return np.broadcast_to(np.asarray(e, float), shape)
+    return np.array(fill(entries), float)
+
+
+def _over_rows(fn):
+    """The lambdified `fn` with `_row_array` for its `numpy.array`: called on `_Rows` it returns its array of one
+    instant for all of them at once, instants last (the same code object: the same operations in the same order)."""
+    return types.FunctionType(fn.__code__, {**fn.__globals__, "array": _row_array}, fn.__name__)
 
 
 _MODEL_CACHE: dict = {}
@@ -405,6 +453,7 @@ class RollingPairFourBar(Mechanism):
             powers=lamb([q, v, pars], list(md["powers"].values())),
             points=lamb([q, pars], [sp.Matrix(pt) for pt in md["points"].values()]),
         )
+        out["rows"] = {name: _over_rows(out[name]) for name in ("M", "Q", "G", "phi")}
         _MODEL_CACHE[key] = out
         return out
 
@@ -553,16 +602,20 @@ class RollingPairFourBar(Mechanism):
         tau = np.full(n, np.nan)
         ke = np.full(n, np.nan)
         resid = np.full(n, np.nan)
-        for i in np.flatnonzero(st.closes):
-            qi, vi, ai = q[:, i], v[:, i], a[:, i]
-            M = np.asarray(num["M"](qi, p), float)
-            Q = np.asarray(num["Q"](qi, vi, p), float).ravel()
-            G = np.asarray(num["G"](qi, p), float)
-            K = np.column_stack([G.T, -np.eye(3)[:, 2]])
-            sol = np.linalg.solve(K, Q - M @ ai)
-            lam[:, i], tau[i] = sol[:2], sol[2]
-            ke[i] = 0.5 * vi @ M @ vi
-            resid[i] = np.max(np.abs(np.asarray(num["phi"](qi, p), float)))
+        idx = np.flatnonzero(st.closes)
+        if idx.size:   # all closing instants at once, each with the numbers of its own M a - Q + G^T lam = tau e_phi
+            rows = num["rows"]
+            qi, vi = [x.view(_Rows) for x in q[:, idx]], [x.view(_Rows) for x in v[:, idx]]
+            vt, at = v[:, idx].T, a[:, idx].T
+            M = np.ascontiguousarray(np.moveaxis(rows["M"](qi, p), -1, 0))   # blas's products, as on one M
+            Q = np.moveaxis(rows["Q"](qi, vi, p), -1, 0).reshape(idx.size, 3)
+            K = np.empty((idx.size, 3, 3))
+            K[:, :, :2] = np.moveaxis(rows["G"](qi, p), -1, 0).swapaxes(1, 2)
+            K[:, :, 2] = -np.eye(3)[:, 2]
+            sol = np.linalg.solve(K, (Q - np.matmul(M, at[:, :, None])[:, :, 0])[:, :, None])[:, :, 0]
+            lam[:, idx], tau[idx] = sol[:, :2].T, sol[:, 2]
+            ke[idx] = np.matmul(np.matmul((0.5 * vt)[:, None, :], M), vt[:, :, None])[:, 0, 0]
+            resid[idx] = np.max(np.abs(rows["phi"](qi, p)), axis=(0, 1))
         ro = num["readouts"](t, q, v, a, lam, p)
         cols = {"mode": np.where(st.closes, "rolling", "open").astype(object)}
         for j, name in enumerate(self.coordinates):
