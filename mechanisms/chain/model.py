@@ -200,7 +200,7 @@ class ChainDwell(Mechanism):
         if self.tuned and not self.kin.L < self.kin.R:
             raise ValueError("mechanism.coupler_length: a dwell sprocket needs L < R (else the reflected curve "
                              "passes a point where its regular constraint degenerates)")
-        self._numeric_cache: dict = {}
+        self._event_rows: dict = {}     # _prescribed_events' rows by junction/apex, for this mechanism's runs
 
     # -- geometry helpers -----------------------------------------------------------------------------
     @property
@@ -258,6 +258,23 @@ class ChainDwell(Mechanism):
         gap = float(np.hypot(*(self._crank_tip(q) - np.asarray(p.centre))))
         still = crank_rate is None or abs(crank_rate) * self.kin.R <= 1e-6
         return "dwell" if gap <= 1e-6 * self.kin.R and still else "swing"
+
+    def _modes_along(self, pieces: np.ndarray, q: np.ndarray, crank_rate: np.ndarray) -> np.ndarray:
+        """`_mode_for` of every instant at once (pieces, q of shape (3, n), crank rates dphi/ds): the same tests on
+        the same numbers."""
+        names = np.array(["line", "arc", "dwell", "swing"], dtype=object)
+        kind = np.array([0 if p.kind == "line" else 1 if p.sprocket not in self.tuned else 2
+                         for p in self.path.pieces], int)[pieces]
+        code = np.minimum(kind, 1)
+        tuned = np.flatnonzero(kind == 2)
+        if tuned.size:
+            centre = np.array([p.centre if p.kind == "arc" else (np.nan, np.nan) for p in self.path.pieces])
+            c = centre[pieces[tuned]]
+            tip = self.kin.Q[:, None] + self.kin.R * np.stack([np.cos(q[1, tuned]), np.sin(q[1, tuned])])
+            gap = np.hypot(tip[0] - c[:, 0], tip[1] - c[:, 1])
+            still = np.abs(crank_rate[tuned]) * self.kin.R <= 1e-6
+            code[tuned] = np.where((gap <= 1e-6 * self.kin.R) & still, 2, 3)
+        return names[code]
 
     @staticmethod
     def _root_sign(q) -> float:
@@ -485,9 +502,11 @@ class ChainDwell(Mechanism):
     # -- prescribed constant drive speed: closed-form kinematics, inverse dynamics, no DAE ------------------
     def _numeric(self) -> dict:
         """numpy functions of the symbolic model: M(q), Q(q, v) at zero drive torque and, per mode, the
-        constraint Jacobian and the read-outs; each returns arrays broadcast to the sample shape."""
-        if self._numeric_cache:
-            return self._numeric_cache
+        constraint Jacobian and the read-outs; each returns arrays broadcast to the sample shape. Made once per
+        model structure (the numbers are arguments), like the symbolic model."""
+        key = ("numeric",) + self.structure_key()
+        if key in _SYM_CACHE:
+            return _SYM_CACHE[key]
         s = self.symbols
         md = self._model()
 
@@ -510,7 +529,7 @@ class ChainDwell(Mechanism):
                 readouts=lambdify([s.t, qa, va, list(s.a), list(s.lam[:2]), pa], list(mode.readouts.values()),
                                   "numpy"),
                 names=list(mode.readouts))
-        self._numeric_cache.update(out)
+        _SYM_CACHE[key] = out
         return out
 
     def prescribed_branch(self, s: np.ndarray, s_start: float) -> dict:
@@ -566,8 +585,7 @@ class ChainDwell(Mechanism):
         # piece, cycle and mode of every instant
         pieces = np.asarray(st["piece"], int)
         cycles = np.floor((s - self.path.boundaries[pieces]) / self.path.length + 1e-12).astype(int)
-        modes = np.array([self._mode_for(int(k), q[:, i], st["dphi"][i]) for i, k in enumerate(pieces)],
-                         dtype=object)
+        modes = self._modes_along(pieces, q, st["dphi"])
         sig = np.asarray(st["sigma"], float)
         lam = np.zeros((2, n))
         torque = np.zeros(n)
@@ -610,7 +628,9 @@ class ChainDwell(Mechanism):
 
     def _prescribed_events(self, th1: np.ndarray, speed: float, t0: float, num: dict) -> list[dict]:
         """Events-table rows of a closed-form run: every junction and apex passed, with the mode before/after
-        and the kinetic energy of the one-sided limits (a stop impact loses 1/2 w^2 (tF M tF - tD M tD))."""
+        and the kinetic energy of the one-sided limits (a stop impact loses 1/2 w^2 (tF M tF - tD M tD)). A
+        mark's row depends on the motion's start and speed only, so it is kept for the next evaluation of the
+        same motion (a located peak reads the closed form many times)."""
         if len(th1) < 2 or speed <= 0:
             return []
         r1, Lc = self.path.r1, self.path.length
@@ -619,9 +639,14 @@ class ChainDwell(Mechanism):
                                                     if k > 0]
         marks = sorted(b + c * Lc for c in range(int(s_lo // Lc) - 1, int(s_hi // Lc) + 2) for b in base
                        if s_lo < b + c * Lc <= s_hi)
-        names = list(self.parameter_names)
+        values = self.parameter_values()
+        P = [np.array([values[nm]], float) for nm in self.parameter_names]
         rows = []
         for sm in marks:
+            key = (sm, r1 * th1[0], speed)
+            if key in self._event_rows:
+                rows.append(dict(self._event_rows[key], t_s=t0 + (sm / r1 - th1[0]) / speed))
+                continue
             sides = {}
             for side in (-1, +1):
                 st = self.prescribed_branch(np.array([sm]), r1 * th1[0]) if side > 0 else None
@@ -632,7 +657,6 @@ class ChainDwell(Mechanism):
                 q = np.array([sm / r1, st["phi"][0], st["theta"][0]])
                 v = speed * np.array([1.0, r1 * st["dphi"][0], r1 * st["dtheta"][0]])
                 k, _ = self._piece_at(sm, side)
-                P = [np.array([self.parameter_values()[nm]], float) for nm in names]
                 M = num["M"](q[:, None], P)[0]
                 sides[side] = (self._mode_for(k, q, st["dphi"][0]), 0.5 * float(v @ M @ v), q)
             (m0, e0, q0), (m1, e1, _) = sides[-1], sides[+1]
@@ -643,10 +667,10 @@ class ChainDwell(Mechanism):
             else:
                 kind = {"dwell": "dwell start", "swing": "arc entry", "arc": "arc entry"}.get(m1, "arc exit")
                 kind = "dwell end" if m0 == "dwell" else kind
-            rows.append(dict(t_s=t0 + (sm / r1 - th1[0]) / speed, from_mode=m0, to_mode=m1, kind=kind,
-                             guard="prescribed", drive_q=q0[0], crank_q=q0[1], coupler_q=q0[2],
-                             kinetic_energy_before_J=e0, kinetic_energy_after_J=e1, message="",
-                             energy_lost_J=e0 - e1))
+            self._event_rows[key] = dict(t_s=None, from_mode=m0, to_mode=m1, kind=kind, guard="prescribed",
+                                         drive_q=q0[0], crank_q=q0[1], coupler_q=q0[2], kinetic_energy_before_J=e0,
+                                         kinetic_energy_after_J=e1, message="", energy_lost_J=e0 - e1)
+            rows.append(dict(self._event_rows[key], t_s=t0 + (sm / r1 - th1[0]) / speed))
         return rows
 
     # -- extra tables and plots -----------------------------------------------------------------------------
