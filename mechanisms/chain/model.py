@@ -46,6 +46,8 @@ from mechsim.mechanisms.chain.dwell import ChainDwellMechanism, ChainDwellParams
 
 APEX_LAWS = ("stop", "smooth", "detuned")
 _ROOT = {"leading": -1, "lagging": +1}
+#: the modes of the chain model, in the order of `ChainDwell._modes_along`'s indices
+MODE_NAMES = np.array(["line", "arc", "dwell", "swing"], dtype=object)
 _SYM_CACHE: dict = {}
 #: |sin(theta - phi)| below which the two-row loop closure of a line or arc mode counts as at a dead centre (the
 #: dyad stretched or folded): the same sine-like margin as the rolling pair's dead_point_margin default
@@ -260,9 +262,8 @@ class ChainDwell(Mechanism):
         return "dwell" if gap <= 1e-6 * self.kin.R and still else "swing"
 
     def _modes_along(self, pieces: np.ndarray, q: np.ndarray, crank_rate: np.ndarray) -> np.ndarray:
-        """`_mode_for` of every instant at once (pieces, q of shape (3, n), crank rates dphi/ds): the same tests on
-        the same numbers."""
-        names = np.array(["line", "arc", "dwell", "swing"], dtype=object)
+        """`_mode_for` of every instant at once (pieces, q of shape (3, n), crank rates dphi/ds), as indices into
+        MODE_NAMES: the same tests on the same numbers."""
         kind = np.array([0 if p.kind == "line" else 1 if p.sprocket not in self.tuned else 2
                          for p in self.path.pieces], int)[pieces]
         code = np.minimum(kind, 1)
@@ -274,7 +275,7 @@ class ChainDwell(Mechanism):
             gap = np.hypot(tip[0] - c[:, 0], tip[1] - c[:, 1])
             still = np.abs(crank_rate[tuned]) * self.kin.R <= 1e-6
             code[tuned] = np.where((gap <= 1e-6 * self.kin.R) & still, 2, 3)
-        return names[code]
+        return code
 
     @staticmethod
     def _root_sign(q) -> float:
@@ -515,8 +516,10 @@ class ChainDwell(Mechanism):
 
             def f(*a):
                 n = np.shape(a[0])[1:]
-                return np.stack([np.broadcast_to(np.asarray(fn(*a), float), n) for fn in fns], -1).reshape(
-                    n + shape)
+                out = np.empty(n + (len(fns),))
+                for j, fn in enumerate(fns):
+                    out[..., j] = fn(*a)
+                return out.reshape(n + shape)
             return f
 
         qa, va, pa = list(s.q), list(s.v), list(s.params)
@@ -585,32 +588,39 @@ class ChainDwell(Mechanism):
         # piece, cycle and mode of every instant
         pieces = np.asarray(st["piece"], int)
         cycles = np.floor((s - self.path.boundaries[pieces]) / self.path.length + 1e-12).astype(int)
-        modes = self._modes_along(pieces, q, st["dphi"])
+        code = self._modes_along(pieces, q, st["dphi"])
+        modes = MODE_NAMES[code]
         sig = np.asarray(st["sigma"], float)
         lam = np.zeros((2, n))
         torque = np.zeros(n)
         ro: dict[str, np.ndarray] = {}
-        for key in sorted({(m, k, c) for m, k, c in zip(modes, pieces, cycles)}):
-            mode, k, c = key
-            idx = np.flatnonzero((modes == mode) & (pieces == k) & (cycles == c))
-            vals = dict(base)
-            vals.update(self._piece_values(int(k), int(c)))
-            P = [np.broadcast_to(vals[nm], idx.shape).astype(float) for nm in names]
-            P[names.index("sigma")] = sig[idx]
+        # the parameters of every instant: the base values, its piece's on its cycle, its root sign
+        span = (cycles - (cycles.min() if n else 0)) * len(self.path.pieces) + pieces
+        _, first, inverse = np.unique(span, return_index=True, return_inverse=True)
+        table = [{**base, **self._piece_values(int(pieces[i]), int(cycles[i]))} for i in first]
+        P = list(np.array([[vals[nm] for nm in names] for vals in table], float).reshape(-1, len(names))[inverse]
+                 .T.copy())
+        P[names.index("sigma")] = sig
+        # M and Q of every instant (the same in every mode), then each mode's constraints and read-outs; the
+        # operands keep the layout of q[:, idx] (numpy's einsum rounds differently for differently strided ones)
+        every = np.arange(n)
+        M_all = num["M"](q[:, every], P)
+        rhs = num["Q"](q[:, every], v[:, every], P) - np.einsum("nij,nj->ni", M_all, a[:, every].T)
+        for m in np.unique(code):
+            idx = np.flatnonzero(code == m)
+            fm = num["modes"][MODE_NAMES[m]]
+            Pi = [x[idx] for x in P]
             qi, vi, ai = q[:, idx], v[:, idx], a[:, idx]
-            Mm, Qf, Gm = num["M"](qi, P), num["Q"](qi, vi, P), num["modes"][mode]["G"](qi, P)
-            fm = num["modes"][mode]
+            Gm = fm["G"](qi, Pi)
             A = np.zeros(idx.shape + (3, 3))
             A[..., :, :2] = np.swapaxes(Gm, -1, -2)
             A[..., 0, 2] = -1.0
-            rhs = Qf - np.einsum("nij,nj->ni", Mm, ai.T)
-            x = np.linalg.solve(A, rhs[..., None])[..., 0]
+            x = np.linalg.solve(A, rhs[idx][..., None])[..., 0]
             lam[:, idx], torque[idx] = x[:, :2].T, x[:, 2]
-            vals_ro = fm["readouts"](t[idx], qi, vi, ai, lam[:, idx], P)
+            vals_ro = fm["readouts"](t[idx], qi, vi, ai, lam[:, idx], Pi)
             for nm, val in zip(fm["names"], vals_ro):
                 ro.setdefault(nm, np.zeros(n))[idx] = np.broadcast_to(np.asarray(val, float), idx.shape)
-        P_all = [np.broadcast_to(base[nm], (n,)).astype(float) for nm in names]
-        ke = 0.5 * np.einsum("in,nij,jn->n", v, num["M"](q, P_all), v)
+        ke = 0.5 * np.einsum("in,nij,jn->n", v, M_all, v)
         B = np.stack([ro["joint_B_x_m"], ro["joint_B_y_m"]])
         A_tip = self.kin.Q[:, None] + self.kin.R * np.stack([np.cos(q[1]), np.sin(q[1])])
         closure = A_tip + self.kin.L * np.stack([np.cos(q[2]), np.sin(q[2])]) - B
@@ -704,12 +714,16 @@ def dwell_rows(mech: ChainDwell, ts: pd.DataFrame, events: pd.DataFrame, near_to
     seg = ts["segment"].to_numpy(float).astype(int)
     r1, Lc = mech.path.r1, mech.path.length
     has_events = events is not None and len(events) and "to_mode" in events and "drive_q" in events
+    if has_events:
+        ev_t, ev_q = events["t_s"].to_numpy(float), events["drive_q"].to_numpy(float)
+        ev = {key: events[key].to_numpy(object) for key in ("to_mode", "from_mode", "kind")}
 
     def event(lo, hi, key, value):
+        """(t, drive angle, kind) of the first event with `key` == value in (lo, hi], or None."""
         if not has_events:
             return None
-        e = events[(events[key] == value) & (events["t_s"] > lo) & (events["t_s"] <= hi)]
-        return None if e.empty else e.iloc[0]
+        hit = np.flatnonzero((ev[key] == value) & (ev_t > lo) & (ev_t <= hi))
+        return (ev_t[hit[0]], ev_q[hit[0]], ev["kind"][hit[0]]) if hit.size else None
 
     def geometric(i_in, i_out, start):
         """(t, drive angle, label) of a dwell end from the path geometry, between rows i_out and i_in."""
@@ -733,13 +747,13 @@ def dwell_rows(mech: ChainDwell, ts: pd.DataFrame, events: pd.DataFrame, near_to
             start = (t[0], th[0], "run start")
         else:
             e = event(t[i0 - 1], t[i0], "to_mode", "dwell")
-            start = (e.t_s, e.drive_q, e.kind) if e is not None else geometric(i0, i0 - 1, True)
+            start = e if e is not None else geometric(i0, i0 - 1, True)
         if i1 == len(t) - 1:
             e = event(t[i1], np.inf, "from_mode", "dwell")
-            end = (e.t_s, e.drive_q, e.kind) if e is not None else (t[i1], th[i1], "run end")
+            end = e if e is not None else (t[i1], th[i1], "run end")
         else:
             e = event(t[i1], t[i1 + 1], "from_mode", "dwell")
-            end = (e.t_s, e.drive_q, e.kind) if e is not None else geometric(i1, i1 + 1, False)
+            end = e if e is not None else geometric(i1, i1 + 1, False)
         rows.append(dict(sprocket=mech.path.pieces[seg[i0]].sprocket + 1, kind="exact", start_event=start[2],
                          end_event=end[2], start_t_s=float(start[0]), end_t_s=float(end[0]),
                          start_drive_angle_rad=float(start[1]), end_drive_angle_rad=float(end[1]),
