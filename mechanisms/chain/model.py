@@ -649,27 +649,41 @@ class ChainDwell(Mechanism):
                                                     if k > 0]
         marks = sorted(b + c * Lc for c in range(int(s_lo // Lc) - 1, int(s_hi // Lc) + 2) for b in base
                        if s_lo < b + c * Lc <= s_hi)
+        s0 = r1 * th1[0]
+        new = [sm for sm in marks if (sm, s0, speed) not in self._event_rows]
+        if new:
+            self._event_rows.update(zip([(sm, s0, speed) for sm in new], self._mark_rows(new, s0, speed, num)))
+        return [dict(self._event_rows[(sm, s0, speed)], t_s=t0 + (sm / r1 - th1[0]) / speed) for sm in marks]
+
+    def _mark_rows(self, marks: list, s_start: float, speed: float, num: dict) -> list[dict]:
+        """`_prescribed_events`' rows (t_s left None) at the junctions/apexes `marks` (travel) of the motion from
+        s_start, all at once: the limit before (the branch of the instant just before, the rates from that side)
+        and after."""
+        r1, Lc = self.path.r1, self.path.length
+        at = np.array(marks, float)
+        after = self.prescribed_branch(at, s_start)
+        lagging = self.prescribed_branch(at - 1e-9 * Lc, s_start)["sigma"] >= 0
+        before = {}
+        for root, sel in (("leading", ~lagging), ("lagging", lagging)):
+            if sel.any():
+                st = self.kin.state(at[sel], root, -1)
+                before.update({int(i): (st, j) for j, i in enumerate(np.flatnonzero(sel))})
+        pieces = {side: self.path.locate(at, side)[0] for side in (-1, +1)}
+        limits = []                     # (side, mark, q, v, dphi) of both sides of every mark
+        for i, sm in enumerate(marks):
+            for side, (st, j) in ((-1, before[i]), (+1, (after, i))):
+                q = np.array([sm / r1, st["phi"][j], st["theta"][j]])
+                v = speed * np.array([1.0, r1 * st["dphi"][j], r1 * st["dtheta"][j]])
+                limits.append((side, i, q, v, st["dphi"][j]))
         values = self.parameter_values()
         P = [np.array([values[nm]], float) for nm in self.parameter_names]
+        M = num["M"](np.stack([x[2] for x in limits], 1), P)
+        sides = {}
+        for (side, i, q, v, dphi), Mi in zip(limits, M):
+            sides[side, i] = (self._mode_for(int(pieces[side][i]), q, dphi), 0.5 * float(v @ Mi @ v), q)
         rows = []
-        for sm in marks:
-            key = (sm, r1 * th1[0], speed)
-            if key in self._event_rows:
-                rows.append(dict(self._event_rows[key], t_s=t0 + (sm / r1 - th1[0]) / speed))
-                continue
-            sides = {}
-            for side in (-1, +1):
-                st = self.prescribed_branch(np.array([sm]), r1 * th1[0]) if side > 0 else None
-                if side < 0:   # the limit before: branch of the instant just before, rates from that side
-                    before = self.prescribed_branch(np.array([sm - 1e-9 * Lc]), r1 * th1[0])
-                    root = "leading" if before["sigma"][0] < 0 else "lagging"
-                    st = self.kin.state(np.array([sm]), root, -1)
-                q = np.array([sm / r1, st["phi"][0], st["theta"][0]])
-                v = speed * np.array([1.0, r1 * st["dphi"][0], r1 * st["dtheta"][0]])
-                k, _ = self._piece_at(sm, side)
-                M = num["M"](q[:, None], P)[0]
-                sides[side] = (self._mode_for(k, q, st["dphi"][0]), 0.5 * float(v @ M @ v), q)
-            (m0, e0, q0), (m1, e1, _) = sides[-1], sides[+1]
+        for i in range(len(marks)):
+            (m0, e0, q0), (m1, e1, _) = sides[-1, i], sides[+1, i]
             if m0 == "swing" and m1 == "dwell":
                 kind = "stop impact"
             elif m0 == m1:
@@ -677,10 +691,9 @@ class ChainDwell(Mechanism):
             else:
                 kind = {"dwell": "dwell start", "swing": "arc entry", "arc": "arc entry"}.get(m1, "arc exit")
                 kind = "dwell end" if m0 == "dwell" else kind
-            self._event_rows[key] = dict(t_s=None, from_mode=m0, to_mode=m1, kind=kind, guard="prescribed",
-                                         drive_q=q0[0], crank_q=q0[1], coupler_q=q0[2], kinetic_energy_before_J=e0,
-                                         kinetic_energy_after_J=e1, message="", energy_lost_J=e0 - e1)
-            rows.append(dict(self._event_rows[key], t_s=t0 + (sm / r1 - th1[0]) / speed))
+            rows.append(dict(t_s=None, from_mode=m0, to_mode=m1, kind=kind, guard="prescribed", drive_q=q0[0],
+                             crank_q=q0[1], coupler_q=q0[2], kinetic_energy_before_J=e0, kinetic_energy_after_J=e1,
+                             message="", energy_lost_J=e0 - e1))
         return rows
 
     # -- extra tables and plots -----------------------------------------------------------------------------

@@ -475,27 +475,26 @@ class ChainPath:
             k = np.where(k < 0, len(self.pieces) - 1, k)
         return k.astype(int), sm
 
-    def _by_piece(self, k, sm, fn):
-        """Apply fn(piece, s_local) piecewise; fn returns arrays shaped like s_local (+ trailing dims)."""
-        out = None
+    def _by_piece(self, k, sm, fns):
+        """Apply each fn(piece, s_local) of `fns` piecewise; each returns arrays shaped like s_local (+ trailing
+        dims). One array per fn."""
+        outs = [None] * len(fns)
         for idx in np.unique(k):
             m = k == idx
-            val = fn(self.pieces[idx], sm[m])
-            if out is None:
-                out = np.zeros(sm.shape + np.shape(val)[1:])
-            out[m] = val
-        if out is None:
-            out = np.zeros(sm.shape + (2,))
-        return out
+            x = sm[m]
+            for j, fn in enumerate(fns):
+                val = fn(self.pieces[idx], x)
+                if outs[j] is None:
+                    outs[j] = np.zeros(sm.shape + np.shape(val)[1:])
+                outs[j][m] = val
+        return [np.zeros(sm.shape + (2,)) if out is None else out for out in outs]
 
     def derivatives(self, s, order: int = 2, side: int = +1):
         """B and its s-derivatives up to `order` at travel s: list [B, B', B'', ...], each shape s.shape+(2,)."""
         s = np.asarray(s, float)
         k, sm = self.locate(s.ravel(), side)
-        res = []
-        for o in range(order + 1):
-            res.append(self._by_piece(k, sm, lambda p, x, o=o: p.derivative(x, o)).reshape(s.shape + (2,)))
-        return res
+        res = self._by_piece(k, sm, [lambda p, x, o=o: p.derivative(x, o) for o in range(order + 1)])
+        return [r.reshape(s.shape + (2,)) for r in res]
 
     def B(self, s, side: int = +1):
         """Position of joint B (m) at chain travel s."""
@@ -508,9 +507,10 @@ class ChainPath:
         """(c_outer^2 - |B-Q|^2, |B-Q|^2 - c_inner^2, (B-Q).B') at travel s, cancellation-free per piece."""
         s = np.asarray(s, float)
         k, sm = self.locate(s.ravel(), side)
-        gp = -self._by_piece(k, sm, lambda p, x: p.sq_dist_minus(x, Q, c_outer))
-        gm = self._by_piece(k, sm, lambda p, x: p.sq_dist_minus(x, Q, c_inner))
-        rr = self._by_piece(k, sm, lambda p, x: p.radial_rate(x, Q))
+        gp, gm, rr = self._by_piece(k, sm, [lambda p, x: p.sq_dist_minus(x, Q, c_outer),
+                                            lambda p, x: p.sq_dist_minus(x, Q, c_inner),
+                                            lambda p, x: p.radial_rate(x, Q)])
+        gp = -gp
         return gp.reshape(s.shape), gm.reshape(s.shape), rr.reshape(s.shape)
 
     def piece_table(self):
