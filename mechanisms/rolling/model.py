@@ -30,6 +30,7 @@ torque-driven DAE (G of full rank) passes through, the driven link reversing; a 
 """
 from __future__ import annotations
 
+import itertools
 import math
 import types
 from dataclasses import dataclass
@@ -102,7 +103,14 @@ class _Rows(np.ndarray):
     _pow = np.frompyfunc(_c_pow, 2, 1)
 
     def __pow__(self, other):
-        return _Rows._pow(np.asarray(self), other).astype(float).view(_Rows)
+        x = np.asarray(self)
+        if np.ndim(other) == 0:      # the model's powers: a number
+            try:
+                return np.fromiter(map(math.pow, x.ravel().tolist(), itertools.repeat(float(other))), float,
+                                   x.size).reshape(x.shape).view(_Rows)
+            except (OverflowError, ValueError):
+                pass
+        return _Rows._pow(x, other).astype(float).view(_Rows)
 
 
 def _row_array(entries):
