@@ -52,26 +52,123 @@ def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
                   for t, k in zip(events["t_s"].to_numpy(float), kinds))
 
 
+def _median(x: np.ndarray) -> float:
+    """numpy.median of sorted instants, as it computes it (the middle one, or the mean of the middle two)."""
+    m = len(x) // 2
+    return float(x[m]) if len(x) % 2 else float(np.mean(x[m - 1:m + 1]))
+
+
+def _column(v) -> np.ndarray:
+    """A reading's column as a frame's column gives it back (`to_numpy`): numpy strings as objects."""
+    v = np.asarray(v)
+    return v.astype(object) if v.dtype.kind in "US" else v
+
+
+def _frame_columns(parts: list[tuple[np.ndarray, dict]], n: int) -> dict[str, np.ndarray]:
+    """The columns of `n` rows put together from `parts` (row positions, their columns' arrays), as one frame of
+    the parts concatenated and sorted by row would hold them; a frame is made only where the parts' columns or
+    dtypes differ (its concatenation fills and promotes them)."""
+    keys = list(parts[0][1])
+    if len(parts) == 1:
+        return dict(parts[0][1])
+    if all(list(p) == keys and all(p[k].dtype == parts[0][1][k].dtype for k in keys) for _, p in parts[1:]):
+        out = {}
+        for k in keys:
+            column = np.empty(n, dtype=parts[0][1][k].dtype)
+            for rows, p in parts:
+                column[rows] = p[k]
+            out[k] = column
+        return out
+    frames = []
+    for rows, p in parts:
+        part = pd.DataFrame(p)
+        part.index = rows
+        frames.append(part)
+    frame = pd.concat(frames).sort_index().reset_index(drop=True)
+    return {c: frame[c].to_numpy() for c in frame.columns}
+
+
 class _KeptReadings:
     """A thermal reader's readings kept for the run: a reading depends only on the interval's ends and the instants
     (not on the row position, which these readers do not use), and the columns' end limits ask for the same one
-    again (`dynamics/extrema.py` `end_limits`: each column and sense reads the ends that may beat its extremum)."""
+    again (`dynamics/extrema.py` `end_limits`: each column and sense reads the ends that may beat its extremum).
+    `read_many` reads many requests in one pass (`_readings`: the thermal columns of all their instants evaluated
+    together), `dynamics/extrema.py` `read_all` as it calls it; called, one request (the reader's error raised)."""
+
+    @staticmethod
+    def _key(iv: Interval, times: np.ndarray):
+        return iv.lo, iv.hi, np.asarray(times, dtype=float).tobytes()
 
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         times = np.asarray(times, dtype=float)
         kept = self.__dict__.setdefault("_kept", {})
-        key = (iv.lo, iv.hi, times.tobytes())
+        key = self._key(iv, times)
         got = kept.get(key)
         if got is None:
-            got = kept[key] = self.read(iv, position, times)
+            got = self._readings([(iv, position, times)])[0]
+            if isinstance(got, ReadingFailed):
+                raise got
+            kept[key] = got
         return got
+
+    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+        return self(iv, position, times)
+
+    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
+        """The readings of every (interval, position, times), those not kept read together; None where a reading
+        failed (the caller reads it alone, and meets its error)."""
+        kept = self.__dict__.setdefault("_kept", {})
+        keys = [self._key(iv, times) for iv, _, times in requests]
+        new = {}
+        for k, (iv, position, times) in zip(keys, requests):
+            if k not in kept and k not in new:
+                new[k] = (iv, position, np.asarray(times, dtype=float))
+        if new:
+            for k, got in zip(new, self._readings(list(new.values()))):
+                if not isinstance(got, ReadingFailed):
+                    kept[k] = got
+        return [kept.get(k) for k in keys]
+
+    def _readings(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
+        """Each request's columns (a dict of arrays) or its ReadingFailed: each request's table columns read as
+        `_columns` gives them, then the thermal columns of all of them with the same columns evaluated at once (the
+        finish's formulas act row by row) and cut back into the requests."""
+        out: list = []
+        groups: dict = {}
+        for i, request in enumerate(requests):
+            try:
+                got = self._columns(*request)
+            except ReadingFailed as error:
+                got = error
+            out.append(got)
+            if not isinstance(got, ReadingFailed):
+                groups.setdefault(tuple((k, v.dtype.str) for k, v in got[0].items()), []).append(i)
+        th = self.thermal
+        for rs in groups.values():
+            frames = [out[i] for i in rs]
+            if len(frames) == 1:
+                columns, states, since = frames[0]
+            else:
+                columns = {k: np.concatenate([f[0][k] for f in frames]) for k in frames[0][0]}
+                states = None if frames[0][1] is None else np.concatenate([f[1] for f in frames])
+                since = np.concatenate([f[2] for f in frames])
+            table = th.add_columns(columns, self.mech.contact_state(columns), states, since)
+            if len(frames) == 1:
+                out[rs[0]] = table
+                continue
+            a = 0
+            for i, f in zip(rs, frames):
+                m = len(f[2])
+                out[i] = {c: v[a:a + m] for c, v in table.items()}
+                a += m
+        return out
 
 
 class ThermalReader(_KeptReadings):
     """Every column of the finished table (mechanical and thermal) at any instants of a smooth interval of it,
     read as module docstring says: `read(interval, position, times)` as `dynamics/extrema.py` readers are (the
-    position is not used: each reading starts from the window's output row nearest its instants); called, the
-    reading kept (`_KeptReadings`)."""
+    position is not used: each reading starts from the window's output row nearest its instants); called or read,
+    the reading kept, `read_many` many at once (`_KeptReadings`)."""
 
     def __init__(self, thermal, traj, window: pd.DataFrame, events: pd.DataFrame, mech, settings, t_table_end: float):
         self.thermal, self.mech = thermal, mech
@@ -110,53 +207,57 @@ class ThermalReader(_KeptReadings):
         a, P = self.solution["t_start"], self.solution["period"]
         return np.where(t <= self.t_sim_end, t, a + np.mod(t - a, P))
 
-    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+    def _columns(self, iv: Interval, position: int, times: np.ndarray) -> tuple[dict, np.ndarray | None, np.ndarray]:
+        """(the window's columns at the instants, the network's states there, the times since the contact began)
+        for the thermal columns (`_KeptReadings._readings`)."""
         eps = ROUNDOFF * self.scale
         # the window interval of each instant, found from the instant nudged inside `iv` (an instant at iv's end is
         # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
         inner = np.clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
         which = np.clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
         at = np.clip(self._phase(times), self.lows[which], self.highs[which])
-        frame = self.frame(at, which)
+        frame = self.frame_columns(at, which)
         frame["t_s"] = times
         late = times > self.t_sim_end if self.cycle else np.zeros(len(times), bool)
         if self.cycle:
             frame["window_t_s"] = at
         if late.any():            # the turns continued: cumulative columns advance by one turn's increase per turn
             turns = np.where(late, np.round((times - at) / self.solution["period"]), 0.0)
-            for c in frame.columns:
+            for c in list(frame):
                 if c in self.per_turn:
-                    frame[c] = frame[c].to_numpy(float) + turns * self.per_turn[c]
+                    frame[c] = np.asarray(frame[c], dtype=float) + turns * self.per_turn[c]
         th = self.thermal
         ext = th.setup.extension
         states = None
         if ext is not None:
-            states = np.array(frame[list(ext.names)].to_numpy(float))
+            states = np.column_stack([np.asarray(frame[name], dtype=float) for name in ext.names])
             if late.any():        # after the window: the cycle-averaged solution's states (no bookkeeping energies)
                 n = th.setup.system.size
                 states[late] = np.nan
                 states[late, :n] = th.cycle_states(self.solution, times[late])
-        table = th._add_columns(frame, self.mech.contact_state(frame), states, th._time_since(at, self.starts))
-        return {c: table[c].to_numpy() for c in table.columns}
+        return frame, states, th._time_since(at, self.starts)
 
-    def frame(self, at: np.ndarray, which: np.ndarray) -> pd.DataFrame:
+    def frame_columns(self, at: np.ndarray, which: np.ndarray) -> dict[str, np.ndarray]:
         """The window's columns (mechanics and the network's states) at the window instants `at`, each in the
         window interval `which` (its end: the one-sided limit from inside it), in their order: the mode
         re-integrated from the interval's output row nearest the instants read in it."""
         parts = []
-        for w in np.unique(which).tolist():
-            pick = np.flatnonzero(which == w)
+        one = len(which) and which.min() == which.max()
+        for w in ([int(which[0])] if one else np.unique(which).tolist()):
+            pick = np.arange(len(which)) if one else np.flatnonzero(which == w)
             wiv = self.windows[w]
             if not len(wiv.rows):
                 raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
             # each distinct window instant read once (instants a period apart, or clipped to an end, coincide)
             distinct, back = np.unique(at[pick], return_inverse=True)
-            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - float(np.median(at[pick])))))
-            part = pd.DataFrame({k: np.asarray(v) for k, v in self.reader(wiv, pos, distinct).items()})
-            part = part.iloc[np.ravel(back)]
-            part.index = pick
-            parts.append(part)
-        return pd.concat(parts).sort_index().reset_index(drop=True)
+            back = np.ravel(back)
+            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(np.sort(at[pick])))))
+            parts.append((pick, {k: _column(v)[back] for k, v in self.reader(wiv, pos, distinct).items()}))
+        return _frame_columns(parts, len(at))
+
+    def frame(self, at: np.ndarray, which: np.ndarray) -> pd.DataFrame:
+        """`frame_columns` as a frame."""
+        return pd.DataFrame(self.frame_columns(at, which))
 
     def readings(self):
         """The window's `WindowReadings` (thermal/plan.py) for the cycle averaging: the window's columns at any
@@ -253,18 +354,17 @@ class ClosedFormThermalReader(_KeptReadings):
                                              self.thermal.quadrature_piece)
         return out
 
-    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
-        frame = pd.DataFrame({k: np.asarray(v) for k, v in self.mechanics(iv, position, times).items()})
+    def _columns(self, iv: Interval, position: int, times: np.ndarray) -> tuple[dict, np.ndarray | None, np.ndarray]:
+        """(the closed form's columns at the instants, the network's states there, the times since the contact
+        began) for the thermal columns (`_KeptReadings._readings`)."""
+        frame = {k: _column(v) for k, v in self.mechanics(iv, position, times).items()}
         # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
         eps = 1e-12 * max(1.0, abs(iv.hi))
         inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
         at = self._window_time(inner)
         if self.cycle:
             frame["window_t_s"] = at
-        th = self.thermal
-        table = th._add_columns(frame, self.mech.contact_state(frame), self._network(inner),
-                                th._time_since(at, self.starts))
-        return {c: table[c].to_numpy() for c in table.columns}
+        return frame, self._network(inner), self.thermal._time_since(at, self.starts)
 
 
 def thermal_reader(source, events: pd.DataFrame, t_table_end: float, mechanics=None):
@@ -333,8 +433,9 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for the thermal columns over [lo, hi] of the table, between its events (a cycle-averaged run's repeated ones
     included) and the heat input's own switches where the reader knows them (`kinks`), on the intervals that may
     hold the extremum (`_promising`), then against the one-sided limits at the intervals' ends that may beat it
-    (`dynamics/extrema.py` `end_limits`)."""
-    from mechsim.dynamics.extrema import end_limits, locate
+    (`dynamics/extrema.py` `end_limits`). Every column's readings are read in one pass of the reader (`read_many`),
+    then every one-sided limit the checks may read in another."""
+    from mechsim.dynamics.extrema import end_guesses, end_limit_requests, end_limits, plan, read_all
     breaks = _breaks(events)
     kinks = getattr(reader, "kinks", None)
     if kinks is not None:         # the heat input's own switches that are no event (within round-off of none)
@@ -342,14 +443,31 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
         near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
         breaks = sorted(breaks + [k for k in kinks(lo, hi) if not len(known) or np.min(np.abs(known - k[0])) > near])
     intervals = intervals_of(t, breaks, lo, hi, *kinds)
+    values = {c: np.asarray(cols[c], float) for c in columns}
+    owns = {c: _promising(f, intervals) for c, f in values.items()}
+    # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
+    plans = {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}
+    tables = read_all(reader, [r for p in plans.values() for r in p.requests])
+    found, a = {}, 0
+    for c, p in plans.items():
+        found[c] = p.finish(tables[a:a + len(p.requests)], reader).get(c, {})
+        a += len(p.requests)
+    # the one-sided limits that may beat each extremum, all read at once, then checked in order
+    ties = {c: tie_of(f) for c, f in values.items()}
+    asks = [(c, sense, getattr(found[c].get(name), "value", None))
+            for c in values for name, sense in (("max", 1.0), ("min", -1.0))]
+    guesses = end_guesses(t, values, intervals, asks, ties) if asks else []
+    ahead = []
+    for (c, sense, _), g in zip(asks, guesses):
+        e = found[c].get("max" if sense > 0 else "min")
+        ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])
+    read_all(reader, ahead)
     out = {}
-    for c in columns:
-        f = np.asarray(cols[c], float)
-        own = _promising(f, intervals)
-        got = locate(t, {c: f}, own, reader).get(c, {})
-        for name, sense in (("max", 1.0), ("min", -1.0)):
-            found = end_limits(got.get(name), c, sense, t, f, own, intervals, reader, tie_of(f))
-            if found is not None:
-                got[name] = found
-        out[c] = (got, own)
+    for (c, sense, _), g in zip(asks, guesses):
+        name = "max" if sense > 0 else "min"
+        got = found[c]
+        e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g)
+        if e is not None:
+            got[name] = e
+        out[c] = (got, owns[c])
     return out

@@ -213,10 +213,13 @@ class ThermalExtension:
 
     def parameter_values(self) -> dict[str, float]:
         sysm = self.system
-        K = sps.csr_matrix(sysm.conductance)
+        K = sps.csr_matrix(sysm.conductance, copy=True)
+        K.sum_duplicates()              # each entry stored once, as K[i, j] reads it (an element read is slow)
+        K = sps.coo_matrix(K)
+        entry = dict(zip(zip(K.row.tolist(), K.col.tolist()), K.data.tolist()))
         values = dict(self.share.values())
         values.update({f"th_C_{i}": float(c) for i, c in enumerate(sysm.capacity)})
-        values.update({f"th_K_{i}_{j}": float(K[i, j]) for i, j in self._K})
+        values.update({f"th_K_{i}_{j}": float(entry.get((i, j), 0.0)) for i, j in self._K})
         values.update({f"th_s_{i}": float(sysm.source[i]) for i in self._s})
         values.update({f"th_B_{i}_{k}": float(sysm.input_matrix[i, k]) for i, k in self._B})
         values.update({f"th_loss_{j}": float(self.loss[j]) for j in self._loss})

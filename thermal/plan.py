@@ -505,6 +505,19 @@ class ThermalPlan:
     # ---------------------------------------------------------------------------------------------- columns
     def _add_columns(self, df: pd.DataFrame, contact: dict, states, t_on_pin) -> pd.DataFrame:
         """The table with the thermal columns (module docstring) and without the DAE's temperature states."""
+        return _with_columns(df, *self.thermal_columns(df, contact, states, t_on_pin))
+
+    def add_columns(self, columns: dict, contact: dict, states, t_on_pin) -> dict[str, np.ndarray]:
+        """`_add_columns` on a mapping of column arrays (the located peaks' readings), as one: the same columns in
+        the same order, no frame made."""
+        new, drop = self.thermal_columns(columns, contact, states, t_on_pin)
+        out = {k: v for k, v in columns.items() if k not in drop}
+        out.update(new)          # a column present is replaced in place, the others appended in order
+        return out
+
+    def thermal_columns(self, df, contact: dict, states, t_on_pin) -> tuple[dict[str, np.ndarray], list[str]]:
+        """(the thermal columns of `_add_columns` by name, the DAE's temperature states to drop) of the table `df`
+        (a frame or a mapping of its column arrays) and its contact state, states and times on the pin."""
         setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
         th = setup.section
         N = contact["normal_force"]
@@ -524,11 +537,11 @@ class ThermalPlan:
                                 t_on_pin=t_on_pin, t_on_wall=t_on_wall, distribution=th["distribution"])
         rise = res["temp_flash_rise_K"]
         if th["flash"] == "seed-blok":
-            seed_speed = geo.driver_arm * df["crank_speed_rad_s"].to_numpy(float)
+            seed_speed = geo.driver_arm * np.asarray(df["crank_speed_rad_s"], dtype=float)
             rise = flash_temperature(N, contact["slip_speed"], U_wall, seed_speed, b, geo.contact_length, mu, mat,
                                      mat, distribution=th["distribution"], method="seed-blok")["temp_flash_rise_K"]
         share = np.where(engaged, res["heat_share_pin"], np.nan)
-        base_pin = base_wheel = np.full(len(df), setup.temp_ambient)
+        base_pin = base_wheel = np.full(len(N), setup.temp_ambient)
         new: dict[str, np.ndarray] = {}
         drop: list[str] = []
         if states is not None:
@@ -556,7 +569,7 @@ class ThermalPlan:
         new["peclet_wheel"] = res["peclet_wheel"]
         new["temp_flash_rise_K"] = rise
         new["temp_contact_C"] = base + rise - KELVIN
-        return _with_columns(df, new, drop)
+        return new, drop
 
     def _wall_surface(self, states, u, track) -> np.ndarray:
         """Surface temperature of the wall track under the contact: T_0 + q dz_0/(2k), q = heat into it / area."""
