@@ -25,6 +25,8 @@ table, so that `locate` finds their extrema as it finds the mechanical ones.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, MutableMapping
+
 import numpy as np
 import pandas as pd
 
@@ -58,19 +60,99 @@ def _median(x: np.ndarray) -> float:
     return float(x[m]) if len(x) % 2 else float(np.mean(x[m - 1:m + 1]))
 
 
+def _clip(x, lo, hi):
+    """numpy.clip(x, lo, hi) (its definition, min(max(x, lo), hi)) without its wrapper's cost."""
+    return np.minimum(np.maximum(x, lo), hi)
+
+
 def _column(v) -> np.ndarray:
     """A reading's column as a frame's column gives it back (`to_numpy`): numpy strings as objects."""
     v = np.asarray(v)
     return v.astype(object) if v.dtype.kind in "US" else v
 
 
-def _frame_columns(parts: list[tuple[np.ndarray, dict]], n: int) -> dict[str, np.ndarray]:
+class _Columns(MutableMapping):
+    """Named column arrays in order, each made when first read (`source(name)`) unless set: a reading's columns,
+    of which its users read a few (the thermal formulas' inputs, a check's column, an extremum's row)."""
+
+    def __init__(self, names, source, got: dict | None = None):
+        self._names, self._source, self._got = list(names), source, dict(got or {})
+        self._known = set(self._names)
+
+    def __getitem__(self, name):
+        got = self._got.get(name)
+        if got is None:
+            if name not in self._known:
+                raise KeyError(name)
+            got = self._got[name] = self._source(name)
+        return got
+
+    def __setitem__(self, name, value):
+        if name not in self._known:
+            self._names.append(name)
+            self._known.add(name)
+        self._got[name] = value
+
+    def __delitem__(self, name):
+        self._names.remove(name)
+        self._known.discard(name)
+        self._got.pop(name, None)
+
+    def __contains__(self, name) -> bool:
+        return name in self._known
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+
+class _Mixed(Exception):
+    """Readings whose column has different dtypes: their thermal columns are evaluated one reading at a time."""
+
+
+class _Stacked(Mapping):
+    """The readings' columns (mappings with the same names) one after the other, each column joined when first
+    read (the thermal formulas read a few); `_Mixed` where a column's dtypes differ (joining would promote it)."""
+
+    def __init__(self, parts: list):
+        self._parts, self._got = parts, {}
+
+    def __getitem__(self, name):
+        got = self._got.get(name)
+        if got is None:
+            arrays = [p[name] for p in self._parts]
+            if any(a.dtype != arrays[0].dtype for a in arrays[1:]):
+                raise _Mixed(name)
+            got = self._got[name] = np.concatenate(arrays)
+        return got
+
+    def __contains__(self, name) -> bool:
+        return name in self._parts[0]
+
+    def __iter__(self):
+        return iter(self._parts[0])
+
+    def __len__(self) -> int:
+        return len(self._parts[0])
+
+
+def _with_new(columns, new: dict, drop: list[str]) -> _Columns:
+    """`columns` without `drop`, those of `new` present replaced in place and the others appended in order (as
+    thermal/plan.py `_with_columns` makes a frame of them), the columns read from `columns` when first read."""
+    names = [k for k in columns if k not in drop]
+    kept = set(names)
+    return _Columns(names + [k for k in new if k not in kept], columns.__getitem__, new)
+
+
+def _frame_columns(parts: list[tuple[np.ndarray, Mapping]], n: int) -> Mapping[str, np.ndarray]:
     """The columns of `n` rows put together from `parts` (row positions, their columns' arrays), as one frame of
     the parts concatenated and sorted by row would hold them; a frame is made only where the parts' columns or
     dtypes differ (its concatenation fills and promotes them)."""
     keys = list(parts[0][1])
     if len(parts) == 1:
-        return dict(parts[0][1])
+        return parts[0][1]
     if all(list(p) == keys and all(p[k].dtype == parts[0][1][k].dtype for k in keys) for _, p in parts[1:]):
         out = {}
         for k in keys:
@@ -81,7 +163,7 @@ def _frame_columns(parts: list[tuple[np.ndarray, dict]], n: int) -> dict[str, np
         return out
     frames = []
     for rows, p in parts:
-        part = pd.DataFrame(p)
+        part = pd.DataFrame(dict(p))
         part.index = rows
         frames.append(part)
     frame = pd.concat(frames).sort_index().reset_index(drop=True)
@@ -99,7 +181,7 @@ class _KeptReadings:
     def _key(iv: Interval, times: np.ndarray):
         return iv.lo, iv.hi, np.asarray(times, dtype=float).tobytes()
 
-    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> Mapping:
         times = np.asarray(times, dtype=float)
         kept = self.__dict__.setdefault("_kept", {})
         key = self._key(iv, times)
@@ -111,10 +193,10 @@ class _KeptReadings:
             kept[key] = got
         return got
 
-    def read(self, iv: Interval, position: int, times: np.ndarray) -> dict:
+    def read(self, iv: Interval, position: int, times: np.ndarray) -> Mapping:
         return self(iv, position, times)
 
-    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
+    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[Mapping | None]:
         """The readings of every (interval, position, times), those not kept read together; None where a reading
         failed (the caller reads it alone, and meets its error)."""
         kept = self.__dict__.setdefault("_kept", {})
@@ -130,9 +212,10 @@ class _KeptReadings:
         return [kept.get(k) for k in keys]
 
     def _readings(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
-        """Each request's columns (a dict of arrays) or its ReadingFailed: each request's table columns read as
-        `_columns` gives them, then the thermal columns of all of them with the same columns evaluated at once (the
-        finish's formulas act row by row) and cut back into the requests."""
+        """Each request's columns (a mapping of column arrays) or its ReadingFailed: each request's table columns
+        read as `_columns` gives them, then the thermal columns of all of them with the same columns evaluated at
+        once (the finish's formulas act row by row: each row's values are the same as on its own) and cut back into
+        the requests."""
         out: list = []
         groups: dict = {}
         for i, request in enumerate(requests):
@@ -142,25 +225,35 @@ class _KeptReadings:
                 got = error
             out.append(got)
             if not isinstance(got, ReadingFailed):
-                groups.setdefault(tuple((k, v.dtype.str) for k, v in got[0].items()), []).append(i)
-        th = self.thermal
+                groups.setdefault(tuple(got[0]), []).append(i)
         for rs in groups.values():
             frames = [out[i] for i in rs]
-            if len(frames) == 1:
-                columns, states, since = frames[0]
-            else:
-                columns = {k: np.concatenate([f[0][k] for f in frames]) for k in frames[0][0]}
-                states = None if frames[0][1] is None else np.concatenate([f[1] for f in frames])
-                since = np.concatenate([f[2] for f in frames])
-            table = th.add_columns(columns, self.mech.contact_state(columns), states, since)
-            if len(frames) == 1:
-                out[rs[0]] = table
-                continue
-            a = 0
-            for i, f in zip(rs, frames):
-                m = len(f[2])
-                out[i] = {c: v[a:a + m] for c, v in table.items()}
-                a += m
+            try:
+                tables = self._thermal(frames)
+            except _Mixed:
+                tables = [t for f in frames for t in self._thermal([f])]
+            for i, table in zip(rs, tables):
+                out[i] = table
+        return out
+
+    def _thermal(self, frames: list[tuple]) -> list[_Columns]:
+        """Each reading's columns with the thermal columns (thermal/plan.py `ThermalPlan.thermal_columns`, as its
+        `_add_columns` puts them in a frame), evaluated on all the readings at once."""
+        if len(frames) == 1:
+            columns, states, since = frames[0]
+        else:
+            columns = _Stacked([f[0] for f in frames])
+            states = None if frames[0][1] is None else np.concatenate([f[1] for f in frames])
+            since = np.concatenate([f[2] for f in frames])
+        th = self.thermal
+        new, drop = th.thermal_columns(columns, self.mech.contact_state(columns), states, since)
+        if len(frames) == 1:
+            return [_with_new(columns, new, drop)]
+        out, a = [], 0
+        for f in frames:
+            m = len(f[2])
+            out.append(_with_new(f[0], {c: v[a:a + m] for c, v in new.items()}, drop))
+            a += m
         return out
 
 
@@ -213,9 +306,9 @@ class ThermalReader(_KeptReadings):
         eps = ROUNDOFF * self.scale
         # the window interval of each instant, found from the instant nudged inside `iv` (an instant at iv's end is
         # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
-        inner = np.clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
-        which = np.clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
-        at = np.clip(self._phase(times), self.lows[which], self.highs[which])
+        inner = _clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
+        which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
+        at = _clip(self._phase(times), self.lows[which], self.highs[which])
         frame = self.frame_columns(at, which)
         frame["t_s"] = times
         late = times > self.t_sim_end if self.cycle else np.zeros(len(times), bool)
@@ -237,7 +330,7 @@ class ThermalReader(_KeptReadings):
                 states[late, :n] = th.cycle_states(self.solution, times[late])
         return frame, states, th._time_since(at, self.starts)
 
-    def frame_columns(self, at: np.ndarray, which: np.ndarray) -> dict[str, np.ndarray]:
+    def frame_columns(self, at: np.ndarray, which: np.ndarray) -> Mapping[str, np.ndarray]:
         """The window's columns (mechanics and the network's states) at the window instants `at`, each in the
         window interval `which` (its end: the one-sided limit from inside it), in their order: the mode
         re-integrated from the interval's output row nearest the instants read in it."""
@@ -248,16 +341,25 @@ class ThermalReader(_KeptReadings):
             wiv = self.windows[w]
             if not len(wiv.rows):
                 raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
-            # each distinct window instant read once (instants a period apart, or clipped to an end, coincide)
-            distinct, back = np.unique(at[pick], return_inverse=True)
-            back = np.ravel(back)
-            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(np.sort(at[pick])))))
-            parts.append((pick, {k: _column(v)[back] for k, v in self.reader(wiv, pos, distinct).items()}))
+            # each distinct window instant read once (instants a period apart, or clipped to an end, coincide): in
+            # increasing order already (as the readings ask), the instants themselves
+            x = at if one else at[pick]
+            if len(x) < 2 or bool((x[1:] > x[:-1]).all()):
+                distinct, back, ordered = x, None, x
+            else:
+                distinct, back = np.unique(x, return_inverse=True)
+                back, ordered = np.ravel(back), np.sort(x)
+            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(ordered))))
+            reading = self.reader(wiv, pos, distinct)
+            if back is None:
+                parts.append((pick, _Columns(reading, lambda k, r=reading: _column(r[k]))))
+            else:
+                parts.append((pick, _Columns(reading, lambda k, r=reading, b=back: _column(r[k])[b])))
         return _frame_columns(parts, len(at))
 
     def frame(self, at: np.ndarray, which: np.ndarray) -> pd.DataFrame:
         """`frame_columns` as a frame."""
-        return pd.DataFrame(self.frame_columns(at, which))
+        return pd.DataFrame(dict(self.frame_columns(at, which)))
 
     def readings(self):
         """The window's `WindowReadings` (thermal/plan.py) for the cycle averaging: the window's columns at any

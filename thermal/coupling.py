@@ -213,10 +213,14 @@ class ThermalExtension:
 
     def parameter_values(self) -> dict[str, float]:
         sysm = self.system
-        K = sps.csr_matrix(sysm.conductance, copy=True)
-        K.sum_duplicates()              # each entry stored once, as K[i, j] reads it (an element read is slow)
-        K = sps.coo_matrix(K)
-        entry = dict(zip(zip(K.row.tolist(), K.col.tolist()), K.data.tolist()))
+        # K's entries read from its stored ones (an element read K[i, j] of a sparse matrix is slow): each stored
+        # once, in canonical CSR (a copy put in that form otherwise), as K[i, j] gives them
+        K = sysm.conductance
+        if not (sps.issparse(K) and K.format == "csr" and K.has_canonical_format):
+            K = sps.csr_matrix(K, copy=True)
+            K.sum_duplicates()
+        rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
+        entry = dict(zip(zip(rows.tolist(), K.indices.tolist()), K.data.tolist()))
         values = dict(self.share.values())
         values.update({f"th_C_{i}": float(c) for i, c in enumerate(sysm.capacity)})
         values.update({f"th_K_{i}_{j}": float(entry.get((i, j), 0.0)) for i, j in self._K})

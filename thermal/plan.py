@@ -507,14 +507,6 @@ class ThermalPlan:
         """The table with the thermal columns (module docstring) and without the DAE's temperature states."""
         return _with_columns(df, *self.thermal_columns(df, contact, states, t_on_pin))
 
-    def add_columns(self, columns: dict, contact: dict, states, t_on_pin) -> dict[str, np.ndarray]:
-        """`_add_columns` on a mapping of column arrays (the located peaks' readings), as one: the same columns in
-        the same order, no frame made."""
-        new, drop = self.thermal_columns(columns, contact, states, t_on_pin)
-        out = {k: v for k, v in columns.items() if k not in drop}
-        out.update(new)          # a column present is replaced in place, the others appended in order
-        return out
-
     def thermal_columns(self, df, contact: dict, states, t_on_pin) -> tuple[dict[str, np.ndarray], list[str]]:
         """(the thermal columns of `_add_columns` by name, the DAE's temperature states to drop) of the table `df`
         (a frame or a mapping of its column arrays) and its contact state, states and times on the pin."""
