@@ -13,7 +13,11 @@ OpenBLAS) are resolved when the program runs, so the second pass still runs them
 Without JAX_COMPILATION_CACHE_DIR in the environment the first process of the session (the xdist controller, or the
 only process) makes a fresh folder, exports it to the workers and subprocesses it starts, and removes it at the end:
 a session never reads another session's programs, so the suite's time on the shared machine is the time a clean
-checkout takes. jax only caches programs that took at least 1 s to compile (its default), a few tens of them.
+checkout takes. Every program the session compiles is kept, however short its compilation (jax's default keeps only
+those of 1 s or more, which on a loaded machine is some and on a quiet one others): a program built again in the same
+process (the sensitivity pass's tools are built per set of read-out columns, and each builds the same event and reset
+functions; jit caches by the function object) and the small ones every worker and subprocess compiles again are
+loaded; only their tracing is paid again.
 """
 from __future__ import annotations
 
@@ -23,6 +27,8 @@ import sys
 import tempfile
 
 VARIABLE = "JAX_COMPILATION_CACHE_DIR"
+#: jax keeps only programs that took at least this long to compile (its default 1 s); the session keeps every one
+MIN_TIME = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
 
 #: the folder this process made (and removes at the end), None when it was given one
 _OWN: str | None = None
@@ -34,8 +40,10 @@ def share() -> None:
     if not os.environ.get(VARIABLE):
         _OWN = tempfile.mkdtemp(prefix="mechsim-tests-jax-")
         os.environ[VARIABLE] = _OWN
-    if "jax" in sys.modules:        # jax reads the variable at import; a process that imported it already
+    os.environ.setdefault(MIN_TIME, "0")
+    if "jax" in sys.modules:        # jax reads the variables at import; a process that imported it already
         sys.modules["jax"].config.update("jax_compilation_cache_dir", os.environ[VARIABLE])
+        sys.modules["jax"].config.update("jax_persistent_cache_min_compile_time_secs", float(os.environ[MIN_TIME]))
 
 
 def remove() -> None:
