@@ -63,10 +63,13 @@ class Trajectory:
 
 
 def parameter_tuple(model: DerivedModel, values: dict[str, float]) -> tuple:
-    missing = [n for n in model.parameter_names if n not in values]
-    if missing:
-        raise KeyError(f"missing parameter values: {missing}")
-    return tuple(float(values[n]) for n in model.parameter_names)
+    try:
+        return tuple(map(float, map(values.__getitem__, model.parameter_names)))
+    except KeyError:
+        missing = [n for n in model.parameter_names if n not in values]
+        if missing:
+            raise KeyError(f"missing parameter values: {missing}") from None
+        raise
 
 
 @dataclass
@@ -217,6 +220,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     first_step = backend.initial_step
     in_row = stuck = 0
     knots = list(start.knots)
+    ordered = t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1]))    # as `prepare` makes them
     wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
         while knots and reached(knots, t):     # a breakpoint reached (a segment's end, or a guard's root on it)
@@ -227,7 +231,9 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
         starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float)[None, :],
                             np.array(yp, dtype=float)[None, :], offset))
-        seg = yield Request(model, mode, mf, p, t, y, yp, t_out[(t_out > t) & (t_out <= stop)], stop, first_step)
+        ahead = (t_out[np.searchsorted(t_out, t, "right"):np.searchsorted(t_out, stop, "right")] if ordered
+                 else t_out[(t_out > t) & (t_out <= stop)])      # the output times in (t, stop]
+        seg = yield Request(model, mode, mf, p, t, y, yp, ahead, stop, first_step)
         stats["segments"] += 1
         for key, count in seg.counts.items():
             if stats[key] is None:            # said unavailable by a backend whose choice came later (`auto`)

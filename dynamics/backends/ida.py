@@ -6,6 +6,8 @@ parameter tuple travels as IDA's userdata.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from sksundae.ida import IDA
 
@@ -82,7 +84,8 @@ def resolving_first_step(settings: SolverSettings, atol: np.ndarray, t0: float, 
     rounds to t0, and the Newton iteration on differences of y at the round-off level of its positions fails
     and succeeds by turns until the step budget is spent."""
     h = 1e-3 * abs(t_first - t0)
-    ypnorm = float(np.sqrt(np.mean((yp0 / (settings.rtol * np.abs(y0) + atol)) ** 2)))
+    z = yp0 / (settings.rtol * np.abs(y0) + atol)
+    ypnorm = math.sqrt(float(np.add.reduce(z * z)) / z.size)     # np.mean's sum and division, without its wrapping
     if ypnorm * h > 0.5:
         h = 0.5 / ypnorm
     return 0.0 if t0 + h != t0 else FRESH_STEP_FRACTION * (t_end - t0)

@@ -72,8 +72,19 @@ class _Memory:
     linear_solver: int = 0
     n_guards: int = 0
     roots: np.ndarray | None = None
+    roots_address: int = 0
     keep: list = field(default_factory=list)
     atol: np.ndarray | None = None
+    #: the segment loop's rows are written here (grown as needed), then copied out at their count
+    rows: tuple = (np.empty(0), np.empty((0, 0)), np.empty((0, 0)))
+
+    def scratch(self, n: int) -> tuple:
+        """(t, y, y') arrays of at least n rows, kept from segment to segment."""
+        if len(self.rows[0]) < n:
+            n = max(n, 2 * len(self.rows[0]))
+            ny = self.y.size
+            self.rows = (np.empty(n), np.empty((n, ny)), np.empty((n, ny)))
+        return self.rows
 
 
 class IdaCompiledBackend(Backend):
@@ -109,6 +120,10 @@ class IdaCompiledBackend(Backend):
         self._tret = np.zeros(1)
         self._tret_address = self._tret.ctypes.data
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
+        # IDA's counters are read into one array (a C long each), in the order of `_COUNTERS`
+        self._counts = np.zeros(len(_COUNTERS), dtype=np.dtype(ctypes.c_long))
+        self._count_calls = tuple((getattr(self.lib, name), self._counts.ctypes.data + i * self._counts.itemsize)
+                                  for i, name in enumerate(_COUNTERS))
 
     def hint(self, code: FailureCode) -> str:
         return IdaBackend.hint(self, code)
@@ -152,6 +167,7 @@ class IdaCompiledBackend(Backend):
             check(lib.IDASetRootDirection(m.mem, directions.ctypes.data), "IDASetRootDirection")
             check(lib.IDASetNoInactiveRootWarn(m.mem), "IDASetNoInactiveRootWarn")
             m.roots = np.zeros(m.n_guards, dtype=np.intc)
+            m.roots_address = m.roots.ctypes.data
         self._memories[id(mf)] = (mf, m)
         return m
 
@@ -203,28 +219,32 @@ class IdaCompiledBackend(Backend):
     def integrate(self, request: Request) -> Segment:
         r, lib = request, self.lib
         counts = {}
-        ahead = (r.t_out > r.t0) if r.t_end >= r.t0 else (r.t_out < r.t0)      # t_end < t0: backward in time
-        t_out = r.t_out[ahead]
+        t_out = np.ascontiguousarray(r.t_out, dtype=float)
+        ahead = (t_out > r.t0) if r.t_end >= r.t0 else (t_out < r.t0)      # t_end < t0: backward in time
+        if not ahead.all():
+            t_out = t_out[ahead]
         n_req = len(t_out)
         if not (n_req and (t_out[-1] - r.t_end) * (r.t_end - r.t0) >= 0):
             t_out = np.append(t_out, r.t_end)
-        t_out = np.ascontiguousarray(t_out, dtype=float)
         m = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts, t_first=float(t_out[0]))
-        rows_t = np.empty(len(t_out))
-        rows_y, rows_yp = np.empty((len(t_out), r.mf.ny)), np.empty((len(t_out), r.mf.ny))
+        rows_t, rows_y, rows_yp = m.scratch(len(t_out))
         flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
                                rows_t, rows_y, rows_yp)
         flag, k = int(flag), int(k)
         counts.update(self._counters(m.mem))
         keep = min(k, n_req)
-        t_rows, y_rows, yp_rows = rows_t[:keep], rows_y[:keep], rows_yp[:keep]
         t_now = float(self._tret[0])
         if flag == IDA_ROOT_RETURN:
-            lib.IDAGetRootInfo(m.mem, m.roots.ctypes.data)
-            fired = tuple(int(i) for i in np.flatnonzero(m.roots))
-            below = t_rows < t_now
-            return Segment(t_rows[below], y_rows[below], yp_rows[below], End.GUARD, t_now, m.y.copy(),
-                           m.yp.copy(), fired=fired, counts=counts)
+            lib.IDAGetRootInfo(m.mem, m.roots_address)
+            fired = tuple(np.flatnonzero(m.roots).tolist())
+            below = rows_t[:keep] < t_now
+            keep = int(np.count_nonzero(below))
+            if not below[:keep].all():                  # rows out of time order: those before the root, in order
+                return Segment(rows_t[:len(below)][below], rows_y[:len(below)][below], rows_yp[:len(below)][below],
+                               End.GUARD, t_now, m.y.copy(), m.yp.copy(), fired=fired, counts=counts)
+            return Segment(rows_t[:keep].copy(), rows_y[:keep].copy(), rows_yp[:keep].copy(), End.GUARD, t_now,
+                           m.y.copy(), m.yp.copy(), fired=fired, counts=counts)
+        t_rows, y_rows, yp_rows = rows_t[:keep].copy(), rows_y[:keep].copy(), rows_yp[:keep].copy()
         if flag < 0:
             code = FailureCode.MAX_STEPS if flag == IDA_TOO_MUCH_WORK else FailureCode.INTEGRATOR_FAILED
             what = ("IDA failed on the index-3 formulation" if self.settings.formulation == "index3"
@@ -245,13 +265,17 @@ class IdaCompiledBackend(Backend):
         return self._memory(mf, compiled, n_params)
 
     def _counters(self, mem: int) -> dict:
-        lib = self.lib
-        steps = lib.counter(lib.IDAGetNumSteps, mem)
-        rejected = (lib.counter(lib.IDAGetNumErrTestFails, mem)
-                    + lib.counter(lib.IDAGetNumNonlinSolvConvFails, mem))
+        for getter, address in self._count_calls:
+            getter(mem, address)
+        steps, error_fails, convergence_fails, residuals, jacobians = self._counts.tolist()
+        rejected = error_fails + convergence_fails
         return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,
-                    residual_evaluations=lib.counter(lib.IDAGetNumResEvals, mem),
-                    jacobian_evaluations=lib.counter(lib.IDAGetNumJacEvals, mem))
+                    residual_evaluations=residuals, jacobian_evaluations=jacobians)
+
+
+#: IDA's counters a segment reports (`IdaCompiledBackend._counters`)
+_COUNTERS = ("IDAGetNumSteps", "IDAGetNumErrTestFails", "IDAGetNumNonlinSolvConvFails", "IDAGetNumResEvals",
+             "IDAGetNumJacEvals")
 
 
 class _Memories(dict):
