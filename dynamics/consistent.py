@@ -214,13 +214,14 @@ def _rows_off_manifold(mf: ModeFunctions, t: float, y: np.ndarray, yp: np.ndarra
         return
     if ix["mu"].stop != ix["mu"].start:
         raise ValueError("a restart without projection is only defined for the index-1 form")
-    rows = np.r_[ix["v"], ix["lam"]]
+    v, lam = ix["v"], ix["lam"]
+    rows = slice(v.start, lam.stop) if v.stop == lam.start else np.r_[v, lam]      # adjacent in the layout
     res = np.zeros(mf.ny)
     mf.residual(t, y, yp, res, p)
     J1, J0 = np.zeros((mf.ny, mf.ny)), np.zeros((mf.ny, mf.ny))
     mf.jacobian(t, y, yp, res, 1.0, J1, p)
     mf.jacobian(t, y, yp, res, 0.0, J0, p)
-    A = np.hstack([(J1 - J0)[np.ix_(rows, np.r_[ix["v"]])], J0[np.ix_(rows, np.r_[ix["lam"]])]])
+    A = np.concatenate([(J1 - J0)[rows][:, v], J0[rows][:, lam]], axis=1)
     step = np.linalg.solve(A, res[rows])
     nv = ix["v"].stop - ix["v"].start
     yp[ix["v"]] -= step[:nv]

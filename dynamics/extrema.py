@@ -973,7 +973,11 @@ class TrajectoryReader:
         forward in time: backward, a damped stiff mode (a compliant contact) is unstable. The row itself only where
         the run holds no earlier state (its segments' starts not kept). A row's state is `_row_state`'s; `row` is
         (piece, row) where it is an IDA run's own (y, y'), else None (a consistent state)."""
-        k, r = (int(x) for x in iv.anchors[position]) if 0 <= position < len(iv.anchors) else (-1, -1)
+        if 0 <= position < len(iv.anchors):
+            at = iv.anchors[position]
+            k, r = int(at[0]), int(at[1])
+        else:
+            k, r = -1, -1
         if first is not None and (k < 0 or first < float(self.traj.pieces[k].t[r])):
             got = self._earlier(first, iv.hi, own)
             if got is not None:
@@ -1039,12 +1043,12 @@ class TrajectoryReader:
         eps = 1e-12 * max(1.0, abs(first))
         # the last segment started at or before `first` (of several at one instant, the one the run went on from),
         # not one started at the stretch's end (after its closing event)
-        s = int(np.searchsorted(ts, min(first + eps, hi - eps), side="right")) - 1
+        s = int(ts.searchsorted(min(first + eps, hi - eps), side="right")) - 1
         if s < 0:
             return None
         start = starts[s]
         t_rows, rows = self._row_order()
-        i = int(np.searchsorted(t_rows, first + eps, side="right")) - 1
+        i = int(t_rows.searchsorted(first + eps, side="right")) - 1
         if i >= 0 and t_rows[i] > ts[s]:          # an output row of that segment, nearer than its start
             try:
                 return self._row_state(int(rows[i][0]), int(rows[i][1]), own)
@@ -1057,10 +1061,12 @@ class TrajectoryReader:
         if self._rows is None:
             pieces = self.traj.pieces
             all_t = np.concatenate([p.t for p in pieces])
-            order = np.argsort(all_t, kind="stable")
             kr = np.stack([np.concatenate([np.full(len(p.t), k) for k, p in enumerate(pieces)]),
                            np.concatenate([np.arange(len(p.t)) for p in pieces])], axis=1)
-            self._rows = (all_t[order], kr[order])
+            if np.any(all_t[1:] < all_t[:-1]):       # not in time order already (as the pieces come): sorted, stably
+                order = np.argsort(all_t, kind="stable")
+                all_t, kr = all_t[order], kr[order]
+            self._rows = (all_t, kr)
         return self._rows
 
     def _owns(self, piece) -> bool:

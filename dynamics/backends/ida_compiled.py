@@ -44,11 +44,18 @@ def note(text: str) -> None:
         print(f"mechsim: note: {text}", file=sys.stderr)
 
 
+#: whether numba is installed (`unavailable`), once found out
+_NUMBA_FOUND: list = []
+
+
 def unavailable() -> Exception | None:
     """Why the compiled path cannot run in this installation (None: it can): numba missing, or scikit-sundae's
     SUNDIALS libraries missing, unloadable or of another release (`sundials_c.SundialsVersionMismatch`). Finding
-    numba does not import it."""
-    if importlib.util.find_spec("numba") is None:
+    numba does not import it; it is looked for once per process (every backend built asks, and an installation does
+    not change under a running process)."""
+    if not _NUMBA_FOUND:
+        _NUMBA_FOUND.append(importlib.util.find_spec("numba") is not None)
+    if not _NUMBA_FOUND[0]:
         return ImportError("numba is not installed")
     try:
         sundials()
@@ -73,6 +80,7 @@ class _Memory:
     n_guards: int = 0
     roots: np.ndarray | None = None
     roots_address: int = 0
+    p_from: tuple | None = None       # the parameter tuple `p` holds (a tuple is immutable: the same one, same values)
     keep: list = field(default_factory=list)
     atol: np.ndarray | None = None
     #: the segment loop's rows are written here (grown as needed), then copied out at their count
@@ -194,7 +202,9 @@ class IdaCompiledBackend(Backend):
             first_step = resolving_first_step(self.settings, m.atol, t0, y0, yp0, t_first, t_end)
         m.y[:] = y0
         m.yp[:] = yp0
-        m.p[:] = p
+        if m.p_from is not p:
+            m.p[:] = p
+            m.p_from = p if isinstance(p, tuple) else None
         self._check(lib.IDAReInit(m.mem, t0, m.yy_nv, m.yp_nv), "IDAReInit")
         self._check(lib.IDASetInitStep(m.mem, first_step), "IDASetInitStep")
         self._check(lib.IDASetStopTime(m.mem, t_end), "IDASetStopTime")
