@@ -231,7 +231,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
         starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float)[None, :],
                             np.array(yp, dtype=float)[None, :], offset))
-        ahead = (t_out[np.searchsorted(t_out, t, "right"):np.searchsorted(t_out, stop, "right")] if ordered
+        ahead = (t_out[t_out.searchsorted(t, "right"):t_out.searchsorted(stop, "right")] if ordered
                  else t_out[(t_out > t) & (t_out <= stop)])      # the output times in (t, stop]
         seg = yield Request(model, mode, mf, p, t, y, yp, ahead, stop, first_step)
         stats["segments"] += 1
