@@ -129,8 +129,9 @@ class IdaCompiledBackend(Backend):
         self._tret_address = self._tret.ctypes.data
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
         # IDA's counters are read into one array (a C long each), in the order of `_COUNTERS`
-        self._counts = np.zeros(len(_COUNTERS), dtype=np.dtype(ctypes.c_long))
-        self._count_calls = tuple((getattr(self.lib, name), self._counts.ctypes.data + i * self._counts.itemsize)
+        self._counts = np.zeros(len(_COUNTERS), dtype=_C_LONG)
+        first = self._counts.ctypes.data
+        self._count_calls = tuple((getattr(self.lib, name), first + i * _C_LONG.itemsize)
                                   for i, name in enumerate(_COUNTERS))
 
     def hint(self, code: FailureCode) -> str:
@@ -286,6 +287,7 @@ class IdaCompiledBackend(Backend):
 #: IDA's counters a segment reports (`IdaCompiledBackend._counters`)
 _COUNTERS = ("IDAGetNumSteps", "IDAGetNumErrTestFails", "IDAGetNumNonlinSolvConvFails", "IDAGetNumResEvals",
              "IDAGetNumJacEvals")
+_C_LONG = np.dtype(ctypes.c_long)
 
 
 class _Memories(dict):
