@@ -153,6 +153,23 @@ def test_a_run_on_kept_ida_memories_is_the_computation_on_fresh_ones(both):
     pd.testing.assert_frame_equal(again.events, fresh.events, check_exact=True)
 
 
+def test_rows_written_in_kept_or_per_segment_arrays_are_the_same_run(monkeypatch):
+    """A segment's rows are written into arrays its IDA memory keeps between segments (up to
+    `ida_compiled.SCRATCH_BYTES`), or into arrays made for the segment beyond that: the run is the same to the last
+    bit either way (the rows are copied out at their count; nothing of an earlier, longer segment shows)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from mechsim.dynamics.backends import ida_compiled
+    name, sets = CASES["geneva-motor-index1"]
+    kept = run(name, sets, "ida-compiled")[0]
+    assert len(kept.events) > 2                   # several segments
+    monkeypatch.setattr(ida_compiled, "SCRATCH_BYTES", 0)
+    with ThreadPoolExecutor(1) as pool:           # a new thread's memories, which keep no rows now
+        made = pool.submit(lambda: run(name, sets, "ida-compiled")[0]).result()
+    pd.testing.assert_frame_equal(kept.timeseries, made.timeseries, check_exact=True)
+    pd.testing.assert_frame_equal(kept.events, made.events, check_exact=True)
+
+
 def test_step_budget_failure_keeps_what_ran_like_the_ida_backend():
     """Too small a step budget: both IDA backends stop with MAX_STEPS at the same instant, keep the rows
     before it, and name IDA's flag."""

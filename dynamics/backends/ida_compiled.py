@@ -64,6 +64,10 @@ def unavailable() -> Exception | None:
     return None
 
 
+#: the most bytes of output rows an IDA memory keeps between segments (`_Memory.scratch`)
+SCRATCH_BYTES = 1 << 20
+
+
 @dataclass
 class _Memory:
     """One mode's IDA memory and the arrays its vectors live in (kept alive with it)."""
@@ -87,12 +91,15 @@ class _Memory:
     rows: tuple = (np.empty(0), np.empty((0, 0)), np.empty((0, 0)))
 
     def scratch(self, n: int) -> tuple:
-        """(t, y, y') arrays of at least n rows, kept from segment to segment."""
-        if len(self.rows[0]) < n:
-            n = max(n, 2 * len(self.rows[0]))
-            ny = self.y.size
-            self.rows = (np.empty(n), np.empty((n, ny)), np.empty((n, ny)))
-        return self.rows
+        """(t, y, y') arrays of at least n rows: kept from segment to segment up to SCRATCH_BYTES (a memory lives
+        as long as its thread's cache, `_kept_memories`), made for the segment beyond."""
+        if len(self.rows[0]) >= n:
+            return self.rows
+        ny = self.y.size
+        rows = (np.empty(n), np.empty((n, ny)), np.empty((n, ny)))
+        if n * (2 * ny + 1) * rows[0].itemsize <= SCRATCH_BYTES:
+            self.rows = rows
+        return rows
 
 
 class IdaCompiledBackend(Backend):
