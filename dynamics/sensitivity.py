@@ -244,11 +244,11 @@ class _Tools:
     """The jitted pieces of one model (jax dispatches the lambdified expressions op by op otherwise, which costs
     seconds per call): the event rule of all modes, and each mode's reset and read-outs, compiled when the path
     first needs them (a run need not visit every mode: chain-mech1-torque for 12 s enters 3 of its 4), so a pass
-    compiles only what its own path uses and a later pass of the same model only what is new to it."""
+    compiles only what its own path uses and a later pass of the same model only what is new to it. Only the
+    read-outs depend on the columns a pass asks for: a pass with other columns compiles its read-outs alone."""
 
-    def __init__(self, mech, model, jmod, columns: tuple, n: int, rates: bool = False):
-        self.mech, self.model, self.jmod, self.columns, self.n = mech, model, jmod, columns, n
-        self.rates = rates
+    def __init__(self, mech, model, jmod, n: int):
+        self.mech, self.model, self.jmod, self.n = mech, model, jmod, n
         self._pieces: dict = {}
         nz, nq, npar = jmod.nz, jmod.nq, len(model.parameter_names)
         z, S, p, P = np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n))
@@ -294,9 +294,10 @@ class _Tools:
             return None
         return self._compiled(("margins", mode, guard), lambda: _margins_fn(self.jmod, self.model, whens))
 
-    def sample(self, name: str):
-        """The read-outs of mode `name` with their gradients (`_sample_fn`)."""
-        return self._compiled(("sample", name), lambda: self._sample_fn(name, self.piece(name)))
+    def sample(self, name: str, columns: tuple, rates: bool = False):
+        """The read-outs `columns` of mode `name` with their gradients, and with `rates` their rates (`_sample_fn`)."""
+        return self._compiled(("sample", name, columns, rates),
+                              lambda: self._sample_fn(name, self.piece(name), columns, rates))
 
     def _reset_fn(self, name, pc, hold: int | None = None, impact: tuple | None = None):
         """(z+, dz+ = R_t dt + R_z dz + R_p P, f(z+), P_1, dP_1) of the re-initialisation in mode `name` at time t
@@ -332,9 +333,9 @@ class _Tools:
             return z_new, dz_new, jm.rates(t, z_new, p), imp, dimp
         return jax.jit(reset)
 
-    def _sample_fn(self, name, pc):
+    def _sample_fn(self, name, pc, columns: tuple, rates: bool):
         jm = self.jmod.modes[self.jmod.index(name)]
-        coords, work_names, columns = self.model.coordinates, self.model.work_names, self.columns
+        coords, work_names = self.model.coordinates, self.model.work_names
         ext_names = self.model.extension_names
 
         def everything(t, zz, pp, offset):
@@ -356,18 +357,17 @@ class _Tools:
         def sample(t, z, S, p, P, offset):
             values, grads = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: everything(t, zz, pp, offset), (z, p),
                                                            (s, dp)), in_axes=(1, 1), out_axes=(None, 1))(S, P)
-            if not self.rates:
+            if not rates:
                 return values, grads, jnp.full_like(values, jnp.nan)
-            rates = jax.jvp(lambda tt, zz: everything(tt, zz, p, offset), (t, z),
-                            (jnp.ones_like(t), jm.rates(t, z, p)))[1]
-            return values, grads, rates
+            dvalues = jax.jvp(lambda tt, zz: everything(tt, zz, p, offset), (t, z),
+                              (jnp.ones_like(t), jm.rates(t, z, p)))[1]
+            return values, grads, dvalues
         return jax.jit(sample)
 
 
-def _tools(mech, model, jmod, columns: tuple, n: int, rates: bool = False) -> _Tools:
-    """The model's jitted tools (each piece compiled on its first use, `_Tools`)."""
-    return program("sensitivity_tools", model, (columns, n) + (("rates",) if rates else ()),
-                   lambda: _Tools(mech, model, jmod, columns, n, rates))[0]
+def _tools(mech, model, jmod, n: int) -> _Tools:
+    """The model's jitted tools for n seed directions (each piece compiled on its first use, `_Tools`)."""
+    return program("sensitivity_tools", model, (n,), lambda: _Tools(mech, model, jmod, n))[0]
 
 
 def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sample_times, columns,
@@ -388,7 +388,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     columns = tuple(columns)
     n_used = seed.n
     n = COLUMNS * -(-n_used // COLUMNS)      # padded with zero columns: one compilation serves 1..COLUMNS values
-    tools = _tools(mech, model, jmod, columns, n, rates)
+    tools = _tools(mech, model, jmod, n)
     nq, nz = jmod.nq, jmod.nz
     P = _padded(seed.dp, n)
     # the statistics every path reports (dynamics/stats.py), with the pass's wall and CPU time beside them
@@ -427,9 +427,10 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
     rows = [e for e in events if e.get("kind") != "rebound absorbed"]
     t = t0
     for ts_j in samples_t[samples_t == t0]:
-        vals, grads, rates = (np.asarray(x) for x in compiled(tools.sample(mode))(t0, z, S, p, P, offset))
+        vals, grads, dvals = (np.asarray(x) for x in compiled(tools.sample(mode, columns, rates))(t0, z, S, p, P,
+                                                                                                 offset))
         samples.append(Sample(t0, mode, dict(zip(columns, map(float, vals))), dict(zip(columns, grads[:, :n_used])),
-                              dict(zip(columns, map(float, rates)))))
+                              dict(zip(columns, map(float, dvals)))))
     for i in range(len(rows) + 1):
         t1 = float(rows[i]["t_s"]) if i < len(rows) else t_end
         k = jmod.index(mode)
@@ -447,12 +448,12 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
             if int(out["result"]) != int(diffrax.RESULTS.successful._value):
                 raise SensitivityUnavailable(f"the sensitivity integration failed in mode '{mode}' after "
                                              f"t = {t:.6g} s: {result_message(out['result'])}")
-            sample = compiled(tools.sample(mode)) if len(chunk) else None
+            sample = compiled(tools.sample(mode, columns, rates)) if len(chunk) else None
             for j, ts_j in enumerate(chunk):
-                vals, grads, rates = (np.asarray(x) for x in sample(float(ts_j), out["z"][j], out["S"][j], p, P,
+                vals, grads, dvals = (np.asarray(x) for x in sample(float(ts_j), out["z"][j], out["S"][j], p, P,
                                                                     offset))
                 samples.append(Sample(float(ts_j), mode, dict(zip(columns, map(float, vals))),
-                                      dict(zip(columns, grads[:, :n_used])), dict(zip(columns, map(float, rates)))))
+                                      dict(zip(columns, grads[:, :n_used])), dict(zip(columns, map(float, dvals)))))
             t, z, S = float(stop), np.asarray(out["z1"]), np.asarray(out["S1"])
             inside = inside[len(chunk):]
             if stop == t1:

@@ -283,6 +283,17 @@ def test_sensitivities_match_finite_differences(geometry):
             sample = samples[round(t, 9)]
             assert sample.values[col] == pytest.approx(y, rel=1e-8, abs=1e-9)
             assert abs(sample.grads[col][j] - fd) * p / abs(y) <= 1e-4, (key, col, t, sample.grads[col][j], fd)
+    # a pass asking for other columns runs on the model's tools already compiled (the event rule, the resets): only
+    # its read-outs are new; the same integration, so the columns both passes read are the same numbers
+    from mechsim.dynamics.programs import programs
+    tools = {id(t) for t in programs("sensitivity_tools")}
+    other = path_sensitivities(mech, drive, settings, ev.to_dict("records"), seed, list(times),
+                               ("wheel_angle_rad",) + columns[::-1], t_end, dt, -np.pi, W1)
+    assert {id(t) for t in programs("sensitivity_tools")} == tools
+    for first, again in zip(path.samples, other.samples, strict=True):
+        assert {c: again.values[c] for c in columns} == first.values
+        for c in columns:
+            assert np.array_equal(again.grads[c], first.grads[c])
 
 
 # -- the drawing ---------------------------------------------------------------------------------------------------
