@@ -145,6 +145,24 @@ def _phi1(x: np.ndarray) -> np.ndarray:
     return np.where(small, 1.0 + 0.5 * x, np.expm1(safe) / safe)
 
 
+def _interior_points(cuts: np.ndarray, max_piece: float) -> np.ndarray:
+    """The interior points of each interval [cuts_i, cuts_i+1] split into k_i = ceil(length / max_piece) equal
+    pieces: np.linspace(a, b, k + 1)[1:-1] for every interval at once, by linspace's own operations
+    (a + j (b - a)/k, j = 1..k-1), so the same floats."""
+    a, b = cuts[:-1], cuts[1:]
+    delta = b - a
+    k = np.maximum(1, np.ceil(delta / max_piece).astype(int))
+    split = k > 1
+    a, b, delta, k = a[split], b[split], delta[split], k[split]
+    step = delta / k
+    if np.any(step == 0):                            # linspace's denormal branch: not worth reproducing
+        return np.concatenate([np.linspace(x, y, n + 1)[1:-1] for x, y, n in zip(a, b, k)] + [cuts[:0]])
+    count = k - 1
+    first = np.cumsum(count) - count                 # where each interval's points start
+    j = np.arange(int(count.sum())) - np.repeat(first, count) + 1
+    return j * np.repeat(step, count) + np.repeat(a, count)
+
+
 class ModalNetwork:
     """Exact linear algebra of a reciprocal network C T' = -K T + s + B u in its modes.
 
@@ -208,9 +226,7 @@ class ModalNetwork:
         t_out = np.asarray(t_out, dtype=float)
         cuts = np.unique(np.concatenate([t_out, [b for b in breaks if t_out[0] < b < t_out[-1]]]))
         if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
-            pieces = np.maximum(1, np.ceil(np.diff(cuts) / max_piece).astype(int))
-            cuts = np.unique(np.concatenate([cuts] + [np.linspace(a, b, k + 1)[1:-1] for a, b, k in
-                                                      zip(cuts[:-1], cuts[1:], pieces) if k > 1]))
+            cuts = np.unique(np.concatenate([cuts, _interior_points(cuts, max_piece)]))
         h = np.diff(cuts)
         x, w = _gauss_legendre(nodes)
         u = np.asarray(inputs((cuts[:-1, None] + h[:, None] * x[None, :]).ravel()), dtype=float)
