@@ -154,6 +154,9 @@ class ThermalPlan:
     #: its own); without them (a window that could not be read, or before it ran: `extend`'s estimate) the turn is
     #: read linear between the window's rows
     dense: WindowReadings | None = None
+    #: the last closed-form `_window_states` (its key, its result): the finish and the run's thermal reader ask for
+    #: the same rows
+    _closed_states: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def extension(self):
@@ -283,9 +286,15 @@ class ThermalPlan:
         if self.method == "dae":
             return df[list(ext.names)].to_numpy(float), None, None
         table = df if table is None else table
-        return integrate_closed_form(ext, mech, self.si["initial"][mech.initial_keys[0]], self.speed,
-                                     np.asarray(table["t_s"], dtype=float), setup.initial, table=table,
-                                     max_piece=self.quadrature_piece)
+        angle0, t = self.si["initial"][mech.initial_keys[0]], np.asarray(table["t_s"], dtype=float)
+        key = (angle0, self.speed, self.quadrature_piece, np.asarray(setup.initial, dtype=float).tobytes(),
+               t.tobytes())
+        kept = self._closed_states
+        if kept is None or kept[0] is not ext or kept[1] is not mech or kept[2] != key:
+            self._closed_states = ext, mech, key, integrate_closed_form(
+                ext, mech, angle0, self.speed, t, setup.initial, table=table, max_piece=self.quadrature_piece)
+        states, inputs, breaks = self._closed_states[3]
+        return states.copy(), inputs, list(breaks)
 
     def cycle_bulk(self, df: pd.DataFrame, t_rows, repetitions) -> tuple[np.ndarray, np.ndarray]:
         """(times, bulk states in K) of the run's cycle-averaged bulk at the window's rows t_rows repeated
