@@ -118,7 +118,17 @@ class GenevaGeometry:
         force about the crank axis (a = x G, by virtual work); docs/theory.md §G1."""
         return (r * lib.sin(alpha) * lib.cos(beta) - (c - r * lib.cos(alpha)) * lib.sin(beta),
                 r * lib.sin(alpha) * lib.sin(beta) + (c - r * lib.cos(alpha)) * lib.cos(beta),
-                r * lib.sin(alpha + beta), r * lib.cos(alpha + beta))
+                GenevaGeometry.slot_sliding(r, alpha, beta, lib), GenevaGeometry.slot_arm(r, alpha, beta, lib))
+
+    @staticmethod
+    def slot_sliding(r, alpha, beta, lib=np):
+        """`pin_in_slot`'s s = r sin(alpha + beta) alone (docs/theory.md §G1)."""
+        return r * lib.sin(alpha + beta)
+
+    @staticmethod
+    def slot_arm(r, alpha, beta, lib=np):
+        """`pin_in_slot`'s a = r cos(alpha + beta) alone (docs/theory.md §G1)."""
+        return r * lib.cos(alpha + beta)
 
 
 def _d(lam: float, alpha):

@@ -496,20 +496,21 @@ class Geneva(Mechanism):
         w2, a2 = kin["wheel_speed"], kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
         x = kin["pin_distance"]
-        s_slide = g.pin_in_slot(r, g.centre_distance, alpha, beta)[2]
+        s_slide = g.slot_sliding(r, alpha, beta)
         v_s = np.where(eng, speed * s_slide, 0.0)
         wheel_moment = self.wheel_inertia * a2 + self.wheel_damping * w2 + self.wheel_torque
 
-        def balance(flank):
+        def balance(flank, v_s, w2, wheel_moment, x):
             u = v_s + flank * R * (w2 - g.crank_sense * speed)
             sigma = np.where(u >= 0, 1.0, -1.0)
             return u, sigma, wheel_moment / (x - mu * sigma * R)
 
         flank = np.ones_like(theta)
-        u, sigma, N = balance(1.0)
-        u2, sigma2, N2 = balance(-1.0)
+        u, sigma, N = balance(1.0, v_s, w2, wheel_moment, x)
         swap = eng & (N < 0)
-        flank[swap], u[swap], sigma[swap], N[swap] = -1.0, u2[swap], sigma2[swap], N2[swap]
+        if swap.any():                               # the other flank, where it carries the load (elementwise)
+            flank[swap] = -1.0
+            u[swap], sigma[swap], N[swap] = balance(-1.0, v_s[swap], w2[swap], wheel_moment[swap], x[swap])
         N, u = np.where(eng, N, 0.0), np.where(eng, u, 0.0)
         flank = np.where(eng, flank, 0.0)
         return theta, kin, alpha, eng, beta, w2, x, s_slide, v_s, sigma, N, u, flank
@@ -548,7 +549,7 @@ class Geneva(Mechanism):
         a2 = kin["wheel_accel"]
         mu, R, r = self.friction, g.pin_radius, g.crank_radius
         fric = mu * np.abs(N) * sigma
-        arm = g.pin_in_slot(r, g.centre_distance, alpha, beta)[3]
+        arm = g.slot_arm(r, alpha, beta)
         torque = (self.crank_damping * speed + N * arm
                   + fric * (s_slide - g.crank_sense * flank * R))
         torque = np.where(eng, torque, self.crank_damping * speed)

@@ -77,7 +77,18 @@ class InternalGenevaGeometry(GenevaGeometry):
         a = r cos(alpha - beta) (= x G)."""
         return (r * lib.sin(alpha) * lib.cos(beta) - (c + r * lib.cos(alpha)) * lib.sin(beta),
                 r * lib.sin(alpha) * lib.sin(beta) + (c + r * lib.cos(alpha)) * lib.cos(beta),
-                -r * lib.sin(alpha - beta), r * lib.cos(alpha - beta))
+                InternalGenevaGeometry.slot_sliding(r, alpha, beta, lib),
+                InternalGenevaGeometry.slot_arm(r, alpha, beta, lib))
+
+    @staticmethod
+    def slot_sliding(r, alpha, beta, lib=np):
+        """`pin_in_slot`'s s = -r sin(alpha - beta) alone (docs/internal_geneva.md eq. 6)."""
+        return -r * lib.sin(alpha - beta)
+
+    @staticmethod
+    def slot_arm(r, alpha, beta, lib=np):
+        """`pin_in_slot`'s a = r cos(alpha - beta) alone (docs/internal_geneva.md eq. 6)."""
+        return r * lib.cos(alpha - beta)
 
 
 def speed_ratio_second_derivative(lam: float, alpha):
