@@ -252,9 +252,12 @@ class ThermalExtension:
         values = self.parameter_values()
         return values.__getitem__
 
-    def inputs_numeric(self, contact: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(u (n_inputs, n_times), Q, gamma) from contact arrays."""
-        u, Q, gamma = heat_inputs(contact, self.numeric_parameter(), self.inputs, self.share.distribution, np)
+    def inputs_numeric(self, contact: dict, parameter: Callable[[str], float] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u (n_inputs, n_times), Q, gamma) from contact arrays; parameter: `numeric_parameter()` where a caller
+        that reads many times keeps it."""
+        P = self.numeric_parameter() if parameter is None else parameter
+        u, Q, gamma = heat_inputs(contact, P, self.inputs, self.share.distribution, np)
         shape = np.shape(Q)
         return np.array([np.broadcast_to(v, shape) for v in u]), np.asarray(Q, float), np.asarray(gamma, float)
 

@@ -45,9 +45,11 @@ def closed_form_columns(mech, angle0: float, speed: float) -> Callable[[np.ndarr
 def input_function(ext: ThermalExtension, mech, columns_fn) -> Callable[[np.ndarray], np.ndarray]:
     """u(t) = [network inputs, Q, gamma Q] at an array of times, shape (n_inputs + 2, len(t)); the contact from
     the mechanism's `contact_state` of the closed-form columns."""
+    parameter = ext.numeric_parameter()
+
     def inputs(t) -> np.ndarray:
         contact = mech.contact_state(columns_fn(t))
-        u, Q, gamma = ext.inputs_numeric(contact)
+        u, Q, gamma = ext.inputs_numeric(contact, parameter)
         return np.vstack([u, Q[None, :], (gamma * Q)[None, :]])
     return inputs
 
