@@ -143,6 +143,8 @@ def _phi1(x: np.ndarray) -> np.ndarray:
     """(e^x - 1)/x, 1 at x = 0 (stable for small |x|)."""
     x = np.asarray(x, dtype=float)
     small = np.abs(x) < 1e-8
+    if not small.any():                              # the quotient alone (what the selection below picks)
+        return np.expm1(x) / x
     safe = np.where(small, 1.0, x)
     return np.where(small, 1.0 + 0.5 * x, np.expm1(safe) / safe)
 
@@ -239,8 +241,9 @@ class ModalNetwork:
         decay = np.exp(lam * h[None, :])                                               # (n, K)
         rest = h[None, :, None] * (1.0 - x[None, None, :])                             # time left after node j
         weights = h[None, :, None] * w[None, None, :]
-        forcing = np.sum(weights * np.exp(lam[:, :, None] * rest) * g, axis=2)
-        forcing_int = np.sum(weights * rest * _phi1(lam[:, :, None] * rest) * g, axis=2)
+        lam_rest = lam[:, :, None] * rest
+        forcing = np.sum(weights * np.exp(lam_rest) * g, axis=2)
+        forcing_int = np.sum(weights * rest * _phi1(lam_rest) * g, axis=2)
         carry_int = h[None, :] * _phi1(lam * h[None, :])
         if u.shape[0] >= m + 2:
             q_int = np.sum(w[None, :] * u[m], axis=1) * h, np.sum(w[None, :] * u[m + 1], axis=1) * h
