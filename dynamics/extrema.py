@@ -165,12 +165,15 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
 
 
 def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
-                       limit: int = CANDIDATES, layout: tuple | None = None
+                       limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None
                        ) -> tuple[list[list[tuple]], np.ndarray | None]:
     """(`_candidates`, each series' largest finite row in each sense: [c max, -(c min), ...], -inf where none is
     finite; None without rows). The row-against-neighbour comparisons are made once for both senses on the rows'
     differences (a >= b exactly where a - b >= 0; the negated series' differences are the differences negated,
-    exactly), and the series in the minimum's sense (-F, -inf where F is not finite) is formed only where read."""
+    exactly), and the series in the minimum's sense (-F, -inf where F is not finite) is formed only where read.
+    groups: the intervals of each of several windows, consecutive (their counts; each window with rows), whose
+    candidates and bounds are each window's own, all found in one pass: [window 0's series, window 1's, ...], each
+    candidate's interval counted in its window's."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
@@ -182,6 +185,15 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         ti, G = t[rows], F[:, rows]
     ok = np.isfinite(G)
     finite = bool(ok.all())
+    S = 2 * len(G)                                  # series per window
+    if groups is None or len(groups) == 1:
+        n_w, cuts, w_of, base = 1, None, None, None
+    else:                                           # each window's first position in the rows, and each row's
+        n_w = len(groups)
+        first_iv = np.cumsum([0, *groups[:-1]])
+        cuts = np.searchsorted(k_of, first_iv)
+        w_of = np.searchsorted(first_iv, k_of, side="right") - 1
+        base = first_iv
 
     def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
         """Series m (2c: F[c], 2c + 1: -F[c]; -inf where not finite) at rows i."""
@@ -210,12 +222,21 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         flat &= ok
         smooth &= ok[:, None]
     with np.errstate(invalid="ignore"):
-        lower = np.empty(2 * len(G))                # the best peak's: the largest row is a peak
-        level = np.empty(2 * len(G))
-        lower[0::2] = np.where(ok, G, -np.inf).max(axis=1) if not finite else G.max(axis=1)
-        lower[1::2] = -(np.where(ok, G, np.inf).min(axis=1) if not finite else G.min(axis=1))
-        level[0::2] = np.where(flat, G, -np.inf).max(axis=1)
-        level[1::2] = -np.where(flat, G, np.inf).min(axis=1)
+        # the best peak's: the largest row is a peak ([window, column, sense])
+        lower = np.empty((n_w, len(G), 2))
+        level = np.empty((n_w, len(G), 2))
+        big, least = (np.where(ok, G, -np.inf), np.where(ok, G, np.inf)) if not finite else (G, G)
+        top, bottom = np.where(flat, G, -np.inf), np.where(flat, G, np.inf)
+        if cuts is None:
+            lower[0, :, 0], lower[0, :, 1] = big.max(axis=1), -least.min(axis=1)
+            level[0, :, 0], level[0, :, 1] = top.max(axis=1), -bottom.min(axis=1)
+        else:                                       # each window's (max and min are exact in any order)
+            lower[:, :, 0], lower[:, :, 1] = np.maximum.reduceat(big, cuts, axis=1).T, \
+                -np.minimum.reduceat(least, cuts, axis=1).T
+            level[:, :, 0], level[:, :, 1] = np.maximum.reduceat(top, cuts, axis=1).T, \
+                -np.minimum.reduceat(bottom, cuts, axis=1).T
+        lower, level = lower.ravel(), level.ravel()
+    wties = np.tile(ties, n_w)
     any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
     # the estimates where they are compared: the smooth peaks (np.nonzero's indices, from the flat ones: far faster)
     ms, ii = np.divmod(np.flatnonzero(smooth), G.shape[1])
@@ -223,34 +244,40 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     est = row.copy()
     inner = ~(first[ii] | last[ii])
     est[inner] = _estimates(ti, fi, ms[inner], ii[inner])
+    wm = ms if w_of is None else w_of[ii] * S + ms          # the series in its window
     with np.errstate(invalid="ignore"):
-        kept = 2 * est - row >= (lower - ties)[ms]
-    ms, ii, est = ms[kept], ii[kept], est[kept]
-    best = np.full(2 * len(G), -np.inf)
-    np.maximum.at(best, ms, est)
-    rank = np.where(est >= best[ms] - ties[ms], best[ms], est)
-    order = np.lexsort((ti[ii], -rank, ms))         # each series' by estimate, ties to the earliest
-    ms, ii, est = ms[order], ii[order], est[order]
-    nth = np.arange(len(ms)) - np.searchsorted(ms, ms)
+        kept = 2 * est - row >= (lower - wties)[wm]
+    ms, ii, est, wm = ms[kept], ii[kept], est[kept], wm[kept]
+    best = np.full(n_w * S, -np.inf)
+    np.maximum.at(best, wm, est)
+    rank = np.where(est >= best[wm] - ties[ms], best[wm], est)
+    order = np.lexsort((ti[ii], -rank, wm))         # each series' by estimate, ties to the earliest
+    ii, est, wm = ii[order], est[order], wm[order]
+    nth = np.arange(len(wm)) - np.searchsorted(wm, wm)
     chosen = nth < limit
-    out: list[list[tuple]] = [[] for _ in range(2 * len(G))]
+    out: list[list[tuple]] = [[] for _ in range(n_w * S)]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - ties))
-    c = constant >> 1
+    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - wties))
+    mc = constant % S
+    c = mc >> 1
     with np.errstate(invalid="ignore"):
         Gc = G[c]
-        signed = np.where((constant & 1)[:, None], -Gc, Gc)
-        earliest = np.argmax(flat[c] & (signed >= (level - ties)[constant, None]), axis=1)
-    for m, i, value in zip(constant.tolist(), earliest.tolist(), fi(constant, earliest).tolist()):
+        signed = np.where((mc & 1)[:, None], -Gc, Gc)
+        held = flat[c] & (signed >= (level - wties)[constant, None])
+        if w_of is not None:                        # in the series' own window
+            held &= w_of == (constant // S)[:, None]
+        earliest = np.argmax(held, axis=1)
+    for m, i, value in zip(constant.tolist(), earliest.tolist(), fi(mc, earliest).tolist()):
         k = int(k_of[i])
         at = float(intervals[k].lo) if first[i] else float(ti[i])
-        out[m].append((value, k, int(pos[i]), at, at, True))
-    for m, i, value in zip(ms[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
-        iv = intervals[int(k_of[i])]
+        out[m].append((value, k - (0 if base is None else int(base[w_of[i]])), int(pos[i]), at, at, True))
+    for m, i, value in zip(wm[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
+        k = int(k_of[i])
+        iv = intervals[k]
         lo = float(iv.lo) if first[i] else float(ti[i - 1])
         hi = float(iv.hi) if last[i] else float(ti[i + 1])
-        out[m].append((value, int(k_of[i]), int(pos[i]), lo, hi, False))
+        out[m].append((value, k - (0 if base is None else int(base[w_of[i]])), int(pos[i]), lo, hi, False))
     return out, lower
 
 
@@ -293,12 +320,21 @@ class Plan:
 
     def finish(self, tables: list[dict | None], read: Reader) -> dict[str, dict[str, Extremum]]:
         """`locate`'s result from the readings of `requests` (None: read here, alone)."""
-        t, values, intervals = self.t, self.values, self.intervals
-        n = len(self.clusters)
-        for (k, group), request, table in zip(self.starts.items(), self.requests[n:], tables[n:]):
+        return finish_all([self], tables, read)[0]
+
+
+def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> list[dict[str, dict[str, Extremum]]]:
+    """`Plan.finish` of each plan, from the readings of their requests one plan after another (`tables`), every
+    bracket refined in one pass (`_refine`)."""
+    ready, a = [], 0
+    for p in plans:
+        t, values, intervals = p.t, p.values, p.intervals
+        n = len(p.clusters)
+        mine = tables[a:a + len(p.requests)]
+        a += len(p.requests)
+        for (k, group), table in zip(p.starts.items(), mine[n:]):
             _constant_from_start(intervals[k], k, group, read, table)
-        ready = []
-        for group, grids, request, table in zip(self.clusters, self.grids, self.requests[:n], tables[:n]):
+        for group, grids, request, table in zip(p.clusters, p.grids, p.requests[:n], mine[:n]):
             try:
                 ready.append((request[0], group, grids, table if table is not None else read(*request)))
             except ReadingFailed:          # the rows' value stands, and says so
@@ -307,33 +343,78 @@ class Plan:
                     j.best_f, j.best_t, j.limit = j.sampled, float(t[r]), None
                     j.best_row = {c: v[r] for c, v in values.items()}
                     j.where = "output row (the re-integration between rows failed)"
-        _refine(ready)
+    _refine(ready)
+    located = []
+    for p in plans:
         out: dict[str, dict[str, Extremum]] = {}
-        for j in self.jobs:
+        for j in p.jobs:
             slot = out.setdefault(j.column, {})
             name = "max" if j.sense > 0 else "min"
             if j.best_row is None:
                 continue
             e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.sense * j.sampled, j.limit, j.edge,
                          j.interval, j.constant)
-            if _beats(e, slot.get(name), j.sense, self.ties[j.column]):
+            if _beats(e, slot.get(name), j.sense, p.ties[j.column]):
                 slot[name] = e
-        return out
+        located.append(out)
+    return located
 
 
 def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], limit: int = CANDIDATES) -> Plan:
     """`locate`'s candidates, brackets and reading requests (see `Plan`)."""
+    return plans([(t, values, intervals)], limit)[0]
+
+
+def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | None]:
+    """`plan` of each window's (t, values, intervals) (None: no plan); the windows over the same table (t and values
+    the same objects, as `with_rowless` hands them back without short intervals) planned together: the table's
+    ties once, their candidates in one pass of its rows (`_candidates_bounds`), every bracket's grid in another
+    (`_grids`)."""
+    out: list[Plan | None] = [None] * len(windows)
+    tables: dict = {}
+    for w, x in enumerate(windows):
+        if x is not None:
+            tables.setdefault((id(x[0]), id(x[1])), []).append(w)
+    for ws in tables.values():
+        t, values = windows[ws[0]][:2]
+        names = list(values)
+        F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
+        col_ties = _ties(F)
+        ties = {col: float(x) for col, x in zip(names, col_ties.tolist())}
+        spans = [windows[w][2] for w in ws]
+        # the windows with rows in the order of their rows (adjacent windows' rows then run on: views of the table)
+        held = sorted((w for w in range(len(ws)) if any(len(iv.rows) for iv in spans[w])),
+                      key=lambda w: next(int(iv.rows[0]) for iv in spans[w] if len(iv.rows)))
+        found: list = [[[] for _ in range(2 * len(names))] for _ in spans]
+        bounds: list = [None] * len(spans)
+        if held:
+            got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in spans[w]], limit,
+                                            groups=[len(spans[w]) for w in held])
+            S = 2 * len(names)
+            for q, w in enumerate(held):
+                found[w], bounds[w] = got[q * S:(q + 1) * S], lower[q * S:(q + 1) * S]
+        jobs = [_jobs(t, values, F, names, ties, ivs, got) for ivs, got in zip(spans, found)]
+        clusters = [_clusters(js) for js, _ in jobs]
+        grids, instants = _grids([g for cs in clusters for g in cs])
+        a = 0
+        for w, intervals, (js, starts), cs, lower in zip(ws, spans, jobs, clusters, bounds):
+            mine = slice(a, a + len(cs))
+            a += len(cs)
+            requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(cs, instants[mine])]
+            requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
+            out[w] = Plan(t, values, intervals, js, ties, cs, grids[mine], starts, requests, lower)
+    return out
+
+
+def _jobs(t: np.ndarray, values: dict, F: np.ndarray, names: list[str], ties: dict, intervals: list[Interval],
+          found: list[list[tuple]]) -> tuple[list[_Job], dict[int, list[_Job]]]:
+    """`plan`'s jobs of each column and sense from its candidates (`found`, as `_candidates_bounds` gives them), in
+    order of interval and row, and the constant stretches read at their interval's start (by interval)."""
     jobs: list[_Job] = []
-    ties: dict[str, float] = {}
     starts: dict[int, list[_Job]] = {}          # constant stretches from an interval's start (read there)
-    layout = _layout(intervals)
-    names = list(values)
-    F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
-    col_ties = _ties(F)
-    found, bounds = _candidates_bounds(t, F, col_ties, intervals, limit, layout)
     for n, col in enumerate(names):
         f = F[n]
-        ties[col] = tie = float(col_ties[n])
+        tie = ties[col]
         for sense, got in ((1.0, found[2 * n]), (-1.0, found[2 * n + 1])):
             for est, k, i, lo, hi, flat in got:
                 j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]), tie=tie)
@@ -351,6 +432,12 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
                         j.where = "output row (constant from here)"
                 jobs.append(j)
     jobs.sort(key=lambda j: (j.interval, j.anchor))
+    return jobs, starts
+
+
+def _clusters(jobs: list[_Job]) -> list[list[_Job]]:
+    """The brackets read together: the jobs still to refine within CLUSTER_ROWS rows of a cluster's first, in its
+    interval (`jobs` in order of interval and row)."""
     clusters: list[list[_Job]] = []
     for j in jobs:
         if j.done:
@@ -359,10 +446,7 @@ def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]
             clusters[-1].append(j)
         else:
             clusters.append([j])
-    grids, instants = _grids(clusters)
-    requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(clusters, instants)]
-    requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
-    return Plan(t, values, intervals, jobs, ties, clusters, grids, starts, requests, bounds)
+    return clusters
 
 
 def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader, table: dict | None = None) -> None:
@@ -370,30 +454,22 @@ def _constant_from_start(iv: Interval, k: int, group: list[_Job], read: Reader, 
     there (the one-sided limit after an event; the window's start for the first interval; `table`: that reading
     where already read). The value stays the rows' (exact); if the reading fails, the stretch's first row stands."""
     try:
-        row = _at(table if table is not None else read(iv, 0, np.array([iv.lo])), 0)
+        table = table if table is not None else read(iv, 0, np.array([iv.lo]))
     except ReadingFailed:
         for j in group:
             j.best_t = j.t_row
         return
     for j in group:
-        j.best_row = dict(row)
+        j.best_row = _Row(table, 0, None)
         j.best_row[j.column] = j.sense * j.best_f
         j.where = (f"{iv.lo_kind} (constant from here, limit from after)" if k > 0
                    else f"{iv.lo_kind} (constant from here)")
         j.limit = "after" if k > 0 else None
 
 
-def _at(table: dict, pos, w: np.ndarray | None = None) -> dict:
-    """Every column at one instant: the reading at pos, or the polynomial through the readings at pos (weights
-    w; a column that is not float: the reading of the largest weight)."""
-    out = {}
-    for c, v in table.items():
-        out[c] = _at_one(np.asarray(v), pos, w)
-    return out
-
-
 def _at_one(v: np.ndarray, pos, w: np.ndarray | None):
-    """`_at` of one column."""
+    """A column at one instant: the reading at pos, or the polynomial through the readings at pos (weights w; a
+    column that is not float: the reading of the largest weight)."""
     if w is None:
         return v[pos]
     if v.dtype.kind == "f":
@@ -402,7 +478,8 @@ def _at_one(v: np.ndarray, pos, w: np.ndarray | None):
 
 
 class _Row(MutableMapping):
-    """`_at` of a table as a mapping, each column evaluated when first read (a summary reads one or two)."""
+    """Every column of a table at one instant (`_at_one`) as a mapping, each column evaluated when first read (a
+    summary reads one or two)."""
 
     def __init__(self, table: dict, pos, w: np.ndarray | None):
         self._table, self._pos, self._w, self._got = table, pos, w, {}
@@ -417,6 +494,9 @@ class _Row(MutableMapping):
 
     def __delitem__(self, c):
         raise TypeError("a located row's columns are fixed")
+
+    def __contains__(self, c):
+        return c in self._got or c in self._table
 
     def __iter__(self):
         return iter(dict.fromkeys([*self._table, *self._got]))
@@ -675,7 +755,8 @@ def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
 class EndLines:
     """Each column's linear extrapolation to every interval end from its rows there (`end_guesses`): the ends
     (`every_end`), their instants te, and per (column, end) the row nearest the end f0 and the next f1, the
-    extrapolated value `line`, its error margin `curve` and whether it can be made (`ok`)."""
+    extrapolated value `line`, its error margin `curve` and whether it can be made (`ok`); over several windows'
+    intervals, each end's window (`window`; its interval counted in its window's), else None."""
 
     ends: list
     te: np.ndarray
@@ -685,10 +766,14 @@ class EndLines:
     line: np.ndarray
     curve: np.ndarray
     ok: np.ndarray
+    window: np.ndarray | None = None
 
 
-def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval]) -> EndLines | None:
-    """`EndLines` of every column of `values` at the intervals' ends; None without ends."""
+def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
+              windows: list[int] | None = None) -> EndLines | None:
+    """`EndLines` of every column of `values` at the intervals' ends; None without ends. windows: the intervals of
+    each of several windows, consecutive (their counts), whose ends are each window's (`end_guesses` picks an ask's
+    among its window's)."""
     ends = every_end(intervals)
     if not ends:
         return None
@@ -707,16 +792,24 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
         # the extrapolation's error over (at most) one step: its second difference, else the step itself
         curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
+    window = None
+    if windows is not None and len(windows) > 1:        # each end's window, its interval counted there
+        first = np.cumsum([0, *windows[:-1]])
+        k = np.array([k for k, _, _ in ends])
+        window = np.searchsorted(first, k, side="right") - 1
+        ends = [(x, side, te) for x, (_, side, te) in zip((k - first[window]).tolist(), ends)]
     return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve,
-                    np.isfinite(step) & (t1 != t0))
+                    np.isfinite(step) & (t1 != t0), window)
 
 
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
                 asks: list[tuple[str, float, float | None]], ties: dict[str, float], limit: int | None = LIMITS,
-                lines: EndLines | None = None) -> list[list[tuple[int, str, float]]]:
+                lines: EndLines | None = None, windows: list[int] | None = None
+                ) -> list[list[tuple[int, str, float]]]:
     """`_end_guesses` of each (column, sense, the extremum's value or None) of `asks` over the same intervals, in
     one array pass: the ends and each column's extrapolation to them (`end_lines`, or `lines` where made already)
-    made once for both senses. limit: the best guesses kept per ask (None: every end that may beat the value)."""
+    made once for both senses. limit: the best guesses kept per ask (None: every end that may beat the value).
+    windows: each ask's window where `lines` are several windows' (its guesses among that window's ends)."""
     if lines is None and asks:
         lines = end_lines(t, {c: values[c] for c in dict.fromkeys(c for c, _, _ in asks)}, intervals)
     if lines is None or not asks:
@@ -728,6 +821,8 @@ def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[In
     with np.errstate(invalid="ignore"):
         guess = sense * lines.line[m]
         able = lines.ok[m] & np.isfinite(guess) & (guess + lines.curve[m] > floor)
+    if lines.window is not None:
+        able &= lines.window == np.array(windows)[:, None]
     # each ask's able ends by guess (largest first), then instant, then position: the best `limit` of them
     a, i = np.nonzero(able)
     order = np.lexsort((te[i], -guess[a, i], a))
@@ -782,7 +877,7 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
             own.append(iv)
             at = len(own) - 1
         kind = iv.lo_kind if side == "after" else iv.hi_kind
-        row = {c: np.asarray(v)[0] for c, v in table.items()}
+        row = _Row(table, 0, None)
         sampled = f[iv.rows[0] if side == "after" else iv.rows[-1]]
         best = Extremum(value, te, f"{kind} (limit from {side})", row, float(sampled), side, side, at, False)
     return best

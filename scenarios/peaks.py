@@ -18,8 +18,10 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
-                                      end_limit_requests, end_limits, end_lines, intervals_of, plan, read_all,
+                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, read_all,
                                       with_rowless)
+from mechsim.dynamics.extrema import plans as plan_windows
+from mechsim.dynamics.tables import TableColumns
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
@@ -99,8 +101,9 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
 def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
     if events is None or not len(events):
         return []
-    kinds = [str(k) for k in events["kind"].tolist()] if "kind" in events else ["event"] * len(events)
-    return sorted((t, f"event '{k}' at t = {t:.9g} s") for t, k in zip(events["t_s"].to_numpy(float).tolist(), kinds))
+    ev = TableColumns(events)           # the frame's own arrays (a pandas column read is not free)
+    kinds = [str(k) for k in ev["kind"].tolist()] if "kind" in ev else ["event"] * len(events)
+    return sorted((t, f"event '{k}' at t = {t:.9g} s") for t, k in zip(np.asarray(ev["t_s"], float).tolist(), kinds))
 
 
 #: consecutive crank turns agree to this (their durations, and the drive speed at their starts, relative) where the
@@ -233,23 +236,22 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events) if read is not None else []
-    plans, requests, spans = [], [], []
-    for lo, hi, label in windows:
-        intervals = _intervals(t[:n], breaks, lo, hi, kinds[label], read) if read is not None and readable else []
-        spans.append(intervals)
-        # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`)
-        plans.append(plan(*with_rowless(t[:n], values, intervals, read)) if intervals else None)
-        requests += plans[-1].requests if plans[-1] is not None else []
+    tn = t[:n]
+    spans = [_intervals(tn, breaks, lo, hi, kinds[label], read) if read is not None and readable else []
+             for lo, hi, label in windows]
+    # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`);
+    # the windows over the same table planned together
+    plans = plan_windows([with_rowless(tn, values, intervals, read) if intervals else None for intervals in spans])
+    requests = [r for p in plans if p is not None for r in p.requests]
     turn = means_asked = None
     if regime is not None and read is not None:
-        turn = _intervals(t[:n], breaks, *regime["last_turn"], ("turn start", "turn end"), read)
+        turn = _intervals(tn, breaks, *regime["last_turn"], ("turn start", "turn end"), read)
         means_asked = _turn_mean_requests(turn)
     # a dense output's readings cost no integration: the one-sided limits `end_limits` may read and the growth toward
     # the events an extremum may lie next to (what the singular-approach check may read) are read in the same pass
     # (`_readings_ahead`); other readers read them once the extrema are known
-    lines = [end_lines(p.t, p.values, p.intervals) if p is not None else None for p in plans]
-    ahead = ([r for p, x in zip(plans, lines) if p is not None for r in _readings_ahead(p, p.values, h, x)]
-             if how == HOW_DENSE else [])
+    lines = _end_lines(plans)
+    ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x)] if how == HOW_DENSE else []
     read = _Readings(read) if read is not None else None
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
     means = {}
@@ -257,21 +259,24 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         got = tables[len(requests):len(requests) + len(means_asked)]
         means = _turn_means(t[:n], values, *regime["last_turn"], turn,
                             [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
-    located, a = [], 0
-    for p in plans:
-        located.append(p.finish(tables[a:a + len(p.requests)], read) if p is not None else {})
-        a += len(p.requests) if p is not None else 0
+    located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
+    located = [next(located) if p is not None else {} for p in plans]
     # each extremum against the one-sided limits at events that may beat it (`end_limits`), read together; not a
     # constant stretch's (exact: a dwell's zero speed, which the limits at the events around it equal only to the
     # integration's tolerance)
     checks = [(p, got, c, name, sense) for p, got in zip(plans, located) if p is not None for c in p.values
               for name, sense in (("max", 1.0), ("min", -1.0))
               if not getattr(got.get(c, {}).get(name), "constant", False)]
-    guesses = []                    # each check's ends to read (`end_guesses`), all of a plan's at once
-    for p, got, x in zip(plans, located, lines) if read is not None else ():
-        mine = [(c, sense, getattr(got.get(c, {}).get(name), "value", None))
-                for q, _, c, name, sense in checks if q is p]
-        guesses += end_guesses(p.t, p.values, p.intervals, mine, p.ties, lines=x) if mine else []
+    guesses = {}                    # each check's ends to read (`end_guesses`), all of a table's plans' at once
+    for ws, x in lines if read is not None else ():
+        mine = [(n, q) for n, check in enumerate(checks) for q, w in enumerate(ws) if check[0] is plans[w]]
+        p = plans[ws[0]]
+        asks = [(c, sense, getattr(got.get(c, {}).get(name), "value", None))
+                for _, got, c, name, sense in (checks[n] for n, _ in mine)]
+        if mine:
+            guesses.update(zip((n for n, _ in mine), end_guesses(p.t, p.values, p.intervals, asks, p.ties, lines=x,
+                                                                 windows=[q for _, q in mine])))
+    guesses = [guesses[n] for n in range(len(checks))] if read is not None else []
     if read is not None and checks:
         read.prefetch([r for (p, *_), g in zip(checks, guesses) for r in end_limit_requests(p.intervals, g)])
     for (p, got, c, name, sense), g in zip(checks, guesses):
@@ -315,6 +320,17 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                                          "mean_over": [a, b]}
                 out[c] = entry
     return out, regime
+
+
+def _end_lines(plans: list) -> list[tuple[list[int], object]]:
+    """The located plans over one table (t and values the same arrays, as `plan_windows` plans them together) with
+    their `end_lines`, made together (each window's ends its own): [(the plans' positions, their lines)]."""
+    tables: dict = {}
+    for w, p in enumerate(plans):
+        if p is not None:
+            tables.setdefault((id(p.t), id(p.values)), []).append(w)
+    return [(ws, end_lines(plans[ws[0]].t, plans[ws[0]].values, [iv for w in ws for iv in plans[w].intervals],
+                           [len(plans[w].intervals) for w in ws])) for ws in tables.values()]
 
 
 class _Readings:
@@ -489,41 +505,51 @@ def _edge(e: Extremum | None) -> str | None:
     return e.limit if e.limit is not None else e.edge
 
 
-def _readings_ahead(p, values: dict[str, np.ndarray], h: float, lines) -> list[tuple]:
-    """The readings `end_limits` and `_first_approaches` may take for a located plan `p` (`dynamics/extrema.py`
-    `plan`; `lines`: its `end_lines`), before its extrema are known: the growth toward each event a bracket
-    reaches, on that side; the one-sided limits at the ends whose guesses may beat each column's best row in the
-    window, in each sense (its located extremum is at least that row, but for round-off: a guess beyond these is
-    read once the extrema are known), and the growth toward each of those ends the column approaches
-    (`_approached`, here for every column, sense and end at once)."""
-    ends, out = [], []
-    for j in p.jobs:
-        if j.done:
-            continue
-        iv = p.intervals[j.interval]
-        for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
-            if reaches and _approached(values[j.column], iv, side, j.sense):
-                ends.append((iv, side))
-    if lines is not None:
-        names = list(lines.of)
+def _readings_ahead(plans: list, h: float, lines) -> list[tuple]:
+    """The readings `end_limits` and `_first_approaches` may take for located plans over one table
+    (`dynamics/extrema.py` `plans`; `lines`: their `end_lines`, made together), before their extrema are known,
+    plan after plan: the growth toward each event a bracket reaches, on that side; the one-sided limits at the ends
+    whose guesses may beat each column's best row in the window, in each sense (its located extremum is at least
+    that row, but for round-off: a guess beyond these is read once the extrema are known), and the growth toward
+    each of those ends the column approaches (`_approached`, here for every column, sense and end at once, from
+    the rows `lines` hold: an end's nearest row and the next)."""
+    if lines is None:            # no interval with two rows: nothing is approached (`_approached`), no end guessed
+        return []
+    window = lines.window if lines.window is not None else np.zeros(len(lines.ends), dtype=int)
+    at = {(q, k, side): e for e, (q, (k, side, _)) in enumerate(zip(window.tolist(), lines.ends))}
+    event = np.array([(plans[q].intervals[k].hi_kind if side == "before" else plans[q].intervals[k].lo_kind)
+                      not in ("start", "end") for q, (k, side, _) in zip(window.tolist(), lines.ends)])
+    with np.errstate(invalid="ignore"):      # `_approached` of each column (row), sense and end (column)
+        up = (event & (lines.f0 > 0) & (lines.f0 >= lines.f1), event & (-lines.f0 > 0) & (-lines.f0 >= -lines.f1))
+    ends: list[list] = [[] for _ in plans]
+    asks, of = [], []
+    for q, p in enumerate(plans):
+        for j in p.jobs:
+            if j.done:
+                continue
+            iv = p.intervals[j.interval]
+            near = up[j.sense < 0][lines.of[j.column]]
+            for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
+                e = at.get((q, j.interval, side)) if reaches else None
+                if e is not None and near[e]:
+                    ends[q].append((iv, side))
         # each column's best rows over the plan's intervals, as its candidates found them (`end_lines` are made
         # on the plan's values and need rows at the ends, so the plan has its bounds)
         top, bottom = p.bounds[0::2].tolist(), (-p.bounds[1::2]).tolist()
-        asks = [(c, sense, v) for c, hi, lo in zip(names, top, bottom) if np.isfinite(hi)
+        mine = [(c, sense, v) for c, hi, lo in zip(lines.of, top, bottom) if np.isfinite(hi)
                 for sense, v in ((1.0, hi), (-1.0, lo))]
-        event = np.array([(p.intervals[k].hi_kind if side == "before" else p.intervals[k].lo_kind)
-                          not in ("start", "end") for k, side, _ in lines.ends])
-        at = {(k, side): e for e, (k, side, _) in enumerate(lines.ends)}
-        with np.errstate(invalid="ignore"):      # `_approached` of each column (row), sense and end (column)
-            up = [event & (lines.f0 > 0) & (lines.f0 >= lines.f1),
-                  event & (-lines.f0 > 0) & (-lines.f0 >= -lines.f1)]
-        for (c, sense, _), guesses in zip(asks, end_guesses(p.t, values, p.intervals, asks, p.ties, limit=None,
-                                                            lines=lines)):
-            out += end_limit_requests(p.intervals, guesses)
-            near = up[0 if sense > 0 else 1][lines.of[c]]
-            ends += [(p.intervals[k], side) for k, side, _ in guesses if near[at[(k, side)]]]
-    return out + [r for r, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends}.values()),
-                                                 h)]
+        asks += mine
+        of += [q] * len(mine)
+    p = plans[0]
+    out: list[list] = [[] for _ in plans]
+    for q, (c, sense, _), guesses in zip(of, asks, end_guesses(p.t, p.values, p.intervals, asks, p.ties, limit=None,
+                                                                lines=lines, windows=of)):
+        intervals = plans[q].intervals
+        out[q] += end_limit_requests(intervals, guesses)
+        near = up[0 if sense > 0 else 1][lines.of[c]]
+        ends[q] += [(intervals[k], side) for k, side, _ in guesses if near[at[(q, k, side)]]]
+    return [r for q in range(len(plans)) for r in out[q] + [
+        x for x, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends[q]}.values()), h)]]
 
 
 def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval]) -> list[tuple]:
