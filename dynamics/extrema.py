@@ -96,14 +96,15 @@ class _Job:
     constant: bool = False
 
 
-def _estimates(t: np.ndarray, f: np.ndarray, m: np.ndarray, i: np.ndarray) -> np.ndarray:
-    """The peak value of the parabola through rows i of series f(m, rows) and their neighbours (each row's value
-    where the parabola opens upwards); 0 < i < len(t) - 1. f: the series' values at (series, rows) as arrays."""
-    f0, f1, f2 = f(m, i - 1), f(m, i), f(m, i + 1)
-    h0, h1 = t[i] - t[i - 1], t[i + 1] - t[i]
+def _estimates(t: np.ndarray, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """The peak value of the parabola through rows i - 1, i, i + 1 of a series (its values f0, f1, f2 there; each
+    row's value where the parabola opens upwards); 0 < i < len(t) - 1."""
+    ti = t[i]
+    h0, h1 = ti - t[i - 1], t[i + 1] - ti
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        d2 = 2.0 * ((f2 - f1) / h1 - (f1 - f0) / h0) / (h0 + h1)
-        d1 = ((f2 - f1) / h1 * h0 + (f1 - f0) / h0 * h1) / (h0 + h1)
+        right, left, h = (f2 - f1) / h1, (f1 - f0) / h0, h0 + h1       # the two slopes, each formed once
+        d2 = 2.0 * (right - left) / h
+        d1 = (right * h0 + left * h1) / h
         gain = np.where(d2 < 0, -0.5 * d1 * d1 / d2, 0.0)
     return f1 + np.where(np.isfinite(gain), gain, 0.0)
 
@@ -164,6 +165,10 @@ def _candidates(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[
     return _candidates_bounds(t, F, ties, intervals, limit, layout)[0]
 
 
+#: a series' sign by its parity (`_candidates_bounds`: 2c the column, 2c + 1 the column negated)
+_SIGNS = np.array([1.0, -1.0])
+
+
 def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
                        limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None
                        ) -> tuple[list[list[tuple]], np.ndarray | None]:
@@ -198,52 +203,57 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
         """Series m (2c: F[c], 2c + 1: -F[c]; -inf where not finite) at rows i."""
         g = G[m >> 1, i]
-        signed = np.where(m & 1, -g, g)
+        signed = g * _SIGNS[m & 1]                  # exactly -g where m is odd
         return signed if finite else np.where(np.isfinite(g), signed, -np.inf)
 
     tie, ties = ties[:, None], np.repeat(ties, 2)
+    d = np.empty((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
+    d[:, 0] = d[:, -1] = 0.0
+    with np.errstate(invalid="ignore"):
+        np.subtract(G[:, 1:], G[:, :-1], out=d[:, 1:-1])
+        small, up, down = np.abs(d) <= tie, d >= 0, d <= 0
     # a neighbour in the row's interval with a finite value (else it counts as -inf: below any finite row)
-    if finite:
-        has_l, has_r = ~first, ~last
+    if finite:               # every row but an interval's first (last) has one: (has & x) | first = x | first
+        no_l, no_r = first, last
+        flat = (small[:, :-1] | first) & (small[:, 1:] | last) & (n_of > 1)
     else:
         has_l, has_r = np.zeros_like(ok), np.zeros_like(ok)
         has_l[:, 1:], has_r[:, :-1] = ok[:, :-1], ok[:, 1:]
         has_l[:, first], has_r[:, last] = False, False
-    d = np.zeros((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
-    with np.errstate(invalid="ignore"):
-        d[:, 1:-1] = G[:, 1:] - G[:, :-1]
-        small, up, down = np.abs(d) <= tie, d >= 0, d <= 0
-    flat = ((has_l & small[:, :-1]) | first) & ((has_r & small[:, 1:]) | last) & (n_of > 1)
-    no_l, no_r = ~has_l, ~has_r
+        no_l, no_r = ~has_l, ~has_r
+        flat = ((has_l & small[:, :-1]) | first) & ((has_r & small[:, 1:]) | last) & (n_of > 1)
+    rough = ~flat
     smooth = np.empty((len(G), 2, G.shape[1]), dtype=bool)        # [c, sense, row]
-    smooth[:, 0] = (no_l | up[:, :-1]) & (no_r | down[:, 1:]) & ~flat
-    smooth[:, 1] = (no_l | down[:, :-1]) & (no_r | up[:, 1:]) & ~flat
+    np.logical_and((no_l | up[:, :-1]) & (no_r | down[:, 1:]), rough, out=smooth[:, 0])
+    np.logical_and((no_l | down[:, :-1]) & (no_r | up[:, 1:]), rough, out=smooth[:, 1])
     if not finite:
         flat &= ok
         smooth &= ok[:, None]
-    with np.errstate(invalid="ignore"):
-        # the best peak's: the largest row is a peak ([window, column, sense])
-        lower = np.empty((n_w, len(G), 2))
-        level = np.empty((n_w, len(G), 2))
-        big, least = (np.where(ok, G, -np.inf), np.where(ok, G, np.inf)) if not finite else (G, G)
-        top, bottom = np.where(flat, G, -np.inf), np.where(flat, G, np.inf)
-        if cuts is None:
-            lower[0, :, 0], lower[0, :, 1] = big.max(axis=1), -least.min(axis=1)
-            level[0, :, 0], level[0, :, 1] = top.max(axis=1), -bottom.min(axis=1)
-        else:                                       # each window's (max and min are exact in any order)
-            lower[:, :, 0], lower[:, :, 1] = np.maximum.reduceat(big, cuts, axis=1).T, \
-                -np.minimum.reduceat(least, cuts, axis=1).T
-            level[:, :, 0], level[:, :, 1] = np.maximum.reduceat(top, cuts, axis=1).T, \
-                -np.minimum.reduceat(bottom, cuts, axis=1).T
-        lower, level = lower.ravel(), level.ravel()
+    ends = [0, G.shape[1]] if cuts is None else [*cuts.tolist(), G.shape[1]]       # each window's rows
     wties = np.tile(ties, n_w)
-    any_peak, any_flat = lower > -np.inf, level > -np.inf  # flat rows and the largest are finite
+    with np.errstate(invalid="ignore"):
+        # the best peak's: the largest row is a peak ([window, column, sense]; max and min are exact in any order)
+        lower = np.empty((n_w, len(G), 2))
+        big, least = (np.where(ok, G, -np.inf), np.where(ok, G, np.inf)) if not finite else (G, G)
+        for w, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
+            lower[w, :, 0], lower[w, :, 1] = big[:, a:b].max(axis=1), -least[:, a:b].min(axis=1)
+        lower = lower.ravel()
+        # a constant stretch can hold the extremum where a flat row is within the tie of the best row (its level,
+        # the largest flat row, is then too: `constant` below)
+        floor = (lower - wties).reshape(n_w, len(G), 2)
+        near = np.empty((n_w, len(G), 2), dtype=bool)
+        for w, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
+            Gw, fw = G[:, a:b], flat[:, a:b]
+            near[w, :, 0] = (fw & (Gw >= floor[w, :, 0, None])).any(axis=1)
+            near[w, :, 1] = (fw & (Gw <= -floor[w, :, 1, None])).any(axis=1)
+    any_peak = lower > -np.inf                      # flat rows and the largest are finite
     # the estimates where they are compared: the smooth peaks (np.nonzero's indices, from the flat ones: far faster)
     ms, ii = np.divmod(np.flatnonzero(smooth), G.shape[1])
     row = fi(ms, ii)
     est = row.copy()
     inner = ~(first[ii] | last[ii])
-    est[inner] = _estimates(ti, fi, ms[inner], ii[inner])
+    mi, ij = ms[inner], ii[inner]
+    est[inner] = _estimates(ti, fi(mi, ij - 1), row[inner], fi(mi, ij + 1), ij)
     wm = ms if w_of is None else w_of[ii] * S + ms          # the series in its window
     with np.errstate(invalid="ignore"):
         kept = 2 * est - row >= (lower - wties)[wm]
@@ -258,26 +268,30 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     out: list[list[tuple]] = [[] for _ in range(n_w * S)]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    constant = np.flatnonzero(any_flat & any_peak & (level >= lower - wties))
+    constant = np.flatnonzero(any_peak & near.ravel())
     mc = constant % S
-    c = mc >> 1
+    # each one's level (its window's largest flat row) and earliest flat row at it, among its window's rows (-g >= x
+    # exactly where g <= -x: negation is exact)
+    earliest = np.zeros(len(constant), dtype=int)
     with np.errstate(invalid="ignore"):
-        Gc = G[c]
-        signed = np.where((mc & 1)[:, None], -Gc, Gc)
-        held = flat[c] & (signed >= (level - wties)[constant, None])
-        if w_of is not None:                        # in the series' own window
-            held &= w_of == (constant // S)[:, None]
-        earliest = np.argmax(held, axis=1)
-    for m, i, value in zip(constant.tolist(), earliest.tolist(), fi(mc, earliest).tolist()):
-        k = int(k_of[i])
-        at = float(intervals[k].lo) if first[i] else float(ti[i])
-        out[m].append((value, k - (0 if base is None else int(base[w_of[i]])), int(pos[i]), at, at, True))
-    for m, i, value in zip(wm[chosen].tolist(), ii[chosen].tolist(), est[chosen].tolist()):
-        k = int(k_of[i])
-        iv = intervals[k]
-        lo = float(iv.lo) if first[i] else float(ti[i - 1])
-        hi = float(iv.hi) if last[i] else float(ti[i + 1])
-        out[m].append((value, k - (0 if base is None else int(base[w_of[i]])), int(pos[i]), lo, hi, False))
+        for q, (m, w, tie_m) in enumerate(zip(mc.tolist(), (constant // S).tolist(), wties[constant].tolist())):
+            a, b = ends[w], ends[w + 1]
+            g, fw = G[m >> 1, a:b], flat[m >> 1, a:b]
+            x = (-g[fw].min() if m & 1 else g[fw].max()) - tie_m
+            earliest[q] = a + np.argmax(fw & (g <= -x if m & 1 else g >= x))
+    # each candidate's interval (counted in its window), position in it and bracket, as numbers
+    ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
+    local = k_of if base is None else k_of - base[w_of]
+    at = np.where(first[earliest], ivlo[k_of[earliest]], ti[earliest])
+    for m, value, k, p, x in zip(constant.tolist(), fi(mc, earliest).tolist(), local[earliest].tolist(),
+                                 pos[earliest].tolist(), at.tolist()):
+        out[m].append((value, k, p, x, x, True))
+    i = ii[chosen]
+    lo = np.where(first[i], ivlo[k_of[i]], ti[i - 1])
+    hi = np.where(last[i], ivhi[k_of[i]], ti[np.minimum(i + 1, len(ti) - 1)])
+    for m, value, k, p, a, b in zip(wm[chosen].tolist(), est[chosen].tolist(), local[i].tolist(), pos[i].tolist(),
+                                    lo.tolist(), hi.tolist()):
+        out[m].append((value, k, p, a, b, False))
     return out, lower
 
 
@@ -417,17 +431,17 @@ def _jobs(t: np.ndarray, values: dict, F: np.ndarray, names: list[str], ties: di
         tie = ties[col]
         for sense, got in ((1.0, found[2 * n]), (-1.0, found[2 * n + 1])):
             for est, k, i, lo, hi, flat in got:
-                j = _Job(col, sense, k, i, lo, hi, sense * float(f[intervals[k].rows[i]]), tie=tie)
-                j.t_row = float(t[intervals[k].rows[i]])
-                j.edge = "before" if hi == intervals[k].hi else "after" if lo == intervals[k].lo else None
+                iv = intervals[k]
+                r = iv.rows[i]
+                j = _Job(col, sense, k, i, lo, hi, sense * float(f[r]), float(t[r]), tie=tie)
+                j.edge = "before" if hi == iv.hi else "after" if lo == iv.lo else None
                 if flat:             # the row's value is the extremum's, at the stretch's first instant
-                    r = intervals[k].rows[i]
                     j.best_f, j.best_t, j.done, j.edge, j.constant = j.sampled, lo, True, None, True
                     j.best_row = {c: v[r] for c, v in values.items()}
                     if lo != j.t_row:
                         starts.setdefault(k, []).append(j)
-                    elif lo == intervals[k].lo:
-                        j.where = f"{intervals[k].lo_kind} (constant from here)"
+                    elif lo == iv.lo:
+                        j.where = f"{iv.lo_kind} (constant from here)"
                     else:
                         j.where = "output row (constant from here)"
                 jobs.append(j)
@@ -552,12 +566,17 @@ def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d1 = c[:, 1:] * np.arange(1, STENCIL)
     d2 = d1[:, 1:] * np.arange(1, STENCIL - 1)
     lo, hi = np.maximum(-1.0, -b.astype(float)), np.minimum(1.0, (STENCIL - 1 - b).astype(float))
-    xs = np.clip(_SEARCH[None, :], lo[:, None], hi[:, None])
+    xs = np.minimum(np.maximum(_SEARCH[None, :], lo[:, None]), hi[:, None])
     x = xs[np.arange(len(b)), np.argmax(_horner(c, xs), axis=1)]
     going = np.ones(len(b), dtype=bool)
+    # d1 and d2 by Horner's rule stepped together (the same operations as `_horner` of each): d1's coefficients
+    # but its lowest beside d2's, one degree below
+    n, pair = len(b), np.concatenate([d1[:, 1:], d2])
     with np.errstate(divide="ignore", invalid="ignore"):
         for _ in range(4):
-            g, h = _horner(d1, x), _horner(d2, x)
+            xx = np.concatenate([x, x])
+            v = _horner(pair, xx)
+            g, h = d1[:, 0] + v[:n] * x, v[n:]
             going &= h < 0
             x = np.where(going, np.minimum(np.maximum(x - g / h, lo), hi), x)
     x = b + x

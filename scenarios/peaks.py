@@ -11,6 +11,7 @@ toward an event has no value there, and its events, growth, impulse and energy l
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -48,7 +49,7 @@ class Source:
 
 
 def _wrapped_deg(angle: float) -> float:
-    return float(np.degrees((angle + np.pi) % (2 * np.pi) - np.pi))
+    return math.degrees((angle + np.pi) % (2 * np.pi) - np.pi)         # as np.degrees: x * (180 / pi)
 
 
 def _entry(value: float, t: float, angle: float, at: str, row_value: float | None = None,
@@ -60,6 +61,11 @@ def _entry(value: float, t: float, angle: float, at: str, row_value: float | Non
     if row_value is not None:
         out["best_row_value"] = float(row_value)
     return out
+
+
+def _valued(f: np.ndarray) -> bool:
+    """Whether a column holds a value (not NaN on every row; a first row with one says so without the rest)."""
+    return bool(len(f)) and (not np.isnan(f[0]) or not np.isnan(f).all())
 
 
 def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table: dict, check: list[str]):
@@ -172,16 +178,26 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     names = list(values)
     if not names:
         return {}
-    V = np.array([values[c] for c in names]).reshape(len(names), -1)
+    # every interval's instants and values side by side, [lo, rows, hi] each: the rule's terms in one pass, summed
+    # interval by interval (each interval's sum as its own array's: a row's contiguous run)
+    sizes = [len(iv.rows) + 2 for iv in intervals]
+    cuts = np.cumsum([0] + sizes).tolist()
+    rows = np.concatenate([iv.rows for iv in intervals]).astype(int) if intervals else np.zeros(0, int)
+    inner = np.ones(cuts[-1], dtype=bool)
+    inner[cuts[:-1]] = inner[np.array(cuts[1:]) - 1] = False
+    tt = np.empty(cuts[-1])
+    tt[inner] = t[rows]
+    tt[cuts[:-1]] = [iv.lo for iv in intervals]
+    tt[np.array(cuts[1:]) - 1] = [iv.hi for iv in intervals]
+    ff = np.empty((len(names), cuts[-1]))
+    for n, c in enumerate(names):
+        ff[n, inner] = values[c][rows]
+    ff[:, cuts[:-1]] = [[tables[2 * k][c][0] for k in range(len(intervals))] for c in names]
+    ff[:, np.array(cuts[1:]) - 1] = [[tables[2 * k + 1][c][0] for k in range(len(intervals))] for c in names]
+    terms = 0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt)
     total = np.zeros(len(names))
-    for n, iv in enumerate(intervals):
-        first, last = tables[2 * n], tables[2 * n + 1]
-        tt = np.concatenate([[iv.lo], t[iv.rows], [iv.hi]])
-        ff = np.empty((len(names), len(tt)))
-        ff[:, 0] = [first[c][0] for c in names]
-        ff[:, 1:-1] = V[:, iv.rows]
-        ff[:, -1] = [last[c][0] for c in names]
-        total += np.sum(0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt), axis=1)
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        total += np.sum(terms[:, lo:hi - 1], axis=1)
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
@@ -203,7 +219,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         return out, None
     t = np.asarray(cols["t_s"], dtype=float)
     angles = np.asarray(cols[angle_column], dtype=float)
-    present = [c for c in peak_columns if c in cols and not np.isnan(np.asarray(cols[c], float)).all()]
+    present = [c for c in peak_columns if c in cols and _valued(np.asarray(cols[c], float))]
     how = HOW_ROWS
     read, coordinates, readable, n = None, (), [], len(t)
     regime = None
@@ -385,7 +401,7 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
     # the larger magnitude; magnitudes equal to round-off (a motion symmetric in sign) go to the maximum, so the
     # signed value reported and differentiated does not follow the rounding
     big, small = abs(entry["max"]["value"]), abs(entry["min"]["value"])
-    side = "max" if big >= small - TIE_ROUNDOFF * max(big, small) or not np.isfinite(small) else "min"
+    side = "max" if big >= small - TIE_ROUNDOFF * max(big, small) or not math.isfinite(small) else "min"
     entry["abs_max"] = dict(entry[side], value=abs(entry[side]["value"]), side=side)
     entry["how"] = how if got else HOW_ROWS
     for name, sense in (("max", 1.0), ("min", -1.0)):
