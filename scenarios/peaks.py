@@ -63,6 +63,18 @@ def _entry(value: float, t: float, angle: float, at: str, row_value: float | Non
     return out
 
 
+def _median_step(t: np.ndarray) -> float:
+    """The median output step, np.median(np.diff(t)) (the middle order statistics by one partition, the mean of
+    the two of an even count as np.mean forms it; NaN where a step is NaN), without np.median's generic machinery."""
+    dt = np.diff(t)
+    m = len(dt)
+    k = m // 2
+    part = np.partition(dt, [k - 1, k, m - 1] if m % 2 == 0 else [k, m - 1])
+    if np.isnan(part[-1]):
+        return float("nan")
+    return float((part[k - 1] + part[k]) / 2) if m % 2 == 0 else float(part[k])
+
+
 def _valued(f: np.ndarray) -> bool:
     """Whether a column holds a value (not NaN on every row; a first row with one says so without the rest)."""
     return bool(len(f)) and (not np.isnan(f[0]) or not np.isnan(f).all())
@@ -178,26 +190,16 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     names = list(values)
     if not names:
         return {}
-    # every interval's instants and values side by side, [lo, rows, hi] each: the rule's terms in one pass, summed
-    # interval by interval (each interval's sum as its own array's: a row's contiguous run)
-    sizes = [len(iv.rows) + 2 for iv in intervals]
-    cuts = np.cumsum([0] + sizes).tolist()
-    rows = np.concatenate([iv.rows for iv in intervals]).astype(int) if intervals else np.zeros(0, int)
-    inner = np.ones(cuts[-1], dtype=bool)
-    inner[cuts[:-1]] = inner[np.array(cuts[1:]) - 1] = False
-    tt = np.empty(cuts[-1])
-    tt[inner] = t[rows]
-    tt[cuts[:-1]] = [iv.lo for iv in intervals]
-    tt[np.array(cuts[1:]) - 1] = [iv.hi for iv in intervals]
-    ff = np.empty((len(names), cuts[-1]))
-    for n, c in enumerate(names):
-        ff[n, inner] = values[c][rows]
-    ff[:, cuts[:-1]] = [[tables[2 * k][c][0] for k in range(len(intervals))] for c in names]
-    ff[:, np.array(cuts[1:]) - 1] = [[tables[2 * k + 1][c][0] for k in range(len(intervals))] for c in names]
-    terms = 0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt)
+    V = np.array([values[c] for c in names]).reshape(len(names), -1)
     total = np.zeros(len(names))
-    for lo, hi in zip(cuts[:-1], cuts[1:]):
-        total += np.sum(terms[:, lo:hi - 1], axis=1)
+    for n, iv in enumerate(intervals):
+        first, last = tables[2 * n], tables[2 * n + 1]
+        tt = np.concatenate([[iv.lo], t[iv.rows], [iv.hi]])
+        ff = np.empty((len(names), len(tt)))
+        ff[:, 0] = [first[c][0] for c in names]
+        ff[:, 1:-1] = V[:, iv.rows]
+        ff[:, -1] = [last[c][0] for c in names]
+        total += np.sum(0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt), axis=1)
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
@@ -248,7 +250,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
     kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
              "startup": ("start", "end of the start-up")}
-    h = float(np.median(np.diff(t[:n]))) if n > 1 else 0.0
+    h = _median_step(t[:n]) if n > 1 else 0.0
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events) if read is not None else []
@@ -266,9 +268,10 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # a dense output's readings cost no integration: the one-sided limits `end_limits` may read and the growth toward
     # the events an extremum may lie next to (what the singular-approach check may read) are read in the same pass
     # (`_readings_ahead`); other readers read them once the extrema are known
-    lines = _end_lines(plans)
-    ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x)] if how == HOW_DENSE else []
     read = _Readings(read) if read is not None else None
+    lines = _end_lines(plans)
+    ahead = ([r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
+             if how == HOW_DENSE else [])
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
     means = {}
     if means_asked is not None:
@@ -305,7 +308,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if read is not None:
         read.prefetch([r for r, _ in _growth_requests([x for p, got in zip(plans, located) if p is not None
                                                        for c, e in got.items()
-                                                       for x in _first_approaches(c, p.values[c], e, p.intervals)], h)])
+                                                       for x in _first_approaches(c, p.values[c], e, p.intervals)], h,
+                                                      kept=read.growth)])
     thermal, treader = [c for c in present if c not in readable], None
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
@@ -355,6 +359,7 @@ class _Readings:
 
     def __init__(self, read):
         self.read, self.kept = read, {}
+        self.growth: dict = {}          # the growth requests made (`_growth_requests`), one h per reader
 
     @staticmethod
     def _key(iv: Interval, position: int, times: np.ndarray):
@@ -468,13 +473,21 @@ SINGULAR_EXPONENT = 0.25
 SINGULAR_EVENTS = 50
 
 
-def _growth_request(iv: Interval, side: str, h: float, decades: int = SINGULAR_DECADES) -> tuple:
+def _growth_request(iv: Interval, side: str, h: float, decades: int = SINGULAR_DECADES, kept: dict | None = None
+                    ) -> tuple:
     """The reading `_growth` takes, (interval, position, times in order), and the order of its distances."""
-    return _growth_requests([(iv, side)], h, decades)[0]
+    return _growth_requests([(iv, side)], h, decades, kept)[0]
 
 
-def _growth_requests(ends: list[tuple[Interval, str]], h: float, decades: int = SINGULAR_DECADES) -> list[tuple]:
-    """`_growth_request` of each (interval, side), in one array pass."""
+def _growth_requests(ends: list[tuple[Interval, str]], h: float, decades: int = SINGULAR_DECADES,
+                     kept: dict | None = None) -> list[tuple]:
+    """`_growth_request` of each (interval, side), in one array pass; kept: those made already for the same h (by
+    interval, side and decades: `_Readings.growth`), the new ones added."""
+    if kept is not None:
+        keys = [(id(iv), side, decades) for iv, side in ends]
+        new = [(k, end) for k, end in zip(keys, ends) if k not in kept]
+        kept.update(zip((k for k, _ in new), _growth_requests([end for _, end in new], h, decades)))
+        return [kept[k] for k in keys]
     if not ends:
         return []
     before = [side == "before" for _, side in ends]
@@ -491,7 +504,7 @@ def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, d
     """The exponent a of |F| ~ distance^-a toward the interval's end on `side` ('before': its end, 'after': its
     start), from readings a decade apart; None where the column stays bounded there (or changes sign)."""
     from mechsim.dynamics.extrema import ReadingFailed
-    request, order = _growth_request(iv, side, h, decades)
+    request, order = _growth_request(iv, side, h, decades, getattr(read, "growth", None))
     try:
         table = read(*request)
     except ReadingFailed:           # the approach cannot be read (a stiff mode re-integrated): no growth claimed
@@ -521,14 +534,14 @@ def _edge(e: Extremum | None) -> str | None:
     return e.limit if e.limit is not None else e.edge
 
 
-def _readings_ahead(plans: list, h: float, lines) -> list[tuple]:
+def _readings_ahead(plans: list, h: float, lines, kept: dict | None = None) -> list[tuple]:
     """The readings `end_limits` and `_first_approaches` may take for located plans over one table
     (`dynamics/extrema.py` `plans`; `lines`: their `end_lines`, made together), before their extrema are known,
     plan after plan: the growth toward each event a bracket reaches, on that side; the one-sided limits at the ends
     whose guesses may beat each column's best row in the window, in each sense (its located extremum is at least
     that row, but for round-off: a guess beyond these is read once the extrema are known), and the growth toward
     each of those ends the column approaches (`_approached`, here for every column, sense and end at once, from
-    the rows `lines` hold: an end's nearest row and the next)."""
+    the rows `lines` hold: an end's nearest row and the next). kept: the growth requests made (`_growth_requests`)."""
     if lines is None:            # no interval with two rows: nothing is approached (`_approached`), no end guessed
         return []
     window = lines.window if lines.window is not None else np.zeros(len(lines.ends), dtype=int)
@@ -565,7 +578,8 @@ def _readings_ahead(plans: list, h: float, lines) -> list[tuple]:
         near = up[0 if sense > 0 else 1][lines.of[c]]
         ends[q] += [(intervals[k], side) for k, side, _ in guesses if near[at[(q, k, side)]]]
     return [r for q in range(len(plans)) for r in out[q] + [
-        x for x, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends[q]}.values()), h)]]
+        x for x, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends[q]}.values()), h,
+                                       kept=kept)]]
 
 
 def _first_approaches(column: str, f: np.ndarray, got: dict, intervals: list[Interval]) -> list[tuple]:
