@@ -106,12 +106,12 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
         n, k = len(at), len(before)
         frame = {name: np.broadcast_to(np.asarray(v), (n,))[k:k + len(inner)] for name, v in cols.items()
                  if np.ndim(v) == 0 or len(np.ravel(v)) == n}
-        if len(history) < len(t_rows):       # a shortened history must give the table's own rows
+        if len(history) < len(t_rows) and check:    # a shortened history must give the table's own rows
             i = np.searchsorted(t_rows, at[:k])
-            for name in check:
-                got, own = np.asarray(cols[name], float)[:k], table[name][i]
-                if not np.allclose(got, own, rtol=1e-9, atol=1e-12, equal_nan=True):
-                    return None
+            got = np.array([np.asarray(cols[name], float)[:k] for name in check])
+            own = np.array([table[name][i] for name in check], dtype=float)
+            if not np.allclose(got, own, rtol=1e-9, atol=1e-12, equal_nan=True):     # every column's rows at once
+                return None
         return frame
     return read
 
