@@ -324,19 +324,25 @@ def turn_rows(t: np.ndarray, t_start: float, period: float) -> np.ndarray:
 def simulated_rows(t: np.ndarray, duration: float, step: float) -> np.ndarray:
     """Indices of the window's rows at times t that lie on the run's output grid (`output_times`): the simulated rows
     a cycle-averaged table keeps (`continue_periodically`); the last of them is where its continuation starts."""
+    t = np.asarray(t, float)
     grid = output_times(duration, step)
-    return np.flatnonzero(np.isin(np.round(np.asarray(t, float) / step, 6), np.round(grid / step, 6)))
+    if len(t):        # grid times a step beyond the last row cannot match it (the rounding is monotone)
+        grid = grid[:np.searchsorted(grid, t.max() + step, side="right")]
+    return np.flatnonzero(np.isin(np.round(t / step, 6), np.round(grid / step, 6)))
 
 
 def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float, period: float, duration: float,
-                          step: float) -> tuple[pd.DataFrame, pd.DataFrame, float, np.ndarray]:
+                          step: float, given: Callable[[np.ndarray], dict] | None = None
+                          ) -> tuple[pd.DataFrame, pd.DataFrame, float, np.ndarray]:
     """The whole run on the output grid (`output_times`: k step, and the end time): the simulated rows on it up to the
     last simulated one, t_sim, then the periodic turn [t_start, t_start + period) interpolated at the phase (t -
     t_start) mod period of every later grid time (the mechanics is periodic there: cycle averaging checks it),
     linear between the window's rows, and across an event (a mode change, where columns jump or kink) from the two
     rows on the phase's side of it (`_event_sides`). Cumulative columns advance by their increase over one turn per
     period; a discrete column (the mode) is that of the row on the phase's side. Events of the turn repeat every
-    period (`message` says so). Returns (table, events, t_sim, the indices into df of the simulated rows kept)."""
+    period (`message` says so). given: the columns' own values at the later grid times where known (a closed form's,
+    exact at any time), which replace the continued ones. Returns (table, events, t_sim, the indices into df of the
+    simulated rows kept)."""
     t = df["t_s"].to_numpy(float)
     grid = output_times(duration, step)
     kept = simulated_rows(t, duration, step)
@@ -349,11 +355,17 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
     at = np.clip(t_start + (new_t - t_start - m * period), t_start, t_start + period)
     lo, hi, side = _event_sides(t, at, None if events is None or not len(events) else events["t_s"].to_numpy(float))
     weight = (at - t[lo]) / (t[hi] - t[lo])
-    new = {}
+    own = {} if given is None else {k: v for k, v in given(new_t).items() if k in df and k != "t_s"}
+    new, out = {}, {}
     for col in df.columns:
         column = df[col]
+        exact = own.get(col)
         if col == "t_s":
             new[col] = new_t
+        elif (exact is not None and isinstance(column.dtype, np.dtype) and column.dtype.kind == "f"
+              and np.asarray(exact).dtype == float):       # taken as assigning it over the continued rows would
+            new[col] = np.asarray(exact)
+            own.pop(col)
         elif isinstance(column.dtype, np.dtype) and column.dtype.kind in "fc":
             values = column.to_numpy().astype(float)
             new[col] = values[lo] + weight * (values[hi] - values[lo])
@@ -364,7 +376,16 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
             new[col] = column.to_numpy()[side]
         else:       # the mode's strings: taken as they are stored (as Python objects, an hour's rows would be slow)
             new[col] = column.array.take(side)
-    table = pd.concat([simulated, pd.DataFrame(new, columns=df.columns)], ignore_index=True)
+        # the simulated rows and the continued ones joined column by column, as concatenating the frames would
+        if isinstance(column.dtype, np.dtype) and isinstance(new[col], np.ndarray):
+            out[col] = np.concatenate([column.to_numpy()[kept], new[col]])
+        else:
+            out[col] = pd.concat([column.iloc[kept], pd.Series(new[col])], ignore_index=True)
+    table = pd.DataFrame(out, columns=df.columns)
+    if own:                 # the other given columns (the mode's strings) assigned over the continued rows
+        later = np.arange(len(table)) >= len(kept)
+        for col, values in own.items():
+            table.loc[later, col] = values
     return table, _repeat_events(df, events, t_start, period, t_sim, duration), t_sim, kept
 
 

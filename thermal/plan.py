@@ -612,16 +612,13 @@ class ThermalPlan:
         estimate = self.averaging_error(df, states, per, readings)
         n = None if states is None else setup.system.size
         duration, step = float(self.si["duration"]), float(self.si["output_step"])
+        given = None
+        if self.method == "closed-form":     # the closed form is exact at any time: its own values there
+            given = closed_form_columns(mech, self.si["initial"][mech.initial_keys[0]], self.speed)
         full, full_events, t_sim, kept = cyc.continue_periodically(df, events, means.t_start, means.period, duration,
-                                                                   step)
+                                                                   step, given)
         times = full["t_s"].to_numpy(float)
         later = times > t_sim
-        if self.method == "closed-form":     # the closed form is exact at any time: its own values there
-            columns = closed_form_columns(mech, self.si["initial"][mech.initial_keys[0]], self.speed)
-            exact = columns(times[later])
-            for col, values in exact.items():
-                if col in full and col != "t_s":
-                    full.loc[later, col] = values
         info = {"period_s": means.period, "mean_heat_rate_W": means.heat_mean,
                 "mean_heat_share_pin": None if states is None else means.share_mean,
                 "turns_simulated": int(per.turns), "mechanics_simulated_until_s": t_sim,
