@@ -366,6 +366,12 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
               and np.asarray(exact).dtype == float):       # taken as assigning it over the continued rows would
             new[col] = np.asarray(exact)
             own.pop(col)
+        elif exact is not None and not isinstance(column.dtype, np.dtype):
+            # the mode's strings in the column's own dtype, as assigning them over the continued rows converts them:
+            # each distinct value converted once (an hour's rows of Python strings converted one by one are slow)
+            codes, uniques = pd.factorize(np.asarray(exact, dtype=object), use_na_sentinel=True)
+            new[col] = pd.array(np.asarray(uniques, dtype=object), dtype=column.dtype).take(codes, allow_fill=True)
+            own.pop(col)
         elif isinstance(column.dtype, np.dtype) and column.dtype.kind in "fc":
             values = column.to_numpy().astype(float)
             new[col] = values[lo] + weight * (values[hi] - values[lo])
@@ -381,7 +387,7 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
             out[col] = np.concatenate([column.to_numpy()[kept], new[col]])
         else:
             out[col] = pd.concat([column.iloc[kept], pd.Series(new[col])], ignore_index=True)
-    table = pd.DataFrame(out, columns=df.columns)
+    table = pd.DataFrame(out, columns=df.columns, copy=False)        # every column made here: no copy needed
     if own:                 # the other given columns (the mode's strings) assigned over the continued rows
         later = np.arange(len(table)) >= len(kept)
         for col, values in own.items():
