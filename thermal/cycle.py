@@ -35,6 +35,8 @@ HERMITE_ABOVE = 4
 #: up to this many distinct phases (a located peak's readings) each is integrated from the periodic ripple at the
 #: start of its piece, kept between calls (`bulk_response`'s cache)
 FEW_PHASES = 64
+#: rows per block of the elementwise work on an hour of rows (blocks that stay in the cache)
+BLOCK = 4096
 
 
 def turn_boundaries(t: np.ndarray, angle: np.ndarray, angle0: float) -> np.ndarray:
@@ -198,7 +200,12 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     # input's breaks) and the phases asked for: so that its value at a phase does not depend on which other phases
     # (which output grid) are asked for with it, as a few phases alone would make the pieces long
     nodes = np.unique(np.concatenate([[0.0, P], breaks, np.linspace(0.0, P, HERMITE_NODES + 1)]))
-    tau = np.unique(np.concatenate([nodes, phase]))
+    above = (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks))
+    # the Hermite's choice needs only to know that there are more distinct phases than `above`: the first rows'
+    # phases often tell (an hour of rows need not be sorted for it); the other ways read all of them
+    tau = np.unique(np.concatenate([nodes, phase[:2 * above]]))
+    if len(tau) <= above and len(phase) > 2 * above:
+        tau = np.unique(np.concatenate([nodes, phase]))
     cache = {} if cache is None else cache
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
@@ -210,7 +217,7 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
         return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
-    if len(tau) > (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks)):
+    if len(tau) > above:
         ripple, periodic0 = _ripple_hermite(homogeneous, ripple_input, P, breaks, phase)
     elif len(np.unique(phase)) <= FEW_PHASES:          # a few phases: each from its piece's start
         if "nodes" not in cache:
@@ -245,12 +252,15 @@ def _ripple_hermite(homogeneous: ModalNetwork, ripple_input, period: float, brea
     lam, Bm = homogeneous.lam[None, :], homogeneous.Bm
     slope_lo = lam * z[:-1] + np.asarray(ripple_input(nodes[:-1] + eps))[:m].T @ Bm.T
     slope_hi = lam * z[1:] + np.asarray(ripple_input(nodes[1:] - eps))[:m].T @ Bm.T
-    k = np.clip(np.searchsorted(nodes, phase, side="right") - 1, 0, len(nodes) - 2)
-    h = (nodes[k + 1] - nodes[k])[:, None]
-    x = ((phase - nodes[k]) / h[:, 0])[:, None]
-    x2, x3 = x * x, x * x * x
-    out = ((2 * x3 - 3 * x2 + 1) * z[k] + (x3 - 2 * x2 + x) * h * slope_lo[k] + (3 * x2 - 2 * x3) * z[k + 1]
-           + (x3 - x2) * h * slope_hi[k])
+    out = np.empty((len(phase), z.shape[1]))
+    for b in range(0, len(phase), BLOCK):       # in blocks that stay in the cache (the same operations per element)
+        p = phase[b:b + BLOCK]
+        k = np.clip(np.searchsorted(nodes, p, side="right") - 1, 0, len(nodes) - 2)
+        h = (nodes[k + 1] - nodes[k])[:, None]
+        x = ((p - nodes[k]) / h[:, 0])[:, None]
+        x2, x3 = x * x, x * x * x
+        out[b:b + BLOCK] = ((2 * x3 - 3 * x2 + 1) * z[k] + (x3 - 2 * x2 + x) * h * slope_lo[k]
+                            + (3 * x2 - 2 * x3) * z[k + 1] + (x3 - x2) * h * slope_hi[k])
     return out @ homogeneous.V.T, values[0]
 
 
