@@ -200,12 +200,10 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     # input's breaks) and the phases asked for: so that its value at a phase does not depend on which other phases
     # (which output grid) are asked for with it, as a few phases alone would make the pieces long
     nodes = np.unique(np.concatenate([[0.0, P], breaks, np.linspace(0.0, P, HERMITE_NODES + 1)]))
-    above = (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks))
-    # the Hermite's choice needs only to know that there are more distinct phases than `above`: the first rows'
-    # phases often tell (an hour of rows need not be sorted for it); the other ways read all of them
-    tau = np.unique(np.concatenate([nodes, phase[:2 * above]]))
-    if len(tau) <= above and len(phase) > 2 * above:
-        tau = np.unique(np.concatenate([nodes, phase]))
+    # the distinct phases by hashing (an hour of rows repeats a few phases: sorting them all is the slow way to the
+    # same set), each row's phase its code among them
+    codes, distinct = pd.factorize(phase)
+    tau = np.unique(np.concatenate([nodes, distinct]))
     cache = {} if cache is None else cache
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
@@ -217,9 +215,9 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
         return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
-    if len(tau) > above:
+    if len(tau) > (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks)):
         ripple, periodic0 = _ripple_hermite(homogeneous, ripple_input, P, breaks, phase)
-    elif len(np.unique(phase)) <= FEW_PHASES:          # a few phases: each from its piece's start
+    elif len(distinct) <= FEW_PHASES:          # a few phases: each from its piece's start
         if "nodes" not in cache:
             Z = homogeneous.integrate(ripple_input, nodes, np.zeros(n + 3), breaks)
             cache["nodes"] = homogeneous.exp(nodes, homogeneous.resolvent_periodic(Z[-1, :n], P)) + Z[:, :n]
@@ -231,7 +229,7 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
         Z = homogeneous.integrate(ripple_input, tau, np.zeros(n + 3), breaks)[:, :n]
         start = homogeneous.resolvent_periodic(Z[-1], P)
         periodic = homogeneous.exp(tau, start) + Z
-        ripple, periodic0 = periodic[np.searchsorted(tau, phase)], periodic[0]
+        ripple, periodic0 = periodic[np.searchsorted(tau, distinct)[codes]], periodic[0]
     T0 = np.asarray(means.start, dtype=float) - periodic0
     mean, _ = ModalNetwork(system).constant(T0, u_bar, since, energy=False)
     return mean, mean + ripple
