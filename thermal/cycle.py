@@ -200,10 +200,15 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
     # input's breaks) and the phases asked for: so that its value at a phase does not depend on which other phases
     # (which output grid) are asked for with it, as a few phases alone would make the pieces long
     nodes = np.unique(np.concatenate([[0.0, P], breaks, np.linspace(0.0, P, HERMITE_NODES + 1)]))
-    # the distinct phases by hashing (an hour of rows repeats a few phases: sorting them all is the slow way to the
-    # same set), each row's phase its code among them
-    codes, distinct = pd.factorize(phase)
-    tau = np.unique(np.concatenate([nodes, distinct]))
+    # with more distinct phases (tau) than `above` the ripple is the Hermite's: the first rows' phases often tell
+    # already; else the distinct phases by hashing (an hour of rows repeats a few phases: sorting them all is the
+    # slow way to the same set), each row's phase its code among them
+    above = (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks))
+    hermite = len(np.unique(np.concatenate([nodes, phase[:2 * above]]))) > above
+    if not hermite:
+        codes, distinct = pd.factorize(phase)
+        tau = np.unique(np.concatenate([nodes, distinct]))
+        hermite = len(tau) > above
     cache = {} if cache is None else cache
     # the remainder must integrate to zero over the period to the quadrature's own accuracy: (I - e^{AP}) is
     # nearly singular for the slow modes (P/tau ~ 1e-3), so its mean is taken with the same quadrature
@@ -215,7 +220,7 @@ def bulk_response(system: LinearThermalSystem, means: CycleMeans, u_of_phase: Ca
         return np.asarray(u_of_phase(np.asarray(x) % P), dtype=float) - u_own[:, None]
 
     homogeneous = ModalNetwork(system, source=False)            # the ripple has no ambient source
-    if len(tau) > (HERMITE_ABOVE + 1) * (HERMITE_NODES + len(breaks)):
+    if hermite:
         ripple, periodic0 = _ripple_hermite(homogeneous, ripple_input, P, breaks, phase)
     elif len(distinct) <= FEW_PHASES:          # a few phases: each from its piece's start
         if "nodes" not in cache:
@@ -380,6 +385,18 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
             codes, uniques = pd.factorize(np.asarray(exact, dtype=object), use_na_sentinel=True)
             new[col] = pd.array(np.asarray(uniques, dtype=object), dtype=column.dtype).take(codes, allow_fill=True)
             own.pop(col)
+        elif column.dtype == np.float64:      # in blocks that stay in the cache, the same operations per element
+            values = column.to_numpy()
+            joined = np.empty(len(kept) + len(new_t))
+            joined[:len(kept)] = values[kept]
+            per_turn = (float(np.diff(np.interp([t_start, t_start + period], t, values))[0]) if cumulative(col)
+                        else None)
+            for b in range(0, len(new_t), BLOCK):
+                j = slice(b, b + BLOCK)
+                value = values[lo[j]] + weight[j] * (values[hi[j]] - values[lo[j]])
+                joined[len(kept) + b:len(kept) + b + BLOCK] = value if per_turn is None else value + m[j] * per_turn
+            out[col] = joined
+            continue
         elif isinstance(column.dtype, np.dtype) and column.dtype.kind in "fc":
             values = column.to_numpy().astype(float)
             new[col] = values[lo] + weight * (values[hi] - values[lo])
