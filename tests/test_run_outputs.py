@@ -55,8 +55,9 @@ def complete(folder: Path) -> dict:
 @pytest.mark.parametrize("moment", ["computing", "writing"])
 def test_ctrl_c_leaves_no_folder_and_no_temporary(tmp_path, moment):
     out = tmp_path / "o"
-    # computing: a DAE run of 20 s (seconds of work); writing: a closed-form run whose figures take seconds to draw
-    args = (["geneva-torque", "--set", "duration=20 s", "--set", "output.plots=false"] if moment == "computing"
+    # computing: a DAE run of 200 s (tens of seconds of work: still computing when interrupted at 3 s, however fast
+    # the machine); writing: a closed-form run whose figures take seconds to draw
+    args = (["geneva-torque", "--set", "duration=200 s", "--set", "output.plots=false"] if moment == "computing"
             else ["geneva-lc1"])
     proc = mechsim("run", *args, "--out", out, "--quiet")
     t0 = time.monotonic()
