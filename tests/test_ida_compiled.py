@@ -251,17 +251,22 @@ def test_another_sundials_release_runs_on_ida_after_a_one_line_note(backend, oth
     assert capfd.readouterr().err == ""                       # once per process
 
 
+def _cache_without_ready_marks(tmp_path) -> dict:
+    """The environment of a process on a copy of numba's cache of the modules this machine compiled already
+    (geneva-motor's, built here if missing), without their ready marks: a process then loads instead of compiling
+    (a fresh machine compiles; the tests are the same, only slower), while `auto` sees the model as not ready."""
+    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
+    shutil.copytree(cache_dir() / "compiled", tmp_path / "cache" / "compiled", copy_function=shutil.copy2,
+                    ignore=shutil.ignore_patterns("*.ready", "*.failed", ".compile.lock"))
+    return dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="1")
+
+
 def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_done(tmp_path):
     """A fresh cache folder: the first process runs the model on `ida` and compiles its callbacks in a background
     process; a process started after that runs it compiled, loading everything from the cache (nothing compiled
     in it), with the first run's events and motion within the runs' accuracy. Within a process the first choice is
     kept. The first process never imports numba: its run costs what an `ida` run costs."""
-    # numba's cache of the modules this machine compiled already, without their ready marks: the background
-    # process then loads instead of compiling (a fresh machine compiles; the test is the same, only slower)
-    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
-    shutil.copytree(cache_dir() / "compiled", tmp_path / "cache" / "compiled", copy_function=shutil.copy2,
-                    ignore=shutil.ignore_patterns("*.ready", "*.failed", ".compile.lock"))
-    env = dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="1")
+    env = _cache_without_ready_marks(tmp_path)
     code = ("import sys, mechsim, numpy as np\n"
             "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
             "runs = [mechsim.run('geneva-motor', set={'duration': '0.5 s', 'output.plots': False}) for _ in (0, 1)]\n"
@@ -292,10 +297,7 @@ def test_a_model_run_on_ida_compiled_is_the_defaults_compiled_model_in_later_pro
     """Where no background compilation can start (here: JAX loaded, so no fork), a process that ran the model on
     `ida-compiled` leaves it marked ready: the default runs it compiled in a later process, loading everything from
     the cache, and where it did not (before), the default ran it on `ida`."""
-    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
-    shutil.copytree(cache_dir() / "compiled", tmp_path / "cache" / "compiled", copy_function=shutil.copy2,
-                    ignore=shutil.ignore_patterns("*.ready", "*.failed", ".compile.lock"))
-    env = dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="1")
+    env = _cache_without_ready_marks(tmp_path)
     code = ("import sys, jax, mechsim\n"
             "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
             "r = mechsim.run('geneva-motor', set={'duration': '0.3 s', 'output.plots': False, "
