@@ -46,13 +46,13 @@ def _gauss_newton(positions, q, xp, steps: int, until_roundoff: bool):
             q = q - _min_norm(G, phi, xp, pad)
         return q, None
     G, phi, pad = positions(q)
-    best = float(np.max(np.abs(phi)))
+    best = float(np.abs(phi).max())
     for _ in range(steps):
         if best == 0.0:
             break
         trial = q - _min_norm(G, phi, xp, pad)
         G_trial, phi_trial, _ = positions(trial)
-        r = float(np.max(np.abs(phi_trial)))
+        r = float(np.abs(phi_trial).max())
         if not r < best:
             break
         q, G, phi, previous, best = trial, G_trial, phi_trial, best, r
@@ -116,7 +116,7 @@ def _projected_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, m
         return q, None
 
     def positions(qq):
-        return _G(mf, t, qq, p), np.atleast_1d(np.asarray(mf.phi(t, qq, p), dtype=float).ravel()), None
+        return _G(mf, t, qq, p), np.asarray(mf.phi(t, qq, p), dtype=float).ravel(), None
     try:
         return _gauss_newton(positions, q, np, max_iter, until_roundoff=True)
     except ValueError as exc:
@@ -137,7 +137,7 @@ def _projected_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndar
     if mf.m == 0:
         return v, Impact(e_before, e_before), M, G
     G = _G(mf, t, q, p) if G is None else G
-    rel = np.atleast_1d(np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel())
+    rel = np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel()
     v_new, impulse = _impact_law(M, G, rel, v, restitution, np, None)
     return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new), impulse), M, G
 

@@ -17,6 +17,7 @@ from mechsim.dynamics.consistent import consistent_state, project_positions, pro
 from mechsim.dynamics.model import DerivedModel
 
 DEFAULT_STOP_HINT = "raise the drive torque or lower the load"
+_TINY = np.finfo(float).tiny
 
 
 @dataclass
@@ -195,8 +196,8 @@ def impact_split(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after
     -P.(G v+ + G v-)/2 = P.Phi_t - P.(r+ + r-)/2: the dissipation D = P.(r+ + r-)/2 (Newton's law: (1 - e^2)/2 of
     r-^2 over G M^-1 G^T, >= 0) and the work of a prescribed motion P.Phi_t, zero for a scleronomic system."""
     impulse = np.asarray(impulse, dtype=float)
-    r_minus = np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel())
-    r_plus = np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel())
+    r_minus = np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel()
+    r_plus = np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel()
     G = np.atleast_2d(np.asarray(contact.G(t, q, p), dtype=float))
     phi_t_minus = r_minus - G @ np.asarray(v_before, dtype=float)
     return float(0.5 * impulse @ (r_plus + r_minus)), float(impulse @ phi_t_minus)
@@ -207,8 +208,8 @@ def impact_speed_mass(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_
     """(approach speed |r-|, effective mass |P|/|r+ - r-|) of an impulse P on `contact`'s first constraint, r = G v +
     Phi_t its rate: the normal speed the bodies close with and the mass 1/(G M^-1 G^T) the impulse sees (Newton's
     law in the mass metric, docs/theory.md §G2.1); what an impact's Hertz duration and flash estimate need (§G2.2)."""
-    r_minus = float(np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel())[0])
-    r_plus = float(np.atleast_1d(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel())[0])
+    r_minus = float(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel()[0])
+    r_plus = float(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel()[0])
     jump = abs(r_plus - r_minus)
     return abs(r_minus), (abs(float(np.asarray(impulse, dtype=float)[0])) / jump if jump > 0 else float("nan"))
 
@@ -227,20 +228,21 @@ def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_
     mf = model.modes[new_mode]
     if model.formulation != "index1" or new_mode != mode or mf.m == 0:
         return False
-    phi_old = np.atleast_1d(np.asarray(mf.phi(t, q_old, p_old), dtype=float).ravel())
-    phi_new = np.atleast_1d(np.asarray(mf.phi(t, q_new, p_new), dtype=float).ravel())
+    phi_old = np.asarray(mf.phi(t, q_old, p_old), dtype=float).ravel()
+    phi_new = np.asarray(mf.phi(t, q_new, p_new), dtype=float).ravel()
     G_old = np.atleast_2d(np.asarray(mf.G(t, q_old, p_old), dtype=float))
     G_new = np.atleast_2d(np.asarray(mf.G(t, q_new, p_new), dtype=float))
-    scale = float(np.max(np.abs(G_old) @ np.maximum(np.abs(q_old), np.abs(q_new)))) + float(np.max(np.abs(G_old)))
-    tol = 1e-12 * max(scale, np.finfo(float).tiny)
-    return bool(np.all(np.abs(phi_new - phi_old) <= tol) and np.all(np.abs(G_new - G_old) <= tol))
+    G_abs = np.abs(G_old)
+    scale = float((G_abs @ np.maximum(np.abs(q_old), np.abs(q_new))).max()) + float(G_abs.max())
+    tol = 1e-12 * max(scale, _TINY)
+    return bool((np.abs(phi_new - phi_old) <= tol).all() and (np.abs(G_new - G_old) <= tol).all())
 
 
 def guard_values(mf, t: float, y: np.ndarray, p: tuple) -> np.ndarray:
     """The mode's guard values at state y (guards are functions of t and y; y' is not read)."""
     g = np.zeros(len(mf.guard_names))
     if len(g):
-        mf.events(t, y, np.zeros_like(y), g, p)
+        mf.events(t, y, np.zeros(y.shape), g, p)
     return g
 
 
