@@ -100,11 +100,18 @@ def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, 
     return q, _impact_law(M, G, rel, v, restitution, xp, pad)[0]
 
 
-def _mass(mf: ModeFunctions, q, p) -> np.ndarray:
+def floats(a) -> list:
+    """A vector argument of the mode's generated functions (`ModeFunctions.phi`, `G`, `mass`, ...) as a list of
+    floats: they unpack it into scalars, which a list does directly, while unpacking an ndarray ends in an
+    IndexError raised and caught at every call; Python floats compute as numpy's float64 scalars do, to the bit."""
+    return np.asarray(a, dtype=float).tolist()
+
+
+def _mass(mf: ModeFunctions, q: list, p) -> np.ndarray:
     return np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
 
 
-def _G(mf: ModeFunctions, t: float, q, p) -> np.ndarray:
+def _G(mf: ModeFunctions, t: float, q: list, p) -> np.ndarray:
     return np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
 
 
@@ -116,7 +123,8 @@ def _projected_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, m
         return q, None
 
     def positions(qq):
-        return _G(mf, t, qq, p), np.asarray(mf.phi(t, qq, p), dtype=float).ravel(), None
+        qs = floats(qq)
+        return _G(mf, t, qs, p), np.asarray(mf.phi(t, qs, p), dtype=float).ravel(), None
     try:
         return _gauss_newton(positions, q, np, max_iter, until_roundoff=True)
     except ValueError as exc:
@@ -132,12 +140,13 @@ def _projected_velocities(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndar
                           G: np.ndarray | None = None):
     """(v+, Impact, M, G) of `project_velocities`, with M(q) and G(q) for what follows at the same q (G given:
     evaluated there already)."""
-    M = _mass(mf, q, p)
+    qs = floats(q)
+    M = _mass(mf, qs, p)
     e_before = 0.5 * float(v @ M @ v)
     if mf.m == 0:
         return v, Impact(e_before, e_before), M, G
-    G = _G(mf, t, q, p) if G is None else G
-    rel = np.asarray(mf.phi_dot(t, q, v, p), dtype=float).ravel()
+    G = _G(mf, t, qs, p) if G is None else G
+    rel = np.asarray(mf.phi_dot(t, qs, floats(v), p), dtype=float).ravel()
     v_new, impulse = _impact_law(M, G, rel, v, restitution, np, None)
     return v_new, Impact(e_before, 0.5 * float(v_new @ M @ v_new), impulse), M, G
 
@@ -153,14 +162,15 @@ def accelerations(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, x: 
                   M: np.ndarray | None = None, G: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Accelerations and multipliers from the KKT system of the mode (`kkt.solve`); M(q) and G(t, q) where the
     caller has them at this q already."""
-    M = _mass(mf, q, p) if M is None else M
-    nq = len(q)
-    Q0 = np.asarray(mf.force0(t, q, v, x, p), dtype=float).ravel()
+    qs, vs, xs = floats(q), floats(v), floats(x)
+    M = _mass(mf, qs, p) if M is None else M
+    nq = len(qs)
+    Q0 = np.asarray(mf.force0(t, qs, vs, xs, p), dtype=float).ravel()
     if mf.m == 0:
         return kkt.solve(M, np.zeros((0, nq)), np.zeros((nq, 0)), Q0, np.zeros(0))
-    G = _G(mf, t, q, p) if G is None else G
-    Ql = np.asarray(mf.force_lam(t, q, v, x, p), dtype=float).reshape(nq, mf.m)
-    gamma = np.asarray(mf.gamma(t, q, v, p), dtype=float).ravel()
+    G = _G(mf, t, qs, p) if G is None else G
+    Ql = np.asarray(mf.force_lam(t, qs, vs, xs, p), dtype=float).reshape(nq, mf.m)
+    gamma = np.asarray(mf.gamma(t, qs, vs, p), dtype=float).ravel()
     return kkt.solve(M, G, Ql, Q0, -gamma)
 
 
@@ -178,7 +188,7 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
                                                 0.0 if restitution is None else restitution, G)
     else:
         q, v = np.array(q, dtype=float), np.array(v, dtype=float)
-        M, G = _mass(mf, q, p), None
+        M, G = _mass(mf, floats(q), p), None
         energy = 0.5 * float(v @ M @ v)
         impact = Impact(energy, energy)
     a, lam = accelerations(mf, t, q, v, ext, p, M, G)

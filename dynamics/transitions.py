@@ -13,7 +13,7 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism, Transition
 
-from mechsim.dynamics.consistent import consistent_state, project_positions, project_velocities
+from mechsim.dynamics.consistent import consistent_state, floats, project_positions, project_velocities
 from mechsim.dynamics.model import DerivedModel
 
 DEFAULT_STOP_HINT = "raise the drive torque or lower the load"
@@ -110,7 +110,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
     if tr.message:
         out.warnings.append(f"t = {t:.6g} s: {tr.message}")
     if tr.stop:
-        M = np.atleast_2d(np.asarray(mf.mass(q, p), float))
+        M = np.atleast_2d(np.asarray(mf.mass(floats(q), p), float))
         ke = 0.5 * float(v @ M @ v)
         out.rows.append(dict(row, kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop))
         out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q + offset),
@@ -196,9 +196,10 @@ def impact_split(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after
     -P.(G v+ + G v-)/2 = P.Phi_t - P.(r+ + r-)/2: the dissipation D = P.(r+ + r-)/2 (Newton's law: (1 - e^2)/2 of
     r-^2 over G M^-1 G^T, >= 0) and the work of a prescribed motion P.Phi_t, zero for a scleronomic system."""
     impulse = np.asarray(impulse, dtype=float)
-    r_minus = np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel()
-    r_plus = np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel()
-    G = np.atleast_2d(np.asarray(contact.G(t, q, p), dtype=float))
+    qs = floats(q)
+    r_minus = np.asarray(contact.phi_dot(t, qs, floats(v_before), p), dtype=float).ravel()
+    r_plus = np.asarray(contact.phi_dot(t, qs, floats(v_after), p), dtype=float).ravel()
+    G = np.atleast_2d(np.asarray(contact.G(t, qs, p), dtype=float))
     phi_t_minus = r_minus - G @ np.asarray(v_before, dtype=float)
     return float(0.5 * impulse @ (r_plus + r_minus)), float(impulse @ phi_t_minus)
 
@@ -208,8 +209,9 @@ def impact_speed_mass(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_
     """(approach speed |r-|, effective mass |P|/|r+ - r-|) of an impulse P on `contact`'s first constraint, r = G v +
     Phi_t its rate: the normal speed the bodies close with and the mass 1/(G M^-1 G^T) the impulse sees (Newton's
     law in the mass metric, docs/theory.md §G2.1); what an impact's Hertz duration and flash estimate need (§G2.2)."""
-    r_minus = float(np.asarray(contact.phi_dot(t, q, v_before, p), dtype=float).ravel()[0])
-    r_plus = float(np.asarray(contact.phi_dot(t, q, v_after, p), dtype=float).ravel()[0])
+    qs = floats(q)
+    r_minus = float(np.asarray(contact.phi_dot(t, qs, floats(v_before), p), dtype=float).ravel()[0])
+    r_plus = float(np.asarray(contact.phi_dot(t, qs, floats(v_after), p), dtype=float).ravel()[0])
     jump = abs(r_plus - r_minus)
     return abs(r_minus), (abs(float(np.asarray(impulse, dtype=float)[0])) / jump if jump > 0 else float("nan"))
 
@@ -228,10 +230,11 @@ def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_
     mf = model.modes[new_mode]
     if model.formulation != "index1" or new_mode != mode or mf.m == 0:
         return False
-    phi_old = np.asarray(mf.phi(t, q_old, p_old), dtype=float).ravel()
-    phi_new = np.asarray(mf.phi(t, q_new, p_new), dtype=float).ravel()
-    G_old = np.atleast_2d(np.asarray(mf.G(t, q_old, p_old), dtype=float))
-    G_new = np.atleast_2d(np.asarray(mf.G(t, q_new, p_new), dtype=float))
+    old, new = floats(q_old), floats(q_new)
+    phi_old = np.asarray(mf.phi(t, old, p_old), dtype=float).ravel()
+    phi_new = np.asarray(mf.phi(t, new, p_new), dtype=float).ravel()
+    G_old = np.atleast_2d(np.asarray(mf.G(t, old, p_old), dtype=float))
+    G_new = np.atleast_2d(np.asarray(mf.G(t, new, p_new), dtype=float))
     G_abs = np.abs(G_old)
     scale = float((G_abs @ np.maximum(np.abs(q_old), np.abs(q_new))).max()) + float(G_abs.max())
     tol = 1e-12 * max(scale, _TINY)
