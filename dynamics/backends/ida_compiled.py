@@ -254,7 +254,7 @@ class IdaCompiledBackend(Backend):
         t_now = float(self._tret[0])
         if flag == IDA_ROOT_RETURN:
             lib.IDAGetRootInfo(m.mem, m.roots_address)
-            fired = tuple(np.flatnonzero(m.roots).tolist())
+            fired = tuple(j for j, root in enumerate(m.roots.tolist()) if root)
             below = rows_t[:keep] < t_now
             keep = int(np.count_nonzero(below))
             if not below[:keep].all():                  # rows out of time order: those before the root, in order
