@@ -103,7 +103,8 @@ def reinitialise(parts, q, v, xp=np, steps: int = 30, restitution: float = 0.0, 
 def floats(a) -> list:
     """A vector argument of the mode's generated functions (`ModeFunctions.phi`, `G`, `mass`, ...) as a list of
     floats: they unpack it into scalars, which a list does directly, while unpacking an ndarray ends in an
-    IndexError raised and caught at every call; Python floats compute as numpy's float64 scalars do, to the bit."""
+    IndexError raised and caught at every call. Python floats round as numpy's float64 scalars do (the same IEEE
+    operations, to the bit); only a division by a state exactly zero would differ (ZeroDivisionError, not inf)."""
     return np.asarray(a, dtype=float).tolist()
 
 
