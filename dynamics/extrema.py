@@ -138,10 +138,10 @@ def _layout(intervals: list[Interval]) -> tuple | None:
     sizes = np.array([len(iv.rows) for iv in intervals], dtype=int)
     if not sizes.sum():
         return None
-    rows = np.concatenate([iv.rows for iv in intervals]).astype(int)
-    n_of = np.repeat(sizes, sizes)
-    pos = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    return rows, np.repeat(np.arange(len(intervals)), sizes), n_of, pos, pos == 0, pos == n_of - 1
+    rows = np.concatenate([iv.rows for iv in intervals]).astype(int, copy=False)
+    n_of = sizes.repeat(sizes)
+    pos = np.arange(len(rows)) - (sizes.cumsum() - sizes).repeat(sizes)
+    return rows, np.arange(len(intervals)).repeat(sizes), n_of, pos, pos == 0, pos == n_of - 1
 
 
 def candidates(t: np.ndarray, f: np.ndarray, intervals: list[Interval], sense: float, limit: int = CANDIDATES,
@@ -184,7 +184,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     if layout is None:
         return [[] for _ in range(2 * len(F))], None
     rows, k_of, n_of, pos, first, last = layout
-    if rows[-1] - rows[0] == len(rows) - 1 and np.all(rows[1:] > rows[:-1]):     # a run of rows: views
+    if rows[-1] - rows[0] == len(rows) - 1 and (rows[1:] > rows[:-1]).all():     # a run of rows: views
         ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
     else:
         ti, G = t[rows], F[:, rows]
@@ -195,9 +195,9 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         n_w, cuts, w_of, base = 1, None, None, None
     else:                                           # each window's first position in the rows, and each row's
         n_w = len(groups)
-        first_iv = np.cumsum([0, *groups[:-1]])
-        cuts = np.searchsorted(k_of, first_iv)
-        w_of = np.searchsorted(first_iv, k_of, side="right") - 1
+        first_iv = np.array([0, *groups[:-1]]).cumsum()
+        cuts = k_of.searchsorted(first_iv)
+        w_of = first_iv.searchsorted(k_of, side="right") - 1
         base = first_iv
 
     def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
@@ -206,7 +206,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         signed = g * _SIGNS[m & 1]                  # exactly -g where m is odd
         return signed if finite else np.where(np.isfinite(g), signed, -np.inf)
 
-    tie, ties = ties[:, None], np.repeat(ties, 2)
+    tie, ties = ties[:, None], ties.repeat(2)
     d = np.empty((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
     d[:, 0] = d[:, -1] = 0.0
     with np.errstate(invalid="ignore"):
@@ -230,7 +230,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         flat &= ok
         smooth &= ok[:, None]
     ends = [0, G.shape[1]] if cuts is None else [*cuts.tolist(), G.shape[1]]       # each window's rows
-    wties = np.tile(ties, n_w)
+    wties = np.concatenate([ties] * n_w)
     with np.errstate(invalid="ignore"):
         # the best peak's: the largest row is a peak ([window, column, sense]; max and min are exact in any order)
         lower = np.empty((n_w, len(G), 2))
@@ -248,7 +248,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
             near[w, :, 1] = (fw & (Gw <= -floor[w, :, 1, None])).any(axis=1)
     any_peak = lower > -np.inf                      # flat rows and the largest are finite
     # the estimates where they are compared: the smooth peaks (np.nonzero's indices, from the flat ones: far faster)
-    ms, ii = np.divmod(np.flatnonzero(smooth), G.shape[1])
+    ms, ii = np.divmod(smooth.ravel().nonzero()[0], G.shape[1])
     row = fi(ms, ii)
     est = row.copy()
     inner = ~(first[ii] | last[ii])
@@ -263,12 +263,12 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     rank = np.where(est >= best[wm] - ties[ms], best[wm], est)
     order = np.lexsort((ti[ii], -rank, wm))         # each series' by estimate, ties to the earliest
     ii, est, wm = ii[order], est[order], wm[order]
-    nth = np.arange(len(wm)) - np.searchsorted(wm, wm)
+    nth = np.arange(len(wm)) - wm.searchsorted(wm)
     chosen = nth < limit
     out: list[list[tuple]] = [[] for _ in range(n_w * S)]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    constant = np.flatnonzero(any_peak & near.ravel())
+    constant = (any_peak & near.ravel()).nonzero()[0]
     mc = constant % S
     # each one's level (its window's largest flat row) and earliest flat row at it, among its window's rows (-g >= x
     # exactly where g <= -x: negation is exact)
@@ -278,7 +278,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
             a, b = ends[w], ends[w + 1]
             g, fw = G[m >> 1, a:b], flat[m >> 1, a:b]
             x = (-g[fw].min() if m & 1 else g[fw].max()) - tie_m
-            earliest[q] = a + np.argmax(fw & (g <= -x if m & 1 else g >= x))
+            earliest[q] = a + (fw & (g <= -x if m & 1 else g >= x)).argmax()
     # each candidate's interval (counted in its window), position in it and bracket, as numbers
     ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
     local = k_of if base is None else k_of - base[w_of]
@@ -544,7 +544,7 @@ def _stencil_weights(x: np.ndarray) -> np.ndarray:
         w = _BARY / d
         w = w / w.sum(axis=1, keepdims=True)
     on = hit.any(axis=1)
-    w[on] = (np.cumsum(hit[on], axis=1) == 1) & hit[on]          # the first node it lies on
+    w[on] = (hit[on].cumsum(axis=1) == 1) & hit[on]          # the first node it lies on
     return w
 
 
@@ -567,7 +567,7 @@ def _poly_max(f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d2 = d1[:, 1:] * np.arange(1, STENCIL - 1)
     lo, hi = np.maximum(-1.0, -b.astype(float)), np.minimum(1.0, (STENCIL - 1 - b).astype(float))
     xs = np.minimum(np.maximum(_SEARCH[None, :], lo[:, None]), hi[:, None])
-    x = xs[np.arange(len(b)), np.argmax(_horner(c, xs), axis=1)]
+    x = xs[np.arange(len(b)), _horner(c, xs).argmax(axis=1)]
     going = np.ones(len(b), dtype=bool)
     # d1 and d2 by Horner's rule stepped together (the same operations as `_horner` of each): d1's coefficients
     # but its lowest beside d2's, one degree below
@@ -600,17 +600,17 @@ def _grids(clusters: list[list[_Job]]) -> tuple[list[np.ndarray], list[np.ndarra
     grid[~wide, :FIRST_GRID] = lo[~wide, None]
     grid[:, FIRST_GRID] = t_row
     sizes = np.array([len(group) for group in clusters])
-    cid = np.repeat(np.arange(len(clusters)), sizes)
+    cid = np.arange(len(clusters)).repeat(sizes)
     # every cluster's instants: its wide brackets' grids, its point brackets' one instant, its jobs' rows
     vals = np.concatenate([grid[wide, :FIRST_GRID].ravel(), lo[~wide], t_row])
-    of = np.concatenate([np.repeat(cid[wide], FIRST_GRID), cid[~wide], cid])
+    of = np.concatenate([cid[wide].repeat(FIRST_GRID), cid[~wide], cid])
     order = np.lexsort((vals, of))
     vals, of = vals[order], of[order]
     new = np.ones(len(vals), dtype=bool)
     new[1:] = (vals[1:] != vals[:-1]) | (of[1:] != of[:-1])
     vals, of = vals[new], of[new]
-    cuts = [0, *np.searchsorted(of, np.arange(1, len(clusters))).tolist(), len(vals)]
-    starts = [0, *np.cumsum(sizes).tolist()]
+    cuts = [0, *of.searchsorted(np.arange(1, len(clusters))).tolist(), len(vals)]
+    starts = [0, *sizes.cumsum().tolist()]
     return ([grid[a:b] for a, b in zip(starts[:-1], starts[1:])],
             [vals[a:b] for a, b in zip(cuts[:-1], cuts[1:])])
 
@@ -644,7 +644,7 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row
     F = np.where(np.isfinite(F), F, -np.inf)
     with np.errstate(invalid="ignore"):
-        b = np.argmax(F >= (F.max(axis=1) - sense_tie)[:, None], axis=1)    # the earliest of ties to round-off
+        b = (F >= (F.max(axis=1) - sense_tie)[:, None]).argmax(axis=1)    # the earliest of ties to round-off
         best_f, best_t, best_pos = F[every, b], G[every, b], P[every, b]
         row = FR > best_f + sense_tie                 # the row itself (between grid readings)
     best_f, best_t, best_pos = np.where(row, FR, best_f), np.where(row, TR, best_t), np.where(row, R, best_pos)
@@ -653,7 +653,7 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     at_lo = (b == 0) & (G[:, 0] == lo)
     at_hi = (b == n_g - 1) & (G[every, n_g - 1] == hi)
     end = at_lo | at_hi | (n_g < STENCIL)            # the one-sided limit at the interval's end
-    c0 = np.clip(b - STENCIL // 2, 0, np.maximum(n_g - STENCIL, 0))
+    c0 = np.minimum(np.maximum(b - STENCIL // 2, 0), np.maximum(n_g - STENCIL, 0))
     part = F[every[:, None], np.minimum(c0[:, None] + np.arange(STENCIL), FIRST_GRID - 1)]
     poly = ~end & np.isfinite(part).all(axis=1) & held
     x = np.full(len(jobs), np.nan)
@@ -666,7 +666,7 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     t_star = (G[every, c0] + x * (G[:, 1] - G[:, 0])).tolist()
     value, best_f, best_t = value.tolist(), best_f.tolist(), best_t.tolist()
     best_pos, c0, better, end, at_lo, at_hi = (a.tolist() for a in (best_pos, c0, better, end, at_lo, at_hi))
-    for m in np.flatnonzero(held).tolist():
+    for m in held.nonzero()[0].tolist():
         j = jobs[m]
         if better[m]:
             j.best_f, j.where, j.best_t = value[m], "interior", t_star[m]
@@ -696,9 +696,9 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
     if len(merged) < 2:
         return []
     ends = np.array([b for b, _ in merged], dtype=float)
-    first = np.searchsorted(t, ends[:-1], side="right").tolist()
-    first[0] = int(np.searchsorted(t, merged[0][0], side="right" if merged[0][0] > t_start else "left"))
-    last = np.searchsorted(t, ends[1:], side="right").tolist()
+    first = t.searchsorted(ends[:-1], side="right").tolist()
+    first[0] = int(t.searchsorted(merged[0][0], side="right" if merged[0][0] > t_start else "left"))
+    last = t.searchsorted(ends[1:], side="right").tolist()
     return [Interval(lo, hi, lk, hk, np.arange(a, b))
             for (lo, lk), (hi, hk), a, b in zip(merged[:-1], merged[1:], first, last)]
 
@@ -813,9 +813,9 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
     window = None
     if windows is not None and len(windows) > 1:        # each end's window, its interval counted there
-        first = np.cumsum([0, *windows[:-1]])
+        first = np.array([0, *windows[:-1]]).cumsum()
         k = np.array([k for k, _, _ in ends])
-        window = np.searchsorted(first, k, side="right") - 1
+        window = first.searchsorted(k, side="right") - 1
         ends = [(x, side, te) for x, (_, side, te) in zip((k - first[window]).tolist(), ends)]
     return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve,
                     np.isfinite(step) & (t1 != t0), window)
@@ -843,11 +843,11 @@ def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[In
     if lines.window is not None:
         able &= lines.window == np.array(windows)[:, None]
     # each ask's able ends by guess (largest first), then instant, then position: the best `limit` of them
-    a, i = np.nonzero(able)
+    a, i = able.nonzero()
     order = np.lexsort((te[i], -guess[a, i], a))
     a, i = a[order], i[order]
     if limit is not None:
-        keep = np.arange(len(a)) - np.searchsorted(a, a) < limit
+        keep = np.arange(len(a)) - a.searchsorted(a) < limit
         a, i = a[keep], i[keep]
     out: list[list[tuple[int, str, float]]] = [[] for _ in asks]
     tes = te.tolist()

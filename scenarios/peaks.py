@@ -66,10 +66,10 @@ def _entry(value: float, t: float, angle: float, at: str, row_value: float | Non
 def _median_step(t: np.ndarray) -> float:
     """The median output step, np.median(np.diff(t)) (the middle order statistics by one partition, the mean of
     the two of an even count as np.mean forms it; NaN where a step is NaN), without np.median's generic machinery."""
-    dt = np.diff(t)
-    m = len(dt)
+    part = t[1:] - t[:-1]            # np.diff(t), partitioned in place (np.partition of a copy)
+    m = len(part)
     k = m // 2
-    part = np.partition(dt, [k - 1, k, m - 1] if m % 2 == 0 else [k, m - 1])
+    part.partition([k - 1, k, m - 1] if m % 2 == 0 else [k, m - 1])
     if np.isnan(part[-1]):
         return float("nan")
     return float((part[k - 1] + part[k]) / 2) if m % 2 == 0 else float(part[k])
@@ -99,7 +99,7 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     def _evaluate(inner: np.ndarray, history: np.ndarray, hi: float) -> dict | None:
         before = history[history < inner.min()]
         after = history[(history > inner.max()) & (history <= hi)]
-        at = np.r_[before, inner, after]
+        at = np.concatenate([before, inner, after])
         cols = mech.closed_form(at, angle0, speed)
         cols.pop("powers", None)
         cols.pop("events", None)
@@ -107,7 +107,7 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
         frame = {name: np.broadcast_to(np.asarray(v), (n,))[k:k + len(inner)] for name, v in cols.items()
                  if np.ndim(v) == 0 or len(np.ravel(v)) == n}
         if len(history) < len(t_rows) and check:    # a shortened history must give the table's own rows
-            i = np.searchsorted(t_rows, at[:k])
+            i = t_rows.searchsorted(at[:k])
             got = np.array([np.asarray(cols[name], float)[:k] for name in check])
             own = np.array([table[name][i] for name in check], dtype=float)
             if not np.allclose(got, own, rtol=1e-9, atol=1e-12, equal_nan=True):     # every column's rows at once
@@ -138,10 +138,10 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict
     bounds = turn_boundaries(t, angle, float(angle[0]))
     if len(bounds) < 3:
         return None
-    b = np.r_[t[0], bounds]
-    periods = np.diff(b)
+    b = np.concatenate([[t[0]], bounds])
+    periods = b[1:] - b[:-1]
     w = np.interp(b, t, speed)
-    scale = max(float(np.max(np.abs(speed))), 1e-300)
+    scale = max(float(np.abs(speed).max()), 1e-300)
     same = ((np.abs(periods - periods[-1]) <= PERIODIC_RTOL * periods[-1])
             & (np.abs(w[:-1] - w[-2]) <= PERIODIC_RTOL * scale))          # each turn against the last
     k = len(same)
@@ -153,7 +153,7 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict
             "period_s": float(periods[-1]), "last_turn": (float(b[-2]), float(b[-1])),
             "criterion": (f"every drive turn from here equal to the last in duration and in starting drive speed to "
                           f"{PERIODIC_RTOL:g} (relative)"),
-            "turn_spread": float(np.max(np.abs(periods[k:] - periods[-1])) / periods[-1])}
+            "turn_spread": float(np.abs(periods[k:] - periods[-1]).max() / periods[-1])}
 
 
 def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],
@@ -190,16 +190,22 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     names = list(values)
     if not names:
         return {}
-    V = np.array([values[c] for c in names]).reshape(len(names), -1)
+    # the turn's rows only (an interval's run of rows read as a slice: a view, not a gather)
+    lo, hi = int(intervals[0].rows[0]), int(intervals[-1].rows[-1]) + 1
+    V = np.array([values[c][lo:hi] for c in names]).reshape(len(names), -1)
+    t = t[lo:hi]
     total = np.zeros(len(names))
     for n, iv in enumerate(intervals):
         first, last = tables[2 * n], tables[2 * n + 1]
-        tt = np.concatenate([[iv.lo], t[iv.rows], [iv.hi]])
+        rows = iv.rows - lo
+        if rows[-1] - rows[0] == len(rows) - 1:      # the rows in order, none left out
+            rows = slice(int(rows[0]), int(rows[-1]) + 1)
+        tt = np.concatenate([[iv.lo], t[rows], [iv.hi]])
         ff = np.empty((len(names), len(tt)))
         ff[:, 0] = [first[c][0] for c in names]
-        ff[:, 1:-1] = V[:, iv.rows]
+        ff[:, 1:-1] = V[:, rows]
         ff[:, -1] = [last[c][0] for c in names]
-        total += np.sum(0.5 * (ff[:, 1:] + ff[:, :-1]) * np.diff(tt), axis=1)
+        total += (0.5 * (ff[:, 1:] + ff[:, :-1]) * (tt[1:] - tt[:-1])).sum(axis=1)
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
@@ -231,7 +237,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         readable = [c for c in present if c in source.columns]
         # a cycle-averaged run's table continues past the simulated window: locate inside the window
         t_end = float(t[-1]) if source.traj is None else float(source.traj.pieces[-1].t[-1])
-        n = int(np.searchsorted(t, t_end, side="right"))
+        n = int(t.searchsorted(t_end, side="right"))
         if source.method == "closed-form":
             angle0 = source.si["initial"][source.mech.initial_keys[0]]
             check = [c for c in readable if c in cols]
@@ -494,7 +500,7 @@ def _growth_requests(ends: list[tuple[Interval, str]], h: float, decades: int = 
     d = np.multiply.outer([min(h, 0.5 * (iv.hi - iv.lo)) for iv, _ in ends], 10.0 ** -np.arange(decades + 1))
     times = (np.array([iv.hi if b else iv.lo for (iv, _), b in zip(ends, before)])[:, None]
              + np.where(before, -1.0, 1.0)[:, None] * d)          # hi - d before the end, lo + d after the start
-    order = np.argsort(times, axis=1)
+    order = times.argsort(axis=1)
     times = times[np.arange(len(ends))[:, None], order]
     return [((iv, len(iv.rows) - 1 if b else 0, x), o) for (iv, _), b, x, o in zip(ends, before, times, order)]
 
@@ -511,10 +517,11 @@ def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, d
         return None
     f = np.empty(len(order))
     f[order] = sign * np.asarray(table[column], dtype=float)
-    if not (np.all(np.isfinite(f)) and np.all(f > 0)):
+    if not (np.isfinite(f).all() and (f > 0).all()):
         return None
-    slopes = np.diff(np.log10(f))            # per decade closer
-    return float(slopes[-1]) if np.all(slopes > SINGULAR_EXPONENT) else None
+    decades = np.log10(f)
+    slopes = decades[1:] - decades[:-1]            # per decade closer
+    return float(slopes[-1]) if (slopes > SINGULAR_EXPONENT).all() else None
 
 
 def _approached(f: np.ndarray, iv: Interval, side: str, sense: float) -> bool:
