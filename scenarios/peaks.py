@@ -116,10 +116,12 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     return read
 
 
-def _breaks(events: pd.DataFrame) -> list[tuple[float, str]]:
+def _breaks(events: pd.DataFrame, ev: TableColumns | None = None) -> list[tuple[float, str]]:
+    """(time, its description) of each event, in order; ev: the events' TableColumns where at hand."""
     if events is None or not len(events):
         return []
-    ev = TableColumns(events)           # the frame's own arrays (a pandas column read is not free)
+    if ev is None:
+        ev = TableColumns(events)           # the frame's own arrays (a pandas column read is not free)
     kinds = [str(k) for k in ev["kind"].tolist()] if "kind" in ev else ["event"] * len(events)
     return sorted((t, f"event '{k}' at t = {t:.9g} s") for t, k in zip(np.asarray(ev["t_s"], float).tolist(), kinds))
 
@@ -218,14 +220,16 @@ def turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
 
 
 def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.DataFrame, cols,
-                  source: Source | None, speed_column: str | None = None) -> tuple[dict, dict | None]:
+                  source: Source | None, speed_column: str | None = None, event_cols: TableColumns | None = None
+                  ) -> tuple[dict, dict | None]:
     """({column: {max, min, abs_max, how[, startup, periodic, singular]}}, the periodic regime or None) for each of
     peak_columns in the table (see the module docstring). Where the run reaches a periodic regime, max and min are
-    the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5)."""
+    the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5). cols, event_cols: the table's and
+    the events' TableColumns (event_cols where at hand)."""
     out: dict = {}
-    if not len(df):
-        return out, None
     t = np.asarray(cols["t_s"], dtype=float)
+    if not len(t):
+        return out, None
     angles = np.asarray(cols[angle_column], dtype=float)
     present = [c for c in peak_columns if c in cols and _valued(np.asarray(cols[c], float))]
     how = HOW_ROWS
@@ -259,7 +263,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     h = _median_step(t[:n]) if n > 1 else 0.0
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
-    breaks = _breaks(events) if read is not None else []
+    breaks = _breaks(events, event_cols) if read is not None else []
     tn = t[:n]
     spans = [_intervals(tn, breaks, lo, hi, kinds[label], read) if read is not None and readable else []
              for lo, hi, label in windows]
@@ -577,14 +581,14 @@ def _readings_ahead(plans: list, h: float, lines, kept: dict | None = None) -> l
         asks += mine
         of += [q] * len(mine)
     p = plans[0]
-    out: list[list] = [[] for _ in plans]
+    limits: list[dict] = [{} for _ in plans]        # each plan's ends to read, each once (in order)
     for q, (c, sense, _), guesses in zip(of, asks, end_guesses(p.t, p.values, p.intervals, asks, p.ties, limit=None,
                                                                 lines=lines, windows=of)):
         intervals = plans[q].intervals
-        out[q] += end_limit_requests(intervals, guesses)
+        limits[q].update(dict.fromkeys(guesses))
         near = up[0 if sense > 0 else 1][lines.of[c]]
         ends[q] += [(intervals[k], side) for k, side, _ in guesses if near[at[(q, k, side)]]]
-    return [r for q in range(len(plans)) for r in out[q] + [
+    return [r for q in range(len(plans)) for r in end_limit_requests(plans[q].intervals, list(limits[q])) + [
         x for x, _ in _growth_requests(list({(id(iv), side): (iv, side) for iv, side in ends[q]}.values()), h,
                                        kept=kept)]]
 

@@ -96,16 +96,17 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
 
 
 def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None,
-          events: pd.DataFrame | None = None, source=None, speed_column: str | None = None
-          ) -> tuple[dict, dict | None]:
+          events: pd.DataFrame | None = None, source=None, speed_column: str | None = None,
+          event_cols: TableColumns | None = None) -> tuple[dict, dict | None]:
     """(peaks, periodic regime or None): maximum, minimum and largest magnitude of each of `columns` in the table
     (the mechanism's `peak_columns`, then the thermal model's) with their instants and drive angles, located in
     continuous time where `source` (scenarios/peaks.py Source) is given, else the output rows'; the periodic
     regime's, with the start-up's beside them, where the run reaches one (docs/theory.md §K5). cols: the table's
-    TableColumns, if at hand."""
+    TableColumns, if at hand (event_cols: the events')."""
     from mechsim.scenarios.peaks import located_peaks
     cols = TableColumns(df) if cols is None else cols
-    return located_peaks(df, angle_column, columns, events, cols, source, speed_column)
+    return located_peaks(df, angle_column, columns, events, cols, source, speed_column,
+                         None if events is None else _event_columns(events, event_cols))
 
 
 def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: TableColumns | None = None,
@@ -353,7 +354,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             valid = validity.evaluate(conditions, cols)
             warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
     peak_summary, regime = peaks(df, angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()), cols,
-                                 events, source if failure is None else None, speed_col)
+                                 events, source if failure is None else None, speed_col, event_cols)
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     summary = {
