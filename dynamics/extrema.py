@@ -114,11 +114,11 @@ def tie_of(f: np.ndarray) -> float:
     return float(_ties(np.asarray(f, dtype=float)[None, :])[0])
 
 
-def _ties(F: np.ndarray) -> np.ndarray:
-    """`tie_of` of each row of F."""
+def _ties(F: np.ndarray, finite: bool | None = None) -> np.ndarray:
+    """`tie_of` of each row of F (finite: whether every value of F is finite, where known)."""
     if not F.shape[-1]:
         return np.zeros(len(F))
-    if np.isfinite(F).all():            # the largest magnitude is the larger of the largest and the negated least
+    if finite if finite is not None else np.isfinite(F).all():            # the largest magnitude is the larger of the largest and the negated least
         return TIE_ROUNDOFF * np.abs(np.maximum(F.max(axis=-1), -F.min(axis=-1)))
     with np.errstate(invalid="ignore"):
         return TIE_ROUNDOFF * np.where(np.isfinite(F), np.abs(F), 0.0).max(axis=-1)
@@ -170,15 +170,15 @@ _SIGNS = np.array([1.0, -1.0])
 
 
 def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
-                       limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None
-                       ) -> tuple[list[list[tuple]], np.ndarray | None]:
+                       limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None,
+                       finite: bool = False) -> tuple[list[list[tuple]], np.ndarray | None]:
     """(`_candidates`, each series' largest finite row in each sense: [c max, -(c min), ...], -inf where none is
     finite; None without rows). The row-against-neighbour comparisons are made once for both senses on the rows'
     differences (a >= b exactly where a - b >= 0; the negated series' differences are the differences negated,
     exactly), and the series in the minimum's sense (-F, -inf where F is not finite) is formed only where read.
     groups: the intervals of each of several windows, consecutive (their counts; each window with rows), whose
     candidates and bounds are each window's own, all found in one pass: [window 0's series, window 1's, ...], each
-    candidate's interval counted in its window's."""
+    candidate's interval counted in its window's. finite: every value of F is finite (known to the caller)."""
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
@@ -188,8 +188,8 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
     else:
         ti, G = t[rows], F[:, rows]
-    ok = np.isfinite(G)
-    finite = bool(ok.all())
+    ok = None if finite else np.isfinite(G)
+    finite = finite or bool(ok.all())
     S = 2 * len(G)                                  # series per window
     if groups is None or len(groups) == 1:
         n_w, cuts, w_of, base = 1, None, None, None
@@ -276,9 +276,10 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     with np.errstate(invalid="ignore"):
         for q, (m, w, tie_m) in enumerate(zip(mc.tolist(), (constant // S).tolist(), wties[constant].tolist())):
             a, b = ends[w], ends[w + 1]
-            g, fw = G[m >> 1, a:b], flat[m >> 1, a:b]
-            x = (-g[fw].min() if m & 1 else g[fw].max()) - tie_m
-            earliest[q] = a + (fw & (g <= -x if m & 1 else g >= x)).argmax()
+            at = flat[m >> 1, a:b].nonzero()[0]          # the window's flat rows
+            g = G[m >> 1, a:b][at]
+            x = (-g.min() if m & 1 else g.max()) - tie_m
+            earliest[q] = a + at[(g <= -x if m & 1 else g >= x).argmax()]
     # each candidate's interval (counted in its window), position in it and bracket, as numbers
     ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
     local = k_of if base is None else k_of - base[w_of]
@@ -393,7 +394,8 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
         t, values = windows[ws[0]][:2]
         names = list(values)
         F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
-        col_ties = _ties(F)
+        finite = bool(np.isfinite(F).all())
+        col_ties = _ties(F, finite)
         ties = {col: float(x) for col, x in zip(names, col_ties.tolist())}
         spans = [windows[w][2] for w in ws]
         # the windows with rows in the order of their rows (adjacent windows' rows then run on: views of the table)
@@ -403,7 +405,7 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
         bounds: list = [None] * len(spans)
         if held:
             got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in spans[w]], limit,
-                                            groups=[len(spans[w]) for w in held])
+                                            groups=[len(spans[w]) for w in held], finite=finite)
             S = 2 * len(names)
             for q, w in enumerate(held):
                 found[w], bounds[w] = got[q * S:(q + 1) * S], lower[q * S:(q + 1) * S]
