@@ -568,10 +568,9 @@ def _readings_ahead(plans: list, h: float, lines, kept: dict | None = None) -> l
             if j.done:
                 continue
             iv = p.intervals[j.interval]
-            near = up[j.sense < 0][lines.of[j.column]]
             for side, reaches in (("after", j.lo == iv.lo), ("before", j.hi == iv.hi)):
                 e = at.get((q, j.interval, side)) if reaches else None
-                if e is not None and near[e]:
+                if e is not None and up[j.sense < 0][lines.of[j.column], e]:
                     ends[q].append((iv, side))
         # each column's best rows over the plan's intervals, as its candidates found them (`end_lines` are made
         # on the plan's values and need rows at the ends, so the plan has its bounds)
