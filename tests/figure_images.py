@@ -5,6 +5,13 @@ import io
 
 def folder_shows_the_drawn_figures(result, folder) -> tuple[int, bool]:
     """(number of figures drawn here, whether the folder's PNGs decode to exactly those images)."""
+    n, same = folders_show_the_drawn_figures(result, {"": folder})
+    return n, same[""]
+
+
+def folders_show_the_drawn_figures(result, folders: dict) -> tuple[int, dict]:
+    """(number of figures drawn here, {key: whether folders[key]'s PNGs decode to exactly those images}): the
+    result's figures drawn once, for every folder written from that result."""
     from PIL import Image
 
     from mechsim.scenarios.output.figures import result_figures
@@ -19,4 +26,5 @@ def folder_shows_the_drawn_figures(result, folder) -> tuple[int, bool]:
         fig.savefig(buf, dpi=DPI, format="png")
         return buf.getvalue()
     expected = {stem: image(png(fig)) for stem, fig in result_figures(result, result.mechanism).items()}
-    return len(expected), {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
+    return len(expected), {key: {p.stem: image(p.read_bytes()) for p in folder.glob("*.png")} == expected
+                           for key, folder in folders.items()}

@@ -3,6 +3,7 @@ hold the same images as drawing them one by one with matplotlib's own `savefig` 
 metadata; tests/test_figure_writer.py), without this process drawing (or importing matplotlib at all) when the
 workers succeed; whatever a worker fails to save is drawn here; a command that stops early leaves no worker
 behind."""
+import json
 import os
 import subprocess
 import sys
@@ -13,58 +14,76 @@ from mechsim.scenarios.output.figure_worker import plots_wanted
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked on Linux only")
 
-# Run apart, in a fresh process: the test session may have loaded JAX (no fork then) and has loaded matplotlib.
+# Run apart, in a fresh process: the test session may have loaded JAX (no fork then) and has loaded matplotlib. One
+# process for the three cases, the clean one first (its check is that this process has not imported matplotlib):
+# one run, written three times by a worker forked for each case, and the result's figures drawn here once to compare
+# the three folders with.
 _SCRIPT = """
-import io, os, sys, tempfile
+import json, os, sys, tempfile
 from pathlib import Path
 from mechsim.scenarios.output.figure_worker import FigureWorker
-MODE = sys.argv[1]
-parent = os.getpid()
-if MODE != "clean":
-    from mechsim.scenarios.output import plots
-    save = plots.save
-    def failing(fig, path):
-        if MODE == "worker-fails" and os.getpid() != parent:
-            raise RuntimeError("no figures in any worker")
-        if MODE == "grandchild-fails" and os.getppid() != parent and os.getpid() != parent:
-            raise RuntimeError("no figures in the worker's own child")
-        return save(fig, path)
-    plots.save = failing
-worker = FigureWorker.start()
-assert worker is not None
 from mechsim.scenarios import api
 from mechsim.scenarios.output.writer import write_result
-result = api.run("geneva-lc1", set=["duration='1.5 s'", "output_step='5 ms'"])
+parent = os.getpid()
 tmp = Path(tempfile.mkdtemp())
-with worker:
-    folder = write_result(result, tmp / "out", mechanism=result.mechanism, worker=worker)
-drew_here = "matplotlib" in sys.modules
-from figure_images import folder_shows_the_drawn_figures
-n, same = folder_shows_the_drawn_figures(result, folder)
-print(drew_here, n, same)
+folders, drew_here = {}, {}
+
+
+def write(mode, result=None):
+    worker = FigureWorker.start()          # forked before the (first) run, as `mechsim run` does
+    assert worker is not None
+    if result is None:
+        result = api.run("geneva-lc1", set=["duration='1.5 s'", "output_step='5 ms'"])
+    with worker:
+        folders[mode] = write_result(result, tmp / mode, mechanism=result.mechanism, worker=worker)
+    return result
+
+
+result = write("clean")
+drew_here["clean"] = "matplotlib" in sys.modules
+from mechsim.scenarios.output import plots
+save = plots.save
+for mode in ("worker-fails", "grandchild-fails"):
+    here = []
+
+    def failing(fig, path, mode=mode, here=here):
+        if os.getpid() == parent:
+            here.append(path)              # drawn and saved by this process
+        if mode == "worker-fails" and os.getpid() != parent:
+            raise RuntimeError("no figures in any worker")
+        if mode == "grandchild-fails" and os.getppid() != parent and os.getpid() != parent:
+            raise RuntimeError("no figures in the worker's own child")
+        return save(fig, path)
+    plots.save = failing                    # before the fork: the worker inherits it
+    write(mode, result)
+    drew_here[mode] = bool(here)
+plots.save = save
+from figure_images import folders_show_the_drawn_figures
+n, same = folders_show_the_drawn_figures(result, folders)
+print(json.dumps({mode: [drew_here[mode], n, same[mode]] for mode in folders}))
 """
 
 
-def _run(mode):
+@pytest.fixture(scope="module")
+def modes():
+    """mode -> (whether the script's process drew a figure, number of figures, whether the folder shows them)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
-    out = subprocess.run([sys.executable, "-c", _SCRIPT, mode], env=env, capture_output=True, text=True,
-                         timeout=300)
+    out = subprocess.run([sys.executable, "-c", _SCRIPT], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    drew_here, n, same = out.stdout.split()
-    return drew_here == "True", int(n), same == "True"
+    return {mode: tuple(v) for mode, v in json.loads(out.stdout.strip().splitlines()[-1]).items()}
 
 
-def test_the_workers_draw_every_figure_and_this_process_none():
-    drew_here, n, same = _run("clean")
+def test_the_workers_draw_every_figure_and_this_process_none(modes):
+    drew_here, n, same = modes["clean"]
     assert n >= 7 and same
     assert not drew_here                 # this process never imported matplotlib: the workers drew all
 
 
 @pytest.mark.parametrize("mode", ["worker-fails", "grandchild-fails"])
-def test_what_a_worker_fails_to_save_is_drawn_here(mode):
-    drew_here, n, same = _run(mode)
+def test_what_a_worker_fails_to_save_is_drawn_here(modes, mode):
+    drew_here, n, same = modes[mode]
     assert n >= 7 and same
-    assert drew_here
+    assert drew_here                     # this process saved what the worker (or its child) failed to
 
 
 def test_plots_wanted_reads_the_scenario_and_overrides():
