@@ -114,15 +114,17 @@ def test_unset_thermal_geometry_is_refused():
 
 def test_band_table_in_jax_is_the_table():
     """The band rise the flash derivatives go through (`band_theta_table_xp` in jax) is the run's table, values and
-    slope, inside the table and on both asymptotes (docs/theory.md §G4.3)."""
+    slope, inside the table and on both asymptotes (docs/theory.md §G4.3). In jax as the pass runs it: jitted (one
+    program each; op by op, jax compiles every operation on its own, seconds of compilation)."""
     import jax
     import jax.numpy as jnp
+    import mechsim.dynamics.jax_model  # noqa: F401 (jax in float64, as the pass runs it; on its own the test had float32)
     from mechsim.thermal.band_source import band_theta_table, band_theta_table_xp
     L = np.logspace(-5, 5, 301)
     np.testing.assert_array_equal(band_theta_table_xp(L), band_theta_table(L))
-    np.testing.assert_allclose(np.asarray(band_theta_table_xp(jnp.asarray(L), xp=jnp)), band_theta_table(L),
-                               rtol=1e-15)
-    slope = np.asarray(jax.vmap(jax.grad(lambda x: band_theta_table_xp(x, xp=jnp)))(jnp.asarray(L)))
+    np.testing.assert_allclose(np.asarray(jax.jit(lambda x: band_theta_table_xp(x, xp=jnp))(jnp.asarray(L))),
+                               band_theta_table(L), rtol=1e-15)
+    slope = np.asarray(jax.jit(jax.vmap(jax.grad(lambda x: band_theta_table_xp(x, xp=jnp))))(jnp.asarray(L)))
     h = 1e-6
     fd = (band_theta_table(L * (1 + h)) - band_theta_table(L * (1 - h))) / (2 * h * L)
     inside = (L > 1.1e-4) & (L < 0.9e4)        # away from the table's ends, where the pieces meet the asymptotes
