@@ -974,6 +974,7 @@ class TrajectoryReader:
         self._segments = self._rows = None
         self._keep: list = []
         self._read: dict = {}        # (start, instants) -> `_from_row`'s (t, y, y'), or its ReadingFailed
+        self._ahead: dict = {}       # (row, instants) -> the tighter try's (t, y, y') or None, read ahead
 
     def anchors(self, t_rows: np.ndarray) -> np.ndarray:
         """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), as
@@ -1004,11 +1005,13 @@ class TrajectoryReader:
         return piece_columns(self.traj.model, self._reading(iv, position, times), self.angle_coordinates,
                              residual=False)
 
-    def _reading(self, iv: Interval, position: int, times: np.ndarray):
-        """The re-integrated states at `times` (ordered) as a Piece of the row's mode; ReadingFailed if IDA fails."""
+    def _reading(self, iv: Interval, position: int, times: np.ndarray, anchor: tuple | None = None):
+        """The re-integrated states at `times` (ordered) as a Piece of the row's mode; ReadingFailed if IDA fails.
+        `anchor`: `_anchor`'s tuple for the reading where the caller has it already."""
         from mechsim.dynamics.hybrid import Piece
         first = float(times.min())
-        anchor = self._anchor(iv, position, first)
+        if anchor is None:
+            anchor = self._anchor(iv, position, first)
         piece, t0 = anchor[0], anchor[2]
         # every reading starts from the row's own state: a restart from an earlier reading's state (projected back
         # onto the constraints) was cheaper but added its own error, which a finite difference of the peak shows
@@ -1044,13 +1047,24 @@ class TrajectoryReader:
             got = dense.read_many([(np.asarray(times, float), iv.lo, iv.hi) for iv, _, times in requests])
         else:                  # re-integrated, each request on its own; read out together (None where IDA failed)
             got = []
-            for request in requests:
-                try:
-                    p = self._reading(*request)
-                except ReadingFailed:
-                    got.append(None)
-                    continue
-                got.append((p.mode, p.params, p.offset, p.y, p.t, p.yp))
+            anchors, ready = self._read_ahead(requests)
+            try:
+                for request, anchor, hit in zip(requests, anchors, ready):
+                    if hit is not None and hit[0] not in self._read and hit[1] not in self._own_failed:
+                        # `_reading` as it goes on such a reading: the first try's rows, kept (`_from_row`)
+                        key, _, piece, t, y, yp = hit
+                        self.reintegrations += 1
+                        self._read[key] = self._ahead.pop(key)
+                        got.append((piece.mode, piece.params, piece.offset, y, t, yp))
+                        continue
+                    try:
+                        p = self._reading(*request, anchor=anchor)
+                    except ReadingFailed:
+                        got.append(None)
+                        continue
+                    got.append((p.mode, p.params, p.offset, p.y, p.t, p.yp))
+            finally:
+                self._ahead.clear()
         groups: dict = {}
         for r, g in enumerate(got):
             if g is not None:
@@ -1071,6 +1085,77 @@ class TrajectoryReader:
                 a += n
         self.dense_readings += len(groups) if dense is not None else 0
         return out
+
+    def _read_ahead(self, requests: list) -> tuple[list, list]:
+        """Each request's `_anchor` (None where it has none), and on the compiled callbacks the first (tighter) try of
+        every reading `_reading` starts forward from its anchor, run ahead in one compiled call per mode
+        (`IdaCompiledBackend.read_many`): the same IDA calls from the same states as one reading at a time, so the
+        same rows. Each such reading's rows (or None where IDA failed) are kept in `_ahead` for `_integrate` to take;
+        per request, (key, row, piece, t, y, y') where that is the whole reading (every instant, in order), else
+        None. A reading from a row IDA failed from before it (`_own_failed`, also found while the requests are then
+        read in order) is not run ahead: it starts from the consistent state, as one at a time."""
+        n = len(requests)
+        times = [np.asarray(r[2], dtype=float) for r in requests]
+        sizes = np.fromiter(map(len, times), dtype=np.int64, count=n)
+        ready: list = [None] * n
+        if not n or not sizes.all():
+            return [self._anchor_or_none(iv, position, float(np.min(t)) if len(t) else None)
+                    for (iv, position, _), t in zip(requests, times)], ready
+        all_t = np.concatenate(times)
+        starts = np.cumsum(sizes) - sizes
+        firsts = np.minimum.reduceat(all_t, starts).tolist()        # each request's times.min()
+        anchors = [self._anchor_or_none(iv, position, first) for (iv, position, _), first in zip(requests, firsts)]
+        if not self._compiled_tries() or np.isnan(all_t).any():
+            return anchors, ready
+        # the instants within round-off of the start: `_split_start`'s, for all requests at once (NaN: none)
+        t0 = np.full(n, np.nan)
+        keys: list = [None] * n
+        seen = set(self._read)
+        for i, anchor in enumerate(anchors):
+            if anchor is None or firsts[i] < anchor[2] or anchor[5] in self._own_failed:
+                continue
+            key = self._key(anchor, times[i])
+            if key in seen:                 # read before, or again in these requests: the kept reading
+                continue
+            seen.add(key)
+            keys[i], t0[i] = key, anchor[2]
+        near = 1e-12 * np.maximum(1.0, np.abs(t0))
+        at_start = np.abs(all_t - np.repeat(t0, sizes)) <= np.repeat(near, sizes)
+        leads = np.add.reduceat(at_start, starts, dtype=np.int64)
+        which = np.flatnonzero(~np.isnan(t0) & (leads < sizes))           # readings with an instant to integrate to
+        groups: dict = {}
+        for i in which.tolist():
+            self._ahead[keys[i]] = None         # IDA failed, unless its rows replace this
+            groups.setdefault(id(anchors[i][1]), []).append(i)
+        request_of = np.repeat(np.arange(n), sizes)
+        for members in groups.values():
+            mf = anchors[members[0]][1]
+            rows = np.concatenate([np.arange(starts[i], starts[i] + sizes[i]) for i in members])
+            rows = rows[np.lexsort((~at_start[rows], request_of[rows]))]      # each reading's instants at t0 first
+            counts = sizes[members]
+            bounds = np.empty((len(members), 3), dtype=np.int64)
+            bounds[:, 2] = np.cumsum(counts)
+            bounds[:, 0] = bounds[:, 2] - counts
+            bounds[:, 1] = bounds[:, 0] + leads[members]
+            t, y, yp, ok = self._compiled[0].read_many(
+                mf, t0[members], np.array([anchors[i][3] for i in members]),
+                np.array([anchors[i][4] for i in members]),
+                np.array([anchors[i][0].params for i in members], dtype=float).reshape(len(members), -1),
+                all_t[rows], bounds)
+            falls = np.concatenate([[0], np.cumsum(~(t[1:] >= t[:-1]))])
+            for i, (lo, _, hi), whole, in zip(members, bounds.tolist(), ok.tolist()):
+                if not whole:
+                    continue
+                got = self._ahead[keys[i]] = (t[lo:hi], y[lo:hi], yp[lo:hi])
+                if falls[hi - 1] == falls[lo]:        # in time order (`_reading`'s check)
+                    ready[i] = (keys[i], anchors[i][5], anchors[i][0]) + got
+        return anchors, ready
+
+    def _anchor_or_none(self, iv: Interval, position: int, first: float | None):
+        try:
+            return self._anchor(iv, position, first)
+        except ReadingFailed:
+            return None
 
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
@@ -1119,13 +1204,12 @@ class TrajectoryReader:
         """`_integrate` from an `_anchor` state. From the run's own (y, y') at the tighter tolerances only: where IDA
         fails from it there, the reading starts from the consistent state made at that row (both tries), and so do the
         later readings from that row (kept)."""
-        piece, mf, t0, y0, yp0, row = anchor
         times = np.asarray(times, dtype=float)
-        key = ((row,) if row is not None else (id(piece), t0, y0.tobytes(), yp0.tobytes())) + (times.tobytes(),)
+        key = self._key(anchor, times)
         got = self._read.get(key)
         if got is None:
             try:
-                got = self._from_row_once(anchor, times)
+                got = self._from_row_once(anchor, times, key)
             except ReadingFailed as exc:
                 got = exc
             self._read[key] = got
@@ -1133,13 +1217,19 @@ class TrajectoryReader:
             raise got
         return got
 
-    def _from_row_once(self, anchor: tuple, times: np.ndarray):
+    @staticmethod
+    def _key(anchor: tuple, times: np.ndarray) -> tuple:
+        """What a reading is kept under: its start (the row, or the state itself) and instants."""
+        piece, _, t0, y0, yp0, row = anchor
+        return ((row,) if row is not None else (id(piece), t0, y0.tobytes(), yp0.tobytes())) + (times.tobytes(),)
+
+    def _from_row_once(self, anchor: tuple, times: np.ndarray, key: tuple | None = None):
         piece, mf, t0, y0, yp0, row = anchor
         if row is None:
-            return self._integrate(mf, piece.params, t0, y0, yp0, times)
+            return self._integrate(mf, piece.params, t0, y0, yp0, times, key=key)
         if row not in self._own_failed:
             try:
-                return self._integrate(mf, piece.params, t0, y0, yp0, times, self.tries[:1])
+                return self._integrate(mf, piece.params, t0, y0, yp0, times, self.tries[:1], key)
             except ReadingFailed:
                 self._own_failed.add(row)
         _, _, t0, y0, yp0, _ = self._row_state(*row, own=False)
@@ -1213,19 +1303,31 @@ class TrajectoryReader:
                               if runs_compiled(self.tries[-1], self.traj.model) else [])
         return bool(self._compiled)
 
-    def _integrate(self, mf, p, t0, y0, yp0, times, tries: tuple | None = None):
-        """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0), with
-        the first of `tries` (default: all the reader's tolerance tries) that IDA meets."""
-        self.reintegrations += 1
+    @staticmethod
+    def _split_start(t0: float, times: np.ndarray) -> tuple:
+        """(mask of the instants within round-off of t0, or None where there are none; the other instants)."""
         # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
         near = 1e-12 * max(1.0, abs(t0))
         gap = np.abs(times - t0)
         at_start = gap <= near if gap.min() <= near else None
-        out_t = times if at_start is None else times[~at_start]
+        return at_start, (times if at_start is None else times[~at_start])
+
+    def _integrate(self, mf, p, t0, y0, yp0, times, tries: tuple | None = None, key: tuple | None = None):
+        """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0), with
+        the first of `tries` (default: all the reader's tolerance tries) that IDA meets; the tighter try's result
+        read ahead (`_read_ahead`) where `key` names one."""
+        self.reintegrations += 1
         n_tries = len(tries if tries is not None else self.tries)
+        done = 0
+        if key is not None and key in self._ahead:        # the first try's result, read ahead
+            got = self._ahead.pop(key)
+            if got is not None:
+                return got
+            done = 1
+        at_start, out_t = self._split_start(t0, times)
         if len(out_t) and self._compiled_tries():       # the instants at t0 in the same arrays (`read`)
             lead = None if at_start is None else times[at_start]
-            for backend in self._compiled[:n_tries]:
+            for backend in self._compiled[done:n_tries]:
                 got = backend.read(mf, p, t0, y0, yp0, out_t, lead)
                 if got is not None:
                     return got

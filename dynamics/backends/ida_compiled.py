@@ -135,6 +135,8 @@ class IdaCompiledBackend(Backend):
         self._tret = np.zeros(1)
         self._tret_address = self._tret.ctypes.data
         self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
+        self._read_addresses = np.array([ctypes.cast(getattr(self.lib, name), ctypes.c_void_p).value for name in
+                                         ("IDASolve", "IDAReInit", "IDASetInitStep", "IDASetStopTime")], dtype=np.int64)
         # IDA's counters are read into one array (a C long each), in the order of `_COUNTERS`
         self._counts = np.zeros(len(_COUNTERS), dtype=_C_LONG)
         first = self._counts.ctypes.data
@@ -222,17 +224,38 @@ class IdaCompiledBackend(Backend):
         """(t, y, y') at every t_out (ordered away from t0, the last one the stop time) from (y0, y0'), None where IDA
         fails first: `integrate` without its segment's bookkeeping (counters, guards, the end state), for what
         re-integrates a run's rows many times over (the located peaks' readings). The instants `at_start` (within
-        round-off of t0) come first, read as (y0, y0') itself, in the same arrays."""
-        m = self._begin(mf, p, t0, y0, yp0, 0.0, float(t_out[-1]), {})
-        t_out = np.ascontiguousarray(t_out, dtype=float)
+        round-off of t0) come first, read as (y0, y0') itself, in the same arrays. One reading of `read_many`."""
+        t_out = np.asarray(t_out, dtype=float)
         n0 = 0 if at_start is None else len(at_start)
-        rows_t = np.empty(n0 + len(t_out))
+        rows = t_out if at_start is None else np.concatenate([at_start, t_out])
+        t, y, yp, ok = self.read_many(mf, np.array([t0], dtype=float), np.asarray(y0, dtype=float)[None],
+                                      np.asarray(yp0, dtype=float)[None], np.asarray(p, dtype=float)[None], rows,
+                                      np.array([[0, n0, len(rows)]], dtype=np.int64))
+        return (t, y, yp) if ok[0] else None
+
+    def read_many(self, mf, t0: np.ndarray, y0: np.ndarray, yp0: np.ndarray, p: np.ndarray, rows_t: np.ndarray,
+                  bounds: np.ndarray) -> tuple:
+        """Many `read`s on the mode `mf` in one compiled call (`native.read_rows`), without a return to Python between
+        them: reading i starts from (t0[i], y0[i], y0'[i]) with the parameters p[i] and fills rows bounds[i, 0] to
+        bounds[i, 2] of rows_t (its instants, ordered away from t0): those up to bounds[i, 1] (within round-off of
+        t0) with the start itself, the others by IDA (IDAReInit with IDA's own first step, the stop time its last
+        instant, IDASolve in IDA_NORMAL mode at each instant, as `integrate` runs a segment). (t, y, y') of all
+        rows, and per reading whether IDA reached all its instants (else it failed first)."""
+        from mechsim.dynamics.backends.native import read_rows
+        n = len(t0)
+        hit = self._memories.get(id(mf))
+        m = hit[1] if hit is not None and hit[0] is mf else self._first_use(mf, {}, p.shape[1])
+        rows_t = np.array(rows_t, dtype=float)            # a copy: IDA's times are written over it
         rows_y, rows_yp = np.empty((len(rows_t), mf.ny)), np.empty((len(rows_t), mf.ny))
-        if n0:
-            rows_t[:n0], rows_y[:n0], rows_yp[:n0] = at_start, y0, yp0
-        flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp,
-                                self._tret, rows_t[n0:], rows_y[n0:], rows_yp[n0:])
-        return (rows_t, rows_y, rows_yp) if int(flag) >= 0 and int(k) == len(t_out) else None
+        written = np.empty(n, dtype=np.int64)
+        read_rows(self._read_addresses, m.mem, m.yy_nv, m.yp_nv, self._tret_address, m.y, m.yp, m.p, self._tret,
+                  np.ascontiguousarray(t0, dtype=float), np.ascontiguousarray(y0, dtype=float),
+                  np.ascontiguousarray(yp0, dtype=float), np.ascontiguousarray(p, dtype=float),
+                  np.zeros(n), np.ascontiguousarray(bounds, dtype=np.int64), rows_t, rows_y, rows_yp, written)
+        m.p_from = None                       # m.p holds the last reading's parameters
+        if np.any(written == -2):
+            raise RuntimeError("IDAReInit, IDASetInitStep or IDASetStopTime failed")
+        return rows_t, rows_y, rows_yp, written == bounds[:, 2] - bounds[:, 1]
 
     def integrate(self, request: Request) -> Segment:
         r, lib = request, self.lib
@@ -347,8 +370,17 @@ def _kept_memories(settings: SolverSettings, lib) -> _Memories:
 
 def reusable(settings: SolverSettings) -> Backend:
     """An `IdaCompiledBackend` for these settings, for what integrates many short segments run after run (the located
-    peaks' readings): its modes' IDA memories are the thread's, kept (`_kept_memories`)."""
-    return IdaCompiledBackend(settings)
+    peaks' readings): the thread's, kept with the latest REUSABLE_SETTINGS settings' (its modes' IDA memories are
+    the thread's too, `_kept_memories`)."""
+    kept = getattr(_KEPT, "backends", None)
+    if kept is None:
+        kept = _KEPT.backends = {}
+    backend = kept.get(settings)
+    if backend is None:
+        while len(kept) >= REUSABLE_SETTINGS:
+            kept.pop(next(iter(kept)))
+        backend = kept[settings] = IdaCompiledBackend(settings)
+    return backend
 
 
 def runs_compiled(settings: SolverSettings, model) -> bool:

@@ -52,6 +52,31 @@ def ida_solve(typingctx, address, mem, tout, tret, yy, yp, itask):
                        types.int32), codegen
 
 
+@intrinsic
+def ida_set_real(typingctx, address, mem, value):
+    """An IDA setter `int f(void *mem, sunrealtype value)` (IDASetInitStep, IDASetStopTime) called through its
+    address."""
+    i64, i32 = ir.IntType(64), ir.IntType(32)
+    fnty = ir.FunctionType(i32, [i64, ir.DoubleType()])
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(fn, list(args[1:]))
+    return types.int32(types.int64, types.int64, types.float64), codegen
+
+
+@intrinsic
+def ida_reinit(typingctx, address, mem, t0, yy, yp):
+    """IDAReInit(mem, t0, yy, yp) called through its address."""
+    i64, i32 = ir.IntType(64), ir.IntType(32)
+    fnty = ir.FunctionType(i32, [i64, ir.DoubleType(), i64, i64])
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(fn, list(args[1:]))
+    return types.int32(types.int64, types.int64, types.float64, types.int64, types.int64), codegen
+
+
 def _advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
     """IDASolve in IDA_NORMAL mode at each output time until the last one, a root (flag 2) or a failure (< 0);
     copies each row. Returns (last flag, rows written)."""
@@ -72,6 +97,48 @@ def _advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, t
     return flag, k
 
 
+def _read_rows(addresses, mem, yy, yp, tret_address, y_view, yp_view, p_view, tret, t0, y0, yp0, p, first_step,
+               bounds, rows_t, rows_y, rows_yp, written):
+    """Many re-integrations on one IDA memory, each as `IdaCompiledBackend.read` runs one: reading i starts from
+    (t0[i], y0[i], yp0[i]) with parameters p[i] and first step first_step[i] (IDAReInit, IDASetInitStep, and the
+    stop time its last instant), and fills rows bounds[i, 0] to bounds[i, 2]: the first up to bounds[i, 1] (its
+    instants within round-off of t0) with the start itself, the others at the instants rows_t holds there
+    (IDASolve in IDA_NORMAL mode, `_advance`'s loop). `addresses` are those of IDASolve, IDAReInit,
+    IDASetInitStep and IDASetStopTime. written[i]: the instants IDA reached, or -1 where it failed (a negative
+    flag), -2 where a setter failed."""
+    solve, reinit, init_step, stop_time = addresses[0], addresses[1], addresses[2], addresses[3]
+    n = y_view.size
+    for i in range(t0.size):
+        a, b, c = bounds[i, 0], bounds[i, 1], bounds[i, 2]
+        for r in range(a, b):
+            for j in range(n):
+                rows_y[r, j] = y0[i, j]
+                rows_yp[r, j] = yp0[i, j]
+        for j in range(n):
+            y_view[j] = y0[i, j]
+            yp_view[j] = yp0[i, j]
+        for j in range(p_view.size):
+            p_view[j] = p[i, j]
+        if (ida_reinit(reinit, mem, t0[i], yy, yp) < 0 or ida_set_real(init_step, mem, first_step[i]) < 0
+                or ida_set_real(stop_time, mem, rows_t[c - 1]) < 0):
+            written[i] = -2
+            continue
+        flag = 0
+        k = b
+        while k < c:
+            flag = ida_solve(solve, mem, rows_t[k], tret_address, yy, yp, np.int32(1))
+            if flag == 2 or flag < 0:
+                break
+            rows_t[k] = tret[0]
+            for j in range(n):
+                rows_y[k, j] = y_view[j]
+                rows_yp[k, j] = yp_view[j]
+            k += 1
+            if flag == 1:          # IDA_TSTOP_RETURN: the last instant
+                break
+        written[i] = -1 if flag < 0 else k - b
+
+
 def _cached_in_the_user_cache_folder(py_func):
     """`njit(cache=True)` with numba's cache in mechsim's user-cache folder (dynamics/user_cache.py, numba/) instead
     of beside this module, like the compiled callbacks: one folder holds what mechsim compiles. numba picks the
@@ -89,10 +156,16 @@ def _cached_in_the_user_cache_folder(py_func):
 
 
 advance = _cached_in_the_user_cache_folder(_advance)
+read_rows = _cached_in_the_user_cache_folder(_read_rows)
 
 
 def compile_advance() -> None:
-    """Compile `advance` for the argument types `IdaCompiledBackend.integrate` passes (numba caches it on disk):
-    a call with no output time, which returns before calling IDASolve."""
+    """Compile `advance` and `read_rows` for the argument types `IdaCompiledBackend.integrate` and `read_many`
+    pass (numba caches them on disk): calls with no output time and no reading, which return before calling
+    IDA."""
     advance(0, 0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros((0, 1)),
             np.zeros((0, 1)))
+    read_rows(np.zeros(4, dtype=np.int64), 0, 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1),
+              np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0),
+              np.zeros((0, 3), dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)),
+              np.zeros(0, dtype=np.int64))
