@@ -974,26 +974,18 @@ class TrajectoryReader:
         self._segments = self._rows = None
         self._keep: list = []
         self._read: dict = {}        # (start, instants) -> `_from_row`'s (t, y, y'), or its ReadingFailed
-        self._ahead: dict = {}       # (row, instants) -> the tighter try's (t, y, y') or None, read ahead
+        self._ahead: dict = {}       # `_read`'s key -> the first try's (t, y, y'), or None, read ahead
 
     def anchors(self, t_rows: np.ndarray) -> np.ndarray:
         """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), as
         rows of an (n, 2) array; (-1, -1) for a time no piece holds. Kept for the reader's life (one table)."""
         if self._anchors is not None and np.array_equal(self._anchors[0], t_rows):
             return self._anchors[1]
-        pieces = self.traj.pieces
-        sizes = np.array([len(p.t) for p in pieces], dtype=int)
-        all_t = np.concatenate([p.t for p in pieces])
-        all_k = np.repeat(np.arange(len(pieces)), sizes)
-        all_r = np.arange(len(all_t)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-        if np.any(all_t[1:] < all_t[:-1]):        # not in time order already (as the pieces come): sorted, stably
-            order = np.argsort(all_t, kind="stable")
-            all_t, all_k, all_r = all_t[order], all_k[order], all_r[order]
+        all_t, kr = self._row_order()
         last = np.searchsorted(all_t, t_rows, side="right") - 1
         at = np.clip(last, 0, None)
         hit = (last >= 0) & (all_t[at] == t_rows)
-        ks, rs = all_k[at], all_r[at]
-        out = np.where(hit[:, None], np.stack([ks, rs], axis=1), -1)
+        out = np.where(hit[:, None], kr[at], -1)
         self._anchors = (t_rows, out)
         return out
 
@@ -1090,24 +1082,25 @@ class TrajectoryReader:
         """Each request's `_anchor` (None where it has none), and on the compiled callbacks the first (tighter) try of
         every reading `_reading` starts forward from its anchor, run ahead in one compiled call per mode
         (`IdaCompiledBackend.read_many`): the same IDA calls from the same states as one reading at a time, so the
-        same rows. Each such reading's rows (or None where IDA failed) are kept in `_ahead` for `_integrate` to take;
-        per request, (key, row, piece, t, y, y') where that is the whole reading (every instant, in order), else
-        None. A reading from a row IDA failed from before it (`_own_failed`, also found while the requests are then
-        read in order) is not run ahead: it starts from the consistent state, as one at a time."""
+        same rows (a reading whose every instant is within round-off of its start is that start, as `_integrate`
+        reads it). Each such reading's rows (or None where IDA failed) are kept in `_ahead` for `_integrate` to
+        take; per request, (key, row, piece, t, y, y') where that is the whole reading (every instant, in order),
+        else None. A reading from a row IDA failed from before it (`_own_failed`, also found while the requests are
+        then read in order) is not run ahead: it starts from the consistent state, as one at a time."""
         n = len(requests)
         times = [np.asarray(r[2], dtype=float) for r in requests]
         sizes = np.fromiter(map(len, times), dtype=np.int64, count=n)
         ready: list = [None] * n
         if not n or not sizes.all():
-            return [self._anchor_or_none(iv, position, float(np.min(t)) if len(t) else None)
-                    for (iv, position, _), t in zip(requests, times)], ready
+            return [None] * n, ready
         all_t = np.concatenate(times)
         starts = np.cumsum(sizes) - sizes
         firsts = np.minimum.reduceat(all_t, starts).tolist()        # each request's times.min()
-        anchors = [self._anchor_or_none(iv, position, first) for (iv, position, _), first in zip(requests, firsts)]
+        anchors = [None if isinstance(a, ReadingFailed) else a
+                   for a in self._anchors_of([(iv, position, f) for (iv, position, _), f in zip(requests, firsts)])]
         if not self._compiled_tries() or np.isnan(all_t).any():
             return anchors, ready
-        # the instants within round-off of the start: `_split_start`'s, for all requests at once (NaN: none)
+        # the instants within round-off of the start (`_integrate`'s), for all requests at once (t0 NaN: none)
         t0 = np.full(n, np.nan)
         keys: list = [None] * n
         seen = set(self._read)
@@ -1122,17 +1115,30 @@ class TrajectoryReader:
         near = 1e-12 * np.maximum(1.0, np.abs(t0))
         at_start = np.abs(all_t - np.repeat(t0, sizes)) <= np.repeat(near, sizes)
         leads = np.add.reduceat(at_start, starts, dtype=np.int64)
-        which = np.flatnonzero(~np.isnan(t0) & (leads < sizes))           # readings with an instant to integrate to
-        groups: dict = {}
-        for i in which.tolist():
+        for i in np.flatnonzero(~np.isnan(t0) & (leads == sizes)).tolist():      # every instant at the start
+            n0, y0, yp0 = int(sizes[i]), anchors[i][3], anchors[i][4]
+            got = self._ahead[keys[i]] = (times[i][at_start[starts[i]:starts[i] + n0]],
+                                          np.repeat(y0[None, :], n0, axis=0), np.repeat(yp0[None, :], n0, axis=0))
+            if n0 == 1 or bool(np.all(got[0][1:] >= got[0][:-1])):
+                ready[i] = (keys[i], anchors[i][5], anchors[i][0]) + got
+        groups: dict = {}           # the readings with an instant to integrate to, by mode
+        group_of = np.full(n, -1, dtype=np.int64)
+        for i in np.flatnonzero(~np.isnan(t0) & (leads < sizes)).tolist():
             self._ahead[keys[i]] = None         # IDA failed, unless its rows replace this
-            groups.setdefault(id(anchors[i][1]), []).append(i)
-        request_of = np.repeat(np.arange(n), sizes)
-        for members in groups.values():
+            number, members = groups.setdefault(id(anchors[i][1]), (len(groups), []))
+            group_of[i] = number
+            members.append(i)
+        if not groups:
+            return anchors, ready
+        # every group's instants, reading after reading, each reading's instants at t0 first
+        in_group = np.repeat(group_of, sizes)
+        rows = np.flatnonzero(in_group >= 0)
+        rows = rows[np.lexsort((~at_start[rows], np.repeat(np.arange(n), sizes)[rows], in_group[rows]))]
+        end = 0
+        for _, members in groups.values():
             mf = anchors[members[0]][1]
-            rows = np.concatenate([np.arange(starts[i], starts[i] + sizes[i]) for i in members])
-            rows = rows[np.lexsort((~at_start[rows], request_of[rows]))]      # each reading's instants at t0 first
             counts = sizes[members]
+            group_rows, end = rows[end:end + int(counts.sum())], end + int(counts.sum())
             bounds = np.empty((len(members), 3), dtype=np.int64)
             bounds[:, 2] = np.cumsum(counts)
             bounds[:, 0] = bounds[:, 2] - counts
@@ -1141,21 +1147,15 @@ class TrajectoryReader:
                 mf, t0[members], np.array([anchors[i][3] for i in members]),
                 np.array([anchors[i][4] for i in members]),
                 np.array([anchors[i][0].params for i in members], dtype=float).reshape(len(members), -1),
-                all_t[rows], bounds)
+                all_t[group_rows], bounds)
             falls = np.concatenate([[0], np.cumsum(~(t[1:] >= t[:-1]))])
-            for i, (lo, _, hi), whole, in zip(members, bounds.tolist(), ok.tolist()):
+            for i, (lo, _, hi), whole in zip(members, bounds.tolist(), ok.tolist()):
                 if not whole:
                     continue
                 got = self._ahead[keys[i]] = (t[lo:hi], y[lo:hi], yp[lo:hi])
                 if falls[hi - 1] == falls[lo]:        # in time order (`_reading`'s check)
                     ready[i] = (keys[i], anchors[i][5], anchors[i][0]) + got
         return anchors, ready
-
-    def _anchor_or_none(self, iv: Interval, position: int, first: float | None):
-        try:
-            return self._anchor(iv, position, first)
-        except ReadingFailed:
-            return None
 
     def momentum(self, iv: Interval, position: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(M(q) v, v) at instant t of the interval (its one-sided limit at an end), from the row at `position`:
@@ -1170,22 +1170,72 @@ class TrajectoryReader:
     def _anchor(self, iv: Interval, position: int, first: float | None = None, own: bool = True):
         """(piece, its mode's functions, t0, y0, y'0, row): the state a reading of the interval starts from: the
         interval's row `position`, or where the reading's `first` instant lies before that row (or the interval has
-        no row there), the latest state the run holds at or before `first` (`_earlier`), so that every reading runs
+        no row there), the latest state the run holds at or before `first` (`_anchors_of`), so that every reading runs
         forward in time: backward, a damped stiff mode (a compliant contact) is unstable. The row itself only where
         the run holds no earlier state (its segments' starts not kept). A row's state is `_row_state`'s; `row` is
-        (piece, row) where it is an IDA run's own (y, y'), else None (a consistent state)."""
-        if 0 <= position < len(iv.anchors):
-            at = iv.anchors[position]
-            k, r = int(at[0]), int(at[1])
-        else:
-            k, r = -1, -1
-        if first is not None and (k < 0 or first < float(self.traj.pieces[k].t[r])):
-            got = self._earlier(first, iv.hi, own)
-            if got is not None:
-                return got
-        if k < 0:
-            raise ReadingFailed(f"no state to read the interval ({iv.lo:.9g}, {iv.hi:.9g}) s from")
-        return self._row_state(k, r, own)
+        (piece, row) where it is an IDA run's own (y, y'), else None (a consistent state). ReadingFailed where there
+        is none."""
+        got = self._anchors_of([(iv, position, first)], own)[0]
+        if isinstance(got, ReadingFailed):
+            raise got
+        return got
+
+    def _anchors_of(self, items: list, own: bool = True) -> list:
+        """`_anchor` of each (interval, position, first), or its ReadingFailed; the rows' times and the searches for
+        earlier states made for all at once. An earlier state is the latest one at or before `first` in the smooth
+        stretch that holds it (ending at the interval's end): an output row of the run's segment there, else the
+        state that segment started from (`Trajectory.starts`, after the event that opened it); none where the run
+        kept no segment starts (the compiled diffrax run)."""
+        n = len(items)
+        k, r = np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64)
+        first, hi = np.full(n, np.nan), np.empty(n)
+        asked = np.zeros(n, dtype=bool)
+        for i, (iv, position, f) in enumerate(items):
+            hi[i] = iv.hi
+            if 0 <= position < len(iv.anchors):
+                at = iv.anchors[position]
+                k[i], r[i] = at[0], at[1]
+            if f is not None:
+                first[i], asked[i] = f, True
+        t_flat, offsets = self._row_times()
+        t_row = t_flat[np.where(k >= 0, offsets[k] + r, 0)] if len(t_flat) else np.full(n, np.nan)
+        earlier = asked & ((k < 0) | (first < t_row))
+        starts = getattr(self.traj, "starts", None)
+        seg = row = np.full(n, -1, dtype=np.int64)
+        if starts and earlier.any():
+            if self._segments is None:
+                self._segments = np.array([float(p.t[0]) for p in starts])
+            ts = self._segments
+            eps = 1e-12 * np.maximum(1.0, np.abs(first))
+            # the last segment started at or before `first` (of several at one instant, the one the run went on
+            # from), not one started at the stretch's end (after its closing event)
+            seg = np.where(earlier, ts.searchsorted(np.minimum(first + eps, hi - eps), side="right") - 1, -1)
+            t_rows, rows = self._row_order()
+            i = t_rows.searchsorted(first + eps, side="right") - 1
+            # an output row of that segment, nearer than its start
+            row = np.where((seg >= 0) & (i >= 0) & (t_rows[np.maximum(i, 0)] > ts[np.maximum(seg, 0)]), i, -1)
+        out: list = []
+        for i in range(n):
+            s = int(seg[i])
+            if s >= 0:
+                if row[i] >= 0:
+                    try:
+                        out.append(self._row_state(int(rows[row[i], 0]), int(rows[row[i], 1]), own))
+                        continue
+                    except ReadingFailed:
+                        pass
+                start = starts[s]
+                out.append((start, self.traj.model.modes[start.mode], float(self._segments[s]), start.y[0],
+                            start.yp[0], None))
+            elif k[i] < 0:
+                iv = items[i][0]
+                out.append(ReadingFailed(f"no state to read the interval ({iv.lo:.9g}, {iv.hi:.9g}) s from"))
+            else:
+                try:
+                    out.append(self._row_state(int(k[i]), int(r[i]), own))
+                except ReadingFailed as exc:
+                    out.append(exc)
+        return out
 
     def _row_state(self, k: int, r: int, own: bool = True):
         """`_anchor`'s tuple at row r of piece k: the run's own (y, y') there where `_owns` says so (own=True),
@@ -1235,45 +1285,26 @@ class TrajectoryReader:
         _, _, t0, y0, yp0, _ = self._row_state(*row, own=False)
         return self._integrate(mf, piece.params, t0, y0, yp0, times)
 
-    def _earlier(self, first: float, hi: float, own: bool = True):
-        """`_anchor`'s tuple of the latest state at or before `first` in the smooth stretch that holds it (ending at
-        `hi`): an output row of the run's segment there, else the state that segment started from
-        (`Trajectory.starts`, after the event that opened it); None where the run kept no segment starts (the
-        compiled diffrax run)."""
-        starts = getattr(self.traj, "starts", None)
-        if not starts:
-            return None
-        if self._segments is None:
-            self._segments = np.array([float(p.t[0]) for p in starts])
-        ts = self._segments
-        eps = 1e-12 * max(1.0, abs(first))
-        # the last segment started at or before `first` (of several at one instant, the one the run went on from),
-        # not one started at the stretch's end (after its closing event)
-        s = int(ts.searchsorted(min(first + eps, hi - eps), side="right")) - 1
-        if s < 0:
-            return None
-        start = starts[s]
-        t_rows, rows = self._row_order()
-        i = int(t_rows.searchsorted(first + eps, side="right")) - 1
-        if i >= 0 and t_rows[i] > ts[s]:          # an output row of that segment, nearer than its start
-            try:
-                return self._row_state(int(rows[i][0]), int(rows[i][1]), own)
-            except ReadingFailed:
-                pass
-        return start, self.traj.model.modes[start.mode], float(ts[s]), start.y[0], start.yp[0], None
+    def _row_times(self):
+        """Every piece's output times, piece after piece, and where each piece's rows begin there."""
+        return self._row_order(flat=True)
 
-    def _row_order(self):
-        """Every piece's output rows in time order: (times, (piece, row) of each)."""
+    def _row_order(self, flat: bool = False):
+        """Every piece's output rows in time order: (times, (piece, row) of each) as rows of an (n, 2) array; with
+        `flat`, `_row_times` (the same rows in piece order)."""
         if self._rows is None:
             pieces = self.traj.pieces
+            sizes = np.array([len(p.t) for p in pieces], dtype=np.int64)
+            starts = np.cumsum(sizes) - sizes
             all_t = np.concatenate([p.t for p in pieces])
-            kr = np.stack([np.concatenate([np.full(len(p.t), k) for k, p in enumerate(pieces)]),
-                           np.concatenate([np.arange(len(p.t)) for p in pieces])], axis=1)
+            kr = np.stack([np.repeat(np.arange(len(pieces)), sizes), np.arange(len(all_t)) - np.repeat(starts, sizes)],
+                          axis=1)
+            flat_t = all_t
             if np.any(all_t[1:] < all_t[:-1]):       # not in time order already (as the pieces come): sorted, stably
                 order = np.argsort(all_t, kind="stable")
                 all_t, kr = all_t[order], kr[order]
-            self._rows = (all_t, kr)
-        return self._rows
+            self._rows = (all_t, kr, flat_t, starts)
+        return self._rows[2:] if flat else self._rows[:2]
 
     def _owns(self, piece) -> bool:
         """Whether readings from this piece's rows start from the run's own (y, y') (`_own_rows`)."""
@@ -1303,15 +1334,6 @@ class TrajectoryReader:
                               if runs_compiled(self.tries[-1], self.traj.model) else [])
         return bool(self._compiled)
 
-    @staticmethod
-    def _split_start(t0: float, times: np.ndarray) -> tuple:
-        """(mask of the instants within round-off of t0, or None where there are none; the other instants)."""
-        # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
-        near = 1e-12 * max(1.0, abs(t0))
-        gap = np.abs(times - t0)
-        at_start = gap <= near if gap.min() <= near else None
-        return at_start, (times if at_start is None else times[~at_start])
-
     def _integrate(self, mf, p, t0, y0, yp0, times, tries: tuple | None = None, key: tuple | None = None):
         """(t, y, yp) at `times` (all on one side of t0, ordered away from it) from the consistent (y0, yp0), with
         the first of `tries` (default: all the reader's tolerance tries) that IDA meets; the tighter try's result
@@ -1324,7 +1346,11 @@ class TrajectoryReader:
             if got is not None:
                 return got
             done = 1
-        at_start, out_t = self._split_start(t0, times)
+        # instants within round-off of t0 are read at t0 (IDA cannot step that little; F' dt is below round-off)
+        near = 1e-12 * max(1.0, abs(t0))
+        gap = np.abs(times - t0)
+        at_start = gap <= near if gap.min() <= near else None
+        out_t = times if at_start is None else times[~at_start]
         if len(out_t) and self._compiled_tries():       # the instants at t0 in the same arrays (`read`)
             lead = None if at_start is None else times[at_start]
             for backend in self._compiled[done:n_tries]:

@@ -339,3 +339,28 @@ def test_a_compiled_runs_peaks_are_re_integrated_on_its_compiled_callbacks(monke
                 continue
             scale = max(1.0, abs(b["value"]))
             assert abs(a["value"] - b["value"]) <= GLOBAL_FACTOR * (rtol * scale + atol), (col, side)
+
+
+def test_readings_run_ahead_together_are_each_reading_run_alone(monkeypatch):
+    """The located peaks' readings of a `read_many` call run on the compiled callbacks in one call per mode
+    (`TrajectoryReader._read_ahead`, `IdaCompiledBackend.read_many`): IDA is re-initialised at every reading's own
+    start, so each reading's rows are, to the last bit, those of that reading run alone (`_reading`, one
+    `IdaCompiledBackend.read`), whatever ran on the IDA memory before it."""
+    from mechsim.dynamics.extrema import TrajectoryReader
+    calls = []
+    real = TrajectoryReader.read_many
+    monkeypatch.setattr(TrajectoryReader, "read_many",
+                        lambda self, requests: calls.append((self, list(requests))) or real(self, requests))
+    sc = mechsim.load("geneva-motor", set={"duration": "1 s", "solver.formulation": "index1",
+                                           "solver.backend": "ida-compiled"})
+    mechsim.run(sc)
+    settings = plan(sc).settings
+    reader, requests = max(calls, key=lambda c: len(c[1]))
+    assert len(requests) > 5
+    _, ready = TrajectoryReader(reader.traj, reader.angle_coordinates, settings)._read_ahead(requests)
+    assert sum(r is not None for r in ready) > 5
+    for request, hit in zip(requests, ready):
+        if hit is not None:
+            piece = TrajectoryReader(reader.traj, reader.angle_coordinates, settings)._reading(*request)
+            for a, b in zip(hit[3:], (piece.t, piece.y, piece.yp)):
+                assert np.array_equal(a, b)
