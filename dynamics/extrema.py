@@ -1101,17 +1101,18 @@ class TrajectoryReader:
         if not self._compiled_tries() or np.isnan(all_t).any():
             return anchors, ready
         # the instants within round-off of the start (`_integrate`'s), for all requests at once (t0 NaN: none)
-        t0 = np.full(n, np.nan)
+        starts_t: list = [np.nan] * n
         keys: list = [None] * n
         seen = set(self._read)
-        for i, anchor in enumerate(anchors):
-            if anchor is None or firsts[i] < anchor[2] or anchor[5] in self._own_failed:
+        for i, (anchor, f, ti) in enumerate(zip(anchors, firsts, times)):
+            if anchor is None or f < anchor[2] or anchor[5] in self._own_failed:
                 continue
-            key = self._key(anchor, times[i])
+            key = self._key(anchor, ti)
             if key in seen:                 # read before, or again in these requests: the kept reading
                 continue
             seen.add(key)
-            keys[i], t0[i] = key, anchor[2]
+            keys[i], starts_t[i] = key, anchor[2]
+        t0 = np.array(starts_t, dtype=float)
         near = 1e-12 * np.maximum(1.0, np.abs(t0))
         at_start = np.abs(all_t - np.repeat(t0, sizes)) <= np.repeat(near, sizes)
         leads = np.add.reduceat(at_start, starts, dtype=np.int64)
@@ -1148,7 +1149,7 @@ class TrajectoryReader:
                 np.array([anchors[i][4] for i in members]),
                 np.array([anchors[i][0].params for i in members], dtype=float).reshape(len(members), -1),
                 all_t[group_rows], bounds)
-            falls = np.concatenate([[0], np.cumsum(~(t[1:] >= t[:-1]))])
+            falls = np.concatenate([[0], np.cumsum(~(t[1:] >= t[:-1]))]).tolist()
             for i, (lo, _, hi), whole in zip(members, bounds.tolist(), ok.tolist()):
                 if not whole:
                     continue
@@ -1187,16 +1188,12 @@ class TrajectoryReader:
         state that segment started from (`Trajectory.starts`, after the event that opened it); none where the run
         kept no segment starts (the compiled diffrax run)."""
         n = len(items)
-        k, r = np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64)
-        first, hi = np.full(n, np.nan), np.empty(n)
-        asked = np.zeros(n, dtype=bool)
-        for i, (iv, position, f) in enumerate(items):
-            hi[i] = iv.hi
-            if 0 <= position < len(iv.anchors):
-                at = iv.anchors[position]
-                k[i], r[i] = at[0], at[1]
-            if f is not None:
-                first[i], asked[i] = f, True
+        kr = [(int(iv.anchors[position][0]), int(iv.anchors[position][1])) if 0 <= position < len(iv.anchors)
+              else (-1, 0) for iv, position, _ in items]
+        k, r = np.array(kr, dtype=np.int64).reshape(n, 2).T
+        first = np.array([np.nan if f is None else f for _, _, f in items], dtype=float)
+        asked = np.array([f is not None for _, _, f in items], dtype=bool)
+        hi = np.array([iv.hi for iv, _, _ in items], dtype=float)
         t_flat, offsets = self._row_times()
         t_row = t_flat[np.where(k >= 0, offsets[k] + r, 0)] if len(t_flat) else np.full(n, np.nan)
         earlier = asked & ((k < 0) | (first < t_row))
@@ -1215,24 +1212,22 @@ class TrajectoryReader:
             # an output row of that segment, nearer than its start
             row = np.where((seg >= 0) & (i >= 0) & (t_rows[np.maximum(i, 0)] > ts[np.maximum(seg, 0)]), i, -1)
         out: list = []
-        for i in range(n):
-            s = int(seg[i])
+        for (ki, ri), s, i, (iv, _, _) in zip(kr, seg.tolist(), row.tolist(), items):
             if s >= 0:
-                if row[i] >= 0:
+                if i >= 0:
                     try:
-                        out.append(self._row_state(int(rows[row[i], 0]), int(rows[row[i], 1]), own))
+                        out.append(self._row_state(int(rows[i, 0]), int(rows[i, 1]), own))
                         continue
                     except ReadingFailed:
                         pass
                 start = starts[s]
                 out.append((start, self.traj.model.modes[start.mode], float(self._segments[s]), start.y[0],
                             start.yp[0], None))
-            elif k[i] < 0:
-                iv = items[i][0]
+            elif ki < 0:
                 out.append(ReadingFailed(f"no state to read the interval ({iv.lo:.9g}, {iv.hi:.9g}) s from"))
             else:
                 try:
-                    out.append(self._row_state(int(k[i]), int(r[i]), own))
+                    out.append(self._row_state(ki, ri, own))
                 except ReadingFailed as exc:
                     out.append(exc)
         return out
