@@ -8,7 +8,8 @@ Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/
 with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
 c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
 Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
-(every output row at once, numpy; a long stack eliminated a row of all its systems at a time, `_stacked`),
+(every output row at once, numpy, entry by entry: `solve_entries`; a long stack eliminated an entry of all its
+systems at a time, `_stacked`),
 `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read a or lam, solved symbolically with
 sympy).
 """
@@ -39,17 +40,28 @@ def unrolled_solve(K, b, xp, spd_block: int = 0):
     code"); the pivots that remain are chosen by comparisons and `where`, as argmax would (first largest).
     Works on jax.numpy and numpy scalars alike."""
     n = K.shape[-1]
-    return _eliminate([[K[i, j] for j in range(n)] + [b[i]] for i in range(n)], xp, spd_block)
+    return xp.stack(_eliminate([[K[i, j] for j in range(n)] + [b[i]] for i in range(n)], xp, spd_block))
 
 
-def _eliminate(A, xp, spd_block: int):
+def _eliminate(A, xp, spd_block: int) -> list:
     """`unrolled_solve` on the augmented matrix [K | b] given as rows of entries (scalars, or arrays over a stack
-    of systems: every operation is elementwise); returns x stacked on the first axis."""
+    of systems: every operation is elementwise); returns the entries of x. On numpy, a pivot exchange that no
+    system of the stack makes is skipped (it would leave every entry as it was) and one that every system makes
+    exchanges the rows' entries whole (`_stacked`): the same values either way."""
     n = len(A)
     for j in range(n):
         if spd_block <= j:
             for r in range(j + 1, n):     # partial pivoting: the first largest |A[r][j]|, r >= j, to row j
-                take = xp.abs(A[r][j]) > xp.abs(A[j][j])      # (columns left of j are read no more: kept)
+                if xp is np:              # (abs: Python's on a float, numpy's on an array)
+                    take = abs(A[r][j]) > abs(A[j][j])
+                    taken = int(take) if type(take) is bool else np.count_nonzero(take)
+                    if taken == 0:
+                        continue
+                    if taken == np.size(take):
+                        A[j], A[r] = A[j][:j] + A[r][j:], A[r][:j] + A[j][j:]
+                        continue
+                else:
+                    take = xp.abs(A[r][j]) > xp.abs(A[j][j])  # (columns left of j are read no more: kept)
                 A[j], A[r] = (A[j][:j] + [xp.where(take, x, y) for x, y in zip(A[r][j:], A[j][j:])],
                               A[r][:j] + [xp.where(take, y, x) for x, y in zip(A[r][j:], A[j][j:])])
         for r in range(j + 1, n):
@@ -61,7 +73,7 @@ def _eliminate(A, xp, spd_block: int):
         for j in range(i + 1, n):
             acc = acc - A[i][j] * x[j]
         x[i] = acc / A[i][i]
-    return xp.stack(x)
+    return x
 
 
 #: set while the compiled diffrax run is traced (`unrolled_solves`): only that program takes the unrolled solve
@@ -93,10 +105,18 @@ def solve(M, G, Ql, Q0, c, xp=np):
     """(a, lam) for one system or a stack of them (leading axes): M (..., nq, nq), G (..., m, nq),
     Ql (..., nq, m), Q0 (..., nq), c (..., m); xp is numpy or jax.numpy."""
     nq, m = M.shape[-1], G.shape[-2]
-    if xp is np and M.ndim == 3 and nq + m <= UNROLLED_MAX and len(M) >= STACK_MIN + STACK_ROWS * (nq + m) ** 2:
-        solved = _stacked(M, G, Ql, Q0, c)
+    if xp is np and M.ndim == 3 and long_stack(len(M), nq + m):
+        solved = _stacked(len(M), [[M[:, i, j] for j in range(nq)] for i in range(nq)],
+                          [[G[:, k, j] for j in range(nq)] for k in range(m)],
+                          [[Ql[:, i, k] for k in range(m)] for i in range(nq)], list(Q0.T), list(c.T))
         if solved is not None:
             return solved
+    return _direct(M, G, Ql, Q0, c, xp)
+
+
+def _direct(M, G, Ql, Q0, c, xp):
+    """`solve` by the linear solver of xp (numpy's LAPACK; traced, `_linear_solve`)."""
+    nq, m = M.shape[-1], G.shape[-2]
     if m == 0:
         return _linear_solve(M, Q0, xp, spd_block=nq), xp.zeros(Q0.shape[:-1] + (0,))
     top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
@@ -106,65 +126,69 @@ def solve(M, G, Ql, Q0, c, xp=np):
     return sol[..., :nq], sol[..., nq:]
 
 
+def solve_entries(rows: int, M, G, Ql, Q0, c):
+    """`solve` on a numpy stack of `rows` systems given entry by entry, as lambdified matrices give them: M, G, Ql
+    as lists of rows of entries (nq x nq, m x nq, nq x m), Q0 and c as lists (nq, m); each entry an array over the
+    systems or a scalar that every system shares. A long stack is solved on the entries themselves (`_stacked`:
+    a shared entry's operations done once, on the scalar); otherwise on the stacked arrays (`stack_entries`)."""
+    nq, m = len(Q0), len(c)
+    if long_stack(rows, nq + m):
+        solved = _stacked(rows, M, G, Ql, Q0, c)
+        if solved is not None:
+            return solved
+    return _direct(stack_entries([e for row in M for e in row], rows, (nq, nq)),
+                   stack_entries([e for row in G for e in row], rows, (m, nq)),
+                   stack_entries([e for row in Ql for e in row], rows, (nq, m)),
+                   stack_entries(Q0, rows, (nq,)), stack_entries(c, rows, (m,)), np)
+
+
+def stack_entries(entries, rows: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Flat entries (arrays over the rows, or scalars) as an (rows, *shape) array."""
+    out = np.empty((rows, len(entries)))
+    for i, e in enumerate(entries):
+        out[:, i] = e                   # a scalar entry broadcasts over the rows
+    return out.reshape(rows, *shape)
+
+
 #: a numpy stack of at least STACK_MIN + STACK_ROWS * n**2 systems of size n <= UNROLLED_MAX is solved by `_stacked`
 STACK_MIN, STACK_ROWS = 64, 40
 
 
-def _stacked(M, G, Ql, Q0, c):
-    """`solve` on a numpy stack of systems (leading axis): the elimination of `unrolled_solve` with partial
-    pivoting in every column, as LAPACK's getrf pivots (the first largest in the column), each operation on whole
-    rows of every system at once (`_eliminate_rows`, on [K | b] copied from the blocks into one array). With
+def long_stack(rows: int, n: int) -> bool:
+    """Whether a numpy stack of `rows` systems of size n is solved by `_stacked`."""
+    return n <= UNROLLED_MAX and rows >= STACK_MIN + STACK_ROWS * n ** 2
+
+
+def _stacked(rows: int, M, G, Ql, Q0, c):
+    """`solve_entries` on a long stack: the elimination of `unrolled_solve` with partial pivoting in every column,
+    as LAPACK's getrf pivots (the first largest in the column), each operation on an entry of every system at once
+    (`_eliminate` on [K | b] held entry by entry: an array over the systems, or a scalar where every system shares
+    the entry, such as a constant mass matrix's; the same operations on the same values either way). With
     LAPACK's pivots a row that fixes one coordinate (a prescribed drive's speed constraint) is eliminated as LAPACK
     eliminates it, so that coordinate's acceleration comes out zero where LAPACK's does; the mass block unpivoted
     would not (a round-off residue instead). numpy.linalg.solve loops over the stack, one small LAPACK call per
     system, which costs more than these elementwise operations on whole columns once the stack holds more than
-    about STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). None where a
-    solution is not finite (a singular system, a NaN entry): the caller's LAPACK solve answers then, or raises."""
-    nq, m = M.shape[-1], G.shape[-2]
-    n = nq + m
-    A = np.empty((n, n + 1, len(M)))          # A[i, j]: entry (i, j) of [K | b] in every system, contiguous
-    A[:nq, :nq] = M.transpose(1, 2, 0)
-    A[:nq, nq:n] = G.transpose(2, 1, 0) - Ql.transpose(1, 2, 0)
-    A[:nq, n] = Q0.T
-    A[nq:, :nq] = G.transpose(1, 2, 0)
-    A[nq:, nq:n] = 0.0
-    A[nq:, n] = c.T
-    with np.errstate(all="ignore"):          # a zero pivot: not finite, answered below
-        x = _eliminate_rows(A)
+    about STACK_MIN + STACK_ROWS * n**2 systems (docs/benchmarks.md, "A warm run end to end"). (a (rows, nq),
+    lam (rows, m)); None where a solution is not finite (a singular system, a NaN entry): the caller's LAPACK
+    solve answers then, or raises."""
+    nq, m = len(Q0), len(c)
+
+    def entry(e):           # a shared entry as a Python float: its operations cost a fraction of numpy's
+        return np.asarray(e, dtype=float) if getattr(e, "ndim", 0) else float(e)
+    A = [[entry(e) for e in M[i]] + [entry(G[k][i]) - entry(Ql[i][k]) for k in range(m)] + [entry(Q0[i])]
+         for i in range(nq)]
+    A += [[entry(e) for e in G[k]] + [0.0] * m + [entry(c[k])] for k in range(m)]
+    try:
+        with np.errstate(all="ignore"):      # a zero pivot: not finite, answered below
+            solved = _eliminate(A, np, 0)
+    except ZeroDivisionError:                # a zero pivot that every system shares (a float's division)
+        return None
+    x = np.empty((nq + m, rows))
+    for i, e in enumerate(solved):
+        x[i] = e                             # a shared entry broadcasts over the systems
     if not np.isfinite(x).all():
         return None
     return x[:nq].T, x[nq:].T
-
-
-def _eliminate_rows(A: np.ndarray) -> np.ndarray:
-    """`_eliminate` with partial pivoting in every column on a numpy stack held as one array A (n, n + 1, systems):
-    the same operations on the same entries in the same order, so the same values to the last bit, with a row's
-    update (all its columns right of the pivot, all rows below it) done in one operation, and a pivot exchange
-    skipped where no system of the stack exchanges (it would leave every entry as it was), made by copying where every
-    system exchanges."""
-    n, count = len(A), A.shape[2]
-    for j in range(n):
-        pivot = np.abs(A[j, j])                # kept until an exchange changes row j
-        for r in range(j + 1, n):
-            take = np.abs(A[r, j]) > pivot
-            taken = np.count_nonzero(take)
-            if taken == count:
-                A[[j, r], j:] = A[[r, j], j:]
-            elif taken:
-                A[j, j:], A[r, j:] = np.where(take, A[r, j:], A[j, j:]), np.where(take, A[j, j:], A[r, j:])
-            else:
-                continue
-            pivot = np.abs(A[j, j])
-        if j + 1 < n:
-            factor = A[j + 1:, j] / A[j, j]
-            A[j + 1:, j + 1:] -= factor[:, None, :] * A[j, None, j + 1:]
-    x = np.empty((n, A.shape[2]))
-    for i in reversed(range(n)):
-        acc = A[i, n]
-        for j in range(i + 1, n):
-            acc = acc - A[i, j] * x[j]
-        x[i] = acc / A[i, i]
-    return x
 
 
 def solve_symbolic(M, G, Ql, Q0, c):

@@ -73,14 +73,6 @@ def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:
     return f"{name}_position_m", f"{name}_speed_m_s", f"{name}_accel_m_s2"
 
 
-def _rows(entries, n: int, shape: tuple[int, ...]) -> np.ndarray:
-    """Flat lambdified entries (arrays over the rows, or scalars) as an (n, *shape) array."""
-    out = np.empty((n, len(entries)))
-    for i, e in enumerate(entries):
-        out[:, i] = e                   # a scalar entry broadcasts over the rows
-    return out.reshape(n, *shape)
-
-
 def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: tuple):
     """Accelerations and multipliers from the KKT system at every output row (exact for the row's q, v).
 
@@ -92,30 +84,36 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
 
 
 def _kkt(mf, t, q, v, x, p):
-    """(M, a, lam) at every row: `kkt_rows` with the mass matrices it solved with (the kinetic energy's)."""
+    """(M, a, lam) at every row: `kkt_rows` with the mass matrix it solved with (the kinetic energy's), as the
+    lambdified entries (nq lists of nq: arrays over the rows, or scalars every row shares), the system solved
+    entry by entry (`kkt.solve_entries`)."""
     f = mf.kkt_flat
     n, nq, m = len(t), q.shape[1], mf.m
-    M = _rows(f["mass"](q.T, p), n, (nq, nq))
-    Q0 = _rows(f["force0"](t, q.T, v.T, x.T, p), n, (nq,))
+    qT, vT, xT = q.T, v.T, x.T
+    mass = f["mass"](qT, p)
+    M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
+    Q0 = f["force0"](t, qT, vT, xT, p)
     if m == 0:
-        return (M,) + kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), Q0, np.zeros((n, 0)))
-    G = _rows(f["G"](t, q.T, p), n, (m, nq))
-    Ql = _rows(f["force_lam"](t, q.T, v.T, x.T, p), n, (nq, m))
-    gamma = _rows(f["gamma"](t, q.T, v.T, p), n, (m,))
-    return (M,) + kkt.solve(M, G, Ql, Q0, -gamma)
+        return (M,) + kkt.solve_entries(n, M, [], [[] for _ in range(nq)], Q0, [])
+    G, Ql = f["G"](t, qT, p), f["force_lam"](t, qT, vT, xT, p)
+    return (M,) + kkt.solve_entries(n, M, [G[k * nq:(k + 1) * nq] for k in range(m)],
+                                    [Ql[i * m:(i + 1) * m] for i in range(nq)], Q0,
+                                    [-np.asarray(g, dtype=float) for g in f["gamma"](t, qT, vT, p)])
 
 
-def _quadratic_form(v: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """v_r^T M_r v_r of every row r: numpy.einsum("ri,rij,rj->r"), whose sum over many rows takes the terms
-    (v_i M_ij) v_j in order of i, then j; that sum a column at a time (the same values to the last bit, several
-    times faster on a few coordinates). A short stack goes to einsum itself (on one row it orders the sum
-    otherwise)."""
-    if len(v) < 64:
-        return np.einsum("ri,rij,rj->r", v, M, v)
+def _quadratic_form(v: np.ndarray, M) -> np.ndarray:
+    """v_r^T M_r v_r of every row r, v as (rows, nq) and M as nq lists of nq entries (arrays over the rows, or
+    scalars): numpy.einsum("ri,rij,rj->r") on M stacked, whose sum over many rows takes the terms (v_i M_ij) v_j
+    in order of i, then j; that sum an entry at a time (the same values to the last bit, several times faster on a
+    few coordinates). A short stack goes to einsum itself (on one row it orders the sum otherwise)."""
+    rows, nq = v.shape
+    if rows < 64:
+        return np.einsum("ri,rij,rj->r", v, kkt.stack_entries([e for row in M for e in row], rows, (nq, nq)), v)
+    v = v.T
     total = None
-    for i in range(v.shape[1]):
-        for j in range(v.shape[1]):
-            term = v[:, i] * M[:, i, j] * v[:, j]
+    for i in range(nq):
+        for j in range(nq):
+            term = v[i] * M[i][j] * v[j]
             total = term if total is None else total + term
     return total
 
@@ -267,7 +265,7 @@ def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) ->
     values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, p)
     for row, val in zip(slots.readouts, values):
         block[row] = val                               # a scalar read-out broadcasts over the rows
-    block[slots.ke] = 0.5 * _quadratic_form(v, M)                 # 1/2 v^T M v with the KKT's M
+    block[slots.ke] = 0.5 * _quadratic_form(v, M)               # 1/2 v^T M v with the KKT's M
     block[slots.works] = y[:, ix["work"]].T
     if residual:
         n_mech = slots.n_mech

@@ -146,12 +146,13 @@ def test_long_stack_keeps_a_prescribed_coordinate_at_zero_acceleration():
 
 @pytest.mark.parametrize("nq, m", [(1, 0), (2, 1), (3, 2), (4, 3)])
 def test_long_stack_rows_eliminate_as_the_unrolled_elimination(nq, m):
-    """The long stack's elimination on one array (`kkt._eliminate_rows`, whole rows a step) performs the operations
-    of the unrolled elimination (`kkt._eliminate` with pivoting in every column) on every system: the same values to
-    the last bit, where no system, some or all exchange rows at a pivot, and on systems with zero blocks."""
+    """The long stack's elimination (`kkt._eliminate` on entries that are arrays over the systems, or one scalar
+    where every system shares the entry) performs on every system the operations of the elimination of that system
+    alone, on its own scalars: the same values to the last bit, where no system, some or all exchange rows at a
+    pivot, on systems with zero blocks, and with a leading block that every system shares."""
     rng = np.random.default_rng(17 + nq + m)
     rows, n = 300, nq + m
-    for case in range(4):
+    for case in range(5):
         A = rng.standard_normal((n, n + 1, rows))
         if case == 1:       # a dominant diagonal: no exchange
             A[np.arange(n), np.arange(n)] += 100.0 * np.sign(A[np.arange(n), np.arange(n)])
@@ -160,7 +161,28 @@ def test_long_stack_rows_eliminate_as_the_unrolled_elimination(nq, m):
         elif case == 3:     # zero blocks, as a KKT matrix has
             A[nq:, nq:n] = 0.0
             A[:, 0][rng.random((n, rows)) < 0.3] = 0.0
+        elif case == 4:     # a leading block every system shares (a constant mass matrix), zeros in it
+            A[:nq, :nq] = A[:nq, :nq, :1] * (rng.random((nq, nq, 1)) < 0.7)
+        entries = [[np.float64(A[i, j, 0]) if np.all(A[i, j] == A[i, j, 0]) else A[i, j].copy()
+                    for j in range(n + 1)] for i in range(n)]
         with np.errstate(all="ignore"):        # a zero column gives zero pivots: the same NaN in both
-            expected = kkt._eliminate([[A[i, j].copy() for j in range(n + 1)] for i in range(n)], np, 0)
-            got = kkt._eliminate_rows(A.copy())
+            got = np.array([np.broadcast_to(e, (rows,)) for e in kkt._eliminate(entries, np, 0)])
+            expected = np.array([kkt._eliminate([[np.float64(A[i, j, s]) for j in range(n + 1)] for i in range(n)],
+                                                np, 0) for s in range(rows)]).T
         np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+
+
+def test_entries_with_shared_scalars_solve_as_the_stacked_arrays():
+    """`kkt.solve_entries` on lambdified entries, some of them one scalar every system shares (a constant mass
+    matrix, a zero friction block), gives the long stack's solution of the same systems stacked as arrays, to the
+    last bit; a short stack, LAPACK's."""
+    rng = np.random.default_rng(23)
+    nq, m = 2, 1
+    for rows in (kkt.STACK_MIN + kkt.STACK_ROWS * 9, 50):
+        M = np.diag([0.02, 0.0015])
+        G = rng.standard_normal((rows, m, nq))
+        Q0, c = rng.standard_normal((rows, nq)), rng.standard_normal((rows, m))
+        a, lam = kkt.solve_entries(rows, [[0.02, 0], [0, 0.0015]], [list(G[:, 0].T)], [[0], [0.0]], list(Q0.T),
+                                   list(c.T))
+        a_ref, lam_ref = kkt.solve(np.broadcast_to(M, (rows, nq, nq)).copy(), G, np.zeros((rows, nq, m)), Q0, c)
+        np.testing.assert_array_equal(np.c_[a, lam].view(np.int64), np.c_[a_ref, lam_ref].view(np.int64))
