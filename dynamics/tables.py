@@ -107,7 +107,8 @@ def _quadratic_form(v: np.ndarray, M) -> np.ndarray:
     in order of i, then j; that sum an entry at a time (the same values to the last bit, several times faster on a
     few coordinates). A short stack goes to einsum itself (on one row it orders the sum otherwise)."""
     rows, nq = v.shape
-    if rows < 64:
+    if rows < 64:               # (v in C order, as einsum was given it from the rows of states)
+        v = np.ascontiguousarray(v)
         return np.einsum("ri,rij,rj->r", v, kkt.stack_entries([e for row in M for e in row], rows, (nq, nq)), v)
     v = v.T
     total = None
@@ -134,8 +135,11 @@ def _mode_params(pieces) -> tuple:
         return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
                      else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
                      for j in range(len(first)))
-    same = (table == table[0]).all(axis=0)
-    return tuple(first[j] if same[j] else np.repeat(table[:, j], counts) for j in range(len(first)))
+    differ = np.flatnonzero(~(table == table[0]).all(axis=0)).tolist()
+    params = list(first)
+    for j, per_row in zip(differ, np.repeat(table[:, differ].T, counts, axis=1)):   # all at once, a row each
+        params[j] = per_row
+    return tuple(params)
 
 
 def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple) -> np.ndarray:
@@ -154,6 +158,8 @@ def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple) -> np.ndarray
 def _kept_rows(t: np.ndarray) -> np.ndarray | None:
     """Rows to keep where an instant repeats (the later one, the state after a mode change), as
     DataFrame.drop_duplicates(subset="t_s", keep="last"); None where every row is kept."""
+    if len(t) > 1 and (t[1:] > t[:-1]).all():        # strictly increasing: nothing repeats
+        return None
     d = np.diff(t)
     if np.all(d >= 0):              # time order (every backend's): repeats are neighbours
         keep = np.append(d != 0, True)
@@ -234,13 +240,13 @@ def _unwrapped(out: np.ndarray, q: np.ndarray, pieces) -> None:
         np.add(q.T, np.asarray(offsets[0], dtype=float)[:, None], out=out)
         return
     counts = [len(pc.t) for pc in pieces]
-    shift = np.repeat(np.array([np.zeros(q.shape[1]) if o is None else o for o in offsets], dtype=float), counts,
-                      axis=0)
+    shift = np.repeat(np.array([np.zeros(q.shape[1]) if o is None else o for o in offsets], dtype=float).T, counts,
+                      axis=1)
     if all(o is not None for o in offsets):
-        np.add(q.T, shift.T, out=out)
+        np.add(q.T, shift, out=out)
         return
     out[...] = q.T
-    np.add(out, shift.T, out=out, where=np.repeat([o is not None for o in offsets], counts))
+    np.add(out, shift, out=out, where=np.repeat([o is not None for o in offsets], counts))
 
 
 def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) -> np.ndarray:
@@ -250,28 +256,36 @@ def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) ->
     mf = model.modes[pieces[0].mode]
     ix, ncoord = mf.index, len(model.coordinates)
     slots = _kept(mf, ("slots", names, residual), lambda: _Slots(model, mf, names, residual))
-    t = np.concatenate([pc.t for pc in pieces])
-    y = np.concatenate([pc.y for pc in pieces])
-    q, v, x = y[:, ix["q"]], y[:, ix["v"]], y[:, ix["ext"]]
-    p = _mode_params(pieces)
-    block = np.empty((len(names), len(t)))
+    block = np.empty((len(names), sum(len(pc.t) for pc in pieces)))
+    # the states a variable a row (contiguous: every evaluation below reads them elementwise)
+    if len(pieces) == 1:
+        t = block[0] = pieces[0].t
+        yT = np.ascontiguousarray(pieces[0].y.T)
+    else:
+        t = np.concatenate([pc.t for pc in pieces], out=block[0])
+        yT = np.concatenate([pc.y.T for pc in pieces], axis=1)
     if slots.missing is not None:
         block[slots.missing] = np.nan
-    block[0] = t
-    M, a, lam = _kkt(mf, t, q, v, x, p)
-    block[2:1 + 3 * ncoord:3] = v.T
+    qT, vT, xT = yT[ix["q"]], yT[ix["v"]], yT[ix["ext"]]
+    p = _mode_params(pieces)
+    M, a, lam = _kkt(mf, t, qT.T, vT.T, xT.T, p)
+    block[2:1 + 3 * ncoord:3] = vT
     block[3:1 + 3 * ncoord:3] = a.T
-    _unwrapped(block[1:1 + 3 * ncoord:3], q, pieces)
-    values = mf.readouts["_all"](t, q.T, v.T, a.T, lam.T, x.T, p)
+    _unwrapped(block[1:1 + 3 * ncoord:3], qT.T, pieces)
+    values = mf.readouts["_all"](t, qT, vT, a.T, lam.T, xT, p)
     for row, val in zip(slots.readouts, values):
         block[row] = val                               # a scalar read-out broadcasts over the rows
-    block[slots.ke] = 0.5 * _quadratic_form(v, M)               # 1/2 v^T M v with the KKT's M
-    block[slots.works] = y[:, ix["work"]].T
+    np.multiply(0.5, _quadratic_form(vT.T, M), out=block[slots.ke])          # 1/2 v^T M v with the KKT's M
+    block[slots.works] = yT[ix["work"]]
     if residual:
         n_mech = slots.n_mech
-        block[slots.residual] = np.max(np.abs(_constraint_values(mf, t, q, p)[:, :n_mech]), axis=1) \
-            if n_mech > 0 else 0.0
-    block[slots.ext] = x.T
+        if n_mech == 1:         # (the largest of one: that one)
+            np.abs(_constraint_values(mf, t, qT.T, p)[:, 0], out=block[slots.residual])
+        elif n_mech > 1:
+            np.max(np.abs(_constraint_values(mf, t, qT.T, p)[:, :n_mech]), axis=1, out=block[slots.residual])
+        else:
+            block[slots.residual] = 0.0
+    block[slots.ext] = xT
     return block
 
 
@@ -293,33 +307,55 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
     """One row per output instant, read-outs evaluated with the mode and parameters of that instant.
 
     The read-outs, the KKT solution, the kinetic energy and the constraint residual are evaluated once per mode on
-    all of that mode's rows (`_mode_block`), copied into one block a piece at a time, from which the frame is
-    built once (columns: `_layout`; NaN where a mode lacks a read-out); a later instant replaces an earlier one
-    at the same time (the state after a mode change)."""
+    all of that mode's rows (`_mode_block`), whose pieces are joined in time order into one block, from which the
+    frame is built once (columns: `_layout`; NaN where a mode lacks a read-out); a later instant replaces an
+    earlier one at the same time (the state after a mode change)."""
     model = traj.model
     pieces = [pc for pc in traj.pieces if len(pc.t)] or list(traj.pieces[:1])
     by_mode: dict[str, list[int]] = {}
     for k, pc in enumerate(pieces):
         by_mode.setdefault(pc.mode, []).append(k)
     names = _layout(model, angle_coordinates, list(by_mode))
-    starts = np.cumsum([0] + [len(pc.t) for pc in pieces])
-    out = np.empty((len(names), int(starts[-1])))
+    counts = [len(pc.t) for pc in pieces]
+    parts = [None] * len(pieces)          # each piece's columns: a view of its mode's block
     for ks in by_mode.values():
         block = _mode_block(model, [pieces[k] for k in ks], names)
         offset = 0
         for k in ks:
-            rows = int(starts[k + 1] - starts[k])
-            out[:, starts[k]:starts[k + 1]] = block[:, offset:offset + rows]
-            offset += rows
-    piece_of_row = np.repeat(np.arange(len(pieces)), np.diff(starts))
+            parts[k] = block[:, offset:offset + counts[k]]
+            offset += counts[k]
+    out = parts[0].copy() if len(parts) == 1 else np.concatenate(parts, axis=1)
     keep = _kept_rows(out[0])
     if keep is not None:
-        out, piece_of_row = out[:, keep], piece_of_row[keep]
-    # the mode names typed once each (not pandas' string inference on every row), then taken row by row: the
-    # column pandas would infer from the names repeated
+        out = out[:, keep]
+        counts = np.bincount(np.repeat(np.arange(len(pieces)), counts)[keep], minlength=len(pieces)).tolist()
     code = {mode: i for i, mode in enumerate(by_mode)}
-    piece_mode = np.array([code[pc.mode] for pc in pieces], dtype=np.intp)
-    return _frame(out, names, _typed_names(tuple(by_mode)).take(piece_mode[piece_of_row]))
+    return _frame(out, names, _mode_column(tuple(by_mode), [code[pc.mode] for pc in pieces], counts))
+
+
+def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
+    """modes[codes[k]] repeated counts[k] times, k in order, as the column pandas infers for those names (the
+    names typed once each, `_typed_names`, then taken row by row). Where that is pyarrow's large string array, as
+    pandas' take builds it, it is put together from its buffers (offsets and bytes, a run of a name at a time:
+    a fraction of the take's cost); pandas' take where the internals it relies on are missing or changed."""
+    typed = _typed_names(modes)
+    n = sum(counts)
+    if n and getattr(getattr(typed, "_pa_array", None), "type", None) is not None:
+        try:
+            import pyarrow as pa
+            if typed._pa_array.type == pa.large_string():
+                raw = [m.encode() for m in modes]
+                offsets = np.empty(n + 1, dtype=np.int64)
+                offsets[0] = 0
+                np.cumsum(np.repeat(np.array([len(raw[c]) for c in codes], dtype=np.int64), counts),
+                          out=offsets[1:])
+                data = b"".join([raw[c] * k for c, k in zip(codes, counts)])
+                column = pa.Array.from_buffers(pa.large_string(), n, [None, pa.py_buffer(offsets),
+                                                                      pa.py_buffer(data)])
+                return typed._from_pyarrow_array(pa.chunked_array([column]))
+        except Exception:      # noqa: BLE001  (a changed internal: pandas' take below is the reference)
+            pass
+    return typed.take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
 
 
 def _typed_names(names: tuple[str, ...]):
