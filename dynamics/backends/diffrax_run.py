@@ -503,7 +503,8 @@ class DenseOutput:
         self._table = None
 
     def _tables(self) -> tuple:
-        """(segment starts, ends, mode-and-parameters group of each; the taken steps' records, their t0, t_acc,
+        """(segment starts, ends, mode-and-parameters group of each, its run (consecutive segments of one group
+        share one), whether starts and ends are each in order (and not NaN); the taken steps' records, their t0, t_acc,
         segment (its index in `segments`), each segment's first and last step + 1, and whether t_acc is sorted over
         all of them), built once per run."""
         if self._table is None:
@@ -513,6 +514,9 @@ class DenseOutput:
             hi = np.array([g[1] for g in S], dtype=float)
             group = np.array([groups.setdefault((g[4], np.asarray(g[5], float).tobytes(),
                                                   np.asarray(g[6], float).tobytes()), len(groups)) for g in S])
+            run = np.concatenate([[0], np.cumsum(group[1:] != group[:-1])]) if len(S) else group   # runs of a group
+            bounds = [g[0] for g in S], [g[1] for g in S]
+            ordered = all(all(x <= y for x, y in zip(b[:-1], b[1:])) and all(x == x for x in b) for b in bounds)
             first = {}                # call -> index of its first segment
             for n, g in enumerate(S):
                 first.setdefault(g[2], n)
@@ -532,7 +536,7 @@ class DenseOutput:
                 rec, seg = rec[order], seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
             acc = np.ascontiguousarray(rec[:, ST_ACC])
-            self._table = (lo, hi, group, rec, rec[:, ST_T0], acc, at, seg, _sorted(acc))
+            self._table = (lo, hi, group, run, ordered, rec, rec[:, ST_T0], acc, at, seg, _sorted(acc))
         return self._table
 
     def _fn(self):
@@ -555,19 +559,34 @@ class DenseOutput:
         out: list = [None] * len(requests)
         if not requests or not self.segments:
             return out
-        s_lo, s_hi, group, rec, t0, acc, at, step_seg, acc_sorted = self._tables()
+        s_lo, s_hi, group, run, ordered, rec, t0, acc, at, step_seg, acc_sorted = self._tables()
         span = np.array([(r[1], r[2]) for r in requests], dtype=float).reshape(-1, 2)
         lengths = [len(r[0]) for r in requests]
         sizes = np.array(lengths)
-        inside = (s_lo < span[:, 1:]) & (s_hi > span[:, :1])             # requests x segments
-        own = inside.argmax(axis=1)
-        ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own, None])).any(axis=1)
         rid = np.repeat(np.arange(len(requests)), sizes)
         ts = (np.asarray(requests[0][0], dtype=float) if len(requests) == 1
               else np.concatenate([np.asarray(r[0], dtype=float) for r in requests]))
-        col = ts[:, None]
-        hold = inside[rid] & (col >= s_lo) & (col <= s_hi)                # instants x segments
-        seg = hold.argmax(axis=1)                                         # the first segment that holds each
+        if ordered and not np.isnan(span).any():
+            # segments in time order (starts and ends each sorted): those overlapping a request, and those holding
+            # an instant, are each a range of them, found by searches (the same first ones as the matrices below)
+            last = len(s_lo) - 1
+            lo_in = np.searchsorted(s_hi, span[:, 0], side="right")      # the first ending after the request's lo
+            hi_in = np.searchsorted(s_lo, span[:, 1], side="left") - 1   # the last starting before its hi
+            some_in = lo_in <= hi_in
+            own = np.where(some_in, lo_in, 0)
+            ok = some_in & (sizes > 0) & (run[np.minimum(lo_in, last)] == run[np.maximum(hi_in, 0)])
+            seg_lo = np.maximum(np.searchsorted(s_hi, ts, side="left"), lo_in[rid])   # first: ends at or after t
+            seg_hi = np.minimum(np.searchsorted(s_lo, ts, side="right") - 1, hi_in[rid])   # last: starts by t
+            held = seg_lo <= seg_hi
+            seg = np.where(held, seg_lo, 0)
+        else:
+            inside = (s_lo < span[:, 1:]) & (s_hi > span[:, :1])             # requests x segments
+            own = inside.argmax(axis=1)
+            ok = inside.any(axis=1) & (sizes > 0) & ~(inside & (group != group[own, None])).any(axis=1)
+            col = ts[:, None]
+            hold = inside[rid] & (col >= s_lo) & (col <= s_hi)                # instants x segments
+            seg = hold.argmax(axis=1)                                         # the first segment that holds each
+            held = hold.any(axis=1)
         a, b = at[seg], at[seg + 1]
         # the step of each instant's segment whose t_acc is the first at or after it (the segment's last where
         # none): its segment's first step + its steps before the instant (t_acc < t). Where t_acc is sorted over
@@ -587,7 +606,7 @@ class DenseOutput:
             steps = steps[n_rec:]
         some = b > a
         j = np.where(some, np.minimum(steps, b - 1), 0)
-        good = hold.any(axis=1) & some & (t0[j] <= ts) & (ts <= acc[j])
+        good = held & some & (t0[j] <= ts) & (ts <= acc[j])
         if not good.all():
             ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
         read = ok[rid]
@@ -600,15 +619,16 @@ class DenseOutput:
             at_t[:n] = tt[c:c + n]
             parts.append(np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n])   # (waited for: staging free again)
         z = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros((0, self.entry.jmod.nz))
-        own_at, start = own.tolist(), 0
+        own_at, segments, start = own.tolist(), self.segments, 0
         ys: dict = {}                           # the IDA layout, once per mode
         for r in np.flatnonzero(ok).tolist():
-            g = self.segments[own_at[r]]
+            g = segments[own_at[r]]
             y = ys.get(g[4])
             if y is None:
                 y = ys[g[4]] = state_rows(self.model.modes[g[4]], self.nq, z)
-            out[r] = (g[4], g[5], g[6], y[start:start + lengths[r]])
-            start += lengths[r]
+            end = start + lengths[r]
+            out[r] = (g[4], g[5], g[6], y[start:end])
+            start = end
         return out
 
 
