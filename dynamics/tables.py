@@ -80,16 +80,16 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
     multiplier states are not accurate enough to report forces from; the KKT solution at the integrated
     (q, v) is, in every formulation and backend.
     """
-    return _kkt(mf, t, q, v, x, p)[1:]
+    return _kkt(mf, t, list(q.T), list(v.T), list(x.T), p)[1:]
 
 
-def _kkt(mf, t, q, v, x, p):
+def _kkt(mf, t, qT, vT, xT, p):
     """(M, a, lam) at every row: `kkt_rows` with the mass matrix it solved with (the kinetic energy's), as the
     lambdified entries (nq lists of nq: arrays over the rows, or scalars every row shares), the system solved
-    entry by entry (`kkt.solve_entries`)."""
+    entry by entry (`kkt.solve_entries`). qT, vT, xT: a list of each variable's rows (the generated functions
+    unpack them: a list unpacks at a tenth of an array's cost)."""
     f = mf.kkt_flat
-    n, nq, m = len(t), q.shape[1], mf.m
-    qT, vT, xT = q.T, v.T, x.T
+    n, nq, m = len(t), len(qT), mf.m
     mass = f["mass"](qT, p)
     M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
     Q0 = f["force0"](t, qT, vT, xT, p)
@@ -142,11 +142,11 @@ def _mode_params(pieces) -> tuple:
     return tuple(params)
 
 
-def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple) -> np.ndarray:
-    """Phi(t, q) as (rows, m): one call on all rows; row by row where an entry does not broadcast (a constant
-    constraint entry makes the lambdified matrix ragged)."""
+def _constraint_values(mf, t: np.ndarray, q: np.ndarray, p: tuple, qT: list | None = None) -> np.ndarray:
+    """Phi(t, q) as (rows, m): one call on all rows (qT: q's rows as a list, if at hand); row by row where an entry
+    does not broadcast (a constant constraint entry makes the lambdified matrix ragged)."""
     try:
-        phi = np.asarray(mf.phi(t, q.T, p), dtype=float)
+        phi = np.asarray(mf.phi(t, q.T if qT is None else qT, p), dtype=float)
         if phi.ndim == 3 and phi.shape[:2] == (mf.m, 1) and phi.shape[2] == len(t):
             return phi[:, 0, :].T
     except (ValueError, TypeError):
@@ -267,12 +267,13 @@ def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) ->
     if slots.missing is not None:
         block[slots.missing] = np.nan
     qT, vT, xT = yT[ix["q"]], yT[ix["v"]], yT[ix["ext"]]
+    ql, vl, xl = list(qT), list(vT), list(xT)          # (the generated functions unpack lists cheaper)
     p = _mode_params(pieces)
-    M, a, lam = _kkt(mf, t, qT.T, vT.T, xT.T, p)
+    M, a, lam = _kkt(mf, t, ql, vl, xl, p)
     block[2:1 + 3 * ncoord:3] = vT
     block[3:1 + 3 * ncoord:3] = a.T
     _unwrapped(block[1:1 + 3 * ncoord:3], qT.T, pieces)
-    values = mf.readouts["_all"](t, qT, vT, a.T, lam.T, xT, p)
+    values = mf.readouts["_all"](t, ql, vl, list(a.T), list(lam.T), xl, p)
     for row, val in zip(slots.readouts, values):
         block[row] = val                               # a scalar read-out broadcasts over the rows
     np.multiply(0.5, _quadratic_form(vT.T, M), out=block[slots.ke])          # 1/2 v^T M v with the KKT's M
@@ -280,9 +281,9 @@ def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) ->
     if residual:
         n_mech = slots.n_mech
         if n_mech == 1:         # (the largest of one: that one)
-            np.abs(_constraint_values(mf, t, qT.T, p)[:, 0], out=block[slots.residual])
+            np.abs(_constraint_values(mf, t, qT.T, p, ql)[:, 0], out=block[slots.residual])
         elif n_mech > 1:
-            np.max(np.abs(_constraint_values(mf, t, qT.T, p)[:, :n_mech]), axis=1, out=block[slots.residual])
+            np.max(np.abs(_constraint_values(mf, t, qT.T, p, ql)[:, :n_mech]), axis=1, out=block[slots.residual])
         else:
             block[slots.residual] = 0.0
     block[slots.ext] = xT
@@ -360,7 +361,7 @@ def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
 
 def _typed_names(names: tuple[str, ...]):
     """The names as the array pandas infers for them in a column (its string dtype), inferred once per set of names
-    and pandas' string options (`_inferred`); never itself put in a frame (a frame gets its `take`)."""
+    and pandas' string options (`_inferred`); never itself put in a frame (a frame gets `_mode_column`'s array)."""
     return _inferred(("typed", names), lambda: pd.Series(np.asarray(names, dtype=object)).array)
 
 
