@@ -127,17 +127,21 @@ def _mode_params(pieces) -> tuple:
     if all(p.params == first for p in pieces[1:]):
         return first
     counts = [len(p.t) for p in pieces]
-    try:                                # pieces x parameters, compared a parameter at a time over all pieces
-        table = np.array([p.params for p in pieces], dtype=float)
+    # the pieces' distinct parameter tuples (pieces read from one segment share its tuple: converted once)
+    distinct: dict = {}
+    which = [distinct.setdefault(id(p.params), (len(distinct), p.params))[0] for p in pieces]
+    try:                                # distinct tuples x parameters, compared a parameter at a time over them all
+        table = np.array([params for _, params in distinct.values()], dtype=float)
     except (TypeError, ValueError):
         table = None
-    if table is None or table.shape != (len(pieces), len(first)):
+    if table is None or table.shape != (len(distinct), len(first)):
         return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
                      else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
                      for j in range(len(first)))
     differ = np.flatnonzero(~(table == table[0]).all(axis=0)).tolist()
     params = list(first)
-    for j, per_row in zip(differ, np.repeat(table[:, differ].T, counts, axis=1)):   # all at once, a row each
+    per_piece = table[:, differ] if len(distinct) == len(pieces) else table[which][:, differ]
+    for j, per_row in zip(differ, np.repeat(per_piece.T, counts, axis=1)):    # all at once, a row each
         params[j] = per_row
     return tuple(params)
 
@@ -236,7 +240,7 @@ def _unwrapped(out: np.ndarray, q: np.ndarray, pieces) -> None:
     if all(o is None for o in offsets):
         out[...] = q.T
         return
-    if len(pieces) == 1:
+    if all(o is offsets[0] for o in offsets):          # one piece, or pieces of one call: one offset
         np.add(q.T, np.asarray(offsets[0], dtype=float)[:, None], out=out)
         return
     counts = [len(pc.t) for pc in pieces]
