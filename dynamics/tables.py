@@ -84,15 +84,24 @@ def kkt_rows(mf, t: np.ndarray, q: np.ndarray, v: np.ndarray, x: np.ndarray, p: 
 
 
 def _kkt(mf, t, qT, vT, xT, p):
-    """(M, a, lam) at every row: `kkt_rows` with the mass matrix it solved with (the kinetic energy's), as the
-    lambdified entries (nq lists of nq: arrays over the rows, or scalars every row shares), the system solved
-    entry by entry (`kkt.solve_entries`). qT, vT, xT: a list of each variable's rows (the generated functions
-    unpack them: a list unpacks at a tenth of an array's cost)."""
+    """(M, a, lam) at every row: `kkt_rows` with the mass matrix it solved with (the kinetic energy's): on a long
+    stack as the lambdified entries (nq lists of nq: arrays over the rows, or scalars every row shares), the
+    system solved entry by entry (`kkt.solve_entries`); on a short one stacked (rows, nq, nq), solved by LAPACK.
+    qT, vT, xT: a list of each variable's rows (the generated functions unpack them: a list unpacks at a tenth of
+    an array's cost)."""
     f = mf.kkt_flat
     n, nq, m = len(t), len(qT), mf.m
     mass = f["mass"](qT, p)
-    M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
     Q0 = f["force0"](t, qT, vT, xT, p)
+    if not kkt.long_stack(n, nq + m):     # a short stack: LAPACK's, on the stacked arrays (M kept stacked)
+        M = kkt.stack_entries(mass, n, (nq, nq))
+        if m == 0:
+            return (M,) + kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), kkt.stack_entries(Q0, n, (nq,)),
+                                    np.zeros((n, 0)))
+        return (M,) + kkt.solve(M, kkt.stack_entries(f["G"](t, qT, p), n, (m, nq)),
+                                kkt.stack_entries(f["force_lam"](t, qT, vT, xT, p), n, (nq, m)),
+                                kkt.stack_entries(Q0, n, (nq,)), -kkt.stack_entries(f["gamma"](t, qT, vT, p), n, (m,)))
+    M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
     if m == 0:
         return (M,) + kkt.solve_entries(n, M, [], [[] for _ in range(nq)], Q0, [])
     G, Ql = f["G"](t, qT, p), f["force_lam"](t, qT, vT, xT, p)
@@ -102,19 +111,22 @@ def _kkt(mf, t, qT, vT, xT, p):
 
 
 def _quadratic_form(v: np.ndarray, M) -> np.ndarray:
-    """v_r^T M_r v_r of every row r, v as (rows, nq) and M as nq lists of nq entries (arrays over the rows, or
-    scalars): numpy.einsum("ri,rij,rj->r") on M stacked, whose sum over many rows takes the terms (v_i M_ij) v_j
-    in order of i, then j; that sum an entry at a time (the same values to the last bit, several times faster on a
-    few coordinates). A short stack goes to einsum itself (on one row it orders the sum otherwise)."""
+    """v_r^T M_r v_r of every row r, v as (rows, nq) and M as (rows, nq, nq) or nq lists of nq entries (arrays over
+    the rows, or scalars): numpy.einsum("ri,rij,rj->r") on M stacked, whose sum over many rows takes the terms
+    (v_i M_ij) v_j in order of i, then j; that sum an entry at a time (the same values to the last bit, several
+    times faster on a few coordinates). A short stack goes to einsum itself (on one row it orders the sum
+    otherwise)."""
     rows, nq = v.shape
+    stacked = isinstance(M, np.ndarray)       # (rows, nq, nq), or entries
     if rows < 64:               # (v in C order, as einsum was given it from the rows of states)
         v = np.ascontiguousarray(v)
-        return np.einsum("ri,rij,rj->r", v, kkt.stack_entries([e for row in M for e in row], rows, (nq, nq)), v)
+        return np.einsum("ri,rij,rj->r", v, M if stacked else kkt.stack_entries([e for row in M for e in row], rows,
+                                                                                (nq, nq)), v)
     v = v.T
     total = None
     for i in range(nq):
         for j in range(nq):
-            term = v[i] * M[i][j] * v[j]
+            term = v[i] * (M[:, i, j] if stacked else M[i][j]) * v[j]
             total = term if total is None else total + term
     return total
 
