@@ -80,10 +80,9 @@ def _friction(df, rtol, atol, power_col, label, names=None):
     force, slip = _column(df, "friction_force_N", names), _column(df, "slip_speed_m_s", names)
     if force is not None and slip is not None:
         du = GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(slip), initial=0.0)) + atol * LEVER_M)
-        bound = np.abs(force)
-        np.multiply(bound, -du, out=bound)          # -|F_f| du (a sign change commutes with the rounding)
-    else:       # one bound for every row
-        bound = -GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(power), initial=0.0)) + atol)
+        bound = -np.abs(force) * du
+    else:
+        bound = np.full(len(power), -GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(power), initial=0.0)) + atol))
     return label, power, bound
 
 
@@ -93,7 +92,8 @@ def _heat_generated(df, rtol, atol, names=None):
         return None
     scale = float(np.nanmax(np.abs(heat), initial=0.0))
     gained = heat - heat[0]
-    return "heat generated since the start (J)", gained, -GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale))
+    return "heat generated since the start (J)", gained, np.full(len(heat), -GLOBAL_FACTOR * (
+        rtol * scale + atol * max(1.0, scale)))
 
 
 def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=None,
@@ -101,36 +101,23 @@ def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=N
     """Per row: works (signed into the system) - change of kinetic energy - impact losses up to that row (J).
     names: the columns to look at (default: all); works: their work columns as one array, if already read.
     df: a frame or its TableColumns."""
-    closed = _closure(_columns(df), events, names, works)
-    return None if closed is None else closed[0]
-
-
-def _closure(df: TableColumns, events, names, works):
-    """(`energy_closure`, the works less their start: rows x works), or None."""
+    df = _columns(df)
     work_names = _works(df, names)
     if not work_names or "kinetic_energy_J" not in (df if names is None else names) or not len(df.frame):
         return None
     t = np.asarray(df["t_s"], dtype=float)
     w = _matrix(df, work_names) if works is None else works
     ke = np.asarray(df["kinetic_energy_J"], dtype=float)
-    gained = w - w[0]
-    closure = gained.sum(axis=1) - (ke - ke[0])
+    lost = np.zeros(len(t))
     ev = None if events is None else _columns(events)
-    if ev is not None and len(ev.frame) and "energy_lost_J" in ev:       # (no loss: nothing to take off)
+    if ev is not None and len(ev.frame) and "energy_lost_J" in ev:
         te, el = event_floats(ev, "t_s"), event_floats(ev, "energy_lost_J")
         el = np.where(np.isnan(el), 0.0, el)                   # an event without a loss loses nothing
         order = np.argsort(te)
         te, cum = te[order], np.concatenate([[0.0], np.cumsum(el[order])])     # cum[k]: the first k impacts' loss
-        if len(t) > 1 and (t[1:] >= t[:-1]).all():
-            # rows in time order: each impact's first row at or after it; the loss since the start constant
-            # between them (the same differences of cum, a run of rows at a time)
-            first = np.searchsorted(t, te, side="left")
-            lost = np.repeat(cum - cum[np.count_nonzero(first == 0)], np.diff(first, prepend=0, append=len(t)))
-        else:
-            k = np.searchsorted(te, t, side="right")           # impacts at or before each row, after the start
-            lost = cum[k] - cum[k[0]]
-        closure -= lost
-    return closure, gained
+        k = np.searchsorted(te, t, side="right")               # impacts at or before each row, after the start
+        lost = cum[k] - cum[k[0]]
+    return (w - w[0]).sum(axis=1) - (ke - ke[0]) - lost
 
 
 def event_floats(events: TableColumns, name: str) -> np.ndarray:
@@ -142,10 +129,9 @@ def event_floats(events: TableColumns, name: str) -> np.ndarray:
 def _energy(df, events, rtol, atol, exact, names=None):
     work_names = _works(df, names)
     w = _matrix(df, work_names) if work_names else None
-    closed = _closure(df, events, names, w)
-    if closed is None:
+    closure = energy_closure(df, events, names, w)
+    if closure is None:
         return None
-    closure, gained = closed
     if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
         inc = np.diff(w.sum(axis=1))
         panel = np.zeros(len(inc))
@@ -154,9 +140,9 @@ def _energy(df, events, rtol, atol, exact, names=None):
             panel[0], panel[-1] = panel[1], panel[-2]
         bound = QUADRATURE_FACTOR * np.concatenate([[0.0], np.cumsum(panel)]) + 1e-12 * np.max(np.abs(w), initial=1.0)
     else:
-        scale = float(np.sum(np.max(np.abs(gained), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
-        bound = GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale))       # one bound for every row
-    return "energy balance closure error (J)", np.abs(closure, out=closure), bound
+        scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
+        bound = np.full(len(w), GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale)))
+    return "energy balance closure error (J)", np.abs(closure), bound
 
 
 def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, atol: float,
@@ -177,12 +163,11 @@ def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, 
         if check is None:
             continue
         label, value, bound = check
-        # a one-sided invariant (>= 0) has a negative bound; the closure error's magnitude a positive one; a bound
-        # is one per row or one for all rows
-        bad = value > bound if label.startswith("energy") else value < bound
-        i = int(bad.argmax())           # the first row that breaks it, if any
-        if bad[i] and (worst is None or i < worst[0]):
-            worst = (i, label, float(value[i]), float(bound[i] if np.ndim(bound) else bound))
+        # a one-sided invariant (>= 0) has a negative bound; the closure error's magnitude a positive one
+        bad = np.flatnonzero(value > bound) if label.startswith("energy") else np.flatnonzero(value < bound)
+        if len(bad) and (worst is None or bad[0] < worst[0]):
+            i = int(bad[0])
+            worst = (i, label, float(value[i]), float(bound[i]))
     if worst is None:
         return None
     i, label, value, bound = worst
