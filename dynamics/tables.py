@@ -352,27 +352,8 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
 
 def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
     """modes[codes[k]] repeated counts[k] times, k in order, as the column pandas infers for those names (the
-    names typed once each, `_typed_names`, then taken row by row). Where that is pyarrow's large string array, as
-    pandas' take builds it, it is put together from its buffers (offsets and bytes, a run of a name at a time:
-    a fraction of the take's cost); pandas' take where the internals it relies on are missing or changed."""
-    typed = _typed_names(modes)
-    n = sum(counts)
-    if n and getattr(getattr(typed, "_pa_array", None), "type", None) is not None:
-        try:
-            import pyarrow as pa
-            if typed._pa_array.type == pa.large_string():
-                raw = [m.encode() for m in modes]
-                offsets = np.empty(n + 1, dtype=np.int64)
-                offsets[0] = 0
-                np.cumsum(np.repeat(np.array([len(raw[c]) for c in codes], dtype=np.int64), counts),
-                          out=offsets[1:])
-                data = b"".join([raw[c] * k for c, k in zip(codes, counts)])
-                column = pa.Array.from_buffers(pa.large_string(), n, [None, pa.py_buffer(offsets),
-                                                                      pa.py_buffer(data)])
-                return typed._from_pyarrow_array(pa.chunked_array([column]))
-        except Exception:      # noqa: BLE001  (a changed internal: pandas' take below is the reference)
-            pass
-    return typed.take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
+    names typed once each, `_typed_names`, then taken row by row)."""
+    return _typed_names(modes).take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
 
 
 def _typed_names(names: tuple[str, ...]):
