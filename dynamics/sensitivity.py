@@ -52,7 +52,7 @@ import numpy as np
 from mechsim.dynamics.codegen import lambdify
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
-from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message
+from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message, save_times
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
 from mechsim.dynamics.programs import program
 from mechsim.dynamics.stats import new_stats
@@ -439,8 +439,7 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
         while True:
             chunk = inside[:N_SAVE]
             stop = t1 if len(inside) <= N_SAVE else float(chunk[-1])
-            ts = np.full(N_SAVE, stop)
-            ts[:len(chunk)] = chunk
+            ts = save_times(chunk, t, stop, N_SAVE)
             out = jax.device_get(solve(np.int32(k), float(t), float(stop), z, S, p, P, ts, float(settings.rtol),
                                        float(settings.atol)))
             stats["segments"] += 1

@@ -676,6 +676,8 @@ def _print_size(result, target: Path) -> None:
 
 def main() -> None:
     """Console entry point; any user error that escaped becomes one line and exit code 2."""
+    from mechsim.dynamics.backends.xla_options import checks_without_callbacks
+    checks_without_callbacks()      # compiled solves kept across processes (before equinox is imported)
     code = 0
     try:
         app()

@@ -13,7 +13,9 @@ OpenBLAS) are resolved when the program runs, so the second pass still runs them
 Without JAX_COMPILATION_CACHE_DIR in the environment the first process of the session (the xdist controller, or the
 only process) makes a fresh folder, exports it to the workers and subprocesses it starts, and removes it at the end:
 a session never reads another session's programs, so the suite's time on the shared machine is the time a clean
-checkout takes. Every program the session compiles is kept, however short its compilation (jax's default keeps only
+checkout takes. The session's equinox checks are the CLI's (EQX_ON_ERROR=nan, dynamics/backends/xla_options.py
+`checks_without_callbacks`): with equinox's default the segment solves hold host callbacks, which jax never keeps.
+Every program the session compiles is kept, however short its compilation (jax's default keeps only
 those of 1 s or more, which on a loaded machine is some and on a quiet one others): a program built again in the same
 process (the sensitivity pass's tools are built per set of read-out columns, and each builds the same event and reset
 functions; jit caches by the function object) and the small ones every worker and subprocess compiles again are
@@ -41,6 +43,9 @@ def share() -> None:
         _OWN = tempfile.mkdtemp(prefix="mechsim-tests-jax-")
         os.environ[VARIABLE] = _OWN
     os.environ.setdefault(MIN_TIME, "0")
+    # equinox's checks as in mechsim's CLI, so that the diffrax solves are kept too (before equinox is imported)
+    from mechsim.dynamics.backends.xla_options import checks_without_callbacks
+    checks_without_callbacks()
     if "jax" in sys.modules:        # jax reads the variables at import; a process that imported it already
         sys.modules["jax"].config.update("jax_compilation_cache_dir", os.environ[VARIABLE])
         sys.modules["jax"].config.update("jax_persistent_cache_min_compile_time_secs", float(os.environ[MIN_TIME]))

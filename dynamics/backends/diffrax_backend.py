@@ -31,7 +31,7 @@ from mechsim.dynamics.programs import program
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, DT0_FLOOR, DiffraxOptions, default_options,
                                                       evaluations_per_step, ida_rows, mode_z, result_message,
-                                                      solver_for)
+                                                      save_times, solver_for)
 from mechsim.dynamics.backends.diffrax_diagnose import explain
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
@@ -233,11 +233,10 @@ class DiffraxBackend(Backend):
         n_save = self.o.rows(jmod.nz)
         chunk = r.t_out[:n_save]
         t1 = r.t_end if len(r.t_out) <= n_save else float(chunk[-1])
-        ts = np.full(n_save, t1)
-        ts[:len(chunk)] = chunk
+        ts = save_times(chunk, r.t0, t1, n_save)
         enabled = np.zeros(jmod.ng_max, bool)
         enabled[:len(r.mf.guard_names)] = bool(self.settings.events)
-        dt0 = r.first_step if r.first_step > 0 else DT0_FIRST
+        dt0 = r.first_step if r.first_step > 0 else DT0_FIRST    # > 0 and t1 >= t0: diffrax's check of dt0 holds
         return segment_arguments(jmod.index(r.mode), r.t0, t1, mode_z(r.mf, r.y0), np.asarray(r.p), enabled, ts,
                                  dt0, (self.o.rtol, self.o.atol)), len(chunk)
 

@@ -146,6 +146,23 @@ def evaluations_per_step(o: DiffraxOptions) -> int | None:
     return stages - 1 if tab.fsal else stages
 
 
+# -- the solves' inputs ------------------------------------------------------------------------------------------
+def save_times(times, t0: float, t1: float, n: int) -> np.ndarray:
+    """The n output times of a segment solve's `SaveAt(ts=...)`: `times` (at most n), padded with t1.
+
+    diffrax checks its save times inside the compiled program, where mechsim's processes make a failed check
+    return NaN rather than raise (`xla_options.checks_without_callbacks`): they are checked here instead, in
+    diffrax's words, so that a broken caller still stops with an error, never with rows silently dropped."""
+    ts = np.full(n, t1, dtype=np.float64)
+    ts[:len(times)] = times
+    d = 1.0 if t0 < t1 else -1.0            # diffrax's checks, in its normalised time (`diffeqsolve`)
+    if np.any(d * ts[1:] < d * ts[:-1]):
+        raise RuntimeError("saveat.ts must be increasing or decreasing.")
+    if np.any((d * ts > d * t1) | (d * ts < d * t0)):
+        raise RuntimeError("saveat.ts must lie between t0 and t1.")
+    return ts
+
+
 # -- state layout ----------------------------------------------------------------------------------------------
 def mode_z(mf: ModeFunctions, y: np.ndarray) -> np.ndarray:
     ix = mf.index

@@ -85,3 +85,20 @@ def state() -> str:
     """'on', 'on (<option> as XLA_FLAGS set it)', 'off: <why>', or 'not requested' (JAX not imported by
     mechsim yet)."""
     return _state or "not requested"
+
+
+#: equinox reads it once, when it is imported: what a failed runtime check (`eqx.error_if`) does
+EQX_VARIABLE = "EQX_ON_ERROR"
+
+
+def checks_without_callbacks() -> None:
+    """Make equinox's runtime checks NaN-returning (EQX_ON_ERROR=nan) in a process mechsim starts (its CLI, the
+    test session), unless the user set the variable; to be called before equinox is imported.
+
+    Why: with equinox's default each check inside a compiled program is a host callback, and JAX's persistent
+    compilation cache refuses programs with host callbacks, so the diffrax segment solve and the sensitivity
+    pass's segment solve were compiled again in every process (docs/diffrax.md, 'Compilation'). Their only runtime
+    checks are diffrax's checks of its inputs (save times ordered and inside [t0, t1], the first step heading to
+    t1); mechsim checks those inputs before each call (`diffrax_common.save_times`), so no check of theirs fires
+    and the results are the same. A process that imports mechsim as a library keeps equinox's default."""
+    os.environ.setdefault(EQX_VARIABLE, "nan")
