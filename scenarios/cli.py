@@ -567,6 +567,8 @@ def sensitivity(
         _fail(f"sensitivity: {exc}", SOLVER_FAILURE)
     except Exception as exc:  # a fault we did not foresee: one line, exit 3, never a traceback
         _fail(f"sensitivity: stopped on an internal error ({_internal_error(exc)})", SOLVER_FAILURE)
+    if table.empty:     # every quantity asked for is undefined on this run (its warnings say why): nothing to write
+        _fail("--of: no quantity asked for has a value on this run: " + "; ".join(table.attrs["warnings"]))
     from mechsim.scenarios.studies.sensitivity import write_sensitivity
     try:
         write_sensitivity(table, target, force=force)

@@ -140,6 +140,9 @@ def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
     (["--wrt", "mechanism.slots"], "mechanism.slots"),                      # an integer: no derivative
     (["--wrt", "load.wheel_torque", "--of", "peak_temp_contact_C"], "--of"),   # no thermal model here
     (["--wrt", "load.wheel_torque", "--of", "no_such_quantity"], "--of"),
+    # no index completes in 0.1 s: an empty table is refused, not written (tornado.png had no panel to draw)
+    # (the values of the tables above: the same traced program)
+    (["--wrt", ",".join(WRT), "--of", "index_time_s", "--set", "duration=0.1 s"], "--of"),
     # the 1-D wall-track model is traced (tests/test_sensitivity_wall.py), its mesh settings are not (a choice)
     (["--wrt", "thermal.mesh_depth", "--set", "thermal.model=1d", "--set", "thermal.mesh_depth=10 mm"],
      "thermal.mesh_depth"),
