@@ -7,6 +7,7 @@ import dataclasses
 import platform
 import time
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
@@ -312,10 +313,64 @@ def read_window(the_plan: Plan):
     return None if dense is None else (dataclasses.replace(thermal, dense=dense), df)
 
 
-def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
-            integrate: Callable | None = None) -> Result:
-    """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
-    wall0 = time.perf_counter()
+class _Reads(Mapping):
+    """A table's columns that note which of them are read or asked for (`_thermal_inputs`)."""
+
+    def __init__(self, cols: TableColumns):
+        self.cols, self.names = cols, set()
+
+    def __getitem__(self, name):
+        self.names.add(name)
+        return self.cols[name]
+
+    def __contains__(self, name) -> bool:
+        self.names.add(name)
+        return name in self.cols
+
+    def __iter__(self):
+        return iter(self.cols)
+
+    def __len__(self) -> int:
+        return len(self.cols)
+
+
+def _thermal_inputs(df: pd.DataFrame, events: pd.DataFrame, cols: TableColumns, mech: Mechanism,
+                    thermal) -> list[str]:
+    """The columns of the mechanics table `df` the thermal finish reads, in the table's order: the contact's (what
+    the mechanism's `contact_state` and `contact_starts` read), the angles, the drive's speed and acceleration, the
+    network's states, and the columns the checks after the finish read."""
+    reads = _Reads(cols)
+    mech.contact_state(reads)
+    mech.contact_starts(reads, events)
+    drive = coordinate_columns(mech.coordinates[mech.drive_coordinate], mech.drive_coordinate in mech.angle_coordinates)
+    wanted = reads.names | set(drive) | set(thermal.setup.extension.names if thermal.setup.extension else ()) | {
+        "t_s", "mode", "friction_force_N", "slip_speed_m_s"}
+    return [c for c in df.columns if c in wanted or c.endswith("_angle_rad")]
+
+
+def thermal_peaks(the_plan: Plan) -> dict:
+    """summary.json `peaks` of the thermal model's columns (ThermalPlan.PEAK_COLUMNS) as `execute` reports them, from
+    a table of only the mechanics columns the thermal finish reads (`_thermal_inputs`): every row of the thermal
+    columns is computed from its own row's inputs and the network's states, so those rows, and the extrema located
+    from them, are the whole run's, without the run's other columns, peaks and checks (a long cycle-averaged run's
+    table continued over the hour costs most of it). The design sensitivities read the run's located thermal peaks
+    so. {} where the run fails."""
+    if the_plan.thermal is None or the_plan.scenario.si.get("output", {}).get("on_invalid", "warn") == "stop":
+        result = execute(the_plan)        # the validity may cut the table: the whole run decides
+        return {} if result.failure is not None else {c: e for c, e in result.summary.get("peaks", {}).items()
+                                                       if c in the_plan.thermal.PEAK_COLUMNS}
+    _, df, events, failure, cols, event_cols, source, angle_col, speed_col, *_ = _finished(
+        the_plan, None, None, _thermal_inputs)
+    if failure is not None:
+        return {}
+    return peaks(df, angle_col, the_plan.thermal.PEAK_COLUMNS, cols, events, source, speed_col, event_cols)[0]
+
+
+def _finished(the_plan: Plan, progress, integrate, keep=None):
+    """The run's tables after the checks and the thermal finish, and what its summary reads of them: (plan, table,
+    events, failure, table columns, event columns, peak source, drive angle and speed columns, solver stats,
+    warnings, thermal summary, thermal tables). keep(df, events, cols, mech, thermal): the mechanics columns to
+    keep for the thermal finish (`thermal_peaks`), else all."""
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
@@ -333,6 +388,9 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
                                         event_cols=event_cols)
     if checked is not df:
         df, cols = checked, TableColumns(checked)
+    if keep is not None and thermal is not None:
+        df = df[keep(df, events, cols, mech, thermal)]
+        cols = TableColumns(df)
     thermal_summary, thermal_tables = None, {}
     if thermal is not None:
         df, events, thermal_tables, thermal_summary, thermal_warnings = thermal.finish(
@@ -345,6 +403,18 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
                                             event_cols=event_cols)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
+    return (the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings,
+            thermal_summary, thermal_tables)
+
+
+def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
+            integrate: Callable | None = None) -> Result:
+    """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
+    wall0 = time.perf_counter()
+    (the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings, thermal_summary,
+     thermal_tables) = _finished(the_plan, progress, integrate)
+    scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
+    method, why, thermal, si = the_plan.method, the_plan.why, the_plan.thermal, the_plan.scenario.si
     conditions = validity.conditions(mech, thermal)       # the model's validity on every row (scenarios/validity.py)
     valid = validity.evaluate(conditions, cols)
     if si.get("output", {}).get("on_invalid", "warn") == "stop":
