@@ -98,13 +98,15 @@ def input_nodes() -> np.ndarray:
 
 def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str]) -> pd.DataFrame:
     """df without `drop`, its columns named in `new` replaced in place and the others of `new` appended in order:
-    as assigning them one at a time would, but in one step (each insertion into a frame has a cost of its own)."""
+    as assigning them one at a time would, but in one step (each insertion into a frame has a cost of its own). The
+    new columns are taken as they are (`copy=False`: not copied into one block, which costs as much as computing
+    them on a long run's rows)."""
     kept = df.drop(columns=drop) if drop else df
     present = {k: v for k, v in new.items() if k in kept.columns}
     if present:
         kept = kept.assign(**present)
     fresh = {k: v for k, v in new.items() if k not in kept.columns}
-    return pd.concat([kept, pd.DataFrame(fresh, index=kept.index)], axis=1) if fresh else kept
+    return pd.concat([kept, pd.DataFrame(fresh, index=kept.index, copy=False)], axis=1) if fresh else kept
 
 
 def _angle_column(df: pd.DataFrame) -> str:
