@@ -348,8 +348,8 @@ def _thermal_inputs(df: pd.DataFrame, events: pd.DataFrame, cols: TableColumns, 
     return [c for c in df.columns if c in wanted or c.endswith("_angle_rad")]
 
 
-def thermal_peaks(the_plan: Plan) -> dict:
-    """summary.json `peaks` of the thermal model's columns (ThermalPlan.PEAK_COLUMNS) as `execute` reports them, from
+def thermal_peaks(the_plan: Plan, columns: list[str]) -> dict:
+    """summary.json `peaks` of the thermal model's `columns` (of ThermalPlan.PEAK_COLUMNS) as `execute` reports them, from
     a table of only the mechanics columns the thermal finish reads (`_thermal_inputs`): every row of the thermal
     columns is computed from its own row's inputs and the network's states, so those rows, and the extrema located
     from them, are the whole run's, without the run's other columns, peaks and checks (a long cycle-averaged run's
@@ -358,12 +358,13 @@ def thermal_peaks(the_plan: Plan) -> dict:
     if the_plan.thermal is None or the_plan.scenario.si.get("output", {}).get("on_invalid", "warn") == "stop":
         result = execute(the_plan)        # the validity may cut the table: the whole run decides
         return {} if result.failure is not None else {c: e for c, e in result.summary.get("peaks", {}).items()
-                                                       if c in the_plan.thermal.PEAK_COLUMNS}
+                                                       if c in columns}
     _, df, events, failure, cols, event_cols, source, angle_col, speed_col, *_ = _finished(
         the_plan, None, None, _thermal_inputs)
     if failure is not None:
         return {}
-    return peaks(df, angle_col, the_plan.thermal.PEAK_COLUMNS, cols, events, source, speed_col, event_cols)[0]
+    return peaks(df, angle_col, tuple(c for c in the_plan.thermal.PEAK_COLUMNS if c in columns), cols, events,
+                 source, speed_col, event_cols)[0]
 
 
 def _finished(the_plan: Plan, progress, integrate, keep=None):

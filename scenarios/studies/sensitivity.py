@@ -272,7 +272,7 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     # (resolved) the DAE pass's own located peak, its value replaced by the closed-form run's (`_closed_form_thermal`)
     thermal_peaks = result.summary.get("peaks", {})
     if cycle and any(q in THERMAL_PEAKS for q in of):       # the run's, without its other columns over the hour
-        thermal_peaks = runner.thermal_peaks(run_plan)
+        thermal_peaks = runner.thermal_peaks(run_plan, [THERMAL_PEAKS[q] for q in of if q in THERMAL_PEAKS])
     located.update({q: e for q in of if q in THERMAL_PEAKS
                     and (e := _located(thermal_peaks, THERMAL_PEAKS[q])) and not e.get("unbounded")})
     if run_plan.method == "closed-form" and not cycle:
