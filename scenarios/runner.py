@@ -349,12 +349,12 @@ def _thermal_inputs(df: pd.DataFrame, events: pd.DataFrame, cols: TableColumns, 
 
 
 def thermal_peaks(the_plan: Plan, columns: list[str]) -> dict:
-    """summary.json `peaks` of the thermal model's `columns` (of ThermalPlan.PEAK_COLUMNS) as `execute` reports them, from
-    a table of only the mechanics columns the thermal finish reads (`_thermal_inputs`): every row of the thermal
-    columns is computed from its own row's inputs and the network's states, so those rows, and the extrema located
-    from them, are the whole run's, without the run's other columns, peaks and checks (a long cycle-averaged run's
-    table continued over the hour costs most of it). The design sensitivities read the run's located thermal peaks
-    so. {} where the run fails."""
+    """summary.json `peaks` of the thermal `columns` (of ThermalPlan.PEAK_COLUMNS) as `execute` reports them, from a
+    table of only the mechanics columns the thermal finish reads (`_thermal_inputs`): every row of the thermal
+    columns is computed from its own row's inputs and the network's states, and each column's extrema are located
+    on their own, so those rows and extrema are the whole run's, without the run's other columns, peaks and checks
+    (a long cycle-averaged run's table continued over the hour). The design sensitivities read the run's located
+    thermal peaks so. {} where the run fails."""
     if the_plan.thermal is None or the_plan.scenario.si.get("output", {}).get("on_invalid", "warn") == "stop":
         result = execute(the_plan)        # the validity may cut the table: the whole run decides
         return {} if result.failure is not None else {c: e for c, e in result.summary.get("peaks", {}).items()
