@@ -552,10 +552,12 @@ def dense_bulk_samples(plan, turn: dict, by_time: dict, seed, model, samples: li
     frame = turn["frame"]
     node_t = turn["sample_times"][2:]
     cols = frame[list(names)].to_numpy(float)
+    # each column's gradient plus its rate times the node's motion, all nodes at once (grad(s, c) + rate d_node)
+    at_nodes = [by_time[t] for t in node_t]
     d_cols = np.zeros(cols.shape + (n,))
-    for r, t in enumerate(node_t):
-        s = by_time[t]
-        d_cols[r] = [grad(s, c) + s.rates[c] * d_nodes[r] for c in names]
+    for j, c in enumerate(names):
+        d_cols[:, j, :n_used] = np.array([s.grads[c] for s in at_nodes], dtype=float)
+        d_cols[:, j] += np.array([s.rates[c] for s in at_nodes], dtype=float)[:, None] * d_nodes
     engaged = frame["mode"].to_numpy() == "engaged"
     primal, tangent = {"ends": np.array([a, a + P]), "cols": np.where(engaged[:, None], cols, 1.0)}, {}
     tangent["ends"] = np.array(d_ends)
