@@ -103,7 +103,7 @@ def _read_rows(addresses, mem, yy, yp, tret_address, y_view, yp_view, p_view, tr
     (t0[i], y0[i], yp0[i]) with parameters p[i] and first step first_step[i] (IDAReInit, IDASetInitStep, and the
     stop time its last instant), and fills rows bounds[i, 0] to bounds[i, 2]: the first up to bounds[i, 1] (its
     instants within round-off of t0) with the start itself, the others at the instants rows_t holds there
-    (IDASolve in IDA_NORMAL mode, `_advance`'s loop). `addresses` are those of IDASolve, IDAReInit,
+    (`advance` on those rows). `addresses` are those of IDASolve, IDAReInit,
     IDASetInitStep and IDASetStopTime. written[i]: the instants IDA reached, or -1 where it failed (a negative
     flag), -2 where a setter failed."""
     solve, reinit, init_step, stop_time = addresses[0], addresses[1], addresses[2], addresses[3]
@@ -123,20 +123,9 @@ def _read_rows(addresses, mem, yy, yp, tret_address, y_view, yp_view, p_view, tr
                 or ida_set_real(stop_time, mem, rows_t[c - 1]) < 0):
             written[i] = -2
             continue
-        flag = 0
-        k = b
-        while k < c:
-            flag = ida_solve(solve, mem, rows_t[k], tret_address, yy, yp, np.int32(1))
-            if flag == 2 or flag < 0:
-                break
-            rows_t[k] = tret[0]
-            for j in range(n):
-                rows_y[k, j] = y_view[j]
-                rows_yp[k, j] = yp_view[j]
-            k += 1
-            if flag == 1:          # IDA_TSTOP_RETURN: the last instant
-                break
-        written[i] = -1 if flag < 0 else k - b
+        flag, k = advance(solve, mem, rows_t[b:c], tret_address, yy, yp, y_view, yp_view, tret, rows_t[b:c],
+                          rows_y[b:c], rows_yp[b:c])
+        written[i] = -1 if flag < 0 else k
 
 
 def _cached_in_the_user_cache_folder(py_func):
