@@ -359,19 +359,34 @@ def thermal_peaks(the_plan: Plan, columns: list[str]) -> dict:
         result = execute(the_plan)        # the validity may cut the table: the whole run decides
         return {} if result.failure is not None else {c: e for c, e in result.summary.get("peaks", {}).items()
                                                        if c in columns}
-    _, df, events, failure, cols, event_cols, source, angle_col, speed_col, *_ = _finished(
-        the_plan, None, None, _thermal_inputs)
-    if failure is not None:
+    done = _finished(the_plan, None, None, _thermal_inputs)
+    if done.failure is not None:
         return {}
-    return peaks(df, angle_col, tuple(c for c in the_plan.thermal.PEAK_COLUMNS if c in columns), cols, events,
-                 source, speed_col, event_cols)[0]
+    return peaks(done.df, done.angle_col, tuple(c for c in the_plan.thermal.PEAK_COLUMNS if c in columns), done.cols,
+                 done.events, done.source, done.speed_col, done.event_cols)[0]
+
+
+@dataclass
+class _Finished:
+    """A run's tables after the checks and the thermal finish, and what its summary reads of them."""
+    plan: Plan
+    df: pd.DataFrame
+    events: pd.DataFrame
+    failure: Failure | None
+    cols: TableColumns                 # each column read once for the checks, the thermal finish, peaks and energy
+    event_cols: TableColumns           # the same for the events' columns (the checks, energy, counts)
+    source: PeakSource                 # where the located peaks read the continuous solution
+    angle_col: str                     # the drive coordinate's angle and speed columns
+    speed_col: str
+    stats: dict                        # the solver's
+    warnings: list[str]
+    thermal_summary: dict | None
+    thermal_tables: dict
 
 
 def _finished(the_plan: Plan, progress, integrate, keep=None):
-    """The run's tables after the checks and the thermal finish, and what its summary reads of them: (plan, table,
-    events, failure, table columns, event columns, peak source, drive angle and speed columns, solver stats,
-    warnings, thermal summary, thermal tables). keep(df, events, cols, mech, thermal): the mechanics columns to
-    keep for the thermal finish (`thermal_peaks`), else all."""
+    """The run's tables after the checks and the thermal finish (`_Finished`). keep(df, events, cols, mech,
+    thermal): the mechanics columns to keep for the thermal finish (`thermal_peaks`), else all."""
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
@@ -382,9 +397,9 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
     si = scenario.si
     angle_col, speed_col, _ = coordinate_columns(mech.coordinates[mech.drive_coordinate],
                                                  mech.drive_coordinate in mech.angle_coordinates)
-    cols = TableColumns(df)         # each column read once for the checks, the thermal finish, peaks and energy
+    cols = TableColumns(df)
     source = PeakSource(method, traj, mech, drive, settings, si, frozenset(cols.names), thermal, df)
-    event_cols = TableColumns(events)           # the same for the events' columns (the checks, energy, counts)
+    event_cols = TableColumns(events)
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols,
                                         event_cols=event_cols)
     if checked is not df:
@@ -404,16 +419,18 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
                                             event_cols=event_cols)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
-    return (the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings,
-            thermal_summary, thermal_tables)
+    return _Finished(the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings,
+                     thermal_summary, thermal_tables)
 
 
 def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             integrate: Callable | None = None) -> Result:
     """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
     wall0 = time.perf_counter()
-    (the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings, thermal_summary,
-     thermal_tables) = _finished(the_plan, progress, integrate)
+    done = _finished(the_plan, progress, integrate)
+    the_plan, df, events, failure, cols, event_cols = (done.plan, done.df, done.events, done.failure, done.cols,
+                                                       done.event_cols)
+    warnings = done.warnings
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal, si = the_plan.method, the_plan.why, the_plan.thermal, the_plan.scenario.si
     conditions = validity.conditions(mech, thermal)       # the model's validity on every row (scenarios/validity.py)
@@ -424,8 +441,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             df, cols = checked, TableColumns(checked)
             valid = validity.evaluate(conditions, cols)
             warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
-    peak_summary, regime = peaks(df, angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()), cols,
-                                 events, source if failure is None else None, speed_col, event_cols)
+    peak_summary, regime = peaks(df, done.angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()),
+                                 cols, events, done.source if failure is None else None, done.speed_col, event_cols)
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     summary = {
@@ -444,7 +461,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "energy": energy_balance(df, events, cols, event_cols),
         "events": event_counts(events, event_cols),
         "validity": valid,
-        "solver": {**stats, "wall_time_s": wall, "output_rows": len(df)},
+        "solver": {**done.stats, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": _largest_magnitude(cols["constraint_residual_m"]) if len(df) else 0.0,
         "warnings": warnings,
         "warning_groups": group_warnings(warnings),
@@ -453,12 +470,12 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "failure_code": failure.code.value if failure else None,
         "versions": dict(versions()),
     }
-    if thermal_summary is not None:
-        summary["thermal"] = thermal_summary
+    if done.thermal_summary is not None:
+        summary["thermal"] = done.thermal_summary
     elif not mech.has_sliding_contact:
         summary["thermal"] = {"model": "none", "why": f"{mech.name} has no sliding contact in the model (pure "
                               "rolling or pin joints): no frictional heat, so no thermal model was built"}
-    extra_tables = {**mech.extra_outputs(df, events), **thermal_tables}
+    extra_tables = {**mech.extra_outputs(df, events), **done.thermal_tables}
     if hasattr(mech, "extra_summary"):              # the mechanism's own figures of its tables (impacts)
         summary.update(mech.extra_summary(extra_tables))
     return Result(df, events, summary, si, failure, extra_tables=extra_tables)
