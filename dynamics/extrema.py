@@ -233,19 +233,16 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     wties = np.concatenate([ties] * n_w)
     with np.errstate(invalid="ignore"):
         # the best peak's: the largest row is a peak ([window, column, sense]; max and min are exact in any order)
-        lower = np.empty((n_w, len(G), 2))
+        lower, level = np.empty((n_w, len(G), 2)), np.empty((n_w, len(G), 2))
         big, least = (np.where(ok, G, -np.inf), np.where(ok, G, np.inf)) if not finite else (G, G)
         for w, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
             lower[w, :, 0], lower[w, :, 1] = big[:, a:b].max(axis=1), -least[:, a:b].min(axis=1)
-        lower = lower.ravel()
-        # a constant stretch can hold the extremum where a flat row is within the tie of the best row (its level,
-        # the largest flat row, is then too: `constant` below)
-        floor = (lower - wties).reshape(n_w, len(G), 2)
-        near = np.empty((n_w, len(G), 2), dtype=bool)
-        for w, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
-            Gw, fw = G[:, a:b], flat[:, a:b]
-            near[w, :, 0] = (fw & (Gw >= floor[w, :, 0, None])).any(axis=1)
-            near[w, :, 1] = (fw & (Gw <= -floor[w, :, 1, None])).any(axis=1)
+            # each window's constant level: its largest flat row (and negated least), -inf where none
+            level[w, :, 0] = G[:, a:b].max(axis=1, where=flat[:, a:b], initial=-np.inf)
+            level[w, :, 1] = -G[:, a:b].min(axis=1, where=flat[:, a:b], initial=np.inf)
+        lower, level = lower.ravel(), level.ravel()
+        # a constant stretch can hold the extremum where its level is within the tie of the best row
+        near = level >= lower - wties
     any_peak = lower > -np.inf                      # flat rows and the largest are finite
     # the estimates where they are compared: the smooth peaks (np.nonzero's indices, from the flat ones: far faster)
     ms, ii = np.divmod(smooth.ravel().nonzero()[0], G.shape[1])
@@ -268,18 +265,16 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     out: list[list[tuple]] = [[] for _ in range(n_w * S)]
     # constant stretches are exact: only the best level's earliest can hold the extremum (no refining); it lies at
     # its first instant (the interval's start where it holds the interval's first row)
-    constant = (any_peak & near.ravel()).nonzero()[0]
+    constant = (any_peak & near).nonzero()[0]
     mc = constant % S
-    # each one's level (its window's largest flat row) and earliest flat row at it, among its window's rows (-g >= x
-    # exactly where g <= -x: negation is exact)
+    # each one's earliest flat row at its level within the tie, among its window's rows (-g >= x exactly where
+    # g <= -x: negation is exact)
     earliest = np.zeros(len(constant), dtype=int)
     with np.errstate(invalid="ignore"):
-        for q, (m, w, tie_m) in enumerate(zip(mc.tolist(), (constant // S).tolist(), wties[constant].tolist())):
+        for q, (m, w, x) in enumerate(zip(mc.tolist(), (constant // S).tolist(), (level - wties)[constant].tolist())):
             a, b = ends[w], ends[w + 1]
-            at = flat[m >> 1, a:b].nonzero()[0]          # the window's flat rows
-            g = G[m >> 1, a:b][at]
-            x = (-g.min() if m & 1 else g.max()) - tie_m
-            earliest[q] = a + at[(g <= -x if m & 1 else g >= x).argmax()]
+            g = G[m >> 1, a:b]
+            earliest[q] = a + (flat[m >> 1, a:b] & (g <= -x if m & 1 else g >= x)).argmax()
     # each candidate's interval (counted in its window), position in it and bracket, as numbers
     ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
     local = k_of if base is None else k_of - base[w_of]
@@ -622,26 +617,27 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     anchor row), all jobs together: the polynomial through the STENCIL readings around the best one gives t* and
     the value, and every column there (its error is of order |F^(STENCIL)| d^STENCIL for the grid's step d, far
     below the tolerance); at an interval's end the one-sided limit there."""
-    jobs, tables, G, A, columns, n_g, ivs, TR = [], [], [], [], [], [], [], []
+    jobs, tables, ivs, G, A, times, columns = [], [], [], [], [], [], []
     for iv, group, grids, table in ready:
         tt = np.asarray(table["t_s"], dtype=float)
-        # each job's grid and row (last) among the cluster's readings, in one search
-        at = np.minimum(tt.searchsorted(grids), len(tt) - 1)
-        for k, j in enumerate(group):
-            columns.append(np.asarray(table[j.column], dtype=float)[at[k]])
+        times.append(tt)
+        A.append(tt.searchsorted(grids))      # each job's grid and row (last) among the cluster's readings
+        G.append(grids)
+        columns += [np.asarray(table[j.column], dtype=float) for j in group]
         jobs += group
         tables += [table] * len(group)
         ivs += [iv] * len(group)
-        G.append(grids)
-        A.append(at)
-        TR.append(tt[at[:, -1]])
     if not jobs:
         return
-    G, A, TR = (np.concatenate(a) for a in (G, A, TR))
-    F = np.array(columns) * np.array([j.sense for j in jobs])[:, None]
+    counts, sizes = [len(group) for _, group, _, _ in ready], np.array([len(tt) for tt in times])
+    G, A = np.concatenate(G), np.minimum(np.concatenate(A), (sizes - 1).repeat(counts)[:, None])
+    TR = np.concatenate(times)[(sizes.cumsum() - sizes).repeat(counts) + A[:, -1]]      # each job's row's instant
+    # per job: sense, bracket, tie and its interval's ends
+    sense, j_lo, j_hi, sense_tie, lo, hi = np.array([(j.sense, j.lo, j.hi, j.tie, iv.lo, iv.hi)
+                                                     for j, iv in zip(jobs, ivs)]).T
+    F = np.array([f[a] for f, a in zip(columns, A)]) * sense[:, None]
     G, P, R, F, FR = G[:, :-1], A[:, :-1], A[:, -1], F[:, :-1], F[:, -1]
-    n_g = np.where([j.hi > j.lo for j in jobs], FIRST_GRID, 1)       # a bracket of one instant: one reading
-    sense_tie = np.array([j.tie for j in jobs])
+    n_g = np.where(j_hi > j_lo, FIRST_GRID, 1)       # a bracket of one instant: one reading
     every = np.arange(len(jobs))
     held = np.isfinite(F).any(axis=1)                 # a job none of whose readings is finite keeps no row
     F = np.where(np.isfinite(F), F, -np.inf)
@@ -650,8 +646,6 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
         best_f, best_t, best_pos = F[every, b], G[every, b], P[every, b]
         row = FR > best_f + sense_tie                 # the row itself (between grid readings)
     best_f, best_t, best_pos = np.where(row, FR, best_f), np.where(row, TR, best_t), np.where(row, R, best_pos)
-    lo = np.array([iv.lo for iv in ivs])
-    hi = np.array([iv.hi for iv in ivs])
     at_lo = (b == 0) & (G[:, 0] == lo)
     at_hi = (b == n_g - 1) & (G[every, n_g - 1] == hi)
     end = at_lo | at_hi | (n_g < STENCIL)            # the one-sided limit at the interval's end
@@ -663,7 +657,8 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     value = np.full(len(jobs), -np.inf)
     if poly.any():
         x[poly], W[poly] = _poly_max(part[poly], (b - c0)[poly])
-        value[poly] = [w @ f for w, f in zip(W[poly], part[poly])]       # as one job's dot product
+        # each job's dot product (a stack of 1 x n by n x 1 products: numpy's dot of each pair, as w @ f)
+        value[poly] = np.matmul(W[poly][:, None, :], part[poly][:, :, None])[:, 0, 0]
     better = poly & (value >= best_f)
     t_star = (G[every, c0] + x * (G[:, 1] - G[:, 0])).tolist()
     value, best_f, best_t = value.tolist(), best_f.tolist(), best_t.tolist()
