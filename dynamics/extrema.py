@@ -22,7 +22,7 @@ re-integration's error from the row's state (the run's own error at that row).
 from __future__ import annotations
 
 from collections.abc import Mapping, MutableMapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -899,6 +899,34 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     return best
 
 
+class _ReadOut(Mapping):
+    """The columns of one mode's readings (`tables.piece_columns` of their pieces, stacked), read out when a column
+    is first asked for: readings nobody reads (a one-sided limit its extremum does not need) cost no read-out. The
+    same call on the same pieces as reading them out at once, so the same columns."""
+
+    def __init__(self, model, pieces: list, angle_coordinates: tuple[int, ...]):
+        self._args, self._columns = (model, pieces, angle_coordinates), None
+
+    def _table(self) -> dict:
+        if self._columns is None:
+            from mechsim.dynamics.tables import piece_columns
+            self._columns = piece_columns(*self._args, residual=False)
+            self._args = None
+        return self._columns
+
+    def __getitem__(self, c):
+        return self._table()[c]
+
+    def __iter__(self):
+        return iter(self._table())
+
+    def __len__(self):
+        return len(self._table())
+
+    def __contains__(self, c):
+        return c in self._table()
+
+
 class _Part(Mapping):
     """Rows a:b of a table read for several requests at once (a mapping of column arrays), each column sliced
     when first read (a reading's user reads a few of its columns)."""
@@ -1028,10 +1056,11 @@ class TrajectoryReader:
         read out together: one read-out per mode; None for a request the dense output does not hold
         (read by re-integration) or whose re-integration failed."""
         from mechsim.dynamics.hybrid import Piece
-        from mechsim.dynamics.tables import piece_columns
         dense = getattr(self.traj, "dense", None)
         if dense is not None:
-            got = dense.read_many([(np.asarray(times, float), iv.lo, iv.hi) for iv, _, times in requests])
+            got = [None if g is None else Piece(g[0], g[1], np.asarray(times, float), g[3], None, g[2])
+                   for g, (_, _, times) in zip(dense.read_many([(np.asarray(times, float), iv.lo, iv.hi)
+                                                                for iv, _, times in requests]), requests)]
         else:                  # re-integrated, each request on its own; read out together (None where IDA failed)
             got = []
             anchors, ready = self._read_ahead(requests)
@@ -1042,35 +1071,34 @@ class TrajectoryReader:
                         key, _, piece, t, y, yp = hit
                         self.reintegrations += 1
                         self._read[key] = self._ahead.pop(key)
-                        got.append((piece.mode, piece.params, piece.offset, y, t, yp))
+                        got.append(Piece(piece.mode, piece.params, t, y, yp, piece.offset))
                         continue
                     try:
-                        p = self._reading(*request, anchor=anchor)
+                        got.append(self._reading(*request, anchor=anchor))
                     except ReadingFailed:
                         got.append(None)
-                        continue
-                    got.append((p.mode, p.params, p.offset, p.y, p.t, p.yp))
             finally:
                 self._ahead.clear()
+        return self._read_out(got)
+
+    def _read_out(self, readings: list) -> list[dict | None]:
+        """Each reading's columns (None where there is none): one read-out per mode of all its readings, stacked
+        (`_ReadOut`, parameters and offsets per row), each reading its rows of it."""
         groups: dict = {}
-        for r, g in enumerate(got):
-            if g is not None:
-                groups.setdefault(g[0], []).append(r)
-        out: list[dict | None] = [None] * len(requests)
-        for mode, rs in groups.items():        # one read-out per mode (parameters and offsets per row)
-            pieces = []
-            for r in rs:
-                params, offset = got[r][1], got[r][2]
-                params = params if isinstance(params, tuple) else tuple(np.asarray(params, float).tolist())
-                t = np.asarray(requests[r][2], float) if dense is not None else got[r][4]
-                pieces.append(Piece(mode, params, t, got[r][3], None if dense is not None else got[r][5], offset))
-            table = piece_columns(self.traj.model, pieces, self.angle_coordinates, residual=False)
+        for r, piece in enumerate(readings):
+            if piece is not None:
+                if not isinstance(piece.params, tuple):       # (the read-out compares parameters as tuples)
+                    readings[r] = replace(piece, params=tuple(np.asarray(piece.params, float).tolist()))
+                groups.setdefault(piece.mode, []).append(r)
+        out: list[dict | None] = [None] * len(readings)
+        for rs in groups.values():
+            table = _ReadOut(self.traj.model, [readings[r] for r in rs], self.angle_coordinates)
             a = 0
             for r in rs:
-                n = len(got[r][3])
+                n = len(readings[r].t)
                 out[r] = _Part(table, a, a + n)
                 a += n
-        self.dense_readings += len(groups) if dense is not None else 0
+        self.dense_readings += len(groups) if getattr(self.traj, "dense", None) is not None else 0
         return out
 
     def _read_ahead(self, requests: list) -> tuple[list, list]:
@@ -1183,9 +1211,9 @@ class TrajectoryReader:
         state that segment started from (`Trajectory.starts`, after the event that opened it); none where the run
         kept no segment starts (the compiled diffrax run)."""
         n = len(items)
-        kr = [(int(iv.anchors[position][0]), int(iv.anchors[position][1])) if 0 <= position < len(iv.anchors)
-              else (-1, 0) for iv, position, _ in items]
-        k, r = np.array(kr, dtype=np.int64).reshape(n, 2).T
+        k, r = np.array([iv.anchors[position] if 0 <= position < len(iv.anchors) else (-1, 0)
+                         for iv, position, _ in items], dtype=np.int64).reshape(n, 2).T
+        kr = zip(k.tolist(), r.tolist())
         first = np.array([np.nan if f is None else f for _, _, f in items], dtype=float)
         asked = np.array([f is not None for _, _, f in items], dtype=bool)
         hi = np.array([iv.hi for iv, _, _ in items], dtype=float)
