@@ -915,7 +915,8 @@ class _ReadOut(Mapping):
         return self._columns
 
     def __getitem__(self, c):
-        return self._table()[c]
+        columns = self._columns
+        return (columns if columns is not None else self._table())[c]
 
     def __iter__(self):
         return iter(self._table())
@@ -1056,8 +1057,8 @@ class TrajectoryReader:
     def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict | None]:
         """The columns of each (interval, position, times) from the run's own dense output where the integrator
         keeps one (the compiled diffrax run: the interpolant its output rows come from), else re-integrated, all
-        read out together: one read-out per mode; None for a request the dense output does not hold
-        (read by re-integration) or whose re-integration failed."""
+        read out together: one read-out per mode, made when a column of it is first read (`_ReadOut`); None for a
+        request the dense output does not hold (read by re-integration) or whose re-integration failed."""
         from mechsim.dynamics.hybrid import Piece
         dense = getattr(self.traj, "dense", None)
         if dense is not None:
@@ -1175,12 +1176,12 @@ class TrajectoryReader:
                 np.array([anchors[i][4] for i in members]),
                 np.array([anchors[i][0].params for i in members], dtype=float).reshape(len(members), -1),
                 all_t[group_rows], bounds)
-            falls = np.concatenate([[0], np.cumsum(~(t[1:] >= t[:-1]))]).tolist()
+            falls = np.flatnonzero(~(t[1:] >= t[:-1]))      # rows k whose next row is not later (usually none)
             for i, (lo, _, hi), whole in zip(members, bounds.tolist(), ok.tolist()):
                 if not whole:
                     continue
                 got = self._ahead[keys[i]] = (t[lo:hi], y[lo:hi], yp[lo:hi])
-                if falls[hi - 1] == falls[lo]:        # in time order (`_reading`'s check)
+                if not len(falls) or not ((falls >= lo) & (falls < hi - 1)).any():   # in time order (`_reading`'s)
                     ready[i] = (keys[i], anchors[i][5], anchors[i][0]) + got
         return anchors, ready
 
