@@ -357,14 +357,15 @@ def test_shipped_lc1_design_is_a_kkt_point():
     multipliers positive (Nocedal & Wright Theorem 12.1): with two active limits in two values the multipliers are
     the solution of that 2x2 system, and their signs are the physics: a higher temperature or a longer index allowed
     would each let the crank shrink. The gradients are the exact sensitivities at the design (the hour's window
-    only; the module's compiled pass is reused: same scenario, values and quantities as the cycle cases)."""
+    only; the module's compiled pass is reused: the cycle cases' model and quantities, and the two values the
+    sizing moves, which the pass pads to its compiled seed width as it does the cycle cases' eight)."""
     from pathlib import Path
 
     from mechsim.scenarios.studies.sizing import ACTIVE, FEASIBLE
     from mechsim.scenarios.keys import lookup
     design = mechsim.load(Path(__file__).resolve().parent.parent / "docs" / "lc1_sizing_design.toml")
-    table = sensitivity(design, CYCLE_WRT, OF + ["index_time_s"])
     keys = ["mechanism.crank_radius", "drive.stall_torque"]
+    table = sensitivity(design, keys, OF + ["index_time_s"])
     values, grads = {}, {}
     for q, limit in (("peak_temp_contact_C", 60.0), ("index_time_s", 0.3)):
         part = table[table["quantity"] == q].set_index("wrt")
