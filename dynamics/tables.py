@@ -134,27 +134,17 @@ def _quadratic_form(v: np.ndarray, M) -> np.ndarray:
 def _mode_params(pieces) -> tuple:
     """The parameters of a mode's pieces, row-aligned with their stacked rows: a value every piece shares as
     that scalar, one that changes from piece to piece (a re-based drive angle, a restart time) as a per-row array,
-    so each lambdified read-out is called once on all of the mode's rows."""
+    so each lambdified read-out is called once on all of the mode's rows. Values are compared as numpy compares
+    them as floats (a NaN differs from itself)."""
     first = pieces[0].params
     if all(p.params == first for p in pieces[1:]):
         return first
-    counts = [len(p.t) for p in pieces]
-    # the pieces' distinct parameter tuples (pieces read from one segment share its tuple: converted once)
-    distinct: dict = {}
-    which = [distinct.setdefault(id(p.params), (len(distinct), p.params))[0] for p in pieces]
-    try:                                # distinct tuples x parameters, compared a parameter at a time over them all
-        table = np.array([params for _, params in distinct.values()], dtype=float)
-    except (TypeError, ValueError):
-        table = None
-    if table is None or table.shape != (len(distinct), len(first)):
-        return tuple(first[j] if all(p.params[j] == first[j] for p in pieces[1:])
-                     else np.repeat(np.asarray([p.params[j] for p in pieces], dtype=float), counts)
-                     for j in range(len(first)))
-    differ = np.flatnonzero(~(table == table[0]).all(axis=0)).tolist()
+    counts = np.array([len(p.t) for p in pieces])
     params = list(first)
-    per_piece = table[:, differ] if len(distinct) == len(pieces) else table[which][:, differ]
-    for j, per_row in zip(differ, np.repeat(per_piece.T, counts, axis=1)):    # all at once, a row each
-        params[j] = per_row
+    for j, values in enumerate(zip(*(p.params for p in pieces), strict=True)):    # a parameter over the pieces
+        v0 = values[0]
+        if v0 != v0 or values.count(v0) != len(values):    # (count: identity, then ==; a NaN is never shared)
+            params[j] = np.repeat(np.asarray(values, dtype=float), counts)
     return tuple(params)
 
 
@@ -352,8 +342,28 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
 
 def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
     """modes[codes[k]] repeated counts[k] times, k in order, as the column pandas infers for those names (the
-    names typed once each, `_typed_names`, then taken row by row)."""
-    return _typed_names(modes).take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
+    names typed once each, `_typed_names`, then taken row by row). A pyarrow-backed string column is written
+    directly, its characters and offsets run by run (`_arrow_strings`: the same column, a fraction of a take's
+    cost)."""
+    typed = _typed_names(modes)
+    if isinstance(typed, pd.arrays.ArrowStringArray):
+        return _arrow_strings(modes, codes, counts, typed.dtype)
+    return typed.take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
+
+
+def _arrow_strings(modes: tuple[str, ...], codes: list[int], counts: list[int], dtype) -> pd.arrays.ArrowStringArray:
+    """modes[codes[k]] repeated counts[k] times as a pandas string array of dtype `dtype` on one pyarrow
+    large_string array (the layout pandas gives its pyarrow strings): the UTF-8 bytes of the runs joined, and
+    the offsets as the running sum of the rows' byte lengths."""
+    import pyarrow as pa
+
+    encoded = [m.encode() for m in modes]
+    data = b"".join(encoded[c] * n for c, n in zip(codes, counts))
+    offsets = np.zeros(sum(counts) + 1, dtype=np.int64)
+    np.cumsum(np.repeat(np.array([len(e) for e in encoded], dtype=np.int64)[codes], counts), out=offsets[1:])
+    strings = pa.Array.from_buffers(pa.large_string(), len(offsets) - 1,
+                                    [None, pa.py_buffer(offsets), pa.py_buffer(data)])
+    return pd.arrays.ArrowStringArray(pa.chunked_array([strings]), dtype=dtype)
 
 
 def _typed_names(names: tuple[str, ...]):
