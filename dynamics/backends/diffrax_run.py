@@ -729,6 +729,9 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         return None
     n_rows = row_bucket(len(start.t_out))
     jmod, names = entry.jmod, list(model.parameter_names)
+    mode_names = jmod.names
+    t_out = start.t_out
+    ordered = t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1]))    # as `hybrid.prepare` makes them
     one_layout = len({mf_.index["mu"].stop for mf_ in model.modes.values()}) == 1
     nq = jmod.nq
     q_columns = [f"{c}_q" for c in model.coordinates]
@@ -761,7 +764,9 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         out = entry.outputs.unpack(np.asarray(res["floats"]), np.asarray(res["ints"]))   # (not device_get: slower)
         calls += 1
         # the call's output rows, from its step buffer (left where it is), in chunks of the row buffer
-        ts = start.t_out[(start.t_out > t) & (start.t_out <= float(out["t"]))]
+        t_call = float(out["t"])          # the output times in (t, t_call]
+        ts = (t_out[t_out.searchsorted(t, "right"):t_out.searchsorted(t_call, "right")] if ordered
+              else t_out[(t_out > t) & (t_out <= t_call)])
         n_ev, n_out = int(out["n_ev"]), len(ts)
         chunks = []
         for lo in range(0, n_out, n_rows):
@@ -788,12 +793,12 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         stats["residual_evaluations"] += (int(out["steps"]) * (per_step or 1) + int(out["accepted"])
                                           + int(out["bisections"]))
         stats["segments"] += n_ev + 1
-        modes = [mode] + [jmod.names[k] for k in out["ev_k"][:n_ev].tolist()]
+        modes = [mode] + [mode_names[k] for k in out["ev_k"][:n_ev].tolist()]
         params = [p] + [tuple(row) for row in out["ev_p"][:n_ev].tolist()]
-        dense.add_call(res["st"], t, float(out["t"]), out["ev_t"][:n_ev], modes, params, offset)
+        dense.add_call(res["st"], t, t_call, out["ev_t"][:n_ev], modes, params, offset)
         seg = out["row_seg"][:n_out]
         # rows are in segment order: one piece per segment, split where the segment number changes
-        edges = np.r_[0, np.flatnonzero(np.diff(seg)) + 1, n_out].tolist() if n_out else []
+        edges = [0] + (np.flatnonzero(seg[1:] != seg[:-1]) + 1).tolist() + [n_out] if n_out else []
         y_all = state_rows(mf, nq, out["rows"][:n_out]) if one_layout else None   # one layout: all rows at once
         for s, lo, hi in zip(seg[edges[:-1]].tolist(), edges[:-1], edges[1:]):
             y_rows = y_all[lo:hi] if y_all is not None else state_rows(model.modes[modes[s]], nq, out["rows"][lo:hi])
@@ -818,7 +823,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         mode, p = modes[-1], params[-1]
         values.update(zip(names, p))
         mf = model.modes[mode]
-        t = float(out["t"])
+        t = t_call
         y, yp = (r[0] for r in ida_rows(mf, nq, out["z"], out["zp_end"], out["a_end"], out["lam_end"][:mf.m]))
         dt0 = float(out["dt"])
         if progress:
