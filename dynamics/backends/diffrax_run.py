@@ -491,12 +491,14 @@ class DenseOutput:
     def __init__(self, entry: CompiledRun, o, model, nq: int):
         self.entry, self.o, self.model, self.nq = entry, o, model, nq
         self.segments: list[tuple] = []       # (t start, t end, call, segment, mode, parameters, offset)
-        self.buffers: list = []
+        self.buffers: list = []               # (step buffer, the steps taken into it) of each call
         self._table = None                    # the segments and their taken steps as arrays, on the host
 
-    def add_call(self, st, t0: float, t1: float, ev_t, modes, params, offset) -> None:
+    def add_call(self, st, n_st: int, t0: float, t1: float, ev_t, modes, params, offset) -> None:
+        """A compiled call's step buffer `st` (its first n_st records the steps it took: a step not taken is
+        written to the first free slot with an infinite end, `make_run`), its interval and its segments."""
         c = len(self.buffers)
-        self.buffers.append(st)
+        self.buffers.append((st, n_st))
         bounds = [t0] + [float(x) for x in ev_t] + [t1]
         for s, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
             self.segments.append((a, b, c, s, modes[s], params[s], offset))
@@ -521,11 +523,8 @@ class DenseOutput:
             for n, g in enumerate(S):
                 first.setdefault(g[2], n)
             recs, segs = [], []
-            for c, buf in enumerate(self.buffers):
-                h = np.asarray(buf)
-                finite = np.isfinite(h[:, ST_ACC])
-                n = int(np.count_nonzero(finite))
-                taken = h[:n] if finite[:n].all() else h[finite]    # the taken steps lead the buffer: a view
+            for c, (buf, n_st) in enumerate(self.buffers):
+                taken = np.asarray(buf)[:n_st]        # the taken steps lead the buffer: a view
                 recs.append(taken)
                 segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
             rec = recs[0] if len(recs) == 1 else (np.concatenate(recs) if recs
@@ -795,7 +794,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
         stats["segments"] += n_ev + 1
         modes = [mode] + [mode_names[k] for k in out["ev_k"][:n_ev].tolist()]
         params = [p] + [tuple(row) for row in out["ev_p"][:n_ev].tolist()]
-        dense.add_call(res["st"], t, t_call, out["ev_t"][:n_ev], modes, params, offset)
+        dense.add_call(res["st"], int(out["n_st"]), t, t_call, out["ev_t"][:n_ev], modes, params, offset)
         seg = out["row_seg"][:n_out]
         # rows are in segment order: one piece per segment, split where the segment number changes
         edges = [0] + (np.flatnonzero(seg[1:] != seg[:-1]) + 1).tolist() + [n_out] if n_out else []
@@ -808,7 +807,8 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
             ev_q = (out["ev_z"][:n_ev, :nq] + offset).tolist()
         for e in range(n_ev):
             t_e, z_b = ev_t[e], out["ev_z"][e]
-            vals = {**values, **dict(zip(names, params[e]))}
+            vals = dict(values)
+            vals.update(zip(names, params[e]))
             guard = model.modes[modes[e]].guard_names[ev_guard[e]]
             # (the call applied the transition: its kind and message only, as on_guard's)
             kind, message = mech.guard_outcome(modes[e], guard, vals, t_e, z_b[:nq], z_b[nq:2 * nq])
