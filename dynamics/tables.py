@@ -331,7 +331,8 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
         for k in ks:
             parts[k] = block[:, offset:offset + counts[k]]
             offset += counts[k]
-    out = parts[0].copy() if len(parts) == 1 else np.concatenate(parts, axis=1)
+    # one mode: its block is the table already (its pieces in order); else the pieces' columns joined in time order
+    out = block if len(by_mode) == 1 else np.concatenate(parts, axis=1)
     keep = _kept_rows(out[0])
     if keep is not None:
         out = out[:, keep]
