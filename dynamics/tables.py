@@ -1,6 +1,7 @@
 """Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
 from __future__ import annotations
 
+import inspect
 import weakref
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
@@ -347,9 +348,13 @@ def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
     directly, its characters and offsets run by run (`_arrow_strings`: the same column, a fraction of a take's
     cost)."""
     typed = _typed_names(modes)
-    if isinstance(typed, pd.arrays.ArrowStringArray):
+    if type(typed) is pd.arrays.ArrowStringArray and _ARROW_STRINGS_TYPED:
         return _arrow_strings(modes, codes, counts, typed.dtype)
     return typed.take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
+
+
+#: whether pandas' ArrowStringArray takes its dtype (pandas 3: the "str" dtype is one of several on that class)
+_ARROW_STRINGS_TYPED = "dtype" in inspect.signature(pd.arrays.ArrowStringArray).parameters
 
 
 def _arrow_strings(modes: tuple[str, ...], codes: list[int], counts: list[int], dtype) -> pd.arrays.ArrowStringArray:
