@@ -1,7 +1,6 @@
 """Turn a raw hybrid trajectory into the result tables (SI, `<quantity>_<unit>` columns)."""
 from __future__ import annotations
 
-import inspect
 import weakref
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
@@ -344,32 +343,8 @@ def timeseries(traj: Trajectory, angle_coordinates: tuple[int, ...]) -> pd.DataF
 
 def _mode_column(modes: tuple[str, ...], codes: list[int], counts: list[int]):
     """modes[codes[k]] repeated counts[k] times, k in order, as the column pandas infers for those names (the
-    names typed once each, `_typed_names`, then taken row by row). A pyarrow-backed string column is written
-    directly, its characters and offsets run by run (`_arrow_strings`: the same column, a fraction of a take's
-    cost)."""
-    typed = _typed_names(modes)
-    if type(typed) is pd.arrays.ArrowStringArray and _ARROW_STRINGS_TYPED:
-        return _arrow_strings(modes, codes, counts, typed.dtype)
-    return typed.take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
-
-
-#: whether pandas' ArrowStringArray takes its dtype (pandas 3: the "str" dtype is one of several on that class)
-_ARROW_STRINGS_TYPED = "dtype" in inspect.signature(pd.arrays.ArrowStringArray).parameters
-
-
-def _arrow_strings(modes: tuple[str, ...], codes: list[int], counts: list[int], dtype) -> pd.arrays.ArrowStringArray:
-    """modes[codes[k]] repeated counts[k] times as a pandas string array of dtype `dtype` on one pyarrow
-    large_string array (the layout pandas gives its pyarrow strings): the UTF-8 bytes of the runs joined, and
-    the offsets as the running sum of the rows' byte lengths."""
-    import pyarrow as pa
-
-    encoded = [m.encode() for m in modes]
-    data = b"".join(encoded[c] * n for c, n in zip(codes, counts))
-    offsets = np.zeros(sum(counts) + 1, dtype=np.int64)
-    np.cumsum(np.repeat(np.array([len(e) for e in encoded], dtype=np.int64)[codes], counts), out=offsets[1:])
-    strings = pa.Array.from_buffers(pa.large_string(), len(offsets) - 1,
-                                    [None, pa.py_buffer(offsets), pa.py_buffer(data)])
-    return pd.arrays.ArrowStringArray(pa.chunked_array([strings]), dtype=dtype)
+    names typed once each, `_typed_names`, then taken row by row)."""
+    return _typed_names(modes).take(np.repeat(np.asarray(codes, dtype=np.intp), counts))
 
 
 def _typed_names(names: tuple[str, ...]):
