@@ -201,16 +201,30 @@ def consistent_state(mf: ModeFunctions, t: float, q: np.ndarray, v: np.ndarray, 
     yp[ix["q"]], yp[ix["v"]] = v, a
     if not project:
         _rows_off_manifold(mf, t, y, yp, p)
-    # rows of work and extension states are linear in their own y': F = A yp_block + b
-    block = slice(ix["work"].start, ix["ext"].stop)
-    if block.stop > block.start:
-        res = np.zeros(mf.ny)
-        mf.residual(t, y, yp, res, p)
-        J1, J0 = np.zeros((mf.ny, mf.ny)), np.zeros((mf.ny, mf.ny))
-        mf.jacobian(t, y, yp, res, 1.0, J1, p)
-        mf.jacobian(t, y, yp, res, 0.0, J0, p)
-        yp[block] = -np.linalg.solve(J1[block, block] - J0[block, block], res[block])
+    _state_rates(mf, t, y, yp, p)
     return y, yp, impact
+
+
+def _state_rates(mf: ModeFunctions, t: float, y: np.ndarray, yp: np.ndarray, p: tuple) -> None:
+    """y' of the work and extension states, in place (zero there on entry): their rows are linear in their own y',
+    F = A y'_block + b, so y'_block = -A^-1 F with F the residual at y'_block = 0.
+
+    A is the difference of the Jacobian at cj = 1 and cj = 0. Without extension states the rows are the work rows
+    W' - P (`dynamics.model`), whose A is the identity: y'_work = -F, the values LAPACK's solve of that system gives
+    (F is never -0 there: W' = +0 enters it as a term), without the Jacobian's two evaluations."""
+    ix = mf.index
+    block = slice(ix["work"].start, ix["ext"].stop)
+    if block.stop == block.start:
+        return
+    res = np.zeros(mf.ny)
+    mf.residual(t, y, yp, res, p)
+    if ix["ext"].stop == ix["ext"].start:
+        yp[block] = -res[block]
+        return
+    J1, J0 = np.zeros((mf.ny, mf.ny)), np.zeros((mf.ny, mf.ny))
+    mf.jacobian(t, y, yp, res, 1.0, J1, p)
+    mf.jacobian(t, y, yp, res, 0.0, J0, p)
+    yp[block] = -np.linalg.solve(J1[block, block] - J0[block, block], res[block])
 
 
 def _rows_off_manifold(mf: ModeFunctions, t: float, y: np.ndarray, yp: np.ndarray, p: tuple) -> None:
