@@ -46,13 +46,13 @@ def _gauss_newton(positions, q, xp, steps: int, until_roundoff: bool):
             q = q - _min_norm(G, phi, xp, pad)
         return q, None
     G, phi, pad = positions(q)
-    best = float(np.abs(phi).max())
+    best = _largest(phi)
     for _ in range(steps):
         if best == 0.0:
             break
         trial = q - _min_norm(G, phi, xp, pad)
         G_trial, phi_trial, _ = positions(trial)
-        r = float(np.abs(phi_trial).max())
+        r = _largest(phi_trial)
         if not r < best:
             break
         q, G, phi, previous, best = trial, G_trial, phi_trial, best, r
@@ -108,12 +108,24 @@ def floats(a) -> list:
     return np.asarray(a, dtype=float).tolist()
 
 
+def _largest(phi: np.ndarray) -> float:
+    """max |phi| (NaN where phi has one), by the reduction ndarray.max calls, without its Python wrapper."""
+    return float(np.maximum.reduce(np.abs(phi), axis=None))
+
+
+def matrix(a) -> np.ndarray:
+    """A generated function's matrix (`ModeFunctions.mass`, `G`) as a 2-D float array: np.atleast_2d where it is not
+    one already (lambdified matrices are)."""
+    a = np.asarray(a, dtype=float)
+    return a if a.ndim == 2 else np.atleast_2d(a)
+
+
 def _mass(mf: ModeFunctions, q: list, p) -> np.ndarray:
-    return np.atleast_2d(np.asarray(mf.mass(q, p), dtype=float))
+    return matrix(mf.mass(q, p))
 
 
 def _G(mf: ModeFunctions, t: float, q: list, p) -> np.ndarray:
-    return np.atleast_2d(np.asarray(mf.G(t, q, p), dtype=float))
+    return matrix(mf.G(t, q, p))
 
 
 def _projected_positions(mf: ModeFunctions, t: float, q: np.ndarray, p: tuple, max_iter: int = 30):

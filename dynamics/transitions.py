@@ -13,7 +13,7 @@ import numpy as np
 
 from mechsim.mechanisms.base import Mechanism, Transition
 
-from mechsim.dynamics.consistent import consistent_state, floats, project_positions, project_velocities
+from mechsim.dynamics.consistent import consistent_state, floats, matrix, project_positions, project_velocities
 from mechsim.dynamics.model import DerivedModel
 
 DEFAULT_STOP_HINT = "raise the drive torque or lower the load"
@@ -110,7 +110,7 @@ def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode
     if tr.message:
         out.warnings.append(f"t = {t:.6g} s: {tr.message}")
     if tr.stop:
-        M = np.atleast_2d(np.asarray(mf.mass(floats(q), p), float))
+        M = matrix(mf.mass(floats(q), p))
         ke = 0.5 * float(v @ M @ v)
         out.rows.append(dict(row, kinetic_energy_before_J=ke, kinetic_energy_after_J=ke, message=tr.stop))
         out.failure = dict(time=t, mode=mode, reason=tr.stop, where=_where(model, q + offset),
@@ -199,7 +199,7 @@ def impact_split(contact, t: float, q: np.ndarray, v_before: np.ndarray, v_after
     qs = floats(q)
     r_minus = np.asarray(contact.phi_dot(t, qs, floats(v_before), p), dtype=float).ravel()
     r_plus = np.asarray(contact.phi_dot(t, qs, floats(v_after), p), dtype=float).ravel()
-    G = np.atleast_2d(np.asarray(contact.G(t, qs, p), dtype=float))
+    G = matrix(contact.G(t, qs, p))
     phi_t_minus = r_minus - G @ np.asarray(v_before, dtype=float)
     return float(0.5 * impulse @ (r_plus + r_minus)), float(impulse @ phi_t_minus)
 
@@ -233,8 +233,7 @@ def same_constraints(model: DerivedModel, mode: str, new_mode: str, t: float, q_
     old, new = floats(q_old), floats(q_new)
     phi_old = np.asarray(mf.phi(t, old, p_old), dtype=float).ravel()
     phi_new = np.asarray(mf.phi(t, new, p_new), dtype=float).ravel()
-    G_old = np.atleast_2d(np.asarray(mf.G(t, old, p_old), dtype=float))
-    G_new = np.atleast_2d(np.asarray(mf.G(t, new, p_new), dtype=float))
+    G_old, G_new = matrix(mf.G(t, old, p_old)), matrix(mf.G(t, new, p_new))
     G_abs = np.abs(G_old)
     scale = float((G_abs @ np.maximum(np.abs(q_old), np.abs(q_new))).max()) + float(G_abs.max())
     tol = 1e-12 * max(scale, _TINY)
@@ -260,12 +259,16 @@ def carried_stop(mech: Mechanism, model: DerivedModel, mode: str, new_mode: str,
     other's value by round-off across zero. Only stops are looked at: they end the run, so nothing is skipped.
     """
     old, new = model.modes[mode], model.modes[new_mode]
-    before, after = guard_values(old, t, y_end, p), guard_values(new, t, y_new, new_p)
+    after = guard_values(new, t, y_new, new_p).tolist()
+    past = [j for j, (name, d, a) in enumerate(zip(new.guard_names, new.guard_directions, after))
+            if name in old.guard_names and ((d < 0 and 0 > a) or (d > 0 and 0 < a))]
+    if not past:              # no guard past zero at the restart: none was carried across (the old side not needed)
+        return None
+    before = guard_values(old, t, y_end, p)
     ix = old.index
     q, v = y_end[ix["q"]], y_end[ix["v"]]
-    for j, name in enumerate(new.guard_names):
-        if name not in old.guard_names:
-            continue
+    for j in past:
+        name = new.guard_names[j]
         d, b, a = new.guard_directions[j], before[old.guard_names.index(name)], after[j]
         if (d < 0 and b >= 0 > a) or (d > 0 and b <= 0 < a):
             tr = mech.on_guard(mode, name, values, t, q, v)

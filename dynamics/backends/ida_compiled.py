@@ -260,10 +260,7 @@ class IdaCompiledBackend(Backend):
     def integrate(self, request: Request) -> Segment:
         r, lib = request, self.lib
         counts = {}
-        t_out = np.ascontiguousarray(r.t_out, dtype=float)
-        ahead = (t_out > r.t0) if r.t_end >= r.t0 else (t_out < r.t0)      # t_end < t0: backward in time
-        if not ahead.all():
-            t_out = t_out[ahead]
+        t_out = _ahead(np.ascontiguousarray(r.t_out, dtype=float), r.t0, r.t_end)
         n_req = len(t_out)
         if not (n_req and (t_out[-1] - r.t_end) * (r.t_end - r.t0) >= 0):
             t_out = np.append(t_out, r.t_end)
@@ -312,6 +309,18 @@ class IdaCompiledBackend(Backend):
         rejected = error_fails + convergence_fails
         return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,
                     residual_evaluations=residuals, jacobian_evaluations=jacobians)
+
+
+def _ahead(t_out: np.ndarray, t0: float, t_end: float) -> np.ndarray:
+    """The output times ahead of t0 (after it; before it where t_end < t0, backward in time). They come ordered away
+    from t0 (IDA_NORMAL reaches them one after the other), so where the first is ahead all are, without a pass over
+    the run's remaining times at every segment."""
+    if not len(t_out):
+        return t_out
+    forward = t_end >= t0
+    if (t_out[0] > t0) if forward else (t_out[0] < t0):
+        return t_out
+    return t_out[t_out > t0] if forward else t_out[t_out < t0]
 
 
 #: IDA's counters a segment reports (`IdaCompiledBackend._counters`)
