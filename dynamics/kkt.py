@@ -119,11 +119,23 @@ def _direct(M, G, Ql, Q0, c, xp):
     nq, m = M.shape[-1], G.shape[-2]
     if m == 0:
         return _linear_solve(M, Q0, xp, spd_block=nq), xp.zeros(Q0.shape[:-1] + (0,))
+    if xp is np and M.ndim == 2:
+        return _one_system(M, G, Ql, Q0, c)
     top = xp.concatenate([M, xp.swapaxes(G, -1, -2) - Ql], axis=-1)
     bottom = xp.concatenate([G, xp.zeros(G.shape[:-1] + (m,))], axis=-1)
     K = xp.concatenate([top, bottom], axis=-2)
     sol = _linear_solve(K, xp.concatenate([Q0, c], axis=-1), xp, spd_block=nq)   # M: mass matrix, SPD
     return sol[..., :nq], sol[..., nq:]
+
+
+def _one_system(M, G, Ql, Q0, c):
+    """`_direct` on one numpy system (a re-initialisation's, `consistent.accelerations`): K written into one array,
+    the entries of the concatenations with fewer numpy calls, and the same LAPACK solve."""
+    nq, m = M.shape[-1], G.shape[-2]
+    K = np.zeros((nq + m, nq + m))
+    K[:nq, :nq], K[:nq, nq:], K[nq:, :nq] = M, G.T - Ql, G
+    sol = np.linalg.solve(K, np.concatenate([Q0, c]))
+    return sol[:nq], sol[nq:]
 
 
 def solve_entries(rows: int, M, G, Ql, Q0, c):
