@@ -88,6 +88,9 @@ class Start:
     offset: np.ndarray
     #: the breakpoints inside (t0, t_end) (`schedule`): (time, parameter updates, events-table kind), by time
     knots: list = field(default_factory=list)
+    #: whether t_out is known to be non-decreasing (as `prepare` makes it): the loop then takes a segment's output
+    #: times by two searches without checking the order of all of them first
+    ordered: bool = False
 
 
 def schedule(mech: Mechanism, drive: Drive, t0: float, t_end: float) -> tuple[dict, list]:
@@ -137,7 +140,7 @@ def prepare(mech: Mechanism, drive: Drive, settings: SolverSettings, t_end: floa
         y, yp = consistent_start(mf, t0, q_init, init.v, work0, x0, p)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"initial state: {exc}") from None
-    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset, knots)
+    return Start(model, derive_time, values, init.mode, t_out, mf, p, y, yp, offset, knots, ordered=True)
 
 
 def output_times(t0: float, t_end: float, dt_out: float) -> np.ndarray:
@@ -228,7 +231,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     first_step = backend.initial_step
     in_row = stuck = 0
     knots = list(start.knots)
-    ordered = t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1]))    # as `prepare` makes them
+    ordered = start.ordered or (t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1])))
     wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
         while knots and reached(knots, t):     # a breakpoint reached (a segment's end, or a guard's root on it)

@@ -424,7 +424,7 @@ class AutoBackend(Backend):
         if isinstance(reason, SundialsVersionMismatch):
             note(f"{reason}: the default solver.backend runs on 'ida' (the same IDA through scikit-sundae's "
                  "binding)")
-        self._compiled = None if reason is not None else IdaCompiledBackend
+        self._compiled = reason is None      # whether the compiled path can run here
         self._use(self._ida)
         self._inner = None
 
@@ -441,15 +441,15 @@ class AutoBackend(Backend):
         compiled = self._CHOSEN.get(key, (None,))[0]
         if compiled is None:
             compiled = False
-            if self._compiled is not None:
+            if self._compiled:
                 folder = cache_dir() / "compiled"
                 compiled = compiled_model.ready(model.modes.values(), folder)
                 if not compiled:
                     compiled_model.compile_in_background(model.modes.values(), folder)
             self._CHOSEN[key] = (compiled, model)     # the model kept alive: a structure by identity stays valid
-        compiled = compiled and self._compiled is not None   # another instance may have chosen where this one can't
+        compiled = compiled and self._compiled   # another instance may have chosen where this one can't
         if compiled and not isinstance(self._inner, IdaCompiledBackend):
-            self._use(self._compiled(self.settings))
+            self._use(reusable(self.settings))      # the thread's, as the readings': none is built per run
         elif not compiled and self._inner is not self._ida:
             self._use(self._ida)
         return self._inner
