@@ -128,20 +128,20 @@ class IdaCompiledBackend(Backend):
     def __init__(self, settings: SolverSettings):
         self.settings = settings
         self.solver = f"IDA (BDF, {settings.formulation}; compiled callbacks)"
-        from mechsim.dynamics.backends.native import advance      # numba: imported where it is used
-        self._advance = advance
+        from mechsim.dynamics.backends.native import segment      # numba: imported where it is used
+        self._segment = segment
         self.lib = sundials()
         self._memories = _kept_memories(settings, self.lib)
         self._tret = np.zeros(1)
         self._tret_address = self._tret.ctypes.data
-        self._solve = ctypes.cast(self.lib.IDASolve, ctypes.c_void_p).value
         self._read_addresses = np.array([ctypes.cast(getattr(self.lib, name), ctypes.c_void_p).value for name in
                                          ("IDASolve", "IDAReInit", "IDASetInitStep", "IDASetStopTime")], dtype=np.int64)
-        # IDA's counters are read into one array (a C long each), in the order of `_COUNTERS`
+        # a segment's calls (`native.segment`): the read loop's, then the getters of IDA's counters, which are read into
+        # one array (a C long each) in the order of `_COUNTERS`
+        self._segment_addresses = np.concatenate([self._read_addresses, np.array(
+            [ctypes.cast(getattr(self.lib, name), ctypes.c_void_p).value for name in _COUNTERS], dtype=np.int64)])
         self._counts = np.zeros(len(_COUNTERS), dtype=_C_LONG)
-        first = self._counts.ctypes.data
-        self._count_calls = tuple((getattr(self.lib, name), first + i * _C_LONG.itemsize)
-                                  for i, name in enumerate(_COUNTERS))
+        self._counts_address = self._counts.ctypes.data
 
     def hint(self, code: FailureCode) -> str:
         return IdaBackend.hint(self, code)
@@ -201,24 +201,21 @@ class IdaCompiledBackend(Backend):
 
     # -- one segment -------------------------------------------------------------------------------------------
     def _begin(self, mf, p, t0: float, y0, yp0, first_step: float, t_end: float, counts: dict,
-               t_first: float | None = None) -> _Memory:
-        """The mode's IDA memory re-initialised at (t0, y0, yp0) with the parameters, first step and stop time;
-        given the first output instant `t_first`, a first step of 0 is IDA's own estimate only where that moves t
-        (`ida.resolving_first_step`, as the `ida` backend's segments)."""
-        lib = self.lib
+               t_first: float) -> tuple[_Memory, float]:
+        """(the mode's IDA memory with (y0, y0') in its vectors and the parameters in its user data, the first step)
+        for a segment from t0 (`native.segment` re-initialises IDA there); given the first output instant
+        `t_first`, a first step of 0 is IDA's own estimate only where that moves t (`ida.resolving_first_step`, as
+        the `ida` backend's segments)."""
         hit = self._memories.get(id(mf))
         m = hit[1] if hit is not None and hit[0] is mf else self._first_use(mf, counts, len(p))
-        if first_step == 0.0 and t_first is not None:
+        if first_step == 0.0:
             first_step = resolving_first_step(self.settings, m.atol, t0, y0, yp0, t_first, t_end)
         m.y[:] = y0
         m.yp[:] = yp0
         if m.p_from is not p:
             m.p[:] = p
             m.p_from = p if isinstance(p, tuple) else None
-        self._check(lib.IDAReInit(m.mem, t0, m.yy_nv, m.yp_nv), "IDAReInit")
-        self._check(lib.IDASetInitStep(m.mem, first_step), "IDASetInitStep")
-        self._check(lib.IDASetStopTime(m.mem, t_end), "IDASetStopTime")
-        return m
+        return m, first_step
 
     def read(self, mf, p, t0: float, y0, yp0, t_out: np.ndarray, at_start: np.ndarray | None = None) -> tuple | None:
         """(t, y, y') at every t_out (ordered away from t0, the last one the stop time) from (y0, y0'), None where IDA
@@ -264,12 +261,15 @@ class IdaCompiledBackend(Backend):
         n_req = len(t_out)
         if not (n_req and (t_out[-1] - r.t_end) * (r.t_end - r.t0) >= 0):
             t_out = np.append(t_out, r.t_end)
-        m = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts, t_first=float(t_out[0]))
+        m, first_step = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts, float(t_out[0]))
         rows_t, rows_y, rows_yp = m.scratch(len(t_out))
-        flag, k = self._advance(self._solve, m.mem, t_out, self._tret_address, m.yy_nv, m.yp_nv, m.y, m.yp, self._tret,
-                               rows_t, rows_y, rows_yp)
+        flag, k = self._segment(self._segment_addresses, m.mem, r.t0, first_step, r.t_end, t_out, self._tret_address,
+                                m.yy_nv, m.yp_nv, m.y, m.yp, self._tret, rows_t, rows_y, rows_yp, self._counts_address,
+                                _C_LONG.itemsize)
         flag, k = int(flag), int(k)
-        counts.update(self._counters(m.mem))
+        if k < 0:                                       # a setter failed: IDA was not run
+            self._check(flag, ("IDAReInit", "IDASetInitStep", "IDASetStopTime")[-1 - k])
+        counts.update(self._counters())
         keep = min(k, n_req)
         t_now = float(self._tret[0])
         if flag == IDA_ROOT_RETURN:
@@ -302,9 +302,8 @@ class IdaCompiledBackend(Backend):
                           compile_cpu_time_s=_time.process_time() - started[1], compilations=1)
         return self._memory(mf, compiled, n_params)
 
-    def _counters(self, mem: int) -> dict:
-        for getter, address in self._count_calls:
-            getter(mem, address)
+    def _counters(self) -> dict:
+        """The segment's statistics from IDA's counters (read by `native.segment`)."""
         steps, error_fails, convergence_fails, residuals, jacobians = self._counts.tolist()
         rejected = error_fails + convergence_fails
         return dict(steps=steps + rejected, accepted_steps=steps, rejected_steps=rejected,

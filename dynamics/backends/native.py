@@ -77,6 +77,44 @@ def ida_reinit(typingctx, address, mem, t0, yy, yp):
     return types.int32(types.int64, types.int64, types.float64, types.int64, types.int64), codegen
 
 
+@intrinsic
+def ida_get_long(typingctx, address, mem, out):
+    """An IDA getter `int f(void *mem, long *out)` (IDAGetNumSteps, ...) called through its address, writing to the
+    address `out`."""
+    i64, i32 = ir.IntType(64), ir.IntType(32)
+    fnty = ir.FunctionType(i32, [i64, i64])
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(fn, list(args[1:]))
+    return types.int32(types.int64, types.int64, types.int64), codegen
+
+
+def _segment(addresses, mem, t0, first_step, t_stop, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t,
+             rows_y, rows_yp, counts_address, count_size):
+    """One segment of `IdaCompiledBackend.integrate` in one call: IDAReInit at t0 from the state the vectors yy, yp
+    hold, IDASetInitStep and IDASetStopTime, `advance` over t_out, then IDA's counters read into the C longs
+    (count_size bytes each) at counts_address. `addresses`: those of IDASolve, IDAReInit, IDASetInitStep,
+    IDASetStopTime, then of the counters' getters. Returns (flag, rows written); where a setter fails, (its flag,
+    -1 - its place among the three); without output times, (0, 0) before calling IDA."""
+    if t_out.size == 0:
+        return 0, 0
+    flag = ida_reinit(addresses[1], mem, t0, yy, yp)
+    if flag < 0:
+        return flag, -1
+    flag = ida_set_real(addresses[2], mem, first_step)
+    if flag < 0:
+        return flag, -2
+    flag = ida_set_real(addresses[3], mem, t_stop)
+    if flag < 0:
+        return flag, -3
+    flag, k = advance(addresses[0], mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y,
+                      rows_yp)
+    for i in range(4, addresses.size):
+        ida_get_long(addresses[i], mem, counts_address + (i - 4) * count_size)
+    return flag, k
+
+
 def _advance(solve_address, mem, t_out, tret_address, yy, yp, y_view, yp_view, tret, rows_t, rows_y, rows_yp):
     """IDASolve in IDA_NORMAL mode at each output time until the last one, a root (flag 2) or a failure (< 0);
     copies each row. Returns (last flag, rows written)."""
@@ -146,15 +184,18 @@ def _cached_in_the_user_cache_folder(py_func):
 
 advance = _cached_in_the_user_cache_folder(_advance)
 read_rows = _cached_in_the_user_cache_folder(_read_rows)
+segment = _cached_in_the_user_cache_folder(_segment)
 
 
 def compile_advance() -> None:
-    """Compile `advance` and `read_rows` for the argument types `IdaCompiledBackend.integrate` and `read_many`
-    pass (numba caches them on disk): calls with no output time and no reading, which return before calling
-    IDA."""
+    """Compile `advance`, `segment` and `read_rows` for the argument types `IdaCompiledBackend.integrate` and
+    `read_many` pass (numba caches them on disk): calls with no output time and no reading, which return before
+    calling IDA."""
     advance(0, 0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros((0, 1)),
             np.zeros((0, 1)))
     read_rows(np.zeros(4, dtype=np.int64), 0, 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1),
               np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0),
               np.zeros((0, 3), dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)),
               np.zeros(0, dtype=np.int64))
+    segment(np.zeros(0, dtype=np.int64), 0, 0.0, 0.0, 0.0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1),
+            np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)), 0, 8)
