@@ -240,8 +240,8 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
             events.append(row)
             stats["restarts"] += 1
         stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
-        starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float)[None, :],
-                            np.array(yp, dtype=float)[None, :], offset))
+        starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float, ndmin=2),
+                            np.array(yp, dtype=float, ndmin=2), offset))
         ahead = (t_out[t_out.searchsorted(t, "right"):t_out.searchsorted(stop, "right")] if ordered
                  else t_out[(t_out > t) & (t_out <= stop)])      # the output times in (t, stop]
         seg = yield Request(model, mode, mf, p, t, y, yp, ahead, stop, first_step)
@@ -296,7 +296,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
             y, yp, first_step = seg.y_end, seg.yp_end, seg.next_step
             continue
         # a guard fired
-        out, failure, last = fire(mech, model, mode, values, t, seg.y_end, q, list(seg.fired), offset, last, stats)
+        out, failure, last = fire(mech, model, mode, values, t, seg.y_end, q, list(seg.fired), offset, last, stats, p)
         if out is not None:
             events += out.rows
             warnings += out.warnings
@@ -336,9 +336,10 @@ def at_breakpoint(model: DerivedModel, mode: str, values: dict, t: float, y_end:
 
 
 def fire(mech: Mechanism, model: DerivedModel, mode: str, values: dict, t: float, y_end: np.ndarray, q: np.ndarray,
-         fired: list[int], offset: np.ndarray, last, stats: dict):
+         fired: list[int], offset: np.ndarray, last, stats: dict, p: tuple | None = None):
     """The guards `fired` (the first the primary) at time t, for every loop (this one and the compiled diffrax
-    run's hand-backs): the chattering check, then the transition (`transitions.apply_transition`).
+    run's hand-backs): the chattering check, then the transition (`transitions.apply_transition`; p: the parameter
+    tuple of `values` where the caller has it).
 
     Returns (outcome or None, failure with its code or None, the new `last` (guard, time)); counts the event and,
     after a successful re-initialisation, the restart in `stats`."""
@@ -347,7 +348,7 @@ def fire(mech: Mechanism, model: DerivedModel, mode: str, values: dict, t: float
     if failure:
         return None, dict(failure, code=FailureCode.CHATTERING), last
     stats["events"] += 1
-    out = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, fired, offset)
+    out = apply_transition(mech, model, parameter_tuple, mode, values, t, y_end, fired, offset, p)
     if out.failure:
         return out, dict(out.failure, code=transition_failure_code(out.failure)), (guard, t)
     stats["restarts"] += 1

@@ -82,16 +82,18 @@ def stepped_over_failure(model: DerivedModel, mode: str, crossed: dict) -> dict:
 
 
 def apply_transition(mech: Mechanism, model: DerivedModel, parameter_tuple, mode: str, values: dict, t: float,
-                     y_end: np.ndarray, fired: list[int], offset: np.ndarray | None = None) -> Outcome:
+                     y_end: np.ndarray, fired: list[int], offset: np.ndarray | None = None, p: tuple | None = None
+                     ) -> Outcome:
     """Handle guards `fired` (indices into the mode's guards, the first one the primary) at time t.
 
     y_end is in the re-based frame: the unwrapped coordinates are y_end's q + offset (zero when None); the
-    outcome's state is re-based again for the new mode (`Outcome.offset`)."""
+    outcome's state is re-based again for the new mode (`Outcome.offset`). p: parameter_tuple(model, values), where
+    the caller has it."""
     mf = model.modes[mode]
     ix = mf.index
     q, v = y_end[ix["q"]], y_end[ix["v"]]
     offset = np.zeros(len(q)) if offset is None else np.asarray(offset, dtype=float)
-    p = parameter_tuple(model, values)
+    p = parameter_tuple(model, values) if p is None else p
     guard = mf.guard_names[fired[0]]
     tr = mech.on_guard(mode, guard, values, t, q, v)
     for other in fired[1:]:
