@@ -84,3 +84,20 @@ def test_the_console_entry_leaves_without_teardown_but_runs_exit_handlers(tmp_pa
     bad = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "no-such-scenario"], env=env,
                          capture_output=True, text=True, timeout=240)
     assert bad.returncode == 2 and bad.stderr.startswith("error: ") and bad.stdout == ""
+
+
+def test_a_dae_run_from_the_caches_without_figures_loads_no_figure_or_fallback_stack(tmp_path):
+    """`mechsim run geneva-motor --set output.plots=false` in a process that finds the derived model and the
+    compiled callbacks on disk (the default backend runs them compiled): no matplotlib (no figures), no
+    scikit-sundae binding with its scipy.optimize (the compiled path reaches SUNDIALS through ctypes), no sympy,
+    no JAX."""
+    import mechsim
+    from mechsim.dynamics.user_cache import cache_dir
+    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})   # the caches written
+    code = ("import sys\nfrom mechsim.scenarios import cli\n"
+            "try:\n    cli.app(['run', 'geneva-motor', '--quiet', '--set', 'duration=0.3 s', '--set', "
+            f"'output.plots=false', '--out', {str(tmp_path / 'out')!r}])\nexcept SystemExit as e:\n"
+            "    assert not e.code, e.code\n"
+            "print(sorted(m for m in ('matplotlib', 'sksundae', 'scipy.optimize', 'sympy', 'jax') if m in sys.modules))")
+    assert fresh(code, cache_dir(), tmp_path).strip() == "[]"
+    assert (tmp_path / "out" / "timeseries.parquet").is_file()

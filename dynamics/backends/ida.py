@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from sksundae.ida import IDA
 
 from mechsim.dynamics.backend import FRESH_STEP_FRACTION, Backend, End, Request, Segment
 from mechsim.dynamics.model import ModeFunctions
@@ -96,6 +95,7 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
     """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end.
 
     first_step: IDA's initial step (0: its own estimate)."""
+    from sksundae.ida import IDA        # with scipy.optimize: only where this backend solves (not on ida-compiled)
     atol = atol_vector(mf, settings)
     tspan = np.concatenate([[t0], t_out[t_out > t0], [] if (len(t_out) and t_out[-1] >= t_end) else [t_end]])
     if len(tspan) == 2:

@@ -140,10 +140,13 @@ class Sundials:
     """The loaded C functions (attributes named as in SUNDIALS) and the layout offsets the callbacks use."""
 
     def __init__(self):
-        import sksundae.ida  # noqa: F401  (loads the libraries the way scikit-sundae itself does)
         files = _library_files()
         mode = getattr(os, "RTLD_GLOBAL", 0)
-        libs = {part: ctypes.CDLL(path, mode=mode) for part, path in files.items()}
+        try:        # by path (each library finds the others beside it): scikit-sundae's import costs scipy.optimize
+            libs = {part: ctypes.CDLL(path, mode=mode) for part, path in files.items()}
+        except OSError:     # a platform whose loader needs scikit-sundae's own set-up first (its DLL folders)
+            import sksundae.ida  # noqa: F401
+            libs = {part: ctypes.CDLL(path, mode=mode) for part, path in files.items()}
         self.files = files
         self.version = library_version(libs["core"])
         check_version(self.version)       # before any prototype is bound or called

@@ -19,8 +19,8 @@ def save_figures(makers, folder: Path, skip: bool = True) -> None:
     `skip`, a figure that cannot be drawn is skipped with a one-line warning on stderr (the run's data is written
     all the same); without, the error propagates (a forked child: its parent draws the figure again and warns).
     An OSError (a refused or full folder) is no drawing problem and always propagates."""
-    from mechsim.scenarios.output.plots import save
     for make in makers:
+        from mechsim.scenarios.output.plots import save      # matplotlib: only where a figure is drawn
         name = getattr(make, "stem", None)
         try:
             for name, fig in make().items():
