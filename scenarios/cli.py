@@ -172,7 +172,7 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
     duration = sc.si["duration"]
     if not quiet and (note := size.large_note(sc.si, size.estimate(sc.si))):
         err.print(note, markup=False, highlight=False, soft_wrap=True)
-    with RunProgress(err.console, sc.name, duration, disable=quiet) as bar:
+    with RunProgress(None if quiet else err.console, sc.name, duration, disable=quiet) as bar:
         try:
             with native_output() as native:
                 result = api.run(sc, progress=bar.simulated)
@@ -676,8 +676,20 @@ def _print_size(result, target: Path) -> None:
         err.print(f"warning (at the design): {w}", markup=False, highlight=False, soft_wrap=True)
 
 
+#: the young generation's collection threshold of a command's process (CPython's default: 700 allocations)
+GC_YOUNG_THRESHOLD = 10_000
+
+
 def main() -> None:
-    """Console entry point; any user error that escaped becomes one line and exit code 2."""
+    """Console entry point; any user error that escaped becomes one line and exit code 2.
+
+    A command's process collects its young generation every GC_YOUNG_THRESHOLD allocations instead of 700: a
+    `mechsim run` imports a few hundred thousand long-lived objects (pandas, numba, matplotlib), which the default
+    threshold sweeps from the young generation hundreds of times and from the whole heap several times
+    (docs/benchmarks.md, "Cold start"). The older generations keep their thresholds, so cyclic garbage is still
+    freed within a run."""
+    import gc
+    gc.set_threshold(GC_YOUNG_THRESHOLD, *gc.get_threshold()[1:])
     from mechsim.dynamics.backends.xla_options import checks_without_callbacks
     checks_without_callbacks()      # compiled solves kept across processes (before equinox is imported)
     code = 0

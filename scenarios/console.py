@@ -139,30 +139,38 @@ def _fileno(stream) -> int | None:
 class RunProgress:
     """The progress bar of `mechsim run` on stderr: the simulated time while the run advances (`simulated(t)`),
     then the share of the tables written while the files are written (`writing(fraction, what)`), so that the bar
-    keeps moving while a long run's tables are written. Transient: it leaves no line behind."""
+    keeps moving while a long run's tables are written. Transient: it leaves no line behind. Disabled (`--quiet`)
+    it only keeps the time (rich is not imported)."""
 
     def __init__(self, console, name: str, duration: float, disable: bool = False):
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
         self.name, self.duration, self.time, self.phase = name, duration, 0.0, "run"
+        self.bar = None
+        if disable:
+            return
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
         self.bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[where]}"),
-                            TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=disable,
-                            transient=True)
+                            TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
         self.task = self.bar.add_task(name, total=duration, where="t = 0.000 s")
 
     def __enter__(self) -> "RunProgress":
-        self.bar.__enter__()
+        if self.bar is not None:
+            self.bar.__enter__()
         return self
 
     def __exit__(self, *exc) -> None:
-        self.bar.__exit__(*exc)
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
 
     def simulated(self, t: float) -> None:
         """The run has reached simulated time t (s)."""
         self.time = t
-        self.bar.update(self.task, completed=t, where=f"t = {t:.3f} s")
+        if self.bar is not None:
+            self.bar.update(self.task, completed=t, where=f"t = {t:.3f} s")
 
     def writing(self, fraction: float, what: str = "files") -> None:
         """A share `fraction` of the tables is written; `what` is being written now."""
+        if self.bar is None:
+            return
         if self.phase != "write":
             self.phase = "write"
             self.bar.reset(self.task, total=1.0)
