@@ -687,9 +687,16 @@ def main() -> None:
     `mechsim run` imports a few hundred thousand long-lived objects (pandas, numba, matplotlib), which the default
     threshold sweeps from the young generation hundreds of times and from the whole heap several times
     (docs/benchmarks.md, "Cold start"). The older generations keep their thresholds, so cyclic garbage is still
-    freed within a run."""
+    freed within a run.
+
+    OpenBLAS (numpy's and scipy's each) starts a thread per core when it loads, and an idle one spins before it
+    sleeps: with OPENBLAS_THREAD_TIMEOUT at its least (2^4 cycles, unless the user set it) they sleep at once.
+    Each BLAS call keeps its threads and its split of the work, so every number is the same; a command's
+    matrices are small, and for the large ones waking a thread is nothing beside the call."""
     import gc
+    import os
     gc.set_threshold(GC_YOUNG_THRESHOLD, *gc.get_threshold()[1:])
+    os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")     # read when numpy loads OpenBLAS, after this
     from mechsim.dynamics.backends.xla_options import checks_without_callbacks
     checks_without_callbacks()      # compiled solves kept across processes (before equinox is imported)
     code = 0
