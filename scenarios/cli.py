@@ -236,11 +236,13 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
 
 
 def time_line(solver: dict, total: float, plots: bool = True) -> str:
-    """Where the command's wall time went: the solve (and compilation) within the run, the tables and summary,
-    and the rest (start-up, files and figures), so a user sees what waiting on figures costs."""
+    """Where the command's wall time went: the solve (and compiling the model's code, or loading it from the cache
+    of an earlier process) within the run, the tables and summary, and the rest (start-up, files and figures), so a
+    user sees what waiting on figures costs."""
     run, solve = solver["wall_time_s"], solver.get("solve_time_s") or 0.0
     compile_ = solver.get("compile_time_s") or 0.0
-    parts = [f"solve {solve:.2f} s"] + ([f"compile {compile_:.2f} s"] if compile_ else []) + [
+    compiled = [f"compile or load compiled code {compile_:.2f} s"] if compile_ else []
+    parts = [f"solve {solve:.2f} s"] + compiled + [
         f"tables and summary {max(run - solve - compile_, 0.0):.2f} s",
         f"start-up, files and figures {max(total - run, 0.0):.2f} s"]
     tip = "; `--set output.plots=false` skips the figures" if plots and total - run > run else ""

@@ -73,8 +73,8 @@ def test_the_time_line_splits_the_whole_command():
     solver = {"wall_time_s": 2.0, "solve_time_s": 0.5, "compile_time_s": 0.25}
     line = time_line(solver, 10.0)
     # 10 s in all = 0.5 solve + 0.25 compile + 1.25 tables and summary + 8 of the rest
-    assert line.startswith("time: 10.00 s in all (solve 0.50 s, compile 0.25 s, tables and summary 1.25 s, "
-                           "start-up, files and figures 8.00 s)")
+    assert line.startswith("time: 10.00 s in all (solve 0.50 s, compile or load compiled code 0.25 s, tables and "
+                           "summary 1.25 s, start-up, files and figures 8.00 s)")
     assert "output.plots=false" in line and "output.plots=false" not in time_line(solver, 10.0, plots=False)
     no_compilation = {"wall_time_s": 1.0, "solve_time_s": 0.5}
     assert "compile" not in time_line(no_compilation, 1.5)
