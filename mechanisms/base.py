@@ -270,6 +270,11 @@ class TransitionRule:
         return self.stop is not None or self.restitution is not None or self.numeric or self.record is not None
 
 
+def _filled(template: str | None, fields: Mapping | None) -> str | None:
+    """A rule's template (`TransitionRule.stop`, `message`, `hint`) filled in with its fields; None stays None."""
+    return None if template is None else template.format(**fields)
+
+
 @dataclass(frozen=True)
 class Breakpoint:
     """An instant where a time-varying input bends or jumps (a load profile's knot, a motor switched on or off):
@@ -440,13 +445,13 @@ class Mechanism(ABC):
         """The transition when `guard` of `mode` fires at state (q, v) with parameter values `values`: the first
         rule of the table (`transitions`) that applies there, evaluated with numpy, its templates filled in. A
         mechanism without a table overrides this."""
-        rule, q, v, fill = self._fired_rule(mode, guard, values, q, v)
+        rule, q, v, fields = self._fired_rule(mode, guard, values, q, v)
         updates = {} if rule.updates is None else {
             name: float(x) for name, x in rule.updates(q, v, values, np).items()}
         record = None if rule.record is None else {
             name: float(x) for name, x in rule.record(q, v, values).items()}
-        return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=fill(rule.stop),
-                          kind=rule.kind, message=fill(rule.message), hint=fill(rule.hint),
+        return Transition(rule.mode or mode, updates, restitution=rule.restitution, stop=_filled(rule.stop, fields),
+                          kind=rule.kind, message=_filled(rule.message, fields), hint=_filled(rule.hint, fields),
                           contact=rule.contact, record=record,
                           restitution_parameter=rule.restitution_parameter)
 
@@ -458,12 +463,13 @@ class Mechanism(ABC):
         if type(self).on_guard is not Mechanism.on_guard:
             tr = self.on_guard(mode, guard, values, t, q, v)
             return tr.kind, tr.message
-        rule, _, _, fill = self._fired_rule(mode, guard, values, q, v)
-        return rule.kind, fill(rule.message)
+        rule, _, _, fields = self._fired_rule(mode, guard, values, q, v)
+        return rule.kind, _filled(rule.message, fields)
 
     def _fired_rule(self, mode: str, guard: str, values: Mapping[str, float], q, v):
-        """(rule, q, v, fill) for `on_guard`: the first rule of (mode, guard) whose `when` holds at (q, v) as
-        float arrays, and fill(template) filling a template with the rule's fields (None stays None)."""
+        """(rule, q, v, fields) for `on_guard`: the first rule of (mode, guard) whose `when` holds at (q, v) as
+        float arrays, and the placeholders of its templates (`_filled`; None where it has no template: its
+        `fields` are not evaluated)."""
         table = self.transition_rules()
         if table is None:
             raise NotImplementedError(f"{self.name} has neither a transition table nor on_guard")
@@ -474,11 +480,9 @@ class Mechanism(ABC):
         for rule in rules:
             if rule.when is not None and not float(rule.when(q, v, values, np)) > 0:
                 continue
-            fields = dict(rule.fields(q, v, values) if rule.fields is not None else {}, mode=mode)
-
-            def fill(template):
-                return None if template is None else template.format(**fields)
-            return rule, q, v, fill
+            if rule.stop is None and rule.message is None and rule.hint is None:
+                return rule, q, v, None
+            return rule, q, v, dict(rule.fields(q, v, values) if rule.fields is not None else {}, mode=mode)
         raise ValueError(f"no rule of guard {guard!r} in mode {mode!r} applies (the last one needs no 'when')")
 
     def schedule(self, t_end: float) -> list[Breakpoint]:

@@ -409,11 +409,11 @@ class Geneva(Mechanism):
     def _entry(self, q, v, p, xp):
         """Flank 1; friction along the slip the pin meets. The wheel is at rest, so the slip is theta' (s -
         crank_sense R) with the pin's sliding speed per unit crank speed s at the wheel angle beta the pin meets
-        (`GenevaGeometry.wheel_motion`, `pin_in_slot`; docs/theory.md §G1 'Pin spin')."""
+        (`GenevaGeometry.wheel_motion`, `slot_sliding`; docs/theory.md §G1 'Pin spin')."""
         g = self.geometry
         alpha = _local(q, p)[0]
         beta = g.wheel_motion(p["r"] / p["c"], alpha, xp)[0]
-        u = v[0] * (g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] - g.crank_sense * p["R"])
+        u = v[0] * (g.slot_sliding(p["r"], alpha, beta, xp) - g.crank_sense * p["R"])
         return {"flank": 1.0, "slide": xp.where(u >= 0, 1.0, -1.0)}
 
     def _flank_switch(self, q, v, p, xp):
@@ -424,7 +424,7 @@ class Geneva(Mechanism):
         g = self.geometry
         alpha, beta = _local(q, p)
         new = -p["flank"]
-        u = (v[0] * g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2]
+        u = (v[0] * g.slot_sliding(p["r"], alpha, beta, xp)
              + new * p["R"] * (v[1] - g.crank_sense * v[0]))
         return {"flank": new, "slide": xp.where(u == 0, p["slide"], xp.sign(u))}
 
@@ -445,7 +445,7 @@ class Geneva(Mechanism):
         g = self.geometry
         alpha, beta = _local(q, p)
         G = g.wheel_motion(p["r"] / p["c"], alpha, xp)[1]
-        s = g.pin_in_slot(p["r"], p["c"], alpha, beta, xp)[2] + p["flank"] * p["R"] * (G - g.crank_sense)
+        s = g.slot_sliding(p["r"], alpha, beta, xp) + p["flank"] * p["R"] * (G - g.crank_sense)
         return xp.minimum(xp.abs(s) - 1e-3 * (p["r"] + p["R"]), self.STOPPED_SPEED - xp.abs(v[0]))
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
