@@ -107,6 +107,17 @@ class GenevaGeometry:
                 -lam * (1 - lam * lam) * sin_a / d ** 2, lib.sqrt(d))
 
     @staticmethod
+    def wheel_angle(lam, alpha, lib=np):
+        """`wheel_motion`'s beta alone (a transition rule needs no more; docs/theory.md §G1)."""
+        return lib.atan2(lam * lib.sin(alpha), 1 - lam * lib.cos(alpha))
+
+    @staticmethod
+    def speed_ratio(lam, alpha, lib=np):
+        """`wheel_motion`'s G alone (docs/theory.md §G1)."""
+        cos_a = lib.cos(alpha)
+        return lam * (cos_a - lam) / (1 - 2 * lam * cos_a + lam * lam)
+
+    @staticmethod
     def pin_position(r, c, alpha, lib=np):
         """The pin centre P = (c - r cos alpha, r sin alpha) in the wheel-centre frame (docs/theory.md §G1)."""
         return c - r * lib.cos(alpha), r * lib.sin(alpha)
@@ -137,12 +148,12 @@ def _d(lam: float, alpha):
 
 def wheel_angle(lam: float, alpha):
     """beta = atan2(lambda sin(alpha), 1 - lambda cos(alpha)) (docs/theory.md §G1; seed S(3b) with its sign)."""
-    return np.arctan2(lam * np.sin(alpha), 1.0 - lam * np.cos(alpha))
+    return GenevaGeometry.wheel_angle(lam, alpha)
 
 
 def speed_ratio(lam: float, alpha):
     """G = d(beta)/d(alpha) = lambda (cos(alpha) - lambda) / D (docs/theory.md §G1)."""
-    return lam * (np.cos(alpha) - lam) / _d(lam, alpha)
+    return GenevaGeometry.speed_ratio(lam, alpha)
 
 
 def speed_ratio_derivative(lam: float, alpha):

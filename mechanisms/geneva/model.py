@@ -409,10 +409,10 @@ class Geneva(Mechanism):
     def _entry(self, q, v, p, xp):
         """Flank 1; friction along the slip the pin meets. The wheel is at rest, so the slip is theta' (s -
         crank_sense R) with the pin's sliding speed per unit crank speed s at the wheel angle beta the pin meets
-        (`GenevaGeometry.wheel_motion`, `slot_sliding`; docs/theory.md §G1 'Pin spin')."""
+        (`GenevaGeometry.wheel_angle`, `slot_sliding`; docs/theory.md §G1 'Pin spin')."""
         g = self.geometry
         alpha = _local(q, p)[0]
-        beta = g.wheel_motion(p["r"] / p["c"], alpha, xp)[0]
+        beta = g.wheel_angle(p["r"] / p["c"], alpha, xp)
         u = v[0] * (g.slot_sliding(p["r"], alpha, beta, xp) - g.crank_sense * p["R"])
         return {"flank": 1.0, "slide": xp.where(u >= 0, 1.0, -1.0)}
 
@@ -444,7 +444,7 @@ class Geneva(Mechanism):
         """
         g = self.geometry
         alpha, beta = _local(q, p)
-        G = g.wheel_motion(p["r"] / p["c"], alpha, xp)[1]
+        G = g.speed_ratio(p["r"] / p["c"], alpha, xp)
         s = g.slot_sliding(p["r"], alpha, beta, xp) + p["flank"] * p["R"] * (G - g.crank_sense)
         return xp.minimum(xp.abs(s) - 1e-3 * (p["r"] + p["R"]), self.STOPPED_SPEED - xp.abs(v[0]))
 

@@ -65,6 +65,17 @@ class InternalGenevaGeometry(GenevaGeometry):
                 -lam * (1 - lam * lam) * sin_a / d ** 2, lib.sqrt(d))
 
     @staticmethod
+    def wheel_angle(lam, alpha, lib=np):
+        """`wheel_motion`'s beta alone (a transition rule needs no more; docs/internal_geneva.md eq. 2)."""
+        return lib.atan2(lam * lib.sin(alpha), 1 + lam * lib.cos(alpha))
+
+    @staticmethod
+    def speed_ratio(lam, alpha, lib=np):
+        """`wheel_motion`'s G alone (docs/internal_geneva.md eq. 3)."""
+        cos_a = lib.cos(alpha)
+        return lam * (cos_a + lam) / (1 + 2 * lam * cos_a + lam * lam)
+
+    @staticmethod
     def pin_position(r, c, alpha, lib=np):
         """The pin centre P = (c + r cos alpha, r sin alpha) in the wheel-centre frame (docs/internal_geneva.md eq. 1)."""
         return c + r * lib.cos(alpha), r * lib.sin(alpha)
