@@ -368,17 +368,22 @@ class Geneva(Mechanism):
         return np.array([2 * np.pi * k, k * pitch]), {
             "slot": 0.0, "lock_angle": values["lock_angle"] - k * pitch, "slot_base": values["slot_base"] + k}
 
+    # the rules that read the state and the parameters only, the same for every Geneva: built once (`transitions`)
+    _STALL = TransitionRule(kind="stall", fields=lambda q, v, p: {"angle": np.degrees(q[0])}, stop=(
+        "crank stalled: its speed fell to zero at crank angle {angle:.2f} deg ({mode}); the drive cannot "
+        "carry the load past this point"))
+    _REST = TransitionRule(kind="rest", fields=lambda q, v, p: {"angle": np.degrees(q[0]), "speed": v[0]}, stop=(
+        "crank stalled: it crept to rest at crank angle {angle:.4f} deg ({mode}), speed {speed:.2e} rad/s with "
+        f"speed + {REST_TIME:g} s x |acceleration| below {REST_SPEED:g} rad/s; it settles where the "
+        "drive's torque at zero speed balances the load"))
+    _EXIT = TransitionRule("dwell", lambda q, v, p, xp: {
+        "slot": p["slot"] + 1, "lock_angle": (p["slot"] + 0.5) * p["pitch"]}, kind="exit")
+    _SLIP_REVERSAL = TransitionRule("engaged", lambda q, v, p, xp: {"slide": -p["slide"]}, kind="slip reversal")
+
     def transitions(self) -> dict[tuple[str, str], TransitionRule | tuple[TransitionRule, ...]]:
         """Entry (flank 1, friction along the slip the pin meets), exit (next slot, the wheel locked half a pitch
         on), flank switch (friction re-chosen from the new flank's slip) and slip reversal; stall and rest are
         stops, and so is a slip reversal at a crank coming to rest (`_crank_stopped`)."""
-        stall = TransitionRule(kind="stall", fields=lambda q, v, p: {"angle": np.degrees(q[0])}, stop=(
-            "crank stalled: its speed fell to zero at crank angle {angle:.2f} deg ({mode}); the drive cannot "
-            "carry the load past this point"))
-        rest = TransitionRule(kind="rest", fields=lambda q, v, p: {"angle": np.degrees(q[0]), "speed": v[0]}, stop=(
-            "crank stalled: it crept to rest at crank angle {angle:.4f} deg ({mode}), speed {speed:.2e} rad/s with "
-            f"speed + {self.REST_TIME:g} s x |acceleration| below {self.REST_SPEED:g} rad/s; it settles where the "
-            "drive's torque at zero speed balances the load"))
         entry = TransitionRule("engaged", self._entry, kind="entry")
         if self.station_torques is not None:
             # the station's torque is a number of this scenario, not a parameter: a numeric rule (numpy only)
@@ -386,8 +391,7 @@ class Geneva(Mechanism):
                 **self._entry(q, v, p, xp), "T_L": self.station_torque(p["slot"] + p["slot_base"])})
         table = {
             ("dwell", "entry"): entry,
-            ("engaged", "exit"): TransitionRule("dwell", lambda q, v, p, xp: {
-                "slot": p["slot"] + 1, "lock_angle": (p["slot"] + 0.5) * p["pitch"]}, kind="exit"),
+            ("engaged", "exit"): self._EXIT,
             ("engaged", "flank_switch"): TransitionRule(
                 "engaged", self._flank_switch, kind="flank switch", fields=lambda q, v, p: {
                     "angle": np.degrees(q[0] - 2 * np.pi * p["slot"]),
@@ -395,12 +399,11 @@ class Geneva(Mechanism):
                     "normal force changed sign at crank angle {angle:.2f} deg (local): the pin crossed to the "
                     "{side} flank (with slot clearance this is a backlash impact)")),
             ("engaged", "slip_reversal"): (
-                replace(stall, when=self._crank_stopped),
-                TransitionRule("engaged", lambda q, v, p, xp: {"slide": -p["slide"]}, kind="slip reversal")),
+                replace(self._STALL, when=self._crank_stopped), self._SLIP_REVERSAL),
         }
         for mode in ("engaged", "dwell"):
-            table[(mode, "stall")] = stall
-            table[(mode, "rest")] = rest
+            table[(mode, "stall")] = self._STALL
+            table[(mode, "rest")] = self._REST
         return table
 
     # the rules' state functions, (q, v, p, xp) for numpy and jax.numpy alike (`TransitionRule`): the geometry
