@@ -154,6 +154,31 @@ def solve_entries(rows: int, M, G, Ql, Q0, c):
                    stack_entries(Q0, rows, (nq,)), stack_entries(c, rows, (m,)), np)
 
 
+def solve_short(M: np.ndarray, G, Ql, Q0, gamma):
+    """`solve` on a short numpy stack (LAPACK's, one system at a time) with c = -gamma: M stacked (rows, nq, nq), the
+    rest as lambdified matrices give them, flat (G m x nq and Ql nq x m row by row, Q0 nq, gamma m; each entry an
+    array over the systems or a scalar they share). K and [Q0; c] are written entry by entry into one array each:
+    the same values as `_direct`'s concatenation of the stacked arrays (each G^T - Ql entry the difference of the
+    two as floats, c the negated gamma), without its intermediate arrays, and the same solve."""
+    rows, nq, m = len(M), len(Q0), len(gamma)
+    K = np.zeros((rows, nq + m, nq + m))
+    b = np.empty((rows, nq + m))
+    K[:, :nq, :nq] = M
+    for e, entry in enumerate(G):
+        K[:, nq + e // nq, e % nq] = entry
+    for e, entry in enumerate(Ql):
+        i, k = divmod(e, m)
+        K[:, i, nq + k] = entry
+        np.subtract(K[:, nq + k, i], K[:, i, nq + k], out=K[:, i, nq + k])
+    for i, entry in enumerate(Q0):
+        b[:, i] = entry
+    for k, entry in enumerate(gamma):
+        b[:, nq + k] = entry
+    np.negative(b[:, nq:], out=b[:, nq:])
+    sol = np.linalg.solve(K, b[..., None])[..., 0]
+    return sol[..., :nq], sol[..., nq:]
+
+
 def stack_entries(entries, rows: int, shape: tuple[int, ...]) -> np.ndarray:
     """Flat entries (arrays over the rows, or scalars) as an (rows, *shape) array."""
     out = np.empty((rows, len(entries)))

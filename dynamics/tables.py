@@ -93,14 +93,12 @@ def _kkt(mf, t, qT, vT, xT, p):
     n, nq, m = len(t), len(qT), mf.m
     mass = f["mass"](qT, p)
     Q0 = f["force0"](t, qT, vT, xT, p)
-    if not kkt.long_stack(n, nq + m):     # a short stack: LAPACK's, on the stacked arrays (M kept stacked)
+    if not kkt.long_stack(n, nq + m):     # a short stack: LAPACK's (M kept stacked)
         M = kkt.stack_entries(mass, n, (nq, nq))
         if m == 0:
-            return (M,) + kkt.solve(M, np.zeros((n, 0, nq)), np.zeros((n, nq, 0)), kkt.stack_entries(Q0, n, (nq,)),
-                                    np.zeros((n, 0)))
-        return (M,) + kkt.solve(M, kkt.stack_entries(f["G"](t, qT, p), n, (m, nq)),
-                                kkt.stack_entries(f["force_lam"](t, qT, vT, xT, p), n, (nq, m)),
-                                kkt.stack_entries(Q0, n, (nq,)), -kkt.stack_entries(f["gamma"](t, qT, vT, p), n, (m,)))
+            return (M,) + kkt.solve_short(M, [], [], Q0, [])
+        return (M,) + kkt.solve_short(M, f["G"](t, qT, p), f["force_lam"](t, qT, vT, xT, p), Q0,
+                                      f["gamma"](t, qT, vT, p))
     M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
     if m == 0:
         return (M,) + kkt.solve_entries(n, M, [], [[] for _ in range(nq)], Q0, [])
