@@ -8,8 +8,8 @@ Q(lam) = Q0 + Ql lam (friction makes the forces depend on the multipliers, docs/
 with c = -gamma (exact constraint acceleration, consistent initialisation and read-outs) or
 c = -gamma - 2 alpha Phi' - beta^2 Phi (the Baumgarte-stabilised index-1 ODE of the diffrax backend).
 Every caller assembles and solves it here: `consistent.accelerations` (one state, numpy), `tables.kkt_rows`
-(every output row at once, numpy, entry by entry: `solve_entries`; a long stack eliminated an entry of all its
-systems at a time, `_stacked`),
+(every output row at once, numpy, entry by entry: a short stack by LAPACK, `solve_short`; a long one eliminated
+an entry of all its systems at a time, `solve_entries`, `_stacked`),
 `jax_model.JaxModel.kkt` (traced, jax.numpy) and `model` (guards that read a or lam, solved symbolically with
 sympy).
 """
@@ -154,29 +154,28 @@ def solve_entries(rows: int, M, G, Ql, Q0, c):
                    stack_entries(Q0, rows, (nq,)), stack_entries(c, rows, (m,)), np)
 
 
-def solve_short(M: np.ndarray, G, Ql, Q0, gamma):
-    """`solve` on a short numpy stack (LAPACK's, one system at a time) with c = -gamma: M stacked (rows, nq, nq), the
-    rest as lambdified matrices give them, flat (G m x nq and Ql nq x m row by row, Q0 nq, gamma m; each entry an
-    array over the systems or a scalar they share). K and [Q0; c] are written entry by entry into one array each:
-    the same values as `_direct`'s concatenation of the stacked arrays (each G^T - Ql entry the difference of the
-    two as floats, c the negated gamma), without its intermediate arrays, and the same solve."""
-    rows, nq, m = len(M), len(Q0), len(gamma)
+def solve_short(rows: int, M, G, Ql, Q0, gamma):
+    """(M, a, lam): `solve` on a short numpy stack of `rows` systems (LAPACK's, one system at a time) with c = -gamma,
+    given as lambdified matrices give them, flat (M nq x nq, G m x nq and Ql nq x m row by row, Q0 nq, gamma m; each
+    entry an array over the systems or a scalar they share), M returned stacked (rows, nq, nq). K and [Q0; c] are
+    written entry by entry into one array each: the same values as `_direct`'s concatenation of the stacked arrays
+    (an entry of G^T - Ql the difference of the two entries, exact for integers as they are in a matrix of
+    coefficients; c the negated gamma), without its intermediate arrays, and the same solve."""
+    nq, m = len(Q0), len(gamma)
     K = np.zeros((rows, nq + m, nq + m))
     b = np.empty((rows, nq + m))
-    K[:, :nq, :nq] = M
+    for e, entry in enumerate(M):
+        K[:, e // nq, e % nq] = entry            # a scalar entry broadcasts over the systems
     for e, entry in enumerate(G):
-        K[:, nq + e // nq, e % nq] = entry
-    for e, entry in enumerate(Ql):
-        i, k = divmod(e, m)
-        K[:, i, nq + k] = entry
-        np.subtract(K[:, nq + k, i], K[:, i, nq + k], out=K[:, i, nq + k])
+        k, j = divmod(e, nq)
+        K[:, nq + k, j] = entry
+        K[:, j, nq + k] = entry - Ql[j * m + k]
     for i, entry in enumerate(Q0):
         b[:, i] = entry
     for k, entry in enumerate(gamma):
-        b[:, nq + k] = entry
-    np.negative(b[:, nq:], out=b[:, nq:])
+        b[:, nq + k] = np.negative(entry, dtype=float)      # (an integer 0 negated as a float: -0.0)
     sol = np.linalg.solve(K, b[..., None])[..., 0]
-    return sol[..., :nq], sol[..., nq:]
+    return K[:, :nq, :nq].copy(), sol[..., :nq], sol[..., nq:]
 
 
 def stack_entries(entries, rows: int, shape: tuple[int, ...]) -> np.ndarray:

@@ -94,11 +94,10 @@ def _kkt(mf, t, qT, vT, xT, p):
     mass = f["mass"](qT, p)
     Q0 = f["force0"](t, qT, vT, xT, p)
     if not kkt.long_stack(n, nq + m):     # a short stack: LAPACK's (M kept stacked)
-        M = kkt.stack_entries(mass, n, (nq, nq))
         if m == 0:
-            return (M,) + kkt.solve_short(M, [], [], Q0, [])
-        return (M,) + kkt.solve_short(M, f["G"](t, qT, p), f["force_lam"](t, qT, vT, xT, p), Q0,
-                                      f["gamma"](t, qT, vT, p))
+            return kkt.solve_short(n, mass, [], [], Q0, [])
+        return kkt.solve_short(n, mass, f["G"](t, qT, p), f["force_lam"](t, qT, vT, xT, p), Q0,
+                               f["gamma"](t, qT, vT, p))
     M = [mass[i * nq:(i + 1) * nq] for i in range(nq)]
     if m == 0:
         return (M,) + kkt.solve_entries(n, M, [], [[] for _ in range(nq)], Q0, [])
