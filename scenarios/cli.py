@@ -67,17 +67,15 @@ def _internal_error(exc: Exception) -> str:
 
 
 def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None, progress=None) -> None:
-    """result.save(target): a refused folder is a user error (exit 2), an OSError one line with exit 4. worker: a
+    """Write the result's folder (`write_result`, as `Result.save` does): a refused folder is a user error naming
+    --out (exit 2), also where another run wrote it while this one ran; an OSError one line with exit 4. worker: a
     figure worker started before the run (scenarios/output/figure_worker.py) to draw the figures; progress: as
     write_result's."""
+    from mechsim.scenarios.output.writer import write_result
     try:
-        if worker is None:
-            result.save(target, force=force, progress=progress)
-        else:
-            from mechsim.scenarios.output.writer import write_result
-            plots = bool(result.scenario.get("output", {}).get("plots", True))
-            write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker,
-                         progress=progress)
+        plots = bool(result.scenario.get("output", {}).get("plots", True))
+        write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker,
+                     progress=progress)
     except ScenarioError as exc:
         _fail(str(exc))
     except OSError as exc:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from cli_helpers import invoke
+from cli_helpers import invoke, one_line_error
 
 #: fields that measure this machine rather than the simulation (docs/limits.md, "Identical runs")
 TIMING = re.compile(r'"(derive|solve|wall)_time_s": [0-9.e+-]+')
@@ -93,10 +93,35 @@ def test_two_runs_racing_into_one_folder_leave_one_whole_run(tmp_path, force):
     assert temporaries(tmp_path) == []
 
 
+@pytest.mark.parametrize("plots", [False, True])
+def test_a_folder_written_while_the_run_ran_is_refused_as_at_the_start(tmp_path, monkeypatch, plots):
+    """The race above, made certain: another run writes --out after this one's check at the start. The refusal is
+    the start's (exit 2, one line naming --out), with or without figures, and the other run's folder stays."""
+    from mechsim.scenarios import api
+    out, run = tmp_path / "o", api.run
+
+    def run_then_folder_appears(*args, **kwargs):
+        result = run(*args, **kwargs)
+        out.mkdir()
+        (out / "theirs.txt").write_text("another run's")
+        return result
+
+    monkeypatch.setattr(api, "run", run_then_folder_appears)
+    r = invoke("run", "geneva-lc1", "--set", "duration=0.2 s", "--set", f"output.plots={str(plots).lower()}",
+               "--out", out, "--quiet")
+    assert r.exit_code == 2, r.output
+    line = one_line_error(r)
+    assert line.startswith("error: --out:") and "exists" in line, line
+    assert os.listdir(out) == ["theirs.txt"] and temporaries(tmp_path) == []
+
+
 def test_identical_runs_write_identical_bytes_but_the_timing_fields(tmp_path):
     outs = [tmp_path / "a", tmp_path / "b"]
     for out in outs:
-        r = invoke("run", "geneva-torque", "--set", "duration=0.3 s", "--out", out, "--quiet")
+        # on `ida` by name: where the default runs a model's compiled callbacks (marked ready by another test of the
+        # session), the first run in a process loads them and counts it (compilations, compile times), the second not
+        r = invoke("run", "geneva-torque", "--set", "duration=0.3 s", "--set", 'solver.backend="ida"', "--out", out,
+                   "--quiet")
         assert r.exit_code == 0, r.output
     a, b = (files(o) for o in outs)
     assert a.keys() == b.keys() and {"timeseries.parquet", "mechanism.png", "report.html"} <= a.keys()
