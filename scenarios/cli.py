@@ -67,17 +67,27 @@ def _internal_error(exc: Exception) -> str:
 
 
 def _save_or_fail(result, target: Path, force: bool, doing: str, worker=None, progress=None) -> None:
-    """Write the result's folder (`write_result`, as `Result.save` does): a refused folder is a user error naming
-    --out (exit 2), also where another run wrote it while this one ran; an OSError one line with exit 4. worker: a
-    figure worker started before the run (scenarios/output/figure_worker.py) to draw the figures; progress: as
-    write_result's."""
-    from mechsim.scenarios.output.writer import write_result
+    """result.save(target): a refused folder is a user error naming --out (exit 2), also where another run wrote it
+    while this one ran (the result's own FileExistsError, refused as the start refuses it: `check_replaceable`);
+    an OSError one line with exit 4. worker: a figure worker started before the run
+    (scenarios/output/figure_worker.py) to draw the figures; progress: as write_result's."""
+    from mechsim.scenarios.output.atomic import check_replaceable
     try:
-        plots = bool(result.scenario.get("output", {}).get("plots", True))
-        write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker,
-                     progress=progress)
+        if worker is None:
+            result.save(target, force=force, progress=progress)
+        else:
+            from mechsim.scenarios.output.writer import write_result
+            plots = bool(result.scenario.get("output", {}).get("plots", True))
+            write_result(result, target, force=force, plots=plots, mechanism=result.mechanism, worker=worker,
+                         progress=progress)
     except ScenarioError as exc:
         _fail(str(exc))
+    except FileExistsError as exc:
+        try:
+            check_replaceable(target, force)
+        except ScenarioError as refused:
+            _fail(str(refused))
+        _os_refused(exc, doing, target)
     except OSError as exc:
         _os_refused(exc, doing, target)
 
