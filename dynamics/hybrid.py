@@ -92,6 +92,12 @@ class Start:
     #: times by two searches without checking the order of all of them first
     ordered: bool = False
 
+    def output_times_ordered(self) -> bool:
+        """Whether t_out is non-decreasing (known from `prepare`, else checked): the hybrid loop and the compiled
+        diffrax run then take a call's output times by two searches."""
+        t_out = self.t_out
+        return self.ordered or (t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1])))
+
 
 def schedule(mech: Mechanism, drive: Drive, t0: float, t_end: float) -> tuple[dict, list]:
     """The time-varying inputs' breakpoints (`Mechanism.schedule`, `Drive.schedule`): (the updates in force at t0,
@@ -231,7 +237,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
     first_step = backend.initial_step
     in_row = stuck = 0
     knots = list(start.knots)
-    ordered = start.ordered or (t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1])))
+    ordered = start.output_times_ordered()
     wall0 = _time.perf_counter()
     while t < t_end - 1e-12:
         while knots and reached(knots, t):     # a breakpoint reached (a segment's end, or a guard's root on it)

@@ -730,7 +730,7 @@ def simulate_run(mech, start, settings, o, t0: float, t_end: float, progress=Non
     jmod, names = entry.jmod, list(model.parameter_names)
     mode_names = jmod.names
     t_out = start.t_out
-    ordered = t_out.ndim == 1 and bool(np.all(t_out[1:] >= t_out[:-1]))    # as `hybrid.prepare` makes them
+    ordered = start.output_times_ordered()
     one_layout = len({mf_.index["mu"].stop for mf_ in model.modes.values()}) == 1
     nq = jmod.nq
     q_columns = [f"{c}_q" for c in model.coordinates]
