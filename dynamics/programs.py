@@ -45,6 +45,13 @@ def structure(obj) -> tuple:
     return ("key", key) if key else ("object", id(obj))
 
 
+def kept_key(of, options: tuple) -> tuple | None:
+    """The key a program of `of`'s structure under `options` is kept under across processes (dynamics/traced.py):
+    None for a structure by identity, which another process cannot name."""
+    s = structure(of)
+    return None if s[0] == "object" else (s, options)
+
+
 def program(kind: str, of, options: tuple, build: Callable[[], T]) -> tuple[T, bool]:
     """The program `kind` of `of`'s structure under `options`, built by `build()` on its first use in this process;
     True when this call built it."""

@@ -54,8 +54,9 @@ from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
 from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message, save_times
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
-from mechsim.dynamics.programs import program
+from mechsim.dynamics.programs import kept_key, program
 from mechsim.dynamics.stats import new_stats
+from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.transitions import apply_transition
 
 import diffrax  # noqa: E402  (after jax_model has switched on float64)
@@ -237,7 +238,8 @@ def _compile_segment_solve(jmod, model, n: int, solver: str, max_steps: int):
     nz, npar = jmod.nz, len(model.parameter_names)
     example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
                np.ones(N_SAVE), 1e-8, 1e-10)
-    return jax.jit(solve).lower(*example).compile()
+    return compile_ahead("sensitivity_segment_solve", kept_key(model, (n, solver, max_steps)), jax.jit(solve),
+                         example)
 
 
 class _Tools:
@@ -266,7 +268,8 @@ class _Tools:
         if fn is not None:
             return fn, 0.0
         wall = _time.perf_counter()
-        fn = self._compiled_fns[key] = make().lower(*self._examples[key[0]]).compile()
+        fn = self._compiled_fns[key] = compile_ahead("sensitivity_tools", kept_key(self.model, (self.n, key)), make(),
+                                                     self._examples[key[0]])
         return fn, _time.perf_counter() - wall
 
     def piece(self, name: str) -> _ModePieces:

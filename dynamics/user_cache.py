@@ -30,15 +30,22 @@ def code_fingerprint() -> str:
     return h.hexdigest()
 
 
+#: JAX's setting of the shortest compilation it keeps (its default 1 s)
+MIN_COMPILE_TIME = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
+
+
 def use_for_jax(jax) -> str | None:
     """Keep JAX's compiled programs in <cache_dir>/jax across processes (JAX's persistent compilation cache),
     unless a folder is chosen already (JAX_COMPILATION_CACHE_DIR, or `jax_compilation_cache_dir` set by the
     caller), which is then kept. The folder in use, or None when JAX has no such option.
 
     Why: the compiled diffrax run takes seconds to compile in every new process; a later process loads it and
-    pays only the tracing (docs/diffrax.md 'Compilation'). JAX keys each program by the
-    lowered program, the compile options and the jax/jaxlib versions, so a loaded program is the one a fresh
-    compilation would give; a folder that cannot be written only costs the compilation (JAX warns)."""
+    skips even the tracing where the traced program is kept too (dynamics/traced.py; docs/diffrax.md
+    'Compilation'). JAX keys each program by the lowered program, the compile options and the jax/jaxlib versions,
+    so a loaded program is the one a fresh compilation would give; a folder that cannot be written only costs the
+    compilation (JAX warns). In mechsim's folder every program is kept, however short its compilation (JAX's
+    default keeps those of a second or more: the sensitivity pass's resets and read-outs, compiled in a few tenths
+    each, were compiled again by every process), unless JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS says otherwise."""
     try:
         chosen = jax.config.jax_compilation_cache_dir
     except AttributeError:
@@ -47,4 +54,6 @@ def use_for_jax(jax) -> str | None:
         return chosen
     folder = str(cache_dir() / "jax")
     jax.config.update("jax_compilation_cache_dir", folder)
+    if MIN_COMPILE_TIME not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return folder

@@ -27,7 +27,8 @@ import numpy as np
 from mechsim.dynamics.consistent import consistent_state
 from mechsim.dynamics.backend import Backend, End, Request, Segment
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
-from mechsim.dynamics.programs import program
+from mechsim.dynamics.programs import kept_key, program
+from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, DT0_FLOOR, DiffraxOptions, default_options,
                                                       evaluations_per_step, ida_rows, mode_z, result_message,
@@ -163,7 +164,8 @@ def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]
         jmod = jax_model(model)      # sympy -> jax lambdification (once per model), counted with the compilation
         example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                                     np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
-        fn = jax.jit(make_solve(jmod, o)).lower(*example).compile()
+        fn = compile_ahead("diffrax_segment_solve", kept_key(model, (compile_key(o),)), jax.jit(make_solve(jmod, o)),
+                           example)
         return _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
     entry, fresh = program("diffrax_segment_solve", model, (compile_key(o),), build)
     return entry, jax_model(model), fresh

@@ -32,7 +32,8 @@ from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.hybrid import Trajectory, hybrid_loop, prepare
 from mechsim.dynamics.jax_model import JaxModel, jax_model
 from mechsim.dynamics.model import StateExtension
-from mechsim.dynamics.programs import program
+from mechsim.dynamics.programs import kept_key, program
+from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.settings import SolverSettings
 
 import jax  # noqa: E402
@@ -60,7 +61,8 @@ def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched
         one = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                                 np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
         example = tuple(np.stack([a] * lanes) for a in one)
-        fn = jax.jit(jax.vmap(make_solve(jmod, o))).lower(*example).compile()
+        fn = compile_ahead("diffrax_batch_solve", kept_key(model, (compile_key(o), lanes)),
+                           jax.jit(jax.vmap(make_solve(jmod, o))), example)
         return _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
     entry, fresh = program("diffrax_batch_solve", model, (compile_key(o), lanes), build)
     return entry, jax_model(model), fresh

@@ -39,8 +39,9 @@ from mechsim.dynamics.backend import End
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float64
-from mechsim.dynamics.programs import program
+from mechsim.dynamics.programs import kept_key, program
 from mechsim.dynamics.result import FailureCode
+from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
                                                       result_message, solver_for, state_rows)
 from mechsim.dynamics.backends.jax_transitions import JaxTransitions, jax_transitions
@@ -133,6 +134,14 @@ class Outputs:
             self.layout.append(rows)
         return dict(st=out["st"], floats=jnp.concatenate([jnp.ravel(out[k]) for k in floats]),
                     ints=jnp.concatenate([jnp.ravel(out[k]).astype(jnp.int32) for k in ints]))
+
+    def recorded(self) -> list | None:
+        """The layout, for a program kept on disk (dynamics/traced.py `Record`)."""
+        return self.layout
+
+    def restore(self, layout: list) -> None:
+        """The layout of a kept program (JSON: its shapes as lists)."""
+        self.layout = [[(k, lo, hi, tuple(shape), is_bool) for k, lo, hi, shape, is_bool in rows] for rows in layout]
 
     def unpack(self, floats: np.ndarray, ints: np.ndarray) -> dict:
         out = {}
@@ -671,14 +680,15 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
         with kkt.unrolled_solves():   # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
             run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
             outputs = Outputs()
-            fn = jax.jit(lambda *a: outputs.pack(run(*a))).lower(*example).compile()
+            fn = compile_ahead("diffrax_whole_run", kept_key(model, options), jax.jit(lambda *a: outputs.pack(run(*a))),
+                               example, outputs)
         return CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, {}, record, outputs)
     rules = mech.transition_rules()
     hand_back = None if rules is None else tuple((k, tuple(r.python_only for r in v)) for k, v in rules.items())
     # the transition table is traced in: the mechanism's class and structure shape the program too, and a numeric
     # rule (a per-station load) is handed back: another program
-    entry, fresh = program("diffrax_whole_run", model, (run_key(o), type(mech).__name__, mech.structure_key(),
-                                                        STEPS_PER_CALL, EVENTS_PER_CALL, hand_back), build)
+    options = (run_key(o), type(mech).__name__, mech.structure_key(), STEPS_PER_CALL, EVENTS_PER_CALL, hand_back)
+    entry, fresh = program("diffrax_whole_run", model, options, build)
     return entry, fresh and entry is not None
 
 

@@ -1,0 +1,123 @@
+"""Traced programs kept on disk (`jax.export`), so that a later process skips tracing them.
+
+A compiled JAX program is made in two stages: tracing the Python into a jaxpr and lowering it to StableHLO, then
+XLA's compilation. JAX's persistent compilation cache (dynamics/user_cache.py `use_for_jax`) keeps the second
+across processes, but it is keyed by the lowered program, so every process still traced it: about a second for
+the compiled diffrax run and two for the sensitivity pass's solve and event rule, all Python. Here the lowered
+program itself is kept: `jax.export` serialises it into the user's cache folder, a later process deserialises it
+and lowers that (a tenth of a second), and XLA's cache supplies the compiled code (docs/diffrax.md, 'Compilation').
+
+Every process compiles the program from its exported form, the one that exported it too, so every process runs
+the same program. The disk key adds to the process's key (dynamics/programs.py: kind, the model's structure,
+the options that shape the program) what one process takes for granted: mechsim's code
+(`user_cache.code_fingerprint`), the versions of the libraries traced in, equinox's error mode and the example
+arguments' shapes and types. What tracing records on the host beside the program (the compiled run's output
+layout) is kept with it (`Record`). A program that cannot be exported (host callbacks: equinox's checks in a
+process that is not mechsim's CLI) or a key that names an object by its address is compiled as before. The folder
+never decides a result: a file that is missing, unreadable or corrupt is traced again and written anew.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from importlib import metadata
+from typing import Protocol
+
+import numpy as np
+
+#: libraries whose code is traced into mechsim's programs
+LIBRARIES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
+#: the layout of a kept file: one JSON line (what tracing recorded on the host), then the serialised program
+FORMAT = 1
+
+
+class Record(Protocol):
+    """What tracing records on the host beside the program: read after tracing, restored instead of tracing."""
+
+    def recorded(self): ...          # JSON-able
+
+    def restore(self, value) -> None: ...
+
+
+def _versions() -> tuple:
+    out = []
+    for name in LIBRARIES:
+        try:
+            out.append((name, metadata.version(name)))
+        except metadata.PackageNotFoundError:
+            out.append((name, None))
+    return tuple(out)
+
+
+def disk_name(kind: str, key, example: tuple) -> str | None:
+    """The file name a program of `kind` under `key`, traced for `example`'s shapes, is kept under; None where
+    `key` holds an object's address (not the same object in another process)."""
+    import jax
+    from mechsim.dynamics.user_cache import code_fingerprint
+    avals = tuple((tuple(np.shape(x)), str(np.result_type(x)), type(x).__name__)
+                  for x in jax.tree_util.tree_leaves(example))
+    text = repr((FORMAT, kind, key, avals, code_fingerprint(), _versions(), os.environ.get("EQX_ON_ERROR"),
+                 bool(jax.config.jax_enable_x64)))
+    if " at 0x" in text:
+        return None
+    return f"{kind}-{hashlib.sha256(text.encode()).hexdigest()[:32]}"
+
+
+def _folder():
+    from mechsim.dynamics.user_cache import cache_dir
+    return cache_dir() / "traced"
+
+
+def _load(name: str, record: Record | None):
+    """The kept program `name` (its record restored), or None where there is none that can be read."""
+    from jax import export
+    try:
+        data = (_folder() / name).read_bytes()
+        head, _, body = data.partition(b"\n")
+        recorded = json.loads(head)["recorded"]
+        exported = export.deserialize(bytearray(body))
+    except Exception:       # noqa: BLE001  missing, truncated or written by another version: traced again
+        return None
+    if record is not None:
+        record.restore(recorded)
+    return exported
+
+
+def _store(name: str, body: bytes, record: Record | None) -> None:
+    """Keep the serialised program (written whole, then renamed: a reader never sees part of a file); a folder that
+    cannot be written only costs the tracing in the next process."""
+    head = json.dumps({"format": FORMAT, "recorded": record.recorded() if record is not None else None})
+    folder = _folder()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".part-")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(head.encode() + b"\n" + body)
+            os.replace(tmp, folder / name)
+        except BaseException:
+            os.unlink(tmp)
+            raise
+    except OSError:
+        pass
+
+
+def compile_ahead(kind: str, key, jitted, example: tuple, record: Record | None = None):
+    """`jitted.lower(*example).compile()`, from the program kept on disk under (kind, key) where there is one (no
+    tracing), else traced, exported and kept. key None: not kept (compiled as it is)."""
+    import jax
+    from jax import export
+    name = disk_name(kind, key, example) if key is not None else None
+    if name is None:
+        return jitted.lower(*example).compile()
+    exported = _load(name, record)
+    if exported is None:
+        try:
+            exported = export.export(jitted)(*example)
+            body = bytes(exported.serialize())
+        except (ValueError, NotImplementedError):   # what jax.export refuses (host callbacks): compiled as it is
+            return jitted.lower(*example).compile()
+        _store(name, body, record)
+    return jax.jit(exported.call).lower(*example).compile()
