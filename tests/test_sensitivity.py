@@ -136,6 +136,29 @@ def test_cli_prints_and_writes_the_table(tmp_path, motor_table):
     assert (out / "tornado.png").stat().st_size > 10_000
 
 
+def test_tornado_panels_share_one_scale_and_fit_with_one_value():
+    """Ten quantities by one value (a study of one design value): every panel has room for its title and bar
+    (constrained layout applies: no warning), and the panels share the elasticity scale, so an elasticity of 1e-9
+    draws a bar too short to see, not one as long as an elasticity of 1."""
+    import io
+    import warnings
+
+    import pandas as pd
+
+    from mechsim.scenarios.studies.sensitivity import tornado_figure
+    e = [1.0, 0.38, 4e-3, -2.4e-4, -4.5e-9, 0.0, 0.13, 7e-3, 5e-3, 0.985]
+    table = pd.DataFrame({"quantity": [f"q{i}" for i in range(10)], "wrt": "contact.friction", "value": 1.0,
+                          "derivative": e, "elasticity": e})
+    fig = tornado_figure(table)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig.savefig(io.BytesIO(), format="png", dpi=50)
+    limits = {ax.get_xlim() for ax in fig.axes}
+    assert len(limits) == 1 and limits.pop()[1] == pytest.approx(1.2)
+    widths = [abs(patch.get_width()) for ax in fig.axes for patch in ax.patches]
+    assert sorted(widths) == sorted(abs(x) for x in e)
+
+
 @pytest.mark.parametrize("args, field", [
     (["--wrt", "mechanism.slots"], "mechanism.slots"),                      # an integer: no derivative
     (["--wrt", "load.wheel_torque", "--of", "peak_temp_contact_C"], "--of"),   # no thermal model here

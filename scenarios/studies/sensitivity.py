@@ -556,13 +556,19 @@ def _cycle_quantity(q: str, events, pmap: ParameterMap, model):
 
 
 def tornado_figure(table: pd.DataFrame):
-    """One panel per quantity: horizontal bars of the elasticities (p/y) dy/dp, largest on top, coloured by the sign
-    of dy/dp (for a negative quantity, a minimum, the elasticity's sign is the other)."""
+    """One panel per quantity: horizontal bars of the elasticities (p/y) dy/dp, largest on top, on one scale for
+    all panels, coloured by the sign of dy/dp (for a negative quantity, a minimum, the elasticity's sign is the
+    other)."""
     from matplotlib.figure import Figure
     quantities = list(dict.fromkeys(table["quantity"]))
-    fig = Figure(figsize=(8, 1.2 + 0.45 * len(table)), constrained_layout=True)
-    heights = [max(1, (table["quantity"] == q).sum()) + 1 for q in quantities]
-    axes = fig.subplots(len(quantities), 1, gridspec_kw={"height_ratios": heights}, squeeze=False)[:, 0]
+    rows = [max(1, int((table["quantity"] == q).sum())) for q in quantities]
+    # each panel: its title and a bar per value (0.3 in each); one elasticity scale for all (they are all % per %,
+    # so the panels compare: a quantity that barely moves shows a short bar, not a full one)
+    fig = Figure(figsize=(8, 1.3 + sum(0.45 + 0.3 * n for n in rows)), constrained_layout=True)
+    axes = fig.subplots(len(quantities), 1, sharex=True, gridspec_kw={"height_ratios": [n + 1.5 for n in rows]},
+                        squeeze=False)[:, 0]
+    e_all = table["elasticity"].to_numpy(float)
+    lim = max(1e-12, float(np.nanmax(np.abs(e_all))) if np.isfinite(e_all).any() else 1.0) * 1.2
     for ax, q in zip(axes, quantities):
         part = table[table["quantity"] == q].copy()
         part = part.iloc[np.argsort(np.abs(part["elasticity"].fillna(0).to_numpy()))]
@@ -572,7 +578,6 @@ def tornado_figure(table: pd.DataFrame):
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_title(f"{q} = {part['value'].iloc[0]:.6g}", fontsize=9, loc="left")
         ax.tick_params(labelsize=8)
-        lim = max(1e-12, float(np.nanmax(np.abs(e)))) * 1.15
         ax.set_xlim(-lim, lim)
     axes[-1].set_xlabel("elasticity (p/y) dy/dp: % change of the quantity per % change of the value\n"
                         "(red: raising the value raises the quantity, blue: it lowers it)")
