@@ -12,6 +12,7 @@ mode's power flows; extension (thermal) rows are linear in their rates, F = A x'
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable
 
 import jax
@@ -56,9 +57,27 @@ class JaxMode:
     guard_directions: tuple[int, ...]
     alpha_index: int
     beta_index: int
-    ext_diagonal: bool
-    _kkt_parts: Callable
-    _post: Callable
+    #: the mode's sympy pieces, lambdified when the mode is first traced (`_functions`): a process that loads its
+    #: programs traced already (dynamics/traced.py) needs only the layout above, not the derivation behind them
+    source: ModeFunctions
+    parameter_names: tuple[str, ...]
+
+    @cached_property
+    def _functions(self) -> tuple[bool, Callable, Callable]:
+        """(ext_diagonal, the KKT pieces' function, the powers', guards' and extension rows' function)."""
+        return _lambdified(self.source, self.parameter_names)
+
+    @property
+    def ext_diagonal(self) -> bool:
+        return self._functions[0]
+
+    @property
+    def _kkt_parts(self) -> Callable:
+        return self._functions[1]
+
+    @property
+    def _post(self) -> Callable:
+        return self._functions[2]
 
     @property
     def nz(self) -> int:
@@ -142,7 +161,17 @@ class JaxMode:
 
 
 def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
-    """Lambdify one mode's symbolic pieces (see module docstring)."""
+    """One mode's layout, its functions lambdified on first use (`JaxMode._functions`)."""
+    size = {k: sl.stop - sl.start for k, sl in mf.index.items()}
+    names = list(parameter_names)
+    return JaxMode(name=mf.name, nq=size["q"], m=mf.m, nw=size["work"], ne=size["ext"], n_mu=size["mu"],
+                   guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
+                   alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"), source=mf,
+                   parameter_names=tuple(parameter_names))
+
+
+def _lambdified(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> tuple[bool, Callable, Callable]:
+    """Lambdify one mode's symbolic pieces (see module docstring): (ext_diagonal, KKT pieces, post pieces)."""
     s = mf.symbolic
     t, q, v, lam, x, xp, params = s["t"], s["q"], s["v"], s["lam"], s["x"], s["xp"], s["params"]
     nq, m = len(q), len(lam)
@@ -174,16 +203,14 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
         stray = sp.sympify(e).free_symbols - set([t, *q, *v, *lam, *x, *a_syms, *params])
         if stray:
             raise ValueError(f"mode {mf.name!r}: unexpected symbols {sorted(map(str, stray))}")
-    names = list(parameter_names)
-    n_mu = mf.index["mu"].stop - mf.index["mu"].start
-    return JaxMode(
-        name=mf.name, nq=nq, m=m, nw=len(powers), ne=len(x), n_mu=n_mu, ext_diagonal=diagonal,
-        guard_names=tuple(mf.guard_names), guard_directions=tuple(mf.guard_directions),
-        alpha_index=names.index("baumgarte_alpha"), beta_index=names.index("baumgarte_beta"),
-        _kkt_parts=lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs, "jax"),
-        _post=lambdify([t, list(q), list(v), a_syms, list(lam), list(x), list(params)], powers + guards + ext_exprs,
-                       "jax"),
-    )
+    if (nq, m, len(powers), len(x)) != (mf.index["q"].stop - mf.index["q"].start, mf.m,
+                                         mf.index["work"].stop - mf.index["work"].start,
+                                         mf.index["ext"].stop - mf.index["ext"].start):
+        raise ValueError(f"mode {mf.name!r}: its sympy pieces do not match its layout")
+    return (diagonal,
+            lambdify([t, list(q), list(v), list(x), list(params)], kkt_exprs, "jax"),
+            lambdify([t, list(q), list(v), a_syms, list(lam), list(x), list(params)], powers + guards + ext_exprs,
+                     "jax"))
 
 
 @dataclass(frozen=True, eq=False)

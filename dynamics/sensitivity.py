@@ -238,7 +238,7 @@ def _compile_segment_solve(jmod, model, n: int, solver: str, max_steps: int):
     nz, npar = jmod.nz, len(model.parameter_names)
     example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
                np.ones(N_SAVE), 1e-8, 1e-10)
-    return compile_ahead("sensitivity_segment_solve", kept_key(model, (n, solver, max_steps)), jax.jit(solve),
+    return compile_ahead("sensitivity_segment_solve", kept_key(model, (n, solver, max_steps)), lambda: jax.jit(solve),
                          example)
 
 
@@ -268,7 +268,7 @@ class _Tools:
         if fn is not None:
             return fn, 0.0
         wall = _time.perf_counter()
-        fn = self._compiled_fns[key] = compile_ahead("sensitivity_tools", kept_key(self.model, (self.n, key)), make(),
+        fn = self._compiled_fns[key] = compile_ahead("sensitivity_tools", kept_key(self.model, (self.n, key)), make,
                                                      self._examples[key[0]])
         return fn, _time.perf_counter() - wall
 

@@ -23,7 +23,7 @@ import json
 import os
 import tempfile
 from importlib import metadata
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -104,16 +104,19 @@ def _store(name: str, body: bytes, record: Record | None) -> None:
         pass
 
 
-def compile_ahead(kind: str, key, jitted, example: tuple, record: Record | None = None):
-    """`jitted.lower(*example).compile()`, from the program kept on disk under (kind, key) where there is one (no
-    tracing), else traced, exported and kept. key None: not kept (compiled as it is)."""
+def compile_ahead(kind: str, key, make: Callable, example: tuple, record: Record | None = None):
+    """`make().lower(*example).compile()` (make: the jitted function), from the program kept on disk under
+    (kind, key) where there is one: then `make` is not called and nothing is traced (nor lambdified: the model's
+    jax functions are built when first traced, dynamics/jax_model.py). Else traced, exported and kept. key None:
+    not kept (compiled as it is)."""
     import jax
     from jax import export
     name = disk_name(kind, key, example) if key is not None else None
     if name is None:
-        return jitted.lower(*example).compile()
+        return make().lower(*example).compile()
     exported = _load(name, record)
     if exported is None:
+        jitted = make()
         try:
             exported = export.export(jitted)(*example)
             body = bytes(exported.serialize())

@@ -47,13 +47,13 @@ def cache(tmp_path, monkeypatch):
 
 def test_a_kept_program_is_loaded_not_traced(cache):
     first = Layout()
-    fn = traced.compile_ahead("test_program", ("structure", 1), _program(first), EXAMPLE, first)
+    fn = traced.compile_ahead("test_program", ("structure", 1), lambda: _program(first), EXAMPLE, first)
     expected = np.sin(EXAMPLE[0]) * np.exp(-EXAMPLE[1] * EXAMPLE[0]) + np.cumsum(EXAMPLE[0])
     got = np.asarray(fn(*EXAMPLE))
     np.testing.assert_allclose(got, expected, rtol=1e-14)
     assert first.value == [[7], "sin"] and len(list(cache.iterdir())) == 1
     again = Layout()
-    loaded = traced.compile_ahead("test_program", ("structure", 1), jax.jit(_untraceable), EXAMPLE, again)
+    loaded = traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(_untraceable), EXAMPLE, again)
     assert np.array_equal(np.asarray(loaded(*EXAMPLE)), got)      # the same program: the same bits
     assert again.value == [[7], "sin"]                            # what tracing recorded, restored
     other = np.linspace(-1.0, 1.0, 7), np.float64(2.0)
@@ -62,7 +62,7 @@ def test_a_kept_program_is_loaded_not_traced(cache):
 
 @pytest.mark.parametrize("change", ["code", "library", "shapes", "key"])
 def test_another_code_library_shape_or_key_is_traced(cache, monkeypatch, change):
-    traced.compile_ahead("test_program", ("structure", 1), _program(Layout()), EXAMPLE, Layout())
+    traced.compile_ahead("test_program", ("structure", 1), lambda: _program(Layout()), EXAMPLE, Layout())
     example, key = EXAMPLE, ("structure", 1)
     if change == "code":
         monkeypatch.setattr(user_cache, "code_fingerprint", lambda: "another revision")
@@ -73,17 +73,17 @@ def test_another_code_library_shape_or_key_is_traced(cache, monkeypatch, change)
     else:
         key = ("structure", 2)
     with pytest.raises(AssertionError, match="traced although"):
-        traced.compile_ahead("test_program", key, jax.jit(_untraceable), example, Layout())
+        traced.compile_ahead("test_program", key, lambda: jax.jit(_untraceable), example, Layout())
 
 
 def test_a_corrupt_file_is_traced_again_and_rewritten(cache):
-    traced.compile_ahead("test_program", ("structure", 1), _program(Layout()), EXAMPLE, Layout())
+    traced.compile_ahead("test_program", ("structure", 1), lambda: _program(Layout()), EXAMPLE, Layout())
     (kept,) = cache.iterdir()
     kept.write_bytes(kept.read_bytes()[:200])               # a file cut short
     layout = Layout()
-    fn = traced.compile_ahead("test_program", ("structure", 1), _program(layout), EXAMPLE, layout)
+    fn = traced.compile_ahead("test_program", ("structure", 1), lambda: _program(layout), EXAMPLE, layout)
     assert layout.value == [[7], "sin"]                       # traced again
-    loaded = traced.compile_ahead("test_program", ("structure", 1), jax.jit(_untraceable), EXAMPLE, Layout())
+    loaded = traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(_untraceable), EXAMPLE, Layout())
     assert np.array_equal(np.asarray(loaded(*EXAMPLE)), np.asarray(fn(*EXAMPLE)))   # and kept again, whole
     assert [p.name for p in cache.iterdir()] == [kept.name]  # no partial file left behind
 
@@ -91,20 +91,21 @@ def test_a_corrupt_file_is_traced_again_and_rewritten(cache):
 def test_host_callbacks_and_keys_by_identity_are_compiled_not_kept(cache):
     def with_callback(x, a):
         return jax.pure_callback(np.cos, jax.ShapeDtypeStruct(x.shape, x.dtype), x) * a
-    fn = traced.compile_ahead("test_program", ("structure", 1), jax.jit(with_callback), EXAMPLE)
+    fn = traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(with_callback), EXAMPLE)
     np.testing.assert_allclose(np.asarray(fn(*EXAMPLE)), np.cos(EXAMPLE[0]) * EXAMPLE[1], rtol=1e-15)
     assert not cache.exists()
     assert kept_key(object(), (1,)) is None                   # a structure by identity: not the same in another process
-    fn = traced.compile_ahead("test_program", None, _program(Layout()), EXAMPLE)
+    fn = traced.compile_ahead("test_program", None, lambda: _program(Layout()), EXAMPLE)
     assert not cache.exists()
 
 
 def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monkeypatch):
     """A diffrax run and a sensitivity pass keep their programs; with the process's programs forgotten (as in a new
-    process) and tracing made to fail (jax.export.export raises), they load them and report the same numbers to
-    the last bit, the compiled run's output layout restored from the file."""
+    process) and tracing made to fail (jax.export.export raises, and so does lambdifying the model's jax
+    functions), they load them and report the same numbers to the last bit, the compiled run's output layout
+    restored from the file."""
     import mechsim
-    from mechsim.dynamics import programs
+    from mechsim.dynamics import jax_model, programs
     from mechsim.scenarios.studies.sensitivity import sensitivity
 
     def numbers():
@@ -122,8 +123,9 @@ def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monke
     monkeypatch.setattr(programs, "_PROGRAMS", {})
 
     def refuse(*a, **k):
-        raise AssertionError("traced although the program is kept")
+        raise AssertionError("traced or lambdified although the program is kept")
     monkeypatch.setattr(jax.export, "export", refuse)
+    monkeypatch.setattr(jax_model, "_lambdified", refuse)      # nor are the model's jax functions built
     loaded = numbers()
     assert np.array_equal(loaded[0], traced_[0]) and loaded[1] == traced_[1]
     assert np.array_equal(loaded[2], traced_[2]) and np.isfinite(loaded[2]).all()

@@ -164,8 +164,8 @@ def compiled_solve(model, o: DiffraxOptions) -> tuple[_Compiled, JaxModel, bool]
         jmod = jax_model(model)      # sympy -> jax lambdification (once per model), counted with the compilation
         example = segment_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)),
                                     np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
-        fn = compile_ahead("diffrax_segment_solve", kept_key(model, (compile_key(o),)), jax.jit(make_solve(jmod, o)),
-                           example)
+        fn = compile_ahead("diffrax_segment_solve", kept_key(model, (compile_key(o),)),
+                           lambda: jax.jit(make_solve(jmod, o)), example)
         return _Compiled(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
     entry, fresh = program("diffrax_segment_solve", model, (compile_key(o),), build)
     return entry, jax_model(model), fresh

@@ -62,7 +62,7 @@ def compiled_batch_solve(model, o: DiffraxOptions, lanes: int) -> tuple[_Batched
                                 np.ones(jmod.ng_max, bool), np.ones(o.rows(jmod.nz)), 1e-3, (o.rtol, o.atol))
         example = tuple(np.stack([a] * lanes) for a in one)
         fn = compile_ahead("diffrax_batch_solve", kept_key(model, (compile_key(o), lanes)),
-                           jax.jit(jax.vmap(make_solve(jmod, o))), example)
+                           lambda: jax.jit(jax.vmap(make_solve(jmod, o))), example)
         return _Batched(fn, _time.perf_counter() - wall, _time.process_time() - cpu)
     entry, fresh = program("diffrax_batch_solve", model, (compile_key(o), lanes), build)
     return entry, jax_model(model), fresh

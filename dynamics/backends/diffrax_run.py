@@ -677,11 +677,13 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
         example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
                                 (1e-6, 1e-8), 100)
         record = step_record(jmod, o)
-        with kkt.unrolled_solves():   # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
+        outputs = Outputs()
+
+        def make():
             run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
-            outputs = Outputs()
-            fn = compile_ahead("diffrax_whole_run", kept_key(model, options), jax.jit(lambda *a: outputs.pack(run(*a))),
-                               example, outputs)
+            return jax.jit(lambda *a: outputs.pack(run(*a)))
+        with kkt.unrolled_solves():   # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
+            fn = compile_ahead("diffrax_whole_run", kept_key(model, options), make, example, outputs)
         return CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, {}, record, outputs)
     rules = mech.transition_rules()
     hand_back = None if rules is None else tuple((k, tuple(r.python_only for r in v)) for k, v in rules.items())
