@@ -25,10 +25,8 @@ jax.config.update("jax_enable_x64", True)
 user_cache.use_for_jax(jax)        # compiled programs reused across processes (dynamics/user_cache.py)
 
 import jax.numpy as jnp  # noqa: E402
-import sympy as sp  # noqa: E402
 
 from mechsim.dynamics import kkt  # noqa: E402
-from mechsim.dynamics.codegen import lambdify  # noqa: E402
 from mechsim.dynamics.model import ModeFunctions  # noqa: E402
 from mechsim.dynamics.programs import program  # noqa: E402
 
@@ -171,7 +169,11 @@ def build_mode(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> JaxMode:
 
 
 def _lambdified(mf: ModeFunctions, parameter_names: tuple[str, ...]) -> tuple[bool, Callable, Callable]:
-    """Lambdify one mode's symbolic pieces (see module docstring): (ext_diagonal, KKT pieces, post pieces)."""
+    """Lambdify one mode's symbolic pieces (see module docstring): (ext_diagonal, KKT pieces, post pieces). sympy
+    is imported here only: a process that loads its programs traced never imports it."""
+    import sympy as sp
+
+    from mechsim.dynamics.codegen import lambdify
     s = mf.symbolic
     t, q, v, lam, x, xp, params = s["t"], s["q"], s["v"], s["lam"], s["x"], s["xp"], s["params"]
     nq, m = len(q), len(lam)

@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mechsim.dynamics.codegen import lambdify
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
 from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message, save_times
@@ -152,6 +151,7 @@ class _ModePieces:
     as jax functions."""
 
     def __init__(self, mf, mech, jmode):
+        from mechsim.dynamics.codegen import lambdify      # sympy: only where a piece is traced
         s = mf.symbolic
         t, q, v, lam, x, params = s["t"], list(s["q"]), list(s["v"]), list(s["lam"]), list(s["x"]), list(s["params"])
         self.jmode, self.m = jmode, len(lam)
