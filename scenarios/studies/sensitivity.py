@@ -204,7 +204,6 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     cycle), derivative (SI), elasticity (p/y) dy/dp, and the first-order change of y for a change of p by `change`
     (relative). attrs: cost, warnings, scenario."""
     from mechsim.dynamics.hybrid import prepare
-    from mechsim.dynamics.sensitivity import path_sensitivities
     from mechsim.scenarios import runner
     from mechsim.scenarios.keys import field_unit
     if not 0 < change < 1:
@@ -300,6 +299,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if repeats:       # the bulk there depends on the turn's ends and on its input at every node
         sample_times = sorted(set(sample_times) | set(dense["sample_times"]))
     wall = time.perf_counter()
+    # JAX imported after the run: its threads would keep the default backend from compiling the model's callbacks
+    # in the background (dynamics/backends/compiled_model.py), so a later process's run would stay on `ida`
+    from mechsim.dynamics.sensitivity import path_sensitivities
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
                               t_end, si["output_step"], angle0, speed0, ext, ext_initial, rates=bool(repeats))
     by_time = {s.t: s for s in path.samples}
