@@ -597,6 +597,11 @@ def sensitivity(
               f"sensitivities {c['sensitivity_wall_time_s']:.3f} s (compilation "
               f"{c['sensitivity_compile_time_s']:.3f} s" + (f"; without it {ratio:.2g}x the run" if ratio else "")
               + f") -> {target}", markup=False, highlight=False, soft_wrap=True)
+    total = time.perf_counter() - STARTED
+    rest = max(total - c["run_wall_time_s"] - c["sensitivity_wall_time_s"], 0.0)
+    out.print(f"time: {total:.2f} s in all (run {c['run_wall_time_s']:.2f} s, sensitivities "
+              f"{c['sensitivity_wall_time_s']:.2f} s, start-up, files and figure {rest:.2f} s)", markup=False,
+              highlight=False, soft_wrap=True)
 
 
 def _print_sensitivity(table) -> None:
