@@ -21,13 +21,13 @@ import builtins
 import hashlib
 import json
 import linecache
-import os
 import sys
-import tempfile
 import types
 from pathlib import Path
 
 import numpy as np
+
+from mechsim.dynamics.user_cache import write_atomically
 
 #: bump when what is stored, or how it is read back, changes
 FORMAT = 1
@@ -108,13 +108,8 @@ def store(key: tuple, model) -> Path | None:
                   "prescribed": bool(model.prescribed),
                   "modes": [_mode_record(mf) for mf in model.modes.values()]}
         path = file_for(key)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".derived-", suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            json.dump(record, fh)
-        os.replace(tmp, path)
-        return path
-    except (OSError, NotStorable, TypeError, AttributeError):
+        return path if write_atomically(path, json.dumps(record).encode(), prefix=".derived-") else None
+    except (NotStorable, TypeError, AttributeError):
         return None
 
 

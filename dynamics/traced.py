@@ -21,7 +21,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from importlib import metadata
 from typing import Callable, Protocol
 
@@ -88,20 +87,9 @@ def _load(name: str, record: Record | None):
 def _store(name: str, body: bytes, record: Record | None) -> None:
     """Keep the serialised program (written whole, then renamed: a reader never sees part of a file); a folder that
     cannot be written only costs the tracing in the next process."""
+    from mechsim.dynamics.user_cache import write_atomically
     head = json.dumps({"format": FORMAT, "recorded": record.recorded() if record is not None else None})
-    folder = _folder()
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".part-")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(head.encode() + b"\n" + body)
-            os.replace(tmp, folder / name)
-        except BaseException:
-            os.unlink(tmp)
-            raise
-    except OSError:
-        pass
+    write_atomically(_folder() / name, head.encode() + b"\n" + body)
 
 
 def compile_ahead(kind: str, key, make: Callable, example: tuple, record: Record | None = None):

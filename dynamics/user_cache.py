@@ -17,6 +17,25 @@ def cache_dir() -> Path:
     return Path(user_cache_dir("mechsim", appauthor=False))
 
 
+def write_atomically(path: Path, data: bytes, prefix: str = ".part-") -> bool:
+    """Write a cache file whole, then rename it into place (a reader never sees part of it); False where the folder
+    cannot be written (the cache is an optimisation: the caller goes on without it)."""
+    import tempfile
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.replace(tmp, path)
+        except BaseException:
+            os.unlink(tmp)
+            raise
+    except OSError:
+        return False
+    return True
+
+
 @lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """A hash of the code that turns a scenario into the expressions (mechanisms/, dynamics/, thermal/): a cached
