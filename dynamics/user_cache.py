@@ -19,20 +19,28 @@ def cache_dir() -> Path:
 
 def write_atomically(path: Path, data: bytes, prefix: str = ".part-") -> bool:
     """Write a cache file whole, then rename it into place (a reader never sees part of it); False where the folder
-    cannot be written (the cache is an optimisation: the caller goes on without it)."""
-    import tempfile
+    cannot be written (the cache is an optimisation: the caller goes on without it). The temporary file is named
+    before it is made, inside the block that removes it: a Ctrl-C just after it was made leaves nothing behind."""
+    tmp = path.parent / f"{prefix}{os.getpid()}-{os.urandom(6).hex()}.tmp"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=".tmp")
         try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            os.replace(tmp, path)
-        except BaseException:
-            os.unlink(tmp)
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        except FileExistsError:       # another's (never in practice: a random name): not ours to remove
+            tmp = None
             raise
-    except OSError:
-        return False
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        if isinstance(exc, OSError):
+            return False
+        raise
     return True
 
 

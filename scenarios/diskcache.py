@@ -11,11 +11,9 @@ from __future__ import annotations
 
 import atexit
 import json
-import os
-import tempfile
 from pathlib import Path
 
-from mechsim.dynamics.user_cache import cache_dir
+from mechsim.dynamics.user_cache import cache_dir, write_atomically
 
 #: entries kept per cache file (the oldest are dropped beyond this)
 MAX_ENTRIES = 20000
@@ -69,12 +67,7 @@ class JsonCache:
             merged = {**self._read(), **self._new}
             if len(merged) > MAX_ENTRIES:
                 merged = dict(list(merged.items())[-MAX_ENTRIES:])
-            folder = self.path.parent
-            folder.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.name}.", dir=folder)
-            with os.fdopen(fd, "w") as f:
-                json.dump(merged, f)
-            os.replace(tmp, self.path)
-            self._new = {}
+            if write_atomically(self.path, json.dumps(merged).encode(), prefix=f".{self.name}."):
+                self._new = {}
         except OSError:
             pass

@@ -7,6 +7,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 import tomli_w
@@ -123,6 +124,74 @@ def test_next_run_removes_only_provably_stale_temporaries(tmp_path):
     assert r.exit_code == 0, r.output
     assert not any(d.exists() for d in stale)
     assert live.exists() and elsewhere.exists() and unowned.exists() and users.exists()
+
+
+def _interrupted_after_making(monkeypatch, kind):
+    """os.mkdir raising KeyboardInterrupt once it has made a temporary folder of `kind` (tmp, old): where a Ctrl-C
+    lands on a loaded machine when the caller watching the parent sends it the moment the folder appears (the
+    signal is handled on the interpreter's first check after the system call returns)."""
+    real = os.mkdir
+
+    def mkdir(path, *args, **kwargs):
+        real(path, *args, **kwargs)
+        if f".{kind}-" in os.fspath(path):
+            raise KeyboardInterrupt
+    monkeypatch.setattr(os, "mkdir", mkdir)
+
+
+def test_ctrl_c_just_after_the_temporary_folder_is_made_leaves_nothing(tmp_path, monkeypatch):
+    from mechsim.scenarios.output.atomic import atomic_folder
+    _interrupted_after_making(monkeypatch, "tmp")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_folder(tmp_path / "o"):
+            pass
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_while_replacing_keeps_the_old_folder(tmp_path, monkeypatch):
+    """Interrupted once the old folder's holding place is made, and between the two renames: the old folder is
+    where it was, whole, and no temporary is left."""
+    from mechsim.scenarios.output.atomic import atomic_folder
+    old = tmp_path / "o"
+    with atomic_folder(old) as tmp:
+        (tmp / "summary.json").write_text("old")
+    _interrupted_after_making(monkeypatch, "old")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_folder(old, force=True) as tmp:
+            (tmp / "summary.json").write_text("new")
+    monkeypatch.undo()
+    real_rename = Path.rename
+
+    def rename(self, target):
+        raise KeyboardInterrupt                  # after the old folder moved aside, before the new one moves in
+    monkeypatch.setattr(Path, "rename", rename)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_folder(old, force=True) as tmp:
+            (tmp / "summary.json").write_text("new")
+    monkeypatch.setattr(Path, "rename", real_rename)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]
+    assert (old / "summary.json").read_text() == "old" and (old / MARKER).is_file()
+
+
+@pytest.mark.parametrize("writer", ["sweep store", "user cache"])
+def test_ctrl_c_just_after_a_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch, writer):
+    """The file writers (a sweep's case files and tables; the user cache's files, the JSON caches' too) the same
+    way: os.open raising KeyboardInterrupt once it has made the temporary file."""
+    from mechsim.dynamics.user_cache import write_atomically
+    from mechsim.scenarios.studies.sweep.store import atomic_write_text
+    real = os.open
+
+    def open_(path, flags, *args):
+        fd = real(path, flags, *args)
+        os.close(fd)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(os, "open", open_)
+    with pytest.raises(KeyboardInterrupt):
+        if writer == "sweep store":
+            atomic_write_text(tmp_path / "case.json", "{}")
+        else:
+            write_atomically(tmp_path / "entry.bin", b"x")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_kill_9_while_writing_then_the_next_run_cleans_up(tmp_path):

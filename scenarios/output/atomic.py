@@ -12,7 +12,6 @@ import os
 import re
 import shutil
 import socket
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -107,25 +106,38 @@ def remove_stale_temporaries(parent: Path) -> list[Path]:
     return removed
 
 
+def _fresh(out_dir: Path, kind: str) -> Path:
+    """The name of a new temporary sibling of out_dir (`_TEMP_NAME`: .<name>.<kind>-<pid>-<random>), not made yet."""
+    return out_dir.parent / f".{out_dir.name}.{kind}-{os.getpid()}-{os.urandom(6).hex()}"
+
+
 @contextmanager
 def atomic_folder(out_dir: Path, force: bool = False) -> Iterator[Path]:
     """Yield a temporary folder to fill; on success it replaces `out_dir` in one rename.
 
-    OSError (a read-only or full disk) propagates after the temporary folder is removed."""
+    Each temporary folder is named before it is made, inside the block that removes it: a Ctrl-C that lands just
+    after a folder was made (the moment its name appears, as a caller watching the parent sees it) still removes
+    it, and one during the replacement puts the old folder back. OSError (a read-only or full disk) propagates
+    after the temporary folder is removed."""
     out_dir = Path(out_dir)
     check_replaceable(out_dir, force)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out_dir.parent)
-    pid = os.getpid()
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{pid}-", dir=out_dir.parent))
+    tmp, trash = _fresh(out_dir, "tmp"), None
     try:
+        try:
+            tmp.mkdir(mode=0o700)
+        except FileExistsError:          # another's (never in practice: a random name): not ours to remove
+            tmp = None
+            raise
         (tmp / OWNER).write_text(_owner_text())
         yield tmp
         (tmp / MARKER).write_text(MARKER_TEXT)
         (tmp / OWNER).unlink()
         if out_dir.exists():
             check_replaceable(out_dir, force)     # again: it may have appeared while we computed
-            trash = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-{pid}-", dir=out_dir.parent))
+            trash = _fresh(out_dir, "old")
+            trash.mkdir(mode=0o700)
             (trash / OWNER).write_text(_owner_text())
             os.replace(out_dir, trash / "folder")
             tmp.rename(out_dir)
@@ -133,5 +145,11 @@ def atomic_folder(out_dir: Path, force: bool = False) -> Iterator[Path]:
         else:
             tmp.rename(out_dir)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if trash is not None:
+            old = trash / "folder"
+            if old.exists() and not out_dir.exists():      # interrupted between the two renames: the old one back
+                os.replace(old, out_dir)
+            shutil.rmtree(trash, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         raise

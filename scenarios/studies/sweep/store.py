@@ -62,40 +62,56 @@ def remove_stale_files(folder: Path) -> int:
     return removed
 
 
-def _temp_file(path: Path) -> tuple[int, str]:
-    """(fd, name) of a new temporary file next to path (its folder made when missing: tried first, as a sweep
-    writes its thousands of case files into folders that exist, and each file-system call costs here)."""
-    prefix = f".{path.name}.tmp-{os.getpid()}-{_host_tag()}-"
+def _temp_name(path: Path) -> Path:
+    """The name of a new temporary file next to path (`_TEMP_FILE`), not made yet."""
+    return path.parent / f".{path.name}.tmp-{os.getpid()}-{_host_tag()}-{os.urandom(6).hex()}"
+
+
+def _create(tmp: Path) -> int:
+    """A descriptor of tmp, made new (its folder made when missing: tried first, as a sweep writes its thousands
+    of case files into folders that exist, and each file-system call costs here)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL
     try:
-        return tempfile.mkstemp(prefix=prefix, dir=path.parent)
+        return os.open(tmp, flags, 0o600)
     except FileNotFoundError:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return tempfile.mkstemp(prefix=prefix, dir=path.parent)
+        tmp.parent.mkdir(parents=True, exist_ok=True)
+        return os.open(tmp, flags, 0o600)
+
+
+def _written(path: Path, fill) -> None:
+    """fill(fd, tmp) on a new temporary file tmp next to path (fd: its descriptor, fill's to close), then renamed
+    to path. The temporary is named before it is
+    made, inside the block that removes it: a Ctrl-C just after it was made leaves nothing behind."""
+    tmp = _temp_name(path)
+    try:
+        try:
+            fd = _create(tmp)
+        except FileExistsError:       # another's (never in practice: a random name): not ours to remove
+            tmp = None
+            raise
+        fill(fd, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def atomic_write(path: Path, write) -> None:
     """Call write(tmp_path), then rename tmp_path to path."""
-    fd, tmp = _temp_file(path)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    def fill(fd: int, tmp: Path) -> None:
+        os.close(fd)
+        write(tmp)
+    _written(path, fill)
 
 
 def atomic_write_text(path: Path, text: str) -> None:
     """atomic_write of a text file, written through the temporary file's own descriptor (one open fewer; the same
     bytes as Path.write_text: default encoding, no newline translation on POSIX)."""
-    fd, tmp = _temp_file(path)
-    try:
+    def fill(fd: int, tmp: Path) -> None:
         with os.fdopen(fd, "w") as f:
             f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    _written(path, fill)
 
 
 def _checksum(record: dict) -> str:
