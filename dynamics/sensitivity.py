@@ -51,15 +51,14 @@ import numpy as np
 
 from mechsim.dynamics.consistent import reinitialise
 from mechsim.dynamics.hybrid import parameter_tuple, prepare
-from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, result_message, save_times
+from mechsim.dynamics.backends.diffrax_common import ida_rows, mode_z, save_times
 from mechsim.dynamics.jax_model import jax_model  # also enables float64
 from mechsim.dynamics.programs import kept_key, program
 from mechsim.dynamics.stats import new_stats
 from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.transitions import apply_transition
 
-import diffrax  # noqa: E402  (after jax_model has switched on float64)
-import jax  # noqa: E402
+import jax  # noqa: E402  (after jax_model has switched on float64)
 import jax.numpy as jnp  # noqa: E402
 
 
@@ -213,33 +212,37 @@ def _segment_solve(jmod, model, n: int, solver: str, max_steps: int):
 
 
 def _compile_segment_solve(jmod, model, n: int, solver: str, max_steps: int):
-    def field_(t, y, args):
-        k, p, P = args
-        z, S = y
+    def make():
+        import diffrax          # traced in: a process that loads the kept program runs it without diffrax
 
-        def f(zz, pp):
-            return jmod.rates(k, t, zz, pp)
-        zdot = f(z, p)
-        Sdot = jax.vmap(lambda s, dp: jax.jvp(f, (z, p), (s, dp))[1], in_axes=(1, 1), out_axes=1)(S, P)
-        return zdot, Sdot
+        def field_(t, y, args):
+            k, p, P = args
+            z, S = y
 
-    term = diffrax.ODETerm(field_)
-    method = getattr(diffrax, solver)()
+            def f(zz, pp):
+                return jmod.rates(k, t, zz, pp)
+            zdot = f(z, p)
+            Sdot = jax.vmap(lambda s, dp: jax.jvp(f, (z, p), (s, dp))[1], in_axes=(1, 1), out_axes=1)(S, P)
+            return zdot, Sdot
 
-    def solve(k, t0, t1, z0, S0, p, P, ts, rtol, atol):
-        controller = diffrax.PIDController(rtol=rtol, atol=atol)
-        saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
-        sol = diffrax.diffeqsolve(term, method, t0, t1, None, (z0, S0), args=(k, p, P), saveat=saveat,
-                                  stepsize_controller=controller, max_steps=max_steps, throw=False,
-                                  adjoint=diffrax.ForwardMode())
-        return dict(z=sol.ys[0][0], S=sol.ys[0][1], z1=sol.ys[1][0][0], S1=sol.ys[1][1][0],
-                    result=sol.result._value, steps=sol.stats["num_steps"])
+        term = diffrax.ODETerm(field_)
+        method = getattr(diffrax, solver)()
+
+        def solve(k, t0, t1, z0, S0, p, P, ts, rtol, atol):
+            controller = diffrax.PIDController(rtol=rtol, atol=atol)
+            saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
+            sol = diffrax.diffeqsolve(term, method, t0, t1, None, (z0, S0), args=(k, p, P), saveat=saveat,
+                                      stepsize_controller=controller, max_steps=max_steps, throw=False,
+                                      adjoint=diffrax.ForwardMode())
+            return dict(z=sol.ys[0][0], S=sol.ys[0][1], z1=sol.ys[1][0][0], S1=sol.ys[1][1][0],
+                        result=sol.result._value, ok=sol.result._value == int(diffrax.RESULTS.successful._value),
+                        steps=sol.stats["num_steps"])
+        return jax.jit(solve)
 
     nz, npar = jmod.nz, len(model.parameter_names)
     example = (np.int32(0), 0.0, 1.0, np.zeros(nz), np.zeros((nz, n)), np.zeros(npar), np.zeros((npar, n)),
                np.ones(N_SAVE), 1e-8, 1e-10)
-    return compile_ahead("sensitivity_segment_solve", kept_key(model, (n, solver, max_steps)), lambda: jax.jit(solve),
-                         example)
+    return compile_ahead("sensitivity_segment_solve", kept_key(model, (n, solver, max_steps)), make, example)
 
 
 class _Tools:
@@ -447,7 +450,8 @@ def path_sensitivities(mech, drive, settings, events: list[dict], seed: Seed, sa
                                        float(settings.atol)))
             stats["segments"] += 1
             stats["steps"] += int(out["steps"])
-            if int(out["result"]) != int(diffrax.RESULTS.successful._value):
+            if not bool(out["ok"]):
+                from mechsim.dynamics.backends.diffrax_solvers import result_message
                 raise SensitivityUnavailable(f"the sensitivity integration failed in mode '{mode}' after "
                                              f"t = {t:.6g} s: {result_message(out['result'])}")
             sample = compiled(tools.sample(mode, columns, rates)) if len(chunk) else None

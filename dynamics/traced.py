@@ -55,7 +55,7 @@ def disk_name(kind: str, key, example: tuple) -> str | None:
     `key` holds an object's address (not the same object in another process)."""
     import jax
     from mechsim.dynamics.user_cache import code_fingerprint
-    avals = tuple((tuple(np.shape(x)), str(np.result_type(x)), type(x).__name__)
+    avals = tuple((tuple(np.shape(x)), str(x.dtype if hasattr(x, "dtype") else np.result_type(x)), type(x).__name__)
                   for x in jax.tree_util.tree_leaves(example))
     text = repr((FORMAT, kind, key, avals, code_fingerprint(), _versions(), os.environ.get("EQX_ON_ERROR"),
                  bool(jax.config.jax_enable_x64)))

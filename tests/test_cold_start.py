@@ -113,3 +113,23 @@ def test_a_sensitivity_runs_its_run_before_loading_jax(tmp_path):
             "runner.execute = stop\n"
             "sensitivity(mechsim.load('geneva-motor', set=['duration=0.4 s']), ['contact.friction'])\n")
     assert fresh(code, tmp_path / "cache", tmp_path).split() == ["False"]
+
+
+def test_a_later_diffrax_run_loads_its_programs_and_imports_no_diffrax(tmp_path):
+    """The compiled diffrax run, its row and dense-reading programs are kept traced in the cache folder
+    (dynamics/traced.py): a later process loads them, and runs them without importing diffrax, equinox, optimistix,
+    lineax or sympy (dynamics/backends/diffrax_solvers.py is imported only to trace), with the same results."""
+    cache = tmp_path / "cache"
+    code = ("import json, sys\nimport mechsim\n"
+            "r = mechsim.run(mechsim.load('geneva-motor', set=['solver.backend=\"diffrax\"', 'duration=0.4 s', "
+            "'output.plots=false']))\n"
+            "print(sorted(m for m in ('diffrax', 'equinox', 'optimistix', 'lineax', 'sympy') if m in sys.modules))\n"
+            "print(r.success, r.summary['model']['backend'], r.timeseries['wheel_angle_rad'].to_numpy().tobytes().hex()[:64])\n"
+            "print(json.dumps(r.summary['peaks'], sort_keys=True))")
+    first = fresh(code, cache, tmp_path).split("\n")
+    second = fresh(code, cache, tmp_path).split("\n")
+    assert first[0] == "['diffrax', 'equinox', 'lineax', 'optimistix', 'sympy']"      # traced
+    assert second[0] == "[]"                                                            # loaded
+    assert first[1].startswith("True diffrax") and second[1:] == first[1:]
+    assert {p.name.split("-")[0] for p in (cache / "traced").iterdir()} >= {"diffrax_whole_run", "diffrax_run_rows",
+                                                                            "diffrax_run_dense"}

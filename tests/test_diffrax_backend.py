@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mechsim.dynamics.backends.diffrax_backend as dbk
-from mechsim.dynamics.backends.diffrax_common import PatientVeryChord
+from mechsim.dynamics.backends.diffrax_solvers import PatientVeryChord
 from mechsim.dynamics.hybrid import simulate
 from mechsim.dynamics.drives import Drive
 from mechsim.dynamics.result import FailureCode
@@ -151,3 +151,16 @@ def test_one_compilation_serves_every_tolerance(motor):
     error = np.abs(loose.timeseries["crank_angle_rad"].to_numpy() - q_tight).max()
     scale = np.abs(q_tight).max()
     assert 1e-10 * scale < error <= 1000 * (1e-5 * scale + 1e-7)
+
+
+def test_evaluations_per_step_are_the_tableaux_stages():
+    """The table of vector-field evaluations per attempted step (diffrax_common, kept apart from diffrax so that a
+    loading process never imports it) against each explicit method's Butcher tableau: its stages, less the one
+    it shares with the next step where it is FSAL (Euler has no tableau: one evaluation)."""
+    import diffrax
+    from mechsim.dynamics.backends.diffrax_common import EVALUATIONS_PER_STEP, EXPLICIT
+    assert set(EVALUATIONS_PER_STEP) == set(EXPLICIT)
+    for name in EXPLICIT:
+        tab = getattr(getattr(diffrax, name)(), "tableau", None)
+        expected = 1 if tab is None else len(tab.c) + 1 - bool(tab.fsal)
+        assert EVALUATIONS_PER_STEP[name] == expected, name

@@ -119,7 +119,7 @@ def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monke
     monkeypatch.setattr(programs, "_PROGRAMS", {})
     traced_ = numbers()
     assert {p.name.split("-")[0] for p in cache.iterdir()} == {
-        "diffrax_whole_run", "sensitivity_segment_solve", "sensitivity_tools"}
+        "diffrax_whole_run", "diffrax_run_rows", "diffrax_run_dense", "sensitivity_segment_solve", "sensitivity_tools"}
     monkeypatch.setattr(programs, "_PROGRAMS", {})
 
     def refuse(*a, **k):

@@ -31,62 +31,19 @@ from mechsim.dynamics.programs import kept_key, program
 from mechsim.dynamics.traced import compile_ahead
 from mechsim.dynamics.backends import xla_options
 from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, DT0_FLOOR, DiffraxOptions, default_options,
-                                                      evaluations_per_step, ida_rows, mode_z, result_message,
-                                                      save_times, solver_for)
+                                                      evaluations_per_step, ida_rows, mode_z, save_times)
 from mechsim.dynamics.backends.diffrax_diagnose import explain
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.settings import SolverSettings
 
-import diffrax  # noqa: E402  (after jax_model has switched on float64)
-import equinox as eqx  # noqa: E402
-import jax  # noqa: E402
+import jax  # noqa: E402  (after jax_model has switched on float64)
 import jax.numpy as jnp  # noqa: E402
-import jax.tree_util as jtu  # noqa: E402
-import optimistix as optx  # noqa: E402
 
 if TYPE_CHECKING:
     from mechsim.mechanisms.base import Mechanism
     from mechsim.dynamics.hybrid import Trajectory
 
-_ADJOINT = diffrax.ForwardMode()   # plain lax while loops: no reverse-mode machinery in the compiled solve
-
-
 # -- one compiled segment solve ----------------------------------------------------------------------------
-class _State(eqx.Module):
-    lower: jax.Array
-    upper: jax.Array
-
-
-class FirstCrossing(optx.AbstractRootFinder):
-    """Bisection on [lower, upper] for the time where the segment's guard function first reaches zero.
-
-    Terminates on the width of the bracket only (guards have mixed units, so no test on |f|), and returns the
-    bracket's upper end: the first instant located *past* the crossing, as IDA does.
-    """
-
-    rtol: float
-    atol: float
-    norm: Callable = optx.max_norm
-
-    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        dtype = jnp.result_type(y)
-        return _State(jnp.asarray(options["lower"], dtype), jnp.asarray(options["upper"], dtype))
-
-    def step(self, fn, y, args, options, state, tags):
-        mid = state.lower + 0.5 * (state.upper - state.lower)
-        f, aux = fn(mid, args)
-        before = sum(jtu.tree_leaves(f)) > 0          # the guard function is positive before its crossing
-        new = _State(jnp.where(before, mid, state.lower), jnp.where(before, state.upper, mid))
-        return new.upper, new, aux
-
-    def terminate(self, fn, y, args, options, state, tags):
-        width = state.upper - state.lower
-        return width <= self.atol + self.rtol * jnp.abs(state.upper), optx.RESULTS.successful
-
-    def postprocess(self, fn, y, aux, args, options, state, tags, result):
-        return y, aux, {}
-
-
 def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
     """solve(k, t0, t1, z0, p, enabled, ts) -> dict of arrays, for mode number k; to be jitted.
 
@@ -94,6 +51,8 @@ def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
     start (ref_i = g_i there, or the sign a guard at zero is heading for), and it first reaches zero exactly
     where the first guard crosses, whatever the units of the others.
     """
+    import diffrax
+    from mechsim.dynamics.backends.diffrax_solvers import ADJOINT, FirstCrossing, solver_for
     term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
 
     def heading(t, y, args):
@@ -120,7 +79,7 @@ def make_solve(jmod: JaxModel, o: DiffraxOptions) -> Callable:
         saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
         sol = diffrax.diffeqsolve(term, solver, t0, t1, jnp.minimum(dt0, t1 - t0), z0, args=args, saveat=saveat,
                                   stepsize_controller=controller, max_steps=o.max_steps, throw=False,
-                                  event=event, adjoint=_ADJOINT)
+                                  event=event, adjoint=ADJOINT)
         ts_out, zs = sol.ts[0], sol.ys[0]
         zp, acc, lam, _ = jax.vmap(jmod.evaluate, in_axes=(None, 0, 0, None))(k, ts_out, zs, p)
         t_end, z_end = sol.ts[1][0], sol.ys[1][0]
@@ -260,14 +219,16 @@ class DiffraxBackend(Backend):
         y_end, yp_end = (row[0] for row in ida_rows(mf, jmod.nq, out["z_end"], out["zp_end"], out["a_end"],
                                                      out["lam_end"]))
         seg = Segment(t_rows, y_rows, yp_rows, End.END, t_seg, y_end, yp_end, counts=counts, next_step=next_step)
+        from mechsim.dynamics.backends.diffrax_solvers import (EVENT_OCCURRED, MAX_STEPS_REACHED, SUCCESSFUL,
+                                                               result_message)
         code = int(out["result"])
-        is_event = code == int(diffrax.RESULTS.event_occurred._value)
-        ok = code == int(diffrax.RESULTS.successful._value) or is_event
+        is_event = code == EVENT_OCCURRED
+        ok = code == SUCCESSFUL or is_event
         if not ok or not np.all(np.isfinite(out["z_end"])):
             msg = result_message(code) if not ok else "non-finite state"
             seg.end, seg.message = End.FAILED, f"diffrax {o.solver} failed: {msg}"
             seg.code = (FailureCode.NON_FINITE if ok else FailureCode.MAX_STEPS
-                        if code == int(diffrax.RESULTS.max_steps_reached._value) else FailureCode.INTEGRATOR_FAILED)
+                        if code == MAX_STEPS_REACHED else FailureCode.INTEGRATOR_FAILED)
             return seg
         ix = mf.index
         if not is_event:

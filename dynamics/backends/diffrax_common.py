@@ -1,21 +1,17 @@
-"""What the diffrax backend and its compiled whole run share: the options of one compiled solve, the solver they
-name, and the state layout between the mode's IDA rows y = [q, v, lam, mu, work, ext] and the ODE state
-z = [q, v, work, ext] that diffrax integrates.
+"""What the diffrax backend and its compiled whole run share: the options of one compiled solve, and the state
+layout between the mode's IDA rows y = [q, v, lam, mu, work, ext] and the ODE state z = [q, v, work, ext] that
+diffrax integrates. diffrax itself is not imported here: its objects are traced into the programs
+(dynamics/backends/diffrax_solvers.py), and a process that loads its programs (dynamics/traced.py) runs them
+without it.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import lru_cache
 
 import numpy as np
 
-from mechsim.dynamics.jax_model import jax_model  # noqa: F401  (switches on float64 before diffrax loads)
 from mechsim.dynamics.model import ModeFunctions
 from mechsim.dynamics.settings import SolverSettings
-
-import diffrax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import optimistix as optx  # noqa: E402
 
 EXPLICIT = ("Tsit5", "Dopri5", "Dopri8", "Bosh3", "Heun", "Midpoint", "Ralston", "Euler")
 IMPLICIT = ("Kvaerno3", "Kvaerno4", "Kvaerno5", "ImplicitEuler")
@@ -90,60 +86,16 @@ def default_options(settings: SolverSettings) -> DiffraxOptions:
 
 
 # -- the solver ------------------------------------------------------------------------------------------------
-class PatientVeryChord(diffrax.VeryChord):
-    """diffrax's VeryChord with a corrected termination test (the cause of diffrax 0.7.2's rejected steps).
-
-    In diffrax 0.7.2 `VeryChord.terminate` reports `nonlinear_divergence` whenever, from the second iteration on,
-    the iteration has not yet converged, even while it is contracting; optimistix stops at the first
-    non-successful result, so every stage that needs a third chord iteration fails, the step's error becomes
-    inf and the step is rejected (about half the steps, docs/diffrax.md). Here divergence means divergence:
-    the corrections grow (rate > 2) or are not finite. The iteration also stops when a correction is already
-    below `floor` tolerance units, where the rate of two round-off-sized corrections is noise.
-    """
-
-    floor: float = 1e-3
-
-    def terminate(self, fn, y, args, options, state, tags):
-        at_least_two = state.step >= 2
-        rate = state.diffsize / state.diffsize_prev
-        factor = state.diffsize * rate / (1 - rate)
-        tiny = (state.step >= 1) & (state.diffsize < self.floor)
-        converged = tiny | (at_least_two & (factor > 0) & (factor < self.kappa))
-        diverged = at_least_two & jnp.invert(tiny) & (jnp.invert(jnp.isfinite(rate)) | (rate > 2))
-        linsolve_fail = state.result != optx.RESULTS.successful
-        result = optx.RESULTS.where(diverged, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful)
-        result = optx.RESULTS.where(linsolve_fail, state.result, result)
-        return converged | diverged | linsolve_fail, result
+#: vector-field evaluations per attempted step of each explicit Runge-Kutta method: its tableau's stages, less
+#: one where the last stage is the next step's first (FSAL); tests/test_diffrax_backend.py reads them off
+#: diffrax's tableaux. A table here, so that a process that loads its compiled programs never imports diffrax.
+EVALUATIONS_PER_STEP = {"Tsit5": 6, "Dopri5": 6, "Dopri8": 13, "Bosh3": 3, "Heun": 2, "Midpoint": 2, "Ralston": 2,
+                        "Euler": 1}
 
 
-def _stage_root_finder(o: DiffraxOptions):
-    rtol, atol = o.newton_tol * o.rtol, o.newton_tol * o.atol
-    if o.newton == "verychord":
-        return diffrax.VeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa)
-    if o.newton == "patient":
-        return PatientVeryChord(rtol=rtol, atol=atol, kappa=o.newton_kappa, floor=o.newton_floor)
-    if o.newton == "chord":
-        return optx.Chord(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
-    if o.newton == "newton":
-        return optx.Newton(rtol=rtol, atol=atol, kappa=o.newton_kappa, cauchy_termination=True)
-    raise ValueError(f"unknown implicit root finder {o.newton!r}")
-
-
-def solver_for(o: DiffraxOptions):
-    cls = getattr(diffrax, o.solver)
-    return cls(root_finder=_stage_root_finder(o)) if o.implicit else cls()
-
-
-@lru_cache(maxsize=64)
 def evaluations_per_step(o: DiffraxOptions) -> int | None:
     """Vector-field evaluations per attempted step of an explicit Runge-Kutta method (None if implicit)."""
-    if o.implicit:
-        return None
-    tab = getattr(solver_for(o), "tableau", None)
-    if tab is None:
-        return {"Euler": 1}.get(o.solver)
-    stages = len(tab.c) + 1
-    return stages - 1 if tab.fsal else stages
+    return None if o.implicit else EVALUATIONS_PER_STEP.get(o.solver)
 
 
 # -- the solves' inputs ------------------------------------------------------------------------------------------
@@ -191,9 +143,3 @@ def state_rows(mf: ModeFunctions, nq: int, z: np.ndarray) -> np.ndarray:
     y[:, 2 * nq:2 * nq + n_alg] = np.nan
     y[:, 2 * nq + n_alg:] = z[:, 2 * nq:]
     return y
-
-
-def result_message(code: int) -> str:
-    """diffrax's words for a solve's result code, first line (diffrax keeps its message table private: read
-    in this one place)."""
-    return diffrax.RESULTS._index_to_message[int(code)].splitlines()[0]

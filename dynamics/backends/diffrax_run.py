@@ -42,11 +42,9 @@ from mechsim.dynamics.jax_model import JaxModel, jax_model  # also enables float
 from mechsim.dynamics.programs import kept_key, program
 from mechsim.dynamics.result import FailureCode
 from mechsim.dynamics.traced import compile_ahead
-from mechsim.dynamics.backends.diffrax_common import (DT0_FIRST, evaluations_per_step, ida_rows, mode_z,
-                                                      result_message, solver_for, state_rows)
+from mechsim.dynamics.backends.diffrax_common import DT0_FIRST, evaluations_per_step, ida_rows, mode_z, state_rows
 from mechsim.dynamics.backends.jax_transitions import JaxTransitions, jax_transitions
 
-import diffrax  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
@@ -102,6 +100,8 @@ def step_record(jmod: JaxModel, o) -> StepRecord:
     """The step-record layout of the solver `o` names on this model's state (traced shapes only: the dense
     output's structure depends on the solver and the state's shape, not on the vector field, so a trivial one
     stands in for the model and tracing it costs nothing)."""
+    import diffrax
+    from mechsim.dynamics.backends.diffrax_solvers import solver_for
     solver = solver_for(o)
     term = diffrax.ODETerm(lambda t, z, args: -z)
 
@@ -109,6 +109,27 @@ def step_record(jmod: JaxModel, o) -> StepRecord:
         sstate = solver.init(term, 0.0, 1e-3, z, None)
         return solver.step(term, 0.0, 1e-3, z, None, sstate, True)[2]
     return StepRecord(jax.eval_shape(dense, jnp.zeros(jmod.nz)))
+
+
+class StepLayout:
+    """A compiled run's step records: their layout (`record`, made by `step_record` when a program is traced: it
+    takes diffrax) and their width, which is all the host needs to run the loaded programs (the width restored
+    from a kept program's record, `RunRecord`)."""
+
+    def __init__(self, jmod: JaxModel, o):
+        self.jmod, self.o = jmod, o
+        self._record: StepRecord | None = None
+        self._width: int | None = None
+
+    @property
+    def record(self) -> StepRecord:
+        if self._record is None:
+            self._record = step_record(self.jmod, self.o)
+        return self._record
+
+    @property
+    def width(self) -> int:
+        return self._width if self._width is not None else self.record.width
 
 
 class Outputs:
@@ -150,6 +171,21 @@ class Outputs:
                 x = vec[lo:hi].reshape(shape)
                 out[k] = x.astype(bool) if is_bool else x
         return out
+
+
+class RunRecord:
+    """What tracing the compiled run records on the host, kept with its program (dynamics/traced.py `Record`): the
+    outputs' layout and the step records' width."""
+
+    def __init__(self, outputs: Outputs, steps: StepLayout):
+        self.outputs, self.steps = outputs, steps
+
+    def recorded(self) -> dict:
+        return {"outputs": self.outputs.recorded(), "step_width": self.steps.width}
+
+    def restore(self, value: dict) -> None:
+        self.outputs.restore(value["outputs"])
+        self.steps._width = int(value["step_width"])
 
 
 class Code(IntEnum):
@@ -220,6 +256,8 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
     tol = (rtol, atol); o: DiffraxOptions; the output rows come from the returned step buffer (`make_rows`);
     seg_steps0: steps already taken in the current mode segment by the previous call (its buffers were full).
     """
+    import diffrax
+    from mechsim.dynamics.backends.diffrax_solvers import solver_for
     solver = solver_for(o)
     term = diffrax.ODETerm(lambda t, z, args: jmod.rates(args[0], t, z, args[1]))
     error_order = solver.error_order(term)
@@ -417,6 +455,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
 def interpolator(o, record: StepRecord) -> Callable:
     """interpolate(row, t) -> z: the state at t from one step record, by the solver's dense output (the one
     interpolant of the output rows and of the readings between them)."""
+    from mechsim.dynamics.backends.diffrax_solvers import solver_for
     solver = solver_for(o)
 
     def interpolate(row, t):
@@ -537,7 +576,7 @@ class DenseOutput:
                 recs.append(taken)
                 segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
             rec = recs[0] if len(recs) == 1 else (np.concatenate(recs) if recs
-                                                   else np.zeros((0, self.entry.record.width)))
+                                                   else np.zeros((0, self.entry.steps.width)))
             seg = segs[0] if len(segs) == 1 else np.concatenate(segs) if segs else np.zeros(0, int)
             if np.any(seg[1:] < seg[:-1]):                # each segment's steps together, in time order
                 order = np.argsort(seg, kind="stable")
@@ -551,8 +590,10 @@ class DenseOutput:
         key = ("dense", DENSE_BATCH)
         fn = self.entry.rows.get(key)
         if fn is None:
-            example = (np.zeros((DENSE_BATCH, self.entry.record.width)), np.zeros(DENSE_BATCH), np.int32(0))
-            fn = jax.jit(make_dense(self.o, self.entry.record)).lower(*example).compile()
+            example = (np.zeros((DENSE_BATCH, self.entry.steps.width)), np.zeros(DENSE_BATCH), np.int32(0))
+            entry = self.entry
+            fn = compile_ahead("diffrax_run_dense", entry.key and (entry.key, DENSE_BATCH),
+                               lambda: jax.jit(make_dense(self.o, entry.steps.record)), example)
             self.entry.rows[key] = fn
         return fn
 
@@ -648,8 +689,9 @@ class CompiledRun:
     compile_time: float
     compile_cpu_time: float
     rows: dict          # output-buffer size -> the compiled row function
-    record: StepRecord
+    steps: StepLayout
     outputs: Outputs
+    key: tuple | None   # the run's key on disk (dynamics/traced.py; None: not kept), its row programs' too
 
 
 def row_bucket(n: int) -> int:
@@ -676,15 +718,16 @@ def compiled_run(mech, model, o) -> tuple[CompiledRun | None, bool]:
             return None
         example = run_arguments(0, 0.0, 1.0, np.zeros(jmod.nz), np.zeros(len(model.parameter_names)), 1e-3,
                                 (1e-6, 1e-8), 100)
-        record = step_record(jmod, o)
-        outputs = Outputs()
+        steps, outputs = StepLayout(jmod, o), Outputs()
+        key = kept_key(model, options)
 
         def make():
-            run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, record)
+            run = make_run(jmod, table, o, EVENTS_PER_CALL, STEPS_PER_CALL, steps.record)
             return jax.jit(lambda *a: outputs.pack(run(*a)))
         with kkt.unrolled_solves():   # the unrolled KKT solve is traced into this program only (dynamics/kkt.py)
-            fn = compile_ahead("diffrax_whole_run", kept_key(model, options), make, example, outputs)
-        return CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, {}, record, outputs)
+            fn = compile_ahead("diffrax_whole_run", key, make, example, RunRecord(outputs, steps))
+        return CompiledRun(fn, jmod, _time.perf_counter() - wall, _time.process_time() - cpu, {}, steps, outputs,
+                           key)
     rules = mech.transition_rules()
     hand_back = None if rules is None else tuple((k, tuple(r.python_only for r in v)) for k, v in rules.items())
     # the transition table is traced in: the mechanism's class and structure shape the program too, and a numeric
@@ -701,7 +744,8 @@ def compiled_rows(entry: CompiledRun, o, n_rows: int, example: tuple) -> tuple[C
     if hit is not None:
         return hit, 0.0, 0.0
     wall, cpu = _time.perf_counter(), _time.process_time()
-    fn = jax.jit(make_rows(o, STEPS_PER_CALL, entry.record)).lower(*example).compile()
+    fn = compile_ahead("diffrax_run_rows", entry.key and (entry.key, n_rows),
+                       lambda: jax.jit(make_rows(o, STEPS_PER_CALL, entry.steps.record)), example)
     entry.rows[n_rows] = fn
     return fn, _time.perf_counter() - wall, _time.process_time() - cpu
 
@@ -716,7 +760,8 @@ def run_arguments(k, t0, t_end, z0, p, dt0, tol, max_steps, seg_steps=0) -> tupl
 def _failure(model, mode: str, t: float, q, code: FailureCode, o) -> dict:
     where = {c: float(v) for c, v in zip(model.coordinates, q)}
     if code is FailureCode.MAX_STEPS:
-        msg = result_message(int(diffrax.RESULTS.max_steps_reached._value))
+        from mechsim.dynamics.backends.diffrax_solvers import MAX_STEPS_REACHED, result_message
+        msg = result_message(MAX_STEPS_REACHED)
         return dict(time=t, mode=mode, reason=f"diffrax {o.solver} failed: {msg} ({o.max_steps} in one mode "
                     "segment)", code=code, where=where,
                     hint="raise solver.max_steps or loosen rtol; check for a singular configuration here")
