@@ -244,15 +244,21 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
 
 
 def time_line(solver: dict, total: float, plots: bool = True) -> str:
-    """Where the command's wall time went: the solve (and compiling the model's code, or loading it from the cache
-    of an earlier process) within the run, the tables and summary, and the rest (start-up, files and figures), so a
+    """Where the command's wall time went: within the run, the solve, compiling the model's code (or loading it
+    from the cache of an earlier process), loading the model and the solver (the derived model, the solver's
+    libraries), the tables, checks and summary (`tables_time_s`); then the rest (start-up, files and figures), so a
     user sees what waiting on figures costs."""
     run, solve = solver["wall_time_s"], solver.get("solve_time_s") or 0.0
     compile_ = solver.get("compile_time_s") or 0.0
-    compiled = [f"compile or load compiled code {compile_:.2f} s"] if compile_ else []
-    parts = [f"solve {solve:.2f} s"] + compiled + [
-        f"tables and summary {max(run - solve - compile_, 0.0):.2f} s",
-        f"start-up, files and figures {max(total - run, 0.0):.2f} s"]
+    tables = solver.get("tables_time_s")
+    parts = [f"solve {solve:.2f} s"] + ([f"compile or load compiled code {compile_:.2f} s"] if compile_ else [])
+    if tables is None:        # a summary written before the tables were timed on their own
+        parts.append(f"tables and summary {max(run - solve - compile_, 0.0):.2f} s")
+    else:
+        setup = run - solve - compile_ - tables
+        parts += ([f"loading the model and solver {setup:.2f} s"] if setup >= 0.005 else []) + [
+            f"tables and summary {tables:.2f} s"]
+    parts.append(f"start-up, files and figures {max(total - run, 0.0):.2f} s")
     tip = "; `--set output.plots=false` skips the figures" if plots and total - run > run else ""
     return f"time: {total:.2f} s in all ({', '.join(parts)}){tip}"
 

@@ -262,9 +262,12 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
         traj = integrate(mech, drive, settings, run_si["duration"], si["output_step"], si["initial"][angle_key],
                          speed0, progress=progress, ext=thermal and thermal.extension,
                          ext_initial=thermal and thermal.ext_initial)
+        tables0 = time.perf_counter()
         df = timeseries(traj, mech.angle_coordinates)
         events = mech.completed_events(events_table(traj), df)
-        stats = traj.stats
+        # the run's own time on its tables, checks and summary (`execute` adds the rest): what the console reports
+        # beside the solve, apart from loading the model and the solver
+        stats = dict(traj.stats, tables_time_s=time.perf_counter() - tables0)
         warnings += traj.warnings
         if traj.failure:
             from mechsim.dynamics.backend import backend_class
@@ -388,6 +391,7 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
     """The run's tables after the checks and the thermal finish (`_Finished`). keep(df, events, cols, mech,
     thermal): the mechanics columns to keep for the thermal finish (`thermal_peaks`), else all."""
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
+    post0 = time.perf_counter()
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
     method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
     if thermal is not None and thermal.averaging == "cycle" and traj is not None \
@@ -419,6 +423,7 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
                                             event_cols=event_cols)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
+    stats = dict(stats, tables_time_s=stats.get("tables_time_s", 0.0) + time.perf_counter() - post0)
     return _Finished(the_plan, df, events, failure, cols, event_cols, source, angle_col, speed_col, stats, warnings,
                      thermal_summary, thermal_tables)
 
@@ -428,6 +433,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     """Integrate a planned scenario, tabulate and summarise (solver trouble comes back in Result.failure)."""
     wall0 = time.perf_counter()
     done = _finished(the_plan, progress, integrate)
+    post0 = time.perf_counter()
     the_plan, df, events, failure, cols, event_cols = (done.plan, done.df, done.events, done.failure, done.cols,
                                                        done.event_cols)
     warnings = done.warnings
@@ -445,6 +451,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
                                  cols, events, done.source if failure is None else None, done.speed_col, event_cols)
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
+    tables = done.stats.get("tables_time_s", 0.0) + time.perf_counter() - post0
     summary = {
         "scenario": scenario.name,
         "mechanism": si["mechanism"]["type"],
@@ -461,7 +468,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         "energy": energy_balance(df, events, cols, event_cols),
         "events": event_counts(events, event_cols),
         "validity": valid,
-        "solver": {**done.stats, "wall_time_s": wall, "output_rows": len(df)},
+        "solver": {**done.stats, "tables_time_s": tables, "wall_time_s": wall, "output_rows": len(df)},
         "max_constraint_residual_m": _largest_magnitude(cols["constraint_residual_m"]) if len(df) else 0.0,
         "warnings": warnings,
         "warning_groups": group_warnings(warnings),

@@ -78,6 +78,13 @@ def test_the_time_line_splits_the_whole_command():
     assert "output.plots=false" in line and "output.plots=false" not in time_line(solver, 10.0, plots=False)
     no_compilation = {"wall_time_s": 1.0, "solve_time_s": 0.5}
     assert "compile" not in time_line(no_compilation, 1.5)
+    # the run's tables timed on their own (summary.json `tables_time_s`): the rest of the run is loading the model
+    # and the solver, 2.0 - 0.5 - 0.25 - 0.75 = 0.5 s
+    timed = dict(solver, tables_time_s=0.75)
+    assert time_line(timed, 10.0).startswith(
+        "time: 10.00 s in all (solve 0.50 s, compile or load compiled code 0.25 s, loading the model and solver 0.50 s, "
+        "tables and summary 0.75 s, start-up, files and figures 8.00 s)")
+    assert "loading" not in time_line(dict(no_compilation, tables_time_s=0.5), 1.5)
 
 
 def test_the_run_bar_moves_from_simulated_time_to_the_share_of_tables_written():

@@ -27,6 +27,7 @@ CASES = [(0.15, 7.0), (0.05, 2.0), (0.3, 12.0)]
 BASE = ["solver.backend=diffrax", "solver.diffrax_compiled_run=false", "duration=1.5 s"]
 VARY = ["contact.friction=0.15,0.05,0.3", "load.wheel_torque=7,2,12 N*m"]
 TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s",
+          "solver_tables_time_s",
           "solver_compile_time_s", "solver_compile_cpu_time_s", "solver_compilations", "solver_wall_time_backend_s",
           "worker", "run_id")
 

@@ -15,6 +15,7 @@ from mechsim.scenarios.studies.sweep.spec import build_spec
 
 #: columns that time the work (every path's solver statistics time the solve, the closed form's too)
 TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s",
+          "solver_tables_time_s",
           "solver_compile_time_s", "solver_compile_cpu_time_s", "worker")
 
 

@@ -20,7 +20,8 @@ from cli_helpers import one_line_error
 
 # crank from -180 deg to the end of the first engagement (+45 deg) at 5.34 rad/s takes 0.735 s
 ONE_INDEX = ["duration=0.8 s", "output_step=5 ms", "solver.method=dae"]
-TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s", "worker", "run_id")
+TIMING = ("case_wall_time_s", "case_cpu_time_s", "solver_wall_time_s", "solver_derive_time_s", "solver_solve_time_s",
+          "solver_tables_time_s", "worker", "run_id")
 cli = CliRunner()
 
 
