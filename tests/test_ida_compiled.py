@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -291,6 +292,52 @@ def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_d
     assert np.array_equal(a[:, 0], b[:, 0])
     rtol, atol = 1e-8, 1e-10                # the scenario's solver tolerances
     assert np.abs(a[:, 1:] - b[:, 1:]).max() <= GLOBAL_FACTOR * (rtol * np.abs(a[:, 1:]).max() + atol)
+
+
+def _holders(path) -> list[int]:
+    """The processes (not this one) with `path` open (Linux: /proc)."""
+    out = []
+    for fd_dir in Path("/proc").glob("[0-9]*/fd"):
+        try:
+            if int(fd_dir.parent.name) != os.getpid() and any(
+                    os.readlink(fd) == str(path) for fd in fd_dir.iterdir()):
+                out.append(int(fd_dir.parent.name))
+        except OSError:                      # a process gone meanwhile, or not ours to read
+            continue
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_the_background_compilation_holds_none_of_the_commands_descriptors(tmp_path):
+    """The default's background compilation outlives the command that started it: it must hold none of its open
+    files, or a caller reading the command's output through a pipe (`mechsim run ... | tee log`, subprocess with
+    captured output) waits for the end of the compilation, not of the command. Here the compilation is held back
+    (this test holds its lock), so the worker is still waiting when the command ends: the command's output is
+    read to its end all the same, and the worker holds no pipe."""
+    import fcntl
+    import signal
+    env = _cache_without_ready_marks(tmp_path)
+    lock_path = tmp_path / "cache" / "compiled" / ".compile.lock"
+    with open(lock_path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        workers = []
+        try:
+            out = subprocess.run([sys.executable, "-m", "mechsim.scenarios.cli", "run", "geneva-motor", "--set",
+                                  "duration=0.3 s", "--set", "output.plots=false", "--out", str(tmp_path / "o")],
+                                 env=env, capture_output=True, text=True, timeout=120)
+            assert out.returncode == 0, out.stderr[-2000:]
+            assert out.stdout.rstrip().splitlines()[-1].startswith("time: ")
+            for _ in range(100):             # the worker, waiting for the lock (it opens it at once)
+                workers = _holders(lock_path)
+                if workers:
+                    break
+                time.sleep(0.1)
+            assert len(workers) == 1
+            held = [os.readlink(fd) for fd in Path(f"/proc/{workers[0]}/fd").iterdir()]
+            assert not [target for target in held if target.startswith("pipe:")], held
+        finally:
+            for pid in workers or _holders(lock_path):
+                os.kill(pid, signal.SIGKILL)
 
 
 def test_a_model_run_on_ida_compiled_is_the_defaults_compiled_model_in_later_processes(tmp_path):

@@ -251,6 +251,11 @@ def _compile_detached(modes, folder: Path) -> None:
         devnull = os.open(os.devnull, os.O_RDWR)
         for fd in (0, 1, 2):
             os.dup2(devnull, fd)
+        # nothing of the parent's held open: a copy of its standard output (the console keeps one while the solver
+        # libraries print into a file) would keep a pipe the user reads the command through open for the whole
+        # compilation (`mechsim run ... | tee log` waited for it); the Python streams too, some of which wrote there
+        os.closerange(3, os.sysconf("SC_OPEN_MAX") if hasattr(os, "sysconf") else 65536)
+        sys.stdout = sys.stderr = open(os.devnull, "w")
         os.nice(19)
         import fcntl
         import signal
