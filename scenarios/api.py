@@ -295,7 +295,8 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
     and advance(ok) (the CLI's progress bar). heatmap_aggregate: how a heat map reduces the cases that share a cell
     (those differing only in parameters beyond the third): "auto" (max of a peak_max_*, min of a peak_min_*, else
     mean), "max", "min" or "mean"; the figure's title names it. The table's attrs: "report" (the one-line account), "exit_code"
-    (the CLI's), "interrupted" (why, or None), "recomputed" ([(case, why)]: stored cases that did not verify).
+    (the CLI's), "interrupted" (why, or None), "recomputed" ([(case, why)]: stored cases that did not verify),
+    "cases_wall_time_s" (the cases' wall time, the one the account gives).
     User errors raise ScenarioError before any case runs."""
     import pandas as pd
 
@@ -321,6 +322,7 @@ def sweep(scenario: str | Path, vary: Overrides, set: Overrides = None, zip: boo
         stored = folder / "sweep.parquet"
         table = pd.read_parquet(stored) if stored.exists() else pd.DataFrame()
     table.attrs.update(report=report.line(), exit_code=exit_code(report), interrupted=report.interrupted,
+                       cases_wall_time_s=report.wall_time_s,
                        recomputed=list(report.discarded or []))
     return table
 

@@ -461,6 +461,10 @@ def sweep(
                   highlight=False, soft_wrap=True)
     (err if table.attrs["interrupted"] else out).print(table.attrs["report"], markup=False, highlight=False,
                                                        soft_wrap=True)
+    if not quiet:                # what the user waited for: the cases, and the rest (start-up, tables and figures)
+        total, cases = time.perf_counter() - STARTED, table.attrs["cases_wall_time_s"]
+        out.print(f"time: {total:.2f} s in all (cases {cases:.2f} s, start-up, tables and figures "
+                  f"{max(total - cases, 0.0):.2f} s)", markup=False, highlight=False, soft_wrap=True)
     raise typer.Exit(table.attrs["exit_code"])
 
 

@@ -167,3 +167,19 @@ def test_a_different_sweep_needs_force(tmp_path):
     assert invoke("geneva-lc1", "--vary", "load.wheel_torque=5,9 N*m", *base, "--force").exit_code == 0
     r = invoke("geneva-lc1", "--vary", "load.wheel_torque=5000,9000 N*mm", *base)
     assert r.exit_code == 0 and "(0 computed, 2 reused" in r.stdout, r.output
+
+
+def test_the_cli_reports_the_whole_commands_time_beside_the_cases(tmp_path):
+    """`mechsim sweep` ends with the time the user waited, split into the cases (the account's, sweep_summary.json's
+    wall_time_s) and the rest: start-up, tables and figures (as `run` and `sensitivity` do)."""
+    import re
+    from cli_helpers import invoke
+    r = invoke("sweep", "geneva-lc1", "--vary", "contact.friction=0.1,0.3", "--set", "output.plots=false",
+               "--workers", "0", "--out", tmp_path / "s")
+    assert r.exit_code == 0, r.output
+    m = re.fullmatch(r"time: ([0-9.]+) s in all \(cases ([0-9.]+) s, start-up, tables and figures ([0-9.]+) s\)",
+                     r.output.strip().splitlines()[-1])
+    assert m, r.output
+    cases = json.loads((tmp_path / "s" / "sweep_summary.json").read_text())["wall_time_s"]
+    assert float(m.group(2)) == round(cases, 2)
+    assert abs(float(m.group(1)) - float(m.group(2)) - float(m.group(3))) <= 0.011
