@@ -71,7 +71,7 @@ def write_curves(name: str, out_dir: Path | None = None, force: bool = False,
         for attr, fname in TABLES.items():
             getattr(atlas, attr).to_csv(tmp / f"{fname}.csv", index=False)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
+        from mechsim.scenarios.output.plots import save as save_figure
         from mechsim.scenarios.output.rolling_plots import plot_coupler_atlas
-        fig = plot_coupler_atlas(atlas, title=f"rolling-pair 4-bar: {label}")
-        fig.savefig(tmp / "atlas.png", dpi=110)
+        save_figure(plot_coupler_atlas(atlas, title=f"rolling-pair 4-bar: {label}"), tmp / "atlas.png")
     return out_dir, summary

@@ -594,11 +594,11 @@ def write_sensitivity(table: pd.DataFrame, folder, force: bool = False):
 
     from mechsim.scenarios.output.atomic import atomic_folder, json_default
     from mechsim.scenarios.output.csv import write_csv
+    from mechsim.scenarios.output.plots import save as save_figure
     folder = Path(folder)
     with atomic_folder(folder, force) as tmp:
         write_csv(table, tmp / "sensitivity.csv")
-        fig = tornado_figure(table)
-        fig.savefig(tmp / "tornado.png", dpi=110)
+        save_figure(tornado_figure(table), tmp / "tornado.png")
         summary = {"scenario": table.attrs.get("scenario"), "sensitivity": {
             "rows": table.to_dict("records"), "change_relative": table.attrs.get("change"),
             "cost": table.attrs.get("cost"), "warnings": table.attrs.get("warnings", []),

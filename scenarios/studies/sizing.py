@@ -109,12 +109,13 @@ class SizingResult:
 
         from mechsim.scenarios.output.atomic import atomic_folder, json_default
         from mechsim.scenarios.output.csv import write_csv
+        from mechsim.scenarios.output.plots import save as save_figure
         folder = Path(folder)
         with atomic_folder(folder, force) as tmp:
             if self.success:
                 (tmp / "design.toml").write_text(self.design_toml())
             write_csv(self.history, tmp / "convergence.csv")
-            convergence_figure(self).savefig(tmp / "convergence.png", dpi=110)
+            save_figure(convergence_figure(self), tmp / "convergence.png")
             (tmp / "summary.json").write_text(json.dumps({"sizing": self.summary}, indent=2, default=json_default))
         return folder
 
