@@ -131,6 +131,10 @@ class StepLayout:
     def width(self) -> int:
         return self._width if self._width is not None else self.record.width
 
+    @width.setter
+    def width(self, value: int) -> None:
+        self._width = int(value)
+
 
 class Outputs:
     """The step loop's small outputs (everything but the step buffer) packed into one float64 and one int32
@@ -185,7 +189,7 @@ class RunRecord:
 
     def restore(self, value: dict) -> None:
         self.outputs.restore(value["outputs"])
-        self.steps._width = int(value["step_width"])
+        self.steps.width = value["step_width"]
 
 
 class Code(IntEnum):
