@@ -3,6 +3,7 @@
     python benchmarks/cold_start.py                          # --help and `run geneva-lc1`, 7 runs each
     python benchmarks/cold_start.py --runs 9 --compare /path/to/other/root
     python benchmarks/cold_start.py --only "run geneva-motor no-plots"    # a DAE run (derived model cached)
+    python benchmarks/cold_start.py --only "run geneva-motor diffrax,sensitivity geneva-motor"   # programs kept
 
 Each command runs in a new Python process (`python -m mechsim.scenarios.cli ...`), the OS file cache warm (one
 unrecorded warm-up run first, which also writes the bytecode caches an installed package has). CPU time is
@@ -32,7 +33,14 @@ COMMANDS = {
     "run geneva-lc1 no-plots": ["run", "geneva-lc1", "--quiet", "--set", "output.plots=false", "--out", "{out}"],
     # a DAE run (IDA): the derived model comes from the disk cache the warm-up run wrote
     "run geneva-motor no-plots": ["run", "geneva-motor", "--quiet", "--set", "output.plots=false", "--out", "{out}"],
+    # diffrax and the sensitivity pass: their programs come traced and compiled from the cache the warm-up wrote
+    "run geneva-motor diffrax": ["run", "geneva-motor", "--quiet", "--set", "output.plots=false", "--set",
+                                 'solver.backend="diffrax"', "--out", "{out}"],
+    "sensitivity geneva-motor": ["sensitivity", "geneva-motor", "--wrt", "contact.friction,mechanism.crank_radius",
+                                 "--quiet", "--out", "{out}"],
 }
+#: the commands run without --only (the others take tens of seconds to warm up)
+DEFAULT = ("--help", "run geneva-lc1", "run geneva-lc1 no-plots", "run geneva-motor no-plots")
 #: what a command's warm-up run adds: the DAE run's warm-up compiles its callbacks in the foreground (`ida-compiled`
 #: by name marks the model ready), so that the measured runs of the default load them rather than overlap a
 #: background compilation
@@ -59,7 +67,7 @@ def once(root: Path, args: list[str], scratch: Path) -> tuple[float, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=7)
-    ap.add_argument("--only", default=",".join(COMMANDS), help=f"comma list of: {', '.join(COMMANDS)}")
+    ap.add_argument("--only", default=",".join(DEFAULT), help=f"comma list of: {', '.join(COMMANDS)}")
     ap.add_argument("--compare", type=Path, default=None, help="another package root, run interleaved")
     args = ap.parse_args()
     roots = {"this": ROOT} | ({"other": args.compare.resolve()} if args.compare else {})
