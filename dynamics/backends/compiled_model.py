@@ -254,7 +254,8 @@ def _compile_detached(modes, folder: Path) -> None:
         # nothing of the parent's held open: a copy of its standard output (the console keeps one while the solver
         # libraries print into a file) would keep a pipe the user reads the command through open for the whole
         # compilation (`mechsim run ... | tee log` waited for it); the Python streams too, some of which wrote there
-        os.closerange(3, os.sysconf("SC_OPEN_MAX") if hasattr(os, "sysconf") else 65536)
+        limit = os.sysconf("SC_OPEN_MAX") if hasattr(os, "sysconf") else -1     # -1: unlimited or unknown
+        os.closerange(3, limit if 0 < limit <= 1 << 20 else 1 << 16)
         sys.stdout = sys.stderr = open(os.devnull, "w")
         os.nice(19)
         import fcntl
