@@ -239,15 +239,16 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
             if line:
                 out.print(line, markup=False, highlight=False, soft_wrap=True)
         plots = bool(result.scenario.get("output", {}).get("plots", True))
-        out.print(time_line(solver, time.perf_counter() - STARTED, plots), markup=False, highlight=False,
+        thermal = s["model"].get("thermal", "none") != "none"
+        out.print(time_line(solver, time.perf_counter() - STARTED, plots, thermal), markup=False, highlight=False,
                   soft_wrap=True)
 
 
-def time_line(solver: dict, total: float, plots: bool = True) -> str:
+def time_line(solver: dict, total: float, plots: bool = True, thermal: bool = False) -> str:
     """Where the command's wall time went: within the run, the solve, compiling the model's code (or loading it
     from the cache of an earlier process), loading the model and the solver (the derived model, the solver's
-    libraries), the tables, checks and summary (`tables_time_s`); then the rest (start-up, files and figures), so a
-    user sees what waiting on figures costs."""
+    libraries), the tables, checks, thermal model (`thermal`: the run has one) and summary (`tables_time_s`); then the
+    rest (start-up, files and figures), so a user sees what waiting on figures costs."""
     run, solve = solver["wall_time_s"], solver.get("solve_time_s") or 0.0
     compile_ = solver.get("compile_time_s") or 0.0
     tables = solver.get("tables_time_s")
@@ -257,7 +258,7 @@ def time_line(solver: dict, total: float, plots: bool = True) -> str:
     else:
         setup = run - solve - compile_ - tables
         parts += ([f"loading the model and solver {setup:.2f} s"] if setup >= 0.005 else []) + [
-            f"tables and summary {tables:.2f} s"]
+            f"tables{', thermal' if thermal else ''} and summary {tables:.2f} s"]
     parts.append(f"start-up, files and figures {max(total - run, 0.0):.2f} s")
     tip = "; `--set output.plots=false` skips the figures" if plots and total - run > run else ""
     return f"time: {total:.2f} s in all ({', '.join(parts)}){tip}"

@@ -85,6 +85,7 @@ def test_the_time_line_splits_the_whole_command():
         "time: 10.00 s in all (solve 0.50 s, compile or load compiled code 0.25 s, loading the model and solver 0.50 s, "
         "tables and summary 0.75 s, start-up, files and figures 8.00 s)")
     assert "loading" not in time_line(dict(no_compilation, tables_time_s=0.5), 1.5)
+    assert "tables, thermal and summary 0.75 s" in time_line(timed, 10.0, thermal=True)
 
 
 def test_the_run_bar_moves_from_simulated_time_to_the_share_of_tables_written():
