@@ -265,8 +265,8 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
         tables0 = time.perf_counter()
         df = timeseries(traj, mech.angle_coordinates)
         events = mech.completed_events(events_table(traj), df)
-        # the run's own time on its tables, checks and summary (`execute` adds the rest): what the console reports
-        # beside the solve, apart from loading the model and the solver
+        # the run's own time on its tables, checks and summary (`_finished` and `execute` add theirs): what the console
+        # reports beside the solve, apart from loading the model and the solver
         stats = dict(traj.stats, tables_time_s=time.perf_counter() - tables0)
         warnings += traj.warnings
         if traj.failure:
