@@ -77,10 +77,10 @@ def _load(name: str, record: Record | None):
         head, _, body = data.partition(b"\n")
         recorded = json.loads(head)["recorded"]
         exported = export.deserialize(bytearray(body))
-    except Exception:       # noqa: BLE001  missing, truncated or written by another version: traced again
-        return None
-    if record is not None:
-        record.restore(recorded)
+        if record is not None:
+            record.restore(recorded)
+    except Exception:       # noqa: BLE001  missing, truncated, written by another version, or a record that does
+        return None         # not read back: traced again
     return exported
 
 

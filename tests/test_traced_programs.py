@@ -3,6 +3,8 @@ Python again, computes exactly what the traced program computes, with what traci
 code or library version, a corrupt file and a program with host callbacks are traced (and compiled) as before."""
 from __future__ import annotations
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -86,6 +88,31 @@ def test_a_corrupt_file_is_traced_again_and_rewritten(cache):
     loaded = traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(_untraceable), EXAMPLE, Layout())
     assert np.array_equal(np.asarray(loaded(*EXAMPLE)), np.asarray(fn(*EXAMPLE)))   # and kept again, whole
     assert [p.name for p in cache.iterdir()] == [kept.name]  # no partial file left behind
+
+
+class StrictLayout(Layout):
+    """A record that refuses what it cannot read back (as the compiled run's does: its keys, its shapes)."""
+
+    def restore(self, value):
+        if not (isinstance(value, list) and value[1] == "sin"):
+            raise TypeError(f"not a layout: {value!r}")
+        self.value = value
+
+
+def test_a_record_that_does_not_read_back_is_traced_again(cache):
+    """A file whose program reads but whose record does not (a foreign or damaged head): traced again and rewritten,
+    never an error of the run."""
+    traced.compile_ahead("test_program", ("structure", 1), lambda: _program(Layout()), EXAMPLE, Layout())
+    (kept,) = cache.iterdir()
+    head, _, body = kept.read_bytes().partition(b"\n")
+    kept.write_bytes(json.dumps({"format": 1, "recorded": {"not": "a layout"}}).encode() + b"\n" + body)
+    layout = StrictLayout()
+    fn = traced.compile_ahead("test_program", ("structure", 1), lambda: _program(layout), EXAMPLE, layout)
+    assert layout.value == [[7], "sin"]                       # traced again
+    loaded = StrictLayout()
+    again = traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(_untraceable), EXAMPLE, loaded)
+    assert loaded.value == [[7], "sin"]                       # the rewritten file reads back
+    assert np.array_equal(np.asarray(again(*EXAMPLE)), np.asarray(fn(*EXAMPLE)))
 
 
 def test_host_callbacks_and_keys_by_identity_are_compiled_not_kept(cache):
