@@ -22,7 +22,7 @@ from pathlib import Path
 
 from mechsim.dynamics import programs
 from mechsim.dynamics.backends.sundials_c import sundials
-from mechsim.dynamics.user_cache import code_fingerprint
+from mechsim.dynamics.user_cache import code_fingerprint, write_atomically
 
 #: bump when the generated module's template changes (part of the cache key)
 TEMPLATE_VERSION = 1
@@ -139,10 +139,9 @@ def _module_path(folder: Path, mf) -> Path:
             where = where if where is not None else Path(tempfile.mkdtemp(prefix="mechsim-compiled-"))
             where.mkdir(parents=True, exist_ok=True)
             path = where / name
-            if not path.exists():
-                tmp = where / f"{name}.{os.getpid()}.tmp"
-                tmp.write_text(source if source is not None else module_source(mf))
-                os.replace(tmp, path)
+            if not path.exists() and not write_atomically(
+                    path, (source if source is not None else module_source(mf)).encode("utf-8")):
+                raise OSError(f"cannot write {path}")
             return path
         except OSError:
             if where is None:
