@@ -91,9 +91,11 @@ def test_a_dae_run_from_the_caches_without_figures_loads_no_figure_or_fallback_s
     compiled callbacks on disk (the default backend runs them compiled): no matplotlib (no figures), no
     scikit-sundae binding with its scipy.optimize (the compiled path reaches SUNDIALS through ctypes), no sympy,
     no JAX."""
-    import mechsim
     from mechsim.dynamics.user_cache import cache_dir
-    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})   # the caches written
+    # the caches written by a process of their own: a run in this process may find the derived model in memory,
+    # derived while another test had another cache folder, and write nothing to this one
+    fresh("import mechsim\nmechsim.run('geneva-motor', set={'solver.backend': 'ida-compiled', 'duration': '0.3 s', "
+          "'output.plots': False})", cache_dir(), tmp_path)
     code = ("import sys\nfrom mechsim.scenarios import cli\n"
             "try:\n    cli.app(['run', 'geneva-motor', '--quiet', '--set', 'duration=0.3 s', '--set', "
             f"'output.plots=false', '--out', {str(tmp_path / 'out')!r}])\nexcept SystemExit as e:\n"
