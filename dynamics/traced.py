@@ -15,12 +15,19 @@ arguments' shapes and types. What tracing records on the host beside the program
 layout) is kept with it (`Record`). A program that cannot be exported (host callbacks: equinox's checks in a
 process that is not mechsim's CLI) or a key that names an object by its address is compiled as before. The folder
 never decides a result: a file that is missing, unreadable or corrupt is traced again and written anew.
+
+One process at a time traces and compiles a given program (a lock file per program in the cache's `locks` folder,
+`_one_at_a_time`): the workers of a sweep's pool on a fresh machine, or two commands started together, would
+otherwise each trace and compile the same program at once, every worker paying the seconds that one pays; the
+others wait and load what it kept.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+import time
+from contextlib import contextmanager
 from importlib import metadata
 from typing import Callable, Protocol
 
@@ -30,6 +37,12 @@ import numpy as np
 LIBRARIES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
 #: the layout of a kept file: one JSON line (what tracing recorded on the host), then the serialised program
 FORMAT = 1
+#: seconds a process waits for another that traces and compiles the same program (that takes seconds); a holder
+#: still busy after this is not waited for: the program is traced and compiled here too, as without the lock
+WAIT_S = 120.0
+#: a program that could not be exported (`compile_ahead`) leaves a mark of this name beside its lock: no process
+#: waits for it again
+UNKEPT = ".unkept"
 
 
 class Record(Protocol):
@@ -69,6 +82,13 @@ def _folder():
     return cache_dir() / "traced"
 
 
+def _locks():
+    """Where the lock files and the unkept marks are (apart from the programs: the folder above holds programs
+    only)."""
+    from mechsim.dynamics.user_cache import cache_dir
+    return cache_dir() / "locks"
+
+
 def _load(name: str, record: Record | None):
     """The kept program `name` (its record restored), or None where there is none that can be read."""
     from jax import export
@@ -92,23 +112,66 @@ def _store(name: str, body: bytes, record: Record | None) -> None:
     write_atomically(_folder() / name, head.encode() + b"\n" + body)
 
 
+@contextmanager
+def _one_at_a_time(name: str):
+    """Held while this process traces, keeps and compiles program `name`: another process that needs it meanwhile
+    waits here (up to WAIT_S), then loads what this one kept, the traced program from the folder and the compiled
+    one from JAX's persistent cache. An advisory lock (flock) on a file per program, released by the system however
+    its holder ends; without fcntl or where the folder cannot be written, nothing is waited for."""
+    try:
+        import fcntl
+        folder = _locks()
+        folder.mkdir(parents=True, exist_ok=True)
+        handle = open(folder / f"{name}.lock", "a")
+    except (ImportError, OSError):
+        yield
+        return
+    with handle:
+        deadline, held = time.monotonic() + WAIT_S, False
+        while not held:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                held = True
+            except BlockingIOError:
+                if time.monotonic() > deadline or (folder / f"{name}{UNKEPT}").exists():
+                    break
+                time.sleep(0.05)
+            except OSError:         # a file system without flock
+                break
+        yield
+
+
+def _compiled(exported, example: tuple):
+    import jax
+    return jax.jit(exported.call).lower(*example).compile()
+
+
 def compile_ahead(kind: str, key, make: Callable, example: tuple, record: Record | None = None):
     """`make().lower(*example).compile()` (make: the jitted function), from the program kept on disk under
     (kind, key) where there is one: then `make` is not called and nothing is traced (nor lambdified: the model's
-    jax functions are built when first traced, dynamics/jax_model.py). Else traced, exported and kept. key None:
-    not kept (compiled as it is)."""
-    import jax
+    jax functions are built when first traced, dynamics/jax_model.py). Else traced, exported, compiled and kept,
+    one process at a time (`_one_at_a_time`: the file is written once the compiled program is in JAX's cache, so a
+    process that finds it compiles nothing). key None: not kept (compiled as it is)."""
     from jax import export
     name = disk_name(kind, key, example) if key is not None else None
     if name is None:
         return make().lower(*example).compile()
     exported = _load(name, record)
-    if exported is None:
+    if exported is not None:
+        return _compiled(exported, example)
+    with _one_at_a_time(name):
+        exported = _load(name, record)          # kept by a process this one waited for
+        if exported is not None:
+            return _compiled(exported, example)
         jitted = make()
         try:
             exported = export.export(jitted)(*example)
             body = bytes(exported.serialize())
-        except (ValueError, NotImplementedError):   # what jax.export refuses (host callbacks): compiled as it is
-            return jitted.lower(*example).compile()
-        _store(name, body, record)
-    return jax.jit(exported.call).lower(*example).compile()
+        except (ValueError, NotImplementedError):   # what jax.export refuses (host callbacks): compiled as it is,
+            from mechsim.dynamics.user_cache import write_atomically    # and no process waits for it again
+            write_atomically(_locks() / f"{name}{UNKEPT}", b"")
+        else:
+            fn = _compiled(exported, example)
+            _store(name, body, record)
+            return fn
+    return jitted.lower(*example).compile()

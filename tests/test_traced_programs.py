@@ -1,6 +1,7 @@
 """Traced programs kept on disk (dynamics/traced.py): a later process loads the program instead of tracing the
 Python again, computes exactly what the traced program computes, with what tracing recorded on the host; another
-code or library version, a corrupt file and a program with host callbacks are traced (and compiled) as before."""
+code or library version, a corrupt file and a program with host callbacks are traced (and compiled) as before. Two
+callers of one program at once: the second waits for the first and loads what it kept."""
 from __future__ import annotations
 
 import json
@@ -156,3 +157,73 @@ def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monke
     loaded = numbers()
     assert np.array_equal(loaded[0], traced_[0]) and loaded[1] == traced_[1]
     assert np.array_equal(loaded[2], traced_[2]) and np.isfinite(loaded[2]).all()
+
+
+def _blocked_program(started, go, layout: Layout):
+    """make() of `_program` that says it has started and then waits for `go` (a trace that takes a while)."""
+    def make():
+        started.set()
+        assert go.wait(60), "never let go"
+        return _program(layout)
+    return make
+
+
+def test_a_program_another_is_tracing_is_waited_for_and_loaded(cache, monkeypatch):
+    """Two callers of one program at once (a sweep's workers on a fresh machine): the second waits for the first,
+    then loads what it kept, traced and compiled, instead of tracing it too; both compute the same bits. (flock
+    treats two opens of the lock file in one process as two holders, as it does two processes.)"""
+    import threading
+    import time
+    started, go, first_layout, got, waits = threading.Event(), threading.Event(), Layout(), {}, threading.Event()
+    sleep = time.sleep
+    monkeypatch.setattr(traced.time, "sleep", lambda s: (waits.set(), sleep(s)))     # the wait loop's pause
+
+    def first():
+        got["first"] = traced.compile_ahead("test_program", ("structure", 1),
+                                            _blocked_program(started, go, first_layout), EXAMPLE, first_layout)
+    worker = threading.Thread(target=first)
+    worker.start()
+    assert started.wait(60)                       # the first is tracing, holding the program's lock
+    second_layout = Layout()
+    waiting = threading.Thread(target=lambda: got.setdefault("second", traced.compile_ahead(
+        "test_program", ("structure", 1), lambda: jax.jit(_untraceable), EXAMPLE, second_layout)))
+    waiting.start()
+    assert waits.wait(60) and "second" not in got     # waiting for the holder, not tracing on its own
+    go.set()
+    worker.join(60)
+    waiting.join(60)
+    assert second_layout.value == [[7], "sin"]                    # loaded: what the first traced, restored
+    assert np.array_equal(np.asarray(got["second"](*EXAMPLE)), np.asarray(got["first"](*EXAMPLE)))
+
+
+def test_a_holder_that_does_not_finish_is_passed_by(cache, monkeypatch):
+    """A holder still busy after WAIT_S (stopped, or a slow machine) is not waited for: the program is traced here."""
+    monkeypatch.setattr(traced, "WAIT_S", 0.2)
+    name = traced.disk_name("test_program", ("structure", 1), EXAMPLE)
+    with traced._one_at_a_time(name):                  # held, never released while the call below runs
+        layout = Layout()
+        fn = traced.compile_ahead("test_program", ("structure", 1), lambda: _program(layout), EXAMPLE, layout)
+    assert layout.value == [[7], "sin"]
+    np.testing.assert_allclose(np.asarray(fn(*EXAMPLE)), np.sin(EXAMPLE[0]) * np.exp(-EXAMPLE[1] * EXAMPLE[0])
+                               + np.cumsum(EXAMPLE[0]), rtol=1e-14)
+
+
+def test_a_program_that_cannot_be_kept_is_not_waited_for(cache, monkeypatch):
+    """A program jax.export refuses (host callbacks) is marked once; later callers compile it at once, even while
+    another holds its lock (waiting would only queue compilations that all happen anyway)."""
+    monkeypatch.setattr(traced, "WAIT_S", 600.0)
+
+    def with_callback(x, a):
+        return jax.pure_callback(np.cos, jax.ShapeDtypeStruct(x.shape, x.dtype), x) * a
+    traced.compile_ahead("test_program", ("structure", 1), lambda: jax.jit(with_callback), EXAMPLE)
+    name = traced.disk_name("test_program", ("structure", 1), EXAMPLE)
+    import threading
+    got = {}
+    with traced._one_at_a_time(name):
+        caller = threading.Thread(target=lambda: got.setdefault("fn", traced.compile_ahead(
+            "test_program", ("structure", 1), lambda: jax.jit(with_callback), EXAMPLE)))
+        caller.start()
+        caller.join(60)                               # returns while the lock is held: not waited for
+        assert "fn" in got
+    np.testing.assert_allclose(np.asarray(got["fn"](*EXAMPLE)), np.cos(EXAMPLE[0]) * EXAMPLE[1], rtol=1e-15)
+    assert not cache.exists()                         # nothing kept
