@@ -51,6 +51,12 @@ QUANTITIES = ("normal_load_N", "half_width_m", "pressure_max_Pa", "peclet_pin", 
               "temp_flash_rise_K", "temp_contact_C")
 #: the run that stands for "after one hour of operation" (cycle-averaged bulk; docs/thermal.md)
 STEADY_DURATION_S = 3600.0
+#: its output step (deg of crank): the first of these, no finer than the report's grid, whose rows the runner's
+#: memory bound allows on this machine (`_hour_run`). An hour on the full report's 0.25 deg grid is 4.4 to 8.8
+#: million rows (LC3 at 10.68 rad/s: about 17 GiB by that bound, refused on most machines); every 1 deg it is 2.2
+#: million for LC3 (4.2 GiB by the bound), every 3 deg 0.73 million. Each is a multiple of every grid the report
+#: uses and divides 45 deg, so mid-stroke stays one of its rows; the grid's rows between them are left empty
+STEADY_STEPS_DEG = (1.0, 3.0, 5.0, 9.0)
 #: fine grid for the energy per index of the analytic models (deg)
 ENERGY_STEP_DEG = 0.01
 
@@ -214,9 +220,10 @@ MECHSIM_EXTRA = {     # kept for checks: the wheel balance, slip, bulk temperatu
 }
 
 
-def _overrides(case: Case, config: ReportConfig, steady: bool) -> list[str]:
-    """Runner overrides that put the output rows on the phi grid (crank angle = start + k * step)."""
-    step = math.radians(config.phi_step_deg) / case.speed
+def _overrides(case: Case, config: ReportConfig, steady: bool, step_deg: float | None = None) -> list[str]:
+    """Runner overrides that put the output rows on the phi grid (crank angle = start + k * step; step_deg, the
+    grid's step unless given)."""
+    step = math.radians(config.phi_step_deg if step_deg is None else step_deg) / case.speed
     if steady:
         return [f"duration={STEADY_DURATION_S!r} s", f"output_step={step!r} s"]
     if config.small:
@@ -226,9 +233,12 @@ def _overrides(case: Case, config: ReportConfig, steady: bool) -> list[str]:
             f"output_step={step!r} s"]
 
 
-def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: float, prefix: str) -> tuple[
-        pd.DataFrame, dict]:
-    """The last complete engagement of a run on the phi grid (prefix_* columns) and its bookkeeping."""
+def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: float, prefix: str,
+                     grid_step_deg: float | None = None) -> tuple[pd.DataFrame, dict]:
+    """The last complete engagement of a run whose rows are every step_deg of crank, on the phi grid (a step of
+    grid_step_deg, step_deg's unless given; step_deg a multiple of it: the grid's rows between the run's are left
+    empty) as prefix_* columns, and its bookkeeping."""
+    grid_step_deg = step_deg if grid_step_deg is None else grid_step_deg
     a0 = case.geometry.engagement_half_angle
     theta = df["crank_angle_rad"].to_numpy(float)
     k = np.floor((theta + np.pi) / (2 * np.pi))
@@ -238,11 +248,11 @@ def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: fl
     if not len(slots):
         raise RuntimeError(f"{case.name}: the run has no complete engagement to report")
     kk = slots[-1]
-    key = np.rint(phi_row / step_deg)
-    on_grid = np.abs(phi_row - key * step_deg) < 1e-6
+    on_grid = np.abs(phi_row - np.rint(phi_row / step_deg) * step_deg) < 1e-6
+    key = np.rint(phi_row / grid_step_deg)
     sel = (k == kk) & engaged & on_grid
     rows = df.loc[sel].assign(_key=key[sel].astype(int)).drop_duplicates("_key").set_index("_key")
-    grid_keys = np.rint(phi / step_deg).astype(int)
+    grid_keys = np.rint(phi / grid_step_deg).astype(int)
     out = {}
     for name, col in {**MECHSIM_COLUMNS, **MECHSIM_EXTRA}.items():
         values = rows[col].reindex(grid_keys) if col in rows else pd.Series(np.nan, index=grid_keys)
@@ -255,16 +265,33 @@ def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: fl
     return pd.DataFrame(out), info
 
 
+def _hour_run(case: Case, config: ReportConfig):
+    """(output step in deg, the loaded scenario) of the hour's run: the first of STEADY_STEPS_DEG the loader accepts
+    (its bound on the rows' memory, scenarios/schema.py `check_derived`); the last one's refusal as it is."""
+    from mechsim.scenarios.loader import load
+    from mechsim.scenarios.units import ScenarioError
+    steps = [s for s in STEADY_STEPS_DEG if s >= config.phi_step_deg - 1e-12]
+    for step in steps:
+        try:
+            return step, load(case.name, _overrides(case, config, True, step))
+        except ScenarioError as exc:
+            if exc.field != "output_step" or step == steps[-1]:
+                raise
+
+
 def mechsim_model(case: Case, config: ReportConfig, phi: np.ndarray, steady: bool = False) -> tuple[
         pd.DataFrame, dict]:
     """The built-in scenario through the runner, its last complete engagement on the phi grid."""
     from mechsim.scenarios.loader import load
     from mechsim.scenarios.runner import run
-    result = run(load(case.name, _overrides(case, config, steady)))
+    step_deg, scenario = (_hour_run(case, config) if steady else
+                          (config.phi_step_deg, load(case.name, _overrides(case, config, False))))
+    result = run(scenario)
     if result.failure:
         raise RuntimeError(f"{case.name}: the run failed: {result.failure.message()}")
     prefix = "mechsim_1h" if steady else "mechsim"
-    table, info = _last_engagement(result.timeseries, case, phi, config.phi_step_deg, prefix)
+    table, info = _last_engagement(result.timeseries, case, phi, step_deg, prefix, config.phi_step_deg)
+    info["step_deg"] = step_deg
     th = result.summary.get("thermal", {})
     if "cycle" in th:
         info["energy_per_index_J"] = th["cycle"]["mean_heat_rate_W"] * th["cycle"]["period_s"]
@@ -309,8 +336,8 @@ def case_table(case: Case, config: ReportConfig, say: Callable[[str], None] | No
         info["energy_per_index_J"][model] = run_info.get("energy_per_index_J", float("nan"))
         info[model] = run_info
         if say:
-            say(f"  {case.name} {model}: {run_info['method']}, {run_info['averaging']}, "
-                f"wall {run_info['wall_time_s']:.2f} s")
+            say(f"  {case.name} {model}: {run_info['method']}, {run_info['averaging']}, rows every "
+                f"{run_info['step_deg']:g} deg, wall {run_info['wall_time_s']:.2f} s")
     return pd.concat(parts, axis=1), info
 
 

@@ -72,7 +72,9 @@ def quantity_figure(report, stem: str, path: Path) -> Path:
                     col = f"{model}_{suffix}"
                     if col not in table:
                         continue
-                    ax.plot(phi, table[col].to_numpy(float) * scale, label=MODEL_LABELS[model] + label_suffix,
+                    y = table[col].to_numpy(float)
+                    shown = np.isfinite(y)          # the hour's run leaves the full report's finer rows empty
+                    ax.plot(phi[shown], y[shown] * scale, label=MODEL_LABELS[model] + label_suffix,
                             **{**STYLE[model], **extra})
             ax.axvline(45.0, color="0.6", lw=0.6)
             ax.set_title(f"LC{lc}: {case.torque:g} N·m, {case.speed:g} rad/s, μ = {mu:g}", fontsize=9)

@@ -283,6 +283,17 @@ def _speed_torque_section(report) -> str:
             + verdict + "\n")
 
 
+def _hour_rows(report) -> str:
+    """Where the hour's runs have coarser rows than the report's grid (seed_report.py `_hour_run`), which."""
+    coarser = {name: info["mechsim_1h"]["step_deg"] for name, info in report.notes.items()
+               if info["mechsim_1h"]["step_deg"] > report.config.phi_step_deg}
+    if not coarser:
+        return ""
+    which = ", ".join(f"{name} every {step:g}°" for name, step in coarser.items())
+    return (f" Its rows: {which} (the finest the runner's memory bound allowed on the machine that made this report, "
+            f"of 1°, 3°, 5°, 9°); the φ grid's rows between them are left empty in its columns.")
+
+
 def markdown(report, figures: dict) -> str:
     """The whole report.md."""
     from mechsim.benchmarks.seed_report import STEADY_DURATION_S
@@ -341,7 +352,7 @@ l = {g.thickness * 1e3:g} mm, wheel inertia J2 = {c0.wheel_inertia:g} kg·m² (t
 - The flash values depend on model choices (flux distribution, transient floors, partition): docs/theory.md §G4.7
   treats them as ±15 % values. The exact band solution is a 2-D steady model; the seed's FE is not reproduced.
 - "After 1 h" runs {STEADY_DURATION_S:g} s with the scenario's lumped bulk model (default convection and pin–crank
-  conductance, docs/thermal.md); the bulk is still rising slowly then (wheel time constant ≈ 1000 s).
+  conductance, docs/thermal.md); the bulk is still rising slowly then (wheel time constant ≈ 1000 s).{_hour_rows(report)}
 - mechsim's resolved run starts from the ambient temperature, so its contact temperature in the first engagements
   is almost ambient + flash; the seed's FE "operating temperature" is not stated precisely enough to compare.
 {warn_text}"""

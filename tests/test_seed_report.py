@@ -160,3 +160,44 @@ def test_conclusions_agree_with_the_tables(report):
         assert "No: doubling the torque (LC2) heats more than doubling the speed (LC3)" in text
     ratios = mech[mech["metric"] == "peak_flash_rise_K"].sort_values("mu")
     assert f"×{'/'.join(f'{v:.3g}' for v in ratios['ratio_lc3_lc1'])} for 2× speed" in text
+
+
+@pytest.mark.parametrize("gib, lc3_step", [(64, 1.0), (8, 3.0)])
+def test_the_full_reports_runs_fit_the_machine(monkeypatch, gib, lc3_step):
+    """Every run of `mechsim report seed` (full) passes the runner's memory bound: the hour's run of LC3 on the full
+    report's 0.25 deg grid asked for 8.8 million rows (about 17 GiB by that bound) and was refused on most machines.
+    The hour's rows are every 1 deg where the bound allows (LC1, LC2: 1.1 million rows, 2.1 GiB), else every 3 deg
+    (LC3 on a machine with 8 GiB: 2.2 million rows, 4.2 GiB by the bound, would exceed its 4 GiB)."""
+    from mechsim.benchmarks.seed_report import CASES, ReportConfig, _hour_run, _overrides, load_case
+    from mechsim.scenarios import schema
+    from mechsim.scenarios.loader import load
+    monkeypatch.setattr(schema, "memory_budget", lambda: schema.MEMORY_SHARE * gib * 2**30)
+    config = ReportConfig.make(small=False)
+    for name in CASES:
+        case = load_case(name)
+        load(name, _overrides(case, config, False))             # a ScenarioError (exit 2) when refused
+        step, scenario = _hour_run(case, config)
+        assert step == (lc3_step if case.load_case == 3 else 1.0), name
+        assert scenario.si["duration"] == 3600.0
+
+
+def test_a_coarser_runs_rows_land_on_their_rows_of_a_finer_grid():
+    """The hour's run (rows every 1 deg) on the full report's 0.25 deg grid: each of its rows on the grid row of its
+    own angle, equal to the same instant of a run on the finer grid, and the rows between left empty."""
+    from mechsim.benchmarks.seed_report import ReportConfig, _last_engagement, _overrides, load_case, phi_grid
+    from mechsim.scenarios.loader import load
+    from mechsim.scenarios.runner import run
+    case = load_case("geneva-seed-lc1-mu015")
+    phi = phi_grid(0.25)
+    fine, coarse = (run(load(case.name, _overrides(case, ReportConfig(True, step, 0), False))).timeseries
+                    for step in (0.25, 1.0))
+    a, _ = _last_engagement(fine, case, phi, 0.25, "m")
+    b, _ = _last_engagement(coarse, case, phi, 1.0, "m", 0.25)
+    whole = np.isclose(phi, np.rint(phi), rtol=0, atol=1e-9)
+    assert whole.sum() == 89 and list(a.columns) == list(b.columns)
+    for col in a:
+        x, y = a[col].to_numpy(float), b[col].to_numpy(float)
+        if np.isnan(x).all():
+            continue
+        assert np.isnan(y[~whole]).all() and np.isfinite(y[whole]).all(), col
+        np.testing.assert_allclose(y[whole], x[whole], rtol=1e-9, atol=1e-12 * np.nanmax(np.abs(x)), err_msg=col)
