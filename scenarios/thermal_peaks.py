@@ -146,6 +146,14 @@ def _with_new(columns, new: dict, drop: list[str]) -> _Columns:
     return _Columns(names + [k for k in new if k not in kept], columns.__getitem__, new)
 
 
+def _reading_columns(reading: Mapping, back: np.ndarray | None) -> _Columns:
+    """A window reading's columns at the instants that asked for it: `back` maps each to its distinct instant
+    (`ThermalReader._frame_asks`; None: one each)."""
+    if back is None:
+        return _Columns(reading, lambda k: _column(reading[k]))
+    return _Columns(reading, lambda k: _column(reading[k])[back])
+
+
 def _frame_columns(parts: list[tuple[np.ndarray, Mapping]], n: int) -> Mapping[str, np.ndarray]:
     """The columns of `n` rows put together from `parts` (row positions, their columns' arrays), as one frame of
     the parts concatenated and sorted by row would hold them; a frame is made only where the parts' columns or
@@ -216,14 +224,9 @@ class _KeptReadings:
         read as `_columns` gives them, then the thermal columns of all of them with the same columns evaluated at
         once (the finish's formulas act row by row: each row's values are the same as on its own) and cut back into
         the requests."""
-        out: list = []
+        out = self._columns_many(requests)
         groups: dict = {}
-        for i, request in enumerate(requests):
-            try:
-                got = self._columns(*request)
-            except ReadingFailed as error:
-                got = error
-            out.append(got)
+        for i, got in enumerate(out):
             if not isinstance(got, ReadingFailed):
                 groups.setdefault(tuple(got[0]), []).append(i)
         for rs in groups.values():
@@ -234,6 +237,16 @@ class _KeptReadings:
                 tables = [t for f in frames for t in self._thermal([f])]
             for i, table in zip(rs, tables):
                 out[i] = table
+        return out
+
+    def _columns_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
+        """`_columns` of each request, or its ReadingFailed."""
+        out: list = []
+        for request in requests:
+            try:
+                out.append(self._columns(*request))
+            except ReadingFailed as error:
+                out.append(error)
         return out
 
     def _thermal(self, frames: list[tuple]) -> list[_Columns]:
@@ -303,13 +316,52 @@ class ThermalReader(_KeptReadings):
     def _columns(self, iv: Interval, position: int, times: np.ndarray) -> tuple[dict, np.ndarray | None, np.ndarray]:
         """(the window's columns at the instants, the network's states there, the times since the contact began)
         for the thermal columns (`_KeptReadings._readings`)."""
+        got = self._columns_many([(iv, position, times)])[0]
+        if isinstance(got, ReadingFailed):
+            raise got
+        return got
+
+    def _columns_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
+        """`_columns` of each request (or its ReadingFailed), the window readings of all of them read in one pass of
+        the mechanics' reader (`TrajectoryReader.read_many`: one read-out per mode, not one per reading)."""
+        places, asks = [], []
+        for iv, _, times in requests:
+            at, which = self._window_instants(iv, times)
+            try:
+                parts = self._frame_asks(at, which)
+            except ReadingFailed as error:
+                places.append(error)
+                continue
+            places.append((times, at, parts, len(asks)))
+            asks += [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
+        readings = self.reader.read_many(asks) if asks else []
+        out: list = []
+        for place in places:
+            if isinstance(place, ReadingFailed):
+                out.append(place)
+                continue
+            times, at, parts, a = place
+            try:
+                got = [r if r is not None else self.reader(*ask)          # not read together: alone, its error raised
+                       for r, ask in zip(readings[a:a + len(parts)], asks[a:a + len(parts)])]
+            except ReadingFailed as error:
+                out.append(error)
+                continue
+            out.append(self._finish(times, at, _frame_columns(
+                [(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)], len(at))))
+        return out
+
+    def _window_instants(self, iv: Interval, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the window instant standing for each instant, the window interval it is read in)."""
         eps = ROUNDOFF * self.scale
         # the window interval of each instant, found from the instant nudged inside `iv` (an instant at iv's end is
         # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
         inner = _clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
         which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
-        at = _clip(self._phase(times), self.lows[which], self.highs[which])
-        frame = self.frame_columns(at, which)
+        return _clip(self._phase(times), self.lows[which], self.highs[which]), which
+
+    def _finish(self, times: np.ndarray, at: np.ndarray, frame) -> tuple:
+        """`_columns`' value from the window's columns `frame` at the window instants `at` of the instants."""
         frame["t_s"] = times
         late = times > self.t_sim_end if self.cycle else np.zeros(len(times), bool)
         if self.cycle:
@@ -334,6 +386,13 @@ class ThermalReader(_KeptReadings):
         """The window's columns (mechanics and the network's states) at the window instants `at`, each in the
         window interval `which` (its end: the one-sided limit from inside it), in their order: the mode
         re-integrated from the interval's output row nearest the instants read in it."""
+        return _frame_columns([(pick, _reading_columns(self.reader(wiv, pos, distinct), back))
+                               for pick, wiv, pos, distinct, back in self._frame_asks(at, which)], len(at))
+
+    def _frame_asks(self, at: np.ndarray, which: np.ndarray) -> list[tuple]:
+        """The readings `frame_columns` takes: (the instants' positions, window interval, its output row to read
+        from, the distinct window instants in order, each instant's index among them or None where they are the
+        instants themselves), per window interval the instants lie in; ReadingFailed where one has no row."""
         parts = []
         one = len(which) and which.min() == which.max()
         for w in ([int(which[0])] if one else np.unique(which).tolist()):
@@ -350,12 +409,8 @@ class ThermalReader(_KeptReadings):
                 distinct, back = np.unique(x, return_inverse=True)
                 back, ordered = np.ravel(back), np.sort(x)
             pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(ordered))))
-            reading = self.reader(wiv, pos, distinct)
-            if back is None:
-                parts.append((pick, _Columns(reading, lambda k, r=reading: _column(r[k]))))
-            else:
-                parts.append((pick, _Columns(reading, lambda k, r=reading, b=back: _column(r[k])[b])))
-        return _frame_columns(parts, len(at))
+            parts.append((pick, wiv, pos, distinct, back))
+        return parts
 
     def frame(self, at: np.ndarray, which: np.ndarray) -> pd.DataFrame:
         """`frame_columns` as a frame."""

@@ -40,3 +40,34 @@ def test_thermal_peaks_do_not_move_with_the_output_step(runs):
 
 def test_thermal_peaks_are_never_below_a_row(runs):
     assert_peaks_bracket_rows(runs, COLUMNS, 1e-9)
+
+
+def test_a_thermal_readers_requests_are_read_in_one_pass_as_each_alone(monkeypatch):
+    """The thermal reader's readings of many requests (scenarios/thermal_peaks.py `ThermalReader._columns_many`) take
+    the mechanics' window readings of all of them in one pass of the run's reader (one read-out per mode, not one per
+    reading), and every column of every request is the same to the last bit as that request read alone."""
+    from mechsim.dynamics.extrema import TrajectoryReader
+    from mechsim.scenarios import thermal_peaks
+    readers = []
+    locate = thermal_peaks.locate_thermal
+    monkeypatch.setattr(thermal_peaks, "locate_thermal", lambda reader, *a, **k: (readers.append(reader),
+                                                                                  locate(reader, *a, **k))[1])
+    runner.run(mechsim.load("geneva-motor", set=["duration=1.2 s", 'thermal.model="lumped"', "contact.friction=0.15",
+                                                 'solver.backend="diffrax"', "output.plots=false"]))
+    reader = readers[0]
+    assert isinstance(reader, thermal_peaks.ThermalReader)
+    requests = [(iv, 0, np.linspace(iv.lo, iv.hi, 7)) for iv in reader.windows if len(iv.rows) > 1]
+    assert len(requests) >= 4
+    passes = []
+    read_many = TrajectoryReader.read_many
+    monkeypatch.setattr(TrajectoryReader, "read_many", lambda self, asks: (passes.append(len(asks)),
+                                                                           read_many(self, asks))[1])
+    together = reader._columns_many(requests)
+    assert passes == [len(requests)]                  # one pass: a window reading per request, all at once
+    for request, got in zip(requests, together):
+        alone = reader._columns(*request)
+        frame, states, since = got
+        assert list(frame) == list(alone[0])
+        for c in frame:
+            assert np.array_equal(np.asarray(frame[c]), np.asarray(alone[0][c])), c
+        assert np.array_equal(states, alone[1]) and np.array_equal(since, alone[2])
