@@ -324,12 +324,12 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if source is not None and thermal and len(t) > 1:
         from mechsim.scenarios.thermal_peaks import thermal_reader
         treader = thermal_reader(source, events, float(t[-1]), read if source.method == "closed-form" else None)
-    for (lo, hi, label), got, intervals in zip(windows, located, spans):
-        heat = {}
-        if treader is not None:       # the thermal columns over the whole table (a cycle-averaged run's continues)
-            from mechsim.scenarios.thermal_peaks import locate_thermal
-            heat = locate_thermal(treader, t, cols, thermal, events, lo, hi if label == "startup" else float(t[-1]),
-                                  kinds[label])
+    heats = [{} for _ in windows]
+    if treader is not None:           # the thermal columns over the whole table (a cycle-averaged run's continues)
+        from mechsim.scenarios.thermal_peaks import locate_thermal
+        heats = locate_thermal(treader, t, cols, thermal, events, [(lo, hi if label == "startup" else float(t[-1]),
+                                                                    kinds[label]) for lo, hi, label in windows])
+    for (lo, hi, label), got, intervals, heat in zip(windows, located, spans, heats):
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
         # run's table continues the simulated window periodically)
         inside = (np.ones(len(t), bool) if label == "run" else t >= lo if label == "periodic"

@@ -584,47 +584,59 @@ def _promising(f: np.ndarray, intervals: list[Interval]) -> list[Interval]:
     return [intervals[k] for k in sorted(keep)]
 
 
-def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame, lo: float,
-                   hi: float, kinds: tuple[str, str]) -> dict:
-    """{column: ({'max', 'min'} located by `dynamics/extrema.py` `locate` with the reader, the intervals searched)}
-    for the thermal columns over [lo, hi] of the table, between its events (a cycle-averaged run's repeated ones
-    included) and the heat input's own switches where the reader knows them (`kinks`), on the intervals that may
-    hold the extremum (`_promising`), then against the one-sided limits at the intervals' ends that may beat it
-    (`dynamics/extrema.py` `end_limits`). Every column's readings are read in one pass of the reader (`read_many`),
-    then every one-sided limit the checks may read in another."""
+def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
+                   windows: list[tuple[float, float, tuple[str, str]]]) -> list[dict]:
+    """For each window (lo, hi, the kinds of its ends) of the table: {column: ({'max', 'min'} located by
+    `dynamics/extrema.py` `locate` with the reader, the intervals searched)} for the thermal columns over [lo, hi],
+    between its events (a cycle-averaged run's repeated ones included) and the heat input's own switches where the
+    reader knows them (`kinks`), on the intervals that may hold the extremum (`_promising`), then against the
+    one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
+    column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
+    read in another."""
     from mechsim.dynamics.extrema import end_guesses, end_limit_requests, end_limits, plan, read_all
-    breaks = _breaks(events)
-    kinks = getattr(reader, "kinks", None)
-    if kinks is not None:         # the heat input's own switches that are no event (within round-off of none)
-        known = np.array([b for b, _ in breaks])
-        near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
-        breaks = sorted(breaks + [k for k in kinks(lo, hi) if not len(known) or np.min(np.abs(known - k[0])) > near])
-    intervals = intervals_of(t, breaks, lo, hi, *kinds)
     values = {c: np.asarray(cols[c], float) for c in columns}
-    owns = {c: _promising(f, intervals) for c, f in values.items()}
-    # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
-    plans = {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}
-    tables = read_all(reader, [r for p in plans.values() for r in p.requests])
-    found, a = {}, 0
-    for c, p in plans.items():
-        found[c] = p.finish(tables[a:a + len(p.requests)], reader).get(c, {})
-        a += len(p.requests)
-    # the one-sided limits that may beat each extremum, all read at once, then checked in order
     ties = {c: tie_of(f) for c, f in values.items()}
-    asks = [(c, sense, getattr(found[c].get(name), "value", None))
-            for c in values for name, sense in (("max", 1.0), ("min", -1.0))]
-    guesses = end_guesses(t, values, intervals, asks, ties) if asks else []
-    ahead = []
-    for (c, sense, _), g in zip(asks, guesses):
-        e = found[c].get("max" if sense > 0 else "min")
-        ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])
+    kinks = getattr(reader, "kinks", None)
+    spans = []
+    for lo, hi, kinds in windows:
+        breaks = _breaks(events)
+        if kinks is not None:     # the heat input's own switches that are no event (within round-off of none)
+            known = np.array([b for b, _ in breaks])
+            near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
+            breaks = sorted(breaks + [k for k in kinks(lo, hi)
+                                      if not len(known) or np.min(np.abs(known - k[0])) > near])
+        intervals = intervals_of(t, breaks, lo, hi, *kinds)
+        owns = {c: _promising(f, intervals) for c, f in values.items()}
+        # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
+        spans.append((intervals, owns, {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}))
+    tables = read_all(reader, [r for _, _, plans in spans for p in plans.values() for r in p.requests])
+    founds, a = [], 0
+    for _, _, plans in spans:
+        found = {}
+        for c, p in plans.items():
+            found[c] = p.finish(tables[a:a + len(p.requests)], reader).get(c, {})
+            a += len(p.requests)
+        founds.append(found)
+    # the one-sided limits that may beat each extremum, every window's read at once, then checked in order
+    checks, ahead = [], []
+    for (intervals, owns, _), found in zip(spans, founds):
+        asks = [(c, sense, getattr(found[c].get(name), "value", None))
+                for c in values for name, sense in (("max", 1.0), ("min", -1.0))]
+        guesses = end_guesses(t, values, intervals, asks, ties) if asks else []
+        for (c, sense, _), g in zip(asks, guesses):
+            e = found[c].get("max" if sense > 0 else "min")
+            ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])
+        checks.append((intervals, owns, found, asks, guesses))
     read_all(reader, ahead)
-    out = {}
-    for (c, sense, _), g in zip(asks, guesses):
-        name = "max" if sense > 0 else "min"
-        got = found[c]
-        e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g)
-        if e is not None:
-            got[name] = e
-        out[c] = (got, owns[c])
+    out = []
+    for intervals, owns, found, asks, guesses in checks:
+        located = {}
+        for (c, sense, _), g in zip(asks, guesses):
+            name = "max" if sense > 0 else "min"
+            got = found[c]
+            e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g)
+            if e is not None:
+                got[name] = e
+            located[c] = (got, owns[c])
+        out.append(located)
     return out
