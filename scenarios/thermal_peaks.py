@@ -285,9 +285,9 @@ class ThermalReader(_KeptReadings):
             events["t_s"].to_numpy(float) <= self.t_sim_end]
         self.windows = intervals_of(t_win, _breaks(win_events), float(t_win[0]), self.t_sim_end)
         anchors = self.reader.anchors(t_win)
-        for iv in self.windows:
-            keep = [r for r in iv.rows if anchors[r] is not None]
-            iv.rows, iv.anchors = np.asarray(keep, dtype=int), [anchors[r] for r in keep]
+        for iv in self.windows:       # every row's (piece, row), as `TrajectoryReader.anchors` gives them
+            iv.rows = np.asarray(iv.rows, dtype=int)
+            iv.anchors = anchors[iv.rows]
         self.t_win = t_win
         self.lows = np.array([iv.lo for iv in self.windows])
         self.highs = np.array([iv.hi for iv in self.windows])
