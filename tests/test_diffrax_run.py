@@ -140,3 +140,22 @@ def test_calls_resume_where_the_buffers_end(case_a, runs, monkeypatch):
     t2, a2 = _crank(case_a, split)
     np.testing.assert_array_equal(t1, t2)
     assert np.max(np.abs(a1 - a2)) < 100 * RTOL
+
+
+def test_the_step_records_of_several_calls_read_as_one_joined_table():
+    """The dense reading's step records (`diffrax_run._Records`) stay in each compiled call's buffer: a record
+    taken, a column read, in the calls' order or another, are those of the records joined into one table (what
+    the reading gathered from before, at the cost of copying every record of the run)."""
+    from mechsim.dynamics.backends.diffrax_run import _Records
+    rng = np.random.default_rng(3)
+    parts = [rng.standard_normal((n, 5)) for n in (7, 1, 4)]
+    joined = np.concatenate(parts)
+    order = rng.permutation(len(joined))
+    for rec, table in ((_Records(parts, 5), joined), (_Records(parts, 5).reordered(order), joined[order]),
+                       (_Records(parts, 5).reordered(order).reordered(order[::-1]), joined[order][order[::-1]]),
+                       (_Records(parts[:1], 5), parts[0])):
+        steps = rng.integers(0, len(table), 9)
+        out = np.empty((9, 5))
+        rec.take(steps, out)
+        assert np.array_equal(out, table[steps])
+        assert all(np.array_equal(rec.column(k), table[:, k]) for k in range(5))

@@ -520,6 +520,41 @@ def _sorted(x: np.ndarray) -> bool:
 _STAGING = threading.local()        # per thread: record width -> the dense reading's input buffers
 
 
+class _Records:
+    """The taken steps' records of a run's compiled calls, numbered one after another (or in `order`), left in the
+    calls' own buffers: joining them would copy every record of the run (a 1-D thermal mesh's are thousands of
+    numbers each: 37 ms a run) where a reading gathers only the few it reads."""
+
+    def __init__(self, parts: list[np.ndarray], width: int, order: np.ndarray | None = None):
+        self.parts, self.width, self.order = parts, width, order
+        self.part = np.repeat(np.arange(len(parts)), [len(p) for p in parts])       # each record's call
+        self.row = np.concatenate([np.arange(len(p)) for p in parts]) if parts else np.zeros(0, int)
+        if order is not None:
+            self.part, self.row = self.part[order], self.row[order]
+
+    def reordered(self, order: np.ndarray) -> "_Records":
+        return _Records(self.parts, self.width, order if self.order is None else self.order[order])
+
+    def column(self, k: int) -> np.ndarray:
+        """Entry k of every record, in their order."""
+        if len(self.parts) == 1 and self.order is None:
+            return self.parts[0][:, k]
+        if not self.parts:
+            return np.zeros(0)
+        joined = np.concatenate([p[:, k] for p in self.parts])
+        return joined if self.order is None else joined[self.order]
+
+    def take(self, steps: np.ndarray, out: np.ndarray) -> None:
+        """out[i] = record steps[i] (each in range)."""
+        if len(self.parts) == 1 and self.order is None:
+            np.take(self.parts[0], steps, axis=0, out=out, mode="clip")           # (in range: unbuffered)
+            return
+        part, row = self.part[steps], self.row[steps]
+        for c in np.unique(part).tolist():
+            mine = part == c
+            out[mine] = self.parts[c][row[mine]]
+
+
 def _staging(width: int) -> tuple[np.ndarray, np.ndarray]:
     """This thread's input buffers of the dense reading (DENSE_BATCH step records and instants; past the instants
     of a call, what an earlier call left, never read), 64-byte aligned so that the CPU client reads them in place
@@ -558,9 +593,9 @@ class DenseOutput:
 
     def _tables(self) -> tuple:
         """(segment starts, ends, mode-and-parameters group of each, its run (consecutive segments of one group
-        share one), whether starts and ends are each in order (and not NaN); the taken steps' records, their t0, t_acc,
-        segment (its index in `segments`), each segment's first and last step + 1, and whether t_acc is sorted over
-        all of them), built once per run."""
+        share one), whether starts and ends are each in order (and not NaN); the taken steps' records (`_Records`),
+        their t0, t_acc, segment (its index in `segments`), each segment's first and last step + 1, and whether t_acc
+        is sorted over all of them), built once per run."""
         if self._table is None:
             groups: dict = {}
             S = self.segments
@@ -579,15 +614,14 @@ class DenseOutput:
                 taken = np.asarray(buf)[:n_st]        # the taken steps lead the buffer: a view
                 recs.append(taken)
                 segs.append(first.get(c, 0) + taken[:, ST_SEG].astype(int))
-            rec = recs[0] if len(recs) == 1 else (np.concatenate(recs) if recs
-                                                   else np.zeros((0, self.entry.steps.width)))
+            rec = _Records(recs, self.entry.steps.width)
             seg = segs[0] if len(segs) == 1 else np.concatenate(segs) if segs else np.zeros(0, int)
             if np.any(seg[1:] < seg[:-1]):                # each segment's steps together, in time order
                 order = np.argsort(seg, kind="stable")
-                rec, seg = rec[order], seg[order]
+                rec, seg = rec.reordered(order), seg[order]
             at = np.searchsorted(seg, np.arange(len(S) + 1))
-            acc = np.ascontiguousarray(rec[:, ST_ACC])
-            self._table = (lo, hi, group, run, ordered, rec, rec[:, ST_T0], acc, at, seg, _sorted(acc))
+            acc = np.ascontiguousarray(rec.column(ST_ACC))
+            self._table = (lo, hi, group, run, ordered, rec, rec.column(ST_T0), acc, at, seg, _sorted(acc))
         return self._table
 
     def _fn(self):
@@ -664,11 +698,11 @@ class DenseOutput:
             ok &= np.bincount(rid[~good], minlength=len(requests)) == 0
         read = ok[rid]
         steps, tt = (j, ts) if read.all() else (j[read], ts[read])
-        rows, at_t = _staging(rec.shape[1])
+        rows, at_t = _staging(rec.width)
         parts = []
         for c in range(0, len(tt), DENSE_BATCH):
             n = min(DENSE_BATCH, len(tt) - c)
-            np.take(rec, steps[c:c + n], axis=0, out=rows[:n], mode="clip")      # (in range: unbuffered)
+            rec.take(steps[c:c + n], rows[:n])
             at_t[:n] = tt[c:c + n]
             parts.append(np.asarray(self._fn()(rows, at_t, np.int32(n)))[:n])   # (waited for: staging free again)
         z = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros((0, self.entry.jmod.nz))
