@@ -101,12 +101,12 @@ def _with_columns(df: pd.DataFrame, new: dict[str, np.ndarray], drop: list[str])
     as assigning them one at a time would, but in one step (each insertion into a frame has a cost of its own). The
     new columns are taken as they are (`copy=False`: not copied into one block, which costs as much as computing
     them on a long run's rows)."""
-    kept = df.drop(columns=drop) if drop else df
-    present = {k: v for k, v in new.items() if k in kept.columns}
-    if present:
-        kept = kept.assign(**present)
-    fresh = {k: v for k, v in new.items() if k not in kept.columns}
-    return pd.concat([kept, pd.DataFrame(fresh, index=kept.index, copy=False)], axis=1) if fresh else kept
+    dropped = set(drop)
+    columns = {c: new[c] if c in new else df[c] for c in df.columns if c not in dropped}
+    fresh = {k: v for k, v in new.items() if k not in columns}
+    out = pd.DataFrame({**columns, **fresh}, index=df.index, copy=False)
+    out.attrs = {} if fresh else dict(df.attrs)         # as joining a frame of the fresh columns left them
+    return out
 
 
 def _angle_column(df: pd.DataFrame) -> str:
