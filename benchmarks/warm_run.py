@@ -1,13 +1,16 @@
-"""A warm `mechsim.run` of case A end to end against the CasADi peer (docs/benchmarks.md, "A warm run end to end").
+"""A warm `mechsim.run` end to end against the CasADi peer (docs/benchmarks.md, "A warm run end to end").
 
-Case A (`peer_bench.CASE_A`, 5 s, 1 ms outputs, figures off) on diffrax (rtol 1e-5) and ida-compiled, ida and
+Case A (`peer_bench.CASES`, 5 s, 1 ms outputs, figures off), or another case, on diffrax (rtol 1e-5) and ida-compiled, ida and
 the default backend (`auto`: ida-compiled once its callbacks are cached), index-1 at rtol 1e-7, all near 1e-6 rad
-of crank-angle error, the scenario's own solver settings (`default idx2`: auto, index-2 at rtol 1e-8), and the
+of crank-angle error on case A, the scenario's own solver settings (`default idx2`: auto, index-2 at rtol 1e-8), and the
 CasADi IDAS peer of `peer_bench` at rtol 1e-6
 (5.6e-7 rad). Interleaved rounds (order rotated each round), process CPU time, medians. Each run is split into
 the integration (`hybrid.simulate`, its process CPU) and the rest: tables, invariant checks and summary.
 
-    python benchmarks/warm_run.py [rounds]
+    python benchmarks/warm_run.py [rounds] [case]
+
+case: one of `peer_bench.CASES` (A, the default; A-mu0.15; A-mu0.15-lumped, the lumped thermal states, whose
+thermal columns' located peaks are the largest part of its post-processing), the peer on the same case.
 """
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ import time
 import mechsim
 from mechsim.benchmarks.bench import BenchConfig, make_problem
 from mechsim.benchmarks.bench_methods import quiet_sundials
-from mechsim.benchmarks.peer_bench import CASE_A, METHODS, PEER
+from mechsim.benchmarks.peer_bench import CASES, METHODS, PEER
 
 #: backend: (scenario overrides, the bench method integrating the same, rtol)
 BACKENDS = {
@@ -32,9 +35,9 @@ BACKENDS = {
 }
 
 
-def main(rounds: int = 9) -> None:
-    base = CASE_A + ("duration=5 s", "output_step=1 ms", "output.plots=false")
-    problem = make_problem(BenchConfig(scenario="geneva-motor", duration=5.0, overrides=CASE_A))
+def main(rounds: int = 9, case: str = "A") -> None:
+    base = CASES[case] + ("duration=5 s", "output_step=1 ms", "output.plots=false")
+    problem = make_problem(BenchConfig(scenario="geneva-motor", duration=5.0, overrides=CASES[case]))
     calls = {}
     for name, (extra, method, rtol) in BACKENDS.items():
         sc = mechsim.load("geneva-motor", set=list(base + extra))
@@ -59,7 +62,7 @@ def main(rounds: int = 9) -> None:
                 calls[name]()
                 cpu[name].append(time.process_time() - c)
     ms = {name: 1e3 * statistics.median(x) for name, x in cpu.items()}
-    print(f"{PEER} (rtol 1e-6): {ms[PEER]:.1f} ms CPU, median of {rounds}")
+    print(f"case {case}; {PEER} (rtol 1e-6): {ms[PEER]:.1f} ms CPU, median of {rounds}")
     for name in BACKENDS:
         run, solve = ms[name], ms[f"{name} solve"]
         print(f"{name:13s} warm run {run:5.1f} ms CPU = {run / ms[PEER]:.2f}x the peer; its integration alone "
@@ -68,4 +71,4 @@ def main(rounds: int = 9) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 9)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 9, sys.argv[2] if len(sys.argv) > 2 else "A")
