@@ -597,9 +597,10 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     values = {c: np.asarray(cols[c], float) for c in columns}
     ties = {c: tie_of(f) for c, f in values.items()}
     kinks = getattr(reader, "kinks", None)
+    events_breaks = _breaks(events)
     spans = []
     for lo, hi, kinds in windows:
-        breaks = _breaks(events)
+        breaks = events_breaks
         if kinks is not None:     # the heat input's own switches that are no event (within round-off of none)
             known = np.array([b for b, _ in breaks])
             near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
