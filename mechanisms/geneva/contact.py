@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mechsim.dynamics.tables import rows_in_mode
 from mechsim.mechanisms.base import ContactGeometry
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 
@@ -29,7 +30,7 @@ def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
 
     w1, w2, v_s = col("crank_speed_rad_s"), col("wheel_speed_rad_s"), col("pin_sliding_speed_m_s")
     w_rel = w2 - g.crank_sense * w1
-    engaged = table["engaged"] if "engaged" in table else np.asarray(table["mode"]) == "engaged"
+    engaged = table["engaged"] if "engaged" in table else rows_in_mode(table["mode"], "engaged")
     with np.errstate(divide="ignore", invalid="ignore"):
         a_s = (col("crank_accel_rad_s2") * v_s + w1 * w_rel * w2 * col("pin_distance_m")) / w1
     return {
@@ -53,7 +54,7 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     t = np.asarray(df["t_s"], dtype=float)
     theta = np.asarray(df["crank_angle_rad"], dtype=float)
     w1 = np.asarray(df["crank_speed_rad_s"], dtype=float)
-    mode = np.asarray(df["mode"])
+    engaged = rows_in_mode(df["mode"], "engaged")
     found: list[float] = []
     kinds = events["kind"].astype(str).to_numpy() if len(events) and "kind" in events else np.array([], str)
     times = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
@@ -65,10 +66,9 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
         found += np.interp(entries[inside], theta, t).tolist()
     if "flank switch" not in kinds:     # a closed form lists no flank switches: the normal force changes sign
         N = np.asarray(df["contact_force_N"], dtype=float)
-        engaged = mode == "engaged"
         flip = np.flatnonzero(engaged[1:] & engaged[:-1] & (np.sign(N[1:]) * np.sign(N[:-1]) < 0))
         found += [t[i] - N[i] * (t[i + 1] - t[i]) / (N[i + 1] - N[i]) for i in flip]
-    if len(t) and mode[0] == "engaged" and w1[0] > 0:
+    if len(t) and engaged[0] and w1[0] > 0:
         alpha = theta[0] - 2 * np.pi * np.floor((theta[0] + np.pi) / (2 * np.pi))
         found.append(t[0] - (alpha + a0) / w1[0])
     return np.sort(np.unique(np.asarray(found, dtype=float)))
