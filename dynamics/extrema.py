@@ -36,6 +36,10 @@ STENCIL = 7
 CANDIDATES = 2
 #: brackets whose rows lie within this many rows of each other are read together
 CLUSTER_ROWS = 8
+#: a table of more values than this has its candidates found one column at a time (`_candidates_bounds`): the
+#: temporaries of all columns at once (an hour's table: 8 columns of 2.2 million rows) cost more in fresh memory than
+#: the per-column calls in Python
+JOINT_VALUES = 1 << 20
 
 
 class ReadingFailed(RuntimeError):
@@ -183,6 +187,12 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         layout = _layout(intervals)
     if layout is None:
         return [[] for _ in range(2 * len(F))], None
+    if len(F) > 1 and F.size > JOINT_VALUES:         # each series is its own: the same candidates and bounds
+        parts = [_candidates_bounds(t, F[c:c + 1], ties[c:c + 1], intervals, limit, layout, groups, finite)
+                 for c in range(len(F))]
+        n_w = 1 if groups is None else len(groups)
+        out = [x for w in range(n_w) for cands, _ in parts for x in cands[2 * w:2 * w + 2]]
+        return out, np.stack([bounds.reshape(n_w, 2) for _, bounds in parts], axis=1).ravel()
     rows, k_of, n_of, pos, first, last = layout
     if rows[-1] - rows[0] == len(rows) - 1 and (rows[1:] > rows[:-1]).all():     # a run of rows: views
         ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
