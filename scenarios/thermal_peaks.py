@@ -565,15 +565,16 @@ def _promising(f: np.ndarray, intervals: list[Interval]) -> list[Interval]:
     first = np.array([intervals[k].rows[0] for k in ks])
     last = np.array([intervals[k].rows[-1] for k in ks])
     keep = set()
+    step = np.abs(np.diff(f))
+    step = np.r_[np.where(np.isfinite(step), step, 0.0), 0.0]
+    # the largest change between neighbours inside each interval (the step leaving its last row excluded)
+    step[last] = 0.0
+    slope = np.maximum.reduceat(step, first)
+    valued = np.isfinite(f)
     for sense in (1.0, -1.0):
-        v = np.where(np.isfinite(f), sense * f, -np.inf)
+        v = np.where(valued, sense * f, -np.inf)
         top = np.maximum.reduceat(v, first)
         top = np.where(last >= first, top, -np.inf)
-        step = np.abs(np.diff(f))
-        step = np.r_[np.where(np.isfinite(step), step, 0.0), 0.0]
-        # the largest change between neighbours inside each interval (the step leaving its last row excluded)
-        step[last] = 0.0
-        slope = np.maximum.reduceat(step, first)
         ok = np.isfinite(top)
         if not ok.any():
             continue
@@ -582,6 +583,18 @@ def _promising(f: np.ndarray, intervals: list[Interval]) -> list[Interval]:
         order = sorted(able.tolist(), key=lambda i: (-(top[i] if top[i] < floor else floor), i))
         keep.update(ks[i] for i in order[:PROMISING])
     return [intervals[k] for k in sorted(keep)]
+
+
+def _apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> list[tuple[float, str]]:
+    """The kinks (time, kind) farther than `near` from every known instant: the distance to the nearest, found by
+    bisection among the known ones in order (a long run has thousands of events and of kinks)."""
+    if not len(known) or not kinks:
+        return list(kinks)
+    known = np.sort(known)
+    at = np.array([x for x, _ in kinks], dtype=float)
+    i = known.searchsorted(at)
+    nearest = np.minimum(np.abs(known[np.maximum(i - 1, 0)] - at), np.abs(known[np.minimum(i, len(known) - 1)] - at))
+    return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
 
 
 def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
@@ -602,10 +615,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for lo, hi, kinds in windows:
         breaks = events_breaks
         if kinks is not None:     # the heat input's own switches that are no event (within round-off of none)
-            known = np.array([b for b, _ in breaks])
             near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
-            breaks = sorted(breaks + [k for k in kinks(lo, hi)
-                                      if not len(known) or np.min(np.abs(known - k[0])) > near])
+            breaks = sorted(breaks + _apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
         intervals = intervals_of(t, breaks, lo, hi, *kinds)
         owns = {c: _promising(f, intervals) for c, f in values.items()}
         # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
