@@ -66,15 +66,6 @@ def column_values(frame: pd.DataFrame, i: int) -> np.ndarray:
     return values.to_numpy()
 
 
-def rows_in_mode(column, mode: str) -> np.ndarray:
-    """Whether each row's mode is `mode` (a boolean array): a pandas column is compared by its own `==` (pandas'
-    string column through pyarrow, without first making a Python string object per row: an hour's table at one
-    degree of crank holds 2.2 million), any other sequence by numpy's; a missing mode is not `mode`."""
-    if isinstance(column, pd.Series):
-        return (column == mode).to_numpy(dtype=bool, na_value=False)
-    return np.asarray(column) == mode
-
-
 def coordinate_columns(name: str, is_angle: bool) -> tuple[str, str, str]:
     """Column names of a coordinate's position, speed and acceleration."""
     if is_angle:

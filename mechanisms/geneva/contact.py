@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from mechsim.dynamics.tables import rows_in_mode
 from mechsim.mechanisms.base import ContactGeometry
 from mechsim.mechanisms.geneva.kinematics import GenevaGeometry
 
@@ -16,6 +15,12 @@ def geometry(g: GenevaGeometry) -> ContactGeometry:
     return ContactGeometry(contact_radius=g.pin_radius, contact_length=g.thickness, driver_arm=g.crank_radius,
                            tracks=g.slots, track_length=abs(g.entry_pin_distance - g.deepest_pin_distance),
                            driven_radius=g.wheel_radius, contact_angle=2 * g.engagement_half_angle)
+
+
+def _engaged(mode) -> np.ndarray:
+    """Whether each row's mode is 'engaged', compared by the column's own `==` (pandas' string column through
+    pyarrow: an hour's 2.2 million rows as Python strings would take ten times as long)."""
+    return np.asarray(mode == "engaged", dtype=bool)
 
 
 def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
@@ -30,7 +35,7 @@ def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
 
     w1, w2, v_s = col("crank_speed_rad_s"), col("wheel_speed_rad_s"), col("pin_sliding_speed_m_s")
     w_rel = w2 - g.crank_sense * w1
-    engaged = table["engaged"] if "engaged" in table else rows_in_mode(table["mode"], "engaged")
+    engaged = table["engaged"] if "engaged" in table else _engaged(table["mode"])
     with np.errstate(divide="ignore", invalid="ignore"):
         a_s = (col("crank_accel_rad_s2") * v_s + w1 * w_rel * w2 * col("pin_distance_m")) / w1
     return {
@@ -54,7 +59,7 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     t = np.asarray(df["t_s"], dtype=float)
     theta = np.asarray(df["crank_angle_rad"], dtype=float)
     w1 = np.asarray(df["crank_speed_rad_s"], dtype=float)
-    engaged = rows_in_mode(df["mode"], "engaged")
+    engaged = _engaged(df["mode"])
     found: list[float] = []
     kinds = events["kind"].astype(str).to_numpy() if len(events) and "kind" in events else np.array([], str)
     times = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
