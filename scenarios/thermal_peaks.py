@@ -551,26 +551,36 @@ def thermal_reader(source, events: pd.DataFrame, t_table_end: float, mechanics=N
 PROMISING = 8
 
 
-def _promising(f: np.ndarray, intervals: list[Interval]) -> list[Interval]:
+def _interval_rows(intervals: list[Interval]) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """(the intervals with rows, their first rows, their last rows): what `_promising` reads of the intervals, made
+    once for the columns located over the same ones."""
+    ks = [k for k, iv in enumerate(intervals) if len(iv.rows)]
+    return (ks, np.array([intervals[k].rows[0] for k in ks], dtype=np.intp),
+            np.array([intervals[k].rows[-1] for k in ks], dtype=np.intp))
+
+
+def _promising(f: np.ndarray, intervals: list[Interval], rows: tuple | None = None) -> list[Interval]:
     """The intervals that may hold the column's maximum or minimum: those whose best row is within twice the
     largest change between neighbouring rows of the interval (the most an extremum between rows, or at an end's
     one-sided limit, can add to its rows: one step at that slope, twice for margin) of the best row, at most
     PROMISING per sense, the best rows first and the earliest of equal ones (a tie goes to the earliest, as in
-    `dynamics/extrema.py`). A long cycle-averaged run has thousands of intervals, the periodic columns' equal."""
-    finite = np.abs(f[np.isfinite(f)])
-    tie = 1e-13 * float(finite.max()) if finite.size else 0.0
-    ks = [k for k, iv in enumerate(intervals) if len(iv.rows)]
+    `dynamics/extrema.py`). A long cycle-averaged run has thousands of intervals, the periodic columns' equal.
+    rows: `_interval_rows(intervals)` where made already."""
+    valued = np.isfinite(f)
+    # the largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
+    largest = max(float(f.max(where=valued, initial=-np.inf)), -float(f.min(where=valued, initial=np.inf)))
+    tie = 1e-13 * largest if np.isfinite(largest) else 0.0
+    ks, first, last = _interval_rows(intervals) if rows is None else rows
     if not ks:
         return []
-    first = np.array([intervals[k].rows[0] for k in ks])
-    last = np.array([intervals[k].rows[-1] for k in ks])
     keep = set()
-    step = np.abs(np.diff(f))
-    step = np.r_[np.where(np.isfinite(step), step, 0.0), 0.0]
+    step = np.zeros(len(f))                     # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
+    np.subtract(f[1:], f[:-1], out=step[:-1])
+    np.abs(step, out=step)
+    step[~np.isfinite(step)] = 0.0
     # the largest change between neighbours inside each interval (the step leaving its last row excluded)
     step[last] = 0.0
     slope = np.maximum.reduceat(step, first)
-    valued = np.isfinite(f)
     for sense in (1.0, -1.0):
         v = np.where(valued, sense * f, -np.inf)
         top = np.maximum.reduceat(v, first)
@@ -618,7 +628,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
             near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
             breaks = sorted(breaks + _apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
         intervals = intervals_of(t, breaks, lo, hi, *kinds)
-        owns = {c: _promising(f, intervals) for c, f in values.items()}
+        rows = _interval_rows(intervals)
+        owns = {c: _promising(f, intervals, rows) for c, f in values.items()}
         # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
         spans.append((intervals, owns, {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}))
     tables = read_all(reader, [r for _, _, plans in spans for p in plans.values() for r in p.requests])

@@ -96,3 +96,19 @@ def test_the_per_cycle_figure_covers_the_run(motor_120s):
     touched = ~np.isnan(contact)
     assert touched.sum() >= len(table) - 1                  # every whole turn has an engagement
     assert np.all(contact[touched] > table["temp_bulk_pin_mean_C"].to_numpy()[touched])   # hotter than the pin
+
+
+def test_the_period_means_stretches_are_numpys_linspaces_to_the_bit():
+    """`_linspaces` (the period mean's quadrature pieces, all stretches at once) gives every point np.linspace gives
+    stretch by stretch, to the last bit: the mean the cycle continuation subtracts must not move."""
+    from mechsim.thermal.cycle import _linspaces
+    rng = np.random.default_rng(1)
+    for trial in range(300):
+        period = float(rng.uniform(0.1, 3.0))
+        breaks = np.sort(rng.uniform(0.0, period, int(rng.integers(1, 60))))
+        edges = np.unique(np.concatenate([[0.0, period], np.round(breaks, 4) if trial % 3 == 0 else breaks]))
+        pieces = int(rng.choice([1, 7, 512]))
+        counts = np.maximum(1, np.ceil(pieces * np.diff(edges) / period)).astype(np.intp)
+        expected = np.concatenate([np.linspace(a, b, n + 1) for a, b, n in zip(edges[:-1], edges[1:], counts)])
+        got = _linspaces(edges, counts)
+        assert got.shape == expected.shape and np.array_equal(got.view(np.int64), expected.view(np.int64)), trial
