@@ -60,7 +60,11 @@ def contact_code(cols: dict) -> np.ndarray:
     """One integer per row that changes wherever the heat input is not smooth: mode changes (jumps), and sign
     changes of the slip (|u| kinks: slip reversal) and of the normal force (flank switch). cols: result columns,
     or a mechanism's `closed_form_contact` (a boolean `engaged` in place of `mode`)."""
-    mode = cols["engaged"] if "engaged" in cols else np.asarray(cols["mode"] == "engaged", dtype=bool)
+    if "engaged" in cols:
+        mode = cols["engaged"]
+    else:           # the column's own == where it is one (pandas' strings through pyarrow), else numpy's
+        mode = cols["mode"] if hasattr(cols["mode"], "dtype") else np.asarray(cols["mode"])
+        mode = np.asarray(mode == "engaged", dtype=bool)
     code = 9 * mode.astype(int)
     for k, name in ((3, "slip_speed_m_s"), (1, "contact_force_N")):
         if name in cols:

@@ -18,9 +18,10 @@ def geometry(g: GenevaGeometry) -> ContactGeometry:
 
 
 def _engaged(mode) -> np.ndarray:
-    """Whether each row's mode is 'engaged', compared by the column's own `==` (pandas' string column through
-    pyarrow: an hour's 2.2 million rows as Python strings would take ten times as long)."""
-    return np.asarray(mode == "engaged", dtype=bool)
+    """Whether each row's mode is 'engaged', compared by the column's own `==` where it is an array or a pandas
+    column (pandas' string column through pyarrow: an hour's 2.2 million rows as Python strings take ten times as
+    long), any other sequence as a numpy array."""
+    return np.asarray((mode if hasattr(mode, "dtype") else np.asarray(mode)) == "engaged", dtype=bool)
 
 
 def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
