@@ -112,3 +112,19 @@ def test_the_period_means_stretches_are_numpys_linspaces_to_the_bit():
         expected = np.concatenate([np.linspace(a, b, n + 1) for a, b, n in zip(edges[:-1], edges[1:], counts)])
         got = _linspaces(edges, counts)
         assert got.shape == expected.shape and np.array_equal(got.view(np.int64), expected.view(np.int64)), trial
+
+
+def test_a_continued_row_is_read_between_adjacent_rows_of_the_turn():
+    """`_event_sides` reads every phase from two adjacent window rows (hi = lo + 1), beside an event as between
+    rows: the continuation forms each column's difference once per window row and gathers it (thermal/cycle.py
+    `continue_periodically`), which holds only for adjacent rows."""
+    from mechsim.thermal.cycle import _event_sides
+    rng = np.random.default_rng(7)
+    for trial in range(200):
+        t = np.cumsum(rng.uniform(0.5, 1.5, int(rng.integers(4, 40))))
+        events = np.sort(np.concatenate([rng.uniform(t[0], t[-1], int(rng.integers(0, 6))),
+                                         rng.choice(t, int(rng.integers(0, 3)))]))    # some on rows
+        at = rng.uniform(t[0] - 0.1, t[-1] + 0.1, 500)
+        lo, hi, side = _event_sides(t, at, events if len(events) else None)
+        assert np.array_equal(hi, lo + 1) and lo.min() >= 0 and hi.max() < len(t), trial
+        assert np.all((side == lo) | (side == hi)), trial

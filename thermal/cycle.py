@@ -403,9 +403,13 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
             joined[:len(kept)] = values[kept]
             per_turn = (float(np.diff(np.interp([t_start, t_start + period], t, values))[0]) if cumulative(col)
                         else None)
+            # values[hi] - values[lo] is the window's own difference at lo (hi = lo + 1): formed once per window row,
+            # gathered with values[lo] per later row (the same numbers: each the same subtraction)
+            rise = values[1:] - values[:-1]
             for b in range(0, len(new_t), BLOCK):
                 j = slice(b, b + BLOCK)
-                value = values[lo[j]] + weight[j] * (values[hi[j]] - values[lo[j]])
+                at_lo = lo[j]
+                value = values[at_lo] + weight[j] * rise[at_lo]
                 joined[len(kept) + b:len(kept) + b + BLOCK] = value if per_turn is None else value + m[j] * per_turn
             out[col] = joined
             continue
@@ -434,7 +438,7 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
 
 def _event_sides(t: np.ndarray, at: np.ndarray, t_events: np.ndarray | None):
     """(lo, hi, side): the rows to interpolate the times `at` between (linear, extrapolating where `at` is outside
-    [t_lo, t_hi]) and the row whose discrete values hold there. Between rows with no event: the rows around; where an
+    [t_lo, t_hi]; always adjacent rows, hi = lo + 1) and the row whose discrete values hold there. Between rows with no event: the rows around; where an
     event lies between them, the two rows on the same side of the event as `at` (a one-sided limit: the columns jump
     or kink at events, and the rows straddling one would smear it)."""
     j = np.clip(np.searchsorted(t, at, side="right") - 1, 0, len(t) - 2)
