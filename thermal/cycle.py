@@ -438,9 +438,9 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
 
 def _event_sides(t: np.ndarray, at: np.ndarray, t_events: np.ndarray | None):
     """(lo, hi, side): the rows to interpolate the times `at` between (linear, extrapolating where `at` is outside
-    [t_lo, t_hi]; always adjacent rows, hi = lo + 1) and the row whose discrete values hold there. Between rows with no event: the rows around; where an
-    event lies between them, the two rows on the same side of the event as `at` (a one-sided limit: the columns jump
-    or kink at events, and the rows straddling one would smear it)."""
+    [t_lo, t_hi]; always adjacent rows, hi = lo + 1) and the row whose discrete values hold there. Between rows with
+    no event: the rows around; where an event lies between them, the two rows on the same side of the event as `at`
+    (a one-sided limit: the columns jump or kink at events, and the rows straddling one would smear it)."""
     j = np.clip(np.searchsorted(t, at, side="right") - 1, 0, len(t) - 2)
     lo, hi, side = j.copy(), j + 1, np.where(at - t[j] <= t[j + 1] - at, j, j + 1)
     if t_events is None or not len(t_events) or len(t) < 4:
