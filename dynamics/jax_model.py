@@ -140,6 +140,12 @@ class JaxMode:
             xp = -b / A if self.ext_diagonal else jnp.linalg.solve(A, -b)
         return jnp.concatenate([v, a, powers, xp]), a, lam, guards
 
+    @cached_property
+    def traced_once(self) -> Callable:
+        """`evaluate` as a jitted function: traced once per argument types and reused wherever a program calls it
+        again (every stage of a step, the guards, the event location), instead of retraced at each call site."""
+        return jax.jit(self.evaluate)
+
     def rates(self, t, z, p):
         """The vector field z' = f(t, z)."""
         return self.evaluate(t, z, p)[0]
@@ -250,9 +256,10 @@ class JaxModel:
 
     def _branch(self, jm: JaxMode):
         m_max, ng_max = self.m_max, self.ng_max
+        evaluate = jm.traced_once
 
         def f(t, z, p):
-            zp, a, lam, g = jm.evaluate(t, z, p)
+            zp, a, lam, g = evaluate(t, z, p)
             return (zp, a, jnp.concatenate([lam, jnp.zeros(m_max - jm.m)]),
                     jnp.concatenate([g, jnp.ones(ng_max - jm.ng)]))
         return f
