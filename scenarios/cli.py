@@ -51,6 +51,24 @@ out = LazyConsole()
 USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
 INTERRUPTED = 130           # 128 + SIGINT, as a shell reports a Ctrl-C
 
+#: whether this process has seen a Ctrl-C (`_on_ctrl_c`)
+_ctrl_c_seen = False
+
+
+def _on_ctrl_c(signum, frame) -> None:
+    """A command's Ctrl-C handler: Python's own (KeyboardInterrupt), with the interrupt noted. The exception can
+    reach the command as another one: raised while C code runs (an import building its own ImportError, as
+    `ssl` does while pyarrow.parquet loads), it is replaced by what that code raises next (a TypeError), and the
+    command must still say it was interrupted (exit 130), not report an internal error (`_interrupted`)."""
+    global _ctrl_c_seen
+    _ctrl_c_seen = True
+    raise KeyboardInterrupt
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether `exc` is a Ctrl-C: the KeyboardInterrupt itself, or whatever replaced it (`_on_ctrl_c`)."""
+    return isinstance(exc, KeyboardInterrupt) or _ctrl_c_seen
+
 
 def _fail(message: str, code: int = USER_ERROR) -> None:
     if code == USER_ERROR:              # a refused command leaves no trace: not even the unit conversions it read
@@ -184,21 +202,24 @@ def _run(api, scenario: str, out_dir: Optional[Path], set_: List[str], force: bo
         try:
             with native_output() as native:
                 result = api.run(sc, progress=bar.simulated)
-        except KeyboardInterrupt:
-            _fail(f"{sc.name}: interrupted (Ctrl-C) at t = {bar.time:.4g} s of {duration:g} s; "
-                  "nothing was written", INTERRUPTED)
-        except ScenarioError as exc:
-            _fail(str(exc))
-        except ValueError as exc:
-            _fail(f"scenario: {exc}")
-        except Exception as exc:  # a backend fault we did not foresee: one line, exit 3, never a traceback
+        except (KeyboardInterrupt, Exception) as exc:
+            if _interrupted(exc):
+                _fail(f"{sc.name}: interrupted (Ctrl-C) at t = {bar.time:.4g} s of {duration:g} s; "
+                      "nothing was written", INTERRUPTED)
+            if isinstance(exc, ScenarioError):
+                _fail(str(exc))
+            if isinstance(exc, ValueError):
+                _fail(f"scenario: {exc}")
+            # a backend fault we did not foresee: one line, exit 3, never a traceback
             _fail(f"the integration stopped on an internal error ({_internal_error(exc)}); "
                   "try solver.backend = 'ida' or another solver.formulation", SOLVER_FAILURE)
         result.summary["solver_messages"] = native
         bar.writing(0.0)
         try:
             _save_or_fail(result, target, force, f"{sc.name}: the results", worker, progress=bar.writing)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Exception) as exc:
+            if not _interrupted(exc):
+                raise
             _fail(f"{sc.name}: interrupted (Ctrl-C) while writing {target}; nothing half-written is left",
                   INTERRUPTED)
     if not quiet and result.scenario.get("output", {}).get("csv") == "auto":
@@ -725,6 +746,9 @@ def main() -> None:
     os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")     # read when numpy loads OpenBLAS, after this
     from mechsim.dynamics.backends.xla_options import checks_without_callbacks
     checks_without_callbacks()      # compiled solves kept across processes (before equinox is imported)
+    import signal
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:     # (an ignored Ctrl-C stays ignored)
+        signal.signal(signal.SIGINT, _on_ctrl_c)
     code = 0
     try:
         app()

@@ -204,6 +204,51 @@ def test_ctrl_c_during_a_run_is_one_line_and_exit_130(tmp_path, monkeypatch):
     assert not (tmp_path / "o").exists()
 
 
+def _ctrl_c_surfacing_as(error: Exception):
+    """A call that takes a Ctrl-C through the CLI's own handler and then raises `error` instead of the
+    KeyboardInterrupt, as CPython does when the signal lands inside C code that raises next (an import building its
+    ImportError: a TypeError 'expected a message argument', seen while pyarrow.parquet loaded)."""
+    import signal
+
+    from mechsim.scenarios import cli
+
+    def call(*args, **kwargs):
+        try:
+            cli._on_ctrl_c(signal.SIGINT, None)
+        except KeyboardInterrupt:
+            raise error from None
+    return call
+
+
+@pytest.mark.parametrize("moment", ["computing", "writing"])
+def test_a_ctrl_c_that_surfaces_as_another_error_is_still_an_interrupt(tmp_path, monkeypatch, moment):
+    from mechsim.scenarios import api, cli
+    from mechsim.scenarios.output import writer
+    monkeypatch.setattr(cli, "_ctrl_c_seen", False)          # (restored after the test: the handler sets it)
+    surfacing = _ctrl_c_surfacing_as(TypeError("expected a message argument"))
+    monkeypatch.setattr(api if moment == "computing" else writer, "run" if moment == "computing" else "write_parquet",
+                        surfacing)
+    r = invoke("run", "geneva-lc1", "--out", tmp_path / "o", "--set", "output.plots=false")
+    assert r.exit_code == 130
+    line = one_line_error(r)
+    assert "interrupted (Ctrl-C)" in line and ("nothing was written" if moment == "computing"
+                                               else "nothing half-written is left") in line
+    assert list(tmp_path.iterdir()) == []                     # no folder, no temporary beside it
+
+
+def test_without_a_ctrl_c_the_same_error_is_an_internal_error(tmp_path, monkeypatch):
+    from mechsim.scenarios import api, cli
+    monkeypatch.setattr(cli, "_ctrl_c_seen", False)
+
+    def broken(sc, progress=None):
+        raise TypeError("expected a message argument")
+    monkeypatch.setattr(api, "run", broken)
+    r = invoke("run", "geneva-lc1", "--out", tmp_path / "o", "--set", "output.plots=false")
+    assert r.exit_code == 3
+    assert "internal error (TypeError: expected a message argument)" in one_line_error(r)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_rolling_pair_on_a_line_refuses_the_circle_keys():
     from mechsim.scenarios.loader import load
     with pytest.raises(ScenarioError) as e:
