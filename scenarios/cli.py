@@ -71,6 +71,8 @@ def _interrupted(exc: BaseException) -> bool:
 
 
 def _fail(message: str, code: int = USER_ERROR) -> None:
+    if _ctrl_c_seen and code != INTERRUPTED:     # what a Ctrl-C raised in any command is the interrupt (`_on_ctrl_c`)
+        message, code = "interrupted (Ctrl-C)", INTERRUPTED
     if code == USER_ERROR:              # a refused command leaves no trace: not even the unit conversions it read
         from mechsim.scenarios.units import forget_unsaved_conversions
         forget_unsaved_conversions()

@@ -236,6 +236,16 @@ def test_a_ctrl_c_that_surfaces_as_another_error_is_still_an_interrupt(tmp_path,
     assert list(tmp_path.iterdir()) == []                     # no folder, no temporary beside it
 
 
+def test_any_command_reports_a_ctrl_c_that_surfaces_as_another_error_as_the_interrupt(tmp_path, monkeypatch):
+    from mechsim.scenarios import api, cli
+    monkeypatch.setattr(cli, "_ctrl_c_seen", False)
+    monkeypatch.setattr(api, "sensitivity", _ctrl_c_surfacing_as(TypeError("expected a message argument")))
+    r = invoke("sensitivity", "geneva-lc1", "--wrt", "load.wheel_torque", "--out", tmp_path / "s")
+    assert r.exit_code == 130
+    assert one_line_error(r) == "error: interrupted (Ctrl-C)"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_without_a_ctrl_c_the_same_error_is_an_internal_error(tmp_path, monkeypatch):
     from mechsim.scenarios import api, cli
     monkeypatch.setattr(cli, "_ctrl_c_seen", False)
