@@ -51,8 +51,9 @@ out = LazyConsole()
 USER_ERROR, SOLVER_FAILURE, OS_REFUSED = 2, 3, 4
 INTERRUPTED = 130           # 128 + SIGINT, as a shell reports a Ctrl-C
 
-#: whether this process has seen a Ctrl-C (`_on_ctrl_c`)
-_ctrl_c_seen = False
+#: whether this process has seen a Ctrl-C (`_on_ctrl_c`); whether the command has said why it stopped (`_fail`, a
+#: sweep's report): a Ctrl-C typer turned into exit 130 silently is then said by `main`
+_ctrl_c_seen = _said = False
 
 
 def _on_ctrl_c(signum, frame) -> None:
@@ -65,6 +66,12 @@ def _on_ctrl_c(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def _saying_why() -> None:
+    """Note that the command says itself why it stops (`main` then adds nothing)."""
+    global _said
+    _said = True
+
+
 def _interrupted(exc: BaseException) -> bool:
     """Whether `exc` is a Ctrl-C: the KeyboardInterrupt itself, or whatever replaced it (`_on_ctrl_c`)."""
     return isinstance(exc, KeyboardInterrupt) or _ctrl_c_seen
@@ -73,6 +80,7 @@ def _interrupted(exc: BaseException) -> bool:
 def _fail(message: str, code: int = USER_ERROR) -> None:
     if _ctrl_c_seen and code != INTERRUPTED:     # what a Ctrl-C raised in any command is the interrupt (`_on_ctrl_c`)
         message, code = "interrupted (Ctrl-C)", INTERRUPTED
+    _saying_why()
     if code == USER_ERROR:              # a refused command leaves no trace: not even the unit conversions it read
         from mechsim.scenarios.units import forget_unsaved_conversions
         forget_unsaved_conversions()
@@ -485,6 +493,7 @@ def sweep(
                   highlight=False, soft_wrap=True)
     (err if table.attrs["interrupted"] else out).print(table.attrs["report"], markup=False, highlight=False,
                                                        soft_wrap=True)
+    _saying_why()
     if not quiet:                # what the user waited for: the cases, and the rest (start-up, tables and figures)
         total, cases = time.perf_counter() - STARTED, table.attrs["cases_wall_time_s"]
         out.print(f"time: {total:.2f} s in all (cases {cases:.2f} s, start-up, tables and figures "
@@ -756,6 +765,8 @@ def main() -> None:
         app()
     except SystemExit as exc:
         code = exc.code
+        if code == INTERRUPTED and not _said:       # typer's own exit on a Ctrl-C, which it does not say
+            err.print("error: interrupted (Ctrl-C)", markup=False, highlight=False)
     except ScenarioError as exc:
         err.print(f"error: {exc}", markup=False, highlight=False)
         code = USER_ERROR

@@ -76,6 +76,21 @@ def test_ctrl_c_leaves_no_folder_and_no_temporary(tmp_path, moment):
     assert not out.exists() and temporaries(tmp_path) == []
 
 
+def test_ctrl_c_in_another_command_is_said_in_one_line(tmp_path):
+    """typer turns a Ctrl-C outside `mechsim run` into exit 130 without a word: the CLI says it (`main`)."""
+    out = tmp_path / "s"
+    proc = mechsim("sensitivity", "geneva-torque", "--wrt", "load.wheel_torque", "--set", "duration=200 s",
+                   "--out", out)
+    time.sleep(3.0)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert [line for line in stderr.splitlines() if line.startswith("error:")] == ["error: interrupted (Ctrl-C)"]
+    assert not out.exists() and temporaries(tmp_path) == []
+
+
 @pytest.mark.parametrize("force", [False, True])
 def test_two_runs_racing_into_one_folder_leave_one_whole_run(tmp_path, force):
     out = tmp_path / "o"
