@@ -1186,12 +1186,17 @@ class TrajectoryReader:
                 np.array([anchors[i][4] for i in members]),
                 np.array([anchors[i][0].params for i in members], dtype=float).reshape(len(members), -1),
                 all_t[group_rows], bounds)
-            falls = np.flatnonzero(~(t[1:] >= t[:-1]))      # rows k whose next row is not later (usually none)
-            for i, (lo, _, hi), whole in zip(members, bounds.tolist(), ok.tolist()):
+            # rows k whose next row is not later (a reading's last row where the next reading starts earlier), and the
+            # readings that hold one before their last row (lo <= k < hi - 1): their rows are not in time order
+            falls = np.flatnonzero(~(t[1:] >= t[:-1]))
+            first = falls.searchsorted(bounds[:, 0])          # each reading's first such row at or after its start
+            unordered = first < len(falls)
+            unordered[unordered] = falls[first[unordered]] < bounds[unordered, 2] - 1
+            for i, (lo, _, hi), whole, out_of_order in zip(members, bounds.tolist(), ok.tolist(), unordered.tolist()):
                 if not whole:
                     continue
                 got = self._ahead[keys[i]] = (t[lo:hi], y[lo:hi], yp[lo:hi])
-                if not len(falls) or not ((falls >= lo) & (falls < hi - 1)).any():   # in time order (`_reading`'s)
+                if not out_of_order:             # in time order (`_reading`'s)
                     ready[i] = (keys[i], anchors[i][5], anchors[i][0]) + got
         return anchors, ready
 
