@@ -24,13 +24,16 @@ peer's solve at equal error.
 Error: max crank-angle difference (rad) at the output times from the reduced-coordinate reference
 (`Mechanism.reference_solution`, DOP853 at rtol 1e-12; thermal states do not act on the mechanics).
 Time: process CPU time of a warm run. The machine is shared and noisy, so every tolerance is timed in
-`rounds` rounds; in each round every method runs once, in an order rotated from round to round (interleaved:
-a burst of load hits every method alike); the figure is the median over the rounds. The ratios at equal
+`rounds` rounds; in each round every method runs once, in an order shuffled anew each round (a fixed seed):
+interleaved, so that a burst of load hits every method alike, and with different neighbours each round, so that
+no method always runs after the same one (what a run leaves in the caches changes the next one's time); the figure
+is the median over the rounds. The ratios at equal
 error interpolate each method's median-CPU work-precision curve (log-log, its Pareto front, no
 extrapolation, `bench.time_at_error`) at 1e-6 and 1e-8 rad and divide by the peer's.
 """
 from __future__ import annotations
 
+import random
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -178,8 +181,10 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
         live = [n for n in names if n != DEFAULT and not isinstance(runs[n], Exception) and not runs[n].failure]
         calls = [(n, False) for n in live] + [(n, True) for n in e2e if not isinstance(runs.get(n), Exception)
                                               and not e2e_runs[n].failure]
-        for k in range(config.rounds):
-            order = calls[k % len(calls):] + calls[:k % len(calls)] if calls else []
+        shuffle = random.Random(0).shuffle
+        for _ in range(config.rounds):
+            order = list(calls)
+            shuffle(order)        # a new order each round (module docstring)
             for n, end_to_end in order:
                 w, c = time.perf_counter(), time.process_time()
                 with quiet_sundials():
