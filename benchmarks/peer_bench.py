@@ -154,6 +154,16 @@ def _error(run, ref) -> float:
     return float(np.max(np.abs(run.angle - np.interp(run.t, ref["t"], ref["angle"]))))
 
 
+def round_orders(items: list, rounds: int):
+    """`items` in a new order for each of `rounds` rounds, shuffled with a fixed seed (the module docstring: no
+    method always runs after the same one)."""
+    shuffle = random.Random(0).shuffle
+    for _ in range(rounds):
+        order = list(items)
+        shuffle(order)
+        yield order
+
+
 def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> list[dict]:
     """Rows (method, rtol) of one case: set up every method, then `rounds` interleaved rounds of warm runs."""
     problem = make_problem(BenchConfig(scenario="geneva-motor", duration=5.0, overrides=CASES[case]))
@@ -181,10 +191,7 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
         live = [n for n in names if n != DEFAULT and not isinstance(runs[n], Exception) and not runs[n].failure]
         calls = [(n, False) for n in live] + [(n, True) for n in e2e if not isinstance(runs.get(n), Exception)
                                               and not e2e_runs[n].failure]
-        shuffle = random.Random(0).shuffle
-        for _ in range(config.rounds):
-            order = list(calls)
-            shuffle(order)        # a new order each round (module docstring)
+        for order in round_orders(calls, config.rounds):
             for n, end_to_end in order:
                 w, c = time.perf_counter(), time.process_time()
                 with quiet_sundials():

@@ -4,9 +4,9 @@ Case A (`peer_bench.CASES`, 5 s, 1 ms outputs, figures off), or another case, on
 the default backend (`auto`: ida-compiled once its callbacks are cached), index-1 at rtol 1e-7, all near 1e-6 rad
 of crank-angle error on case A, the scenario's own solver settings (`default idx2`: auto, index-2 at rtol 1e-8), and the
 CasADi IDAS peer of `peer_bench` at rtol 1e-6
-(5.6e-7 rad). Interleaved rounds, the order shuffled anew each round (a fixed seed), so that no method always runs
-after the same one (what a run leaves in the caches changes the next one's time), process CPU time, medians. Each run is split into
-the integration (`hybrid.simulate`, its process CPU) and the rest: tables, invariant checks and summary.
+(5.6e-7 rad). Interleaved rounds, the order shuffled anew each round (`peer_bench.round_orders`: no method always
+runs after the same one), process CPU time, medians. Each run is split into the integration (`hybrid.simulate`,
+its process CPU) and the rest: tables, invariant checks and summary.
 
     python benchmarks/warm_run.py [rounds] [case]
 
@@ -15,7 +15,6 @@ thermal columns' located peaks are the largest part of its post-processing), the
 """
 from __future__ import annotations
 
-import random
 import statistics
 import sys
 import time
@@ -23,7 +22,7 @@ import time
 import mechsim
 from mechsim.benchmarks.bench import BenchConfig, make_problem
 from mechsim.benchmarks.bench_methods import quiet_sundials
-from mechsim.benchmarks.peer_bench import CASES, METHODS, PEER
+from mechsim.benchmarks.peer_bench import CASES, METHODS, PEER, round_orders
 
 #: backend: (scenario overrides, the bench method integrating the same, rtol)
 BACKENDS = {
@@ -58,10 +57,7 @@ def main(rounds: int = 9, case: str = "A") -> None:
             calls[name]()
             calls[name]()
         cpu: dict[str, list[float]] = {name: [] for name in names}
-        shuffle = random.Random(0).shuffle
-        for r in range(rounds):
-            order = list(names)
-            shuffle(order)            # a new order each round (module docstring)
+        for order in round_orders(names, rounds):
             for name in order:
                 c = time.process_time()
                 calls[name]()
