@@ -378,7 +378,8 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
         return simulated.reset_index(drop=True), events, t_sim, kept
     m = np.floor((new_t - t_start) / period + 1e-12)
     at = np.clip(t_start + (new_t - t_start - m * period), t_start, t_start + period)
-    lo, hi, side = _event_sides(t, at, None if events is None or not len(events) else events["t_s"].to_numpy(float))
+    lo, side = _event_sides(t, at, None if events is None or not len(events) else events["t_s"].to_numpy(float))
+    hi = lo + 1
     weight = (at - t[lo]) / (t[hi] - t[lo])
     own = {} if given is None else {k: v for k, v in given(new_t).items() if k in df and k != "t_s"}
     new, out = {}, {}
@@ -403,8 +404,8 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
             joined[:len(kept)] = values[kept]
             per_turn = (float(np.diff(np.interp([t_start, t_start + period], t, values))[0]) if cumulative(col)
                         else None)
-            # values[hi] - values[lo] is the window's own difference at lo (hi = lo + 1): formed once per window row,
-            # gathered with values[lo] per later row (the same numbers: each the same subtraction)
+            # values[hi] - values[lo] is the window's own difference at lo: formed once per window row, gathered with
+            # values[lo] per later row (the same numbers: each the same subtraction)
             rise = values[1:] - values[:-1]
             for b in range(0, len(new_t), BLOCK):
                 j = slice(b, b + BLOCK)
@@ -437,23 +438,23 @@ def continue_periodically(df: pd.DataFrame, events: pd.DataFrame, t_start: float
 
 
 def _event_sides(t: np.ndarray, at: np.ndarray, t_events: np.ndarray | None):
-    """(lo, hi, side): the rows to interpolate the times `at` between (linear, extrapolating where `at` is outside
-    [t_lo, t_hi]; always adjacent rows, hi = lo + 1) and the row whose discrete values hold there. Between rows with
-    no event: the rows around; where an event lies between them, the two rows on the same side of the event as `at`
-    (a one-sided limit: the columns jump or kink at events, and the rows straddling one would smear it)."""
+    """(lo, side): the rows lo and lo + 1 to interpolate the times `at` between (linear, extrapolating where `at` is
+    outside [t_lo, t_lo+1]) and the row whose discrete values hold there. Between rows with no event: the rows
+    around; where an event lies between them, the two rows on the same side of the event as `at` (a one-sided
+    limit: the columns jump or kink at events, and the rows straddling one would smear it)."""
     j = np.clip(np.searchsorted(t, at, side="right") - 1, 0, len(t) - 2)
-    lo, hi, side = j.copy(), j + 1, np.where(at - t[j] <= t[j + 1] - at, j, j + 1)
+    lo, side = j.copy(), np.where(at - t[j] <= t[j + 1] - at, j, j + 1)
     if t_events is None or not len(t_events) or len(t) < 4:
-        return lo, hi, side
+        return lo, side
     te = np.sort(t_events)
     k = np.clip(np.searchsorted(te, t[j], side="right"), 0, len(te) - 1)
     crossed = (te[k] > t[j]) & (te[k] < t[j + 1])
     before = crossed & (at < te[k]) & (j >= 1)
     after = crossed & (at >= te[k]) & (j + 2 < len(t))
-    lo[before], hi[before] = j[before] - 1, j[before]
-    lo[after], hi[after] = j[after] + 1, j[after] + 2
+    lo[before] = j[before] - 1
+    lo[after] = j[after] + 1
     side = np.where(crossed, np.where(at < te[k], j, j + 1), side)
-    return lo, hi, side
+    return lo, side
 
 
 def _repeat_events(df, events, t_start, period, t_sim, duration) -> pd.DataFrame:
