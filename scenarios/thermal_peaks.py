@@ -616,7 +616,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
-    from mechsim.dynamics.extrema import end_guesses, end_limit_requests, end_limits, plan, read_all
+    from mechsim.dynamics.extrema import end_guesses, end_limit_requests, end_limits, finish_all, plan, read_all
     values = {c: np.asarray(cols[c], float) for c in columns}
     ties = {c: tie_of(f) for c, f in values.items()}
     kinks = getattr(reader, "kinks", None)
@@ -632,14 +632,10 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
         owns = {c: _promising(f, intervals, rows) for c, f in values.items()}
         # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
         spans.append((intervals, owns, {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}))
-    tables = read_all(reader, [r for _, _, plans in spans for p in plans.values() for r in p.requests])
-    founds, a = [], 0
-    for _, _, plans in spans:
-        found = {}
-        for c, p in plans.items():
-            found[c] = p.finish(tables[a:a + len(p.requests)], reader).get(c, {})
-            a += len(p.requests)
-        founds.append(found)
+    every = [p for _, _, plans in spans for p in plans.values()]
+    # every window's and column's brackets refined in one pass (`finish_all`)
+    done = iter(finish_all(every, read_all(reader, [r for p in every for r in p.requests]), reader))
+    founds = [{c: next(done).get(c, {}) for c in plans} for _, _, plans in spans]
     # the one-sided limits that may beat each extremum, every window's read at once, then checked in order
     checks, ahead = [], []
     for (intervals, owns, _), found in zip(spans, founds):
