@@ -175,32 +175,31 @@ _SIGNS = np.array([1.0, -1.0])
 
 def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
                        limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None,
-                       finite: bool = False) -> tuple[list[list[tuple]], np.ndarray | None]:
+                       finite: bool = False, series: list[int] | None = None
+                       ) -> tuple[list[list[tuple]], np.ndarray | None]:
     """(`_candidates`, each series' largest finite row in each sense: [c max, -(c min), ...], -inf where none is
     finite; None without rows). The row-against-neighbour comparisons are made once for both senses on the rows'
     differences (a >= b exactly where a - b >= 0; the negated series' differences are the differences negated,
     exactly), and the series in the minimum's sense (-F, -inf where F is not finite) is formed only where read.
     groups: the intervals of each of several windows, consecutive (their counts; each window with rows), whose
     candidates and bounds are each window's own, all found in one pass: [window 0's series, window 1's, ...], each
-    candidate's interval counted in its window's. finite: every value of F is finite (known to the caller)."""
+    candidate's interval counted in its window's. finite: every value of F is finite (known to the caller).
+    series: each window's one series, a row of F (its tie that row's of ties): [window 0's, window 1's, ...], each
+    window's candidates and bounds those of that series alone, as if found on its own (windows over one table that
+    each locate another column)."""
+    if series is not None and (groups is None or len(groups) == 1):       # one window: its series is the table
+        F, ties, series = F[series[0]:series[0] + 1], ties[series[0]:series[0] + 1], None
     if layout is None:
         layout = _layout(intervals)
     if layout is None:
-        return [[] for _ in range(2 * len(F))], None
-    if len(F) > 1 and F.size > JOINT_VALUES:         # each series is its own: the same candidates and bounds
+        return [[] for _ in range(2 * (len(F) if series is None else len(series)))], None
+    if series is None and len(F) > 1 and F.size > JOINT_VALUES:    # each series is its own: the same candidates and bounds
         parts = [_candidates_bounds(t, F[c:c + 1], ties[c:c + 1], intervals, limit, layout, groups, finite)
                  for c in range(len(F))]
         n_w = 1 if groups is None else len(groups)
         out = [x for w in range(n_w) for cands, _ in parts for x in cands[2 * w:2 * w + 2]]
         return out, np.stack([bounds.reshape(n_w, 2) for _, bounds in parts], axis=1).ravel()
     rows, k_of, n_of, pos, first, last = layout
-    if rows[-1] - rows[0] == len(rows) - 1 and (rows[1:] > rows[:-1]).all():     # a run of rows: views
-        ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
-    else:
-        ti, G = t[rows], F[:, rows]
-    ok = None if finite else np.isfinite(G)
-    finite = finite or bool(ok.all())
-    S = 2 * len(G)                                  # series per window
     if groups is None or len(groups) == 1:
         n_w, cuts, w_of, base = 1, None, None, None
     else:                                           # each window's first position in the rows, and each row's
@@ -209,6 +208,20 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         cuts = k_of.searchsorted(first_iv)
         w_of = first_iv.searchsorted(k_of, side="right") - 1
         base = first_iv
+    if series is not None:          # one series: each row its window's (a row's neighbours are in its window)
+        of = np.asarray(series, dtype=np.intp)[w_of]
+        ti, G = t[rows], F[of, rows][None, :]
+        wtie = np.asarray(ties, dtype=float)[np.asarray(series, dtype=np.intp)]
+        # a difference's tie: its later row's window's (where the two rows are in different windows, neither
+        # reads it: the later row is an interval's first, the earlier one its last)
+        ties, tie = wtie.repeat(2), np.append(wtie[w_of], 0.0)[None, :]
+    elif rows[-1] - rows[0] == len(rows) - 1 and (rows[1:] > rows[:-1]).all():     # a run of rows: views
+        ti, G = t[rows[0]:rows[-1] + 1], F[:, rows[0]:rows[-1] + 1]
+    else:
+        ti, G = t[rows], F[:, rows]
+    ok = None if finite else np.isfinite(G)
+    finite = finite or bool(ok.all())
+    S = 2 * len(G)                                  # series per window
 
     def fi(m: np.ndarray, i: np.ndarray) -> np.ndarray:
         """Series m (2c: F[c], 2c + 1: -F[c]; -inf where not finite) at rows i."""
@@ -216,7 +229,8 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         signed = g * _SIGNS[m & 1]                  # exactly -g where m is odd
         return signed if finite else np.where(np.isfinite(g), signed, -np.inf)
 
-    tie, ties = ties[:, None], ties.repeat(2)
+    if series is None:
+        tie, ties = ties[:, None], ties.repeat(2)
     d = np.empty((len(G), G.shape[1] + 1))                 # d[:, i] = G[:, i] - G[:, i - 1]
     d[:, 0] = d[:, -1] = 0.0
     with np.errstate(invalid="ignore"):
@@ -240,7 +254,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         flat &= ok
         smooth &= ok[:, None]
     ends = [0, G.shape[1]] if cuts is None else [*cuts.tolist(), G.shape[1]]       # each window's rows
-    wties = np.concatenate([ties] * n_w)
+    wties = ties if series is not None else np.concatenate([ties] * n_w)       # each window's series' and sense's
     with np.errstate(invalid="ignore"):
         # the best peak's: the largest row is a peak ([window, column, sense]; max and min are exact in any order)
         lower, level = np.empty((n_w, len(G), 2)), np.empty((n_w, len(G), 2))
@@ -267,7 +281,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     ms, ii, est, wm = ms[kept], ii[kept], est[kept], wm[kept]
     best = np.full(n_w * S, -np.inf)
     np.maximum.at(best, wm, est)
-    rank = np.where(est >= best[wm] - ties[ms], best[wm], est)
+    rank = np.where(est >= best[wm] - wties[wm], best[wm], est)
     order = np.lexsort((ti[ii], -rank, wm))         # each series' by estimate, ties to the earliest
     ii, est, wm = ii[order], est[order], wm[order]
     nth = np.arange(len(wm)) - wm.searchsorted(wm)
@@ -403,9 +417,7 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
         col_ties = _ties(F, finite)
         ties = {col: float(x) for col, x in zip(names, col_ties.tolist())}
         spans = [windows[w][2] for w in ws]
-        # the windows with rows in the order of their rows (adjacent windows' rows then run on: views of the table)
-        held = sorted((w for w in range(len(ws)) if any(len(iv.rows) for iv in spans[w])),
-                      key=lambda w: next(int(iv.rows[0]) for iv in spans[w] if len(iv.rows)))
+        held = _held(spans)
         found: list = [[[] for _ in range(2 * len(names))] for _ in spans]
         bounds: list = [None] * len(spans)
         if held:
@@ -414,16 +426,55 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
             S = 2 * len(names)
             for q, w in enumerate(held):
                 found[w], bounds[w] = got[q * S:(q + 1) * S], lower[q * S:(q + 1) * S]
-        jobs = [_jobs(t, values, F, names, ties, ivs, got) for ivs, got in zip(spans, found)]
-        clusters = [_clusters(js) for js, _ in jobs]
-        grids, instants = _grids([g for cs in clusters for g in cs])
-        a = 0
-        for w, intervals, (js, starts), cs, lower in zip(ws, spans, jobs, clusters, bounds):
-            mine = slice(a, a + len(cs))
-            a += len(cs)
-            requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(cs, instants[mine])]
-            requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
-            out[w] = Plan(t, values, intervals, js, ties, cs, grids[mine], starts, requests, lower)
+        for w, plan_ in zip(ws, _planned(t, [(values, F, names, ties)] * len(spans), spans, found, bounds)):
+            out[w] = plan_
+    return out
+
+
+def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple[str, list[Interval]]],
+                 limit: int = CANDIDATES) -> list[Plan]:
+    """`plan(t, {c: values[c]}, intervals)` of each (column c, intervals) of `spans` (each column searched on
+    intervals of its own, over one table): the same plans, every candidate found in one pass of the rows the spans
+    hold (`_candidates_bounds`, a series per span), every bracket's grid in another (`_grids`)."""
+    names = list(dict.fromkeys(c for c, _ in spans))
+    row = {c: i for i, c in enumerate(names)}
+    F = np.array([np.asarray(values[c], dtype=float) for c in names]).reshape(len(names), len(t))
+    col_ties = _ties(F)           # each column's own (a row's largest finite magnitude: exact in any order)
+    own = [({c: values[c]}, F[row[c]:row[c] + 1], [c], {c: float(col_ties[row[c]])}) for c, _ in spans]
+    intervals = [ivs for _, ivs in spans]
+    held = _held(intervals)
+    found: list = [[[], []] for _ in spans]
+    bounds: list = [None] * len(spans)
+    if held:
+        got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in intervals[w]], limit,
+                                        groups=[len(intervals[w]) for w in held],
+                                        series=[row[spans[w][0]] for w in held])
+        for q, w in enumerate(held):
+            found[w], bounds[w] = got[2 * q:2 * q + 2], lower[2 * q:2 * q + 2]
+    return _planned(t, own, intervals, found, bounds)
+
+
+def _held(spans: list[list[Interval]]) -> list[int]:
+    """The windows with rows in the order of their rows (adjacent windows' rows then run on: views of the table)."""
+    return sorted((w for w in range(len(spans)) if any(len(iv.rows) for iv in spans[w])),
+                  key=lambda w: next(int(iv.rows[0]) for iv in spans[w] if len(iv.rows)))
+
+
+def _planned(t: np.ndarray, tables: list[tuple], spans: list[list[Interval]], found: list, bounds: list
+             ) -> list[Plan]:
+    """Each window's Plan from its candidates (`found`) and bounds: its jobs, brackets and requests, every window's
+    grids made in one pass (`_grids`); tables: each window's (values, F, names, ties)."""
+    jobs = [_jobs(t, values, F, names, ties, ivs, got)
+            for (values, F, names, ties), ivs, got in zip(tables, spans, found)]
+    clusters = [_clusters(js) for js, _ in jobs]
+    grids, instants = _grids([g for cs in clusters for g in cs])
+    out, a = [], 0
+    for (values, _, _, ties), intervals, (js, starts), cs, lower in zip(tables, spans, jobs, clusters, bounds):
+        mine = slice(a, a + len(cs))
+        a += len(cs)
+        requests = [(intervals[g[0].interval], max(g[0].anchor - 1, 0), x) for g, x in zip(cs, instants[mine])]
+        requests += [(intervals[k], 0, np.array([intervals[k].lo])) for k in starts]
+        out.append(Plan(t, values, intervals, js, ties, cs, grids[mine], starts, requests, lower))
     return out
 
 

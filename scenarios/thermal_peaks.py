@@ -616,7 +616,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
-    from mechsim.dynamics.extrema import end_guesses, end_limit_requests, end_limits, finish_all, plan, read_all
+    from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
+                                          read_all)
     values = {c: np.asarray(cols[c], float) for c in columns}
     ties = {c: tie_of(f) for c, f in values.items()}
     kinks = getattr(reader, "kinks", None)
@@ -629,9 +630,11 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
             breaks = sorted(breaks + _apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
         intervals = intervals_of(t, breaks, lo, hi, *kinds)
         rows = _interval_rows(intervals)
-        owns = {c: _promising(f, intervals, rows) for c, f in values.items()}
-        # `locate` of each column on its own intervals: its plan, the readings of all of them at once, its finish
-        spans.append((intervals, owns, {c: plan(t, {c: values[c]}, own) for c, own in owns.items()}))
+        spans.append((intervals, {c: _promising(f, intervals, rows) for c, f in values.items()}))
+    # `locate` of each column on its own intervals: every window's and column's plan made together, the readings of
+    # all of them at once, then their finish
+    planned = iter(column_plans(t, values, [(c, own) for _, owns in spans for c, own in owns.items()]))
+    spans = [(intervals, owns, {c: next(planned) for c in owns}) for intervals, owns in spans]
     every = [p for _, _, plans in spans for p in plans.values()]
     # every window's and column's brackets refined in one pass (`finish_all`)
     done = iter(finish_all(every, read_all(reader, [r for p in every for r in p.requests]), reader))
