@@ -193,7 +193,7 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
         layout = _layout(intervals)
     if layout is None:
         return [[] for _ in range(2 * (len(F) if series is None else len(series)))], None
-    if series is None and len(F) > 1 and F.size > JOINT_VALUES:    # each series is its own: the same candidates and bounds
+    if series is None and len(F) > 1 and F.size > JOINT_VALUES:    # each series alone: the same candidates, bounds
         parts = [_candidates_bounds(t, F[c:c + 1], ties[c:c + 1], intervals, limit, layout, groups, finite)
                  for c in range(len(F))]
         n_w = 1 if groups is None else len(groups)

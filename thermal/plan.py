@@ -235,7 +235,7 @@ class ThermalPlan:
         # a compliant contact's impact loses its energy over the episode (a work column, not the rows' energy_lost_J):
         # its heat_J, on the episode's onset row
         lost = events["heat_J" if "heat_J" in events else "energy_lost_J"].to_numpy(float)
-        rows = events["kind"].astype(str).str.startswith("impact").to_numpy() & np.isfinite(lost)
+        rows = np.array([str(k).startswith("impact") for k in events["kind"].tolist()], dtype=bool) & np.isfinite(lost)
         if not rows.any():
             return events, states, None
         setup, geo, mat = self.setup, self.setup.geometry, self.setup.material
@@ -285,9 +285,10 @@ class ThermalPlan:
         setup, mech, ext = self.setup, self.mech, self.setup.extension
         if ext is None:
             return None, None, None
-        if self.method == "dae":
-            return df[list(ext.names)].to_numpy(float), None, None
         table = df if table is None else table
+        if self.method == "dae":        # the states' columns side by side (as df[names].to_numpy(float) gives them)
+            states = np.array([np.asarray(table[c], dtype=float) for c in ext.names])
+            return states.reshape(len(ext.names), -1).T, None, None
         angle0, t = self.si["initial"][mech.initial_keys[0]], np.asarray(table["t_s"], dtype=float)
         key = (angle0, self.speed, self.quadrature_piece, np.asarray(setup.initial, dtype=float).tobytes(),
                t.tobytes())

@@ -62,7 +62,8 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     w1 = np.asarray(df["crank_speed_rad_s"], dtype=float)
     engaged = _engaged(df["mode"])
     found: list[float] = []
-    kinds = events["kind"].astype(str).to_numpy() if len(events) and "kind" in events else np.array([], str)
+    kinds = (np.array([str(k) for k in events["kind"].tolist()], dtype=object) if len(events) and "kind" in events
+             else np.array([], str))
     times = events["t_s"].to_numpy(float) if len(kinds) else np.array([])
     found += times[np.isin(kinds, ["entry", "flank switch"])].tolist()
     if "entry" not in kinds:
