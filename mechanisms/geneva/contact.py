@@ -20,8 +20,9 @@ def geometry(g: GenevaGeometry) -> ContactGeometry:
 def _engaged(mode) -> np.ndarray:
     """Whether each row's mode is 'engaged', compared by the column's own `==` where it is an array or a pandas
     column (pandas' string column through pyarrow: an hour's 2.2 million rows as Python strings take ten times as
-    long), any other sequence as a numpy array."""
-    return np.asarray((mode if hasattr(mode, "dtype") else np.asarray(mode)) == "engaged", dtype=bool)
+    long; a pandas Series by its array's `==`, at half the Series' own cost), any other sequence as a numpy array."""
+    values = getattr(mode, "array", mode)
+    return np.asarray((values if hasattr(values, "dtype") else np.asarray(values)) == "engaged", dtype=bool)
 
 
 def state(g: GenevaGeometry, table) -> dict[str, np.ndarray]:
@@ -60,7 +61,7 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
     t = np.asarray(df["t_s"], dtype=float)
     theta = np.asarray(df["crank_angle_rad"], dtype=float)
     w1 = np.asarray(df["crank_speed_rad_s"], dtype=float)
-    engaged = _engaged(df["mode"])
+    mode = df["mode"]
     found: list[float] = []
     kinds = (np.array([str(k) for k in events["kind"].tolist()], dtype=object) if len(events) and "kind" in events
              else np.array([], str))
@@ -73,9 +74,10 @@ def starts(g: GenevaGeometry, df, events) -> np.ndarray:
         found += np.interp(entries[inside], theta, t).tolist()
     if "flank switch" not in kinds:     # a closed form lists no flank switches: the normal force changes sign
         N = np.asarray(df["contact_force_N"], dtype=float)
+        engaged = _engaged(mode)
         flip = np.flatnonzero(engaged[1:] & engaged[:-1] & (np.sign(N[1:]) * np.sign(N[:-1]) < 0))
         found += [t[i] - N[i] * (t[i + 1] - t[i]) / (N[i + 1] - N[i]) for i in flip]
-    if len(t) and engaged[0] and w1[0] > 0:
+    if len(t) and (mode.iloc[0] if hasattr(mode, "iloc") else mode[0]) == "engaged" and w1[0] > 0:
         alpha = theta[0] - 2 * np.pi * np.floor((theta[0] + np.pi) / (2 * np.pi))
         found.append(t[0] - (alpha + a0) / w1[0])
     return np.sort(np.unique(np.asarray(found, dtype=float)))
