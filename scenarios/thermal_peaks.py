@@ -552,47 +552,46 @@ PROMISING = 8
 
 
 def _interval_rows(intervals: list[Interval]) -> tuple[list[int], np.ndarray, np.ndarray]:
-    """(the intervals with rows, their first rows, their last rows): what `_promising` reads of the intervals, made
-    once for the columns located over the same ones."""
+    """(the intervals with rows, their first rows, their last rows): what `_promising` reads of the intervals."""
     ks = [k for k, iv in enumerate(intervals) if len(iv.rows)]
     return (ks, np.array([intervals[k].rows[0] for k in ks], dtype=np.intp),
             np.array([intervals[k].rows[-1] for k in ks], dtype=np.intp))
 
 
-def _promising(f: np.ndarray, intervals: list[Interval], rows: tuple | None = None) -> list[Interval]:
-    """The intervals that may hold the column's maximum or minimum: those whose best row is within twice the
-    largest change between neighbouring rows of the interval (the most an extremum between rows, or at an end's
-    one-sided limit, can add to its rows: one step at that slope, twice for margin) of the best row, at most
-    PROMISING per sense, the best rows first and the earliest of equal ones (a tie goes to the earliest, as in
-    `dynamics/extrema.py`). A long cycle-averaged run has thousands of intervals, the periodic columns' equal.
-    rows: `_interval_rows(intervals)` where made already."""
-    valued = np.isfinite(f)
-    # the largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
-    largest = max(float(f.max(where=valued, initial=-np.inf)), -float(f.min(where=valued, initial=np.inf)))
-    tie = 1e-13 * largest if np.isfinite(largest) else 0.0
-    ks, first, last = _interval_rows(intervals) if rows is None else rows
+def _promising(F: np.ndarray, intervals: list[Interval]) -> list[list[Interval]]:
+    """For each column (a row of F): the intervals that may hold its maximum or minimum: those whose best row is
+    within twice the largest change between neighbouring rows of the interval (the most an extremum between rows,
+    or at an end's one-sided limit, can add to its rows: one step at that slope, twice for margin) of the best row,
+    at most PROMISING per sense, the best rows first and the earliest of equal ones (a tie goes to the earliest, as
+    in `dynamics/extrema.py`); every column's rows compared in one pass. A long cycle-averaged run has thousands of
+    intervals, the periodic columns' equal."""
+    ks, first, last = _interval_rows(intervals)
     if not ks:
-        return []
-    keep = set()
-    step = np.zeros(len(f))                     # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
-    np.subtract(f[1:], f[:-1], out=step[:-1])
+        return [[] for _ in F]
+    valued = np.isfinite(F)
+    # each column's largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
+    largest = np.maximum(F.max(axis=1, where=valued, initial=-np.inf), -F.min(axis=1, where=valued, initial=np.inf))
+    ties = np.where(np.isfinite(largest), 1e-13 * largest, 0.0).tolist()
+    step = np.zeros(F.shape)                    # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
+    with np.errstate(invalid="ignore"):         # (inf - inf: not finite, so 0 below)
+        np.subtract(F[:, 1:], F[:, :-1], out=step[:, :-1])
     np.abs(step, out=step)
     step[~np.isfinite(step)] = 0.0
     # the largest change between neighbours inside each interval (the step leaving its last row excluded)
-    step[last] = 0.0
-    slope = np.maximum.reduceat(step, first)
+    step[:, last] = 0.0
+    slope = np.maximum.reduceat(step, first, axis=1)
+    keep: list[set] = [set() for _ in F]
     for sense in (1.0, -1.0):
-        v = np.where(valued, sense * f, -np.inf)
-        top = np.maximum.reduceat(v, first)
+        top = np.maximum.reduceat(np.where(valued, sense * F, -np.inf), first, axis=1)
         top = np.where(last >= first, top, -np.inf)
-        ok = np.isfinite(top)
-        if not ok.any():
-            continue
-        floor = float(top[ok].max()) - tie
-        able = np.flatnonzero(ok & (top + 2.0 * slope >= floor))
-        order = sorted(able.tolist(), key=lambda i: (-(top[i] if top[i] < floor else floor), i))
-        keep.update(ks[i] for i in order[:PROMISING])
-    return [intervals[k] for k in sorted(keep)]
+        for c, (tc, ok, tie) in enumerate(zip(top, np.isfinite(top), ties)):
+            if not ok.any():
+                continue
+            floor = float(tc[ok].max()) - tie
+            able = np.flatnonzero(ok & (tc + 2.0 * slope[c] >= floor))
+            order = sorted(able.tolist(), key=lambda i: (-(tc[i] if tc[i] < floor else floor), i))
+            keep[c].update(ks[i] for i in order[:PROMISING])
+    return [[intervals[k] for k in sorted(mine)] for mine in keep]
 
 
 def _apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> list[tuple[float, str]]:
@@ -619,6 +618,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
                                           read_all)
     values = {c: np.asarray(cols[c], float) for c in columns}
+    F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
     kinks = getattr(reader, "kinks", None)
     events_breaks = _breaks(events)
@@ -629,8 +629,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
             near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
             breaks = sorted(breaks + _apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
         intervals = intervals_of(t, breaks, lo, hi, *kinds)
-        rows = _interval_rows(intervals)
-        spans.append((intervals, {c: _promising(f, intervals, rows) for c, f in values.items()}))
+        spans.append((intervals, dict(zip(values, _promising(F, intervals)))))
     # `locate` of each column on its own intervals: every window's and column's plan made together, the readings of
     # all of them at once, then their finish
     planned = iter(column_plans(t, values, [(c, own) for _, owns in spans for c, own in owns.items()]))

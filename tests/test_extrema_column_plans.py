@@ -108,3 +108,19 @@ def test_a_series_per_window_finds_each_windows_candidates_as_alone(seed):
         own, own_bounds = _candidates_bounds(t, F[s:s + 1], ties[s:s + 1], w)
         assert got[2 * q:2 * q + 2] == own
         np.testing.assert_array_equal(bounds[2 * q:2 * q + 2], own_bounds)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_each_columns_promising_intervals_are_its_own(seed):
+    """The thermal columns' intervals worth refining (`thermal_peaks._promising`), found for all columns in one
+    pass: each column's are those it gets alone (its own tie and slopes, not another column's)."""
+    from mechsim.scenarios.thermal_peaks import _promising
+    rng = np.random.default_rng(200 + seed)
+    t, values = _table(rng, int(rng.integers(40, 300)), 4)
+    F = np.array(list(values.values()))
+    windows, _ = _spans(rng, t, values)
+    for intervals in windows:
+        together = _promising(F, intervals)
+        for c in range(len(F)):
+            assert [id(iv) for iv in together[c]] == [id(iv) for iv in _promising(F[c:c + 1], intervals)[0]]
+        assert any(together)
