@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of, tie_of
+from mechsim.dynamics.tables import TableColumns
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
                "(the network's states in the same DAE) and the thermal formulas evaluated there")
@@ -279,7 +280,8 @@ class ThermalReader(_KeptReadings):
     def __init__(self, thermal, traj, window: pd.DataFrame, events: pd.DataFrame, mech, settings, t_table_end: float):
         self.thermal, self.mech = thermal, mech
         self.reader = TrajectoryReader(traj, mech.angle_coordinates, settings)
-        t_win = window["t_s"].to_numpy(float)
+        columns = TableColumns(window)          # the window's column arrays, each read from the frame once
+        t_win = np.asarray(columns["t_s"], dtype=float)
         self.t_sim_end = float(traj.pieces[-1].t[-1])
         win_events = events if events is None or not len(events) else events[
             events["t_s"].to_numpy(float) <= self.t_sim_end]
@@ -291,7 +293,7 @@ class ThermalReader(_KeptReadings):
         self.t_win = t_win
         self.lows = np.array([iv.lo for iv in self.windows])
         self.highs = np.array([iv.hi for iv in self.windows])
-        self.starts = np.asarray(mech.contact_starts(window, win_events), dtype=float)
+        self.starts = np.asarray(mech.contact_starts(columns, win_events), dtype=float)
         self.solution = None
         self.cycle = t_table_end > self.t_sim_end * (1 + ROUNDOFF) + ROUNDOFF
         if self.cycle:
