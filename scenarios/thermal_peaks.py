@@ -498,32 +498,57 @@ class ClosedFormThermalReader(_KeptReadings):
         a, P = self.solution["t_start"], self.solution["period"]
         return np.where(t <= self.t_sim, t, a + np.mod(t - a, P))
 
-    def _network(self, t: np.ndarray) -> np.ndarray | None:
-        """The network's states (with the bookkeeping energies; NaN after the simulated rows) at the instants t."""
+    def _networks(self, times: list[np.ndarray]) -> list[np.ndarray | None]:
+        """The network's states (with the bookkeeping energies; NaN after the simulated rows) at each array of
+        instants, every integration from a row run together (`states_between_rows_many`)."""
         if self.states is None:
-            return None
-        from mechsim.thermal.exact import states_between_rows
+            return [None] * len(times)
+        from mechsim.thermal.exact import states_between_rows_many
         n = self.thermal.setup.system.size
-        out = np.full((len(t), self.states.shape[1]), np.nan)
-        late = t > self.t_sim if self.cycle else np.zeros(len(t), bool)
-        if late.any():
-            out[late, :n] = self.thermal.cycle_states(self.solution, t[late])
-        if not late.all():
-            out[~late] = states_between_rows(self.network, self.inputs, self.breaks, self.t_win, self.states, t[~late],
-                                             self.thermal.quadrature_piece)
-        return out
+        outs, early = [], []
+        for t in times:
+            out = np.full((len(t), self.states.shape[1]), np.nan)
+            late = t > self.t_sim if self.cycle else np.zeros(len(t), bool)
+            if late.any():
+                out[late, :n] = self.thermal.cycle_states(self.solution, t[late])
+            if not late.all():
+                early.append((out, ~late, t[~late]))
+            outs.append(out)
+        if early:
+            got = states_between_rows_many(self.network, self.inputs, self.breaks, self.t_win, self.states,
+                                           [t for _, _, t in early], self.thermal.quadrature_piece)
+            for (out, mask, _), states in zip(early, got):
+                out[mask] = states
+        return outs
 
     def _columns(self, iv: Interval, position: int, times: np.ndarray) -> tuple[dict, np.ndarray | None, np.ndarray]:
         """(the closed form's columns at the instants, the network's states there, the times since the contact
         began) for the thermal columns (`_KeptReadings._readings`)."""
-        frame = {k: _column(v) for k, v in self.mechanics(iv, position, times).items()}
-        # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
-        eps = 1e-12 * max(1.0, abs(iv.hi))
-        inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
-        at = self._window_time(inner)
-        if self.cycle:
-            frame["window_t_s"] = at
-        return frame, self._network(inner), self.thermal._time_since(at, self.starts)
+        got = self._columns_many([(iv, position, times)])[0]
+        if isinstance(got, ReadingFailed):
+            raise got
+        return got
+
+    def _columns_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
+        """`_columns` of each request (or its ReadingFailed), the network's states of all of them integrated
+        together (`_networks`: one evaluation of the heat input)."""
+        out: list = []
+        for iv, position, times in requests:
+            try:
+                frame = {k: _column(v) for k, v in self.mechanics(iv, position, times).items()}
+            except ReadingFailed as error:
+                out.append(error)
+                continue
+            # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
+            eps = 1e-12 * max(1.0, abs(iv.hi))
+            inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
+            at = self._window_time(inner)
+            if self.cycle:
+                frame["window_t_s"] = at
+            out.append((frame, inner, at))
+        networks = iter(self._networks([got[1] for got in out if not isinstance(got, ReadingFailed)]))
+        return [got if isinstance(got, ReadingFailed) else
+                (got[0], next(networks), self.thermal._time_since(got[2], self.starts)) for got in out]
 
 
 def thermal_reader(source, events: pd.DataFrame, t_table_end: float, mechanics=None):

@@ -240,14 +240,35 @@ class ModalNetwork:
         Per interval h (split at the breaks): z <- e^{lambda h} z + sum_j h w_j e^{lambda h (1 - x_j)} g_j, and
         int z = h phi1(lambda h) z + sum_j h w_j h (1 - x_j) phi1(lambda h (1 - x_j)) g_j, g_j the modal forcing.
         """
-        t_out = np.asarray(t_out, dtype=float)
-        cuts = np.unique(np.concatenate([t_out, [b for b in breaks if t_out[0] < b < t_out[-1]]]))
-        if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
-            cuts = np.unique(np.concatenate([cuts, _interior_points(cuts, max_piece)]))
-        h = np.diff(cuts)
+        return self.integrate_many(inputs, [(t_out, y0)], breaks, nodes, max_piece)[0]
+
+    def integrate_many(self, inputs: Callable[[np.ndarray], np.ndarray], starts: list[tuple[np.ndarray, np.ndarray]],
+                       breaks: list[float], nodes: int = QUADRATURE_NODES, max_piece: float | None = None
+                       ) -> list[np.ndarray]:
+        """`integrate` of each (t_out, y0) of `starts`, each on its own pieces (the same states as one at a time):
+        the heat input evaluated at every start's quadrature nodes in one call (an input's evaluation, the closed
+        form's, has a fixed cost that dominates a short integration's)."""
         x, w = _gauss_legendre(nodes)
-        u = np.asarray(inputs((cuts[:-1, None] + h[:, None] * x[None, :]).ravel()), dtype=float)
-        u = u.reshape(u.shape[0], len(h), nodes)
+        pieces = []
+        for t_out, y0 in starts:
+            t_out = np.asarray(t_out, dtype=float)
+            cuts = np.unique(np.concatenate([t_out, [b for b in breaks if t_out[0] < b < t_out[-1]]]))
+            if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
+                cuts = np.unique(np.concatenate([cuts, _interior_points(cuts, max_piece)]))
+            pieces.append((t_out, y0, cuts, np.diff(cuts)))
+        U = np.asarray(inputs(np.concatenate([(cuts[:-1, None] + h[:, None] * x[None, :]).ravel()
+                                              for _, _, cuts, h in pieces])), dtype=float)
+        out, a = [], 0
+        for t_out, y0, cuts, h in pieces:
+            u = U[:, a:a + len(h) * nodes].reshape(U.shape[0], len(h), nodes)
+            a += len(h) * nodes
+            out.append(self._advanced(u, t_out, y0, cuts, h, x, w))
+        return out
+
+    def _advanced(self, u: np.ndarray, t_out: np.ndarray, y0: np.ndarray, cuts: np.ndarray, h: np.ndarray,
+                  x: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """`integrate`'s states at t_out from y0 over the pieces h between the cuts, u the inputs at each piece's
+        quadrature nodes x (weights w): (inputs, pieces, nodes)."""
         m = self.Bm.shape[1]
         g = self.b0[:, None, None] + np.einsum("im,mkj->ikj", self.Bm, u[:m])         # (n, K, nodes)
         lam = self.lam[:, None]
@@ -291,18 +312,32 @@ def states_between_rows(network: ModalNetwork, inputs: Callable, breaks: list[fl
     integrated exactly in the modes (`ModalNetwork.integrate`, split at the breaks) from the row at or before it (the
     first row for an instant before it), as the rows themselves were: so a reading between rows is the solution
     the rows sample, whatever the rows' spacing (to the quadrature's error on the pieces between them)."""
-    times = np.asarray(times, dtype=float)
-    out = np.empty((len(times), rows.shape[1]))
-    at = np.clip(np.searchsorted(t_rows, times, side="right") - 1, 0, len(t_rows) - 1)
-    for r in np.unique(at).tolist():
-        pick = np.flatnonzero(at == r)
-        out[pick] = rows[r]
-        ahead = times[pick] > t_rows[r]
-        if ahead.any():
-            later = np.unique(times[pick][ahead])
-            got = network.integrate(inputs, np.r_[t_rows[r], later], rows[r], breaks, max_piece=max_piece)[1:]
-            out[pick[ahead]] = got[np.searchsorted(later, times[pick][ahead])]
-    return out
+    return states_between_rows_many(network, inputs, breaks, t_rows, rows, [times], max_piece)[0]
+
+
+def states_between_rows_many(network: ModalNetwork, inputs: Callable, breaks: list[float], t_rows: np.ndarray,
+                             rows: np.ndarray, times: list[np.ndarray], max_piece: float | None = None
+                             ) -> list[np.ndarray]:
+    """`states_between_rows` of each array of instants in `times`, each on its own (the same states as one at a
+    time), every integration from a row run together (`ModalNetwork.integrate_many`: one evaluation of the input)."""
+    outs, starts, places = [], [], []
+    for ts in times:
+        ts = np.asarray(ts, dtype=float)
+        out = np.empty((len(ts), rows.shape[1]))
+        at = np.clip(np.searchsorted(t_rows, ts, side="right") - 1, 0, len(t_rows) - 1)
+        for r in np.unique(at).tolist():
+            pick = np.flatnonzero(at == r)
+            out[pick] = rows[r]
+            ahead = ts[pick] > t_rows[r]
+            if ahead.any():
+                later = np.unique(ts[pick][ahead])
+                starts.append((np.r_[t_rows[r], later], rows[r]))
+                places.append((out, pick[ahead], np.searchsorted(later, ts[pick][ahead])))
+        outs.append(out)
+    for (out, rows_at, index), got in zip(places, network.integrate_many(inputs, starts, breaks,
+                                                                         max_piece=max_piece) if starts else []):
+        out[rows_at] = got[1:][index]
+    return outs
 
 
 def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: float, t_out: np.ndarray,
