@@ -380,6 +380,11 @@ class Mechanism(ABC):
         """Build from validated scenario sections (SI values); raise ValueError naming a field on bad input."""
         raise NotImplementedError
 
+    #: whether `closed_form`'s columns at an instant depend on that instant and the first one alone (its angle's
+    #: origin), not on the instants between: its readings between rows then evaluate only the instants they ask for
+    #: (scenarios/peaks.py `_closed_form_reader`); else each reading evaluates its interval's rows with them
+    closed_form_pointwise: bool = False
+
     def closed_form(self, t: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray] | None:
         """Time series at a prescribed constant drive speed without a DAE, or None if there is none.
 

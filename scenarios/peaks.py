@@ -86,6 +86,8 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     angle from the run's first instant, and a mechanism's branch may follow the motion's history (the chain's
     apex law)."""
     mech, speed = source.mech, source.drive.speed
+    if mech.closed_form_pointwise:
+        return _pointwise_reader(mech, angle0, speed, t_rows[:1])
     # the table's instants in order (as a run's are): the rows from an instant on, and those before or after one, are
     # found by bisection, not by comparing every row (an hour's table read a hundred times)
     ordered = bool((t_rows[1:] >= t_rows[:-1]).all())
@@ -129,6 +131,36 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
             if not np.allclose(got, own, rtol=1e-9, atol=1e-12, equal_nan=True):     # every column's rows at once
                 return None
         return frame
+    return read
+
+
+def _pointwise_reader(mech, angle0: float, speed: float, t0: np.ndarray):
+    """`_closed_form_reader` of a closed form whose columns at an instant depend on it and the first instant `t0`
+    alone (`Mechanism.closed_form_pointwise`): the instants asked for, after t0, and nothing between (the same
+    operations on each instant as on the table's rows); `read_many` reads many requests in one evaluation."""
+    def read_many(requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict]:
+        inner = []
+        for iv, _, times in requests:          # an interval's ends 1e-12 s inside: the one-sided limits there
+            eps = 1e-12 * max(1.0, abs(iv.hi))
+            inner.append(np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times)
+        at = np.concatenate([t0, *inner])
+        cols = mech.closed_form(at, angle0, speed)
+        cols.pop("powers", None)
+        cols.pop("events", None)
+        n = len(at)
+        full = {name: np.broadcast_to(np.asarray(v), (n,)) for name, v in cols.items()
+                if np.ndim(v) == 0 or len(np.ravel(v)) == n}
+        out, a = [], 1
+        for (_, _, times), x in zip(requests, inner):
+            frame = {name: v[a:a + len(x)] for name, v in full.items()}
+            frame["t_s"] = times
+            out.append(frame)
+            a += len(x)
+        return out
+
+    def read(iv: Interval, position: int, times: np.ndarray) -> dict:
+        return read_many([(iv, position, times)])[0]
+    read.read_many = read_many
     return read
 
 

@@ -30,7 +30,7 @@ from collections.abc import Mapping, MutableMapping
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of, tie_of
+from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of, read_all, tie_of
 from mechsim.dynamics.tables import TableColumns
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
@@ -530,12 +530,14 @@ class ClosedFormThermalReader(_KeptReadings):
         return got
 
     def _columns_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list:
-        """`_columns` of each request (or its ReadingFailed), the network's states of all of them integrated
-        together (`_networks`: one evaluation of the heat input)."""
+        """`_columns` of each request (or its ReadingFailed): the closed form of all of them read together where its
+        reader reads many (`read_all`), the network's states of all of them integrated together (`_networks`: one
+        evaluation of the heat input)."""
         out: list = []
-        for iv, position, times in requests:
+        for (iv, position, times), reading in zip(requests, read_all(self.mechanics, requests)):
             try:
-                frame = {k: _column(v) for k, v in self.mechanics(iv, position, times).items()}
+                reading = reading if reading is not None else self.mechanics(iv, position, times)
+                frame = {k: _column(v) for k, v in reading.items()}
             except ReadingFailed as error:
                 out.append(error)
                 continue
@@ -642,8 +644,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
-    from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
-                                          read_all)
+    from mechsim.dynamics.extrema import column_plans, end_guesses, end_limit_requests, end_limits, finish_all
     values = {c: np.asarray(cols[c], float) for c in columns}
     F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}

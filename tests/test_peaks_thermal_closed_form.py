@@ -94,3 +94,20 @@ def test_cycle_averaged_closed_form_peaks_do_not_move_with_the_output_step(runs)
     peak = one["temp_contact_C"]["max"]
     assert peak["t_s"] > got[1].summary["thermal"]["cycle"]["mechanics_simulated_until_s"]      # after the window
     assert peak["value"] - np.nanmax(got[4].timeseries["temp_contact_C"]) > 1e-4
+
+
+@pytest.mark.parametrize("name, extra", [("geneva-seed-lc1-mu015", ()), ("geneva-lc1", ("duration=1 s",)),
+                                         ("internal-geneva-speed", ('thermal.model="lumped"',))])
+def test_pointwise_readings_equal_the_readings_on_the_interval_rows(name, extra, monkeypatch):
+    """A pointwise closed form (the Geneva's: `Mechanism.closed_form_pointwise`) is read between rows on the instants
+    asked for alone, many readings in one evaluation; every located peak, mechanical and thermal, and every table is
+    the same to the bit as reading each instant with its interval's rows around it (the general reader, which a
+    closed form that follows the motion's history needs)."""
+    from mechsim.mechanisms.geneva.model import Geneva
+    sc = mechsim.load(name, set=[*extra, "output.plots=false"])
+    fast = mechsim.run(sc)
+    monkeypatch.setattr(Geneva, "closed_form_pointwise", False)
+    general = mechsim.run(sc)
+    assert fast.summary["peaks"] == general.summary["peaks"]
+    assert fast.timeseries.equals(general.timeseries) and fast.events.equals(general.events)
+    assert any("located" in entry.get("how", "") for entry in fast.summary["peaks"].values())

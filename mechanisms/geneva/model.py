@@ -62,6 +62,8 @@ class Geneva(Mechanism):
     STOPPED_SPEED = 1e-3   # rad/s
 
     has_sliding_contact = True
+    #: the closed form at constant crank speed is a function of each instant (the angle from the first instant's)
+    closed_form_pointwise = True
     peak_columns = ("contact_force_N", "drive_torque_N_m", "wheel_speed_rad_s", "wheel_accel_rad_s2", "slip_speed_m_s",
                     "friction_power_W", "crank_speed_rad_s", "crank_accel_rad_s2")
     drawing = "mechsim.mechanisms.geneva.drawing:GenevaDrawing"
