@@ -82,14 +82,19 @@ def test_dae_and_closed_form_give_the_same_temperatures(lumped_pair, one_d_pair)
     assert "same IDA run" in dae.summary["thermal"]["why"] and "no DAE" in cf.summary["thermal"]["why"]
 
 
-def test_closed_form_path_equals_the_thermal_package_integrator():
-    """The modal exponential integrator of the closed-form path against LinearThermalSystem.integrate (Radau)."""
+def _closed_form_lc1():
+    """geneva-lc1 over 1.2 s at its prescribed speed: (its thermal plan, the closed form's columns, the heat input)."""
     sc = load("geneva-lc1", ["duration=1.2 s"])
     mech = build_mechanism(sc.si)
     pl = plan(sc.si, mech, make_drive(sc.si), "closed-form")
-    ext = pl.setup.extension
     columns = closed_form_columns(mech, -math.pi, 5.34)
-    inputs = input_function(ext, mech, columns)
+    return pl, columns, input_function(pl.setup.extension, mech, columns)
+
+
+def test_closed_form_path_equals_the_thermal_package_integrator():
+    """The modal exponential integrator of the closed-form path against LinearThermalSystem.integrate (Radau)."""
+    pl, columns, inputs = _closed_form_lc1()
+    ext = pl.setup.extension
     t = np.linspace(0.0, 1.2, 1201)
     breaks = switch_times(columns, t)
     assert len(breaks) == 3                       # entry, slip reversal, exit
@@ -113,12 +118,8 @@ def test_readings_between_rows_together_equal_each_alone():
     one evaluation of the heat input for all their integrations) equal each reading's own, to the bit; and a state
     read between rows is the one integrating through that instant gives (to round-off: both are exact in the modes
     and the quadrature's error on 10 ms pieces is below it; ~100 steps on 293 K carry about 1e-12 K)."""
-    sc = load("geneva-lc1", ["duration=1.2 s"])
-    mech = build_mechanism(sc.si)
-    pl = plan(sc.si, mech, make_drive(sc.si), "closed-form")
+    pl, columns, inputs = _closed_form_lc1()
     ext = pl.setup.extension
-    columns = closed_form_columns(mech, -math.pi, 5.34)
-    inputs = input_function(ext, mech, columns)
     t = np.linspace(0.0, 1.2, 121)
     breaks = switch_times(columns, t)
     network = ModalNetwork(ext.system, ext.loss)
