@@ -58,6 +58,12 @@ class Interval:
     rows: np.ndarray
     anchors: list | np.ndarray = field(default_factory=list)
 
+    def inside(self, times: np.ndarray) -> np.ndarray:
+        """The instants with the interval's ends moved 1e-12 s (relative to its time scale) inside it, where it is
+        longer than that: a reading at an end is the one-sided limit there."""
+        eps = 1e-12 * max(1.0, abs(self.hi))
+        return np.clip(times, self.lo + eps, self.hi - eps) if self.hi - self.lo > 4 * eps else times
+
 
 @dataclass
 class Extremum:

@@ -101,8 +101,7 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
         return t_rows if i <= starts else np.concatenate([t_rows[:starts], t_rows[i:]])
 
     def read(iv: Interval, position: int, times: np.ndarray) -> dict:
-        eps = 1e-12 * max(1.0, abs(iv.hi))
-        inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
+        inner = iv.inside(times)
         frame = _evaluate(inner, since(iv.lo), iv.hi)
         if frame is None:             # the interval's rows alone did not reproduce the table: the whole history
             frame = _evaluate(inner, t_rows, iv.hi)
@@ -118,12 +117,9 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
             before = history[history < inner.min()]
             after = history[(history > inner.max()) & (history <= hi)]
         at = np.concatenate([before, inner, after])
-        cols = mech.closed_form(at, angle0, speed)
-        cols.pop("powers", None)
-        cols.pop("events", None)
-        n, k = len(at), len(before)
-        frame = {name: np.broadcast_to(np.asarray(v), (n,))[k:k + len(inner)] for name, v in cols.items()
-                 if np.ndim(v) == 0 or len(np.ravel(v)) == n}
+        cols = _closed_form_at(mech, at, angle0, speed)
+        k = len(before)
+        frame = {name: v[k:k + len(inner)] for name, v in cols.items()}
         if len(history) < len(t_rows) and check:    # a shortened history must give the table's own rows
             i = t_rows.searchsorted(at[:k])
             got = np.array([np.asarray(cols[name], float)[:k] for name in check])
@@ -134,22 +130,24 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     return read
 
 
+def _closed_form_at(mech, at: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
+    """The closed form's columns at the instants `at`, each an array of their length (a scalar column broadcast;
+    its powers and events, and a column of another length, left out)."""
+    cols = mech.closed_form(at, angle0, speed)
+    cols.pop("powers", None)
+    cols.pop("events", None)
+    n = len(at)
+    return {name: np.broadcast_to(np.asarray(v), (n,)) for name, v in cols.items()
+            if np.ndim(v) == 0 or len(np.ravel(v)) == n}
+
+
 def _pointwise_reader(mech, angle0: float, speed: float, t0: np.ndarray):
     """`_closed_form_reader` of a closed form whose columns at an instant depend on it and the first instant `t0`
     alone (`Mechanism.closed_form_pointwise`): the instants asked for, after t0, and nothing between (the same
     operations on each instant as on the table's rows); `read_many` reads many requests in one evaluation."""
     def read_many(requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict]:
-        inner = []
-        for iv, _, times in requests:          # an interval's ends 1e-12 s inside: the one-sided limits there
-            eps = 1e-12 * max(1.0, abs(iv.hi))
-            inner.append(np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times)
-        at = np.concatenate([t0, *inner])
-        cols = mech.closed_form(at, angle0, speed)
-        cols.pop("powers", None)
-        cols.pop("events", None)
-        n = len(at)
-        full = {name: np.broadcast_to(np.asarray(v), (n,)) for name, v in cols.items()
-                if np.ndim(v) == 0 or len(np.ravel(v)) == n}
+        inner = [iv.inside(times) for iv, _, times in requests]
+        full = _closed_form_at(mech, np.concatenate([t0, *inner]), angle0, speed)
         out, a = [], 1
         for (_, _, times), x in zip(requests, inner):
             frame = {name: v[a:a + len(x)] for name, v in full.items()}

@@ -541,9 +541,7 @@ class ClosedFormThermalReader(_KeptReadings):
             except ReadingFailed as error:
                 out.append(error)
                 continue
-            # the instants the closed form read (an interval's ends 1e-12 s inside: the one-sided limits there)
-            eps = 1e-12 * max(1.0, abs(iv.hi))
-            inner = np.clip(times, iv.lo + eps, iv.hi - eps) if iv.hi - iv.lo > 4 * eps else times
+            inner = iv.inside(times)          # the instants the closed form read (`Interval.inside`)
             at = self._window_time(inner)
             if self.cycle:
                 frame["window_t_s"] = at
