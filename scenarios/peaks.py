@@ -420,6 +420,13 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         from mechsim.scenarios.thermal_peaks import locate_thermal
         heats = locate_thermal(treader, t, cols, thermal, events, [(lo, hi if label == "startup" else float(t[-1]),
                                                                     kinds[label]) for lo, hi, label in windows])
+        # the growth toward the event next to a thermal column's extremum: every window's and column's first approach
+        # read together (the thermal reader keeps them for `singular_approaches`)
+        firsts = [x for heat in heats for c, (got, intervals) in heat.items()
+                  for x in _first_approaches(c, np.asarray(cols[c], dtype=float), got, intervals)]
+        if firsts:
+            treader.read_many([r for r, _ in _growth_requests(list({(id(iv), side): (iv, side)
+                                                                   for iv, side in firsts}.values()), h)])
     for (lo, hi, label), got, intervals, heat in zip(windows, located, spans, heats):
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
         # run's table continues the simulated window periodically)
