@@ -84,9 +84,9 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     """Every closed-form column at any instants, at an interval's ends 1e-12 s inside (the one-sided limits). The
     closed form is evaluated on the table's own instants with the new ones among them, in time order: it counts the
     angle from the run's first instant, and a mechanism's branch may follow the motion's history (the chain's apex
-    law). `read_many` takes many readings in few evaluations: requests whose rows lie close together share one
-    (`_groups`), its history the first instant's rows and the rows from the group's first interval start to its last
-    instant, checked against the table where it skips rows (else the whole history up to there)."""
+    law). That history is shortened to what it depends on: the first instant's rows, the rows where an unwrapped angle
+    of the table crosses a quarter turn (`turns`) and the row before each instant, checked against the table (else
+    the whole history up to there); `read_many` takes many readings in one evaluation."""
     mech, speed = source.mech, source.drive.speed
     if mech.closed_form_pointwise:
         return _pointwise_reader(mech, angle0, speed, t_rows[:1])
@@ -96,18 +96,29 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     perm = None if ordered else np.argsort(t_rows, kind="stable")
     ts = t_rows if perm is None else t_rows[perm]
     starts = int(ts.searchsorted(ts[0], side="right")) if len(ts) else 0
+    # the rows on either side of each crossing of a quarter turn by an unwrapped angle of the table: between them and
+    # the rows from an interval on, neighbours differ by less than a quarter turn, so a history of these rows unwraps
+    # the angles as one of every row does (to round-off)
+    angles = [np.asarray(table[c], dtype=float) for c in check if c.endswith("_angle_rad")]
+    turns = np.zeros(0, dtype=np.intp)
+    if angles and len(ts) > 1:
+        quarter = np.floor(np.array(angles if perm is None else [a[perm] for a in angles]) / (0.5 * np.pi))
+        cross = np.flatnonzero((quarter[:, 1:] != quarter[:, :-1]).any(axis=0))
+        turns = np.union1d(cross, cross + 1)
 
-    def evaluate(lo: float, asked: np.ndarray) -> dict:
-        """Every column at the instants `asked`, from the history of an interval starting at lo: where that skips
-        more rows than GROUP_GAP_ROWS, the first instant's rows and those from the last row before lo to the last
-        instant asked, checked against the table (a shortened history must give the table's own rows); else, or
-        where the check fails, all rows up to there."""
+    def evaluate(asked: np.ndarray) -> dict:
+        """Every column at the instants `asked`: from the history of the first instant's rows, the `turns` up to the
+        last instant and the row at or before each instant, checked against the table (a shortened history must give
+        the table's own rows); where the check fails, from all rows up to the last instant."""
         last = int(ts.searchsorted(asked.max(), side="right")) if len(asked) else starts
-        first = max(int(ts.searchsorted(lo, side="left")) - 1, starts)
-        if first > starts + GROUP_GAP_ROWS:
-            got = _at(np.concatenate([np.arange(starts), np.arange(first, max(first, last))]), asked, True)
-            if got is not None:
-                return got
+        if last > starts:
+            rows = np.union1d(turns[turns.searchsorted(starts):turns.searchsorted(last)],
+                              ts.searchsorted(asked, side="right") - 1)
+            rows = np.concatenate([np.arange(starts), rows[rows >= starts]])
+            if len(rows) < last:
+                got = _at(rows, asked, True)
+                if got is not None:
+                    return got
         return _at(np.arange(max(last, starts)), asked, False)
 
     def _at(rows: np.ndarray, asked: np.ndarray, checked: bool) -> dict | None:
@@ -125,11 +136,12 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
         return {name: np.asarray(v)[place[len(rows):]] for name, v in cols.items()}
 
     def read_many(requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict]:
-        """Each request's columns, the requests evaluated in groups (`_groups`)."""
+        """Each request's columns: every request with instants, all finite, in one evaluation; any other alone."""
         inner = [np.asarray(iv.inside(times), dtype=float) for iv, _, times in requests]
+        together = [r for r, x in enumerate(inner) if len(x) and np.isfinite(x).all()]
         out: list = [None] * len(requests)
-        for group in _groups([iv.lo for iv, _, _ in requests], inner):
-            cols = evaluate(min(requests[r][0].lo for r in group), np.concatenate([inner[r] for r in group]))
+        for group in [together] * bool(together) + [[r] for r in range(len(requests)) if r not in set(together)]:
+            cols = evaluate(np.concatenate([inner[r] for r in group]))
             a = 0
             for r in group:
                 frame = {name: v[a:a + len(inner[r])] for name, v in cols.items()}
@@ -138,37 +150,10 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
                 a += len(inner[r])
         return out
 
-    def _groups(los: list[float], inner: list[np.ndarray]) -> list[list[int]]:
-        """The requests in groups evaluated together: in order of their intervals' starts, a request joins the group
-        before it where the rows between that group's last instant and its start cost less to evaluate than an
-        evaluation of its own (GROUP_GAP_ROWS); a request with an instant not finite alone."""
-        first = ts.searchsorted(np.asarray(los, dtype=float), side="left")
-        groups: list[list[int]] = []
-        alone: list[list[int]] = []
-        end = None
-        for r in np.argsort(first, kind="stable").tolist():
-            x = inner[r]
-            if not (len(x) and np.isfinite(x).all()):
-                alone.append([r])
-                continue
-            last = int(ts.searchsorted(x.max(), side="right"))
-            if end is not None and first[r] <= end + GROUP_GAP_ROWS:
-                groups[-1].append(r)
-                end = max(end, last)
-            else:
-                groups.append([r])
-                end = last
-        return groups + alone
-
     def read(iv: Interval, position: int, times: np.ndarray) -> dict:
         return read_many([(iv, position, times)])[0]
     read.read_many = read_many
     return read
-
-
-#: rows of a closed form evaluated in about the time of one evaluation's own cost (the chain's: 0.85 ms for a few
-#: instants, about 0.7 us a row more): a reading this close to the group before it joins it (`_closed_form_reader`)
-GROUP_GAP_ROWS = 1000
 
 
 def _closed_form_at(mech, at: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
@@ -187,7 +172,7 @@ def _pointwise_reader(mech, angle0: float, speed: float, t0: np.ndarray):
     alone (`Mechanism.closed_form_pointwise`): the instants asked for, after t0, and nothing between (the same
     operations on each instant as on the table's rows); `read_many` reads many requests in one evaluation."""
     def read_many(requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict]:
-        """Each request's columns, the requests evaluated in groups (`_groups`)."""
+        """Each request's columns, all requests in one evaluation."""
         inner = [iv.inside(times) for iv, _, times in requests]
         full = _closed_form_at(mech, np.concatenate([t0, *inner]), angle0, speed)
         out, a = [], 1

@@ -17,13 +17,15 @@ COLUMNS = {"chain-mech2-kinematic": ("crank_angle_rad", "coupler_angle_rad", "co
            "rolling-c-cusp": ("coupler_angle_rad", "rolling_angle_rad", "rolling_speed_rad_s", "contact_force_N")}
 
 
-def _reader_and_table(name: str, monkeypatch):
-    """The reader a run of `name` located its peaks with, and the run's table."""
+def _reader_and_table(name: str, monkeypatch, arguments: list | None = None):
+    """The reader a run of `name` located its peaks with, and the run's table (arguments: filled with the reader's)."""
     made = []
     real = peaks._closed_form_reader
 
-    def keep(*args, **kwargs):
-        made.append(real(*args, **kwargs))
+    def keep(*args):
+        made.append(real(*args))
+        if arguments is not None:
+            arguments.extend(args)
         return made[-1]
     monkeypatch.setattr(peaks, "_closed_form_reader", keep)
     result = mechsim.run(mechsim.load(name, set=["output.plots=false"]))
@@ -62,7 +64,8 @@ def test_readings_together_equal_the_table_and_each_reading_alone(name, monkeypa
     together = read.read_many(requests)
     evaluations_together = len(sizes)
     alone = [read(*r) for r in requests]
-    assert evaluations_together < len(requests) <= len(sizes) - evaluations_together
+    assert evaluations_together == 1 and len(sizes) - evaluations_together >= len(requests)
+    assert sizes[0] < n // 4                          # the history shortened to what the readings depend on
     for (iv, _, times), a, b in zip(requests, together, alone):
         np.testing.assert_array_equal(a["t_s"], times)
         on_rows = np.isin(times, t)
@@ -75,38 +78,45 @@ def test_readings_together_equal_the_table_and_each_reading_alone(name, monkeypa
                                        atol=1e-10 * np.abs(df[c]).max())
 
 
-def test_a_shortened_history_that_miscounts_the_turns_is_caught(monkeypatch):
-    """The rolling pair's crank turns: a history that skips the rows between the run's first instant and a late
-    interval would unwrap the angles across many turns at once. The check against the table must reject it, and the
-    reading is then taken over the whole history: the angles are the table's, turns included."""
+def test_a_late_reading_counts_the_turns_from_a_short_history(monkeypatch):
+    """The rolling pair's rolling angle turns four times: a reading late in the run is evaluated from a history of a
+    few rows (the first instant's, those where an angle crosses a quarter turn, the row before each instant), not from
+    every row before it, and counts the turns as the table does."""
     read, df = _reader_and_table("rolling-c-cusp", monkeypatch)
     t, angle = df["t_s"].to_numpy(float), df["rolling_angle_rad"].to_numpy(float)
-    assert angle.max() - angle.min() > 4 * np.pi              # several turns: a miscount would show
+    assert angle.max() - angle.min() > 6 * np.pi              # several turns: a miscount would show
     k = len(t) - 20
     iv = Interval(float(t[k - 3]), float(t[k + 3]), "start", "end", np.arange(k - 3, k + 4))
     sizes = _evaluations(monkeypatch)
     got = read(iv, 0, t[k - 1:k + 2])
-    np.testing.assert_allclose(got["rolling_angle_rad"], angle[k - 1:k + 2], rtol=1e-10)
-    # the shortened history first (a few rows), then the whole history up to the reading (its check failed)
-    assert len(sizes) == 2 and sizes[0] < 20 and sizes[1] > k
+    np.testing.assert_allclose(got["rolling_angle_rad"], angle[k - 1:k + 2], rtol=1e-12)
+    assert len(sizes) == 1 and sizes[0] < k // 10
 
 
-def test_requests_far_apart_are_evaluated_apart(monkeypatch):
-    """Requests whose rows lie far apart (more than GROUP_GAP_ROWS) are not evaluated together: one evaluation over
-    the rows between would cost more than one of their own."""
-    read, df = _reader_and_table("chain-mech2-kinematic", monkeypatch)
-    t = df["t_s"].to_numpy(float)
-    gap = peaks.GROUP_GAP_ROWS
-    monkeypatch.setattr(peaks, "GROUP_GAP_ROWS", 5)
-    requests = [(Interval(float(t[k - 3]), float(t[k + 3]), "start", "end", np.arange(k - 3, k + 4)), 0, t[k:k + 1])
-                for k in (100, 110, 400, 405)]
+@pytest.mark.parametrize("change", ["a turn off from the middle on", "a located column off next to the reading"])
+def test_a_history_that_does_not_reproduce_the_table_is_not_used(change, monkeypatch):
+    """Where the shortened history's rows do not give the table's own values (a table whose rolling angle is a turn
+    off from the middle of the run on; one whose located column is off by 1e-6 on the rows around the reading), the
+    check rejects it and the reading is taken from every row up to it."""
+    arguments: list = []
+    _reader_and_table("rolling-c-cusp", monkeypatch, arguments)
+    source, angle0, t, table, check = arguments
+    k = len(t) - 20
+    if change.startswith("a turn"):
+        name = "rolling_angle_rad"
+        off = np.where(t > t[len(t) // 2], table[name] + 2 * np.pi, table[name])
+    else:
+        name = next(c for c in check if not c.endswith("_angle_rad"))
+        off = table[name].copy()
+        off[k - 2:k + 3] *= 1 + 1e-6
+    assert name in check
+    read = peaks._closed_form_reader(source, angle0, t, dict(table, **{name: off}), check)
+    iv = Interval(float(t[k - 3]), float(t[k + 3]), "start", "end", np.arange(k - 3, k + 4))
     sizes = _evaluations(monkeypatch)
-    read.read_many(requests)
-    assert len(sizes) == 3                       # 100 and 110 are 10 rows apart, 400 and 405 2 rows
-    monkeypatch.setattr(peaks, "GROUP_GAP_ROWS", gap)
-    sizes.clear()
-    read.read_many(requests)
-    assert len(sizes) == 1
+    got = read(iv, 0, t[k - 1:k + 2])
+    assert len(sizes) == 2 and sizes[0] < k // 10 and sizes[1] >= k
+    # from every row: the closed form's own values (the true table's), not the changed ones
+    np.testing.assert_allclose(got[name], table[name][k - 1:k + 2], rtol=1e-12)
 
 
 def test_a_request_without_instants_is_read_alone(monkeypatch):
