@@ -96,9 +96,9 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     perm = None if ordered else np.argsort(t_rows, kind="stable")
     ts = t_rows if perm is None else t_rows[perm]
     starts = int(ts.searchsorted(ts[0], side="right")) if len(ts) else 0
-    # the rows on either side of each crossing of a quarter turn by an unwrapped angle of the table: between them and
-    # the rows from an interval on, neighbours differ by less than a quarter turn, so a history of these rows unwraps
-    # the angles as one of every row does (to round-off)
+    # the rows on either side of each crossing of a quarter turn by an unwrapped angle of the table: the two rows of a
+    # crossing stay neighbours, and between crossings every row lies within one quarter turn, so a history of these
+    # rows unwraps the angles as one of every row does (to round-off)
     angles = [np.asarray(table[c], dtype=float) for c in check if c.endswith("_angle_rad")]
     turns = np.zeros(0, dtype=np.intp)
     if angles and len(ts) > 1:
@@ -138,9 +138,10 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
     def read_many(requests: list[tuple[Interval, int, np.ndarray]]) -> list[dict]:
         """Each request's columns: every request with instants, all finite, in one evaluation; any other alone."""
         inner = [np.asarray(iv.inside(times), dtype=float) for iv, _, times in requests]
-        together = [r for r, x in enumerate(inner) if len(x) and np.isfinite(x).all()]
+        finite = [bool(len(x)) and bool(np.isfinite(x).all()) for x in inner]
+        together = [r for r, ok in enumerate(finite) if ok]
         out: list = [None] * len(requests)
-        for group in [together] * bool(together) + [[r] for r in range(len(requests)) if r not in set(together)]:
+        for group in [together] * bool(together) + [[r] for r, ok in enumerate(finite) if not ok]:
             cols = evaluate(np.concatenate([inner[r] for r in group]))
             a = 0
             for r in group:
