@@ -135,3 +135,15 @@ def test_a_later_diffrax_run_loads_its_programs_and_imports_no_diffrax(tmp_path)
     assert first[1].startswith("True diffrax") and second[1:] == first[1:]
     assert {p.name.split("-")[0] for p in (cache / "traced").iterdir()} >= {"diffrax_whole_run", "diffrax_run_rows",
                                                                             "diffrax_run_dense"}
+
+
+def test_a_clearance_run_without_figures_imports_no_matplotlib(tmp_path):
+    """The clearance model's impacts table and summary (mechanisms/geneva/impacts.py) are made without its figure
+    module: a run without figures does not import matplotlib (a third of such a run's cold start), and has its
+    impacts."""
+    from mechsim.dynamics.user_cache import cache_dir
+    code = ("import sys\nimport mechsim\nr = mechsim.run('geneva-clearance', set={'duration': '0.5 s', "
+            "'output.plots': False, 'solver.backend': 'ida'})\n"
+            "print('matplotlib' in sys.modules, r.summary['impacts']['count'], len(r.extra_tables['impacts']))")
+    imported, count, rows = fresh(code, cache_dir(), tmp_path).split()
+    assert imported == "False" and int(count) == int(rows) > 0

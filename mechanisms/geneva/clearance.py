@@ -91,16 +91,16 @@ class GenevaClearance(Geneva):
         return out
 
     def extra_outputs(self, timeseries, events) -> dict:
-        """impacts.csv: one row per pin-flank impact (`clearance_plots.impacts_table`)."""
-        from mechsim.mechanisms.geneva.clearance_plots import impacts_table, lock_impacts_table
+        """impacts.csv: one row per pin-flank impact (`impacts.impacts_table`)."""
+        from mechsim.mechanisms.geneva.impacts import impacts_table, lock_impacts_table
         out = {"impacts": impacts_table(events)}
         if self.lock_clearance > 0:
             out["lock_impacts"] = lock_impacts_table(events, self.geometry.pitch)
         return out
 
     def extra_summary(self, tables: dict) -> dict:
-        """summary['impacts'] from the impacts table (`clearance_plots.impacts_summary`)."""
-        from mechsim.mechanisms.geneva.clearance_plots import impacts_summary, lock_impacts_summary
+        """summary['impacts'] from the impacts table (`impacts.impacts_summary`)."""
+        from mechsim.mechanisms.geneva.impacts import impacts_summary, lock_impacts_summary
         out = {"impacts": impacts_summary(tables.get("impacts"))}
         if self.lock_clearance > 0:
             out["lock_impacts"] = lock_impacts_summary(tables.get("lock_impacts"))
@@ -109,12 +109,14 @@ class GenevaClearance(Geneva):
     def extra_figures(self, timeseries, tables: dict) -> dict:
         """clearance_vs_angle: the pin's offset in its slot and the impacts over a crank turn; with lock play
         lock_play_vs_angle: the wheel in its play and the lock impacts over the dwell."""
-        from mechsim.mechanisms.geneva.clearance_plots import gap_figure, impacts_table
+        from mechsim.mechanisms.geneva.clearance_plots import gap_figure
+        from mechsim.mechanisms.geneva.impacts import impacts_table
         impacts = tables.get("impacts")
         out = {"clearance_vs_angle": gap_figure(timeseries, impacts if impacts is not None else impacts_table(None),
                                                 self.slot_clearance)}
         if self.lock_clearance > 0:
-            from mechsim.mechanisms.geneva.clearance_plots import lock_figure, lock_impacts_table
+            from mechsim.mechanisms.geneva.clearance_plots import lock_figure
+            from mechsim.mechanisms.geneva.impacts import lock_impacts_table
             lock = tables.get("lock_impacts")
             out["lock_play_vs_angle"] = lock_figure(
                 timeseries, lock if lock is not None else lock_impacts_table(None, self.geometry.pitch),

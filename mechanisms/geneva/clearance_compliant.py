@@ -183,9 +183,9 @@ class GenevaCompliant(GenevaClearance):
             None).drop(columns="row"), self.slot_clearance, force=True)}
 
     def extra_summary(self, tables: dict) -> dict:
-        """summary['impacts']: the rigid model's figures of the episodes (`clearance_plots.impacts_summary`) and
+        """summary['impacts']: the rigid model's figures of the episodes (`impacts.impacts_summary`) and
         the largest located force peak with its instant."""
-        from mechsim.mechanisms.geneva.clearance_plots import impacts_summary
+        from mechsim.mechanisms.geneva.impacts import impacts_summary
         impacts = tables.get("impacts")
         # an episode the exit or the run's end closes has no rebound speed, so no impulse: 0 for the largest's search
         out = impacts_summary(None if impacts is None else impacts.fillna({"impulse_N_s": 0.0}))
@@ -210,7 +210,7 @@ def contact_episodes(events: pd.DataFrame, table=None) -> pd.DataFrame:
     tends to as K grows), energy lost (the hysteresis work between the onset and the end: the table's last row
     where the run ends in contact, its duration then not known), whether the pin left the flank (rebound), the
     episodes in the crank turn; `row` the onset's row in `events`."""
-    from mechsim.mechanisms.geneva.clearance_plots import local_angle_deg
+    from mechsim.mechanisms.geneva.impacts import local_angle_deg
     if events is None or not len(events) or "work_hysteresis_J" not in events:
         return pd.DataFrame(columns=EPISODE_COLUMNS)
     ev = events.reset_index(drop=True)
