@@ -147,3 +147,15 @@ def test_a_clearance_run_without_figures_imports_no_matplotlib(tmp_path):
             "print('matplotlib' in sys.modules, r.summary['impacts']['count'], len(r.extra_tables['impacts']))")
     imported, count, rows = fresh(code, cache_dir(), tmp_path).split()
     assert imported == "False" and int(count) == int(rows) > 0
+
+
+@pytest.mark.parametrize("name", ["chain-mech2-torque", "rolling-a-torque"])
+def test_a_chain_or_rolling_dae_run_from_the_cache_derives_nothing(name, tmp_path):
+    """A chain or rolling-pair DAE run in a process that finds its derived model on disk imports no sympy: the
+    mechanisms' symbolic models are made where they are derived, not when their modules are imported."""
+    from mechsim.dynamics.user_cache import cache_dir
+    run = (f"import sys\nimport mechsim\nr = mechsim.run({name!r}, set={{'duration': '0.5 s', 'output.plots': False, "
+           "'solver.backend': 'ida'})\n")
+    fresh(run, cache_dir(), tmp_path)                 # the derivation written to the cache, if it was not there
+    assert fresh(run + "print('sympy' in sys.modules, r.summary['success'])", cache_dir(), tmp_path).split() == [
+        "False", "True"]

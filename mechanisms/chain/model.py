@@ -37,9 +37,7 @@ from typing import Mapping
 
 import numpy as np
 import pandas as pd
-import sympy as sp
 
-from mechsim.dynamics.codegen import lambdify
 from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, Transition,
                                      ValidityCondition)
 from mechsim.mechanisms.chain.dwell import ChainDwellMechanism, ChainDwellParams
@@ -55,6 +53,7 @@ DEAD_CENTRE_MARGIN = 0.01
 
 
 def _e(angle):
+    import sympy as sp
     return sp.Matrix([sp.cos(angle), sp.sin(angle)])
 
 
@@ -284,6 +283,7 @@ class ChainDwell(Mechanism):
 
     # -- symbolic model -------------------------------------------------------------------------------
     def _model(self) -> dict:
+        import sympy as sp
         key = self.structure_key()
         if key in _SYM_CACHE:
             return _SYM_CACHE[key]
@@ -505,6 +505,8 @@ class ChainDwell(Mechanism):
         """numpy functions of the symbolic model: M(q), Q(q, v) at zero drive torque and, per mode, the
         constraint Jacobian and the read-outs; each returns arrays broadcast to the sample shape. Made once per
         model structure (the numbers are arguments), like the symbolic model."""
+        import sympy as sp
+        from mechsim.dynamics.codegen import lambdify
         key = ("numeric",) + self.structure_key()
         if key in _SYM_CACHE:
             return _SYM_CACHE[key]

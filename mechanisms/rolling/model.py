@@ -37,11 +37,8 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-import sympy as sp
 from scipy.optimize import brentq
-from sympy.simplify.fu import TR5, TR10i
 
-from mechsim.dynamics.codegen import lambdify
 from mechsim.mechanisms.base import (DriveCycle, Field, Guard, InitialState, Mechanism, Mode, TransitionRule,
                                      ValidityCondition)
 from mechsim.mechanisms.rolling.pair import CircleOnCircle, CircleOnLine, RollingFourBar, closure_intervals, rolling_span
@@ -323,6 +320,8 @@ class RollingPairFourBar(Mechanism):
 
     def _model(self) -> dict:
         """Positions, mass matrix, forces and read-outs as sympy expressions (cached per structure)."""
+        import sympy as sp
+        from sympy.simplify.fu import TR5, TR10i
         key = self.structure_key()
         if key in _MODEL_CACHE:
             return _MODEL_CACHE[key]
@@ -442,6 +441,8 @@ class RollingPairFourBar(Mechanism):
 
     # -- numeric helpers (numpy, from the same symbolic model) -----------------------------------------
     def _numeric(self) -> dict:
+        import sympy as sp
+        from mechsim.dynamics.codegen import lambdify
         key = ("numeric",) + self.structure_key()
         if key in _MODEL_CACHE:
             return _MODEL_CACHE[key]
