@@ -1,5 +1,6 @@
 """The derived model kept on disk, so that a later process skips the sympy derivation (docs/benchmarks.md, "Cold
-start").
+start"); and a mechanism's own lambdified functions (`store_functions`: the chain's and rolling pair's closed-form
+inverse dynamics), so that their closed-form runs skip it too.
 
 What is stored is what the solvers call: the source of every generated function (the plain-Python residual,
 Jacobian and guards of `codegen.emit`, and the numpy functions of `codegen.lambdify`), with the numpy names
@@ -111,6 +112,43 @@ def store(key: tuple, model) -> Path | None:
         return path if write_atomically(path, json.dumps(record).encode(), prefix=".derived-") else None
     except (NotStorable, TypeError, AttributeError):
         return None
+
+
+def store_functions(key: tuple, functions: dict, meta: dict | None = None) -> Path | None:
+    """Write lambdified numpy functions of a mechanism's own (its closed form's inverse dynamics: the chain's, the
+    rolling pair's) under `key`, with `meta` (names, JSON), as `store` writes a derived model; None where they cannot
+    be stored or written."""
+    try:
+        record = {"format": FORMAT, "key": repr(key), "targets": TARGETS, "meta": meta or {},
+                  "functions": {name: _lambdified(fn) for name, fn in functions.items()}}
+        path = file_for(key)
+        return path if write_atomically(path, json.dumps(record).encode(), prefix=".derived-") else None
+    except (NotStorable, TypeError, AttributeError, OSError):
+        return None
+
+
+def load_functions(key: tuple) -> tuple[dict, dict] | None:
+    """(functions, meta) stored for `key` by `store_functions`, or None where there is no usable file."""
+    try:
+        record = json.loads(file_for(key).read_text())
+        if record.get("format") != FORMAT or record.get("key") != repr(key) or record.get("targets") != TARGETS:
+            return None
+        return ({name: _lambdified_fn(entry, f"{key[0]} {name}") for name, entry in record["functions"].items()},
+                record["meta"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, SyntaxError):
+        return None
+
+
+class FunctionStore:
+    """`load_functions` and `store_functions` as the object a mechanism holds (`Mechanism.function_store`: what the
+    scenario loader gives it, so that mechanisms/ imports no dynamics/; an object, not this module, so that the
+    mechanism pickles)."""
+
+    def load_functions(self, key: tuple) -> tuple[dict, dict] | None:
+        return load_functions(key)
+
+    def store_functions(self, key: tuple, functions: dict, meta: dict | None = None) -> Path | None:
+        return store_functions(key, functions, meta)
 
 
 # -- loading --------------------------------------------------------------------------------------------------

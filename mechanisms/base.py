@@ -368,6 +368,10 @@ class Mechanism(ABC):
     #: whole-number scenario keys a sizing enumerates (each value one design to size) rather than varies
     #: continuously, e.g. the Geneva's slot count
     enumerated_keys: tuple[str, ...] = ()
+    #: where functions a mechanism derives for itself are kept between processes: an object with
+    #: `load_functions(key)` and `store_functions(key, functions, meta)` (dynamics/derivation_cache.py, which the
+    #: scenario loader sets: mechanisms/ imports no dynamics/); None: derived in every process
+    function_store = None
 
     @cached_property
     def symbols(self) -> Symbols:

@@ -351,12 +351,16 @@ def validate(raw: dict) -> dict:
 
 
 def build_mechanism(si: dict) -> Mechanism:
-    """The mechanism model of a validated scenario (geometry errors become ScenarioError)."""
+    """The mechanism model of a validated scenario (geometry errors become ScenarioError), with the derivation
+    cache as the store of the functions it derives for itself (`Mechanism.function_store`)."""
+    from mechsim.dynamics import derivation_cache
     cls = MECHANISMS[si["mechanism"]["type"]]
     try:
         if (si.get("contact") or {}).get("model") == "compliant":
             si = _with_contact_modulus(si)
-        return cls.from_config(si)
+        mech = cls.from_config(si)
+        mech.function_store = derivation_cache.FunctionStore()
+        return mech
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise

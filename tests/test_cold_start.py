@@ -149,10 +149,11 @@ def test_a_clearance_run_without_figures_imports_no_matplotlib(tmp_path):
     assert imported == "False" and int(count) == int(rows) > 0
 
 
-@pytest.mark.parametrize("name", ["chain-mech2-torque", "rolling-a-torque"])
-def test_a_chain_or_rolling_dae_run_from_the_cache_derives_nothing(name, tmp_path):
-    """A chain or rolling-pair DAE run in a process that finds its derived model on disk imports no sympy: the
-    mechanisms' symbolic models are made where they are derived, not when their modules are imported."""
+@pytest.mark.parametrize("name", ["chain-mech2-torque", "rolling-a-torque", "chain-mech2-kinematic", "rolling-a-speed"])
+def test_a_chain_or_rolling_run_from_the_cache_derives_nothing(name, tmp_path):
+    """A chain or rolling-pair run in a process that finds on disk what was derived for it imports no sympy: a DAE
+    run its derived model, a closed-form run its inverse dynamics' functions (dynamics/derivation_cache.py
+    `store_functions`); the mechanisms' symbolic models are made where they are derived, not at import."""
     from mechsim.dynamics.user_cache import cache_dir
     run = (f"import sys\nimport mechsim\nr = mechsim.run({name!r}, set={{'duration': '0.5 s', 'output.plots': False, "
            "'solver.backend': 'ida'})\n")

@@ -122,3 +122,28 @@ def test_a_second_process_runs_a_dae_scenario_without_sympy(tmp_path, monkeypatc
     second = out.stdout.split("\n", 1)
     assert second[0] == "False"
     assert second[1] == first.timeseries.to_csv(float_format="%.17g") + "\n"      # print's newline
+
+
+@pytest.mark.parametrize("name", ["chain-mech2-kinematic", "rolling-c-cusp"])
+def test_a_closed_forms_stored_functions_are_the_derived_ones_bit_for_bit(name, tmp_path, monkeypatch):
+    """The chain's and rolling pair's closed-form inverse dynamics (`_numeric`, `derivation_cache.store_functions`):
+    the functions loaded from the file give every table column and event as the derived ones do, to the bit."""
+    from mechsim.mechanisms.chain import model as chain_model
+    from mechsim.mechanisms.rolling import model as rolling_model
+    monkeypatch.setenv("MECHSIM_CACHE_DIR", str(tmp_path))
+    sc = mechsim.load(name, set=["output.plots=false"])
+
+    def fresh_run():
+        chain_model._SYM_CACHE.clear()
+        rolling_model._MODEL_CACHE.clear()
+        return mechsim.run(sc)
+    derived = fresh_run()                                    # derived, and stored
+    assert len(list((tmp_path / "derived").glob("*.json"))) == 1
+
+    def derive_again(self):
+        raise AssertionError("derived again instead of loaded")
+    monkeypatch.setattr(chain_model.ChainDwell, "_numeric_functions", derive_again)
+    monkeypatch.setattr(rolling_model.RollingPairFourBar, "_numeric_functions", derive_again)
+    loaded = fresh_run()                                     # loaded from the file
+    assert loaded.timeseries.equals(derived.timeseries) and loaded.events.equals(derived.events)
+    assert loaded.summary["peaks"] == derived.summary["peaks"]

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -50,6 +50,18 @@ _SYM_CACHE: dict = {}
 #: |sin(theta - phi)| below which the two-row loop closure of a line or arc mode counts as at a dead centre (the
 #: dyad stretched or folded): the same sine-like margin as the rolling pair's dead_point_margin default
 DEAD_CENTRE_MARGIN = 0.01
+
+
+def _entries(fns: list, shape: tuple) -> Callable:
+    """One function of the entries' functions `fns` (each of the same arguments, arrays over the samples), returning
+    their values as an array of `shape` per sample (samples first)."""
+    def f(*a):
+        n = np.shape(a[0])[1:]
+        out = np.empty(n + (len(fns),))
+        for j, fn in enumerate(fns):
+            out[..., j] = fn(*a)
+        return out.reshape(n + shape)
+    return f
 
 
 def _e(angle):
@@ -504,38 +516,41 @@ class ChainDwell(Mechanism):
     def _numeric(self) -> dict:
         """numpy functions of the symbolic model: M(q), Q(q, v) at zero drive torque and, per mode, the
         constraint Jacobian and the read-outs; each returns arrays broadcast to the sample shape. Made once per
-        model structure (the numbers are arguments), like the symbolic model."""
-        import sympy as sp
-        from mechsim.dynamics.codegen import lambdify
+        model structure (the numbers are arguments), like the symbolic model, and kept between processes
+        (`function_store`): a later process loads them without sympy."""
         key = ("numeric",) + self.structure_key()
         if key in _SYM_CACHE:
             return _SYM_CACHE[key]
-        s = self.symbols
-        md = self._model()
-
-        def entries(args, exprs, shape):
-            fns = [lambdify(args, e, "numpy") for e in exprs]
-
-            def f(*a):
-                n = np.shape(a[0])[1:]
-                out = np.empty(n + (len(fns),))
-                for j, fn in enumerate(fns):
-                    out[..., j] = fn(*a)
-                return out.reshape(n + shape)
-            return f
-
-        qa, va, pa = list(s.q), list(s.v), list(s.params)
-        out = {"M": entries([qa, pa], list(md["M"]), (3, 3)),
-               "Q": entries([qa, va, pa], list(md["force"]), (3,)), "modes": {}}
-        for name, mode in md["modes"].items():
-            G = sp.Matrix(mode.constraints).jacobian(qa)
-            out["modes"][name] = dict(
-                G=entries([qa, pa], list(G), (2, 3)),
-                readouts=lambdify([s.t, qa, va, list(s.a), list(s.lam[:2]), pa], list(mode.readouts.values()),
-                                  "numpy"),
-                names=list(mode.readouts))
+        store = self.function_store
+        got = store.load_functions(("chain closed form",) + key) if store is not None else None
+        if got is None:
+            got = self._numeric_functions()
+            if store is not None:
+                store.store_functions(("chain closed form",) + key, *got)
+        fns, meta = got
+        out = {"M": _entries([fns[f"M.{j}"] for j in range(9)], (3, 3)),
+               "Q": _entries([fns[f"Q.{j}"] for j in range(3)], (3,)), "modes": {}}
+        for name, names in meta["readouts"].items():
+            out["modes"][name] = dict(G=_entries([fns[f"{name}.G.{j}"] for j in range(6)], (2, 3)),
+                                      readouts=fns[f"{name}.readouts"], names=list(names))
         _SYM_CACHE[key] = out
         return out
+
+    def _numeric_functions(self) -> tuple[dict, dict]:
+        """`_numeric`'s lambdified functions, each entry of M, Q and every mode's G its own function, and the modes'
+        read-out names: ({name: function}, {"readouts": {mode: names}})."""
+        import sympy as sp
+        from mechsim.dynamics.codegen import lambdify
+        s, md = self.symbols, self._model()
+        qa, va, pa = list(s.q), list(s.v), list(s.params)
+        fns = {f"M.{j}": lambdify([qa, pa], e, "numpy") for j, e in enumerate(md["M"])}
+        fns.update({f"Q.{j}": lambdify([qa, va, pa], e, "numpy") for j, e in enumerate(md["force"])})
+        for name, mode in md["modes"].items():
+            G = sp.Matrix(mode.constraints).jacobian(qa)
+            fns.update({f"{name}.G.{j}": lambdify([qa, pa], e, "numpy") for j, e in enumerate(G)})
+            fns[f"{name}.readouts"] = lambdify([s.t, qa, va, list(s.a), list(s.lam[:2]), pa],
+                                               list(mode.readouts.values()), "numpy")
+        return fns, {"readouts": {name: list(mode.readouts) for name, mode in md["modes"].items()}}
 
     def prescribed_branch(self, s: np.ndarray, s_start: float) -> dict:
         """Closed-form dyad state along the motion a prescribed chain speed produces under the apex law.

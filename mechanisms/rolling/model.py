@@ -441,11 +441,28 @@ class RollingPairFourBar(Mechanism):
 
     # -- numeric helpers (numpy, from the same symbolic model) -----------------------------------------
     def _numeric(self) -> dict:
-        import sympy as sp
-        from mechsim.dynamics.codegen import lambdify
+        """numpy functions of the symbolic model (M, Q, G, phi, the read-outs, V, the powers, the points), made once
+        per model structure and kept between processes (`function_store`): a later process loads them without
+        sympy."""
         key = ("numeric",) + self.structure_key()
         if key in _MODEL_CACHE:
             return _MODEL_CACHE[key]
+        store = self.function_store
+        got = store.load_functions(("rolling pair closed form",) + key) if store is not None else None
+        if got is None:
+            got = self._numeric_functions()
+            if store is not None:
+                store.store_functions(("rolling pair closed form",) + key, *got)
+        out = dict(got[0], readout_names=list(got[1]["readouts"]), power_names=list(got[1]["powers"]))
+        out["rows"] = {name: _over_rows(out[name]) for name in ("M", "Q", "G", "phi")}
+        _MODEL_CACHE[key] = out
+        return out
+
+    def _numeric_functions(self) -> tuple[dict, dict]:
+        """`_numeric`'s lambdified functions, and the names of the read-outs and powers they return:
+        ({name: function}, {"readouts": names, "powers": names})."""
+        import sympy as sp
+        from mechsim.dynamics.codegen import lambdify
         s, md = self.symbols, self._model()
         q, v, a, lam = list(s.q), list(s.v), list(s.a), list(s.lam[:2])
         pars = list(s.params)
@@ -454,17 +471,14 @@ class RollingPairFourBar(Mechanism):
             return lambdify(args, expr, "numpy")
 
         Gm = sp.Matrix(md["constraints"]).jacobian(q)
-        out = dict(
+        return dict(
             M=lamb([q, pars], md["M"]), Q=lamb([q, v, pars], sp.Matrix(md["force"])), G=lamb([q, pars], Gm),
             phi=lamb([q, pars], sp.Matrix(md["constraints"])),
             readouts=lamb([s.t, q, v, a, lam, pars], list(md["readouts"].values())),
             V=lamb([q, pars], md["V"]),
             powers=lamb([q, v, pars], list(md["powers"].values())),
             points=lamb([q, pars], [sp.Matrix(pt) for pt in md["points"].values()]),
-        )
-        out["rows"] = {name: _over_rows(out[name]) for name in ("M", "Q", "G", "phi")}
-        _MODEL_CACHE[key] = out
-        return out
+        ), {"readouts": list(md["readouts"]), "powers": list(md["powers"])}
 
     def transmissions(self, q) -> tuple[float, float]:
         """(sin(theta3 - theta2), w . B'/(l3 (r + l4))): zero at the rolling-input / crank-input dead points."""
@@ -629,7 +643,7 @@ class RollingPairFourBar(Mechanism):
         cols = {"mode": np.where(st.closes, "rolling", "open").astype(object)}
         for j, name in enumerate(self.coordinates):
             cols[f"{name}_angle_rad"], cols[f"{name}_speed_rad_s"], cols[f"{name}_accel_rad_s2"] = q[j], v[j], a[j]
-        for name, val in zip(self._model()["readouts"], ro):
+        for name, val in zip(num["readout_names"], ro):
             cols[name] = np.broadcast_to(np.asarray(val, float), t.shape).copy()
         cols["drive_torque_N_m"] = tau
         cols["kinetic_energy_J"] = ke
@@ -637,7 +651,7 @@ class RollingPairFourBar(Mechanism):
         pw = num["powers"](q, v, p)
         cols["powers"] = {"drive": tau * speed,
                           **{k: np.broadcast_to(np.asarray(x, float), t.shape) for k, x in
-                             zip(self._model()["powers"], pw)}}
+                             zip(num["power_names"], pw)}}
         return cols
 
     def reference_solution(self, drive, t_eval, angle0, speed0, rtol=1e-12):
