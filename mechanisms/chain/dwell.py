@@ -25,7 +25,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import brentq
 
 from mechsim.mechanisms.chain.path import ChainPath, cross, unit
 
@@ -419,6 +418,7 @@ class ChainDwellMechanism:
         Scans the closed-form speed on n points per cycle and refines every edge with Brent's method.
         Reports the crank excursion (max - min phi) and the peak |acceleration| (rad/s^2 at omega1) inside.
         """
+        from scipy.optimize import brentq
         Lc, r1, w = self.path.length, self.r1, self.omega1
         s = np.linspace(0.0, cycles * Lc, int(n * cycles) + 1)
 
