@@ -178,9 +178,20 @@ def high_peclet_coefficient(kind: str = "uniform", statistic: str = "max") -> fl
         return 2.0 / math.sqrt(math.pi) if statistic == "max" else 4.0 / (3.0 * math.sqrt(math.pi))
     if statistic == "avg":
         return 64.0 / (15.0 * math.pi**1.5)
+    return SEMI_ELLIPTIC_HIGH_MAX
+
+
+def semi_elliptic_high_max() -> float:
+    """The semi-elliptic band's A for the maximum: the largest high-L profile over the band, found by quadrature and
+    a bounded minimiser (what SEMI_ELLIPTIC_HIGH_MAX holds)."""
     res = minimize_scalar(lambda x: -_semi_elliptic_high_profile(x), bounds=(0.0, 1.0), method="bounded",
                           options={"xatol": 1e-9})
     return float(-res.fun)
+
+
+#: `semi_elliptic_high_max()` (Blok's 1.11; tests/test_thermal_band.py computes it again): kept as a number so that a
+#: run does not load scipy's quadrature and minimiser for a constant
+SEMI_ELLIPTIC_HIGH_MAX = 1.1115483780654032
 
 
 def low_peclet_constant(kind: str = "uniform", statistic: str = "max") -> float:
