@@ -373,6 +373,16 @@ class Mechanism(ABC):
     #: scenario loader sets: mechanisms/ imports no dynamics/); None: derived in every process
     function_store = None
 
+    def stored_functions(self, key: tuple, derive: Callable[[], tuple[dict, dict]]) -> tuple[dict, dict]:
+        """(functions, meta) kept under `key` in `function_store`, else `derive()`d and kept there."""
+        store = self.function_store
+        got = store.load_functions(key) if store is not None else None
+        if got is None:
+            got = derive()
+            if store is not None:
+                store.store_functions(key, *got)
+        return got
+
     @cached_property
     def symbols(self) -> Symbols:
         """The symbols of this model's expressions, made on first use (so that a closed-form run, which derives

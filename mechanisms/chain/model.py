@@ -521,12 +521,7 @@ class ChainDwell(Mechanism):
         key = ("numeric",) + self.structure_key()
         if key in _SYM_CACHE:
             return _SYM_CACHE[key]
-        store = self.function_store
-        got = store.load_functions(("chain closed form",) + key) if store is not None else None
-        if got is None:
-            got = self._numeric_functions()
-            if store is not None:
-                store.store_functions(("chain closed form",) + key, *got)
+        got = self.stored_functions(("chain closed form",) + key, self._numeric_functions)
         fns, meta = got
         out = {"M": _entries([fns[f"M.{j}"] for j in range(9)], (3, 3)),
                "Q": _entries([fns[f"Q.{j}"] for j in range(3)], (3,)), "modes": {}}

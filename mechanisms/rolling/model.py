@@ -447,12 +447,7 @@ class RollingPairFourBar(Mechanism):
         key = ("numeric",) + self.structure_key()
         if key in _MODEL_CACHE:
             return _MODEL_CACHE[key]
-        store = self.function_store
-        got = store.load_functions(("rolling pair closed form",) + key) if store is not None else None
-        if got is None:
-            got = self._numeric_functions()
-            if store is not None:
-                store.store_functions(("rolling pair closed form",) + key, *got)
+        got = self.stored_functions(("rolling pair closed form",) + key, self._numeric_functions)
         out = dict(got[0], readout_names=list(got[1]["readouts"]), power_names=list(got[1]["powers"]))
         out["rows"] = {name: _over_rows(out[name]) for name in ("M", "Q", "G", "phi")}
         _MODEL_CACHE[key] = out
