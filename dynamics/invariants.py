@@ -12,9 +12,9 @@ first such row instead of writing it. Checked once per run on the finished table
 - the energy balance closes on every row: work of drive, load, friction and damping (all signed into the
   system) = change of kinetic energy + energy lost in impacts up to that row. Integrated runs: within
   K (rtol S + atol max(1, S)), S = sum of the largest |work| of each kind + the largest kinetic energy (the
-  work states are integrated with the motion under the same weights); closed-form runs: within K times the
-  trapezoidal rule's own error estimate (|second difference of the work increments| / 12 per step,
-  accumulated), times QUADRATURE_FACTOR, since there the works are quadratures of exact powers.
+  work states are integrated with the motion under the same weights); closed-form runs: within
+  QUADRATURE_FACTOR times the trapezoidal rule's own error estimate (`trapezoid_error_estimate`), since there
+  the works are quadratures of exact powers.
 
 K = 1000 (GLOBAL_FACTOR): integrators control the local error per step to rtol; the global error of a run is a
 modest multiple of it (docs/stability.md measures it over the built-ins and the robustness grid). A violation is
@@ -31,8 +31,8 @@ from mechsim.dynamics.tables import TableColumns
 
 #: global error of a run in units of the local tolerance (see the module docstring)
 GLOBAL_FACTOR = 1000.0
-#: the closed form's energy bound in units of the trapezoidal rule's error estimate, with a margin: the estimate
-#: is rough at the kinks of the power at entry and exit (docs/benchmarks.md, "Costs behind the code")
+#: the closed form's energy bound in units of the trapezoidal rule's error estimate, with a margin: at a jump of
+#: the power inside a panel the error reaches 4 times the estimate (`trapezoid_error_estimate`)
 QUADRATURE_FACTOR = 10.0
 #: lever arm (m) turning atol on angular speeds (rad/s) into a slip-speed resolution (m/s)
 LEVER_M = 1.0
@@ -126,6 +126,26 @@ def event_floats(events: TableColumns, name: str) -> np.ndarray:
     return values if values.dtype == np.float64 else events.frame[name].to_numpy(float)
 
 
+def trapezoid_error_estimate(work: np.ndarray) -> np.ndarray:
+    """Per row: the trapezoidal rule's error accumulated up to it, estimated from the cumulative work's panels.
+
+    A panel's error is h^3 |p''| / 12 where the power p is smooth, which the second difference of the panel
+    increments centred on it estimates. Where the power jumps or kinks inside a panel (an apex, a junction, an
+    engagement: the closed form's events fall between the output rows) the difference centred on that panel
+    vanishes by symmetry while its neighbours' do not, so each panel takes the largest of the three centred on
+    it and on its neighbours: a jump J of the power then gets J h / 8 over the three panels against an error of
+    at most J h / 2; a kink J' h^2 / 12 against J' h^2 / 8 (docs/stability.md, 'The closed form's energy
+    bound')."""
+    inc = np.diff(work)
+    panel = np.zeros(len(inc))
+    if len(inc) >= 3:
+        panel[1:-1] = np.abs(inc[2:] - 2 * inc[1:-1] + inc[:-2]) / 12.0
+        panel[0], panel[-1] = panel[1], panel[-2]
+        padded = np.concatenate([panel[:1], panel, panel[-1:]])
+        panel = np.maximum(np.maximum(padded[:-2], padded[1:-1]), padded[2:])
+    return np.concatenate([[0.0], np.cumsum(panel)])
+
+
 def _energy(df, events, rtol, atol, exact, names=None):
     work_names = _works(df, names)
     w = _matrix(df, work_names) if work_names else None
@@ -133,12 +153,7 @@ def _energy(df, events, rtol, atol, exact, names=None):
     if closure is None:
         return None
     if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
-        inc = np.diff(w.sum(axis=1))
-        panel = np.zeros(len(inc))
-        if len(inc) >= 3:
-            panel[1:-1] = np.abs(inc[2:] - 2 * inc[1:-1] + inc[:-2]) / 12.0
-            panel[0], panel[-1] = panel[1], panel[-2]
-        bound = QUADRATURE_FACTOR * np.concatenate([[0.0], np.cumsum(panel)]) + 1e-12 * np.max(np.abs(w), initial=1.0)
+        bound = QUADRATURE_FACTOR * trapezoid_error_estimate(w.sum(axis=1)) + 1e-12 * np.max(np.abs(w), initial=1.0)
     else:
         scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
         bound = np.full(len(w), GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale)))
