@@ -767,6 +767,18 @@ def intervals_of(t: np.ndarray, breaks: list[tuple[float, str]], t_start: float,
             for (lo, lk), (hi, hk), a, b in zip(merged[:-1], merged[1:], first, last)]
 
 
+def apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> list[tuple[float, str]]:
+    """The kinks (time, kind) farther than `near` from every known instant: the distance to the nearest, found by
+    bisection among the known ones in order (a long run has thousands of events and of kinks)."""
+    if not len(known) or not kinks:
+        return list(kinks)
+    known = np.sort(known)
+    at = np.array([x for x, _ in kinks], dtype=float)
+    i = known.searchsorted(at)
+    nearest = np.minimum(np.abs(known[np.maximum(i - 1, 0)] - at), np.abs(known[np.minimum(i, len(known) - 1)] - at))
+    return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
+
+
 #: an interval with fewer output rows than this is also read at ROWLESS_READINGS instants over it (its ends included)
 SPARSE_ROWS = 3
 ROWLESS_READINGS = 9

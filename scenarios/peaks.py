@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, end_guesses,
+from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
                                       end_limit_requests, end_limits, end_lines, finish_all, intervals_of, read_all,
                                       with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
@@ -155,6 +155,35 @@ def _closed_form_reader(source: Source, angle0: float, t_rows: np.ndarray, table
         return read_many([(iv, position, times)])[0]
     read.read_many = read_many
     return read
+
+
+def _contact_switches(source: Source, t: np.ndarray, cols, breaks: list[tuple[float, str]]
+                      ) -> list[tuple[float, str]]:
+    """The closed form's contact switches between output rows that are no event, as breaks (time, kind): a slip
+    reversal (the friction force, and with it the normal force, jumps) and a flank switch (the slip jumps). A DAE
+    run lists both as events; a closed form lists only entries and exits, so without these an extremum at a
+    switch was read as a smooth interior one (a parabola across the jump: geneva-seed-lc3's contact force 242.13 to
+    242.37 N with the output step). Located as the thermal path locates them (thermal/exact.py `switch_times`:
+    bisection between the rows where the contact's code changes); each is named by which sign changed there."""
+    mech = source.mech
+    needed = ("mode", "slip_speed_m_s", "contact_force_N")
+    if getattr(mech, "closed_form_contact", None) is None or not all(c in cols for c in needed):
+        return []
+    from mechsim.thermal.exact import contact_code, contact_columns, switch_times
+    angle0 = source.si["initial"][mech.initial_keys[0]]
+    contact = contact_columns(mech, angle0, source.drive.speed, None)
+    grid = {c: np.asarray(cols[c])[:len(t)] for c in needed}
+    known = np.array([b for b, _ in breaks], dtype=float)
+    found = switch_times(contact, t, grid_columns=grid, known=known)
+    kept = apart([(x, "") for x in found], known, 1e-9 * max(1.0, abs(float(t[-1]))))
+    if not kept:
+        return []
+    at = np.array([x for x, _ in kept])
+    eps = 1e-12 * np.maximum(1.0, np.abs(at))          # the one-sided limits' distance (`Interval.inside`)
+    code = contact_code(contact(np.concatenate([at - eps, at + eps])))
+    flank = (code[:len(at)] % 3) != (code[len(at):] % 3)         # the normal force's sign changed: the other flank
+    return [(x, f"{'flank switch' if f else 'slip reversal'} of the closed form at t = {x:.9g} s")
+            for x, f in zip(at.tolist(), flank.tolist())]
 
 
 def _closed_form_at(mech, at: np.ndarray, angle0: float, speed: float) -> dict[str, np.ndarray]:
@@ -342,6 +371,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events, event_cols) if read is not None else []
     tn = t[:n]
+    if source is not None and source.method == "closed-form" and read is not None:
+        breaks = sorted(breaks + _contact_switches(source, tn, cols, breaks))
     spans = [_intervals(tn, breaks, lo, hi, kinds[label], read) if read is not None and readable else []
              for lo, hi, label in windows]
     # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`);

@@ -30,7 +30,8 @@ from collections.abc import Mapping, MutableMapping
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import Interval, ReadingFailed, TrajectoryReader, intervals_of, read_all, tie_of
+from mechsim.dynamics.extrema import (Interval, ReadingFailed, TrajectoryReader, apart, intervals_of, read_all,
+                                      tie_of)
 from mechsim.dynamics.tables import TableColumns
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
@@ -621,18 +622,6 @@ def _promising(F: np.ndarray, intervals: list[Interval]) -> list[list[Interval]]
     return [[intervals[k] for k in sorted(mine)] for mine in keep]
 
 
-def _apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> list[tuple[float, str]]:
-    """The kinks (time, kind) farther than `near` from every known instant: the distance to the nearest, found by
-    bisection among the known ones in order (a long run has thousands of events and of kinks)."""
-    if not len(known) or not kinks:
-        return list(kinks)
-    known = np.sort(known)
-    at = np.array([x for x, _ in kinks], dtype=float)
-    i = known.searchsorted(at)
-    nearest = np.minimum(np.abs(known[np.maximum(i - 1, 0)] - at), np.abs(known[np.minimum(i, len(known) - 1)] - at))
-    return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
-
-
 def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
                    windows: list[tuple[float, float, tuple[str, str]]]) -> list[dict]:
     """For each window (lo, hi, the kinds of its ends) of the table: {column: ({'max', 'min'} located by
@@ -653,7 +642,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
         breaks = events_breaks
         if kinks is not None:     # the heat input's own switches that are no event (within round-off of none)
             near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
-            breaks = sorted(breaks + _apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
+            breaks = sorted(breaks + apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
         intervals = intervals_of(t, breaks, lo, hi, *kinds)
         spans.append((intervals, dict(zip(values, _promising(F, intervals)))))
     # `locate` of each column on its own intervals: every window's and column's plan made together, the readings of

@@ -13,9 +13,11 @@ Both at rtol 1e-10: the limits are read at 1/10 of it and the events located to 
 is the margin; the instant of the temperature's minimum is its event's, located to 1e-9 s of these runs' time
 scale (the crank deceleration's repeats every turn, equal to the solver's tolerance: its instant is not asserted).
 """
+import numpy as np
 import pytest
 
 import mechsim
+from mechsim.scenarios.loader import build_mechanism
 
 STEPS = ("0.5 ms", "1 ms", "4 ms")
 TIGHT = ["solver.rtol=1e-10", "solver.atol=1e-12", "output.plots=false"]
@@ -44,3 +46,30 @@ def test_crank_deceleration_at_an_entry_does_not_move_with_the_output_step():
     for step, e in mins.items():
         assert "entry" in e["at"] and e["limit"] == "after", (step, e["at"])
         assert e["value"] == pytest.approx(mins["1 ms"]["value"], rel=1e-8, abs=0), step
+
+
+def test_closed_form_contact_force_at_a_slip_reversal_is_the_limit_there_at_any_output_step():
+    """geneva-seed-lc3 (friction 0.15, prescribed 10.5 rad/s): the friction force reverses with the slip in mid-
+    engagement, and the normal force jumps there (232.1 -> 241.1 N), its maximum the limit from after. A closed form
+    lists no slip reversal among its events, so before it was read as an interior maximum (a parabola across the
+    jump): 242.13 to 242.37 N with the output step. Checked against the slip reversal found here by Brent's method on
+    the closed form's own slip speed, and the closed form 1e-9 s after it (its slope there is ~1.5e3 N/s)."""
+    from scipy.optimize import brentq
+    name = "geneva-seed-lc3-mu015"
+    runs = {step: mechsim.run(mechsim.load(name, set=["duration=0.5 s", "output.plots=false", f"output_step={step}",
+                                                      "thermal.model='none'"]))
+            for step in ("0.37 ms", "1 ms", "2.3 ms")}
+    r = runs["1 ms"]
+    mech = build_mechanism(r.scenario)
+    angle0, speed = r.scenario["initial"]["crank_angle"], r.scenario["drive"]["speed"]
+
+    def contact(t):
+        return mech.closed_form_contact(np.array([0.0, t]), angle0, speed)
+    t_rev = brentq(lambda t: contact(t)["slip_speed_m_s"][1], 0.28, 0.30, xtol=1e-15, rtol=1e-15)
+    limit = contact(t_rev + 1e-9)["contact_force_N"][1]
+    assert contact(t_rev - 1e-9)["contact_force_N"][1] < limit - 5.0          # a jump, not a smooth maximum
+    for step, run in runs.items():
+        e = run.summary["peaks"]["contact_force_N"]["max"]
+        assert "slip reversal" in e["at"] and e["limit"] == "after", (step, e["at"])
+        assert e["value"] == pytest.approx(limit, rel=1e-8), step
+        assert e["t_s"] == pytest.approx(t_rev, abs=1e-9), step

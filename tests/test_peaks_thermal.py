@@ -74,9 +74,9 @@ def test_a_thermal_readers_requests_are_read_in_one_pass_as_each_alone(monkeypat
 
 
 def test_kinks_apart_from_the_events_are_those_farther_than_near_from_every_one():
-    """`_apart` finds each kink's nearest event by bisection: the kinks kept are exactly those whose distance to every
+    """`apart` finds each kink's nearest event by bisection: the kinks kept are exactly those whose distance to every
     event exceeds `near` (events unordered, repeated, a kink on an event, before the first and after the last)."""
-    from mechsim.scenarios.thermal_peaks import _apart
+    from mechsim.dynamics.extrema import apart
     rng = np.random.default_rng(3)
     for _ in range(200):
         known = rng.uniform(0.0, 10.0, int(rng.integers(0, 30)))
@@ -88,4 +88,4 @@ def test_kinks_apart_from_the_events_are_those_farther_than_near_from_every_one(
         kinks = [(float(x), f"k{n}") for n, x in enumerate(at)]
         near = float(rng.choice([0.0, 1e-9, 0.05, 0.5]))
         brute = [k for k in kinks if not len(known) or np.min(np.abs(known - k[0])) > near]
-        assert _apart(kinks, known, near) == brute
+        assert apart(kinks, known, near) == brute

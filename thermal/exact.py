@@ -89,7 +89,7 @@ def contact_columns(mech, angle0: float, speed: float, columns_fn, part: str = "
 
 
 def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int = SEARCH_LEVELS,
-                 grid_columns=None) -> list[float]:
+                 grid_columns=None, known: np.ndarray | None = None) -> list[float]:
     """Times where the closed form's contact changes (see contact_code), by bisection between output rows, so
     that every quadrature interval sees a smooth input.
 
@@ -98,12 +98,15 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
     bisection computes it, 0.5 (a + b) of its own parents), then the halvings walk down that tree. About 36
     halvings take 6 calls instead of 36 (a call's fixed cost dominates the cost of a point);
     each bracket stops on its own tolerance, so the times are those of one-at-a-time bisection, to the bit.
-    grid_columns: columns_fn(t_grid) when already at hand (the run's closed-form table), to save that call."""
+    grid_columns: columns_fn(t_grid) when already at hand (the run's closed-form table), to save that call.
+    known: instants known already (the run's events, sorted): a bracket holding one is not searched."""
     code = contact_code(columns_fn(t_grid) if grid_columns is None else grid_columns)
     idx = np.flatnonzero(code[1:] != code[:-1])
+    t_grid = np.asarray(t_grid, dtype=float)
+    if known is not None and len(known) and len(idx):
+        idx = idx[known.searchsorted(t_grid[idx]) == known.searchsorted(t_grid[idx + 1], side="right")]
     if not len(idx):
         return []
-    t_grid = np.asarray(t_grid, dtype=float)
     a, b, ca = t_grid[idx].copy(), t_grid[idx + 1].copy(), code[idx]
     active = b - a > tol * np.maximum(1.0, np.abs(b))
     while np.any(active):
