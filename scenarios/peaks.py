@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
-                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, read_all,
-                                      with_rowless)
+                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, merged,
+                                      read_all, second_round, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -398,6 +398,13 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                             [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]
+    # the candidates beyond the first that may still beat what these found, refined in a second pass; not in a
+    # periodic regime, whose turns repeat the same peaks (to its criterion): there the first are the regime's
+    more = second_round([p if label != "periodic" else None for p, (_, _, label) in zip(plans, windows)],
+                        located) if read is not None else []
+    if any(p is not None for p in more):
+        again = [p for p in more if p is not None]
+        merged(located, more, finish_all(again, read.prefetch([r for p in again for r in p.requests]), read))
     # each extremum against the one-sided limits at events that may beat it (`end_limits`), read together; not a
     # constant stretch's (exact: a dwell's zero speed, which the limits at the events around it equal only to the
     # integration's tolerance)
