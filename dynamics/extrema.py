@@ -520,13 +520,18 @@ def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple
     held = _held(intervals)
     found: list = [[[], []] for _ in spans]
     bounds: list = [None] * len(spans)
+    reserve: list = [None] * len(spans)
     if held:
-        got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in intervals[w]], limit,
+        got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in intervals[w]], EVERY,
                                         groups=[len(intervals[w]) for w in held],
                                         series=[row[spans[w][0]] for w in held])
         for q, w in enumerate(held):
-            found[w], bounds[w] = got[2 * q:2 * q + 2], lower[2 * q:2 * q + 2]
-    return _planned(t, own, intervals, found, bounds)
+            found[w], reserve[w] = (list(x) for x in zip(*(_first(x, limit) for x in got[2 * q:2 * q + 2])))
+            bounds[w] = lower[2 * q:2 * q + 2]
+    out = _planned(t, own, intervals, found, bounds)
+    for p, table, rest in zip(out, own, reserve):
+        p.table, p.reserve = table, rest
+    return out
 
 
 def _held(spans: list[list[Interval]]) -> list[int]:

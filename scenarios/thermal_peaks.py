@@ -631,7 +631,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
-    from mechsim.dynamics.extrema import column_plans, end_guesses, end_limit_requests, end_limits, finish_all
+    from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
+                                          merged, second_round)
     values = {c: np.asarray(cols[c], float) for c in columns}
     F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
@@ -651,7 +652,14 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     spans = [(intervals, owns, {c: next(planned) for c in owns}) for intervals, owns in spans]
     every = [p for _, _, plans in spans for p in plans.values()]
     # every window's and column's brackets refined in one pass (`finish_all`)
-    done = iter(finish_all(every, read_all(reader, [r for p in every for r in p.requests]), reader))
+    results = finish_all(every, read_all(reader, [r for p in every for r in p.requests]), reader)
+    # the candidates beyond the first that may still beat them, in every window: a temperature rises with the bulk
+    # through a periodic regime of the motion, so its turns do not repeat the same peaks
+    more = second_round(every, results)
+    if any(p is not None for p in more):
+        again = [p for p in more if p is not None]
+        merged(results, more, finish_all(again, read_all(reader, [r for p in again for r in p.requests]), reader))
+    done = iter(results)
     founds = [{c: next(done).get(c, {}) for c in plans} for _, _, plans in spans]
     # the one-sided limits that may beat each extremum, every window's read at once, then checked in order
     checks, ahead = [], []
