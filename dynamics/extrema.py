@@ -447,6 +447,8 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
 
 #: `_candidates_bounds`'s limit that keeps every candidate
 EVERY = 1 << 62
+#: candidates refined per column and sense in the second round at most (`second_round`): the largest bounds
+SECOND_ROUND = 4
 
 
 def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
@@ -461,7 +463,9 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
     """For each plan, a plan of its reserve candidates that may still beat the extremum located from its first ones
     (None where none may): a bracket's extremum may reach its row plus twice its parabola estimate's gain (the
     bound `_candidates_bounds` keeps candidates by), so a candidate whose bound exceeds the located value by more
-    than the tie is refined too. The first ones are the best by the rows' parabola estimates, which rank the peaks
+    than the tie is refined too, the SECOND_ROUND largest bounds first (a run of many turns
+    repeats its peaks, each within its bound of the located one). The first ones are the best by the rows' parabola
+    estimates, which rank the peaks
     wrongly where a peak is narrow against the output step and the peaks differ (a start-up, whose peaks grow turn
     by turn: geneva-torque's contact force at 2.3 ms rows, 0.1 % low; a drive that is not periodic:
     chain-mech2-detuned's coupler force at its own 10 ms rows, 0.14 % low)."""
@@ -481,11 +485,9 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
                 continue
             v = sense * e.value
             f = values[c]
-            for x in rest:
-                est, k, pos = x[0], x[1], x[2]
-                row = sense * float(f[p.intervals[k].rows[pos]])
-                if 2.0 * est - row > v + ties[c]:
-                    found[m].append(x)
+            bounds = [2.0 * x[0] - sense * float(f[p.intervals[x[1]].rows[x[2]]]) for x in rest]
+            able = [(-u, n) for n, u in enumerate(bounds) if u > v + ties[c]]
+            found[m] = [rest[n] for _, n in sorted(able)[:SECOND_ROUND]]
         if not any(found):
             out.append(None)
             continue

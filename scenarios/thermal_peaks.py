@@ -506,15 +506,21 @@ class ClosedFormThermalReader(_KeptReadings):
             return [None] * len(times)
         from mechsim.thermal.exact import states_between_rows_many
         n = self.thermal.setup.system.size
-        outs, early = [], []
+        outs, early, after = [], [], []
         for t in times:
             out = np.full((len(t), self.states.shape[1]), np.nan)
             late = t > self.t_sim if self.cycle else np.zeros(len(t), bool)
             if late.any():
-                out[late, :n] = self.thermal.cycle_states(self.solution, t[late])
+                after.append((out, late, t[late]))
             if not late.all():
                 early.append((out, ~late, t[~late]))
             outs.append(out)
+        if after:        # the cycle-averaged solution at every request's later instants in one evaluation
+            got = self.thermal.cycle_states(self.solution, np.concatenate([t for _, _, t in after]))
+            a = 0
+            for out, mask, t in after:
+                out[mask, :n] = got[a:a + len(t)]
+                a += len(t)
         if early:
             got = states_between_rows_many(self.network, self.inputs, self.breaks, self.t_win, self.states,
                                            [t for _, _, t in early], self.thermal.quadrature_piece)
