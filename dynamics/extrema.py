@@ -448,7 +448,7 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
 #: `_candidates_bounds`'s limit that keeps every candidate
 EVERY = 1 << 62
 #: candidates refined per column and sense in the second round at most (`second_round`): the largest bounds
-SECOND_ROUND = 4
+SECOND_ROUND = 2
 
 
 def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
