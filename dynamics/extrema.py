@@ -508,6 +508,15 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
                     got.setdefault(c, {})[name] = e
 
 
+def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader) -> None:
+    """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`) read in one pass of
+    `read` and refined, each better extremum in its place (`merged`)."""
+    more = second_round(plans, located)
+    again = [p for p in more if p is not None]
+    if again:
+        merged(located, more, finish_all(again, read_all(read, [r for p in again for r in p.requests]), read))
+
+
 def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple[str, list[Interval]]],
                  limit: int = CANDIDATES) -> list[Plan]:
     """`plan(t, {c: values[c]}, intervals)` of each (column c, intervals) of `spans` (each column searched on

@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
-                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, merged,
-                                      read_all, second_round, with_rowless)
+                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, read_all,
+                                      refine_further, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -321,13 +321,8 @@ def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events:
     where the contact starts and ends), their ends' one-sided limits read by the thermal reader. The trapezoidal
     rule on the rows alone put each jump inside a panel: an error of O(h) of the jump that moved with the output
     step (internal-geneva-motor's mean flash rise by 9e-4 of it between 0.37 and 2.3 ms rows)."""
-    from mechsim.scenarios.thermal_peaks import ROUNDOFF
-    breaks = _breaks(events)
-    kinks = getattr(reader, "kinks", None)
-    if kinks is not None:
-        near = ROUNDOFF * max(1.0, abs(b)) * 1e3
-        breaks = sorted(breaks + apart(kinks(a, b), np.array([x for x, _ in breaks], dtype=float), near))
-    turn = intervals_of(t, breaks, a, b, "turn start", "turn end")
+    from mechsim.scenarios.thermal_peaks import heat_breaks
+    turn = intervals_of(t, heat_breaks(reader, _breaks(events), a, b), a, b, "turn start", "turn end")
     asked = _turn_mean_requests(turn) if turn else None
     if asked is None:
         return {}
@@ -423,11 +418,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     located = [next(located) if p is not None else {} for p in plans]
     # the candidates beyond the first that may still beat what these found, refined in a second pass; not in a
     # periodic regime, whose turns repeat the same peaks (to its criterion): there the first are the regime's
-    more = second_round([p if label != "periodic" else None for p, (_, _, label) in zip(plans, windows)],
-                        located) if read is not None else []
-    if any(p is not None for p in more):
-        again = [p for p in more if p is not None]
-        merged(located, more, finish_all(again, read.prefetch([r for p in again for r in p.requests]), read))
+    if read is not None:
+        refine_further([p if label != "periodic" else None for p, (_, _, label) in zip(plans, windows)], located, read)
     # each extremum against the one-sided limits at events that may beat it (`end_limits`), read together; not a
     # constant stretch's (exact: a dwell's zero speed, which the limits at the events around it equal only to the
     # integration's tolerance)

@@ -624,6 +624,16 @@ def _promising(F: np.ndarray, intervals: list[Interval]) -> list[list[Interval]]
     return [[intervals[k] for k in sorted(mine)] for mine in keep]
 
 
+def heat_breaks(reader, breaks: list[tuple[float, str]], lo: float, hi: float) -> list[tuple[float, str]]:
+    """The events' `breaks` with the heat input's own switches inside (lo, hi) that are no event (within round-off
+    of none): the reader's `kinks`, where it knows them (the thermal columns kink there)."""
+    kinks = getattr(reader, "kinks", None)
+    if kinks is None:
+        return breaks
+    near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
+    return sorted(breaks + apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
+
+
 def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
                    windows: list[tuple[float, float, tuple[str, str]]]) -> list[dict]:
     """For each window (lo, hi, the kinds of its ends) of the table: {column: ({'max', 'min'} located by
@@ -634,19 +644,14 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
-                                          merged, second_round)
+                                          refine_further)
     values = {c: np.asarray(cols[c], float) for c in columns}
     F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
-    kinks = getattr(reader, "kinks", None)
     events_breaks = _breaks(events)
     spans = []
     for lo, hi, kinds in windows:
-        breaks = events_breaks
-        if kinks is not None:     # the heat input's own switches that are no event (within round-off of none)
-            near = ROUNDOFF * max(1.0, abs(hi)) * 1e3
-            breaks = sorted(breaks + apart(kinks(lo, hi), np.array([b for b, _ in breaks], dtype=float), near))
-        intervals = intervals_of(t, breaks, lo, hi, *kinds)
+        intervals = intervals_of(t, heat_breaks(reader, events_breaks, lo, hi), lo, hi, *kinds)
         spans.append((intervals, dict(zip(values, _promising(F, intervals)))))
     # `locate` of each column on its own intervals: every window's and column's plan made together, the readings of
     # all of them at once, then their finish
@@ -657,10 +662,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     results = finish_all(every, read_all(reader, [r for p in every for r in p.requests]), reader)
     # the candidates beyond the first that may still beat them, in every window: a temperature rises with the bulk
     # through a periodic regime of the motion, so its turns do not repeat the same peaks
-    more = second_round(every, results)
-    if any(p is not None for p in more):
-        again = [p for p in more if p is not None]
-        merged(results, more, finish_all(again, read_all(reader, [r for p in again for r in p.requests]), reader))
+    refine_further(every, results, reader)
     done = iter(results)
     founds = [{c: next(done).get(c, {}) for c in plans} for _, _, plans in spans]
     # the one-sided limits that may beat each extremum, every window's read at once, then checked in order
