@@ -913,7 +913,8 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
             {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()}, out)
 
 
-#: one-sided limits read per column and sense at most (`end_limits`): the best guesses
+#: one-sided limits read per column and sense at most (`end_limits`): the best guesses (the limits themselves where
+#: the reader holds the state there: `stored_limits`)
 LIMITS = 8
 
 
@@ -950,10 +951,11 @@ class EndLines:
 
 
 def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
-              windows: list[int] | None = None) -> EndLines | None:
+              windows: list[int] | None = None, reader=None) -> EndLines | None:
     """`EndLines` of every column of `values` at the intervals' ends; None without ends. windows: the intervals of
     each of several windows, consecutive (their counts), whose ends are each window's (`end_guesses` picks an ask's
-    among its window's)."""
+    among its window's). reader: where it holds the state at an end (`stored_ends`: a reading there costs no
+    integration), the limit itself, read there, replaces the extrapolation (`stored_limits`)."""
     ends = every_end(intervals)
     if not ends:
         return None
@@ -972,14 +974,34 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
         # the extrapolation's error over (at most) one step: its second difference, else the step itself
         curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
+    ok = np.isfinite(step) & (t1 != t0)
+    if reader is not None:
+        stored_limits(reader, intervals, ends, names, line, curve, ok)
     window = None
     if windows is not None and len(windows) > 1:        # each end's window, its interval counted there
         first = np.array([0, *windows[:-1]]).cumsum()
         k = np.array([k for k, _, _ in ends])
         window = first.searchsorted(k, side="right") - 1
         ends = [(x, side, te) for x, (_, side, te) in zip((k - first[window]).tolist(), ends)]
-    return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve,
-                    np.isfinite(step) & (t1 != t0), window)
+    return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve, ok, window)
+
+
+def stored_limits(reader, intervals: list[Interval], ends: list[tuple[int, str, float]], names: list[str],
+                  line: np.ndarray, curve: np.ndarray, ok: np.ndarray) -> None:
+    """`end_lines`' guesses made exact where the reader holds the state at an end (its `limits`: a segment's start
+    after an event, its end before one, a dense output's interpolant, read there in one pass): each column's
+    one-sided limit replaces the extrapolation, with no margin. A column whose value or derivative jumps at an
+    event, or grows like a root of the distance toward it (a flash temperature at a slip reversal), is extrapolated
+    from its rows with an error beyond any margin the rows can give, and its limits ranked so would be read in an
+    order that need not hold the best (docs/theory.md §K5)."""
+    limits = getattr(reader, "limits", None)
+    if limits is None:
+        return
+    got = limits([(intervals[k], side) for k, side, _ in ends], names)
+    have = np.isfinite(got)
+    line[have] = got[have]
+    curve[have] = 0.0
+    ok |= have
 
 
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
@@ -1031,11 +1053,12 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     `locate` ranks an interval's end by its row next to it, but a column whose value or derivative
     jumps at an event (the contact temperature at a slip reversal: the flash rise follows |slip speed|, the heat
     share jumps; a force at an entry) has its limit up to one row step beyond that row, and the side whose row is
-    the better one need not hold the better limit, nor need that row be the column's best. Each end whose linear
-    extrapolation from its two rows, plus their second difference for margin (the extrapolation's error over a
-    step), beats `e` is read there (the LIMITS best guesses of them); the best limit that beats `e` by more than the
-    tie is returned (`e` where none does). An end read that `own` lacks is appended to it (the entry's later
-    checks index the intervals searched). `guesses`: those ends where already found (`end_guesses`)."""
+    the better one need not hold the better limit, nor need that row be the column's best. Each end whose limit
+    (where the reader holds the state there: `stored_limits`) or linear extrapolation from its two rows, plus their
+    second difference for margin (the extrapolation's error over a step), beats `e` is read there (the LIMITS best
+    guesses of them); the best limit that beats `e` by more than the tie is returned (`e` where none does). An end
+    read that `own` lacks is appended to it (the entry's later checks index the intervals searched). `guesses`:
+    those ends where already found (`end_guesses`, their lines made with the reader: `end_lines`)."""
     best = e
     if guesses is None:
         guesses = _end_guesses(e, sense, t, f, intervals, tie)
@@ -1090,6 +1113,66 @@ class _ReadOut(Mapping):
 
     def __contains__(self, c):
         return c in self._table()
+
+
+class Gathered(Mapping):
+    """Columns of several tables put in one order: (table, the positions its rows take) per table, each column
+    gathered when first read (one indexing per table); NaN for the rows of a table without it. The one-sided
+    limits of many ends read together (`TrajectoryReader.stored_columns`), one table per mode."""
+
+    def __init__(self, groups: list[tuple[Mapping, np.ndarray]]):
+        self._groups = groups
+        self._order = np.argsort(np.concatenate([np.asarray(at, dtype=np.int64) for _, at in groups]), kind="stable")
+        self._names = list(dict.fromkeys(c for table, _ in groups for c in table))
+        self._got: dict = {}
+
+    @staticmethod
+    def of(parts: list) -> "Gathered | None":
+        """Readings' columns in their order, or None unless each is one row of a table read for many (`_Part`)."""
+        if not parts or not all(isinstance(t, _Part) and t._b - t._a == 1 for t in parts):
+            return None
+        groups: dict = {}
+        for j, part in enumerate(parts):
+            group = groups.setdefault(id(part._table), (part._table, [], []))
+            group[1].append(j)
+            group[2].append(part._a)
+        return Gathered([(_Rows(table, np.array(rows, dtype=np.int64)), np.array(js, dtype=np.int64))
+                         for table, js, rows in groups.values()])
+
+    def __getitem__(self, c):
+        got = self._got.get(c)
+        if got is None:
+            if c not in self._names:
+                raise KeyError(c)
+            got = self._got[c] = np.concatenate(
+                [np.asarray(table[c]) if c in table else np.full(len(at), np.nan)
+                 for table, at in self._groups])[self._order]
+        return got
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+
+class _Rows(Mapping):
+    """Some rows of a table (a mapping of column arrays), each column indexed when first read."""
+
+    def __init__(self, table: Mapping, rows: np.ndarray):
+        self._table, self._rows = table, rows
+
+    def __getitem__(self, c):
+        return np.asarray(self._table[c])[self._rows]
+
+    def __iter__(self):
+        return iter(self._table)
+
+    def __len__(self):
+        return len(self._table)
+
+    def __contains__(self, c):
+        return c in self._table
 
 
 class _Part(Mapping):
@@ -1159,7 +1242,7 @@ class TrajectoryReader:
         self._solvers: dict = {}
         self._compiled: list | None = None       # per try: the compiled IDA backend (a compiled run's readings)
         self._anchors = None
-        self._segments = self._rows = None
+        self._segments = self._rows = self._stop_times = None
         self._keep: list = []
         self._read: dict = {}        # (start, instants) -> `_from_row`'s (t, y, y'), or its ReadingFailed
         self._ahead: dict = {}       # `_read`'s key -> the first try's (t, y, y'), or None, read ahead
@@ -1382,7 +1465,8 @@ class TrajectoryReader:
         earlier states made for all at once. An earlier state is the latest one at or before `first` in the smooth
         stretch that holds it (ending at the interval's end): an output row of the run's segment there, else the
         state that segment started from (`Trajectory.starts`, after the event that opened it); none where the run
-        kept no segment starts (the compiled diffrax run)."""
+        kept no segment starts (the compiled diffrax run). A reading at the interval's end, where the run ended a
+        segment there, starts from that state (`_stops_at`): the one-sided limit the run itself reached."""
         n = len(items)
         k, r = np.array([iv.anchors[position] if 0 <= position < len(iv.anchors) else (-1, 0)
                          for iv, position, _ in items], dtype=np.int64).reshape(n, 2).T
@@ -1395,10 +1479,9 @@ class TrajectoryReader:
         earlier = asked & ((k < 0) | (first < t_row))
         starts = getattr(self.traj, "starts", None)
         seg = row = np.full(n, -1, dtype=np.int64)
+        stop = self._stops_at(first, hi) if own else seg
         if starts and earlier.any():
-            if self._segments is None:
-                self._segments = np.array([float(p.t[0]) for p in starts])
-            ts = self._segments
+            ts = self._segment_times()
             eps = 1e-12 * np.maximum(1.0, np.abs(first))
             # the last segment started at or before `first` (of several at one instant, the one the run went on
             # from), not one started at the stretch's end (after its closing event)
@@ -1408,8 +1491,11 @@ class TrajectoryReader:
             # an output row of that segment, nearer than its start
             row = np.where((seg >= 0) & (i >= 0) & (t_rows[np.maximum(i, 0)] > ts[np.maximum(seg, 0)]), i, -1)
         out: list = []
-        for (ki, ri), s, i, (iv, _, _) in zip(kr, seg.tolist(), row.tolist(), items):
-            if s >= 0:
+        for (ki, ri), s, i, e, (iv, _, _) in zip(kr, seg.tolist(), row.tolist(), stop.tolist(), items):
+            if e >= 0:                  # the interval's end, where its segment ended: the run's state there
+                end = self.traj.stops[e]
+                out.append((end, self.traj.model.modes[end.mode], float(end.t[0]), end.y[0], end.yp[0], None))
+            elif s >= 0:
                 if i >= 0:
                     try:
                         out.append(self._row_state(int(rows[i, 0]), int(rows[i, 1]), own))
@@ -1427,6 +1513,85 @@ class TrajectoryReader:
                 except ReadingFailed as exc:
                     out.append(exc)
         return out
+
+    def _segment_times(self) -> np.ndarray:
+        """The instant each segment of the run started at (`Trajectory.starts`), kept."""
+        if self._segments is None:
+            self._segments = np.array([float(p.t[0]) for p in self.traj.starts])
+        return self._segments
+
+    def _stops_at(self, first: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Per reading (its first instant, its interval's end): the segment whose end state is the reading's start,
+        where the reading is the one-sided limit at the interval's end and the run ended a segment there
+        (`Trajectory.stops`: the state before the event's transition); -1 elsewhere."""
+        stops = getattr(self.traj, "stops", None)
+        if not stops or not len(hi):
+            return np.full(len(hi), -1, dtype=np.int64)
+        if self._stop_times is None:
+            self._stop_times = np.array([np.nan if p is None else float(p.t[0]) for p in stops])
+        eps = 1e-12 * np.maximum(1.0, np.abs(hi))
+        s = self._segment_times().searchsorted(hi - eps, side="right") - 1       # the segment running into the end
+        with np.errstate(invalid="ignore"):
+            ok = (np.abs(first - hi) <= eps) & (s >= 0) & (np.abs(self._stop_times[np.maximum(s, 0)] - hi) <= eps)
+        return np.where(ok, s, -1)
+
+    def stored_ends(self, ends: list[tuple[Interval, str]]) -> np.ndarray:
+        """Whether the one-sided limit at each (interval, side: 'after' its start, 'before' its end) is a state the
+        run holds, read without integrating: the segment's start after an event, its end before one
+        (`Trajectory.starts`, `stops`); every end of a dense output (an interpolation)."""
+        if getattr(self.traj, "dense", None) is not None:
+            return np.ones(len(ends), dtype=bool)
+        return np.array([p is not None for p in self._stored_states(ends)], dtype=bool)
+
+    def _stored_states(self, ends: list[tuple[Interval, str]]) -> list:
+        """The state the run holds at each (interval, side) end, as a one-row Piece (`stored_ends`), or None."""
+        if not getattr(self.traj, "starts", None) or not ends:
+            return [None] * len(ends)
+        after = np.array([side == "after" for _, side in ends], dtype=bool)
+        te = np.array([iv.lo if a else iv.hi for (iv, _), a in zip(ends, after)], dtype=float)
+        ts = self._segment_times()
+        eps = 1e-12 * np.maximum(1.0, np.abs(te))
+        s = ts.searchsorted(te + eps, side="right") - 1      # the segment started there (the last of several)
+        started = np.where((s >= 0) & (np.abs(ts[np.maximum(s, 0)] - te) <= eps), s, -1)
+        ended = self._stops_at(te, te)
+        starts, stops = self.traj.starts, self.traj.stops
+        return [(starts[a] if a >= 0 else None) if x else (stops[b] if b >= 0 else None)
+                for x, a, b in zip(after.tolist(), started.tolist(), ended.tolist())]
+
+    def limits(self, ends: list[tuple[Interval, str]], names: list[str]) -> np.ndarray:
+        """The columns `names` at each (interval, side) end the run holds the state of (`stored_ends`), read out in
+        one pass (`stored_columns`): (column, end) values, NaN where the run holds none or the column has none
+        (`stored_limits`)."""
+        out = np.full((len(names), len(ends)), np.nan)
+        columns, read = self.stored_columns(ends)
+        if columns is not None:
+            for m, c in enumerate(names):
+                if c in columns:
+                    out[m, read] = np.asarray(columns[c], dtype=float)
+        return out
+
+    def stored_columns(self, ends: list[tuple[Interval, str]]) -> tuple[Mapping | None, np.ndarray]:
+        """(the columns at the ends the run holds the state of (`stored_ends`), in the ends' order, those ends'
+        positions): the states read out together, one read-out per mode (`tables.piece_columns` of the stacked
+        one-row pieces, as a reading's), or the dense output read there; (None, none) where there is none."""
+        if getattr(self.traj, "dense", None) is not None:
+            tables = self.read_many([(iv, 0 if side == "after" else len(iv.rows) - 1,
+                                      np.array([iv.lo if side == "after" else iv.hi])) for iv, side in ends])
+            read = np.array([j for j, table in enumerate(tables) if table is not None], dtype=np.int64)
+            return Gathered.of([tables[j] for j in read.tolist()]), read
+        modes: dict = {}
+        for j, piece in enumerate(self._stored_states(ends)):
+            if piece is not None:
+                if not isinstance(piece.params, tuple):       # (the read-out compares parameters as tuples)
+                    piece = replace(piece, params=tuple(np.asarray(piece.params, float).tolist()))
+                modes.setdefault(piece.mode, ([], []))
+                modes[piece.mode][0].append(piece)
+                modes[piece.mode][1].append(j)
+        if not modes:
+            return None, np.zeros(0, dtype=np.int64)
+        groups = [(_ReadOut(self.traj.model, pieces, self.angle_coordinates), np.array(at, dtype=np.int64))
+                  for pieces, at in modes.values()]
+        return Gathered(groups), np.sort(np.concatenate([at for _, at in groups]))
 
     def _row_state(self, k: int, r: int, own: bool = True):
         """`_anchor`'s tuple at row r of piece k: the run's own (y, y') there where `_owns` says so (own=True),

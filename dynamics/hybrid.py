@@ -60,6 +60,9 @@ class Trajectory:
     #: the consistent state each segment of the run started from (one row each, in time order; after an event, the
     #: state after it): where a reading of the continuous solution starts, forward, when no output row precedes it
     starts: list[Piece] = field(default_factory=list)
+    #: the state each of those segments ended at (one row, before the transition at its end: the one-sided limit
+    #: from before an event), None where it failed; a reading at that instant is this state
+    stops: list[Piece | None] = field(default_factory=list)
 
 
 def parameter_tuple(model: DerivedModel, values: dict[str, float]) -> tuple:
@@ -227,6 +230,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
                                                          start.mf, start.p, start.y, start.yp, start.offset)
     pieces = [Piece(mode, p, np.array([t0]), y[None, :].copy(), yp[None, :].copy(), offset)]
     starts: list[Piece] = []
+    stops: list[Piece | None] = []
     events: list[dict] = []
     stats = new_stats(backend.name, backend.solver, start.derive_time, unavailable=backend.unavailable)
     stats["notes"].update(backend.notes)
@@ -248,6 +252,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         stop = knots[0][0] if knots else t_end   # a breakpoint is a segment's end: never stepped over
         starts.append(Piece(mode, p, np.array([t]), np.array(y, dtype=float, ndmin=2),
                             np.array(yp, dtype=float, ndmin=2), offset))
+        stops.append(None)
         ahead = (t_out[t_out.searchsorted(t, "right"):t_out.searchsorted(stop, "right")] if ordered
                  else t_out[(t_out > t) & (t_out <= stop)])      # the output times in (t, stop]
         seg = yield Request(model, mode, mf, p, t, y, yp, ahead, stop, first_step)
@@ -283,6 +288,8 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
                            where={c: float(v) for c, v in zip(model.coordinates, q)}, hint=backend.hint(code))
             break
         in_row = 0
+        stops[-1] = Piece(mode, p, np.array([seg.t_end]), np.array(seg.y_end, dtype=float, ndmin=2),
+                          np.array(seg.yp_end, dtype=float, ndmin=2), offset)
         stuck = stuck + 1 if seg.t_end - t <= 1e-12 * max(1.0, abs(t)) else 0
         t = seg.t_end
         if seg.end is End.END:
@@ -312,7 +319,7 @@ def hybrid_loop(mech: Mechanism, start: Start, settings: SolverSettings, backend
         mf = model.modes[mode]
         first_step = RESTART_STEP_FACTOR * seg.next_step
     stats["solve_time_s"] = _time.perf_counter() - wall0 - stats["compile_time_s"]
-    return Trajectory(model, pieces, events, stats, failure, warnings, starts)
+    return Trajectory(model, pieces, events, stats, failure, warnings, starts, stops)
 
 
 def reached(knots: list, t: float) -> bool:

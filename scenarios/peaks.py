@@ -405,7 +405,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # the events an extremum may lie next to (what the singular-approach check may read) are read in the same pass
     # (`_readings_ahead`); other readers read them once the extrema are known
     read = _Readings(read) if read is not None else None
-    lines = _end_lines(plans)
+    lines = _end_lines(plans, read)
     ahead = ([r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
              if how == HOW_DENSE else [])
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
@@ -491,15 +491,16 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     return out, regime
 
 
-def _end_lines(plans: list) -> list[tuple[list[int], object]]:
+def _end_lines(plans: list, read) -> list[tuple[list[int], object]]:
     """The located plans over one table (t and values the same arrays, as `plan_windows` plans them together) with
-    their `end_lines`, made together (each window's ends its own): [(the plans' positions, their lines)]."""
+    their `end_lines`, made together (each window's ends its own), the limits the reader holds read there:
+    [(the plans' positions, their lines)]."""
     tables: dict = {}
     for w, p in enumerate(plans):
         if p is not None:
             tables.setdefault((id(p.t), id(p.values)), []).append(w)
     return [(ws, end_lines(plans[ws[0]].t, plans[ws[0]].values, [iv for w in ws for iv in plans[w].intervals],
-                           [len(plans[w].intervals) for w in ws])) for ws in tables.values()]
+                           [len(plans[w].intervals) for w in ws], read)) for ws in tables.values()]
 
 
 class _Readings:

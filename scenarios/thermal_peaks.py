@@ -335,7 +335,7 @@ class ThermalReader(_KeptReadings):
             except ReadingFailed as error:
                 places.append(error)
                 continue
-            places.append((times, at, parts, len(asks)))
+            places.append((times, at, parts, len(asks), self._before(at, which)))
             asks += [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
         readings = self.reader.read_many(asks) if asks else []
         out: list = []
@@ -343,7 +343,7 @@ class ThermalReader(_KeptReadings):
             if isinstance(place, ReadingFailed):
                 out.append(place)
                 continue
-            times, at, parts, a = place
+            times, at, parts, a, before = place
             try:
                 got = [r if r is not None else self.reader(*ask)          # not read together: alone, its error raised
                        for r, ask in zip(readings[a:a + len(parts)], asks[a:a + len(parts)])]
@@ -351,7 +351,54 @@ class ThermalReader(_KeptReadings):
                 out.append(error)
                 continue
             out.append(self._finish(times, at, _frame_columns(
-                [(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)], len(at))))
+                [(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)], len(at)), before))
+        return out
+
+    def stored_ends(self, ends: list[tuple[Interval, str]]) -> np.ndarray:
+        """Whether the one-sided limit at each (interval, side) is read from a state the run holds
+        (`TrajectoryReader.stored_ends`): the instant standing for it (`_window_instants`) at the same end of its
+        window interval, and the mechanics' reader holding that end."""
+        return self._stored(ends)[0]
+
+    def _stored(self, ends: list[tuple[Interval, str]]) -> tuple[np.ndarray, ...]:
+        """(`stored_ends`, each end's instant, its window instant, its window interval, whether it is an 'after'
+        limit), the window instants found for all ends at once as `_window_instants` finds them."""
+        n = len(ends)
+        if not n:
+            return np.zeros(0, dtype=bool), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, bool)
+        eps = ROUNDOFF * self.scale
+        after = np.array([side == "after" for _, side in ends], dtype=bool)
+        lo = np.array([iv.lo for iv, _ in ends], dtype=float)
+        hi = np.array([iv.hi for iv, _ in ends], dtype=float)
+        te = np.where(after, lo, hi)
+        inner = np.where(hi - lo > 4e3 * eps, np.where(after, te + 1e3 * eps, te - 1e3 * eps), te)
+        which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
+        at = _clip(self._phase(te), self.lows[which], self.highs[which])
+        edge = np.where(after, self.lows[which], self.highs[which])
+        same = np.flatnonzero(np.abs(at - edge) <= 1e-12 * np.maximum(1.0, np.abs(edge)))
+        stored = np.zeros(n, dtype=bool)
+        stored[same] = self.reader.stored_ends([(self.windows[w], "after" if a else "before")
+                                                for w, a in zip(which[same].tolist(), after[same].tolist())])
+        return stored, te, at, which, after
+
+    def limits(self, ends: list[tuple[Interval, str]], names: list[str]) -> np.ndarray:
+        """The columns `names` (thermal ones included) at each (interval, side) end whose mechanics the run holds
+        (`stored_ends`): the mechanics read out there in one pass (`TrajectoryReader.stored_columns`), then the thermal formulas on all of them at once, as `_readings` evaluates them; NaN elsewhere
+        (`dynamics/extrema.py` `stored_limits`)."""
+        out = np.full((len(names), len(ends)), np.nan)
+        stored, te, at, which, after = self._stored(ends)
+        pick = np.flatnonzero(stored)
+        if not len(pick):
+            return out
+        stacked, read = self.reader.stored_columns([(self.windows[w], "after" if a else "before")
+                                                    for w, a in zip(which[pick].tolist(), after[pick].tolist())])
+        if stacked is None:
+            return out
+        pick = pick[read]
+        table = self._thermal([self._finish(te[pick], at[pick], _reading_columns(stacked, None), ~after[pick])])[0]
+        for m, c in enumerate(names):
+            if c in table:
+                out[m, pick] = np.asarray(table[c], dtype=float)
         return out
 
     def _window_instants(self, iv: Interval, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -363,8 +410,14 @@ class ThermalReader(_KeptReadings):
         which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
         return _clip(self._phase(times), self.lows[which], self.highs[which]), which
 
-    def _finish(self, times: np.ndarray, at: np.ndarray, frame) -> tuple:
-        """`_columns`' value from the window's columns `frame` at the window instants `at` of the instants."""
+    def _before(self, at: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """Which window instants are the limit from before their window interval's end (at its end, not its start)."""
+        eps = 1e-12 * np.maximum(1.0, np.abs(at))
+        return (np.abs(self.highs[which] - at) <= eps) & (at - self.lows[which] > eps)
+
+    def _finish(self, times: np.ndarray, at: np.ndarray, frame, before: np.ndarray) -> tuple:
+        """`_columns`' value from the window's columns `frame` at the window instants `at` of the instants; `before`:
+        those that are the limit from before an event (`_before`), where a contact starting at it has not begun."""
         frame["t_s"] = times
         late = times > self.t_sim_end if self.cycle else np.zeros(len(times), bool)
         if self.cycle:
@@ -383,7 +436,7 @@ class ThermalReader(_KeptReadings):
                 n = th.setup.system.size
                 states[late] = np.nan
                 states[late, :n] = th.cycle_states(self.solution, times[late])
-        return frame, states, th._time_since(at, self.starts)
+        return frame, states, th._time_since(at, self.starts, before)
 
     def frame_columns(self, at: np.ndarray, which: np.ndarray) -> Mapping[str, np.ndarray]:
         """The window's columns (mechanics and the network's states) at the window instants `at`, each in the
@@ -643,8 +696,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
-    from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, finish_all,
-                                          refine_further)
+    from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, end_lines,
+                                          finish_all, refine_further)
     values = {c: np.asarray(cols[c], float) for c in columns}
     F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
@@ -670,7 +723,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for (intervals, owns, _), found in zip(spans, founds):
         asks = [(c, sense, getattr(found[c].get(name), "value", None))
                 for c in values for name, sense in (("max", 1.0), ("min", -1.0))]
-        guesses = end_guesses(t, values, intervals, asks, ties) if asks else []
+        guesses = end_guesses(t, values, intervals, asks, ties, lines=end_lines(t, values, intervals, reader=reader)
+                              ) if asks else []
         for (c, sense, _), g in zip(asks, guesses):
             e = found[c].get("max" if sense > 0 else "min")
             ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])

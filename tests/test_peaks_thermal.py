@@ -89,3 +89,16 @@ def test_kinks_apart_from_the_events_are_those_farther_than_near_from_every_one(
         near = float(rng.choice([0.0, 1e-9, 0.05, 0.5]))
         brute = [k for k in kinks if not len(known) or np.min(np.abs(known - k[0])) > near]
         assert apart(kinks, known, near) == brute
+
+
+def test_time_since_contact_start_from_before_a_start_is_the_earlier_contacts():
+    """The limit from before an instant where a contact starts (a flank switch: the pin crosses to the other flank)
+    belongs to the contact before it: its time since contact runs on from the earlier start; at or after the start
+    it is the new contact's, zero at the start itself (thermal/plan.py `_time_since`)."""
+    from mechsim.thermal.plan import ThermalPlan
+    starts = np.array([0.1, 0.3])
+    t = np.array([0.05, 0.3, 0.3, 0.35, 0.3])
+    before = np.array([False, True, False, False, True])
+    since = ThermalPlan._time_since(t, starts, before)
+    np.testing.assert_allclose(since, [np.inf, 0.2, 0.0, 0.05, 0.2], rtol=1e-15, atol=1e-15)
+    np.testing.assert_array_equal(ThermalPlan._time_since(t, starts), [np.inf, 0.0, 0.0, since[3], 0.0])

@@ -506,11 +506,14 @@ class ThermalPlan:
                                                              + why])
 
     @staticmethod
-    def _time_since(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
-        """Time since the latest contact start (inf before the first)."""
+    def _time_since(t: np.ndarray, starts: np.ndarray, before: np.ndarray | None = None) -> np.ndarray:
+        """Time since the latest contact start (inf before the first); where `before`, the limit from before t: a
+        contact starting at t has not begun (the time since the one before it)."""
         if not len(starts):
             return np.full(t.shape, np.inf)
         i = np.searchsorted(starts, t + 1e-12, side="right") - 1
+        if before is not None and before.any():
+            i = np.where(before, np.searchsorted(starts, t - 1e-12, side="left") - 1, i)
         out = np.where(i >= 0, t - starts[np.clip(i, 0, None)], np.inf)
         return np.clip(out, 0.0, None)
 
