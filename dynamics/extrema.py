@@ -976,7 +976,7 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
     ok = np.isfinite(step) & (t1 != t0)
     if reader is not None:
-        stored_limits(reader, intervals, ends, names, line, curve, ok)
+        stored_limits(reader, intervals, ends, names, line, curve, ok, f0, f1)
     window = None
     if windows is not None and len(windows) > 1:        # each end's window, its interval counted there
         first = np.array([0, *windows[:-1]]).cumsum()
@@ -987,18 +987,24 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
 
 
 def stored_limits(reader, intervals: list[Interval], ends: list[tuple[int, str, float]], names: list[str],
-                  line: np.ndarray, curve: np.ndarray, ok: np.ndarray) -> None:
+                  line: np.ndarray, curve: np.ndarray, ok: np.ndarray, f0: np.ndarray, f1: np.ndarray) -> None:
     """`end_lines`' guesses made exact where the reader holds the state at an end (its `limits`: a segment's start
     after an event, its end before one, a dense output's interpolant, read there in one pass): each column's
     one-sided limit replaces the extrapolation, with no margin. A column whose value or derivative jumps at an
-    event, or grows like a root of the distance toward it (a flash temperature at a slip reversal), is extrapolated
-    from its rows with an error beyond any margin the rows can give, and its limits ranked so would be read in an
-    order that need not hold the best (docs/theory.md §K5)."""
+    event, or grows like a root of the distance toward it (a flash temperature at a slip reversal), or changes
+    within a step of it (the flash rise as a contact begins), is extrapolated from its rows with an error beyond any
+    margin the rows can give, and its limits ranked so would be read in an order that need not hold the best
+    (docs/theory.md §K5). A limit is taken where it continues the rows' change toward the end (from the next row
+    `f1` to the nearest `f0`, per column and end), or equals the nearest row: a column unbounded toward the event
+    (a force growing like 1/distance) has at the event itself a value of round-off, of either sign; one that
+    continues its rows is checked for growth next to the extremum as any other (`scenarios/peaks.py`
+    `singular_approaches`), and the others are ranked by the extrapolation, as where the run holds no state."""
     limits = getattr(reader, "limits", None)
     if limits is None:
         return
     got = limits([(intervals[k], side) for k, side, _ in ends], names)
-    have = np.isfinite(got)
+    with np.errstate(invalid="ignore"):
+        have = np.isfinite(got) & ((got - f0) * (f0 - f1) >= 0.0)
     line[have] = got[have]
     curve[have] = 0.0
     ok |= have
@@ -1558,24 +1564,26 @@ class TrajectoryReader:
         return [(starts[a] if a >= 0 else None) if x else (stops[b] if b >= 0 else None)
                 for x, a, b in zip(after.tolist(), started.tolist(), ended.tolist())]
 
-    def limits(self, ends: list[tuple[Interval, str]], names: list[str]) -> np.ndarray:
+    def limits(self, ends: list[tuple[Interval, str]], names: list[str], read_many=None) -> np.ndarray:
         """The columns `names` at each (interval, side) end the run holds the state of (`stored_ends`), read out in
         one pass (`stored_columns`): (column, end) values, NaN where the run holds none or the column has none
-        (`stored_limits`)."""
+        (`stored_limits`). read_many: what reads a dense output there (default its own; a caller's that keeps the
+        readings, for the limits read again later)."""
         out = np.full((len(names), len(ends)), np.nan)
-        columns, read = self.stored_columns(ends)
+        columns, read = self.stored_columns(ends, read_many)
         if columns is not None:
             for m, c in enumerate(names):
                 if c in columns:
                     out[m, read] = np.asarray(columns[c], dtype=float)
         return out
 
-    def stored_columns(self, ends: list[tuple[Interval, str]]) -> tuple[Mapping | None, np.ndarray]:
+    def stored_columns(self, ends: list[tuple[Interval, str]], read_many=None) -> tuple[Mapping | None, np.ndarray]:
         """(the columns at the ends the run holds the state of (`stored_ends`), in the ends' order, those ends'
         positions): the states read out together, one read-out per mode (`tables.piece_columns` of the stacked
-        one-row pieces, as a reading's), or the dense output read there; (None, none) where there is none."""
+        one-row pieces, as a reading's), or the dense output read there (by `read_many`, default `read_many`);
+        (None, none) where there is none."""
         if getattr(self.traj, "dense", None) is not None:
-            tables = self.read_many([(iv, 0 if side == "after" else len(iv.rows) - 1,
+            tables = (read_many or self.read_many)([(iv, 0 if side == "after" else len(iv.rows) - 1,
                                       np.array([iv.lo if side == "after" else iv.hi])) for iv, side in ends])
             read = np.array([j for j, table in enumerate(tables) if table is not None], dtype=np.int64)
             return Gathered.of([tables[j] for j in read.tolist()]), read

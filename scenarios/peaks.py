@@ -509,6 +509,8 @@ class _Readings:
 
     def __init__(self, read):
         self.read, self.kept = read, {}
+        if hasattr(read, "limits"):     # the reader's, a dense output's readings kept (read again by `end_limits`)
+            self.limits = lambda ends, names: read.limits(ends, names, self.prefetch)
         self.growth: dict = {}          # the growth requests made (`_growth_requests`), one h per reader
 
     @staticmethod

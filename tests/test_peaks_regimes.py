@@ -43,6 +43,22 @@ def test_a_run_that_does_not_settle_has_no_regime():
     assert all("startup" not in e for e in r.summary["peaks"].values())
 
 
+def test_coupler_force_through_the_smooth_apex_is_unbounded_not_its_value_at_the_event():
+    """chain-mech2-smooth: through the apex on the smooth branch the coupler's force grows like 1/distance on both
+    sides, with opposite signs. The run holds its state at the apex (`Trajectory.stops`, `starts`), where the force
+    is round-off (-6.2e10 N, its sign either): read as the limit there it would be reported as the minimum. A limit
+    against its rows' approach is not taken (`dynamics/extrema.py` `stored_limits`), and the growth toward
+    the apex is what is reported, at any output step."""
+    for step in ("10 ms", "23 ms"):
+        r = runner.run(mechsim.load("chain-mech2-smooth", set=["duration=8 s", f"output_step={step}"]))
+        force = r.summary["peaks"]["coupler_force_N"]
+        apex = float(r.events.loc[r.events["kind"] == "apex", "t_s"].min())
+        for name in ("max", "min"):
+            assert force[name]["value"] is None and force[name]["unbounded"], (step, name, force[name])
+            assert force[name]["t_s"] == apex, (step, name)
+            assert force[name]["growth_exponent"] == pytest.approx(1.0, abs=0.02), (step, name)
+
+
 def test_coupler_force_toward_the_crank_stop_is_unbounded_not_a_row():
     """chain-mech2-torque: at the apex the coupler's constraint loses rank (§K1.5) and its force grows like
     1/(t_stop - t) toward each crank stop; no peak is reported for it at any output step, the stop's impulse and
