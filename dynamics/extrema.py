@@ -1122,14 +1122,15 @@ class _ReadOut(Mapping):
 
 
 class Gathered(Mapping):
-    """Columns of several tables put in one order: (table, the positions its rows take) per table, each column
-    gathered when first read (one indexing per table); NaN for the rows of a table without it. The one-sided
-    limits of many ends read together (`TrajectoryReader.stored_columns`), one table per mode."""
+    """Columns of several tables put in one order: (table, its rows taken or None for all, the positions they take)
+    per table, each column gathered when first read (one indexing per table); NaN for the rows of a table without
+    it. The one-sided limits of many ends read together (`TrajectoryReader.stored_columns`), one table per mode."""
 
-    def __init__(self, groups: list[tuple[Mapping, np.ndarray]]):
+    def __init__(self, groups: list[tuple[Mapping, np.ndarray | None, np.ndarray]]):
         self._groups = groups
-        self._order = np.argsort(np.concatenate([np.asarray(at, dtype=np.int64) for _, at in groups]), kind="stable")
-        self._names = list(dict.fromkeys(c for table, _ in groups for c in table))
+        self._order = np.argsort(np.concatenate([np.asarray(at, dtype=np.int64) for _, _, at in groups]),
+                                 kind="stable")
+        self._names = list(dict.fromkeys(c for table, _, _ in groups for c in table))
         self._got: dict = {}
 
     @staticmethod
@@ -1140,10 +1141,10 @@ class Gathered(Mapping):
         groups: dict = {}
         for j, part in enumerate(parts):
             group = groups.setdefault(id(part._table), (part._table, [], []))
-            group[1].append(j)
-            group[2].append(part._a)
-        return Gathered([(_Rows(table, np.array(rows, dtype=np.int64)), np.array(js, dtype=np.int64))
-                         for table, js, rows in groups.values()])
+            group[1].append(part._a)
+            group[2].append(j)
+        return Gathered([(table, np.array(rows, dtype=np.int64), np.array(js, dtype=np.int64))
+                         for table, rows, js in groups.values()])
 
     def __getitem__(self, c):
         got = self._got.get(c)
@@ -1151,8 +1152,8 @@ class Gathered(Mapping):
             if c not in self._names:
                 raise KeyError(c)
             got = self._got[c] = np.concatenate(
-                [np.asarray(table[c]) if c in table else np.full(len(at), np.nan)
-                 for table, at in self._groups])[self._order]
+                [(np.asarray(table[c]) if rows is None else np.asarray(table[c])[rows]) if c in table else
+                 np.full(len(at), np.nan) for table, rows, at in self._groups])[self._order]
         return got
 
     def __iter__(self):
@@ -1160,25 +1161,6 @@ class Gathered(Mapping):
 
     def __len__(self):
         return len(self._names)
-
-
-class _Rows(Mapping):
-    """Some rows of a table (a mapping of column arrays), each column indexed when first read."""
-
-    def __init__(self, table: Mapping, rows: np.ndarray):
-        self._table, self._rows = table, rows
-
-    def __getitem__(self, c):
-        return np.asarray(self._table[c])[self._rows]
-
-    def __iter__(self):
-        return iter(self._table)
-
-    def __len__(self):
-        return len(self._table)
-
-    def __contains__(self, c):
-        return c in self._table
 
 
 class _Part(Mapping):
@@ -1597,9 +1579,9 @@ class TrajectoryReader:
                 modes[piece.mode][1].append(j)
         if not modes:
             return None, np.zeros(0, dtype=np.int64)
-        groups = [(_ReadOut(self.traj.model, pieces, self.angle_coordinates), np.array(at, dtype=np.int64))
+        groups = [(_ReadOut(self.traj.model, pieces, self.angle_coordinates), None, np.array(at, dtype=np.int64))
                   for pieces, at in modes.values()]
-        return Gathered(groups), np.sort(np.concatenate([at for _, at in groups]))
+        return Gathered(groups), np.sort(np.concatenate([at for _, _, at in groups]))
 
     def _row_state(self, k: int, r: int, own: bool = True):
         """`_anchor`'s tuple at row r of piece k: the run's own (y, y') there where `_owns` says so (own=True),
