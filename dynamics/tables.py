@@ -138,10 +138,9 @@ def _mode_params(pieces) -> tuple:
         return first
     counts = np.array([len(p.t) for p in pieces])
     params = list(first)
-    for j, values in enumerate(zip(*(p.params for p in pieces), strict=True)):    # a parameter over the pieces
-        v0 = values[0]
-        if v0 != v0 or values.count(v0) != len(values):    # (count: identity, then ==; a NaN is never shared)
-            params[j] = np.repeat(np.asarray(values, dtype=float), counts)
+    P = np.array([p.params for p in pieces], dtype=float)        # (pieces, parameters)
+    for j in np.flatnonzero(~(P == P[0]).all(axis=0)).tolist():  # a parameter over the pieces (a NaN never shared)
+        params[j] = np.repeat(P[:, j], counts)
     return tuple(params)
 
 

@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
-                                      end_limit_requests, end_limits, end_lines, finish_all, intervals_of, read_all,
-                                      refine_further, with_rowless)
+                                      end_limit_requests, end_limits, end_lines, every_end, finish_all, intervals_of,
+                                      read_all, refine_further, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -401,14 +401,18 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is not None and read is not None:
         turn = _intervals(tn, breaks, *regime["last_turn"], ("turn start", "turn end"), read)
         means_asked = _turn_mean_requests(turn)
-    # a dense output's readings cost no integration: the one-sided limits `end_limits` may read and the growth toward
-    # the events an extremum may lie next to (what the singular-approach check may read) are read in the same pass
-    # (`_readings_ahead`); other readers read them once the extrema are known
+    # a dense output's readings cost no integration: the one-sided limits at every end (`stored_limits` ranks the ends
+    # by them), those `end_limits` may read and the growth toward the events an extremum may lie next to (what the
+    # singular-approach check may read) are read in the same pass (`_readings_ahead`, on the rows' lines); other
+    # readers read them once the extrema are known
     read = _Readings(read) if read is not None else None
-    lines = _end_lines(plans, read)
-    ahead = ([r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
-             if how == HOW_DENSE else [])
+    ahead = []
+    if how == HOW_DENSE:
+        ahead = [r for ws, x in _end_lines(plans, None) for r in _readings_ahead([plans[w] for w in ws], h, x,
+                                                                                 read.growth)]
+        ahead += [r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))]
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
+    lines = _end_lines(plans, read)
     means = {}
     if means_asked is not None:
         got = tables[len(requests):len(requests) + len(means_asked)]
@@ -509,8 +513,6 @@ class _Readings:
 
     def __init__(self, read):
         self.read, self.kept = read, {}
-        if hasattr(read, "limits"):     # the reader's, a dense output's readings kept (read again by `end_limits`)
-            self.limits = lambda ends, names: read.limits(ends, names, self.prefetch)
         self.growth: dict = {}          # the growth requests made (`_growth_requests`), one h per reader
 
     @staticmethod
@@ -530,6 +532,13 @@ class _Readings:
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         got = self.kept.get(self._key(iv, position, times))
         return got if got is not None else self.read(iv, position, times)
+
+    @property
+    def limits(self):
+        """The reader's `limits` (None where it has none), a dense output's readings kept (read again by
+        `end_limits`)."""
+        inner = getattr(self.read, "limits", None)
+        return None if inner is None else (lambda ends, names: inner(ends, names, self.prefetch))
 
     def __getattr__(self, name):
         return getattr(self.read, name)
