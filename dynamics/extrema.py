@@ -951,11 +951,10 @@ class EndLines:
 
 
 def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
-              windows: list[int] | None = None, reader=None) -> EndLines | None:
+              windows: list[int] | None = None) -> EndLines | None:
     """`EndLines` of every column of `values` at the intervals' ends; None without ends. windows: the intervals of
     each of several windows, consecutive (their counts), whose ends are each window's (`end_guesses` picks an ask's
-    among its window's). reader: where it holds the state at an end (`stored_ends`: a reading there costs no
-    integration), the limit itself, read there, replaces the extrapolation (`stored_limits`)."""
+    among its window's). The limits a reader holds replace the extrapolation where `stored_limits` is applied."""
     ends = every_end(intervals)
     if not ends:
         return None
@@ -975,8 +974,6 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
         curve = np.where(near[:, 2] != near[:, 1], np.abs(step - (f1 - f2)), np.abs(step))
         curve = np.where(np.isfinite(curve), curve, np.abs(step))
     ok = np.isfinite(step) & (t1 != t0)
-    if reader is not None:
-        stored_limits(reader, intervals, ends, names, line, curve, ok, f0, f1)
     window = None
     if windows is not None and len(windows) > 1:        # each end's window, its interval counted there
         first = np.array([0, *windows[:-1]]).cumsum()
@@ -986,28 +983,27 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
     return EndLines(ends, te, {c: n for n, c in enumerate(names)}, f0, f1, line, curve, ok, window)
 
 
-def stored_limits(reader, intervals: list[Interval], ends: list[tuple[int, str, float]], names: list[str],
-                  line: np.ndarray, curve: np.ndarray, ok: np.ndarray, f0: np.ndarray, f1: np.ndarray) -> None:
-    """`end_lines`' guesses made exact where the reader holds the state at an end (its `limits`: a segment's start
+def stored_limits(lines: EndLines | None, intervals: list[Interval], reader) -> None:
+    """`end_lines`' guesses (made over `intervals`, in place) made exact where the reader holds the state at an end (its `limits`: a segment's start
     after an event, its end before one, a dense output's interpolant, read there in one pass): each column's
     one-sided limit replaces the extrapolation, with no margin. A column whose value or derivative jumps at an
     event, or grows like a root of the distance toward it (a flash temperature at a slip reversal), or changes
     within a step of it (the flash rise as a contact begins), is extrapolated from its rows with an error beyond any
     margin the rows can give, and its limits ranked so would be read in an order that need not hold the best
     (docs/theory.md §K5). A limit is taken where it continues the rows' change toward the end (from the next row
-    `f1` to the nearest `f0`, per column and end), or equals the nearest row: a column unbounded toward the event
+    to the nearest, per column and end: `EndLines.f1`, `f0`), or equals the nearest row: a column unbounded toward the event
     (a force growing like 1/distance) has at the event itself a value of round-off, of either sign; one that
     continues its rows is checked for growth next to the extremum as any other (`scenarios/peaks.py`
     `singular_approaches`), and the others are ranked by the extrapolation, as where the run holds no state."""
     limits = getattr(reader, "limits", None)
-    if limits is None:
+    if lines is None or limits is None:
         return
-    got = limits([(intervals[k], side) for k, side, _ in ends], names)
+    got = limits([(intervals[k], side) for k, side, _ in every_end(intervals)], list(lines.of))
     with np.errstate(invalid="ignore"):
-        have = np.isfinite(got) & ((got - f0) * (f0 - f1) >= 0.0)
-    line[have] = got[have]
-    curve[have] = 0.0
-    ok |= have
+        have = np.isfinite(got) & ((got - lines.f0) * (lines.f0 - lines.f1) >= 0.0)
+    lines.line[have] = got[have]
+    lines.curve[have] = 0.0
+    lines.ok |= have
 
 
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
@@ -1064,7 +1060,7 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     second difference for margin (the extrapolation's error over a step), beats `e` is read there (the LIMITS best
     guesses of them); the best limit that beats `e` by more than the tie is returned (`e` where none does). An end
     read that `own` lacks is appended to it (the entry's later checks index the intervals searched). `guesses`:
-    those ends where already found (`end_guesses`, their lines made with the reader: `end_lines`)."""
+    those ends where already found (`end_guesses`, on lines with the limits the reader holds: `stored_limits`)."""
     best = e
     if guesses is None:
         guesses = _end_guesses(e, sense, t, f, intervals, tie)

@@ -20,7 +20,7 @@ import pandas as pd
 
 from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
                                       end_limit_requests, end_limits, end_lines, every_end, finish_all, intervals_of,
-                                      read_all, refine_further, with_rowless)
+                                      read_all, refine_further, stored_limits, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -406,13 +406,14 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     # singular-approach check may read) are read in the same pass (`_readings_ahead`, on the rows' lines); other
     # readers read them once the extrema are known
     read = _Readings(read) if read is not None else None
+    lines = _end_lines(plans)
     ahead = []
     if how == HOW_DENSE:
-        ahead = [r for ws, x in _end_lines(plans, None) for r in _readings_ahead([plans[w] for w in ws], h, x,
-                                                                                 read.growth)]
+        ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
         ahead += [r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))]
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
-    lines = _end_lines(plans, read)
+    for ws, x in lines if read is not None else ():      # the limits the reader holds rank the ends
+        stored_limits(x, [iv for w in ws for iv in plans[w].intervals], read)
     means = {}
     if means_asked is not None:
         got = tables[len(requests):len(requests) + len(means_asked)]
@@ -495,16 +496,15 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     return out, regime
 
 
-def _end_lines(plans: list, read) -> list[tuple[list[int], object]]:
+def _end_lines(plans: list) -> list[tuple[list[int], object]]:
     """The located plans over one table (t and values the same arrays, as `plan_windows` plans them together) with
-    their `end_lines`, made together (each window's ends its own), the limits the reader holds read there:
-    [(the plans' positions, their lines)]."""
+    their `end_lines`, made together (each window's ends its own): [(the plans' positions, their lines)]."""
     tables: dict = {}
     for w, p in enumerate(plans):
         if p is not None:
             tables.setdefault((id(p.t), id(p.values)), []).append(w)
     return [(ws, end_lines(plans[ws[0]].t, plans[ws[0]].values, [iv for w in ws for iv in plans[w].intervals],
-                           [len(plans[w].intervals) for w in ws], read)) for ws in tables.values()]
+                           [len(plans[w].intervals) for w in ws])) for ws in tables.values()]
 
 
 class _Readings:

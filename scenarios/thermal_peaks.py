@@ -697,7 +697,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another."""
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, end_lines,
-                                          finish_all, refine_further)
+                                          finish_all, refine_further, stored_limits)
     values = {c: np.asarray(cols[c], float) for c in columns}
     F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
@@ -723,8 +723,9 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     for (intervals, owns, _), found in zip(spans, founds):
         asks = [(c, sense, getattr(found[c].get(name), "value", None))
                 for c in values for name, sense in (("max", 1.0), ("min", -1.0))]
-        guesses = end_guesses(t, values, intervals, asks, ties, lines=end_lines(t, values, intervals, reader=reader)
-                              ) if asks else []
+        lines = end_lines(t, values, intervals)
+        stored_limits(lines, intervals, reader)
+        guesses = end_guesses(t, values, intervals, asks, ties, lines=lines) if asks else []
         for (c, sense, _), g in zip(asks, guesses):
             e = found[c].get("max" if sense > 0 else "min")
             ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])
