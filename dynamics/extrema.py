@@ -984,17 +984,18 @@ def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Inte
 
 
 def stored_limits(lines: EndLines | None, intervals: list[Interval], reader) -> None:
-    """`end_lines`' guesses (made over `intervals`, in place) made exact where the reader holds the state at an end (its `limits`: a segment's start
-    after an event, its end before one, a dense output's interpolant, read there in one pass): each column's
-    one-sided limit replaces the extrapolation, with no margin. A column whose value or derivative jumps at an
-    event, or grows like a root of the distance toward it (a flash temperature at a slip reversal), or changes
-    within a step of it (the flash rise as a contact begins), is extrapolated from its rows with an error beyond any
-    margin the rows can give, and its limits ranked so would be read in an order that need not hold the best
-    (docs/theory.md §K5). A limit is taken where it continues the rows' change toward the end (from the next row
-    to the nearest, per column and end: `EndLines.f1`, `f0`), or equals the nearest row: a column unbounded toward the event
-    (a force growing like 1/distance) has at the event itself a value of round-off, of either sign; one that
-    continues its rows is checked for growth next to the extremum as any other (`scenarios/peaks.py`
-    `singular_approaches`), and the others are ranked by the extrapolation, as where the run holds no state."""
+    """`end_lines`' guesses (made over `intervals`), made exact in place where the reader holds the state at an end
+    (its `limits`: a segment's start after an event, its end before one, a dense output's interpolant, read there
+    in one pass): each column's one-sided limit replaces the extrapolation, with no margin. A column whose value or
+    derivative jumps at an event, or grows like a root of the distance toward it (a flash temperature at a slip
+    reversal), or changes within a step of it (the flash rise as a contact begins), is extrapolated from its rows
+    with an error beyond any margin the rows can give, and its limits ranked so would be read in an order that need
+    not hold the best (docs/theory.md §K5). A limit is taken where it continues the rows' change toward the end
+    (from the next row to the nearest, per column and end: `EndLines.f1`, `f0`), or equals the nearest row: a
+    column unbounded toward the event (a force growing like 1/distance) has at the event itself a value of
+    round-off, of either sign; one that continues its rows is checked for growth next to the extremum as any other
+    (`scenarios/peaks.py` `singular_approaches`), and the others are ranked by the extrapolation, as where the run
+    holds no state."""
     limits = getattr(reader, "limits", None)
     if lines is None or limits is None:
         return

@@ -329,7 +329,7 @@ class ThermalReader(_KeptReadings):
         the mechanics' reader (`TrajectoryReader.read_many`: one read-out per mode, not one per reading)."""
         places, asks = [], []
         for iv, _, times in requests:
-            at, which = self._window_instants(iv, times)
+            at, which = self._window_instants(times, iv.lo, iv.hi)
             try:
                 parts = self._frame_asks(at, which)
             except ReadingFailed as error:
@@ -362,18 +362,15 @@ class ThermalReader(_KeptReadings):
 
     def _stored(self, ends: list[tuple[Interval, str]]) -> tuple[np.ndarray, ...]:
         """(`stored_ends`, each end's instant, its window instant, its window interval, whether it is an 'after'
-        limit), the window instants found for all ends at once as `_window_instants` finds them."""
+        limit), the window instants of all ends found at once (`_window_instants`)."""
         n = len(ends)
         if not n:
             return np.zeros(0, dtype=bool), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, bool)
-        eps = ROUNDOFF * self.scale
         after = np.array([side == "after" for _, side in ends], dtype=bool)
         lo = np.array([iv.lo for iv, _ in ends], dtype=float)
         hi = np.array([iv.hi for iv, _ in ends], dtype=float)
         te = np.where(after, lo, hi)
-        inner = np.where(hi - lo > 4e3 * eps, np.where(after, te + 1e3 * eps, te - 1e3 * eps), te)
-        which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
-        at = _clip(self._phase(te), self.lows[which], self.highs[which])
+        at, which = self._window_instants(te, lo, hi)
         edge = np.where(after, self.lows[which], self.highs[which])
         same = np.flatnonzero(np.abs(at - edge) <= 1e-12 * np.maximum(1.0, np.abs(edge)))
         stored = np.zeros(n, dtype=bool)
@@ -383,8 +380,9 @@ class ThermalReader(_KeptReadings):
 
     def limits(self, ends: list[tuple[Interval, str]], names: list[str]) -> np.ndarray:
         """The columns `names` (thermal ones included) at each (interval, side) end whose mechanics the run holds
-        (`stored_ends`): the mechanics read out there in one pass (`TrajectoryReader.stored_columns`), then the thermal formulas on all of them at once, as `_readings` evaluates them; NaN elsewhere
-        (`dynamics/extrema.py` `stored_limits`)."""
+        (`stored_ends`): the mechanics read out there in one pass (`TrajectoryReader.stored_columns`), then the
+        thermal formulas on all of them at once, as `_readings` evaluates them; NaN elsewhere (`dynamics/extrema.py`
+        `stored_limits`)."""
         out = np.full((len(names), len(ends)), np.nan)
         stored, te, at, which, after = self._stored(ends)
         pick = np.flatnonzero(stored)
@@ -401,12 +399,13 @@ class ThermalReader(_KeptReadings):
                 out[m, pick] = np.asarray(table[c], dtype=float)
         return out
 
-    def _window_instants(self, iv: Interval, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(the window instant standing for each instant, the window interval it is read in)."""
+    def _window_instants(self, times: np.ndarray, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """(the window instant standing for each instant, the window interval it is read in), each instant in the
+        interval (lo, hi) (one for all, or each its own)."""
         eps = ROUNDOFF * self.scale
-        # the window interval of each instant, found from the instant nudged inside `iv` (an instant at iv's end is
-        # its one-sided limit: the window interval on the same side of the event), then the instant clipped into it
-        inner = _clip(times, iv.lo + 1e3 * eps, iv.hi - 1e3 * eps) if iv.hi - iv.lo > 4e3 * eps else times
+        # the window interval of each instant, found from the instant nudged inside its interval (an instant at its
+        # end is its one-sided limit: the window interval on the same side of the event), then clipped into it
+        inner = np.where(hi - lo > 4e3 * eps, _clip(times, lo + 1e3 * eps, hi - 1e3 * eps), times)
         which = _clip(np.searchsorted(self.lows, self._phase(inner), side="right") - 1, 0, len(self.windows) - 1)
         return _clip(self._phase(times), self.lows[which], self.highs[which]), which
 
