@@ -181,7 +181,7 @@ _SIGNS = np.array([1.0, -1.0])
 
 def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals: list[Interval],
                        limit: int = CANDIDATES, layout: tuple | None = None, groups: list[int] | None = None,
-                       finite: bool = False, series: list[int] | None = None
+                       finite: bool = False, series: list[int] | None = None, edges: list | None = None
                        ) -> tuple[list[list[tuple]], np.ndarray | None]:
     """(`_candidates`, each series' largest finite row in each sense: [c max, -(c min), ...], -inf where none is
     finite; None without rows). The row-against-neighbour comparisons are made once for both senses on the rows'
@@ -192,7 +192,10 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     candidate's interval counted in its window's. finite: every value of F is finite (known to the caller).
     series: each window's one series, a row of F (its tie that row's of ties): [window 0's, window 1's, ...], each
     window's candidates and bounds those of that series alone, as if found on its own (windows over one table that
-    each locate another column)."""
+    each locate another column).
+    edges: a list that gets, per series as `out`, the candidates at an interval's first or last row that the bound
+    drops (their estimate is their row, and what lies between the row and the event is not in it): `second_round`
+    bounds them by the one-sided limit at the end."""
     if series is not None and (groups is None or len(groups) == 1):       # one window: its series is the table
         F, ties, series = F[series[0]:series[0] + 1], ties[series[0]:series[0] + 1], None
     if layout is None:
@@ -200,10 +203,13 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     if layout is None:
         return [[] for _ in range(2 * (len(F) if series is None else len(series)))], None
     if series is None and len(F) > 1 and F.size > JOINT_VALUES:    # each series alone: the same candidates, bounds
-        parts = [_candidates_bounds(t, F[c:c + 1], ties[c:c + 1], intervals, limit, layout, groups, finite)
-                 for c in range(len(F))]
+        own_edges = [[] if edges is not None else None for _ in range(len(F))]
+        parts = [_candidates_bounds(t, F[c:c + 1], ties[c:c + 1], intervals, limit, layout, groups, finite,
+                                    edges=own_edges[c]) for c in range(len(F))]
         n_w = 1 if groups is None else len(groups)
         out = [x for w in range(n_w) for cands, _ in parts for x in cands[2 * w:2 * w + 2]]
+        if edges is not None:
+            edges.extend(x for w in range(n_w) for got in own_edges for x in got[2 * w:2 * w + 2])
         return out, np.stack([bounds.reshape(n_w, 2) for _, bounds in parts], axis=1).ravel()
     rows, k_of, n_of, pos, first, last = layout
     if groups is None or len(groups) == 1:
@@ -284,6 +290,18 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     wm = ms if w_of is None else w_of[ii] * S + ms          # the series in its window
     with np.errstate(invalid="ignore"):
         kept = 2 * est - row >= (lower - wties)[wm]
+    if edges is not None:
+        edges.extend([] for _ in range(n_w * S))
+        dropped = (~kept & (first[ii] | last[ii])).nonzero()[0]
+        e_i = ii[dropped]
+        e_k = k_of[e_i]
+        e_lo = np.where(first[e_i], np.array([iv.lo for iv in intervals], dtype=float)[e_k], ti[e_i - 1])
+        e_hi = np.where(last[e_i], np.array([iv.hi for iv in intervals], dtype=float)[e_k],
+                        ti[np.minimum(e_i + 1, len(ti) - 1)])
+        local_k = e_k if base is None else e_k - base[w_of[e_i]]
+        for m, value, k, p, a, b in zip(wm[dropped].tolist(), est[dropped].tolist(), local_k.tolist(),
+                                        pos[e_i].tolist(), e_lo.tolist(), e_hi.tolist()):
+            edges[m].append((value, k, p, a, b, False))
     ms, ii, est, wm = ms[kept], ii[kept], est[kept], wm[kept]
     best = np.full(n_w * S, -np.inf)
     np.maximum.at(best, wm, est)
@@ -361,6 +379,9 @@ class Plan:
     #: names, ties): what `second_round` refines where they may beat the located extremum
     reserve: list | None = None
     table: tuple | None = None
+    #: per series, the candidates at an interval's first or last row that the rows' bound dropped (`_candidates_bounds`
+    #: `edges`): `second_round` bounds them by the limit at the interval's end
+    edges: list | None = None
 
     def finish(self, tables: list[dict | None], read: Reader) -> dict[str, dict[str, Extremum]]:
         """`locate`'s result from the readings of `requests` (None: read here, alone)."""
@@ -431,16 +452,19 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
         found: list = [[[] for _ in range(2 * len(names))] for _ in spans]
         bounds: list = [None] * len(spans)
         reserve: list = [None] * len(spans)
+        more: list = [None] * len(spans)
         if held:
+            edges: list = []
             got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in spans[w]], EVERY,
-                                            groups=[len(spans[w]) for w in held], finite=finite)
+                                            groups=[len(spans[w]) for w in held], finite=finite, edges=edges)
             S = 2 * len(names)
             for q, w in enumerate(held):
                 found[w], reserve[w] = zip(*(_first(x, limit) for x in got[q * S:(q + 1) * S]))
                 found[w], bounds[w] = list(found[w]), lower[q * S:(q + 1) * S]
+                more[w] = edges[q * S:(q + 1) * S]
         table = (values, F, names, ties)
         for q, (w, plan_) in enumerate(zip(ws, _planned(t, [table] * len(spans), spans, found, bounds))):
-            plan_.reserve, plan_.table = reserve[q], table
+            plan_.reserve, plan_.edges, plan_.table = reserve[q], more[q], table
             out[w] = plan_
     return out
 
@@ -459,7 +483,9 @@ def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
     return flat + rest[:limit], rest[limit:]
 
 
-def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]]) -> list[Plan | None]:
+def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]],
+                 ends: list[tuple[EndLines, int | None] | None] | None = None, edges_only: list[bool] | None = None
+                 ) -> list[Plan | None]:
     """For each plan, a plan of its reserve candidates that may still beat the extremum located from its first ones
     (None where none may): a bracket's extremum may reach its row plus twice its parabola estimate's gain (the
     bound `_candidates_bounds` keeps candidates by), so a candidate whose bound exceeds the located value by more
@@ -468,24 +494,41 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
     estimates, which rank the peaks
     wrongly where a peak is narrow against the output step and the peaks differ (a start-up, whose peaks grow turn
     by turn: geneva-torque's contact force at 2.3 ms rows, 0.1 % low; a drive that is not periodic:
-    chain-mech2-detuned's coupler force at its own 10 ms rows, 0.14 % low)."""
+    chain-mech2-detuned's coupler force at its own 10 ms rows, 0.14 % low).
+
+    ends: per plan, its intervals' one-sided limits (`EndLines`, with `stored_limits` applied, and the plan's window
+    in them), or None. An interval's first or last row has no neighbour beyond it, so its estimate is its row and
+    its bound says nothing of the stretch between it and the event: there the bound is the parabola through the
+    row, its inner neighbour and the limit at the end (`_ReserveBounds`), so that an extremum within a step of an event
+    that the row does not show is refined (rolling-b-components' crank speed at 23 ms rows, 1.5 % short).
+    edges_only: per plan, whether only those are refined (a periodic regime's, whose turns repeat the same peaks:
+    its first candidates are the regime's, but an extremum next to an event in every turn is in none of them)."""
     out: list[Plan | None] = []
-    for p, got in zip(plans, located):
-        if p is None or not p.reserve or not any(p.reserve):
+    for n_plan, (p, got) in enumerate(zip(plans, located)):
+        only = edges_only is not None and edges_only[n_plan]
+        has_ends = p is not None and ends is not None and ends[n_plan] is not None
+        edges = p.edges if has_ends and p.edges is not None else None
+        if p is None or not any(p.reserve or ()) and not any(edges or ()) or only and not any(edges or ()):
             out.append(None)
             continue
         values, F, names, ties = p.table
         found: list[list[tuple]] = [[] for _ in range(2 * len(names))]
-        for m, rest in enumerate(p.reserve):
-            if not rest:
-                continue
+        asks = []
+        for m, rest in enumerate(p.reserve or [()] * (2 * len(names))):
             c, sense = names[m >> 1], -1.0 if m & 1 else 1.0
             e = got.get(c, {}).get("min" if m & 1 else "max")
             if e is None:
                 continue
-            v = sense * e.value
-            f = values[c]
-            bounds = [2.0 * x[0] - sense * float(f[p.intervals[x[1]].rows[x[2]]]) for x in rest]
+            # (not next to an event where a constant stretch holds the extremum: exact, where the limits at the events
+            # around it equal it only to the integration's tolerance, as `end_limits` leaves it)
+            rest = ([] if only else list(rest or ())) + (list(edges[m]) if edges is not None and not e.constant
+                                                          else [])
+            if rest:
+                asks.append((m, rest))
+        every = _ReserveBounds(p.t, p.intervals, *(ends[n_plan] if has_ends else ())).bounds(F, names, asks)
+        for (m, rest), bounds in zip(asks, every):
+            c, sense = names[m >> 1], -1.0 if m & 1 else 1.0
+            v = sense * got[c]["min" if m & 1 else "max"].value
             able = [(-u, n) for n, u in enumerate(bounds) if u > v + ties[c]]
             found[m] = [rest[n] for _, n in sorted(able)[:SECOND_ROUND]]
         if not any(found):
@@ -493,6 +536,79 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
             continue
         out.append(_planned(p.t, [p.table], [p.intervals], [found], [p.bounds])[0])
     return out
+
+
+class _ReserveBounds:
+    """`second_round`'s bounds of a window's candidates, all series at once (`bounds`); those whose bracket reaches
+    their interval's end at an event (an interval's first or last row, which has no neighbour beyond it: its
+    estimate is its own value) from the limit there: the window's intervals, and its ends in `lines` (`window`: its
+    number where the lines are several windows', else None; no lines: the rows' bounds alone)."""
+
+    def __init__(self, t: np.ndarray, intervals: list[Interval], lines: EndLines | None = None,
+                 window: int | None = None):
+        self.t, self.lines = t, lines
+        self.lo = np.array([iv.lo for iv in intervals], dtype=float)
+        self.hi = np.array([iv.hi for iv in intervals], dtype=float)
+        self.n = np.array([len(iv.rows) for iv in intervals], dtype=np.int64)
+        self.first = np.cumsum(self.n) - self.n
+        self.rows = np.concatenate([np.asarray(iv.rows, dtype=np.int64) for iv in intervals]) if intervals else \
+            np.zeros(0, dtype=np.int64)
+        # each interval's end positions in the lines (-1: none): [interval, 0 after its start / 1 before its end]; the
+        # events inside the window only (the column runs on smoothly across a window's own ends: in a periodic regime
+        # the turn after repeats what lies next to its start)
+        self.at = np.full((len(intervals), 2), -1, dtype=np.int64)
+        for e, (k, side, _) in enumerate(lines.ends if lines is not None else ()):
+            inside = (k > 0 or side == "before") and (k < len(intervals) - 1 or side == "after")
+            if inside and (window is None or lines.window is None or int(lines.window[e]) == window):
+                self.at[k, 1 if side == "before" else 0] = e
+
+    def bounds(self, F: np.ndarray, names: list[str], asks: list[tuple[int, list[tuple]]]) -> list[list[float]]:
+        """The bounds of every (series m, its candidates) of `asks` (F: the window's columns `names`, series 2c the
+        column c, 2c + 1 it negated): a candidate's row plus twice its estimate's gain, where its bracket does not
+        reach its interval's end at an event whose limit the lines hold. Where it does, and the parabola through the row, its inner neighbour and the limit at the end
+        (sense * values) turns between the row and the end: its vertex plus its gain over the larger of row and limit
+        again (the estimate's error is of the order of its gain). Where the limit is the rows' extrapolation (the
+        reader holds no state there, or its limit does not continue the rows: `stored_limits`), the column may reach
+        it plus its margin within the step: that too; where it is the reader's, it is `end_limits`' to read. All
+        series at once."""
+        lines = self.lines
+        sizes = [len(cands) for _, cands in asks]
+        if not sum(sizes):
+            return [[] for _ in asks]
+        x = np.array([c[:5] for _, cands in asks for c in cands], dtype=float)
+        m = np.repeat(np.array([m for m, _ in asks], dtype=np.int64), sizes)
+        k, pos, lo, hi = x[:, 1].astype(np.int64), x[:, 2].astype(np.int64), x[:, 3], x[:, 4]
+        own = np.where(m & 1, -1.0, 1.0)
+        out = 2.0 * x[:, 0] - own * F[m >> 1, self.rows[self.first[k] + pos]]
+        cuts = np.cumsum(sizes)[:-1].tolist()
+        if lines is None:
+            return [part.tolist() for part in np.split(out, cuts)]
+        col = np.array([lines.of.get(c, -1) for c in names], dtype=np.int64)[m >> 1]
+        before = (pos == self.n[k] - 1) & (hi == self.hi[k])
+        after = ~before & (pos == 0) & (lo == self.lo[k])
+        inner = np.where(before, pos - 1, pos + 1)
+        e = np.where(before, self.at[k, 1], np.where(after, self.at[k, 0], -1))
+        use = (before | after) & (e >= 0) & (col >= 0) & (inner >= 0) & (inner < self.n[k])
+        use[use] = lines.ok[col[use], e[use]]
+        if use.any():
+            i = use.nonzero()[0]
+            e, k, n, c = e[i], k[i], col[i], m[i] >> 1
+            sense = np.where(m[i] & 1, -1.0, 1.0)
+            r, q = self.rows[self.first[k] + pos[i]], self.rows[self.first[k] + inner[i]]
+            te, fe, margin = lines.te[e], sense * lines.line[n, e], lines.curve[n, e]
+            tr, fr, ti, fi = self.t[r], sense * F[c, r], self.t[q], sense * F[c, q]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                guessed = fe + margin if lines.exact is None else np.where(lines.exact[n, e], -np.inf, fe + margin)
+                # the parabola through (ti, fi), (tr, fr), (te, fe) by its divided differences:
+                # p(x) = fr + (x - tr) (d1 + c2 (x - ti)), p'(x) = d1 + c2 (2x - tr - ti) = 0 at the vertex
+                d1, d2 = (fr - fi) / (tr - ti), (fe - fr) / (te - tr)
+                c2 = (d2 - d1) / (te - ti)
+                xv = 0.5 * (tr + ti - d1 / c2)
+                turns = (c2 < 0) & (np.minimum(tr, te) < xv) & (xv < np.maximum(tr, te))
+                top = fr + (xv - tr) * (d1 + c2 * (xv - ti))
+                got = np.fmax(guessed, np.where(turns, 2.0 * top - np.maximum(fr, fe) + margin, -np.inf))
+            out[i] = np.fmax(out[i], np.where(np.isfinite(got), got, -np.inf))
+        return [part.tolist() for part in np.split(out, cuts)]
 
 
 def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None], again: list[dict]) -> None:
@@ -508,10 +624,12 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
                     got.setdefault(c, {})[name] = e
 
 
-def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader) -> None:
-    """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`) read in one pass of
-    `read` and refined, each better extremum in its place (`merged`)."""
-    more = second_round(plans, located)
+def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader,
+                   ends: list[tuple[EndLines, int | None] | None] | None = None, edges_only: list[bool] | None = None
+                   ) -> None:
+    """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`, the plans' `ends`,
+    `edges_only`) read in one pass of `read` and refined, each better extremum in its place (`merged`)."""
+    more = second_round(plans, located, ends, edges_only)
     again = [p for p in more if p is not None]
     if again:
         merged(located, more, finish_all(again, read_all(read, [r for p in again for r in p.requests]), read))
@@ -532,16 +650,19 @@ def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple
     found: list = [[[], []] for _ in spans]
     bounds: list = [None] * len(spans)
     reserve: list = [None] * len(spans)
+    more: list = [None] * len(spans)
     if held:
+        edges: list = []
         got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in intervals[w]], EVERY,
                                         groups=[len(intervals[w]) for w in held],
-                                        series=[row[spans[w][0]] for w in held])
+                                        series=[row[spans[w][0]] for w in held], edges=edges)
         for q, w in enumerate(held):
             found[w], reserve[w] = (list(x) for x in zip(*(_first(x, limit) for x in got[2 * q:2 * q + 2])))
+            more[w] = edges[2 * q:2 * q + 2]
             bounds[w] = lower[2 * q:2 * q + 2]
     out = _planned(t, own, intervals, found, bounds)
-    for p, table, rest in zip(out, own, reserve):
-        p.table, p.reserve = table, rest
+    for p, table, rest, edges in zip(out, own, reserve, more):
+        p.table, p.reserve, p.edges = table, rest, edges
     return out
 
 
@@ -948,6 +1069,8 @@ class EndLines:
     curve: np.ndarray
     ok: np.ndarray
     window: np.ndarray | None = None
+    #: per (column, end), whether `line` is the limit the reader holds (`stored_limits`), not an extrapolation
+    exact: np.ndarray | None = None
 
 
 def end_lines(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],
@@ -1005,6 +1128,7 @@ def stored_limits(lines: EndLines | None, intervals: list[Interval], reader) -> 
     lines.line[have] = got[have]
     lines.curve[have] = 0.0
     lines.ok |= have
+    lines.exact = have
 
 
 def end_guesses(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval],

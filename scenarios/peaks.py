@@ -421,10 +421,13 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                             [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]
-    # the candidates beyond the first that may still beat what these found, refined in a second pass; not in a
-    # periodic regime, whose turns repeat the same peaks (to its criterion): there the first are the regime's
+    # the candidates beyond the first that may still beat what these found, refined in a second pass; in a periodic
+    # regime, whose turns repeat the same peaks (to its criterion), only those next to an event (`second_round`):
+    # there the first are the regime's
     if read is not None:
-        refine_further([p if label != "periodic" else None for p, (_, _, label) in zip(plans, windows)], located, read)
+        ends = {w: (x, q if len(ws) > 1 else None) for ws, x in lines if x is not None for q, w in enumerate(ws)}
+        refine_further(plans, located, read, [ends.get(w) for w in range(len(plans))],
+                       [label == "periodic" for _, _, label in windows])
     # each extremum against the one-sided limits at events that may beat it (`end_limits`), read together; not a
     # constant stretch's (exact: a dwell's zero speed, which the limits at the events around it equal only to the
     # integration's tolerance)

@@ -95,3 +95,60 @@ def test_a_thermal_peak_in_an_interval_whose_rows_rank_low():
     coarse = _peak("geneva-torque", sets, "2.3 ms", "temp_contact_C", "max")
     assert coarse["value"] == pytest.approx(fine["value"], rel=1e-6)
     assert coarse["t_s"] == pytest.approx(fine["t_s"], abs=1e-6)
+
+
+@pytest.mark.parametrize("centre, g0, g1, g2", [(0.93, -4.9e-3, 0.1, -0.55), (0.96, -1.6e-3, 0.02, -0.15)])
+def test_a_peak_between_an_intervals_last_row_and_its_event(centre, g0, g1, g2):
+    """f = -(t - centre)^2 before an event at t = 1, g = g0 + g1 (t - 1) + g2 (t - 1)^2 after it (continuous there;
+    its largest below zero), rows 0.1 apart: the maximum, 0 at t = centre, lies between the first interval's last row
+    (0.9) and the event, and the second interval's first row (1.1) is higher than that row. The row's estimate is its
+    value (no neighbour beyond it), below the best row, so the rows' bound dropped it and the second interval's peak
+    was reported. At 0.93 the limit at the event lies below the row (the column turned): the reader's limit does
+    not continue the rows, so the rows' extrapolation bounds the stretch; at 0.96 it lies above, and the parabola
+    through the row, its neighbour and the limit turns between them. Either way the bracket is refined and the
+    maximum found to the refinement's accuracy (the polynomial through 7 of 33 readings: exact for a parabola)."""
+    from mechsim.dynamics.extrema import end_lines, refine_further, stored_limits
+
+    def column(iv, x):
+        x = np.asarray(x, dtype=float)
+        return -(x - centre) ** 2 if iv.lo < 1.0 else g0 + g1 * (x - 1.0) + g2 * (x - 1.0) ** 2
+
+    t = np.r_[np.arange(10) * 0.1, 1.0 + np.arange(1, 11) * 0.1]
+    ivs = [Interval(0.0, 1.0, "start", "event", np.arange(10)), Interval(1.0, 2.0, "event", "end", np.arange(10, 20))]
+
+    class Reader:
+        def __call__(self, iv, position, times):
+            return {"f": column(iv, times), "t_s": np.asarray(times, dtype=float)}
+
+        def limits(self, ends, names):
+            return np.array([[float(column(iv, iv.lo if side == "after" else iv.hi)) for iv, side in ends]
+                             for _ in names])
+
+    read = Reader()
+    values = {"f": np.r_[column(ivs[0], t[:10]), column(ivs[1], t[10:])]}
+    assert g0 == pytest.approx(-(1.0 - centre) ** 2) and g0 - g1 ** 2 / (4 * g2) < 0
+    assert values["f"][9] < values["f"][10]                 # the row before the event is below the one after
+    (p,) = plans([(t, values, ivs)])
+    located = finish_all([p], [read(*r) for r in p.requests], read)
+    assert located[0]["f"]["max"].value == pytest.approx(g0 - g1 ** 2 / (4 * g2), rel=1e-9)      # the first round's
+    lines = end_lines(t, values, ivs)
+    stored_limits(lines, ivs, read)
+    # the reader's limit before the event stands where it continues the rows (0.96), not where it turned (0.93)
+    assert bool(lines.exact[0, lines.ends.index((0, "before", 1.0))]) == (centre > 0.95)
+    refine_further([p], located, read, [(lines, None)])
+    best = located[0]["f"]["max"]
+    assert best.value == pytest.approx(0.0, abs=1e-12)
+    assert best.t == pytest.approx(centre, abs=1e-6)
+    assert best.where == "interior"
+
+
+def test_a_minimum_within_a_step_of_a_dead_point():
+    """rolling-b-components' crank speed has its minimum, -4.14656 rad/s at t = 5.3697 s, 8 ms before the dead
+    point at 5.3778 s; at 23 ms rows the last row before the dead point (5.359 s, -4.0146) lies above the first after
+    it (-4.0176), so the limit at the dead point, -4.0855, was reported (1.5 % short). Readings at 1/10 of the run's
+    tolerances from rows: the two steps agree to 4e-9, so 1e-7 is the margin."""
+    fine = _peak("rolling-b-components", [], "10 ms", "crank_speed_rad_s", "min")
+    coarse = _peak("rolling-b-components", [], "23 ms", "crank_speed_rad_s", "min")
+    assert fine["t_s"] == pytest.approx(5.3697, abs=1e-3)
+    assert coarse["value"] == pytest.approx(fine["value"], rel=1e-7)
+    assert coarse["t_s"] == pytest.approx(fine["t_s"], abs=1e-6)
