@@ -484,8 +484,8 @@ def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
 
 
 def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]],
-                 ends: list[tuple[EndLines, int | None] | None] | None = None, edges_only: list[bool] | None = None
-                 ) -> list[Plan | None]:
+                 ends: list[tuple[EndLines, int | None] | None] | None = None,
+                 edges_only: list[tuple[float, float] | None] | None = None) -> list[Plan | None]:
     """For each plan, a plan of its reserve candidates that may still beat the extremum located from its first ones
     (None where none may): a bracket's extremum may reach its row plus twice its parabola estimate's gain (the
     bound `_candidates_bounds` keeps candidates by), so a candidate whose bound exceeds the located value by more
@@ -501,14 +501,17 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
     its bound says nothing of the stretch between it and the event: there the bound is the parabola through the
     row, its inner neighbour and the limit at the end (`_ReserveBounds`), so that an extremum within a step of an event
     that the row does not show is refined (rolling-b-components' crank speed at 23 ms rows, 1.5 % short).
-    edges_only: per plan, whether only those are refined (a periodic regime's, whose turns repeat the same peaks:
-    its first candidates are the regime's, but an extremum next to an event in every turn is in none of them)."""
+    edges_only: per plan, None, or (a, b): only those within [a, b] are refined (a periodic regime's last turn: its
+    turns repeat the same peaks, so its first candidates are the regime's, but an extremum next to an event in every
+    turn is in none of them)."""
     out: list[Plan | None] = []
     for n_plan, (p, got) in enumerate(zip(plans, located)):
-        only = edges_only is not None and edges_only[n_plan]
+        only = edges_only[n_plan] if edges_only is not None else None
         has_ends = p is not None and ends is not None and ends[n_plan] is not None
         edges = p.edges if has_ends and p.edges is not None else None
-        if p is None or not any(p.reserve or ()) and not any(edges or ()) or only and not any(edges or ()):
+        if edges is not None and only is not None:
+            edges = [[x for x in got if x[3] >= only[0] and x[4] <= only[1]] for got in edges]
+        if p is None or (not any(p.reserve or ()) or only is not None) and not any(edges or ()):
             out.append(None)
             continue
         values, F, names, ties = p.table
@@ -521,8 +524,8 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
                 continue
             # (not next to an event where a constant stretch holds the extremum: exact, where the limits at the events
             # around it equal it only to the integration's tolerance, as `end_limits` leaves it)
-            rest = ([] if only else list(rest or ())) + (list(edges[m]) if edges is not None and not e.constant
-                                                          else [])
+            rest = ([] if only is not None else list(rest or ())) + (list(edges[m]) if edges is not None and
+                                                                      not e.constant else [])
             if rest:
                 asks.append((m, rest))
         every = _ReserveBounds(p.t, p.intervals, *(ends[n_plan] if has_ends else ())).bounds(F, names, asks)
@@ -564,13 +567,13 @@ class _ReserveBounds:
 
     def bounds(self, F: np.ndarray, names: list[str], asks: list[tuple[int, list[tuple]]]) -> list[list[float]]:
         """The bounds of every (series m, its candidates) of `asks` (F: the window's columns `names`, series 2c the
-        column c, 2c + 1 it negated): a candidate's row plus twice its estimate's gain, where its bracket does not
-        reach its interval's end at an event whose limit the lines hold. Where it does, and the parabola through the row, its inner neighbour and the limit at the end
-        (sense * values) turns between the row and the end: its vertex plus its gain over the larger of row and limit
-        again (the estimate's error is of the order of its gain). Where the limit is the rows' extrapolation (the
-        reader holds no state there, or its limit does not continue the rows: `stored_limits`), the column may reach
-        it plus its margin within the step: that too; where it is the reader's, it is `end_limits`' to read. All
-        series at once."""
+        column c, 2c + 1 it negated): a candidate's row plus twice its estimate's gain. Where its bracket reaches its
+        interval's end at an event whose limit the lines hold, and the parabola through the row, its inner neighbour
+        and the limit at the end (sense * values) turns between the row and the end: its vertex plus its gain over
+        the larger of row and limit again (the estimate's error is of the order of its gain), if more. Where the
+        limit is the rows' extrapolation (the reader holds no state there, or its limit does not continue the rows:
+        `stored_limits`), the column may reach it plus its margin within the step: that too; where it is the
+        reader's, it is `end_limits`' to read."""
         lines = self.lines
         sizes = [len(cands) for _, cands in asks]
         if not sum(sizes):
@@ -625,8 +628,8 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
 
 
 def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader,
-                   ends: list[tuple[EndLines, int | None] | None] | None = None, edges_only: list[bool] | None = None
-                   ) -> None:
+                   ends: list[tuple[EndLines, int | None] | None] | None = None,
+                   edges_only: list[tuple[float, float] | None] | None = None) -> None:
     """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`, the plans' `ends`,
     `edges_only`) read in one pass of `read` and refined, each better extremum in its place (`merged`)."""
     more = second_round(plans, located, ends, edges_only)

@@ -422,12 +422,12 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]
     # the candidates beyond the first that may still beat what these found, refined in a second pass; in a periodic
-    # regime, whose turns repeat the same peaks (to its criterion), only those next to an event (`second_round`):
-    # there the first are the regime's
+    # regime, whose turns repeat the same peaks (to its criterion), only those next to an event in its last turn
+    # (`second_round`): there the first are the regime's
     if read is not None:
         ends = {w: (x, q if len(ws) > 1 else None) for ws, x in lines if x is not None for q, w in enumerate(ws)}
         refine_further(plans, located, read, [ends.get(w) for w in range(len(plans))],
-                       [label == "periodic" for _, _, label in windows])
+                       [tuple(regime["last_turn"]) if label == "periodic" else None for _, _, label in windows])
     # each extremum against the one-sided limits at events that may beat it (`end_limits`), read together; not a
     # constant stretch's (exact: a dwell's zero speed, which the limits at the events around it equal only to the
     # integration's tolerance)
