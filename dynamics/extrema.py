@@ -290,17 +290,19 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
     wm = ms if w_of is None else w_of[ii] * S + ms          # the series in its window
     with np.errstate(invalid="ignore"):
         kept = 2 * est - row >= (lower - wties)[wm]
+    # each candidate's interval (counted in its window), position in it and bracket, as numbers
+    ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
+    local = k_of if base is None else k_of - base[w_of]
+
+    def brackets(i: np.ndarray) -> tuple[list, ...]:
+        """Rows i's (interval in its window, position, bracket lo, bracket hi): the neighbouring rows, an
+        interval's first (last) row reaching out to its start (end)."""
+        return (local[i].tolist(), pos[i].tolist(), np.where(first[i], ivlo[k_of[i]], ti[i - 1]).tolist(),
+                np.where(last[i], ivhi[k_of[i]], ti[np.minimum(i + 1, len(ti) - 1)]).tolist())
     if edges is not None:
         edges.extend([] for _ in range(n_w * S))
         dropped = (~kept & (first[ii] | last[ii])).nonzero()[0]
-        e_i = ii[dropped]
-        e_k = k_of[e_i]
-        e_lo = np.where(first[e_i], np.array([iv.lo for iv in intervals], dtype=float)[e_k], ti[e_i - 1])
-        e_hi = np.where(last[e_i], np.array([iv.hi for iv in intervals], dtype=float)[e_k],
-                        ti[np.minimum(e_i + 1, len(ti) - 1)])
-        local_k = e_k if base is None else e_k - base[w_of[e_i]]
-        for m, value, k, p, a, b in zip(wm[dropped].tolist(), est[dropped].tolist(), local_k.tolist(),
-                                        pos[e_i].tolist(), e_lo.tolist(), e_hi.tolist()):
+        for m, value, k, p, a, b in zip(wm[dropped].tolist(), est[dropped].tolist(), *brackets(ii[dropped])):
             edges[m].append((value, k, p, a, b, False))
     ms, ii, est, wm = ms[kept], ii[kept], est[kept], wm[kept]
     best = np.full(n_w * S, -np.inf)
@@ -323,18 +325,11 @@ def _candidates_bounds(t: np.ndarray, F: np.ndarray, ties: np.ndarray, intervals
             a, b = ends[w], ends[w + 1]
             g = G[m >> 1, a:b]
             earliest[q] = a + (flat[m >> 1, a:b] & (g <= -x if m & 1 else g >= x)).argmax()
-    # each candidate's interval (counted in its window), position in it and bracket, as numbers
-    ivlo, ivhi = np.array([iv.lo for iv in intervals], dtype=float), np.array([iv.hi for iv in intervals], dtype=float)
-    local = k_of if base is None else k_of - base[w_of]
     at = np.where(first[earliest], ivlo[k_of[earliest]], ti[earliest])
     for m, value, k, p, x in zip(constant.tolist(), fi(mc, earliest).tolist(), local[earliest].tolist(),
                                  pos[earliest].tolist(), at.tolist()):
         out[m].append((value, k, p, x, x, True))
-    i = ii[chosen]
-    lo = np.where(first[i], ivlo[k_of[i]], ti[i - 1])
-    hi = np.where(last[i], ivhi[k_of[i]], ti[np.minimum(i + 1, len(ti) - 1)])
-    for m, value, k, p, a, b in zip(wm[chosen].tolist(), est[chosen].tolist(), local[i].tolist(), pos[i].tolist(),
-                                    lo.tolist(), hi.tolist()):
+    for m, value, k, p, a, b in zip(wm[chosen].tolist(), est[chosen].tolist(), *brackets(ii[chosen])):
         out[m].append((value, k, p, a, b, False))
     return out, lower
 
@@ -380,7 +375,8 @@ class Plan:
     reserve: list | None = None
     table: tuple | None = None
     #: per series, the candidates at an interval's first or last row that the rows' bound dropped (`_candidates_bounds`
-    #: `edges`): `second_round` bounds them by the limit at the interval's end
+    #: `edges`): `second_round` bounds them by the limit at the interval's end (`plans`' only: the thermal columns'
+    #: `column_plans` have none)
     edges: list | None = None
 
     def finish(self, tables: list[dict | None], read: Reader) -> dict[str, dict[str, Extremum]]:
@@ -653,19 +649,16 @@ def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple
     found: list = [[[], []] for _ in spans]
     bounds: list = [None] * len(spans)
     reserve: list = [None] * len(spans)
-    more: list = [None] * len(spans)
     if held:
-        edges: list = []
         got, lower = _candidates_bounds(t, F, col_ties, [iv for w in held for iv in intervals[w]], EVERY,
                                         groups=[len(intervals[w]) for w in held],
-                                        series=[row[spans[w][0]] for w in held], edges=edges)
+                                        series=[row[spans[w][0]] for w in held])
         for q, w in enumerate(held):
             found[w], reserve[w] = (list(x) for x in zip(*(_first(x, limit) for x in got[2 * q:2 * q + 2])))
-            more[w] = edges[2 * q:2 * q + 2]
             bounds[w] = lower[2 * q:2 * q + 2]
     out = _planned(t, own, intervals, found, bounds)
-    for p, table, rest, edges in zip(out, own, reserve, more):
-        p.table, p.reserve, p.edges = table, rest, edges
+    for p, table, rest in zip(out, own, reserve):
+        p.table, p.reserve = table, rest
     return out
 
 
