@@ -75,7 +75,7 @@ class Extremum:
     t: float
     where: str
     row: Mapping
-    sampled: float          # the best output row's value (for comparison)
+    sampled: float          # its candidate's value (a row of the plan's table: an output row or a reading added)
     limit: str | None = None   # at an interval's end: the one-sided limit from 'before' or 'after' that instant
     edge: str | None = None    # the bracket reaches the interval's end ('before' it) or start ('after' it)
     interval: int = -1         # the smooth interval it lies in (the `intervals` list given to `locate`)
@@ -981,13 +981,27 @@ def apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> lis
     return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
 
 
+def _between(knots: np.ndarray, finest: float) -> np.ndarray:
+    """Instants evenly between consecutive `knots` (in order) farther apart than `finest`, as few as leave no two
+    neighbours farther apart than that; the knots themselves not among them."""
+    gaps = knots[1:] - knots[:-1]
+    with np.errstate(invalid="ignore"):
+        extra = np.maximum(np.ceil(gaps / finest) - 1.0, 0.0)
+    extra = np.where(np.isfinite(extra), extra, 0.0).astype(np.int64)
+    if not extra.any():
+        return np.zeros(0)
+    which = np.repeat(np.arange(len(gaps)), extra)
+    j = np.arange(len(which)) - np.repeat(np.cumsum(extra) - extra, extra) + 1.0
+    return knots[which] + gaps[which] * j / (extra[which] + 1.0)
+
+
 #: an interval with fewer output rows than this is also read at ROWLESS_READINGS instants over it (its ends included)
 SPARSE_ROWS = 3
 ROWLESS_READINGS = 9
 
 
-def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader
-                 ) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
+def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader,
+                 finest: float | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
     """(t, values, intervals) for `locate` where some smooth intervals hold fewer than SPARSE_ROWS output rows (a
     stretch between events shorter than a few output steps, e.g. a contact episode): each such interval read at
     ROWLESS_READINGS instants evenly over [lo, hi], its ends the one-sided limits at its events, and the readings
@@ -995,14 +1009,26 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
     before them), so that its extrema are candidates ranked by the rows' parabola estimates as any interval's (a
     lone row's estimate is its value, which says nothing of the interval's peak). The given intervals are not
     changed (copies get the rows); an interval whose reading fails keeps its own. Without such intervals, the
-    arguments themselves."""
+    arguments themselves.
+
+    finest (s): where a reading costs no integration (a closed form), every interval is also read between its
+    instants (its ends and rows) farther apart than this, evenly, so that no two are: the candidates then do not
+    depend on the output step (a peak narrower than the rows' step is among them at any step; docs/theory.md §K5).
+    """
     # (an interval within round-off of an instant has nothing between its ends' one-sided limits to read)
-    sparse = [k for k, iv in enumerate(intervals)
-              if len(iv.rows) < SPARSE_ROWS and iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))]
+    t = np.asarray(t, dtype=float)
+    sparse, requests = [], []
+    for k, iv in enumerate(intervals):
+        if not iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi)):
+            continue
+        times = np.linspace(iv.lo, iv.hi, ROWLESS_READINGS) if len(iv.rows) < SPARSE_ROWS else np.zeros(0)
+        if finest is not None:
+            times = np.concatenate([times, _between(np.unique(np.r_[iv.lo, t[iv.rows], times, iv.hi]), finest)])
+        if len(times):
+            sparse.append(k)
+            requests.append((iv, 0, np.sort(times)))
     if not sparse:
         return t, values, intervals
-    t = np.asarray(t, dtype=float)
-    requests = [(intervals[k], 0, np.linspace(intervals[k].lo, intervals[k].hi, ROWLESS_READINGS)) for k in sparse]
     many = getattr(read, "read_many", None)
     tables = many(requests) if many is not None else [None] * len(requests)
     out, t_new, v_new, n = list(intervals), [], {c: [] for c in values}, len(t)

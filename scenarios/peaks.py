@@ -26,7 +26,13 @@ from mechsim.dynamics.tables import TableColumns
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
-HOW_CLOSED = "located: the closed form evaluated between output rows"
+HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart (200 000 "
+              "samples a run at most)")
+
+#: a closed-form run's columns are sampled (beside its rows) at least this often in drive angle (rad) before their
+#: candidates are ranked (`_finest`); at most CLOSED_READINGS samples a run (its resources bounded before any work)
+CLOSED_STEP_RAD = math.radians(0.5)
+CLOSED_READINGS = 200_000
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 
 
@@ -395,7 +401,9 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
              for lo, hi, label in windows]
     # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`);
     # the windows over the same table planned together
-    plans = plan_windows([with_rowless(tn, values, intervals, read) if intervals else None for intervals in spans])
+    finest = _finest(source, tn) if source is not None and source.method == "closed-form" else None
+    plans = plan_windows([with_rowless(tn, values, intervals, read, finest) if intervals else None
+                          for intervals in spans])
     requests = [r for p in plans if p is not None for r in p.requests]
     turn = means_asked = None
     if regime is not None and read is not None:
@@ -499,6 +507,18 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     return out, regime
 
 
+def _finest(source: Source, t: np.ndarray) -> float | None:
+    """The time step a closed-form run's columns are sampled at between its rows (`with_rowless`): CLOSED_STEP_RAD of
+    drive angle at the prescribed speed, coarser where the run would take more than CLOSED_READINGS samples; None
+    without a speed or rows. A peak narrower than the output step (the rolling pair's coupler force near zero, a
+    dip of a few degrees) is then among the candidates at every output step (docs/theory.md §K5)."""
+    speed = abs(float(getattr(source.drive, "speed", None) or 0.0))
+    span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+    if not (speed > 0.0 and math.isfinite(speed) and span > 0.0):
+        return None
+    return max(CLOSED_STEP_RAD / speed, span / CLOSED_READINGS)
+
+
 def _end_lines(plans: list) -> list[tuple[list[int], object]]:
     """The located plans over one table (t and values the same arrays, as `plan_windows` plans them together) with
     their `end_lines`, made together (each window's ends its own): [(the plans' positions, their lines)]."""
@@ -550,18 +570,20 @@ class _Readings:
 def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates) -> dict:
     """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window)."""
     entry: dict = {}
-    rows = None                     # the rows inside the window with a value: read where a column is not located
+    rows = None                     # the rows inside the window with a value
     for name, pick in (("max", np.argmax), ("min", np.argmin)):
         e = got.get(name)
+        if rows is None:
+            rows = np.flatnonzero(inside & np.isfinite(f))
         if e is not None:
             # a constant stretch's row carries the peak columns only: its angle is the table's at that row
             angle = float(e.row[angle_column]) if angle_column in e.row else float(np.interp(e.t, t, angles))
-            entry[name] = _entry(e.value, e.t, angle, e.where, e.sampled, e.limit)
+            # beside it, the best output row of the window (what the rows alone would report)
+            best = float(f[rows[pick(f[rows])]]) if len(rows) else None
+            entry[name] = _entry(e.value, e.t, angle, e.where, best, e.limit)
             if "window_t_s" in e.row:     # after a cycle-averaged window: the instant of the turn it repeats
                 entry[name]["window_t_s"] = float(e.row["window_t_s"])
             continue
-        if rows is None:
-            rows = np.flatnonzero(inside & np.isfinite(f))
         if len(rows):
             i = int(rows[pick(f[rows])])
             entry[name] = _entry(f[i], t[i], angles[i], "output row")
