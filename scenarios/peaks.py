@@ -26,13 +26,13 @@ from mechsim.dynamics.tables import TableColumns
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
-HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart (200 000 "
+HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart (100 000 "
               "samples a run at most)")
 
 #: a closed-form run's columns are sampled (beside its rows) at least this often in drive angle (rad) before their
 #: candidates are ranked (`_finest`); at most CLOSED_READINGS samples a run (its resources bounded before any work)
 CLOSED_STEP_RAD = math.radians(0.5)
-CLOSED_READINGS = 200_000
+CLOSED_READINGS = 100_000
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 
 
