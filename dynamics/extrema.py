@@ -1377,6 +1377,8 @@ class TrajectoryReader:
         self._keep: list = []
         self._read: dict = {}        # (start, instants) -> `_from_row`'s (t, y, y'), or its ReadingFailed
         self._ahead: dict = {}       # `_read`'s key -> the first try's (t, y, y'), or None, read ahead
+        self._staged: list = []      # the ends `stage_limits` staged, until the next read-out
+        self._limit_parts: dict = {}  # (id(interval), side) -> (interval, its stored state's read-out or None)
 
     def anchors(self, t_rows: np.ndarray) -> np.ndarray:
         """(piece index, row index) of each table time (the last piece that holds it, as the table keeps it), as
@@ -1463,9 +1465,21 @@ class TrajectoryReader:
                 self._ahead.clear()
         return self._read_out(got)
 
+    def stage_limits(self, ends: list[tuple[Interval, str]]) -> None:
+        """Read out the states the run holds at `ends` (`stored_columns`) with the next `read_many`'s readings, in
+        its read-out of each mode: a read-out has a fixed cost of its own (the generated functions' calls), and
+        the limits are read right after the first readings (`stored_limits`). A dense output reads them anyway."""
+        if getattr(self.traj, "dense", None) is None:
+            self._staged += [(iv, side) for iv, side in ends if (id(iv), side) not in self._limit_parts]
+
     def _read_out(self, readings: list) -> list[dict | None]:
         """Each reading's columns (None where there is none): one read-out per mode of all its readings, stacked
-        (`_ReadOut`, parameters and offsets per row), each reading its rows of it."""
+        (`_ReadOut`, parameters and offsets per row), each reading its rows of it; with them the states staged
+        (`stage_limits`), whose read-outs are kept for `stored_columns`."""
+        n, staged = len(readings), self._staged
+        if staged:
+            self._staged = []
+            readings = readings + self._stored_states(staged)
         groups: dict = {}
         for r, piece in enumerate(readings):
             if piece is not None:
@@ -1477,11 +1491,13 @@ class TrajectoryReader:
             table = _ReadOut(self.traj.model, [readings[r] for r in rs], self.angle_coordinates)
             a = 0
             for r in rs:
-                n = len(readings[r].t)
-                out[r] = _Part(table, a, a + n)
-                a += n
+                rows = len(readings[r].t)
+                out[r] = _Part(table, a, a + rows)
+                a += rows
         self.dense_readings += len(groups) if getattr(self.traj, "dense", None) is not None else 0
-        return out
+        for (iv, side), part in zip(staged, out[n:]):
+            self._limit_parts[id(iv), side] = (iv, part)
+        return out[:n]
 
     def _read_ahead(self, requests: list) -> tuple[list, list]:
         """Each request's `_anchor` (None where it has none), and on the compiled callbacks the first (tighter) try of
@@ -1712,6 +1728,11 @@ class TrajectoryReader:
                                       np.array([iv.lo if side == "after" else iv.hi])) for iv, side in ends])
             read = np.array([j for j, table in enumerate(tables) if table is not None], dtype=np.int64)
             return Gathered.of([tables[j] for j in read.tolist()]), read
+        kept = self._limit_parts
+        if ends and all(kept.get((id(iv), side), (None,))[0] is iv for iv, side in ends):   # (`stage_limits`)
+            parts = [kept[id(iv), side][1] for iv, side in ends]
+            read = np.array([j for j, part in enumerate(parts) if part is not None], dtype=np.int64)
+            return (Gathered.of([parts[j] for j in read.tolist()]) if len(read) else None), read
         modes: dict = {}
         for j, piece in enumerate(self._stored_states(ends)):
             if piece is not None:

@@ -26,8 +26,8 @@ from mechsim.dynamics.tables import TableColumns
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
-HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart (100 000 "
-              "samples a run at most)")
+HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart "
+              "(100 000 samples a run at most)")
 
 #: a closed-form run's columns are sampled (beside its rows) at least this often in drive angle (rad) before their
 #: candidates are ranked (`_finest`); at most CLOSED_READINGS samples a run (its resources bounded before any work)
@@ -419,9 +419,13 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if how == HOW_DENSE:
         ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
         ahead += [r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))]
+    spanned = [[iv for w in ws for iv in plans[w].intervals] for ws, _ in lines]      # each line group's intervals
+    if read is not None and hasattr(read, "stage_limits"):     # the ends `stored_limits` reads, read out with these
+        for ivs in spanned:
+            read.stage_limits([(ivs[k], side) for k, side, _ in every_end(ivs)])
     tables = read.prefetch(requests + (means_asked or []) + ahead) if read is not None else []
-    for ws, x in lines if read is not None else ():      # the limits the reader holds rank the ends
-        stored_limits(x, [iv for w in ws for iv in plans[w].intervals], read)
+    for (_, x), ivs in zip(lines, spanned) if read is not None else ():      # the limits the reader holds rank the ends
+        stored_limits(x, ivs, read)
     means = {}
     if means_asked is not None:
         got = tables[len(requests):len(requests) + len(means_asked)]
