@@ -175,12 +175,12 @@ def _contact_switches(source: Source, t: np.ndarray, cols, breaks: list[tuple[fl
     needed = ("mode", "slip_speed_m_s", "contact_force_N")
     if getattr(mech, "closed_form_contact", None) is None or not all(c in cols for c in needed):
         return []
-    from mechsim.thermal.exact import contact_code, contact_columns, switch_times
+    from mechsim.thermal.exact import contact_code, contact_columns, contact_switches
     angle0 = source.si["initial"][mech.initial_keys[0]]
     contact = contact_columns(mech, angle0, source.drive.speed, None)
     grid = {c: np.asarray(cols[c])[:len(t)] for c in needed}
     known = np.array([b for b, _ in breaks], dtype=float)
-    found = switch_times(contact, t, grid_columns=grid, known=known)
+    found = contact_switches(mech, angle0, source.drive.speed, t, grid_columns=grid, known=known)
     kept = apart([(x, "") for x in found], known, 1e-9 * max(1.0, abs(float(t[-1]))))
     if not kept:
         return []

@@ -508,10 +508,8 @@ class ClosedFormThermalReader(_KeptReadings):
         self.mechanics = mechanics
         self.states, self.inputs, self.breaks = thermal._window_states(window)
         if self.breaks is None:       # no network (the flash model): the switches alone
-            from mechsim.thermal.exact import closed_form_columns, contact_columns, switch_times
-            angle0 = si["initial"][mech.initial_keys[0]]
-            columns = closed_form_columns(mech, angle0, thermal.speed)
-            self.breaks = switch_times(contact_columns(mech, angle0, thermal.speed, columns), t_win)
+            from mechsim.thermal.exact import contact_switches
+            self.breaks = contact_switches(mech, si["initial"][mech.initial_keys[0]], thermal.speed, t_win)
         ext = thermal.setup.extension
         self.network = None if self.states is None else ModalNetwork(ext.system, ext.loss)
         self.t_win = t_win

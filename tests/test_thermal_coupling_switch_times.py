@@ -49,3 +49,26 @@ def test_multilevel_search_gives_the_bisection_times_to_the_bit():
         for levels in (1, 3, 6, 8):
             assert switch_times(columns, t, levels=levels) == ref
         assert switch_times(columns, t, grid_columns=columns(t)) == ref     # the run's table saves the grid call
+
+
+def test_switches_searched_once_are_those_searched_with_the_known_instants_left_out():
+    """A run's thermal integration and its located peaks search the same brackets (`contact_switches`, kept for the
+    run): the peaks' search leaves out the brackets that hold an event, afterwards instead of before; each
+    bracket's bisection is its own, so the times are those of `switch_times` given the known instants, to the bit,
+    whichever call comes first."""
+    from mechsim.thermal import exact
+    from mechsim.thermal.exact import contact_columns, contact_switches
+    si = load("geneva-lc1", ["duration=2.5 s", "contact.friction=0.15"]).si
+    mech = build_mechanism(si)
+    contact = contact_columns(mech, 0.3, 5.34, closed_form_columns(mech, 0.3, 5.34))
+    t = np.arange(0.0, 2.5 + 0.0025, 0.005)
+    every = switch_times(contact, t)
+    known = np.array(every[::3])                       # a third of them known (events), some rows apart
+    known = np.sort(np.r_[known, 0.5 * (t[10] + t[11])])      # and a bracket with no switch
+    ref = switch_times(contact, t, known=known)
+    assert 0 < len(ref) < len(every)
+    for first in (None, known):
+        exact._SWITCHES.clear()
+        assert contact_switches(mech, 0.3, 5.34, t, known=first) == (every if first is None else ref)
+        assert contact_switches(mech, 0.3, 5.34, t, known=known) == ref        # from the kept search
+        assert contact_switches(mech, 0.3, 5.34, t) == every

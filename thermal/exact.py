@@ -100,13 +100,27 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
     each bracket stops on its own tolerance, so the times are those of one-at-a-time bisection, to the bit.
     grid_columns: columns_fn(t_grid) when already at hand (the run's closed-form table), to save that call.
     known: instants known already (the run's events, sorted): a bracket holding one is not searched."""
+    t_grid = np.asarray(t_grid, dtype=float)
+    _, times = _bracket_switches(columns_fn, t_grid, tol, levels, grid_columns, known)
+    return sorted(times.tolist())
+
+
+def _unknown(idx: np.ndarray, t_grid: np.ndarray, known: np.ndarray | None) -> np.ndarray:
+    """Which brackets (t_grid[i], t_grid[i + 1]] of `idx` hold none of the sorted instants `known`."""
+    if known is None or not len(known) or not len(idx):
+        return np.ones(len(idx), dtype=bool)
+    return known.searchsorted(t_grid[idx]) == known.searchsorted(t_grid[idx + 1], side="right")
+
+
+def _bracket_switches(columns_fn, t_grid: np.ndarray, tol: float, levels: int, grid_columns, known
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """`switch_times`' brackets (the rows i where the contact's code changes between i and i + 1, those holding a
+    known instant left out) and each one's switch time, in the brackets' order."""
     code = contact_code(columns_fn(t_grid) if grid_columns is None else grid_columns)
     idx = np.flatnonzero(code[1:] != code[:-1])
-    t_grid = np.asarray(t_grid, dtype=float)
-    if known is not None and len(known) and len(idx):
-        idx = idx[known.searchsorted(t_grid[idx]) == known.searchsorted(t_grid[idx + 1], side="right")]
+    idx = idx[_unknown(idx, t_grid, known)]
     if not len(idx):
-        return []
+        return idx, np.zeros(0)
     a, b, ca = t_grid[idx].copy(), t_grid[idx + 1].copy(), code[idx]
     active = b - a > tol * np.maximum(1.0, np.abs(b))
     while np.any(active):
@@ -134,7 +148,33 @@ def switch_times(columns_fn, t_grid: np.ndarray, tol: float = 1e-13, levels: int
             b[j[down]] = m[down]
             node = 2 * node + same
             active = b - a > tol * np.maximum(1.0, np.abs(b))
-    return sorted((0.5 * (a + b)).tolist())
+    return idx, 0.5 * (a + b)
+
+
+#: the contact switches found per closed form and output rows (`contact_switches`): (the mechanism, by weak
+#: reference, its brackets and their times) by (its identity, start angle, speed, the rows)
+_SWITCHES: dict = {}
+
+
+def contact_switches(mech, angle0: float, speed: float, t_grid: np.ndarray, grid_columns=None,
+                     known: np.ndarray | None = None) -> list[float]:
+    """`switch_times` of the closed form's contact (`contact_columns`) on the output rows `t_grid`, searched once for
+    a run: its thermal integration (`integrate_closed_form`) and its located peaks (scenarios/peaks.py
+    `_contact_switches`, with the events `known`) search the same brackets. The brackets holding a known instant
+    are left out afterwards, as `switch_times` leaves them out before (each bracket's bisection is its own: the
+    same times to the bit)."""
+    import weakref
+    t_grid = np.asarray(t_grid, dtype=float)
+    key = (id(mech), float(angle0), float(speed), len(t_grid), hash(t_grid.tobytes()))
+    hit = _SWITCHES.get(key)
+    if hit is None or hit[0]() is not mech:
+        columns = contact_columns(mech, angle0, speed, closed_form_columns(mech, angle0, speed))
+        idx, times = _bracket_switches(columns, t_grid, 1e-13, SEARCH_LEVELS, grid_columns, None)
+        if len(_SWITCHES) >= 16:
+            _SWITCHES.clear()
+        hit = _SWITCHES[key] = (weakref.ref(mech), idx, times)
+    _, idx, times = hit
+    return sorted(times[_unknown(idx, t_grid, known)].tolist())
 
 
 @functools.lru_cache(maxsize=8)
@@ -351,5 +391,5 @@ def integrate_closed_form(ext: ThermalExtension, mech, angle0: float, speed: flo
     t_out, if already computed (the run's table). max_piece: the longest quadrature piece (`ModalNetwork.integrate`)."""
     columns = closed_form_columns(mech, angle0, speed)
     inputs = input_function(ext, mech, contact_columns(mech, angle0, speed, columns, "closed_form_heat"))
-    breaks = switch_times(contact_columns(mech, angle0, speed, columns), t_out, grid_columns=table)
+    breaks = contact_switches(mech, angle0, speed, t_out, grid_columns=table)
     return ModalNetwork(ext.system, ext.loss).integrate(inputs, t_out, y0, breaks, max_piece=max_piece), inputs, breaks
