@@ -290,28 +290,23 @@ class ModalNetwork:
                        ) -> list[np.ndarray]:
         """`integrate` of each (t_out, y0) of `starts`, each on its own pieces (the same states as one at a time):
         the heat input evaluated at every start's quadrature nodes in one call (an input's evaluation, the closed
-        form's, has a fixed cost that dominates a short integration's)."""
+        form's, has a fixed cost that dominates a short integration's), and each piece's decay and forcing for all
+        starts' pieces in one pass of whole-array work (elementwise: the same values as start by start); the
+        recurrence and the sums over each start's own pieces then start by start (`_advanced`)."""
         x, w = _gauss_legendre(nodes)
+        known = np.sort(np.asarray(breaks, dtype=float))
         pieces = []
         for t_out, y0 in starts:
             t_out = np.asarray(t_out, dtype=float)
-            cuts = np.unique(np.concatenate([t_out, [b for b in breaks if t_out[0] < b < t_out[-1]]]))
+            inside = known[known.searchsorted(t_out[0], side="right"):known.searchsorted(t_out[-1], side="left")]
+            cuts = np.unique(np.concatenate([t_out, inside]))          # the breaks strictly between its ends
             if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
                 cuts = np.unique(np.concatenate([cuts, _interior_points(cuts, max_piece)]))
             pieces.append((t_out, y0, cuts, np.diff(cuts)))
-        U = np.asarray(inputs(np.concatenate([(cuts[:-1, None] + h[:, None] * x[None, :]).ravel()
-                                              for _, _, cuts, h in pieces])), dtype=float)
-        out, a = [], 0
-        for t_out, y0, cuts, h in pieces:
-            u = U[:, a:a + len(h) * nodes].reshape(U.shape[0], len(h), nodes)
-            a += len(h) * nodes
-            out.append(self._advanced(u, t_out, y0, cuts, h, x, w))
-        return out
-
-    def _advanced(self, u: np.ndarray, t_out: np.ndarray, y0: np.ndarray, cuts: np.ndarray, h: np.ndarray,
-                  x: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """`integrate`'s states at t_out from y0 over the pieces h between the cuts, u the inputs at each piece's
-        quadrature nodes x (weights w): (inputs, pieces, nodes)."""
+        h = np.concatenate([h for *_, h in pieces])                    # every start's pieces, start after start
+        U = np.asarray(inputs(np.concatenate([(cuts[:-1, None] + hs[:, None] * x[None, :]).ravel()
+                                              for _, _, cuts, hs in pieces])), dtype=float)
+        u = U.reshape(U.shape[0], len(h), nodes)
         m = self.Bm.shape[1]
         g = self.b0[:, None, None] + np.einsum("im,mkj->ikj", self.Bm, u[:m])         # (n, K, nodes)
         lam = self.lam[:, None]
@@ -326,6 +321,18 @@ class ModalNetwork:
             q_int = np.sum(w[None, :] * u[m], axis=1) * h, np.sum(w[None, :] * u[m + 1], axis=1) * h
         else:                                                      # no heat rows: no bookkeeping energies
             q_int = np.zeros(len(h)), np.zeros(len(h))
+        out, a = [], 0
+        for t_out, y0, cuts, hs in pieces:
+            k = slice(a, a + len(hs))
+            a += len(hs)
+            out.append(self._advanced(t_out, y0, cuts, hs, decay[:, k], forcing[:, k], forcing_int[:, k],
+                                      carry_int[:, k], (q_int[0][k], q_int[1][k])))
+        return out
+
+    def _advanced(self, t_out: np.ndarray, y0: np.ndarray, cuts: np.ndarray, h: np.ndarray, decay: np.ndarray,
+                  forcing: np.ndarray, forcing_int: np.ndarray, carry_int: np.ndarray, q_int: tuple) -> np.ndarray:
+        """`integrate`'s states at t_out from y0 over the pieces h between the cuts, from each piece's modal decay
+        and forcing, their integrals over it (n, pieces) and the heat inputs' (`integrate_many`)."""
         y = np.asarray(y0, dtype=float)
         # the modal recurrence z_{k+1} = decay_k z_k + forcing_k is the only sequential part: per mode, over Python
         # floats (the same IEEE operations as numpy's, faster than a loop of length-n array steps, and a plain loop
