@@ -39,8 +39,9 @@ HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row
 HOW_THERMAL_CYCLE = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's "
                      "tolerances (after the simulated window at the periodic turn's phase), the network's states "
                      "the DAE's, then the cycle-averaged solution at the instant, and the thermal formulas there")
-HOW_THERMAL_CLOSED = ("located: the closed form evaluated between output rows, the network's states integrated exactly "
-                      "in its modes from the output row before the instant, and the thermal formulas there")
+HOW_THERMAL_CLOSED = ("located: the closed form evaluated between output rows (sampled at most 0.5° of drive angle "
+                      "apart, 100 000 samples a run at most), the network's states integrated exactly in its modes "
+                      "from the output row before the instant, and the thermal formulas there")
 HOW_THERMAL_CYCLE_CLOSED = ("located: the closed form evaluated between output rows, the network's states integrated "
                             "exactly in its modes from the output row before the instant, after the simulated window "
                             "the cycle-averaged solution at the instant, and the thermal formulas there")
@@ -527,6 +528,18 @@ class ClosedFormThermalReader(_KeptReadings):
         self.starts = np.asarray(mech.contact_starts(window, win_events), dtype=float)
         self.how = HOW_THERMAL_CYCLE_CLOSED if self.cycle else HOW_THERMAL_CLOSED
 
+    def sampler(self):
+        """What samples the thermal columns between rows for the candidates (`locate_thermal`'s `finest`), or None
+        (a cycle-averaged run: its later rows repeat the simulated turns): this reader itself where the columns
+        need no network states (the flash model), else one that reads the closed form at the instants and takes
+        the network's states there by linear interpolation between the window's rows. The bulk temperatures
+        change slowly against the output step, and the sharp part of a contact temperature, the flash rise, is
+        algebraic in the contact read exactly, so the samples rank the candidates; every located value is then
+        read as any reading is (`_KeptReadings`)."""
+        if self.cycle:
+            return None
+        return self if self.states is None else _InterpolatedStates(self)
+
     def kinks(self, lo: float, hi: float) -> list[tuple[float, str]]:
         """The heat input's switches inside (lo, hi) that are no event of the table (thermal/exact.py
         `switch_times`: a slip reversal, a flank switch), as (time, kind) breaks: the thermal columns kink there
@@ -608,6 +621,31 @@ class ClosedFormThermalReader(_KeptReadings):
                 (got[0], next(networks), self.thermal._time_since(got[2], self.starts)) for got in out]
 
 
+class _InterpolatedStates:
+    """`ClosedFormThermalReader.sampler` where the columns need the network's states: the closed form read at the
+    instants, the states interpolated linearly between the window's rows, the finish's thermal columns there."""
+
+    def __init__(self, reader: ClosedFormThermalReader):
+        self.reader = reader
+
+    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[Mapping | None]:
+        """Each request's columns, or None where its closed form could not be read."""
+        r = self.reader
+        frames, out = [], []
+        for (iv, position, times), reading in zip(requests, read_all(r.mechanics, requests)):
+            try:
+                reading = reading if reading is not None else r.mechanics(iv, position, times)
+            except ReadingFailed:
+                out.append(None)
+                continue
+            inner = iv.inside(times)
+            states = np.column_stack([np.interp(inner, r.t_win, r.states[:, j]) for j in range(r.states.shape[1])])
+            frames.append(({k: _column(v) for k, v in reading.items()}, states, r.thermal._time_since(inner, r.starts)))
+            out.append(len(frames) - 1)
+        tables = r._thermal(frames) if frames else []
+        return [None if k is None else tables[k] for k in out]
+
+
 def thermal_reader(source, events: pd.DataFrame, t_table_end: float, mechanics=None):
     """The `ThermalReader` (a closed-form run: `ClosedFormThermalReader`, its closed form read by `mechanics`, the
     run's reader of it) of a finished run (scenarios/peaks.py Source), or None where its thermal columns are not read
@@ -685,24 +723,41 @@ def heat_breaks(reader, breaks: list[tuple[float, str]], lo: float, hi: float) -
 
 
 def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
-                   windows: list[tuple[float, float, tuple[str, str]]]) -> list[dict]:
+                   windows: list[tuple[float, float, tuple[str, str]]], finest: float | None = None) -> list[dict]:
     """For each window (lo, hi, the kinds of its ends) of the table: {column: ({'max', 'min'} located by
     `dynamics/extrema.py` `locate` with the reader, the intervals searched)} for the thermal columns over [lo, hi],
     between its events (a cycle-averaged run's repeated ones included) and the heat input's own switches where the
     reader knows them (`kinks`), on the intervals that may hold the extremum (`_promising`), then against the
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
-    read in another."""
+    read in another. finest (s): a closed-form run's columns are also sampled between the rows at most this far
+    apart (the reader's `sampler`, as the mechanical columns are: scenarios/peaks.py `_finest`), the samples
+    candidates beside the rows; the intervals handed back are the table's own."""
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, end_lines,
-                                          finish_all, refine_further, stored_limits)
+                                          finish_all, refine_further, stored_limits, with_rowless)
     values = {c: np.asarray(cols[c], float) for c in columns}
-    F = np.array(list(values.values())).reshape(len(values), len(t))
     ties = {c: tie_of(f) for c, f in values.items()}
     events_breaks = _breaks(events)
-    spans = []
-    for lo, hi, kinds in windows:
-        intervals = intervals_of(t, heat_breaks(reader, events_breaks, lo, hi), lo, hi, *kinds)
-        spans.append((intervals, dict(zip(values, _promising(F, intervals)))))
+    tables = [intervals_of(t, heat_breaks(reader, events_breaks, lo, hi), lo, hi, *kinds) for lo, hi, kinds in windows]
+    sampler = getattr(reader, "sampler", None) if finest is not None else None
+    sampler = sampler() if sampler is not None else None
+    own = [iv for intervals in tables for iv in intervals]              # the table's intervals, every window's
+    back = {id(iv): iv for iv in own}
+    if sampler is not None and own:
+        t, values, sampled = with_rowless(t, values, own, sampler, finest)
+        if sampled is not own:
+            # the samples put in time order among the rows, so that each interval's rows run on (`_promising` reads
+            # an interval's rows as one stretch of the table)
+            order = np.argsort(t, kind="stable")
+            at = np.empty(len(order), dtype=np.int64)
+            at[order] = np.arange(len(order))
+            t, values = t[order], {c: v[order] for c, v in values.items()}
+            sampled = [Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, np.sort(at[iv.rows])) for iv in sampled]
+            back = {id(b): a for a, b in zip(own, sampled)}
+            sizes = np.cumsum([0] + [len(ivs) for ivs in tables]).tolist()
+            tables = [sampled[a:b] for a, b in zip(sizes[:-1], sizes[1:])]
+    F = np.array(list(values.values())).reshape(len(values), len(t))
+    spans = [(intervals, dict(zip(values, _promising(F, intervals)))) for intervals in tables]
     # `locate` of each column on its own intervals: every window's and column's plan made together, the readings of
     # all of them at once, then their finish
     planned = iter(column_plans(t, values, [(c, own) for _, owns in spans for c, own in owns.items()]))
@@ -737,6 +792,6 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
             e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g)
             if e is not None:
                 got[name] = e
-            located[c] = (got, owns[c])
+            located[c] = (got, [back[id(iv)] for iv in owns[c]])
         out.append(located)
     return out
