@@ -489,16 +489,17 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                                                                    for iv, side in firsts}.values()), h)])
     if treader is not None and regime is not None and thermal:
         means.update(_thermal_turn_means(treader, t, cols, thermal, events, *regime["last_turn"]))
+    table = np.array([np.asarray(cols[c], dtype=float) for c in present]).reshape(len(present), len(t))
     for (lo, hi, label), got, intervals, heat in zip(windows, located, spans, heats):
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
         # run's table continues the simulated window periodically)
         inside = (np.ones(len(t), bool) if label == "run" else t >= lo if label == "periodic"
                   else (t >= lo) & (t <= hi))
-        for c in present:
-            f = np.asarray(cols[c], dtype=float)
+        bests = _best_rows(table, inside)
+        for c, f, best in zip(present, table, bests):
             mine, own = ((heat[c][0], (treader.how, heat[c][1], treader)) if c in heat else
                          (got.get(c, {}), (how, intervals, read)))
-            entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates)
+            entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates, best)
             if label == "startup":
                 out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
                 if "singular" in entry:
@@ -572,23 +573,38 @@ class _Readings:
         return getattr(self.read, name)
 
 
-def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates) -> dict:
-    """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window)."""
+def _best_rows(table: np.ndarray, inside: np.ndarray) -> list[dict]:
+    """Each column's (a row of `table`) largest and least finite value over the rows `inside` the window, {max, min}
+    (None where it has none there): what the rows alone would report, beside each located extremum. The window's
+    rows run on (a run, a start-up, a periodic regime to the table's end): read as one slice of them."""
+    idx = np.flatnonzero(inside)
+    if not len(idx):
+        return [{"max": None, "min": None} for _ in table]
+    part = table[:, idx[0]:idx[-1] + 1] if idx[-1] - idx[0] == len(idx) - 1 else table[:, idx]
+    ok = np.isfinite(part)
+    top = part.max(axis=1, where=ok, initial=-np.inf).tolist()
+    least = part.min(axis=1, where=ok, initial=np.inf).tolist()
+    return [{"max": a if math.isfinite(a) else None, "min": b if math.isfinite(b) else None}
+            for a, b in zip(top, least)]
+
+
+def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates,
+                  best: dict) -> dict:
+    """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window);
+    best: its best rows in the window (`_best_rows`), reported beside a located extremum."""
     entry: dict = {}
-    rows = None                     # the rows inside the window with a value
+    rows = None                     # the rows inside the window with a value: read where a column is not located
     for name, pick in (("max", np.argmax), ("min", np.argmin)):
         e = got.get(name)
-        if rows is None:
-            rows = np.flatnonzero(inside & np.isfinite(f))
         if e is not None:
             # a constant stretch's row carries the peak columns only: its angle is the table's at that row
             angle = float(e.row[angle_column]) if angle_column in e.row else float(np.interp(e.t, t, angles))
-            # beside it, the best output row of the window (what the rows alone would report)
-            best = float(f[rows[pick(f[rows])]]) if len(rows) else None
-            entry[name] = _entry(e.value, e.t, angle, e.where, best, e.limit)
+            entry[name] = _entry(e.value, e.t, angle, e.where, best[name], e.limit)
             if "window_t_s" in e.row:     # after a cycle-averaged window: the instant of the turn it repeats
                 entry[name]["window_t_s"] = float(e.row["window_t_s"])
             continue
+        if rows is None:
+            rows = np.flatnonzero(inside & np.isfinite(f))
         if len(rows):
             i = int(rows[pick(f[rows])])
             entry[name] = _entry(f[i], t[i], angles[i], "output row")
