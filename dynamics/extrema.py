@@ -75,7 +75,6 @@ class Extremum:
     t: float
     where: str
     row: Mapping
-    sampled: float          # its candidate's value (a row of the plan's table: an output row or a reading added)
     limit: str | None = None   # at an interval's end: the one-sided limit from 'before' or 'after' that instant
     edge: str | None = None    # the bracket reaches the interval's end ('before' it) or start ('after' it)
     interval: int = -1         # the smooth interval it lies in (the `intervals` list given to `locate`)
@@ -413,8 +412,7 @@ def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> li
             name = "max" if j.sense > 0 else "min"
             if j.best_row is None:
                 continue
-            e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.sense * j.sampled, j.limit, j.edge,
-                         j.interval, j.constant)
+            e = Extremum(j.sense * j.best_f, j.best_t, j.where, j.best_row, j.limit, j.edge, j.interval, j.constant)
             if _beats(e, slot.get(name), j.sense, p.ties[j.column]):
                 slot[name] = e
         located.append(out)
@@ -1230,8 +1228,7 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
             at = len(own) - 1
         kind = iv.lo_kind if side == "after" else iv.hi_kind
         row = _Row(table, 0, None)
-        sampled = f[iv.rows[0] if side == "after" else iv.rows[-1]]
-        best = Extremum(value, te, f"{kind} (limit from {side})", row, float(sampled), side, side, at, False)
+        best = Extremum(value, te, f"{kind} (limit from {side})", row, side, side, at, False)
     return best
 
 

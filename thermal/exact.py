@@ -17,6 +17,7 @@ exactly, from the modal integral of T), so the heat balance closes to round-off 
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Callable
 
 import numpy as np
@@ -163,7 +164,6 @@ def contact_switches(mech, angle0: float, speed: float, t_grid: np.ndarray, grid
     `_contact_switches`, with the events `known`) search the same brackets. The brackets holding a known instant
     are left out afterwards, as `switch_times` leaves them out before (each bracket's bisection is its own: the
     same times to the bit)."""
-    import weakref
     t_grid = np.asarray(t_grid, dtype=float)
     key = (id(mech), float(angle0), float(speed), len(t_grid), hash(t_grid.tobytes()))
     hit = _SWITCHES.get(key)
