@@ -979,18 +979,36 @@ def apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> lis
     return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
 
 
-def _between(knots: np.ndarray, finest: float) -> np.ndarray:
-    """Instants evenly between consecutive `knots` (in order) farther apart than `finest`, as few as leave no two
-    neighbours farther apart than that; the knots themselves not among them."""
+def _between(knots: np.ndarray, finest) -> np.ndarray:
+    """Instants evenly between consecutive `knots` (in order) farther apart than `finest` (a time, or one per gap),
+    as few as leave no two neighbours farther apart than that; the knots themselves not among them."""
+    return _between_gaps(knots, finest)[0]
+
+
+def _between_gaps(knots: np.ndarray, finest) -> tuple[np.ndarray, np.ndarray]:
+    """`_between`'s instants and the gap each lies in (its knot before)."""
     gaps = knots[1:] - knots[:-1]
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):
         extra = np.maximum(np.ceil(gaps / finest) - 1.0, 0.0)
     extra = np.where(np.isfinite(extra), extra, 0.0).astype(np.int64)
     if not extra.any():
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
     which = np.repeat(np.arange(len(gaps)), extra)
     j = np.arange(len(which)) - np.repeat(np.cumsum(extra) - extra, extra) + 1.0
-    return knots[which] + gaps[which] * j / (extra[which] + 1.0)
+    return knots[which] + gaps[which] * j / (extra[which] + 1.0), which
+
+
+def _read_tables(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]):
+    """Each request's columns read by `read` (its `read_many` where it has one, a request it leaves out read alone),
+    in order; None for a request whose reading failed."""
+    many = getattr(read, "read_many", None)
+    for request, table in zip(requests, many(requests) if many is not None else [None] * len(requests)):
+        if table is None:
+            try:
+                table = read(*request)
+            except ReadingFailed:
+                table = None
+        yield table
 
 
 #: an interval with fewer output rows than this is also read at ROWLESS_READINGS instants over it (its ends included)
@@ -998,8 +1016,60 @@ SPARSE_ROWS = 3
 ROWLESS_READINGS = 9
 
 
+def _samples(t: np.ndarray, intervals: list[Interval], rowless: dict[int, np.ndarray], finest
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(instants, their interval) of `with_rowless`'s samples: each interval's instants (its ends, rows and
+    `rowless` readings) spaced by `_between` at `finest`, every interval's in one pass."""
+    ids = [k for k, iv in enumerate(intervals) if iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))]
+    if not ids:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+    rows = [np.asarray(intervals[k].rows, dtype=np.int64) for k in ids]
+    extra = [rowless.get(k, np.zeros(0)) for k in ids]
+    ks = np.array(ids, dtype=np.int64)
+    knots = np.concatenate([np.array([intervals[k].lo for k in ids] + [intervals[k].hi for k in ids]),
+                            t[np.concatenate(rows)], *extra])
+    of = np.concatenate([ks, ks, np.repeat(ks, [len(r) for r in rows]), np.repeat(ks, [len(x) for x in extra])])
+    order = np.lexsort((knots, of))
+    knots, of = knots[order], of[order]
+    spacing = np.broadcast_to(finest(knots) if callable(finest) else finest, len(knots) - 1).astype(float)
+    spacing[of[1:] != of[:-1]] = np.inf             # (no gap from one interval's end to the next one's start)
+    times, gap = _between_gaps(knots, spacing)
+    return times, of[gap]
+
+
+def _with_rows(t: np.ndarray, intervals: list[Interval], added: dict[int, np.ndarray], of: np.ndarray,
+               first: int) -> list[Interval]:
+    """Copies of the intervals that get rows of the table (t: its instants, the new rows' among them): `added`
+    (interval -> the rows of its readings) and the samples (their intervals `of`, in order; their rows from `first`
+    on), each interval's rows in time order (stably: its own first), the new ones' anchors (-1, -1)."""
+    out = list(intervals)
+    touched = sorted(set(added) | set(np.unique(of).tolist()))
+    if not touched:
+        return out
+    own = [np.asarray(intervals[k].rows, dtype=np.int64) for k in touched]
+    mine = [added.get(k, np.zeros(0, dtype=np.int64)) for k in touched]
+    ks = np.array(touched, dtype=np.int64)
+    rows = np.concatenate([*own, *mine, np.arange(first, first + len(of))])
+    where = np.concatenate([np.repeat(ks, [len(x) for x in own]), np.repeat(ks, [len(x) for x in mine]), of])
+    times = t[rows]
+    anchors = np.full((len(rows), 2), -1, dtype=int)
+    n_own = sum(len(x) for x in own)
+    if n_own:
+        anchors[:n_own] = np.concatenate(
+            [np.asarray(intervals[k].anchors, dtype=int).reshape(len(x), -1) if len(intervals[k].anchors) else
+             np.full((len(x), 2), -1) for k, x in zip(touched, own)])
+    order = np.lexsort((times, where))
+    rows, where, anchors = rows[order], where[order], anchors[order]
+    cuts = where.searchsorted(ks[1:]).tolist()
+    for k, r, x in zip(touched, np.split(rows, cuts), np.split(anchors, cuts)):
+        iv = intervals[k]
+        out[k] = Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, r, x)
+    return out
+
+
 def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], read: Reader,
-                 finest: float | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
+                 finest: float | Callable[[np.ndarray], np.ndarray] | None = None, sampler=None
+                 ) -> tuple[np.ndarray, dict[str, np.ndarray], list[Interval]]:
     """(t, values, intervals) for `locate` where some smooth intervals hold fewer than SPARSE_ROWS output rows (a
     stretch between events shorter than a few output steps, e.g. a contact episode): each such interval read at
     ROWLESS_READINGS instants evenly over [lo, hi], its ends the one-sided limits at its events, and the readings
@@ -1009,49 +1079,58 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
     changed (copies get the rows); an interval whose reading fails keeps its own. Without such intervals, the
     arguments themselves.
 
-    finest (s): where a reading costs no integration (a closed form), every interval is also read between its
-    instants (its ends and rows) farther apart than this, evenly, so that no two are: the candidates then do not
-    depend on the output step (a peak narrower than the rows' step is among them at any step; docs/theory.md §K5).
+    finest (s): every interval is also sampled between its instants (its ends and rows) farther apart than this
+    (a time, or a function of the instants giving one per gap), evenly, so that no two are: the candidates then do
+    not depend on the output step (a peak narrower than the rows' step is among them at any step; docs/theory.md
+    §K5). The samples are read with the interval's other readings by `read` (a closed form: no integration), or
+    by `sampler` where given (`read_at(instants, [(interval, a, b)])`: every column at all the instants, those
+    a:b in that interval; `TrajectoryReader.sampler`: a dense output's readings, or a DAE run's states
+    interpolated between its rows, whose values rank the candidates only: every located value is still read by
+    `read`).
     """
     # (an interval within round-off of an instant has nothing between its ends' one-sided limits to read)
     t = np.asarray(t, dtype=float)
-    sparse, requests = [], []
-    for k, iv in enumerate(intervals):
-        if not iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi)):
-            continue
-        times = np.linspace(iv.lo, iv.hi, ROWLESS_READINGS) if len(iv.rows) < SPARSE_ROWS else np.zeros(0)
-        if finest is not None:
-            times = np.concatenate([times, _between(np.unique(np.r_[iv.lo, t[iv.rows], times, iv.hi]), finest)])
-        if len(times):
-            sparse.append(k)
-            requests.append((iv, 0, np.sort(times)))
-    if not sparse:
+    rowless = {k: np.linspace(iv.lo, iv.hi, ROWLESS_READINGS) for k, iv in enumerate(intervals)
+               if len(iv.rows) < SPARSE_ROWS and iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))}
+    at, of = _samples(t, intervals, rowless, finest) if finest is not None else (np.zeros(0), np.zeros(0, int))
+    if sampler is None:                    # the samples read with the interval's rowless readings
+        cuts = of.searchsorted(np.arange(len(intervals) + 1))      # each interval's samples: at[cuts[k]:cuts[k + 1]]
+        asked = {k: np.sort(np.r_[rowless.get(k, ()), at[cuts[k]:cuts[k + 1]]])
+                 for k in sorted(set(rowless) | set(of.tolist()))}
+        at, of = np.zeros(0), np.zeros(0, dtype=np.int64)
+    else:
+        asked = rowless
+    if not asked and not len(at):
         return t, values, intervals
-    many = getattr(read, "read_many", None)
-    tables = many(requests) if many is not None else [None] * len(requests)
-    out, t_new, v_new, n = list(intervals), [], {c: [] for c in values}, len(t)
-    for k, request, table in zip(sparse, requests, tables):
+    requests = [(intervals[k], 0, times) for k, times in asked.items()]
+    tables = dict(zip(asked, _read_tables(read, requests)))
+    if len(at):
+        cuts = of.searchsorted(np.arange(len(intervals) + 1))      # each interval's samples: at[cuts[k]:cuts[k + 1]]
+        sampled = sampler.read_at(at, [(intervals[k], cuts[k], cuts[k + 1]) for k in np.unique(of).tolist()])
+    t_new, v_new, n = [], {c: [] for c in values}, len(t)
+    for k, table in tables.items():
         if table is None:
-            try:
-                table = read(*request)
-            except ReadingFailed:
-                continue
-        times, iv = request[2], intervals[k]
+            continue
+        times = asked[k]
         t_new.append(times)
         for c in values:
             got = table.get(c)
             v_new[c].append(np.full(len(times), np.nan) if got is None else np.asarray(got, dtype=float))
-        own = np.asarray(iv.rows, dtype=int)
-        rows = np.r_[own, np.arange(n, n + len(times))]
-        order = np.argsort(np.r_[t[own], times], kind="stable")
-        anchors = np.vstack([np.asarray(iv.anchors, dtype=int).reshape(len(own), -1) if len(iv.anchors) else
-                             np.full((len(own), 2), -1), np.full((len(times), 2), -1)])
-        out[k] = Interval(iv.lo, iv.hi, iv.lo_kind, iv.hi_kind, rows[order], anchors[order])
-        n += len(times)
+    added = {}                          # each interval's readings' rows
+    for k, table in tables.items():
+        if table is not None:
+            added[k] = np.arange(n, n + len(asked[k]))
+            n += len(asked[k])
+    if len(at):
+        t_new.append(at)
+        for c in values:
+            got = sampled.get(c)
+            v_new[c].append(np.full(len(at), np.nan) if got is None else np.asarray(got, dtype=float))
     if not t_new:
         return t, values, intervals
-    return (np.concatenate([t] + t_new),
-            {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()}, out)
+    t_all = np.concatenate([t] + t_new)
+    return (t_all, {c: np.concatenate([np.asarray(f, dtype=float)] + v_new[c]) for c, f in values.items()},
+            _with_rows(t_all, intervals, added, of, n))
 
 
 #: one-sided limits read per column and sense at most (`end_limits`): the best guesses (the limits themselves where
@@ -1461,6 +1540,17 @@ class TrajectoryReader:
             finally:
                 self._ahead.clear()
         return self._read_out(got)
+
+    def sampler(self):
+        """What samples the columns between the rows (`with_rowless`'s `sampler`): on a dense output its own
+        readings (`_DenseSamples`: exact, and costing no integration), else the run's states interpolated between
+        its own (`_RowInterpolation`); None where a piece keeps no y' to interpolate with."""
+        traj = self.traj
+        if getattr(traj, "dense", None) is not None:
+            return _DenseSamples(self)
+        if any(p.yp is None for p in traj.pieces + traj.starts):
+            return None
+        return _RowInterpolation(self)
 
     def stage_limits(self, ends: list[tuple[Interval, str]]) -> None:
         """Read out the states the run holds at `ends` (`stored_columns`) with the next `read_many`'s readings, in
@@ -1900,3 +1990,118 @@ class TrajectoryReader:
         if len(rows_t) == 1:          # one block (the usual reading): as it is, not copied
             return rows_t[0], rows_y[0], rows_yp[0]
         return np.concatenate(rows_t), np.vstack(rows_y), np.vstack(rows_yp)
+
+
+class _RowInterpolation:
+    """A DAE run's columns between its output rows, approximated: each segment's states (its start, its rows, its
+    end: y and y' as the integrator left them) joined by cubic Hermite interpolation, read out as the rows are
+    (`TrajectoryReader._read_out`: one read-out per mode). A state's error is of order h^4 |y^(4)| / 384 over rows
+    h apart, while a column's narrow peak comes from the read-out's sharp dependence on a smooth state (a contact
+    force through an engagement), so the samples rank the candidates; every located value is then read by
+    re-integration (docs/theory.md §K5)."""
+
+    def __init__(self, reader: TrajectoryReader):
+        traj = reader.traj
+        self.reader = reader
+        self.start_t = np.array([float(p.t[0]) for p in traj.starts])
+        parts: list[list] = [[p] for p in traj.starts]           # each segment's states in time order
+        for piece in traj.pieces:
+            if len(piece.t):
+                k = int(self.start_t.searchsorted(piece.t[0], side="left")) - 1
+                if k >= 0:                     # (the run's first row is its first segment's start)
+                    parts[k].append(piece)
+        for k, stop in enumerate(traj.stops):
+            if stop is not None and stop.t[0] > parts[k][-1].t[-1]:
+                parts[k].append(stop)
+        sizes = np.array([sum(len(p.t) for p in part) for part in parts], dtype=np.int64)
+        self.first = np.cumsum(sizes) - sizes                     # each segment's first state
+        self.size = sizes
+        every = [p for part in parts for p in part]
+        self.t = np.concatenate([p.t for p in every])
+        # the states of every segment in one array, each mode's layout padded to the widest (NaN beyond its own)
+        self.width = [p.y.shape[1] for p in traj.starts]
+        if min(self.width) == max(self.width):
+            self.y, self.yp = np.concatenate([p.y for p in every]), np.concatenate([p.yp for p in every])
+        else:
+            self.y, self.yp = np.full((len(self.t), max(self.width)), np.nan), np.full((len(self.t), max(self.width)),
+                                                                                      np.nan)
+            row = 0
+            for p in every:
+                rows, width = p.y.shape
+                self.y[row:row + rows, :width], self.yp[row:row + rows, :width] = p.y, p.yp
+                row += rows
+        self.starts = traj.starts
+
+    def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[Mapping]:
+        """Each (interval, position, times)'s columns, as a reader's (`read_at` of every request's instants at
+        once, each request its rows of it): a thermal reader's mechanics between rows (scenarios/thermal_peaks.py
+        `ThermalReader.sampler`)."""
+        sizes = [len(times) for _, _, times in requests]
+        if not sizes:
+            return []
+        table = self.read_at(np.concatenate([np.asarray(times, dtype=float) for _, _, times in requests]), [])
+        ends = np.cumsum(sizes).tolist()
+        return [_Part(table, e - n, e) for n, e in zip(sizes, ends)]
+
+    def __call__(self, iv: Interval, position: int, times: np.ndarray) -> Mapping:
+        return self.read_many([(iv, position, times)])[0]
+
+    def read_at(self, times: np.ndarray, spans: list[tuple[Interval, int, int]]) -> Mapping:
+        """Every column at `times` (in order; NaN where no segment's states bracket one), each in the segment
+        started last at or before it (`spans`, the interval of each stretch times[a:b], is not needed)."""
+        from mechsim.dynamics.hybrid import Piece
+        times = np.asarray(times, dtype=float)
+        seg = self.start_t.searchsorted(times, side="right") - 1
+        ok = (seg >= 0) & (self.size[np.maximum(seg, 0)] > 1)
+        seg = np.maximum(seg, 0)
+        a = self.first[seg]
+        # the state at or before each instant within its segment (its last gap where it lies beyond: NaN below)
+        j = np.clip(self.t.searchsorted(times, side="right") - 1, a, a + self.size[seg] - 2)
+        t0, t1 = self.t[j], self.t[np.minimum(j + 1, len(self.t) - 1)]
+        h = (t1 - t0)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = (times[:, None] - t0[:, None]) / h
+        s2, s3 = s * s, s * s * s
+        y = ((2 * s3 - 3 * s2 + 1) * self.y[j] + (s3 - 2 * s2 + s) * h * self.yp[j]
+             + (3 * s2 - 2 * s3) * self.y[np.minimum(j + 1, len(self.t) - 1)]
+             + (s3 - s2) * h * self.yp[np.minimum(j + 1, len(self.t) - 1)])
+        y[~(ok & (times >= t0) & (times <= t1) & (h[:, 0] > 0))] = np.nan
+        # one piece a run of instants in one segment (its mode, parameters and offset); one read-out a mode, each
+        # column put in the instants' order when first read (`Gathered`)
+        bounds = np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(times)].tolist()
+        modes: dict = {}
+        for i, e, k in zip(bounds[:-1], bounds[1:], seg[bounds[:-1]].tolist()):
+            start = self.starts[k]
+            params = start.params if isinstance(start.params, tuple) else tuple(np.asarray(start.params, float).tolist())
+            pieces, at = modes.setdefault(start.mode, ([], []))
+            pieces.append(Piece(start.mode, params, times[i:e], y[i:e, :self.width[k]], None, start.offset))
+            at.append(np.arange(i, e))
+        model, angles = self.reader.traj.model, self.reader.angle_coordinates
+        return Gathered([(_ReadOut(model, pieces, angles), None, np.concatenate(at)) for pieces, at in modes.values()])
+
+
+class _DenseSamples:
+    """A dense output's readings at many instants of many intervals, their columns in one order (`Gathered`): the
+    samples between the rows of a compiled diffrax run."""
+
+    def __init__(self, reader: TrajectoryReader):
+        self.reader = reader
+
+    def read_at(self, times: np.ndarray, spans: list[tuple[Interval, int, int]]) -> Mapping:
+        """Every column at `times`, times[a:b] in the interval of each (interval, a, b) of `spans` (NaN where the
+        dense output does not hold a stretch)."""
+        parts = self.reader.read_many([(iv, 0, times[a:b]) for iv, a, b in spans])
+        groups: dict = {}
+        missing = []
+        for (_, a, b), part in zip(spans, parts):
+            if part is None:
+                missing.append(np.arange(a, b))
+                continue
+            table = part._table
+            group = groups.setdefault(id(table), (table, [], []))
+            group[1].append(np.arange(part._a, part._b))
+            group[2].append(np.arange(a, b))
+        found = [(table, np.concatenate(rows), np.concatenate(at)) for table, rows, at in groups.values()]
+        if missing:
+            found.append(({}, None, np.concatenate(missing)))
+        return Gathered(found)

@@ -26,6 +26,11 @@ from mechsim.dynamics.tables import TableColumns
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
+#: what `how` adds where a DAE run's columns were sampled between its rows (`_rows_finest`)
+SAMPLED_DENSE = "; its candidates also read between output rows at most 1° of drive angle apart"
+SAMPLED_STATES = "; its candidates also from the states interpolated between output rows at most 1° of drive angle apart"
+HOW_DENSE_SAMPLED = HOW_DENSE + SAMPLED_DENSE
+HOW_DAE_SAMPLED = HOW_DAE + SAMPLED_STATES
 HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart "
               "(100 000 samples a run at most)")
 
@@ -33,6 +38,9 @@ HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled a
 #: candidates are ranked (`_finest`); at most CLOSED_READINGS samples a run (its resources bounded before any work)
 CLOSED_STEP_RAD = math.radians(0.5)
 CLOSED_READINGS = 100_000
+#: a DAE run's columns are sampled (beside its rows) at least this often in drive angle (rad) where its rows are
+#: farther apart (`_rows_finest`), from its states interpolated between its rows; as many samples at most
+DAE_STEP_RAD = math.radians(1.0)
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 
 
@@ -401,8 +409,18 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
              for lo, hi, label in windows]
     # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`);
     # the windows over the same table planned together
-    finest = _finest(source, tn) if source is not None and source.method == "closed-form" else None
-    plans = plan_windows([with_rowless(tn, values, intervals, read, finest) if intervals else None
+    finest = sampler = None
+    if source is not None and source.method == "closed-form":
+        finest = _finest(source, tn)
+    elif read is not None and angle_column.endswith("_rad"):
+        # a DAE run's: its dense output's readings, else its states interpolated between its rows
+        finest = _rows_finest(tn, angles[:n])
+        sampler = read.sampler() if finest is not None else None
+        if sampler is None:
+            finest = None
+        else:
+            how = HOW_DAE_SAMPLED if how == HOW_DAE else HOW_DENSE_SAMPLED
+    plans = plan_windows([with_rowless(tn, values, intervals, read, finest, sampler) if intervals else None
                           for intervals in spans])
     requests = [r for p in plans if p is not None for r in p.requests]
     turn = means_asked = None
@@ -416,7 +434,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     read = _Readings(read) if read is not None else None
     lines = _end_lines(plans)
     ahead = []
-    if how == HOW_DENSE:
+    if how in (HOW_DENSE, HOW_DENSE_SAMPLED):
         ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
         ahead += [r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))]
     spanned = [[iv for w in ws for iv in plans[w].intervals] for ws, _ in lines]      # each line group's intervals
@@ -475,6 +493,9 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         from mechsim.scenarios.thermal_peaks import thermal_reader
         treader = thermal_reader(source, events, float(t[-1]), read if source.method == "closed-form" else None)
     heats = [{} for _ in windows]
+    # (a DAE run's thermal columns sampled as its mechanical ones: `ThermalReader.sampler`, none for a cycle average)
+    sampled = ("" if treader is None or sampler is None or source.method == "closed-form" or treader.cycle else
+               SAMPLED_DENSE if how == HOW_DENSE_SAMPLED else SAMPLED_STATES)
     if treader is not None:           # the thermal columns over the whole table (a cycle-averaged run's continues)
         from mechsim.scenarios.thermal_peaks import locate_thermal
         heats = locate_thermal(treader, t, cols, thermal, events, [(lo, hi if label == "startup" else float(t[-1]),
@@ -497,7 +518,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                   else (t >= lo) & (t <= hi))
         bests = _best_rows(table, inside)
         for c, f, best in zip(present, table, bests):
-            mine, own = ((heat[c][0], (treader.how, heat[c][1], treader)) if c in heat else
+            mine, own = ((heat[c][0], (treader.how + sampled, heat[c][1], treader)) if c in heat else
                          (got.get(c, {}), (how, intervals, read)))
             entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates, best)
             if label == "startup":
@@ -523,6 +544,27 @@ def _finest(source: Source, t: np.ndarray) -> float | None:
     if not (speed > 0.0 and math.isfinite(speed) and span > 0.0):
         return None
     return max(CLOSED_STEP_RAD / speed, span / CLOSED_READINGS)
+
+
+def _rows_finest(t: np.ndarray, angles: np.ndarray):
+    """A DAE run's sampling between its rows (`with_rowless`'s `finest`), as a closed form's (`_finest`): the
+    spacing in each gap between instants that keeps the drive angle DAE_STEP_RAD apart at the rows' pace there
+    (at most CLOSED_READINGS samples a run); None where no two rows are farther apart than that. Coarser than a
+    closed form's: the samples are read-outs of interpolated states, one per sample, and a peak a few degrees
+    wide still has samples inside it (docs/theory.md §K5)."""
+    if len(t) < 2:
+        return None
+    turned = np.abs(np.diff(angles))
+    with np.errstate(invalid="ignore"):
+        total = float(np.nansum(turned))
+        step = max(DAE_STEP_RAD, total / CLOSED_READINGS)
+        if not np.nanmax(turned, initial=0.0) > step:
+            return None
+
+    def spacing(knots: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.diff(knots) * step / np.abs(np.diff(np.interp(knots, t, angles)))
+    return spacing
 
 
 def _end_lines(plans: list) -> list[tuple[list[int], object]]:

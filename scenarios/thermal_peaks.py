@@ -25,6 +25,8 @@ table, so that `locate` finds their extrema as it finds the mechanical ones.
 """
 from __future__ import annotations
 
+import copy
+
 from collections.abc import Mapping, MutableMapping
 
 import numpy as np
@@ -308,6 +310,38 @@ class ThermalReader(_KeptReadings):
                              for c in window.columns if cumulative(c)}
         self.scale = max(1.0, abs(t_table_end))
         self.how = HOW_THERMAL_CYCLE if self.cycle else HOW_THERMAL
+
+    def sampler(self):
+        """What samples the thermal columns between rows for the candidates (`locate_thermal`'s `finest`), or None
+        (a cycle-averaged run, whose later rows repeat the simulated turns; a run without the states to
+        interpolate): this reader itself on a dense output (its readings cost no integration), else a copy of it
+        that reads the mechanics and the network's states, DAE states of the run, interpolated between the run's
+        own (`TrajectoryReader.sampler`). They rank the candidates; every located value is read by this reader."""
+        if self.cycle:
+            return None
+        states = self.reader.sampler()
+        if states is None or not hasattr(states, "read_many"):
+            return None if states is None else self
+        clone = copy.copy(self)
+        clone.__dict__.pop("_kept", None)           # (its readings are not this reader's)
+        clone.reader = states
+        return clone
+
+    def read_at(self, times: np.ndarray, spans: list[tuple[Interval, int, int]]) -> Mapping:
+        """Every column at `times`, times[a:b] in the interval of each (interval, a, b) of `spans`, read as one
+        reading (`dynamics/extrema.py` `with_rowless`'s sampler): the window's columns of all of them in one pass
+        of the mechanics' reader, the thermal formulas once."""
+        times = np.asarray(times, dtype=float)
+        lo, hi = np.empty(len(times)), np.empty(len(times))
+        for iv, a, b in spans:
+            lo[a:b], hi[a:b] = iv.lo, iv.hi
+        at, which = self._window_instants(times, lo, hi)
+        parts = self._frame_asks(at, which)
+        asks = [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
+        got = [r if r is not None else self.reader(*ask) for r, ask in zip(self.reader.read_many(asks), asks)]
+        frame = _frame_columns([(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)],
+                               len(at))
+        return self._thermal([self._finish(times, at, frame, self._before(at, which))])[0]
 
     def _phase(self, t: np.ndarray) -> np.ndarray:
         """The window instant standing for each instant: itself within the simulated window, else the periodic
@@ -730,9 +764,10 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     reader knows them (`kinks`), on the intervals that may hold the extremum (`_promising`), then against the
     one-sided limits at the intervals' ends that may beat it (`dynamics/extrema.py` `end_limits`). Every window's and
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
-    read in another. finest (s): a closed-form run's columns are also sampled between the rows at most this far
-    apart (the reader's `sampler`, as the mechanical columns are: scenarios/peaks.py `_finest`), the samples
-    candidates beside the rows; the intervals handed back are the table's own."""
+    read in another. finest: the columns are also sampled between the rows at most this far apart (a time, or one
+    per gap: `with_rowless`), by the reader's `sampler`, as the mechanical columns are (scenarios/peaks.py
+    `_finest`, `_rows_finest`), the samples candidates beside the rows; the intervals handed back are the table's
+    own."""
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, end_lines,
                                           finish_all, refine_further, stored_limits, with_rowless)
     values = {c: np.asarray(cols[c], float) for c in columns}
@@ -744,7 +779,9 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     own = [iv for intervals in tables for iv in intervals]              # the table's intervals, every window's
     back = {id(iv): iv for iv in own}
     if sampler is not None and own:
-        t, values, sampled = with_rowless(t, values, own, sampler, finest)
+        # a DAE run's sampler reads all the samples at once (`read_at`), the rowless intervals read by the reader
+        t, values, sampled = (with_rowless(t, values, own, reader, finest, sampler) if hasattr(sampler, "read_at")
+                              else with_rowless(t, values, own, sampler, finest))
         if sampled is not own:
             # the samples put in time order among the rows, so that each interval's rows run on (`_promising` reads
             # an interval's rows as one stretch of the table)
