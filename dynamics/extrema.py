@@ -1544,11 +1544,12 @@ class TrajectoryReader:
     def sampler(self):
         """What samples the columns between the rows (`with_rowless`'s `sampler`): on a dense output its own
         readings (`_DenseSamples`: exact, and costing no integration), else the run's states interpolated between
-        its own (`_RowInterpolation`); None where a piece keeps no y' to interpolate with."""
+        its own (`_RowInterpolation`); None where a piece keeps no y' to interpolate with, or the run no segment
+        starts."""
         traj = self.traj
         if getattr(traj, "dense", None) is not None:
             return _DenseSamples(self)
-        if any(p.yp is None for p in traj.pieces + traj.starts):
+        if not traj.starts or any(p.yp is None for p in traj.pieces + traj.starts):
             return None
         return _RowInterpolation(self)
 
