@@ -1522,6 +1522,10 @@ class TrajectoryReader:
                    for g, (_, _, times) in zip(dense.read_many([(np.asarray(times, float), iv.lo, iv.hi)
                                                                 for iv, _, times in requests]), requests)]
         else:                  # re-integrated, each request on its own; read out together (None where IDA failed)
+            stored = [self._stored_limit(*r) for r in requests] if self._limit_parts else []
+            if any(x is not None for x in stored):          # a limit read out with the first readings is that one
+                rest = iter(self.read_many([r for r, x in zip(requests, stored) if x is None]))
+                return [x if x is not None else next(rest) for x in stored]
             got = []
             anchors, ready = self._read_ahead(requests)
             try:
@@ -1552,6 +1556,16 @@ class TrajectoryReader:
         if not traj.starts or any(p.yp is None for p in traj.pieces + traj.starts):
             return None
         return _RowInterpolation(self)
+
+    def _stored_limit(self, iv: Interval, position: int, times: np.ndarray) -> Mapping | None:
+        """The read-out of the state the run holds at the interval's end (`stage_limits`) where a request asks for
+        just that one-sided limit (its one instant the end, from the end's own row), else None."""
+        if len(times) != 1:
+            return None
+        side = ("after" if position == 0 and times[0] == iv.lo else
+                "before" if position == len(iv.rows) - 1 and times[0] == iv.hi else None)
+        kept = self._limit_parts.get((id(iv), side)) if side is not None else None
+        return kept[1] if kept is not None and kept[0] is iv else None
 
     def stage_limits(self, ends: list[tuple[Interval, str]]) -> None:
         """Read out the states the run holds at `ends` (`stored_columns`) with the next `read_many`'s readings, in

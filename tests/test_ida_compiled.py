@@ -443,3 +443,29 @@ def test_limits_read_out_with_the_first_readings_are_those_read_out_alone(monkey
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max(), err_msg=c)
         else:
             assert np.array_equal(got, want, equal_nan=got.dtype.kind == "f"), c
+
+
+def test_a_stored_limit_asked_for_again_is_the_one_read_out_with_the_first_readings(monkeypatch):
+    """A request for just a one-sided limit the run holds (an interval's end, from that end's row: what
+    `end_limits` asks for) is the read-out staged with the first readings (`TrajectoryReader._stored_limit`), not a
+    reading and read-out of its own, and equals the reading of that instant by a reader that staged nothing (the
+    same state; the accelerations and forces to the round-off of the stacked KKT solve, as above)."""
+    from mechsim.dynamics.extrema import TrajectoryReader
+    staged = []
+    real = TrajectoryReader.stage_limits
+    monkeypatch.setattr(TrajectoryReader, "stage_limits",
+                        lambda self, ends: staged.append((self, list(ends))) or real(self, ends))
+    sc = mechsim.load("geneva-torque", set={"duration": "2.5 s", "solver.backend": "ida-compiled"})
+    mechsim.run(sc)
+    reader, ends = staged[0]
+    held = [(iv, side) for iv, side in ends if reader._limit_parts.get((id(iv), side), (None, None))[1] is not None]
+    assert len(held) > 40
+    requests = [(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([iv.lo if side == "after" else iv.hi]))
+                for iv, side in held]
+    got = reader.read_many(requests)
+    assert all(g is reader._limit_parts[id(iv), side][1] for g, (iv, side) in zip(got, held))
+    alone = TrajectoryReader(reader.traj, reader.angle_coordinates, plan(sc).settings).read_many(requests)
+    for c in ("crank_angle_rad", "wheel_speed_rad_s", "crank_accel_rad_s2", "contact_force_N"):
+        have = np.array([np.asarray(g[c])[0] for g in got])
+        want = np.array([np.asarray(a[c])[0] for a in alone])
+        np.testing.assert_allclose(have, want, rtol=0, atol=1e-12 * np.abs(want).max(), err_msg=c)
