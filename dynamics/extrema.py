@@ -1001,8 +1001,7 @@ def _between_gaps(knots: np.ndarray, finest) -> tuple[np.ndarray, np.ndarray]:
 def _read_tables(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]):
     """Each request's columns read by `read` (its `read_many` where it has one, a request it leaves out read alone),
     in order; None for a request whose reading failed."""
-    many = getattr(read, "read_many", None)
-    for request, table in zip(requests, many(requests) if many is not None else [None] * len(requests)):
+    for request, table in zip(requests, read_all(read, requests)):
         if table is None:
             try:
                 table = read(*request)
@@ -2087,7 +2086,8 @@ class _RowInterpolation:
         modes: dict = {}
         for i, e, k in zip(bounds[:-1], bounds[1:], seg[bounds[:-1]].tolist()):
             start = self.starts[k]
-            params = start.params if isinstance(start.params, tuple) else tuple(np.asarray(start.params, float).tolist())
+            params = (start.params if isinstance(start.params, tuple) else
+                      tuple(np.asarray(start.params, float).tolist()))
             pieces, at = modes.setdefault(start.mode, ([], []))
             pieces.append(Piece(start.mode, params, times[i:e], y[i:e, :self.width[k]], None, start.offset))
             at.append(np.arange(i, e))

@@ -442,7 +442,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     read = _Readings(read) if read is not None else None
     lines = _end_lines(plans)
     ahead = []
-    if how in (HOW_DENSE, HOW_DENSE_SAMPLED):
+    if how.startswith(HOW_DENSE):
         ahead = [r for ws, x in lines for r in _readings_ahead([plans[w] for w in ws], h, x, read.growth)]
         ahead += [r for p in plans if p is not None for r in end_limit_requests(p.intervals, every_end(p.intervals))]
     spanned = [[iv for w in ws for iv in plans[w].intervals] for ws, _ in lines]      # each line group's intervals

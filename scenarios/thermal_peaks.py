@@ -335,13 +335,10 @@ class ThermalReader(_KeptReadings):
         lo, hi = np.empty(len(times)), np.empty(len(times))
         for iv, a, b in spans:
             lo[a:b], hi[a:b] = iv.lo, iv.hi
-        at, which = self._window_instants(times, lo, hi)
-        parts = self._frame_asks(at, which)
+        at, parts, before = self._window_asks(times, lo, hi)
         asks = [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
         got = [r if r is not None else self.reader(*ask) for r, ask in zip(self.reader.read_many(asks), asks)]
-        frame = _frame_columns([(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)],
-                               len(at))
-        return self._thermal([self._finish(times, at, frame, self._before(at, which))])[0]
+        return self._thermal([self._framed(times, at, parts, got, before)])[0]
 
     def _phase(self, t: np.ndarray) -> np.ndarray:
         """The window instant standing for each instant: itself within the simulated window, else the periodic
@@ -364,13 +361,12 @@ class ThermalReader(_KeptReadings):
         the mechanics' reader (`TrajectoryReader.read_many`: one read-out per mode, not one per reading)."""
         places, asks = [], []
         for iv, _, times in requests:
-            at, which = self._window_instants(times, iv.lo, iv.hi)
             try:
-                parts = self._frame_asks(at, which)
+                at, parts, before = self._window_asks(times, iv.lo, iv.hi)
             except ReadingFailed as error:
                 places.append(error)
                 continue
-            places.append((times, at, parts, len(asks), self._before(at, which)))
+            places.append((times, at, parts, len(asks), before))
             asks += [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
         readings = self.reader.read_many(asks) if asks else []
         out: list = []
@@ -385,9 +381,20 @@ class ThermalReader(_KeptReadings):
             except ReadingFailed as error:
                 out.append(error)
                 continue
-            out.append(self._finish(times, at, _frame_columns(
-                [(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)], len(at)), before))
+            out.append(self._framed(times, at, parts, got, before))
         return out
+
+    def _window_asks(self, times: np.ndarray, lo, hi) -> tuple:
+        """(the window instants standing for `times` in (lo, hi) (one for all, or each its own), the window readings
+        to ask for them (`_frame_asks`), which are limits from before an end (`_before`)); ReadingFailed where a
+        window interval has no row."""
+        at, which = self._window_instants(times, lo, hi)
+        return at, self._frame_asks(at, which), self._before(at, which)
+
+    def _framed(self, times: np.ndarray, at: np.ndarray, parts: list, got: list, before: np.ndarray) -> tuple:
+        """`_columns`' value from the window readings `got` of `_window_asks`' `parts`."""
+        return self._finish(times, at, _frame_columns(
+            [(pick, _reading_columns(r, back)) for (pick, _, _, _, back), r in zip(parts, got)], len(at)), before)
 
     def stored_ends(self, ends: list[tuple[Interval, str]]) -> np.ndarray:
         """Whether the one-sided limit at each (interval, side) is read from a state the run holds
