@@ -979,14 +979,14 @@ def apart(kinks: list[tuple[float, str]], known: np.ndarray, near: float) -> lis
     return [k for k, far in zip(kinks, (nearest > near).tolist()) if far]
 
 
-def _between(knots: np.ndarray, finest) -> np.ndarray:
+def between(knots: np.ndarray, finest) -> np.ndarray:
     """Instants evenly between consecutive `knots` (in order) farther apart than `finest` (a time, or one per gap),
     as few as leave no two neighbours farther apart than that; the knots themselves not among them."""
     return _between_gaps(knots, finest)[0]
 
 
 def _between_gaps(knots: np.ndarray, finest) -> tuple[np.ndarray, np.ndarray]:
-    """`_between`'s instants and the gap each lies in (its knot before)."""
+    """`between`'s instants and the gap each lies in (its knot before)."""
     gaps = knots[1:] - knots[:-1]
     with np.errstate(invalid="ignore", divide="ignore"):
         extra = np.maximum(np.ceil(gaps / finest) - 1.0, 0.0)
@@ -1018,7 +1018,7 @@ ROWLESS_READINGS = 9
 def _samples(t: np.ndarray, intervals: list[Interval], rowless: dict[int, np.ndarray], finest
              ) -> tuple[np.ndarray, np.ndarray]:
     """(instants, their interval) of `with_rowless`'s samples: each interval's instants (its ends, rows and
-    `rowless` readings) spaced by `_between` at `finest`, every interval's in one pass."""
+    `rowless` readings) spaced by `between` at `finest`, every interval's in one pass."""
     ids = [k for k, iv in enumerate(intervals) if iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))]
     if not ids:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
@@ -1316,7 +1316,7 @@ class _ReadOut(Mapping):
     same call on the same pieces as reading them out at once, so the same columns."""
 
     def __init__(self, model, pieces: list, angle_coordinates: tuple[int, ...]):
-        self._args, self._columns = (model, pieces, angle_coordinates), None
+        self._args, self._columns, self._states = (model, pieces, angle_coordinates), None, {}
 
     def _table(self) -> dict:
         if self._columns is None:
@@ -1327,7 +1327,16 @@ class _ReadOut(Mapping):
 
     def __getitem__(self, c):
         columns = self._columns
-        return (columns if columns is not None else self._table())[c]
+        if columns is None:         # a state column (a position, speed or work) read without the read-out
+            got = self._states.get(c)
+            if got is None:
+                from mechsim.dynamics.tables import state_column
+                got = state_column(*self._args, c)
+                if got is None:
+                    return self._table()[c]
+                self._states[c] = got
+            return got
+        return columns[c]
 
     def __iter__(self):
         return iter(self._table())

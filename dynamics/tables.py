@@ -292,6 +292,26 @@ def _mode_block(model, pieces, names: tuple[str, ...], residual: bool = True) ->
     return block
 
 
+def state_column(model, pieces: list, angle_coordinates: tuple[int, ...], name: str) -> np.ndarray | None:
+    """The column `name` over the rows of one mode's pieces (stacked) where it is a state, read without the
+    read-out: a coordinate's position (its piece's offset added) or speed, a work; None for any other column.
+    The same values as `_mode_block` puts there (the same additions): a reader that needs only these (the drive's
+    turns located, scenarios/turns.py) pays no KKT solve."""
+    mf = model.modes[pieces[0].mode]
+    ix = mf.index
+    for i, coordinate in enumerate(model.coordinates):
+        position, speed, _ = coordinate_columns(coordinate, i in angle_coordinates)
+        if name == speed:
+            return np.concatenate([pc.y[:, ix["v"]][:, i] for pc in pieces])
+        if name == position:
+            return np.concatenate([pc.y[:, ix["q"]][:, i] if pc.offset is None else
+                                   pc.y[:, ix["q"]][:, i] + np.asarray(pc.offset, dtype=float)[i] for pc in pieces])
+    works = [f"work_{w}_J" for w in model.work_names]
+    if name in works:
+        return np.concatenate([pc.y[:, ix["work"]][:, works.index(name)] for pc in pieces])
+    return None
+
+
 def piece_columns(model, piece, angle_coordinates: tuple[int, ...], residual: bool = True) -> dict[str, np.ndarray]:
     """The table's columns over one piece's rows (or over a list of one mode's pieces, stacked: one evaluation for
     all), read-outs evaluated with the piece's mode and parameters, as `timeseries` evaluates them (residual=False:

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart, end_guesses,
-                                      end_limit_requests, end_limits, end_lines, every_end, finish_all, intervals_of,
-                                      read_all, refine_further, stored_limits, with_rowless)
+from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart,
+                                      between, end_guesses, end_limit_requests, end_limits, end_lines, every_end,
+                                      finish_all, intervals_of, read_all, refine_further, stored_limits, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -248,13 +248,18 @@ def _breaks(events: pd.DataFrame, ev: TableColumns | None = None) -> list[tuple[
 PERIODIC_RTOL = 1e-3
 
 
-def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict | None:
+def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=None, works: dict | None = None
+                    ) -> dict | None:
     """Where a run reaches a periodic regime: the first turn of the drive (from the run's first angle) from which
     every turn lasts as long as the last turn and starts at the same drive speed, to PERIODIC_RTOL (against the last
     turn, so that a slow drift is not taken for periodic); at least two such turns. None without (a prescribed or
-    accelerating drive, a stall, fewer than three turns)."""
-    from mechsim.thermal.cycle import turn_boundaries
-    bounds = turn_boundaries(t, angle, float(angle[0]))
+    accelerating drive, a stall, fewer than three turns). The turns' ends from the rows (`turns.crossings`, O(h^4));
+    locate(times, levels): (the regime's start and its last turn's ends where the angle reaches `levels`, located on
+    the continuous solution; their column tables and the instants those were read at, within a Newton step of
+    them), as `_located_turns` makes it. The reported ends are then those, and the last turn's work of each power
+    flow (`last_turn_work_J`) the `works` columns ({name: rows}) read there (`turns.carried` over the step)."""
+    from mechsim.scenarios.turns import carried, crossings
+    bounds = crossings(t, angle, speed, float(angle[0]))
     if len(bounds) < 3:
         return None
     b = np.concatenate([[t[0]], bounds])
@@ -268,11 +273,56 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray) -> dict
         k -= 1
     if len(same) - k < 3:
         return None
-    return {"from_t_s": float(b[k]), "startup_turns": int(k), "periodic_turns": int(len(periods) - k),
-            "period_s": float(periods[-1]), "last_turn": (float(b[-2]), float(b[-1])),
-            "criterion": (f"every drive turn from here equal to the last in duration and in starting drive speed to "
-                          f"{PERIODIC_RTOL:g} (relative)"),
-            "turn_spread": float(np.abs(periods[k:] - periods[-1]).max() / periods[-1])}
+    work = {}
+    if locate is not None:
+        at = sorted({i for i in (k, len(b) - 2, len(b) - 1) if i > 0})
+        located, tables, read = locate(b[at], float(angle[0]) + 2 * np.pi * np.array(at, dtype=float))
+        b = b.copy()
+        for i, x, table in zip(at, located, tables):
+            if table is not None:
+                b[i] = x
+        ends = [at.index(len(b) - 2), len(at) - 1]
+        if all(tables[e] is not None for e in ends):
+            ia, ib = ends
+            work = {c[5:-2]: carried(t, f, float(np.asarray(tables[ib][c])[0]), read[ib], located[ib])
+                    - carried(t, f, float(np.asarray(tables[ia][c])[0]), read[ia], located[ia])
+                    for c, f in (works or {}).items()}
+        periods = b[1:] - b[:-1]
+    out = {"from_t_s": float(b[k]), "startup_turns": int(k), "periodic_turns": int(len(periods) - k),
+           "period_s": float(periods[-1]), "last_turn": (float(b[-2]), float(b[-1])),
+           "criterion": (f"every drive turn from here equal to the last in duration and in starting drive speed to "
+                         f"{PERIODIC_RTOL:g} (relative)"),
+           "turn_spread": float(np.abs(periods[k:] - periods[-1]).max() / periods[-1])}
+    if work:
+        out["last_turn_work_J"] = work
+    return out
+
+
+def _located_turns(read, intervals: list[Interval], t: np.ndarray, angle_column: str, speed_column: str):
+    """`periodic_regime`'s locate for a run with a reader: the instants the drive angle reaches the levels, by
+    Newton's method on the angle read at the rows' estimates (`turns.newton_passes`), each reading from the last
+    row before it in the smooth interval that holds it (`intervals`: the whole run's); (instants, tables)."""
+    from mechsim.scenarios.turns import newton_passes
+    his = np.array([iv.hi for iv in intervals])
+
+    def read_at(times: np.ndarray) -> list:
+        requests, where = [], []
+        for j, x in enumerate(times.tolist()):
+            i = min(int(his.searchsorted(x, side="left")), len(intervals) - 1)
+            iv = intervals[i]
+            if not len(iv.rows) or not iv.lo <= x <= iv.hi:
+                continue
+            position = max(int(t[iv.rows].searchsorted(x, side="right")) - 1, 0)
+            requests.append((iv, position, np.array([x])))
+            where.append(j)
+        got = [None] * len(times)
+        for j, table in zip(where, read.prefetch(requests) if requests else []):
+            got[j] = table
+        return got
+
+    def locate(times: np.ndarray, levels: np.ndarray):
+        return newton_passes(read_at, times, levels, angle_column, speed_column)
+    return locate
 
 
 def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],
@@ -293,46 +343,71 @@ def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: fl
     return intervals
 
 
-def _turn_mean_requests(t: np.ndarray, intervals: list[Interval]) -> list[tuple] | None:
-    """The readings `_turn_means` needs: each smooth interval's one-sided limits at its ends and its readings at the
-    midpoints between its instants (its ends and rows); None where an interval holds no row to read from."""
-    if any(not len(iv.rows) for iv in intervals):
+def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None) -> list[tuple] | None:
+    """The readings `_turn_means` needs, two requests an interval: its one-sided limits at its ends (one request
+    each), then the instants between its knots (its ends and rows) in time order: the midpoint of each gap and,
+    where `finest` is given (`_rows_finest`'s spacing), the knots added between rows farther apart than that (an
+    interval with no row read over evenly then, from the state the run holds before it); None where an interval
+    holds no row and `finest` is not given."""
+    if finest is None and any(not len(iv.rows) for iv in intervals):
         return None
     out = []
     for iv in intervals:
         knots = np.r_[iv.lo, t[iv.rows], iv.hi]
-        out += [(iv, 0, np.array([iv.lo])), (iv, len(iv.rows) - 1, np.array([iv.hi])),
-                (iv, 0, 0.5 * (knots[1:] + knots[:-1]))]
+        inner = np.zeros(0)
+        if finest is not None:
+            if not len(iv.rows):
+                inner = np.linspace(iv.lo, iv.hi, ROWLESS_READINGS)[1:-1]
+                knots = np.r_[iv.lo, inner, iv.hi]
+            more = between(knots, finest(knots) if callable(finest) else finest)
+            if len(more):
+                inner = np.r_[inner, more]
+                knots = np.sort(np.r_[knots, more])
+        mids = 0.5 * (knots[1:] + knots[:-1])
+        out += [(iv, 0, np.array([iv.lo])), (iv, max(len(iv.rows) - 1, 0), np.array([iv.hi])),
+                (iv, 0, np.sort(np.r_[mids, inner]) if len(inner) else mids)]
     return out
 
 
 def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float, intervals: list[Interval],
-                tables: list) -> dict:
+                tables: list, asked: list[tuple]) -> dict:
     """The mean of each column over the turn [a, b] (its smooth `intervals`): Simpson's rule on each gap between an
-    interval's instants (its ends, with the one-sided limits read there, and its rows), with the reading at the
-    gap's midpoint (`tables`, the readings of `_turn_mean_requests`), so that a jump at an event costs nothing and
-    the error is O(h^4 F^(4)) of the output step h (docs/theory.md §K5: the trapezoidal rule's O(h^2 F^(2)) moved the
-    mean by up to 2e-3 of it between grids)."""
+    interval's knots (its ends, with the one-sided limits read there, its rows and the knots read between rows
+    farther apart than a degree of drive angle), with the reading at the gap's midpoint (`tables`, the readings of
+    `_turn_mean_requests` `asked`), so that a jump at an event costs nothing and the error is O(h^4 F^(4)) of the
+    knots' spacing h, which no output step coarsens (docs/theory.md §K5: the trapezoidal rule's O(h^2 F^(2)) moved
+    the mean by up to 2e-3 of it between grids)."""
     names = list(values)
     if not names:
         return {}
-    # the turn's rows only (an interval's run of rows read as a slice: a view, not a gather)
-    lo, hi = int(intervals[0].rows[0]), int(intervals[-1].rows[-1]) + 1
-    V = np.array([values[c][lo:hi] for c in names]).reshape(len(names), -1)
-    t = t[lo:hi]
     total = np.zeros(len(names))
     for n, iv in enumerate(intervals):
-        first, last, middle = tables[3 * n:3 * n + 3]
-        rows = iv.rows - lo
-        if rows[-1] - rows[0] == len(rows) - 1:      # the rows in order, none left out
+        first, last, between = tables[3 * n:3 * n + 3]
+        at = asked[3 * n + 2][2]                  # the midpoints and the added knots, in time order
+        rows = np.asarray(iv.rows, dtype=np.int64)
+        if len(rows) and rows[-1] - rows[0] == len(rows) - 1:      # the rows in order, none left out: a view
             rows = slice(int(rows[0]), int(rows[-1]) + 1)
-        tt = np.concatenate([[iv.lo], t[rows], [iv.hi]])
+        if len(iv.rows) and len(at) == len(iv.rows) + 1:     # the midpoints only, between the ends and rows
+            tt = np.concatenate([[iv.lo], t[rows], [iv.hi]])
+            ff = np.empty((len(names), len(tt)))
+            ff[:, 0] = [first[c][0] for c in names]
+            ff[:, 1:-1] = np.array([values[c][rows] for c in names]).reshape(len(names), -1)
+            ff[:, -1] = [last[c][0] for c in names]
+            mid = np.array([np.asarray(between[c], dtype=float) for c in names]).reshape(len(names), -1)
+            total += ((ff[:, 1:] + 4.0 * mid + ff[:, :-1]) * (tt[1:] - tt[:-1])).sum(axis=1) / 6.0
+            continue
+        tt = np.concatenate([[iv.lo], t[rows], at, [iv.hi]])
         ff = np.empty((len(names), len(tt)))
         ff[:, 0] = [first[c][0] for c in names]
-        ff[:, 1:-1] = V[:, rows]
+        ff[:, 1:len(iv.rows) + 1] = np.array([values[c][rows] for c in names]).reshape(len(names), -1)
+        ff[:, len(iv.rows) + 1:-1] = np.array([np.asarray(between[c], dtype=float) for c in names]
+                                           ).reshape(len(names), -1)
         ff[:, -1] = [last[c][0] for c in names]
-        mid = np.array([np.asarray(middle[c], dtype=float) for c in names]).reshape(len(names), -1)
-        total += ((ff[:, 1:] + 4.0 * mid + ff[:, :-1]) * (tt[1:] - tt[:-1])).sum(axis=1) / 6.0
+        order = np.argsort(tt, kind="stable")
+        tt, ff = tt[order], ff[:, order]
+        keep = np.r_[True, tt[1:] != tt[:-1]]     # (a row at an end is its limit: the end's read one kept)
+        tt, ff = tt[keep], ff[:, keep]          # knot, midpoint, knot, ..., knot
+        total += ((ff[:, 2::2] + 4.0 * ff[:, 1:-1:2] + ff[:, :-2:2]) * (tt[2::2] - tt[:-2:2])).sum(axis=1) / 6.0
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
@@ -351,7 +426,7 @@ def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events:
     got = reader.read_many(asked)
     if any(x is None for x in got):
         return {}
-    return _turn_means(t, {c: np.asarray(cols[c], dtype=float) for c in columns}, a, b, turn, got)
+    return _turn_means(t, {c: np.asarray(cols[c], dtype=float) for c in columns}, a, b, turn, got, asked)
 
 
 def turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
@@ -399,21 +474,32 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             model = source.traj.model
             coordinates = tuple(f"{c}_N_m_s" if i in source.mech.angle_coordinates else f"{c}_N_s"
                                 for i, c in enumerate(model.coordinates))
-            if speed_column in cols and not source.drive.is_prescribed:
-                regime = periodic_regime(t[:n], angles[:n], np.asarray(cols[speed_column], float)[:n])
-        windows = [(float(t[0]), t_end, "run")]
-        if regime is not None and regime["startup_turns"] > 0:
-            windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
-    kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
-             "startup": ("start", "end of the start-up")}
     h = _median_step(t[:n]) if n > 1 else 0.0
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events, event_cols) if read is not None else []
     tn = t[:n]
+    raw = read
+    read = _Readings(raw) if raw is not None else None
+    if raw is not None and source.method != "closed-form":
+        windows = [(float(t[0]), t_end, "run")]
+        if speed_column in cols and not source.drive.is_prescribed:
+            # the regime's turns located on the continuous solution first: its windows and turn start there
+            whole = (_intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), raw)
+                     if angle_column in source.columns and speed_column in source.columns else [])
+            regime = periodic_regime(tn, angles[:n], np.asarray(cols[speed_column], float)[:n],
+                                     _located_turns(read, whole, tn, angle_column, speed_column) if whole else None,
+                                     {c: np.asarray(cols[c], float)[:n] for c in cols.names
+                                      if c.startswith("work_") and c.endswith("_J") and c in source.columns})
+    elif source is not None and len(t) > 1:
+        windows = [(float(t[0]), t_end, "run")]
+    if regime is not None and regime["startup_turns"] > 0:
+        windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
+    kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
+             "startup": ("start", "end of the start-up")}
     if source is not None and source.method == "closed-form" and read is not None:
         breaks = sorted(breaks + _contact_switches(source, tn, cols, breaks))
-    spans = [_intervals(tn, breaks, lo, hi, kinds[label], read) if read is not None and readable else []
+    spans = [_intervals(tn, breaks, lo, hi, kinds[label], raw) if read is not None and readable else []
              for lo, hi, label in windows]
     # an interval with (almost) no rows is located from readings over it, added to its plan's table (`p.values`);
     # the windows over the same table planned together
@@ -423,23 +509,23 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     elif read is not None and angle_column.endswith("_rad"):
         # a DAE run's: its dense output's readings, else its states interpolated between its rows
         finest = _rows_finest(tn, angles[:n])
-        sampler = read.sampler() if finest is not None else None
+        sampler = raw.sampler() if finest is not None else None
         if sampler is None:
             finest = None
         else:
             how = HOW_DAE_SAMPLED if how == HOW_DAE else HOW_DENSE_SAMPLED
-    plans = plan_windows([with_rowless(tn, values, intervals, read, finest, sampler) if intervals else None
+    plans = plan_windows([with_rowless(tn, values, intervals, raw, finest, sampler) if intervals else None
                           for intervals in spans])
     requests = [r for p in plans if p is not None for r in p.requests]
     turn = means_asked = None
     if regime is not None and read is not None:
-        turn = _intervals(tn, breaks, *regime["last_turn"], ("turn start", "turn end"), read)
-        means_asked = _turn_mean_requests(tn, turn)
+        turn = _intervals(tn, breaks, *regime["last_turn"], ("turn start", "turn end"), raw)
+        spacing = finest if finest is not None else _rows_finest(tn, angles[:n])
+        means_asked = _turn_mean_requests(tn, turn, spacing if spacing is not None else np.inf)
     # a dense output's readings cost no integration: the one-sided limits at every end (`stored_limits` ranks the ends
     # by them), those `end_limits` may read and the growth toward the events an extremum may lie next to (what the
     # singular-approach check may read) are read in the same pass (`_readings_ahead`, on the rows' lines); other
     # readers read them once the extrema are known
-    read = _Readings(read) if read is not None else None
     lines = _end_lines(plans)
     ahead = []
     if how.startswith(HOW_DENSE):
@@ -456,7 +542,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if means_asked is not None:
         got = tables[len(requests):len(requests) + len(means_asked)]
         means = _turn_means(t[:n], values, *regime["last_turn"], turn,
-                            [x if x is not None else read(*r) for r, x in zip(means_asked, got)])
+                            [x if x is not None else read(*r) for r, x in zip(means_asked, got)], means_asked)
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]
     # the candidates beyond the first that may still beat what these found, refined in a second pass; in a periodic

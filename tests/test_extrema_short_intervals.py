@@ -34,4 +34,4 @@ def test_an_interval_within_round_off_of_an_instant_is_not_read():
 
 
 def test_a_turn_mean_over_no_column_is_empty():
-    assert _turn_means(np.array([0.0, 1.0]), {}, 0.0, 1.0, [], []) == {}
+    assert _turn_means(np.array([0.0, 1.0]), {}, 0.0, 1.0, [], [], []) == {}

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from mechsim.dynamics.extrema import Interval, _between, finish_all, plans, with_rowless
+from mechsim.dynamics.extrema import Interval, between, finish_all, plans, with_rowless
 
 
 def _coupler_min(step):
@@ -39,14 +39,14 @@ def test_a_dip_narrower_than_the_rows_is_the_minimum_at_any_step(step):
 
 def test_between_fills_every_gap_wider_than_the_step_evenly():
     knots = np.array([0.0, 0.05, 0.3, 0.31, 1.0])
-    got = _between(knots, 0.1)
+    got = between(knots, 0.1)
     merged = np.sort(np.r_[knots, got])
     assert np.diff(merged).max() <= 0.1 + 1e-15
     # the fewest that do it: ceil(gap / 0.1) - 1 in each gap, evenly spaced
     assert len(got) == sum(int(np.ceil(g / 0.1)) - 1 for g in np.diff(knots))
     inside = got[(got > 0.31) & (got < 1.0)]
     np.testing.assert_allclose(np.diff(np.r_[0.31, inside, 1.0]), 0.69 / 7, rtol=1e-12)
-    assert len(_between(knots, 10.0)) == 0
+    assert len(between(knots, 10.0)) == 0
 
 
 def test_a_narrow_dip_between_rows_is_located_from_the_sampled_candidates():

@@ -79,7 +79,11 @@ def headline(result) -> dict[str, float]:
             if math.isfinite(mean):             # a column defined only in contact (NaN between) has no cycle mean
                 out[f"cycle_mean_{col}"] = mean
     if cycle is not None and cycle.column in df:
-        for name, value in cycle_figures(df, cycle.column).items():
+        speed = cycle.column[:-len("_angle_rad")] + "_speed_rad_s" if cycle.column.endswith("_angle_rad") else None
+        mech = result.mechanism
+        drive = (mech is not None and mech.drive_coordinate in mech.angle_coordinates
+                 and cycle.column == f"{mech.coordinates[mech.drive_coordinate]}_angle_rad")
+        for name, value in cycle_figures(df, cycle.column, s.get("regime") if drive else None, speed).items():
             if name != "cycles" and not (isinstance(value, float) and math.isnan(value)):
                 out[name] = float(value)
     balance = (s.get("thermal") or {}).get("heat_balance") or {}

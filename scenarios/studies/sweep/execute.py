@@ -52,14 +52,16 @@ class Outcome:
     timeseries: pd.DataFrame | None = None
 
 
-def _drive_angle_column(si: dict) -> str | None:
+def _drive_columns(si: dict) -> tuple[str | None, str | None]:
+    """The drive angle's and speed's columns, or (None, None) where the drive coordinate is not an angle."""
     from mechsim.dynamics.tables import coordinate_columns
     from mechsim.scenarios.loader import build_mechanism
     mech = build_mechanism(si)
     k = mech.drive_coordinate
     if k not in mech.angle_coordinates:
-        return None
-    return coordinate_columns(mech.coordinates[k], True)[0]
+        return None, None
+    names = coordinate_columns(mech.coordinates[k], True)
+    return names[0], names[1]
 
 
 def run_case(task: CaseTask, integrate=None) -> Outcome:
@@ -76,7 +78,8 @@ def run_case(task: CaseTask, integrate=None) -> Outcome:
             row["failure_kind"] = result.failure.kind
             row["failure_code"] = result.failure.code.value
         df = result.timeseries
-        row.update(cycle_figures(df, _drive_angle_column(task.scenario.si)))
+        angle, speed = _drive_columns(task.scenario.si)
+        row.update(cycle_figures(df, angle, result.summary.get("regime"), speed))
         row["simulated_time_s"] = float(df["t_s"].iloc[-1]) if len(df) else 0.0
         if task.timeseries:
             ts = df

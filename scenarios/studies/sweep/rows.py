@@ -52,14 +52,19 @@ def case_key(sc: Scenario, overrides: list[str], base_raw: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def cycle_figures(df: pd.DataFrame, angle_col: str | None) -> dict:
+def cycle_figures(df: pd.DataFrame, angle_col: str | None, regime: dict | None = None,
+                  speed_col: str | None = None) -> dict:
     """Figures of the last complete drive revolution: its duration and the work of each power flow over it.
 
-    The revolution boundaries are the first instants the drive angle has advanced 2 pi k from its start
-    (linear interpolation between output rows). The last one is used because the first may hold a start-up
-    transient (a motor running up). Not defined (NaN, cycles = 0) when the drive is not an angle or has not
-    completed a turn.
+    The revolution boundaries are the first instants the drive angle has advanced 2 pi k from its start. The last
+    one is used because the first may hold a start-up transient (a motor running up). Where the run reached a
+    periodic regime (`regime`, the summary's), its last turn is this one, located on the continuous solution with
+    the works read there (scenarios/peaks.py `periodic_regime`); otherwise the boundaries are the roots of the
+    cubic Hermite interpolant of the angle and its speed (`speed_col`) between rows and the works the cubic through
+    the rows around them (scenarios/turns.py: O(h^4) in the output step h), linear between rows only without the
+    speed. Not defined (NaN, cycles = 0) when the drive is not an angle or has not completed a turn.
     """
+    from mechsim.scenarios.turns import crossings, cubic_at
     out = {"cycles": 0, "cycle_time_s": math.nan}
     work_cols = [c for c in df.columns if c.startswith("work_") and c.endswith("_J")]
     for c in work_cols:
@@ -75,20 +80,30 @@ def cycle_figures(df: pd.DataFrame, angle_col: str | None) -> dict:
     turns = int(np.floor(np.nanmax(advance) / (2 * np.pi) + 1e-12))
     if turns < 1:
         return out
-
-    def crossing(level: float) -> float:
-        if level == 0.0:
-            return t[0]
-        j = int(np.argmax(advance >= level))
-        a0, a1 = advance[j - 1], advance[j]
-        return float(t[j - 1] + (level - a0) / (a1 - a0) * (t[j] - t[j - 1])) if a1 != a0 else float(t[j])
-
-    t0, t1 = crossing(2 * np.pi * (turns - 1)), crossing(2 * np.pi * turns)
     out["cycles"] = turns
+    located = (regime or {}).get("last_turn")
+    if located is not None and "last_turn_work_J" in regime:
+        t0, t1 = (float(x) for x in located)
+        out["cycle_time_s"] = t1 - t0
+        for c in work_cols:
+            out[f"{c[:-2]}_per_cycle_J"] = float(regime["last_turn_work_J"].get(c[5:-2], math.nan))
+        return out
+    speed = sign * np.asarray(cols[speed_col], dtype=float) if speed_col is not None and speed_col in df else None
+    ends = crossings(t, advance, speed, 0.0)
+    if len(ends) >= turns:
+        t0, t1 = (float(t[0]) if turns == 1 else float(ends[turns - 2])), float(ends[turns - 1])
+    else:                                           # the angle not increasing throughout: the first crossings
+        def crossing(level: float) -> float:
+            if level == 0.0:
+                return t[0]
+            j = int(np.argmax(advance >= level))
+            a0, a1 = advance[j - 1], advance[j]
+            return float(t[j - 1] + (level - a0) / (a1 - a0) * (t[j] - t[j - 1])) if a1 != a0 else float(t[j])
+        t0, t1 = crossing(2 * np.pi * (turns - 1)), crossing(2 * np.pi * turns)
     out["cycle_time_s"] = t1 - t0
     for c in work_cols:
-        w = np.asarray(cols[c], dtype=float)
-        out[f"{c[:-2]}_per_cycle_J"] = float(np.interp(t1, t, w) - np.interp(t0, t, w))
+        w0, w1 = cubic_at(t, np.asarray(cols[c], dtype=float), np.array([t0, t1]))
+        out[f"{c[:-2]}_per_cycle_J"] = float(w1 - w0)
     return out
 
 
