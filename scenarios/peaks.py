@@ -343,12 +343,16 @@ def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: fl
     return intervals
 
 
-def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None) -> list[tuple] | None:
-    """The readings `_turn_means` needs, two requests an interval: its one-sided limits at its ends (one request
+def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None, graded: int = 0
+                        ) -> list[tuple] | None:
+    """The readings `_turn_means` needs, three requests an interval: its one-sided limits at its ends (one request
     each), then the instants between its knots (its ends and rows) in time order: the midpoint of each gap and,
     where `finest` is given (`_rows_finest`'s spacing), the knots added between rows farther apart than that (an
-    interval with no row read over evenly then, from the state the run holds before it); None where an interval
-    holds no row and `finest` is not given."""
+    interval with no row read over evenly then, from the state the run holds before it); with `graded`, knots at
+    1/2, 1/4, ... 1/2^graded of the first and last gaps from the interval's ends (a column that starts like the
+    square root of the time from an end, as a flash temperature where a contact begins, keeps Simpson's rule
+    within (2^-graded)^1.5 of its error on the gap); None where an interval holds no row and `finest` is not
+    given."""
     if finest is None and any(not len(iv.rows) for iv in intervals):
         return None
     out = []
@@ -363,6 +367,13 @@ def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None) -
             if len(more):
                 inner = np.r_[inner, more]
                 knots = np.sort(np.r_[knots, more])
+        if graded and knots[-1] > knots[0]:
+            steps = 0.5 ** np.arange(1, graded + 1)
+            first, last = knots[1] - knots[0], knots[-1] - knots[-2]
+            more = np.r_[knots[0] + first * steps, knots[-1] - last * steps]
+            more = more[(more > knots[0]) & (more < knots[-1])]
+            inner = np.r_[inner, more]
+            knots = np.unique(np.r_[knots, more])
         mids = 0.5 * (knots[1:] + knots[:-1])
         out += [(iv, 0, np.array([iv.lo])), (iv, max(len(iv.rows) - 1, 0), np.array([iv.hi])),
                 (iv, 0, np.sort(np.r_[mids, inner]) if len(inner) else mids)]
@@ -411,6 +422,11 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
     return {c: float(v) / (b - a) for c, v in zip(names, total.tolist())}
 
 
+#: the thermal means' knots graded toward each interval's ends (`_turn_mean_requests`): a flash rise grows like
+#: sqrt(t - t_on) where a contact begins (docs/theory.md §G4.6)
+ONSET_GRADING = 6
+
+
 def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame, a: float,
                         b: float) -> dict:
     """`_turn_means` of the thermal columns over the turn [a, b]: its smooth intervals split at the events and at
@@ -420,7 +436,7 @@ def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events:
     step (internal-geneva-motor's mean flash rise by 9e-4 of it between 0.37 and 2.3 ms rows)."""
     from mechsim.scenarios.thermal_peaks import heat_breaks
     turn = intervals_of(t, heat_breaks(reader, _breaks(events), a, b), a, b, "turn start", "turn end")
-    asked = _turn_mean_requests(t, turn) if turn else None
+    asked = _turn_mean_requests(t, turn, graded=ONSET_GRADING) if turn else None
     if asked is None:
         return {}
     got = reader.read_many(asked)
