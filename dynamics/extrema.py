@@ -998,7 +998,7 @@ def _between_gaps(knots: np.ndarray, finest) -> tuple[np.ndarray, np.ndarray]:
     return knots[which] + gaps[which] * j / (extra[which] + 1.0), which
 
 
-def _read_tables(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]):
+def read_tables(read: Reader, requests: list[tuple[Interval, int, np.ndarray]]):
     """Each request's columns read by `read` (its `read_many` where it has one, a request it leaves out read alone),
     in order; None for a request whose reading failed."""
     for request, table in zip(requests, read_all(read, requests)):
@@ -1102,7 +1102,7 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
     if not asked and not len(at):
         return t, values, intervals
     requests = [(intervals[k], 0, times) for k, times in asked.items()]
-    tables = dict(zip(asked, _read_tables(read, requests)))
+    tables = dict(zip(asked, read_tables(read, requests)))
     if len(at):
         cuts = of.searchsorted(np.arange(len(intervals) + 1))      # each interval's samples: at[cuts[k]:cuts[k + 1]]
         sampled = sampler.read_at(at, [(intervals[k], cuts[k], cuts[k + 1]) for k in np.unique(of).tolist()])

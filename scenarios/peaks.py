@@ -18,9 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader, apart,
-                                      between, end_guesses, end_limit_requests, end_limits, end_lines, every_end,
-                                      finish_all, intervals_of, read_all, refine_further, stored_limits, with_rowless)
+from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader,
+                                      apart, between, end_guesses, end_limit_requests, end_limits,
+                                      end_lines, every_end, finish_all, intervals_of, read_all, refine_further,
+                                      read_tables, stored_limits, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
 
@@ -298,31 +299,70 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
     return out
 
 
-def _located_turns(read, intervals: list[Interval], t: np.ndarray, angle_column: str, speed_column: str):
-    """`periodic_regime`'s locate for a run with a reader: the instants the drive angle reaches the levels, by
-    Newton's method on the angle read at the rows' estimates (`turns.newton_passes`), each reading from the last
-    row before it in the smooth interval that holds it (`intervals`: the whole run's); (instants, tables)."""
-    from mechsim.scenarios.turns import newton_passes
+def _reads_at(read, intervals: list[Interval], t: np.ndarray):
+    """read_at(times, groups=False): the columns at each instant (one table each; None where it was not read), or
+    with groups, at each array of instants (ascending, within one smooth interval: one table each), each read from
+    the last row before its first instant in the smooth interval that holds that (`intervals`: the whole run's, an
+    instant at an event read as the limit from before), all in one pass of `read` (a `_Readings`: its `prefetch`,
+    else `read_tables`)."""
     his = np.array([iv.hi for iv in intervals])
 
-    def read_at(times: np.ndarray) -> list:
+    def read_at(times, groups: bool = False) -> list:
+        asked = list(times) if groups else [np.array([x]) for x in np.asarray(times, dtype=float).tolist()]
         requests, where = [], []
-        for j, x in enumerate(times.tolist()):
-            i = min(int(his.searchsorted(x, side="left")), len(intervals) - 1)
-            iv = intervals[i]
-            if not len(iv.rows) or not iv.lo <= x <= iv.hi:
+        for j, x in enumerate(asked):
+            x = np.asarray(x, dtype=float)
+            if not len(x):
                 continue
-            position = max(int(t[iv.rows].searchsorted(x, side="right")) - 1, 0)
-            requests.append((iv, position, np.array([x])))
+            i = min(int(his.searchsorted(0.5 * (x[0] + x[-1]), side="left")), len(intervals) - 1)
+            iv = intervals[i]
+            if not len(iv.rows) or not (iv.lo <= x[0] and x[-1] <= iv.hi):
+                continue
+            position = max(int(t[iv.rows].searchsorted(x[0], side="right")) - 1, 0)
+            requests.append((iv, position, x))
             where.append(j)
-        got = [None] * len(times)
-        for j, table in zip(where, read.prefetch(requests) if requests else []):
+        got = [None] * len(asked)
+        tables = read.prefetch(requests) if hasattr(read, "prefetch") else read_tables(read, requests)
+        for j, table in zip(where, tables if requests else []):
             got[j] = table
         return got
+    return read_at
+
+
+def _located_turns(read, intervals: list[Interval], t: np.ndarray, angle_column: str, speed_column: str):
+    """`periodic_regime`'s locate for a run with a reader: the instants the drive angle reaches the levels, by
+    Newton's method on the angle read at the rows' estimates (`turns.newton_passes`, `_reads_at`);
+    (instants, tables, the instants those were read at)."""
+    from mechsim.scenarios.turns import newton_passes
+    read_at = _reads_at(read, intervals, t)
 
     def locate(times: np.ndarray, levels: np.ndarray):
         return newton_passes(read_at, times, levels, angle_column, speed_column)
     return locate
+
+
+def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event_cols: TableColumns | None = None):
+    """(read_at, the smooth intervals' ends) for a finished run (`_reads_at`): every column of the run at any
+    instants of it, read on its continuous solution as the located peaks read it (a DAE run's dense output or
+    re-integration from its rows, a closed form evaluated); None without a source (a failed run) or rows."""
+    t = np.asarray(cols["t_s"], dtype=float)
+    if source is None or len(t) < 2:
+        return None
+    t_end = float(t[-1]) if source.traj is None else float(source.traj.pieces[-1].t[-1])
+    n = int(t.searchsorted(t_end, side="right"))
+    tn = t[:n]
+    breaks = _breaks(events, event_cols) if events is not None else []
+    if source.method == "closed-form":
+        check = [c for c in source.mech.peak_columns if c in cols] + [c for c in cols if c.endswith("_angle_rad")]
+        read = _closed_form_reader(source, source.si["initial"][source.mech.initial_keys[0]], tn,
+                                   {c: np.asarray(cols[c], float)[:n] for c in check}, check)
+        breaks = sorted(breaks + _contact_switches(source, tn, cols, breaks))
+    else:
+        read = TrajectoryReader(source.traj, source.mech.angle_coordinates, source.settings)
+    intervals = _intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), read)
+    if not intervals:
+        return None
+    return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals])
 
 
 def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],

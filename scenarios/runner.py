@@ -449,6 +449,11 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
     peak_summary, regime = peaks(df, done.angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()),
                                  cols, events, done.source if failure is None else None, done.speed_col, event_cols)
+    if failure is None and any(validity.locatable(valid, conditions, done.source.columns)):
+        from mechsim.scenarios.peaks import point_reader       # the validity's numbers on the continuous solution
+        reader = point_reader(done.source, cols, events, event_cols)
+        if reader is not None:
+            validity.located(valid, conditions, cols, reader, done.source.columns)
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     tables = done.stats.get("tables_time_s", 0.0) + time.perf_counter() - post0

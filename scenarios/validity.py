@@ -7,7 +7,8 @@
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -56,7 +57,7 @@ def evaluate(conds: list[ValidityCondition], columns: Mapping[str, np.ndarray]) 
         applies = np.isfinite(margin)
         bad = applies & (margin < 0)
         first = int(np.argmax(bad)) if bad.any() else None
-        row.update(evaluated=True, applies_share=float(weights[applies].sum() / total),
+        row.update(evaluated=True, how="rows", applies_share=float(weights[applies].sum() / total),
                    violated_share=float(weights[bad].sum() / total), violated_rows=int(bad.sum()),
                    first_violation_t_s=None if first is None else float(t[first]),
                    first_violation_value=None if first is None else float(values[first]), worst=None)
@@ -72,9 +73,11 @@ def describe(row: dict) -> str:
     """One line of a violated condition: its share of time, worst value and when, the bound."""
     unit = f" {row['unit']}" if row["unit"] else ""
     w = row["worst"]
+    worst = (f"unbounded near t = {w['t_s']:.6g} s" if w.get("unbounded") else
+             f"worst {w['value']:.4g}{unit} at t = {w['t_s']:.6g} s")
     return (f"{row['name']} violated {100 * row['violated_share']:.3g} % of the time (first at t = "
-            f"{row['first_violation_t_s']:.6g} s; worst {w['value']:.4g}{unit} at t = {w['t_s']:.6g} s, must be "
-            f"{row['sense']} {row['bound']:g}{unit}): {row['description']}")
+            f"{row['first_violation_t_s']:.6g} s; {worst}, must be {row['sense']} {row['bound']:g}{unit}): "
+            f"{row['description']}")
 
 
 def violation_lines(section: dict | None) -> list[str]:
@@ -82,7 +85,7 @@ def violation_lines(section: dict | None) -> list[str]:
     if not section:
         return []
     return [f"warning: the model leaves its validity: {describe(r)}" for r in section["conditions"]
-            if r.get("violated_rows")]
+            if r.get("violated_rows") or r.get("violated_between_rows")]
 
 
 def stop(section: dict, df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, mode_column: str = "mode"):
@@ -108,3 +111,259 @@ def stop(section: dict, df: pd.DataFrame, events: pd.DataFrame, failure: Failure
     if len(events):
         events = events[events["t_s"].to_numpy(float) <= t_v].reset_index(drop=True)
     return df, events, failure
+
+
+#: readings per bracket and pass (`located`): each pass narrows a bracket to two of its spacings
+SAMPLES = 64
+#: passes at most; a bracket narrower than LOCATED of its instant ends them
+PASSES = 8
+LOCATED = 1e-12
+#: the next bracket around an interpolated answer spans this fraction of a spacing either side (`_refine`)
+GUESS_SHRINK = 64.0
+#: a least value settled when a pass changes it by less than this (relative, `_settled`)
+SETTLED = 1e-13
+#: row minima of a condition's margin refined (`located`), the lowest first
+CANDIDATES = 4
+#: the worst value counts as unbounded where its magnitude grew by more than this in each of the last three passes
+UNBOUNDED_GROWTH = 3.0
+
+
+@dataclass
+class _Job:
+    """A bracket [lo, hi] of one condition narrowed on readings (`_refine`): to its least margin (`first` False) or
+    to where the margin, times `sign`, first turns negative (a crossing from the left). Its result: the instant, the
+    reading's table and the instant's place in it, the best score of each pass."""
+
+    lo: float
+    hi: float
+    margin: Callable
+    quantity: Callable
+    sign: float = 1.0
+    first: bool = False
+    found: tuple | None = None
+    scores: list = field(default_factory=list)
+    root: float | None = None          # a crossing's instant, interpolated between the samples around it
+    value: float | None = None         # the quantity there, interpolated the same way
+
+
+def _refine(read_at, jobs: list[_Job]) -> None:
+    """Every job's bracket narrowed on readings, all jobs in one pass of `read_at` (with groups) per step: SAMPLES
+    instants evenly over it (its ends included); the next bracket is 1/GUESS_SHRINK of a spacing either side of the
+    interpolated answer (the secant's root between the samples around a crossing, the parabola's vertex through the
+    three around the least score), so that a smooth margin needs two or three passes, and where that bracket turns
+    out not to hold the answer (a kink, a pole), the two spacings around it as found by the samples; until
+    narrower than LOCATED of its instant or PASSES passes. A job whose reading fails keeps what it had."""
+    live = list(jobs)
+    plain: dict[int, tuple[float, float]] = {}          # a job's bracket by the samples alone, if its guess fails
+    for _ in range(PASSES):
+        live = [job for job in live if job.root is None
+                and (job.hi - job.lo > LOCATED * max(1.0, abs(job.hi)) or job.found is None)]
+        if not live:
+            return
+        grids = [np.linspace(job.lo, job.hi, SAMPLES) if job.hi > job.lo else np.array([job.lo]) for job in live]
+        failed = []
+        for job, grid, table in zip(live, grids, read_at(grids, groups=True)):
+            if table is None:
+                failed.append(job)
+                continue
+            f = job.sign * np.broadcast_to(np.asarray(job.margin(table), dtype=float), grid.shape)
+            n = len(grid)
+            if job.first:
+                below = np.flatnonzero(f < 0)
+                j = int(below[0]) if len(below) else n - 1
+                held = len(below) and j > 0               # the crossing inside this bracket
+            else:
+                j = int(np.argmin(np.where(np.isfinite(f), f, np.inf)))
+                held = 0 < j < n - 1 or n == 1            # the least inside, not at an edge
+            if not held and id(job) in plain:             # the guess missed: the samples' bracket before it
+                job.lo, job.hi = plain.pop(id(job))
+                continue
+            if job.first and held and id(job) in plain:
+                # a crossing inside its guessed bracket: the secant's root there is the crossing to O(spacing^2)
+                x = _guess(grid, f, j, True)
+                if x is not None:
+                    job.root = x
+                    job.value = float(np.interp(x, grid[j - 1:j + 1], job.quantity(table)[j - 1:j + 1]))
+            job.found = (float(grid[j]), table, j)
+            job.scores.append(float(f[j]))
+            lo, hi = float(grid[max(j - 1, 0)]), float(grid[min(j + (0 if job.first else 1), n - 1)])
+            plain[id(job)] = (lo, hi)
+            guess = _guess(grid, f, j, job.first) if held else None
+            if guess is None:
+                job.lo, job.hi = lo, hi
+            else:
+                w = (grid[1] - grid[0]) / GUESS_SHRINK
+                job.lo, job.hi = max(lo, guess - w), min(hi, guess + w)
+        live = [job for job in live if job not in failed and (job.first or not (_unbounded(job.scores)
+                                                                                 or _settled(job.scores)))]
+
+
+def _instant(job: _Job) -> float:
+    """A crossing's instant: the interpolated root where its last pass found one, else its sample."""
+    return job.root if job.root is not None else job.found[0]
+
+
+def _settled(scores: list[float]) -> bool:
+    """A least value that no longer changes from pass to pass (to SETTLED of it): its instant may still move along a
+    minimum flat to round-off, its value does not."""
+    return len(scores) >= 2 and abs(scores[-1] - scores[-2]) <= SETTLED * max(1.0, abs(scores[-1]))
+
+
+def _guess(grid: np.ndarray, f: np.ndarray, j: int, first: bool) -> float | None:
+    """The answer interpolated between the samples: the secant's root between samples j - 1 and j (a crossing), or
+    the vertex of the parabola through j - 1, j, j + 1 (a least value); None where it is not defined."""
+    if first:
+        a, b = f[j - 1], f[j]
+        return float(grid[j - 1] + (grid[j] - grid[j - 1]) * a / (a - b)) if np.isfinite(a - b) and a != b else None
+    y0, y1, y2 = f[j - 1], f[j], f[j + 1]
+    curve = y0 - 2.0 * y1 + y2
+    if not (np.isfinite(curve) and curve > 0):
+        return None
+    return float(grid[j] + 0.5 * (grid[1] - grid[0]) * (y0 - y2) / curve)
+
+
+def _value(c: ValidityCondition, table, j: int) -> float:
+    """The condition's quantity in a reading's table at its instant j."""
+    return float(np.broadcast_to(np.asarray(c.quantity(table), dtype=float),
+                                 np.asarray(table["t_s"]).shape).reshape(-1)[j])
+
+
+def _unbounded(scores: list[float]) -> bool:
+    """A worst value that keeps growing as its bracket narrows: its magnitude up by UNBOUNDED_GROWTH in each of the
+    last three passes (a quantity with a pole inside the run, such as a friction demand |F_t|/|N| where N
+    passes zero)."""
+    a = np.abs(np.asarray(scores[-4:], dtype=float))
+    return len(a) == 4 and bool(np.all(a[1:] > UNBOUNDED_GROWTH * a[:-1]))
+
+
+def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[bool]:
+    """Which conditions `located` reads: evaluated, and every column they need among the reader's (`readable`)."""
+    return [bool(row.get("evaluated")) and all(n in readable for n in c.needs)
+            for c, row in zip(conds, section["conditions"])]
+
+
+def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str, np.ndarray], reader,
+            readable) -> None:
+    """The section's numbers (`evaluate`, on the rows) located on the run's continuous solution, in place, for each
+    condition whose columns the reader reads (`readable`; `scenarios/peaks.py` `point_reader`: (read_at, the smooth
+    intervals' ends); a thermal condition stays on the rows, `how` says which): its worst value the extremum of the
+    quantity (the least margin, refined on readings around the CANDIDATES lowest row minima, within the smooth
+    interval holding each), or unbounded (`_unbounded`: value None); its first violation the instant the margin
+    crosses zero (between the last row that holds and the first that does not); its violated share with every
+    crossing between rows located (the rows' half-gap weights elsewhere); a violation between two rows that hold,
+    which the worst reveals, counted as well. Every condition's brackets are narrowed together (`_refine`)
+    (docs/theory.md, "Validity")."""
+    read_at, ends = reader
+    t = np.asarray(columns["t_s"], dtype=float)
+    if len(t) < 2:
+        return
+    work = [_Condition(c, row, t, columns, ends) for c, row, ok in
+            zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
+    work = [w for w in work if w.applies.any()]
+    _refine(read_at, [job for w in work for job in w.worst_jobs + w.crossing_jobs])
+    _refine(read_at, [job for w in work for job in w.between_jobs()])
+    for w in work:
+        w.report()
+    section["violated"] = [r["name"] for r in section["conditions"]
+                           if r.get("violated_rows") or r.get("violated_between_rows")]
+    section["valid"] = not section["violated"]
+
+
+class _Condition:
+    """One condition's rows, its brackets to narrow (`_Job`) and what it reports from them (`located`)."""
+
+    def __init__(self, c: ValidityCondition, row: dict, t: np.ndarray, columns, ends: np.ndarray):
+        self.c, self.row, self.t, self.ends = c, row, t, ends
+        values = np.broadcast_to(np.asarray(c.quantity(columns), dtype=float), t.shape)
+        m = c.margin(values)
+        self.applies = applies = np.isfinite(m)
+        self.bad = applies & (m < 0)
+
+        def quantity(table):
+            return np.broadcast_to(np.asarray(c.quantity(table), dtype=float), np.asarray(table["t_s"]).shape)
+
+        def margin(table):
+            return c.margin(quantity(table))
+        self.margin, self.quantity = margin, quantity
+        # the worst: the least margin near each of the lowest row minima
+        mm = np.where(applies, m, np.inf)
+        lower = np.r_[True, mm[1:] <= mm[:-1]] & np.r_[mm[:-1] <= mm[1:], True] & applies
+        rows = np.flatnonzero(lower)
+        rows = rows[np.argsort(mm[rows], kind="stable")][:CANDIDATES]
+        self.worst_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
+                                quantity) for i in rows]
+        # every sign change of the margin between two applying rows: into a violation (the margin's first
+        # negative sample) or out of one (the negated margin's)
+        both = applies[:-1] & applies[1:]
+        bad = self.bad
+        self.gaps = [(int(g), bool(bad[g])) for g in np.flatnonzero(both & (bad[:-1] != bad[1:]))]
+        self.crossing_jobs = [_Job(*self._within(g + 1, g, g + 1), margin, quantity, -1.0 if was_bad else 1.0, True)
+                              for g, was_bad in self.gaps]
+        self.extra: list[_Job] = []
+
+    def _within(self, centre: int, i: int, j: int) -> tuple[float, float]:
+        """[t_i, t_j] clipped to the smooth interval holding row `centre` (a row at an event: the one before)."""
+        t, ends = self.t, self.ends
+        k = int(np.clip(ends.searchsorted(t[centre], side="left"), 1, len(ends) - 1))
+        return max(float(t[i]), float(ends[k - 1])), min(float(t[j]), float(ends[k]))
+
+    def _best(self):
+        best = None
+        for job in self.worst_jobs:
+            if job.found is None:
+                continue
+            if _unbounded(job.scores):
+                return job, True
+            if best is None or job.scores[-1] < best.scores[-1]:
+                best = job
+        return best, False
+
+    def between_jobs(self) -> list[_Job]:
+        """A worst margin below zero between two rows that hold: the crossings into and out of it."""
+        best, unbounded = self._best()
+        if best is None or unbounded or best.scores[-1] >= 0:
+            return []
+        t, at = self.t, best.found[0]
+        g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
+        if not (self.applies[g] and self.applies[g + 1]) or self.bad[g] or self.bad[g + 1]:
+            return []
+        self.extra = [_Job(float(t[g]), at, self.margin, self.quantity, 1.0, True),
+                      _Job(at, float(t[g + 1]), self.margin, self.quantity, -1.0, True)]
+        return self.extra
+
+    def report(self) -> None:
+        c, row, t = self.c, self.row, self.t
+        row["how"] = "located"
+        best, unbounded = self._best()
+        if best is not None:
+            at, table, j = best.found
+            row["worst"] = ({"value": None, "t_s": at, "margin": None, "unbounded": True} if unbounded else
+                            {"value": _value(c, table, j), "t_s": at, "margin": best.scores[-1]})
+        weights = _row_weights(t)
+        total = float(weights.sum()) or 1.0
+        violated = float(weights[self.bad].sum())
+        starts = []
+        for (g, was_bad), job in zip(self.gaps, self.crossing_jobs):
+            if job.found is None:
+                continue
+            x = _instant(job)
+            violated += (x - t[g] if was_bad else t[g + 1] - x) - 0.5 * (t[g + 1] - t[g])
+            if not was_bad:
+                starts.append(job)
+        if self.extra and all(job.found is not None for job in self.extra):
+            violated += _instant(self.extra[1]) - _instant(self.extra[0])
+            row["violated_between_rows"] = True
+            starts.append(self.extra[0])
+        row["violated_share"] = float(violated / total)
+        # the first violation: the earliest crossing into it, or the first violating row where none lies before it
+        # (the run's first row, or a row after one the condition does not apply to)
+        first = min(starts, key=_instant) if starts else None
+        if self.bad.any():
+            r = int(np.argmax(self.bad))
+            if first is None or t[r] < _instant(first):
+                row["first_violation_t_s"] = float(t[r])          # (the rows' own value stays)
+                return
+        if first is not None:
+            at, table, j = first.found
+            row["first_violation_t_s"] = _instant(first)
+            row["first_violation_value"] = first.value if first.root is not None else _value(c, table, j)

@@ -149,9 +149,9 @@ def _validity(section: dict | None) -> list[str]:
             state, share, worst, when = f"not evaluated ({c.get('why', '')})", "", "", ""
         else:
             w = c.get("worst") or {}
-            state = "VIOLATED" if c["violated_rows"] else "holds"
+            state = "VIOLATED" if c["violated_rows"] or c.get("violated_between_rows") else "holds"
             share = f"{100 * c['violated_share']:.3g} %"
-            worst = f"{w['value']:.6g}{unit}" if w else "never applies"
+            worst = ("unbounded" if w.get("unbounded") else f"{w['value']:.6g}{unit}") if w else "never applies"
             when = f"{w['t_s']:.6g}" if w else ""
         cells = [c["name"], state, f"{c['sense']} {c['bound']:g}{unit}", share, worst, when, c["description"],
                  c["source"]]
