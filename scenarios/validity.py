@@ -124,7 +124,7 @@ GUESS_SHRINK = 64.0
 SETTLED = 1e-13
 #: row minima of a condition's margin refined (`located`), the lowest first
 CANDIDATES = 4
-#: the worst value counts as unbounded where its magnitude grew by more than this in each of the last three passes
+#: the worst value counts as unbounded where its magnitude grew by more than this in each of the last two passes
 UNBOUNDED_GROWTH = 3.0
 
 
@@ -230,10 +230,10 @@ def _value(c: ValidityCondition, table, j: int) -> float:
 
 def _unbounded(scores: list[float]) -> bool:
     """A worst value that keeps growing as its bracket narrows: its magnitude up by UNBOUNDED_GROWTH in each of the
-    last three passes (a quantity with a pole inside the run, such as a friction demand |F_t|/|N| where N
-    passes zero)."""
-    a = np.abs(np.asarray(scores[-4:], dtype=float))
-    return len(a) == 4 and bool(np.all(a[1:] > UNBOUNDED_GROWTH * a[:-1]))
+    last two passes (a quantity with a pole inside the run, such as a friction demand |F_t|/|N| where N passes
+    zero, grows like the bracket shrinks, a hundredfold a pass and more; a bounded one settles)."""
+    a = np.abs(np.asarray(scores[-3:], dtype=float))
+    return len(a) == 3 and bool(np.all(a[1:] > UNBOUNDED_GROWTH * a[:-1]))
 
 
 def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[bool]:
@@ -290,6 +290,11 @@ class _Condition:
         lower = np.r_[True, mm[1:] <= mm[:-1]] & np.r_[mm[:-1] <= mm[1:], True] & applies
         rows = np.flatnonzero(lower)
         rows = rows[np.argsort(mm[rows], kind="stable")][:CANDIDATES]
+        # a later one only where it may dip below the least row between its neighbours: by no more than the rise
+        # to the higher of them (a smooth minimum between rows lies within a quarter of it)
+        near = np.maximum(mm[np.maximum(rows - 1, 0)], mm[np.minimum(rows + 1, len(t) - 1)])
+        rise = np.where(np.isfinite(near), near - mm[rows], np.inf)
+        rows = rows[(mm[rows] - rise <= mm[rows[0]]) | (np.arange(len(rows)) == 0)] if len(rows) else rows
         self.worst_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
                                 quantity) for i in rows]
         # every sign change of the margin between two applying rows: into a violation (the margin's first
