@@ -438,15 +438,6 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
         rows = np.asarray(iv.rows, dtype=np.int64)
         if len(rows) and rows[-1] - rows[0] == len(rows) - 1:      # the rows in order, none left out: a view
             rows = slice(int(rows[0]), int(rows[-1]) + 1)
-        if len(iv.rows) and len(at) == len(iv.rows) + 1:     # the midpoints only, between the ends and rows
-            tt = np.concatenate([[iv.lo], t[rows], [iv.hi]])
-            ff = np.empty((len(names), len(tt)))
-            ff[:, 0] = [first[c][0] for c in names]
-            ff[:, 1:-1] = np.array([values[c][rows] for c in names]).reshape(len(names), -1)
-            ff[:, -1] = [last[c][0] for c in names]
-            mid = np.array([np.asarray(between[c], dtype=float) for c in names]).reshape(len(names), -1)
-            total += ((ff[:, 1:] + 4.0 * mid + ff[:, :-1]) * (tt[1:] - tt[:-1])).sum(axis=1) / 6.0
-            continue
         tt = np.concatenate([[iv.lo], t[rows], at, [iv.hi]])
         ff = np.empty((len(names), len(tt)))
         ff[:, 0] = [first[c][0] for c in names]

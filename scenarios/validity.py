@@ -222,12 +222,6 @@ def _guess(grid: np.ndarray, f: np.ndarray, j: int, first: bool) -> float | None
     return float(grid[j] + 0.5 * (grid[1] - grid[0]) * (y0 - y2) / curve)
 
 
-def _value(c: ValidityCondition, table, j: int) -> float:
-    """The condition's quantity in a reading's table at its instant j."""
-    return float(np.broadcast_to(np.asarray(c.quantity(table), dtype=float),
-                                 np.asarray(table["t_s"]).shape).reshape(-1)[j])
-
-
 def _unbounded(scores: list[float]) -> bool:
     """A worst value that keeps growing as its bracket narrows: its magnitude up by UNBOUNDED_GROWTH in each of the
     last two passes (a quantity with a pole inside the run, such as a friction demand |F_t|/|N| where N passes
@@ -337,13 +331,13 @@ class _Condition:
         return self.extra
 
     def report(self) -> None:
-        c, row, t = self.c, self.row, self.t
+        row, t = self.row, self.t
         row["how"] = "located"
         best, unbounded = self._best()
         if best is not None:
             at, table, j = best.found
             row["worst"] = ({"value": None, "t_s": at, "margin": None, "unbounded": True} if unbounded else
-                            {"value": _value(c, table, j), "t_s": at, "margin": best.scores[-1]})
+                            {"value": float(best.quantity(table)[j]), "t_s": at, "margin": best.scores[-1]})
         weights = _row_weights(t)
         total = float(weights.sum()) or 1.0
         violated = float(weights[self.bad].sum())
@@ -371,4 +365,4 @@ class _Condition:
         if first is not None:
             at, table, j = first.found
             row["first_violation_t_s"] = _instant(first)
-            row["first_violation_value"] = first.value if first.root is not None else _value(c, table, j)
+            row["first_violation_value"] = first.value if first.root is not None else float(first.quantity(table)[j])
