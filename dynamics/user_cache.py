@@ -44,17 +44,41 @@ def write_atomically(path: Path, data: bytes, prefix: str = ".part-") -> bool:
     return True
 
 
-@lru_cache(maxsize=1)
-def code_fingerprint() -> str:
-    """A hash of the code that turns a scenario into the expressions (mechanisms/, dynamics/, thermal/): a cached
-    derivation or compiled module made by other code is never reused."""
+@lru_cache(maxsize=None)
+def code_fingerprint(folders: tuple[str, ...] = ("mechanisms", "dynamics", "thermal")) -> str:
+    """A hash of mechsim's modules in `folders` (default: the code that turns a scenario into the expressions): a
+    cached derivation or compiled module made by other code is never reused. "" names the package's own top-level
+    modules."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for folder in ("mechanisms", "dynamics", "thermal"):
-        for path in sorted((root / folder).rglob("*.py")):
+    for folder in folders:
+        for path in sorted((root / folder).rglob("*.py") if folder else root.glob("*.py")):
             h.update(path.relative_to(root).as_posix().encode())
             h.update(path.read_bytes())
     return h.hexdigest()
+
+
+#: the distributions whose versions a run's numbers depend on (`results_fingerprint`)
+COMPUTING_LIBRARIES = ("numpy", "scipy", "sympy", "jax", "jaxlib", "diffrax", "equinox", "optimistix",
+                       "scikit-sundae", "numba", "llvmlite", "pandas", "pint")
+
+
+@lru_cache(maxsize=1)
+def results_fingerprint() -> str:
+    """A hash of everything a run's numbers depend on besides its scenario: every module a run executes
+    (mechanisms/, dynamics/, thermal/, scenarios/ and the top level) and the versions of the libraries that compute
+    them (`COMPUTING_LIBRARIES`). A stored result made under another (a sweep's finished case) is not reused."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "absent"
+    h = hashlib.sha256(code_fingerprint(("", "mechanisms", "dynamics", "thermal", "scenarios")).encode())
+    for name in COMPUTING_LIBRARIES:
+        h.update(f"\n{name} {installed(name)}".encode())
+    return h.hexdigest()[:16]
 
 
 #: JAX's setting of the shortest compilation it keeps (its default 1 s)

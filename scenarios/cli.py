@@ -488,9 +488,13 @@ def sweep(
         _fail(str(exc))
     except OSError as exc:
         _os_refused(exc, "sweep", out_dir)
+    reasons: dict[str, list[str]] = {}
     for key, why in table.attrs["recomputed"]:
-        err.print(f"sweep: stored case {key} did not verify ({why}); it was computed again", markup=False,
-                  highlight=False, soft_wrap=True)
+        reasons.setdefault(why, []).append(key)
+    for why, keys in reasons.items():           # a line per reason: an upgrade discards every case at once
+        err.print(f"sweep: stored case {keys[0]} did not verify ({why}); it was computed again" if len(keys) == 1
+                  else f"sweep: {len(keys)} stored cases did not verify ({why}); they were computed again",
+                  markup=False, highlight=False, soft_wrap=True)
     (err if table.attrs["interrupted"] else out).print(table.attrs["report"], markup=False, highlight=False,
                                                        soft_wrap=True)
     _saying_why()

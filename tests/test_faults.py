@@ -158,6 +158,38 @@ def test_resume_recomputes_corrupt_cases_and_says_so(tmp_path):
     assert r.exit_code == 0 and "(0 computed, 3 reused, 0 failed)" in r.stdout and "did not verify" not in r.stderr
 
 
+def test_resume_recomputes_cases_another_build_computed_and_says_so_once(tmp_path):
+    """A case stored by another build of mechsim (other code, another version of a library that computes it), or
+    by one that did not record its build, is computed again: a table never mixes two builds' rows."""
+    from mechsim.dynamics.user_cache import results_fingerprint
+    from mechsim.scenarios.studies.sweep.store import _checksum
+    out = tmp_path / "sw"
+    r = invoke("sweep", *SWEEP, "--out", out)
+    assert r.exit_code == 0, r.output
+    cases = sorted((out / "cases").glob("*.json"))
+    first = {p.name: json.loads(p.read_text()) for p in cases}
+    assert {rec["computed_by"] for rec in first.values()} == {results_fingerprint()}
+    for p, build in zip(cases, ("another build", "another build", None)):     # checksums sound: only the build differs
+        rec = json.loads(p.read_text())
+        rec.pop("checksum")
+        rec.pop("computed_by")
+        if build is not None:
+            rec["computed_by"] = build
+        rec["checksum"] = _checksum(rec)
+        p.write_text(json.dumps(rec))
+    r = invoke("sweep", *SWEEP, "--out", out)
+    assert r.exit_code == 0, r.output
+    lines = [line for line in r.stderr.splitlines() if "did not verify" in line]
+    assert len(lines) == 1 and "3 stored cases" in lines[0] and "another mechsim build" in lines[0], lines
+    assert "(3 computed, 0 reused, 0 failed)" in r.stdout
+    again = {p.name: json.loads(p.read_text()) for p in (out / "cases").glob("*.json")}
+    assert {rec["computed_by"] for rec in again.values()} == {results_fingerprint()}
+    for name, rec in again.items():
+        assert rec["row"]["work_drive_J"] == first[name]["row"]["work_drive_J"] and rec["run_id"] != first[name]["run_id"]
+    r = invoke("sweep", *SWEEP, "--out", out)
+    assert "(0 computed, 3 reused, 0 failed)" in r.stdout and "did not verify" not in r.stderr
+
+
 def test_sweep_force_refuses_a_folder_mechsim_did_not_write(tmp_path):
     victim = tmp_path / "victim"
     victim.mkdir()

@@ -2,15 +2,17 @@
 
     DIR/sweep.toml            the sweep definition (valid `mechsim sweep` input)
     DIR/sweep.json            case keys in sweep order, the runs that worked on it
-    DIR/cases/<key>.json      one finished case: its overrides, parameters, summary row, run id
+    DIR/cases/<key>.json      one finished case: its overrides, parameters, summary row, run id, build
     DIR/timeseries/<key>.parquet   its time series (--timeseries)
     DIR/sweep.parquet, sweep.csv   the table, a row per finished case
     DIR/sweep_summary.json    counts, runner, timing, batching note, failed cases
 
 Every file is written to a temporary name in the same folder and renamed, so a reader (or a resumed sweep)
 never sees half a file; a case counts as finished when its cases/<key>.json exists and verifies: it parses,
-its SHA-256 checksum matches its content, and its time series (when asked for) matches the checksum recorded
-for it. A case that does not verify (a truncated or edited file, a disk fault) is removed and computed again.
+its SHA-256 checksum matches its content, it was computed by this build of mechsim (its code and its computing
+libraries' versions: `results_fingerprint`), and its time series (when asked for) matches the checksum recorded
+for it. A case that does not verify (a truncated or edited file, a disk fault, an upgrade) is removed and computed
+again, so that a table never mixes rows of two builds.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ from pathlib import Path
 import pandas as pd
 import tomli_w
 
+from mechsim.dynamics.user_cache import results_fingerprint
 from mechsim.scenarios.output.atomic import MARKER, MARKER_TEXT, check_replaceable
 from mechsim.scenarios.output.atomic import json_default as _json_default
 from mechsim.scenarios.units import ScenarioError
@@ -226,6 +229,8 @@ class SweepStore:
         stored = record.pop("checksum")
         if stored != _checksum(record) or record.get("case_id") != key or not isinstance(record.get("row"), dict):
             return "checksum mismatch"
+        if record.get("computed_by") != results_fingerprint():
+            return "computed by another mechsim build: its code or a computing library's version differs"
         if need_timeseries or "timeseries_sha256" in record:
             path = self.series_path(key)
             if not path.is_file():
@@ -236,8 +241,10 @@ class SweepStore:
         return None
 
     def write_case(self, record: dict, timeseries: pd.DataFrame | None = None) -> None:
-        """The time series first, then the case file (with checksums of both) that marks the case finished."""
+        """The time series first, then the case file (with checksums of both, and the build that computed it:
+        `results_fingerprint`) that marks the case finished."""
         key = record["case_id"]
+        record = {**record, "computed_by": results_fingerprint()}
         text = json.dumps(record, default=_json_default)
         record = json.loads(text)                                          # exactly what will be read back
         tail = {}
