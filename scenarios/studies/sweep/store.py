@@ -23,7 +23,6 @@ import os
 import re
 import socket
 import shutil
-import tempfile
 from pathlib import Path
 
 import pandas as pd
