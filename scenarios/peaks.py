@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, TrajectoryReader,
-                                      apart, between, end_guesses, end_limit_requests, end_limits,
+from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, ReadingFailed,
+                                      TrajectoryReader, apart, between, end_guesses, end_limit_requests, end_limits,
                                       end_lines, every_end, finish_all, intervals_of, read_all, refine_further,
                                       read_tables, stored_limits, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
@@ -43,6 +43,8 @@ CLOSED_READINGS = 100_000
 #: farther apart (`_rows_finest`), from its states interpolated between its rows; as many samples at most
 DAE_STEP_RAD = math.radians(1.0)
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
+#: a turn's mean not read on the continuous solution (a reading between rows failed): the rows' trapezoidal rule
+HOW_ROWS_MEAN = "the trapezoidal rule on the output rows (the readings between them failed)"
 
 
 @dataclass
@@ -299,6 +301,30 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
     return out
 
 
+def last_drive_cycle(t: np.ndarray, angle: np.ndarray, speed: np.ndarray | None, cycle, locate=None
+                     ) -> tuple[float, float] | None:
+    """(start, end) of the last complete drive cycle within the rows, for the cycle means of a run without a
+    periodic regime: the last two instants the drive angle (increasing) reaches cycle.start + k cycle.period (the
+    mechanism's `drive_cycle`), each the root of the rows' cubic Hermite interpolant (`turns.hermite_crossings`;
+    linear between rows without the speed), then located on the continuous solution by locate(times, levels) where
+    given (as `periodic_regime`'s: `_located_turns`); None where the angle does not increase through a whole
+    cycle."""
+    from mechsim.scenarios.turns import hermite_crossings
+    period = getattr(cycle, "period", None)
+    if not period or len(t) < 2 or not np.all(np.diff(angle) > 0):
+        return None
+    last = math.floor((float(angle[-1]) - cycle.start) / period + 1e-12)
+    if last - math.ceil((float(angle[0]) - cycle.start) / period - 1e-12) < 1:
+        return None
+    levels = cycle.start + period * np.array([last - 1, last], dtype=float)
+    ends = (hermite_crossings(t, angle, speed, levels) if speed is not None and np.all(np.isfinite(speed))
+            else np.interp(levels, angle, t))
+    if locate is not None:
+        located, tables, _ = locate(ends, levels)
+        ends = np.where([table is not None for table in tables], located, ends)
+    return float(ends[0]), float(ends[1])
+
+
 def _reads_at(read, intervals: list[Interval], t: np.ndarray):
     """read_at(times, groups=False): the columns at each instant (one table each; None where it was not read), or
     with groups, at each array of instants (ascending, within one smooth interval: one table each), each read from
@@ -459,15 +485,16 @@ ONSET_GRADING = 6
 
 
 def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame, a: float,
-                        b: float) -> dict:
+                        b: float, finest=None) -> dict:
     """`_turn_means` of the thermal columns over the turn [a, b]: its smooth intervals split at the events and at
     the heat input's own switches (the thermal reader's `kinks`: the flash rise follows |slip speed|, and jumps
     where the contact starts and ends), their ends' one-sided limits read by the thermal reader. The trapezoidal
     rule on the rows alone put each jump inside a panel: an error of O(h) of the jump that moved with the output
-    step (internal-geneva-motor's mean flash rise by 9e-4 of it between 0.37 and 2.3 ms rows)."""
+    step (internal-geneva-motor's mean flash rise by 9e-4 of it between 0.37 and 2.3 ms rows). finest: the knots
+    added between rows farther apart, as the mechanical means' (`_turn_mean_requests`)."""
     from mechsim.scenarios.thermal_peaks import heat_breaks
     turn = intervals_of(t, heat_breaks(reader, _breaks(events), a, b), a, b, "turn start", "turn end")
-    asked = _turn_mean_requests(t, turn, graded=ONSET_GRADING) if turn else None
+    asked = _turn_mean_requests(t, turn, finest, graded=ONSET_GRADING) if turn else None
     if asked is None:
         return {}
     got = reader.read_many(asked)
@@ -487,9 +514,10 @@ def turn_mean(t: np.ndarray, f: np.ndarray, a: float, b: float) -> float:
 def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.DataFrame, cols,
                   source: Source | None, speed_column: str | None = None, event_cols: TableColumns | None = None
                   ) -> tuple[dict, dict | None]:
-    """({column: {max, min, abs_max, how[, startup, periodic, singular]}}, the periodic regime or None) for each of
-    peak_columns in the table (see the module docstring). Where the run reaches a periodic regime, max and min are
-    the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5). cols, event_cols: the table's and
+    """({column: {max, min, abs_max, how[, startup, periodic | cycle, singular]}}, the periodic regime or None) for
+    each of peak_columns in the table (see the module docstring). Where the run reaches a periodic regime, max and
+    min are the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5), `periodic` the mean over
+    its last turn; elsewhere `cycle` holds the mean over the last complete drive cycle (`last_drive_cycle`). cols, event_cols: the table's and
     the events' TableColumns (event_cols where at hand)."""
     out: dict = {}
     t = np.asarray(cols["t_s"], dtype=float)
@@ -540,6 +568,18 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                                       if c.startswith("work_") and c.endswith("_J") and c in source.columns})
     elif source is not None and len(t) > 1:
         windows = [(float(t[0]), t_end, "run")]
+    # the turn the means are taken over: the periodic regime's last, else (a prescribed drive, a run that does not
+    # settle) the last complete drive cycle, located as the regime's turns are
+    mean_over = None if regime is None else regime["last_turn"]
+    if regime is None and raw is not None and speed_column in cols:
+        cycle = source.mech.drive_cycle()
+        if cycle is not None and cycle.column == angle_column:
+            locating = (source.method != "closed-form" and not source.drive.is_prescribed
+                        and angle_column in source.columns and speed_column in source.columns)
+            whole = _intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), raw) if locating else []
+            mean_over = last_drive_cycle(tn, angles[:n], np.asarray(cols[speed_column], float)[:n], cycle,
+                                         _located_turns(read, whole, tn, angle_column, speed_column) if whole
+                                         else None)
     if regime is not None and regime["startup_turns"] > 0:
         windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
     kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),
@@ -564,9 +604,9 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     plans = plan_windows([with_rowless(tn, values, intervals, raw, finest, sampler) if intervals else None
                           for intervals in spans])
     requests = [r for p in plans if p is not None for r in p.requests]
-    turn = means_asked = None
-    if regime is not None and read is not None:
-        turn = _intervals(tn, breaks, *regime["last_turn"], ("turn start", "turn end"), raw)
+    turn = means_asked = spacing = None
+    if mean_over is not None and read is not None:
+        turn = _intervals(tn, breaks, *mean_over, ("turn start", "turn end"), raw)
         spacing = finest if finest is not None else _rows_finest(tn, angles[:n])
         means_asked = _turn_mean_requests(tn, turn, spacing if spacing is not None else np.inf)
     # a dense output's readings cost no integration: the one-sided limits at every end (`stored_limits` ranks the ends
@@ -588,8 +628,11 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     means = {}
     if means_asked is not None:
         got = tables[len(requests):len(requests) + len(means_asked)]
-        means = _turn_means(t[:n], values, *regime["last_turn"], turn,
-                            [x if x is not None else read(*r) for r, x in zip(means_asked, got)], means_asked)
+        try:
+            means = _turn_means(t[:n], values, *mean_over, turn,
+                                [x if x is not None else read(*r) for r, x in zip(means_asked, got)], means_asked)
+        except ReadingFailed:           # the rows' mean stands (`turn_mean`), and says so
+            pass
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]
     # the candidates beyond the first that may still beat what these found, refined in a second pass; in a periodic
@@ -649,8 +692,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         if firsts:
             treader.read_many([r for r, _ in _growth_requests(list({(id(iv), side): (iv, side)
                                                                    for iv, side in firsts}.values()), h)])
-    if treader is not None and regime is not None and thermal:
-        means.update(_thermal_turn_means(treader, t, cols, thermal, events, *regime["last_turn"]))
+    if treader is not None and mean_over is not None and thermal:
+        means.update(_thermal_turn_means(treader, t, cols, thermal, events, *mean_over, spacing))
     table = np.array([np.asarray(cols[c], dtype=float) for c in present]).reshape(len(present), len(t))
     for (lo, hi, label), got, intervals, heat in zip(windows, located, spans, heats):
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
@@ -667,12 +710,29 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                 if "singular" in entry:
                     out[c].setdefault("singular", []).extend(entry["singular"])
             else:
-                if label == "periodic":
-                    a, b = regime["last_turn"]
-                    entry["periodic"] = {"mean": means[c] if c in means else turn_mean(t[:n], f[:n], a, b),
-                                         "mean_over": [a, b]}
+                if label == "periodic" or (label == "run" and mean_over is not None):
+                    a, b = mean_over
+                    mean = {"mean": means[c] if c in means else turn_mean(t[:n], f[:n], a, b), "mean_over": [a, b]}
+                    if c not in means:
+                        mean["how"] = HOW_ROWS_MEAN
+                    if _pole_inside(entry.get("singular", ()), a, b):
+                        mean.update(mean=None, unbounded=True)
+                    elif not math.isfinite(mean["mean"]):       # a column defined only in contact (NaN between)
+                        mean["mean"] = None
+                    entry["periodic" if regime is not None else "cycle"] = mean
                 out[c] = entry
     return out, regime
+
+
+#: a column that grows like distance^-p toward an event has no finite mean over a turn holding it where p >= 1 (the
+#: integral of 1/x diverges); measured exponents of a 1/x pole are 1 to within 1e-3 (`singular_approaches`)
+POLE_EXPONENT = 0.95
+
+
+def _pole_inside(singular, a: float, b: float) -> bool:
+    """Whether a column's `singular` events (its entry's) put a pole of order POLE_EXPONENT or more in [a, b]: its
+    mean over them is then unbounded."""
+    return any(a <= s["t_s"] <= b and (s.get("growth_exponent") or 0.0) >= POLE_EXPONENT for s in singular)
 
 
 def _finest(source: Source, t: np.ndarray) -> float | None:
@@ -893,7 +953,6 @@ def _growth(read, iv: Interval, side: str, column: str, h: float, sign: float, d
             ) -> float | None:
     """The exponent a of |F| ~ distance^-a toward the interval's end on `side` ('before': its end, 'after': its
     start), from readings a decade apart; None where the column stays bounded there (or changes sign)."""
-    from mechsim.dynamics.extrema import ReadingFailed
     request, order = _growth_request(iv, side, h, decades, getattr(read, "growth", None))
     try:
         table = read(*request)
@@ -1032,7 +1091,6 @@ def singular_approaches(column: str, f: np.ndarray, side: str, sense: float, int
         if len(found) >= SINGULAR_EVENTS:
             break
     if found:                                  # the impulse of the earliest (a stop of a periodic motion repeats it)
-        from mechsim.dynamics.extrema import ReadingFailed
         by_time = sorted(range(len(found)), key=lambda i: found[i]["t_s"])
         found, k = [found[i] for i in by_time], where[by_time[0]]
         try:

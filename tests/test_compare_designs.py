@@ -75,12 +75,18 @@ def test_a_load_torque_changes_the_load_work_per_index_and_not_the_kinematics(to
 
 
 def test_the_cycle_mean_is_the_mean_over_one_crank_turn(torques):
-    """Without a periodic regime (a prescribed drive) the cycle mean is the rows' trapezoidal mean over the last
-    crank turn: at the constant crank speed w, mean drive torque x 2 pi is the drive's work per turn. The drive
-    torque jumps at entry and exit, where the trapezoid between rows is off by at most h |jump| / T per jump."""
-    h = torques.a.scenario["output_step"]
-    for side in ("a", "b"):
+    """Without a periodic regime (a prescribed drive) the cycle mean is the run's own, over its last complete crank
+    turn located on the closed form (`peaks.last_drive_cycle`): at the constant crank speed w the turn lasts
+    2 pi / w, and the drive's mean power w x mean torque is the wheel load's T w / slots plus the mean friction
+    power (the kinetic energy returns), to the closed form's quadrature (1e-9). The work per turn is the rows'
+    trapezoidal rule on the closed form's power (a closed-form run's work columns): off by at most h |jump| / T per
+    jump of the drive torque, at entry and exit."""
+    h, slots = torques.a.scenario["output_step"], torques.a.scenario["mechanism"]["slots"]
+    for side, result, load in zip(("a", "b"), (torques.a, torques.b), TORQUES):
         mean = _row(torques, "cycle_mean_drive_torque_N_m")[side]
+        assert mean == result.summary["peaks"]["drive_torque_N_m"]["cycle"]["mean"]
+        friction = _row(torques, "cycle_mean_friction_power_W")[side]
+        assert 5.34 * mean == pytest.approx(load * 5.34 / slots + friction, rel=1e-9)
         work = _row(torques, "work_drive_per_cycle_J")[side]
         period = _row(torques, "cycle_time_s")[side]
         jump = _row(torques, "peak_max_drive_torque_N_m")[side]

@@ -4,8 +4,9 @@ result folder; their headline figures as one table and their columns overlaid in
 The headline figures are read from each run's summary, as the sweep table names them (scenarios/studies/sweep/
 rows.py): the located peaks `peak_max_<column>` / `peak_min_<column>` (the periodic regime's where a run reaches
 one, the start-up's beside them as `startup_peak_...`; docs/theory.md §K5), the cycle means `cycle_mean_<column>`
-(over the periodic regime's last turn, located, where the run has one; otherwise the trapezoidal mean of the
-output rows over the last complete drive cycle), the cycle time and the work of each power flow per cycle, the
+(over the periodic regime's last turn where the run has one, else over the last complete drive cycle, each
+located on the continuous solution; the trapezoidal mean of the output rows only for a run that has no
+continuous solution to read, as one that failed), the cycle time and the work of each power flow per cycle, the
 heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares
 (docs/limits.md). Each row holds both values, the difference b - a and the relative difference (b - a) / |a|; the
 quantity's name ends in its unit.
@@ -72,12 +73,18 @@ def headline(result) -> dict[str, float]:
     if cycle is not None and cycle.column in df and "t_s" in df:
         window = _last_cycle(df["t_s"].to_numpy(float), df[cycle.column].to_numpy(float), cycle)
     for col, e in peaks.items():
-        if "periodic" in e:
-            out[f"cycle_mean_{col}"] = _number(e["periodic"]["mean"])
+        located = e.get("periodic") or e.get("cycle")
+        if located is not None and located.get("unbounded"):
+            out[f"cycle_mean_{col}"] = math.nan         # a pole in the turn: no finite mean, as a peak's (`_number`)
+            continue
+        if located is not None:
+            mean = _number(located["mean"])
         elif window is not None and col in df:
             mean = turn_mean(df["t_s"].to_numpy(float), df[col].to_numpy(float), *window)
-            if math.isfinite(mean):             # a column defined only in contact (NaN between) has no cycle mean
-                out[f"cycle_mean_{col}"] = mean
+        else:
+            continue
+        if math.isfinite(mean):                 # a column defined only in contact (NaN between) has no cycle mean
+            out[f"cycle_mean_{col}"] = mean
     if cycle is not None and cycle.column in df:
         speed = cycle.column[:-len("_angle_rad")] + "_speed_rad_s" if cycle.column.endswith("_angle_rad") else None
         mech = result.mechanism
