@@ -1,11 +1,12 @@
-"""The sweep store writes each case file as the earlier code did, byte for byte: the record as JSON reads it back,
-then its checksum (SHA-256 of the sorted-key JSON); the file verifies; a store that wrote or verified a case tabulates
+"""The sweep store writes each case file as the earlier code did, byte for byte: the record (with the build that
+computed it) as JSON reads it back, then its checksum (SHA-256 of the sorted-key JSON); the file verifies; a store that wrote or verified a case tabulates
 it from memory with the same row."""
 import json
 
 import numpy as np
 import pandas as pd
 
+from mechsim.dynamics.user_cache import results_fingerprint
 from mechsim.scenarios.output.atomic import json_default
 from mechsim.scenarios.studies.sweep.store import SweepStore, _checksum
 
@@ -21,8 +22,9 @@ def _record():
 
 
 def _as_before(record, extra=None):
-    """The earlier write_case: round trip, extra entries, checksum, one more json.dumps."""
-    rec = json.loads(json.dumps(record, default=json_default))
+    """The earlier write_case: round trip (the record with the build that computed it), extra entries, checksum,
+    one more json.dumps."""
+    rec = json.loads(json.dumps({**record, "computed_by": results_fingerprint()}, default=json_default))
     rec.update(extra or {})
     rec["checksum"] = _checksum(rec)
     return json.dumps(rec)
