@@ -31,6 +31,10 @@ QUADRATURE_NODES = 6
 SEARCH_LEVELS = 6
 #: rows per block of `ModalNetwork.constant`'s elementwise work
 CONSTANT_BLOCK = 4096
+#: `ModalNetwork.integrate_many` advances the starts of at most this many pieces together, in a network of at most
+#: this many states (their elementwise products with the modes held at once); longer ones one by one
+SHORT_PIECES = 8
+SHORT_STATES = 32
 
 
 def closed_form_columns(mech, angle0: float, speed: float) -> Callable[[np.ndarray], dict]:
@@ -202,18 +206,66 @@ def _interior_points(cuts: np.ndarray, max_piece: float) -> np.ndarray:
     """The interior points of each interval [cuts_i, cuts_i+1] split into k_i = ceil(length / max_piece) equal
     pieces: np.linspace(a, b, k + 1)[1:-1] for every interval at once, by linspace's own operations
     (a + j (b - a)/k, j = 1..k-1), so the same floats."""
-    a, b = cuts[:-1], cuts[1:]
+    return _gap_points(cuts[:-1], cuts[1:], max_piece)[0]
+
+
+def _gap_points(a: np.ndarray, b: np.ndarray, max_piece: float) -> tuple[np.ndarray, np.ndarray]:
+    """(`_interior_points` of the gaps [a_i, b_i], each gap's index of each point)."""
     delta = b - a
     k = np.maximum(1, np.ceil(delta / max_piece).astype(int))
-    split = k > 1
-    a, b, delta, k = a[split], b[split], delta[split], k[split]
+    gaps = np.flatnonzero(k > 1)
+    a, b, delta, k = a[gaps], b[gaps], delta[gaps], k[gaps]
     step = delta / k
-    if np.any(step == 0):                            # linspace's denormal branch: not worth reproducing
-        return np.concatenate([np.linspace(x, y, n + 1)[1:-1] for x, y, n in zip(a, b, k)] + [cuts[:0]])
     count = k - 1
+    if np.any(step == 0):                            # linspace's denormal branch: not worth reproducing
+        return (np.concatenate([np.linspace(x, y, n + 1)[1:-1] for x, y, n in zip(a, b, k)] + [a[:0]]),
+                np.repeat(gaps, count))
     first = np.cumsum(count) - count                 # where each interval's points start
     j = np.arange(int(count.sum())) - np.repeat(first, count) + 1
-    return j * np.repeat(step, count) + np.repeat(a, count)
+    return j * np.repeat(step, count) + np.repeat(a, count), np.repeat(gaps, count)
+
+
+def _distinct(values: np.ndarray, segment: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The values of each segment sorted and distinct (as np.unique of each segment's alone), segment after segment:
+    (values, their segments, each original value's position among them: origin[q] is where values' entry q came
+    from, -1 for none)."""
+    order = np.lexsort((values, segment))
+    values, segment, origin = values[order], segment[order], origin[order]
+    keep = np.ones(len(values), bool)
+    keep[1:] = (segment[1:] != segment[:-1]) | (values[1:] != values[:-1])
+    position = np.cumsum(keep) - 1                   # the first of each run of equal values
+    at = np.full(int(origin.max(initial=-1)) + 1, -1, dtype=np.int64)
+    mine = origin >= 0
+    at[origin[mine]] = position[mine]
+    return values[keep], segment[keep], at
+
+
+def _pieces(T: np.ndarray, t_first: np.ndarray, known: np.ndarray, max_piece: float | None
+            ) -> tuple[np.ndarray, ...]:
+    """Every start's cuts, all in one pass of whole-array work: (cuts, first, where), start j's cuts
+    cuts[first[j]:first[j + 1]] (its instants T[t_first[j]:t_first[j + 1]] (ascending), the `known` breaks strictly
+    between its first and last, and with max_piece each gap longer split into equal pieces, `_interior_points`: the
+    same floats as np.unique of those of each start alone), and where each instant lies among its start's cuts
+    (`ModalNetwork.integrate_flat`)."""
+    S = len(t_first) - 1
+    seg = np.repeat(np.arange(S), np.diff(t_first))
+    i0 = known.searchsorted(T[t_first[:-1]], side="right")
+    nb = np.maximum(known.searchsorted(T[t_first[1:] - 1], side="left") - i0, 0)
+    nth = np.arange(int(nb.sum())) - np.repeat(np.cumsum(nb) - nb, nb)
+    cut, cseg, where = _distinct(np.concatenate([T, known[np.repeat(i0, nb) + nth]]),
+                                 np.concatenate([seg, np.repeat(np.arange(S), nb)]),
+                                 np.concatenate([np.arange(len(T)), np.full(int(nb.sum()), -1)]))
+    if max_piece is not None and len(cut) > 1:
+        inner = cseg[1:] == cseg[:-1]                # the gaps between a start's own cuts
+        gaps = np.flatnonzero(inner)
+        if len(gaps) and (cut[gaps + 1] - cut[gaps]).max() > max_piece:
+            points, of = _gap_points(cut[gaps], cut[gaps + 1], max_piece)
+            if len(points):
+                cut, cseg, at = _distinct(np.concatenate([cut, points]), np.concatenate([cseg, cseg[gaps[of]]]),
+                                          np.concatenate([np.arange(len(cut)), np.full(len(points), -1)]))
+                where = at[where]
+    first = np.searchsorted(cseg, np.arange(S + 1))
+    return cut, first, where - first[seg]
 
 
 class ModalNetwork:
@@ -288,24 +340,35 @@ class ModalNetwork:
     def integrate_many(self, inputs: Callable[[np.ndarray], np.ndarray], starts: list[tuple[np.ndarray, np.ndarray]],
                        breaks: list[float], nodes: int = QUADRATURE_NODES, max_piece: float | None = None
                        ) -> list[np.ndarray]:
-        """`integrate` of each (t_out, y0) of `starts`, each on its own pieces (the same states as one at a time):
-        the heat input evaluated at every start's quadrature nodes in one call (an input's evaluation, the closed
-        form's, has a fixed cost that dominates a short integration's), and each piece's decay and forcing for all
-        starts' pieces in one pass of whole-array work (elementwise: the same values as start by start); the
-        recurrence and the sums over each start's own pieces then start by start (`_advanced`)."""
+        """`integrate` of each (t_out, y0) of `starts`, each on its own pieces (its states do not depend on the
+        other starts): `integrate_flat` of them all."""
+        sizes = np.array([len(t_out) for t_out, _ in starts], dtype=np.int64)
+        t_first = np.concatenate([[0], np.cumsum(sizes)])
+        states = self.integrate_flat(inputs, np.concatenate([np.asarray(t, dtype=float) for t, _ in starts]),
+                                     t_first, np.array([y0 for _, y0 in starts], dtype=float).reshape(
+                                         len(starts), self.n + 3), breaks, nodes, max_piece)
+        return [states[t_first[j]:t_first[j + 1]] for j in range(len(starts))]
+
+    def integrate_flat(self, inputs: Callable[[np.ndarray], np.ndarray], t_out: np.ndarray, t_first: np.ndarray,
+                       y0: np.ndarray, breaks: list[float], nodes: int = QUADRATURE_NODES,
+                       max_piece: float | None = None) -> np.ndarray:
+        """The states at t_out of several starts, start j from y0[j] at t_out[t_first[j]] over its instants
+        t_out[t_first[j]:t_first[j + 1]] (ascending), each on its own pieces as `integrate` (its states do not
+        depend on the other starts): every start's pieces found in one pass of whole-array work (`_pieces`), the
+        heat input evaluated at all their quadrature nodes in one call (an input's evaluation, the closed form's,
+        has a fixed cost that dominates a short integration's), each piece's decay and forcing in one pass; the
+        recurrence and the sums over each start's own pieces then start by start (`_advanced`) for a long start,
+        and for the short ones (a reading from the row before it: a piece or two) all together, piece index by
+        piece index (`_advanced_short`: the same operations per element, the products with the modes as
+        elementwise sums)."""
         x, w = _gauss_legendre(nodes)
-        known = np.sort(np.asarray(breaks, dtype=float))
-        pieces = []
-        for t_out, y0 in starts:
-            t_out = np.asarray(t_out, dtype=float)
-            inside = known[known.searchsorted(t_out[0], side="right"):known.searchsorted(t_out[-1], side="left")]
-            cuts = np.unique(np.concatenate([t_out, inside]))          # the breaks strictly between its ends
-            if max_piece is not None and len(cuts) > 1 and np.diff(cuts).max() > max_piece:
-                cuts = np.unique(np.concatenate([cuts, _interior_points(cuts, max_piece)]))
-            pieces.append((t_out, y0, cuts, np.diff(cuts)))
-        h = np.concatenate([h for *_, h in pieces])                    # every start's pieces, start after start
-        U = np.asarray(inputs(np.concatenate([(cuts[:-1, None] + hs[:, None] * x[None, :]).ravel()
-                                              for _, _, cuts, hs in pieces])), dtype=float)
+        S = len(y0)
+        cut, first, where = _pieces(t_out, t_first, np.sort(np.asarray(breaks, dtype=float)), max_piece)
+        count = np.diff(first) - 1                                      # pieces of each start
+        lo = np.ones(len(cut), bool)
+        lo[first[1:] - 1] = False                                       # a start's last cut begins no piece
+        h = (cut[1:] - cut[:-1])[lo[:-1]]                               # every start's pieces, start after start
+        U = np.asarray(inputs((cut[lo][:, None] + h[:, None] * x[None, :]).ravel()), dtype=float)
         u = U.reshape(U.shape[0], len(h), nodes)
         m = self.Bm.shape[1]
         g = self.b0[:, None, None] + np.einsum("im,mkj->ikj", self.Bm, u[:m])         # (n, K, nodes)
@@ -321,12 +384,50 @@ class ModalNetwork:
             q_int = np.sum(w[None, :] * u[m], axis=1) * h, np.sum(w[None, :] * u[m + 1], axis=1) * h
         else:                                                      # no heat rows: no bookkeeping energies
             q_int = np.zeros(len(h)), np.zeros(len(h))
-        out, a = [], 0
-        for t_out, y0, cuts, hs in pieces:
-            k = slice(a, a + len(hs))
-            a += len(hs)
-            out.append(self._advanced(t_out, y0, cuts, hs, decay[:, k], forcing[:, k], forcing_int[:, k],
-                                      carry_int[:, k], (q_int[0][k], q_int[1][k])))
+        piece0 = first[:-1] - np.arange(S)                              # each start's first piece
+        out = np.empty((len(t_out), self.n + 3))
+        short = (count <= SHORT_PIECES) & (self.n <= SHORT_STATES)
+        for j in np.flatnonzero(~short).tolist():
+            k = slice(piece0[j], piece0[j] + count[j])
+            mine = slice(t_first[j], t_first[j + 1])
+            out[mine] = self._advanced(t_out[mine], y0[j], cut[first[j]:first[j + 1]], h[k], decay[:, k],
+                                       forcing[:, k], forcing_int[:, k], carry_int[:, k], (q_int[0][k], q_int[1][k]))
+        if short.any():
+            ids = np.flatnonzero(short)
+            got = self._advanced_short(y0[ids], piece0[ids], count[ids], h, decay, forcing, forcing_int, carry_int,
+                                       q_int)
+            sizes = np.diff(t_first)
+            rows = np.repeat(ids, sizes[ids])                           # each short start's instants, in order
+            nth = np.arange(len(rows)) - np.repeat(np.cumsum(sizes[ids]) - sizes[ids], sizes[ids])
+            at = t_first[rows] + nth
+            out[at] = got[np.repeat(np.arange(len(ids)), sizes[ids]), where[at]]
+        return out
+
+    def _advanced_short(self, y0: np.ndarray, piece0: np.ndarray, count: np.ndarray, h: np.ndarray,
+                        decay: np.ndarray, forcing: np.ndarray, forcing_int: np.ndarray, carry_int: np.ndarray,
+                        q_int: tuple) -> np.ndarray:
+        """`_advanced` of several starts (their states y0, first piece and piece count among the pieces' arrays),
+        each at every one of its cuts: (starts, most pieces + 1, n + 3), a start's cuts past its last its last
+        state. The recurrence piece index by piece index over all the starts at once, and each product with the
+        modes an elementwise sum over them, so that a start's states are the same in any batch."""
+        n, S, P = self.n, len(y0), int(count.max(initial=0))
+        k = np.minimum(piece0[:, None] + np.minimum(np.arange(P)[None, :], np.maximum(count - 1, 0)[:, None]),
+                       max(len(h) - 1, 0))                                    # (S, P): a held start reads any
+        live = np.arange(P)[None, :] < count[:, None]
+        Z = np.empty((S, P + 1, n))
+        Z[:, 0] = (self.Vinv[None, :, :] * y0[:, None, :n]).sum(axis=2)
+        D, F = decay.T[k], forcing.T[k]                                                 # (S, P, n)
+        for p in range(P):                           # past a start's last piece its state is held
+            Z[:, p + 1] = np.where(live[:, p, None], D[:, p] * Z[:, p] + F[:, p], Z[:, p])
+        z_int = carry_int.T[k] * Z[:, :-1] + forcing_int.T[k]                          # (S, P, n)
+        conv = (z_int * self.loss_m).sum(axis=2) - float(np.sum(self.s)) * h[k]
+        out = np.empty((S, P + 1, n + 3))
+        out[:, :, :n] = (Z[:, :, None, :] * self.V[None, None, :, :]).sum(axis=3)
+        out[:, 0] = y0
+        for j, inc in enumerate((q_int[0][k], q_int[1][k], conv)):
+            column = out[:, :, n + j]
+            for p in range(P):                       # cumsum's order: one addition a piece
+                column[:, p + 1] = np.where(live[:, p], column[:, p] + inc[:, p], column[:, p])
         return out
 
     def _advanced(self, t_out: np.ndarray, y0: np.ndarray, cuts: np.ndarray, h: np.ndarray, decay: np.ndarray,
@@ -369,24 +470,46 @@ def states_between_rows_many(network: ModalNetwork, inputs: Callable, breaks: li
                              rows: np.ndarray, times: list[np.ndarray], max_piece: float | None = None
                              ) -> list[np.ndarray]:
     """`states_between_rows` of each array of instants in `times`, each on its own (the same states as one at a
-    time), every integration from a row run together (`ModalNetwork.integrate_many`: one evaluation of the input)."""
-    outs, starts, places = [], [], []
+    time): an array's instants after one row integrated together from it, and every such integration of every
+    array run together (`ModalNetwork.integrate_flat`: one evaluation of the input)."""
+    outs, places, t_out, sizes, y0 = [], [], [], [], []
     for ts in times:
         ts = np.asarray(ts, dtype=float)
-        out = np.empty((len(ts), rows.shape[1]))
         at = np.clip(np.searchsorted(t_rows, ts, side="right") - 1, 0, len(t_rows) - 1)
-        for r in np.unique(at).tolist():
-            pick = np.flatnonzero(at == r)
-            out[pick] = rows[r]
-            ahead = ts[pick] > t_rows[r]
-            if ahead.any():
-                later = np.unique(ts[pick][ahead])
-                starts.append((np.r_[t_rows[r], later], rows[r]))
-                places.append((out, pick[ahead], np.searchsorted(later, ts[pick][ahead])))
+        out = rows[at]                  # (an instant at a row, or before the first, is that row's)
         outs.append(out)
-    for (out, rows_at, index), got in zip(places, network.integrate_many(inputs, starts, breaks,
-                                                                         max_piece=max_piece) if starts else []):
-        out[rows_at] = got[1:][index]
+        ahead = np.flatnonzero(ts > t_rows[at])
+        if not len(ahead):
+            continue
+        r, t = at[ahead], ts[ahead]
+        order = np.lexsort((t, r))      # each row's later instants, distinct and ascending: a start per row
+        r, t = r[order], t[order]
+        keep = np.ones(len(t), bool)
+        keep[1:] = (r[1:] != r[:-1]) | (t[1:] != t[:-1])
+        position = np.empty(len(t), dtype=np.int64)
+        position[order] = np.cumsum(keep) - 1
+        r, t = r[keep], t[keep]
+        new = np.ones(len(r), bool)
+        new[1:] = r[1:] != r[:-1]
+        row = r[new]
+        # each start's instants: its row's, then the later ones (a place for the row's instant before each group)
+        group = np.cumsum(new) - 1
+        slot = np.arange(len(t)) + group + 1
+        instants = np.empty(len(t) + len(row))
+        instants[slot] = t
+        instants[slot[new] - 1] = t_rows[row]
+        t_out.append(instants)
+        sizes.append(np.bincount(group, minlength=len(row)) + 1)
+        y0.append(rows[row])
+        places.append((out, ahead, slot[position]))
+    if t_out:
+        sizes = np.concatenate(sizes)
+        states = network.integrate_flat(inputs, np.concatenate(t_out), np.concatenate([[0], np.cumsum(sizes)]),
+                                        np.concatenate(y0), breaks, max_piece=max_piece)
+        a = 0
+        for (out, ahead, slots), instants in zip(places, t_out):
+            out[ahead] = states[a + slots]
+            a += len(instants)
     return outs
 
 
