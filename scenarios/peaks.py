@@ -368,9 +368,10 @@ def _located_turns(read, intervals: list[Interval], t: np.ndarray, angle_column:
 
 
 def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event_cols: TableColumns | None = None):
-    """(read_at, the smooth intervals' ends) for a finished run (`_reads_at`): every column of the run at any
-    instants of it, read on its continuous solution as the located peaks read it (a DAE run's dense output or
-    re-integration from its rows, a closed form evaluated); None without a source (a failed run) or rows."""
+    """(read_at, the smooth intervals' ends, the reader behind them) for a finished run (`_reads_at`): every column
+    of the run at any instants of it, read on its continuous solution as the located peaks read it (a DAE run's
+    dense output or re-integration from its rows, a closed form evaluated); None without a source (a failed run) or
+    rows."""
     t = np.asarray(cols["t_s"], dtype=float)
     if source is None or len(t) < 2:
         return None
@@ -388,7 +389,36 @@ def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event
     intervals = _intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), read)
     if not intervals:
         return None
-    return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals])
+    return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals]), read
+
+
+def thermal_point_reader(source: Source | None, cols, events: pd.DataFrame | None,
+                         event_cols: TableColumns | None = None):
+    """(read_at, the smooth intervals' ends, the columns it reads) of a finished run's thermal columns, as
+    `point_reader` (`_reads_at` on the thermal reader that locates their peaks, `thermal_peaks.thermal_reader`, over
+    the whole table, its intervals split at the events and the heat input's own switches: the thermal columns
+    jump where a contact starts and ends); None where they are not read between rows (no thermal model, a failed
+    run)."""
+    from mechsim.scenarios.thermal_peaks import heat_breaks, thermal_reader
+    t = np.asarray(cols["t_s"], dtype=float)
+    if source is None or len(t) < 2 or getattr(source, "thermal", None) is None:
+        return None
+    mechanics = None
+    if source.method == "closed-form":
+        mechanics = point_reader(source, cols, events, event_cols)
+        if mechanics is None:
+            return None
+        mechanics = mechanics[2]
+    reader = thermal_reader(source, events, float(t[-1]), mechanics)
+    if reader is None:
+        return None
+    lo, hi = float(t[0]), float(t[-1])
+    intervals = intervals_of(t, heat_breaks(reader, _breaks(events, event_cols) if events is not None else [], lo, hi),
+                             lo, hi, "start", "end")
+    if not intervals:
+        return None
+    return (_reads_at(reader, intervals, t), np.array([intervals[0].lo] + [iv.hi for iv in intervals]),
+            frozenset(source.columns) | frozenset(cols.names))
 
 
 def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],

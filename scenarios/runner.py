@@ -453,7 +453,12 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         from mechsim.scenarios.peaks import point_reader       # the validity's numbers on the continuous solution
         reader = point_reader(done.source, cols, events, event_cols)
         if reader is not None:
-            validity.located(valid, conditions, cols, reader, done.source.columns)
+            validity.located(valid, conditions, cols, reader[:2], done.source.columns)
+    if failure is None and thermal is not None and any(validity.locatable(valid, conditions, cols.names)):
+        from mechsim.scenarios.peaks import thermal_point_reader     # those on the thermal columns
+        reader = thermal_point_reader(done.source, cols, events, event_cols)
+        if reader is not None:
+            validity.located(valid, conditions, cols, reader[:2], reader[2])
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     tables = done.stats.get("tables_time_s", 0.0) + time.perf_counter() - post0

@@ -231,8 +231,9 @@ def _unbounded(scores: list[float]) -> bool:
 
 
 def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[bool]:
-    """Which conditions `located` reads: evaluated, and every column they need among the reader's (`readable`)."""
-    return [bool(row.get("evaluated")) and all(n in readable for n in c.needs)
+    """Which conditions `located` reads: evaluated, not located yet (by another reader), and every column they need
+    among the reader's (`readable`)."""
+    return [bool(row.get("evaluated")) and row.get("how") != "located" and all(n in readable for n in c.needs)
             for c, row in zip(conds, section["conditions"])]
 
 
@@ -240,7 +241,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
             readable) -> None:
     """The section's numbers (`evaluate`, on the rows) located on the run's continuous solution, in place, for each
     condition whose columns the reader reads (`readable`; `scenarios/peaks.py` `point_reader`: (read_at, the smooth
-    intervals' ends); a thermal condition stays on the rows, `how` says which): its worst value the extremum of the
+    intervals' ends), the mechanics'; then `thermal_point_reader`, the thermal columns', for those left; a
+    condition neither reads stays on the rows, `how` says which): its worst value the extremum of the
     quantity (the least margin, refined on readings around the CANDIDATES lowest row minima, within the smooth
     interval holding each), or unbounded (`_unbounded`: value None); its first violation the instant the margin
     crosses zero (between the last row that holds and the first that does not); its violated share with every

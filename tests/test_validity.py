@@ -91,16 +91,18 @@ def test_stop_keeps_the_run_up_to_its_first_violation():
     base = NO_PLOTS + ["duration='1.5 s'", "mechanism.pin_radius='0.05 mm'"]
     full = run(load("geneva-lc1", base))
     assert full.summary["validity"]["violated"] == ["hertz_half_width"]
-    t_v = _condition(full.summary, "hertz_half_width")["first_violation_t_s"]
+    t_v = _condition(full.summary, "hertz_half_width")["first_violation_t_s"]      # located between rows
     stopped = run(load("geneva-lc1", base + ["output.on_invalid='stop'"]))
-    assert stopped.failure.code.value == "model_invalid" and stopped.failure.time == t_v
+    t_stop = stopped.failure.time                                                  # its first violating row
+    assert stopped.failure.code.value == "model_invalid" and t_v <= t_stop
+    assert t_stop - t_v < full.scenario["output_step"]                  # the row after the located crossing
     assert stopped.summary["failure_code"] == "model_invalid" and stopped.failure.mode == "engaged"
-    expected = full.timeseries[full.timeseries["t_s"] <= t_v].reset_index(drop=True)
-    assert len(expected) > 100 and stopped.timeseries["t_s"].iloc[-1] == t_v
+    expected = full.timeseries[full.timeseries["t_s"] <= t_stop].reset_index(drop=True)
+    assert len(expected) > 100 and stopped.timeseries["t_s"].iloc[-1] == t_stop
     pd.testing.assert_frame_equal(stopped.timeseries, expected)
     ratio = stopped.timeseries["hertz_half_width_m"].to_numpy(float) / 0.05e-3
     assert ratio[-1] > 0.1 >= np.nanmax(ratio[:-1])
-    assert (stopped.events["t_s"] <= t_v).all() and len(stopped.events) == (full.events["t_s"] <= t_v).sum()
+    assert (stopped.events["t_s"] <= t_stop).all() and len(stopped.events) == (full.events["t_s"] <= t_stop).sum()
 
 
 def test_console_and_report_show_the_violations(tmp_path):
@@ -155,8 +157,10 @@ def test_the_seed_flash_formula_is_checked_against_its_peclet_range():
     assert result.summary["validity"]["valid"]
     N = result.timeseries["contact_force_N"].abs().to_numpy(float)
     N = N[N > 0]
-    assert high["worst"]["value"] == pytest.approx(0.583 * np.sqrt(N.max() / 93.33), rel=1e-3)
-    assert low["worst"]["value"] == pytest.approx(0.583 * np.sqrt(N.min() / 93.33), rel=1e-3)
+    peak = result.summary["peaks"]["contact_force_N"]["max"]["value"]         # located, as the worst L is
+    assert high["worst"]["value"] == pytest.approx(0.583 * np.sqrt(peak / 93.33), rel=1e-3)
+    # the least L located where a contact starts or ends, below the rows' least (0.15 % here)
+    assert low["worst"]["value"] <= 0.583 * np.sqrt(N.min() / 93.33) * (1 + 1e-3)
     assert 0.1 < low["worst"]["value"] < high["worst"]["value"] < 5
 
 
@@ -171,3 +175,26 @@ def test_a_pole_is_unbounded_at_any_output_step(step):
     # N there is zero: within the linear interpolation's reach of the rows around it (a row step of N's change)
     j = int(np.searchsorted(t, worst["t_s"]))
     assert N[j - 1] * N[j] <= 0 or abs(np.interp(worst["t_s"], t, N)) <= abs(N[j] - N[j - 1])
+
+
+def test_the_thermal_conditions_are_located_too():
+    """The thermal model's conditions (the Hertz band, the seed's Peclet range) are read between rows as its columns
+    are (`peaks.thermal_point_reader`, the thermal reader of the located peaks): each worst value the same at 1, 2.3
+    and 10 ms rows to 1e-9 (on the rows: 0.05 %, 0.08 % and 0.5 % below the located at 10 ms), the band's the Hertz
+    width at the located peak of the contact force, b growing as sqrt(N) (thermal/hertz.py `half_width`)."""
+    got = {}
+    for step in ("1 ms", "2.3 ms", "10 ms"):
+        r = run(load("geneva-seed-lc3-mu030", NO_PLOTS + ["thermal.flash='seed-blok'", f"output_step='{step}'",
+                                                          "duration='1.5 s'"]))
+        rows = r.summary["validity"]["conditions"]
+        assert [c["how"] for c in rows] == ["located"] * 3
+        got[step] = {c["name"]: c["worst"]["value"] for c in rows}
+        df, R = r.timeseries, r.scenario["mechanism"]["pin_radius"]
+        N, b = df["contact_force_N"].abs().to_numpy(float), df["hertz_half_width_m"].to_numpy(float)
+        i = int(np.nanargmax(N))
+        peak = r.summary["peaks"]["contact_force_N"]["max"]["value"]
+        assert got[step]["hertz_half_width"] == pytest.approx(b[i] * np.sqrt(peak / N[i]) / R, rel=1e-9)
+        assert got[step]["hertz_half_width"] >= np.nanmax(b) / R
+    for step in ("2.3 ms", "10 ms"):
+        for name, value in got["1 ms"].items():
+            assert got[step][name] == pytest.approx(value, rel=1e-9), (step, name)
