@@ -445,10 +445,10 @@ def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None, g
     each), then the instants between its knots (its ends and rows) in time order: the midpoint of each gap and,
     where `finest` is given (`_rows_finest`'s spacing), the knots added between rows farther apart than that (an
     interval with no row read over evenly then, from the state the run holds before it); with `graded`, knots at
-    1/2, 1/4, ... 1/2^graded of the first and last gaps from the interval's ends (a column that starts like the
-    square root of the time from an end, as a flash temperature where a contact begins, keeps Simpson's rule
-    within (2^-graded)^1.5 of its error on the gap); None where an interval holds no row and `finest` is not
-    given."""
+    1/2, 1/4, ... 1/2^graded of the first and last gaps from the interval's ends, and at (k / ONSET_KNOTS)^3 of the
+    interval from its start (a column that starts like the square root of the time from its start, as a flash
+    temperature where a contact begins, where Simpson's rule loses its order: the gaps grow from the start as the
+    column's derivatives fall); None where an interval holds no row and `finest` is not given."""
     if finest is None and any(not len(iv.rows) for iv in intervals):
         return None
     out = []
@@ -466,7 +466,8 @@ def _turn_mean_requests(t: np.ndarray, intervals: list[Interval], finest=None, g
         if graded and knots[-1] > knots[0]:
             steps = 0.5 ** np.arange(1, graded + 1)
             first, last = knots[1] - knots[0], knots[-1] - knots[-2]
-            more = np.r_[knots[0] + first * steps, knots[-1] - last * steps]
+            more = np.r_[knots[0] + first * steps, knots[-1] - last * steps,
+                         knots[0] + (knots[-1] - knots[0]) * (np.arange(1, ONSET_KNOTS) / ONSET_KNOTS) ** 3]
             more = more[(more > knots[0]) & (more < knots[-1])]
             inner = np.r_[inner, more]
             knots = np.unique(np.r_[knots, more])
@@ -512,6 +513,9 @@ def _turn_means(t: np.ndarray, values: dict[str, np.ndarray], a: float, b: float
 #: the thermal means' knots graded toward each interval's ends (`_turn_mean_requests`): a flash rise grows like
 #: sqrt(t - t_on) where a contact begins (docs/theory.md §G4.6)
 ONSET_GRADING = 6
+#: and over each interval from its start, at (k / ONSET_KNOTS)^3 of it: the first gap 1/ONSET_KNOTS^3 of the interval,
+#: where Simpson's rule on sqrt(t - t_on) errs by 3e-2 of the gap^1.5 (docs/theory.md §K5)
+ONSET_KNOTS = 64
 
 
 def _thermal_turn_means(reader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame, a: float,
