@@ -43,8 +43,8 @@ CLOSED_READINGS = 100_000
 #: farther apart (`_rows_finest`), from its states interpolated between its rows; as many samples at most
 DAE_STEP_RAD = math.radians(1.0)
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
-#: a turn's mean not read on the continuous solution (a reading between rows failed): the rows' trapezoidal rule
-HOW_ROWS_MEAN = "the trapezoidal rule on the output rows (the readings between them failed)"
+#: a turn's mean not read on the continuous solution (a column not read between rows, or a reading there failed)
+HOW_ROWS_MEAN = "the trapezoidal rule on the output rows (not read between them, or a reading there failed)"
 
 
 @dataclass
@@ -551,8 +551,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     """({column: {max, min, abs_max, how[, startup, periodic | cycle, singular]}}, the periodic regime or None) for
     each of peak_columns in the table (see the module docstring). Where the run reaches a periodic regime, max and
     min are the periodic regime's and `startup` holds the start-up's (docs/theory.md §K5), `periodic` the mean over
-    its last turn; elsewhere `cycle` holds the mean over the last complete drive cycle (`last_drive_cycle`). cols, event_cols: the table's and
-    the events' TableColumns (event_cols where at hand)."""
+    its last turn; elsewhere `cycle` holds the mean over the last complete drive cycle (`last_drive_cycle`). cols,
+    event_cols: the table's and the events' TableColumns (event_cols where at hand)."""
     out: dict = {}
     t = np.asarray(cols["t_s"], dtype=float)
     if not len(t):
@@ -665,7 +665,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         try:
             means = _turn_means(t[:n], values, *mean_over, turn,
                                 [x if x is not None else read(*r) for r, x in zip(means_asked, got)], means_asked)
-        except ReadingFailed:           # the rows' mean stands (`turn_mean`), and says so
+        except ReadingFailed:           # the rows' mean stands (`turn_mean`), and says so (HOW_ROWS_MEAN)
             pass
     located = iter(finish_all([p for p in plans if p is not None], tables[:len(requests)], read))
     located = [next(located) if p is not None else {} for p in plans]

@@ -185,7 +185,8 @@ def test_resume_recomputes_cases_another_build_computed_and_says_so_once(tmp_pat
     again = {p.name: json.loads(p.read_text()) for p in (out / "cases").glob("*.json")}
     assert {rec["computed_by"] for rec in again.values()} == {results_fingerprint()}
     for name, rec in again.items():
-        assert rec["row"]["work_drive_J"] == first[name]["row"]["work_drive_J"] and rec["run_id"] != first[name]["run_id"]
+        assert rec["row"]["work_drive_J"] == first[name]["row"]["work_drive_J"]
+        assert rec["run_id"] != first[name]["run_id"]
     r = invoke("sweep", *SWEEP, "--out", out)
     assert "(0 computed, 3 reused, 0 failed)" in r.stdout and "did not verify" not in r.stderr
 

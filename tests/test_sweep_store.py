@@ -1,6 +1,6 @@
 """The sweep store writes each case file as the earlier code did, byte for byte: the record (with the build that
-computed it) as JSON reads it back, then its checksum (SHA-256 of the sorted-key JSON); the file verifies; a store that wrote or verified a case tabulates
-it from memory with the same row."""
+computed it) as JSON reads it back, then its checksum (SHA-256 of the sorted-key JSON); the file verifies; a store
+that wrote or verified a case tabulates it from memory with the same row."""
 import json
 
 import numpy as np
