@@ -930,7 +930,8 @@ def console_lines(summary: dict) -> list[str]:
 
 def console_line(peaks: dict) -> str | None:
     """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
-    instant, and whether they are located or the rows' (the full entries are in summary.json)."""
+    instant, its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
+    whether they are located or the rows' (the full entries are in summary.json)."""
     parts = []
     for col in CONSOLE_COLUMNS:
         e = peaks.get(col)
@@ -943,6 +944,10 @@ def console_line(peaks: dict) -> str | None:
             return "unbounded" if x["value"] is None else f"{x['value']:.5g}"
         start = e.get("startup", {}).get("max")
         beside = f", start-up max {shown(start)}" if start else ""
+        turn = e.get("periodic") or e.get("cycle") or {}
+        if turn.get("mean") is not None or turn.get("unbounded"):
+            mean = "unbounded" if turn.get("unbounded") else f"{turn['mean']:.5g}"
+            beside += f", mean {mean} over the last turn"
         parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{beside}){tag}")
     return "peaks, min .. max: " + "; ".join(parts) if parts else None
 

@@ -119,3 +119,16 @@ def test_a_pole_inside_the_turn_has_no_mean():
     assert coupler["cycle"]["mean"] is None and coupler["cycle"]["unbounded"] is True
     assert coupler["max"]["value"] is None
     assert peaks["crank_speed_rad_s"]["cycle"]["mean"] == pytest.approx(2 * np.pi / (b - a), rel=1e-7)
+
+
+def test_the_console_and_the_report_show_the_mean_over_the_turn(prescribed):
+    """What a designer reads first carries the mean beside the peaks: the console's peaks line and report.html's peaks
+    table each show the summary's located mean of the contact force over the last drive cycle, and its span."""
+    from mechsim.scenarios.output.report_html import report_html
+    from mechsim.scenarios.peaks import console_lines
+    r = prescribed["1 ms"]
+    cycle = r.summary["peaks"]["contact_force_N"]["cycle"]
+    assert f"mean {cycle['mean']:.5g} over the last turn" in console_lines(r.summary)[0]
+    html = report_html(r, {})
+    a, b = cycle["mean_over"]
+    assert "mean over the last drive cycle" in html and f"{a:.6g} .. {b:.6g}" in html

@@ -192,6 +192,12 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
             words, unit = quantity(c)
             rows += [[words, side, "unbounded" if x["value"] is None else x["value"], unit or "1", x["t_s"],
                       x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
+            turn = p.get("periodic") or p.get("cycle")
+            if turn and (turn.get("mean") is not None or turn.get("unbounded")):   # (none: defined only in contact)
+                a, b = turn["mean_over"]
+                rows.append([words, "mean over the periodic turn" if "periodic" in p else "mean over the last drive "
+                             "cycle", "unbounded" if turn.get("unbounded") else turn["mean"], unit or "1",
+                             f"{a:.6g} .. {b:.6g}", "", "", turn.get("how", p.get("how", ""))])
         parts += [_table(["quantity", "", "value", "unit", "t (s)", "drive angle, wrapped (deg)", "at", "how"], rows)]
     parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
