@@ -78,8 +78,15 @@ def test_sweep_batch_matches_serial_and_says_what_ran_how(tmp_path):
     a = pd.read_parquet(tmp_path / "serial" / "sweep.parquet")
     b = pd.read_parquet(tmp_path / "batch" / "sweep.parquet")
     assert list(a.columns) == list(b.columns) and b["success"].all()
-    drop = [c for c in a.columns if c in TIMING]
+    means = [c for c in a.columns if c.startswith("cycle_mean_")]
+    drop = [c for c in a.columns if c in TIMING] + means
     pd.testing.assert_frame_equal(a.drop(columns=drop), b.drop(columns=drop), check_exact=False, rtol=1e-7)
+    for c in means:         # a mean near 0 (the wheel's acceleration over a turn) to 1e-7 of the column's own scale
+        col = c[len("cycle_mean_"):]
+        scale = np.maximum(a[f"peak_max_{col}"].abs(), a[f"peak_min_{col}"].abs()).to_numpy()
+        assert (a[c].isna() == b[c].isna()).all(), c
+        held = a[c].notna().to_numpy()
+        assert (np.abs(b[c] - a[c]).to_numpy()[held] <= 1e-7 * scale[held]).all(), c
     note = json.loads((tmp_path / "batch" / "sweep_summary.json").read_text())["batching"]
     assert note.startswith("batched: 3 case(s) in 1 vmapped diffrax group(s) of [3]"), note
     assert "--batch" in json.loads((tmp_path / "serial" / "sweep_summary.json").read_text())["batching"]

@@ -132,3 +132,15 @@ def test_the_console_and_the_report_show_the_mean_over_the_turn(prescribed):
     html = report_html(r, {})
     a, b = cycle["mean_over"]
     assert "mean over the last drive cycle" in html and f"{a:.6g} .. {b:.6g}" in html
+
+
+def test_a_sweep_row_carries_the_located_means():
+    """A sweep's table has each case's located means (`cycle_mean_<col>`, as mechsim compare names them): at the
+    prescribed crank speed w the drive's mean power equals the wheel load's T_L w / slots plus the mean friction
+    power, case by case, to 1e-9; a contact-only column has none (empty)."""
+    table = mechsim.sweep("geneva-lc1", {"load.wheel_torque": "5,9 N*m"}, set={"duration": "1.5 s"})
+    assert table["success"].all() and len(table) == 2
+    w = 5.34
+    np.testing.assert_allclose(w * table["cycle_mean_drive_torque_N_m"],
+                               table["load.wheel_torque_N_m"] * w / 4 + table["cycle_mean_friction_power_W"], rtol=1e-9)
+    assert table["cycle_mean_temp_contact_C"].isna().all()

@@ -112,7 +112,8 @@ def _scalar(v) -> bool:
 
 
 def summary_row(summary: dict) -> dict:
-    """The summary flattened: peaks with time and drive angle, energy, events, solver statistics, model."""
+    """The summary flattened: peaks with time and drive angle, each column's mean over the last turn, energy, events,
+    solver statistics, model."""
     row: dict = {"success": bool(summary.get("success")), "failure": summary.get("failure") or ""}
     model = summary.get("model", {})
     for k in ("drive", "method", "backend", "formulation", "thermal"):
@@ -126,6 +127,9 @@ def summary_row(summary: dict) -> dict:
                     row[f"{prefix}peak_{side}_{col}"] = sides[side]["value"]
                     row[f"{prefix}peak_{side}_{col}_at_t_s"] = sides[side]["t_s"]
                     row[f"{prefix}peak_{side}_{col}_at_drive_angle_deg"] = sides[side]["drive_angle_wrapped_deg"]
+        turn = pk.get("periodic") or pk.get("cycle")
+        if turn is not None:                # the located mean over the last turn (None: unbounded, or not defined)
+            row[f"cycle_mean_{col}"] = turn["mean"]
     energy = summary.get("energy") or {}
     for name, w in (energy.get("work_J") or {}).items():
         row[f"work_{name}_J"] = w
