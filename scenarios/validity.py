@@ -145,6 +145,9 @@ class _Job:
     root: float | None = None          # a crossing's instant, interpolated between the samples around it
     value: float | None = None         # the quantity there, interpolated the same way
 
+    def __post_init__(self):
+        self.end = self.hi                 # the bracket's end as given (the search narrows hi)
+
 
 def _refine(read_at, jobs: list[_Job]) -> None:
     """Every job's bracket narrowed on readings, all jobs in one pass of `read_at` (with groups) per step: SAMPLES
@@ -196,6 +199,17 @@ def _refine(read_at, jobs: list[_Job]) -> None:
                 job.lo, job.hi = max(lo, guess - w), min(hi, guess + w)
         live = [job for job in live if job not in failed and (job.first or not (_unbounded(job.scores)
                                                                                  or _settled(job.scores)))]
+
+
+def _crossing(jobs: list[_Job]) -> _Job | None:
+    """Of one gap's crossing searches, one per smooth interval in time order: the first that found its sign change
+    before its interval's end (inside it, or at its start: a change at the event before it, its one-sided limit
+    there), else the last (none read: None)."""
+    found = [job for job in jobs if job.found is not None]
+    for job in found:
+        if _instant(job) < job.end:
+            return job
+    return found[-1] if found else None
 
 
 def _instant(job: _Job) -> float:
@@ -256,7 +270,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     work = [_Condition(c, row, t, columns, ends) for c, row, ok in
             zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     work = [w for w in work if w.applies.any()]
-    _refine(read_at, [job for w in work for job in w.worst_jobs + w.crossing_jobs])
+    _refine(read_at, [job for w in work
+                      for job in w.worst_jobs + w.dip_jobs + [j for jobs in w.crossing_jobs for j in jobs]])
     _refine(read_at, [job for w in work for job in w.between_jobs()])
     for w in work:
         w.report()
@@ -293,14 +308,28 @@ class _Condition:
         rows = rows[(mm[rows] - rise <= mm[rows[0]]) | (np.arange(len(rows)) == 0)] if len(rows) else rows
         self.worst_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
                                 quantity) for i in rows]
+        # every other row minimum that holds, between rows that hold, and may dip below the bound between them: by
+        # no more than its rise to the higher neighbour (a violation narrower than a row, that no row sees)
+        every = np.flatnonzero(lower)
+        up = np.maximum(mm[np.maximum(every - 1, 0)], mm[np.minimum(every + 1, len(t) - 1)])
+        held = (mm[every] >= 0) & np.isfinite(up) & (mm[every] - (up - mm[every]) < 0)
+        self.dip_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
+                              quantity) for i in every[held] if int(i) not in set(rows.tolist())]
         # every sign change of the margin between two applying rows: into a violation (the margin's first
-        # negative sample) or out of one (the negated margin's)
+        # negative sample) or out of one (the negated margin's), each smooth interval between the two rows searched
+        # in time order (a sign change at an event between them: its one-sided limits, `_crossing`)
         both = applies[:-1] & applies[1:]
         bad = self.bad
         self.gaps = [(int(g), bool(bad[g])) for g in np.flatnonzero(both & (bad[:-1] != bad[1:]))]
-        self.crossing_jobs = [_Job(*self._within(g + 1, g, g + 1), margin, quantity, -1.0 if was_bad else 1.0, True)
-                              for g, was_bad in self.gaps]
-        self.extra: list[_Job] = []
+        self.crossing_jobs = [[_Job(lo, hi, margin, quantity, -1.0 if was_bad else 1.0, True)
+                               for lo, hi in self._pieces(float(t[g]), float(t[g + 1]))] for g, was_bad in self.gaps]
+        self.extra: list[tuple[_Job, _Job]] = []
+
+    def _pieces(self, a: float, b: float) -> list[tuple[float, float]]:
+        """[a, b] split at the smooth intervals' ends inside it, in time order."""
+        inside = self.ends[(self.ends > a) & (self.ends < b)].tolist()
+        cuts = [a, *inside, b]
+        return list(zip(cuts[:-1], cuts[1:]))
 
     def _within(self, centre: int, i: int, j: int) -> tuple[float, float]:
         """[t_i, t_j] clipped to the smooth interval holding row `centre` (a row at an event: the one before)."""
@@ -320,17 +349,22 @@ class _Condition:
         return best, False
 
     def between_jobs(self) -> list[_Job]:
-        """A worst margin below zero between two rows that hold: the crossings into and out of it."""
-        best, unbounded = self._best()
-        if best is None or unbounded or best.scores[-1] >= 0:
-            return []
-        t, at = self.t, best.found[0]
-        g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
-        if not (self.applies[g] and self.applies[g + 1]) or self.bad[g] or self.bad[g + 1]:
-            return []
-        self.extra = [_Job(float(t[g]), at, self.margin, self.quantity, 1.0, True),
-                      _Job(at, float(t[g + 1]), self.margin, self.quantity, -1.0, True)]
-        return self.extra
+        """Each least margin below zero between two rows that hold (the worst's, a dip's): the crossings into and out
+        of it, within its smooth interval (one gap between rows counted once)."""
+        t, gaps = self.t, set()
+        for job in self.worst_jobs + self.dip_jobs:
+            if job.found is None or not job.scores or job.scores[-1] >= 0 or _unbounded(job.scores):
+                continue
+            at = job.found[0]
+            g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
+            if g in gaps or not (self.applies[g] and self.applies[g + 1]) or self.bad[g] or self.bad[g + 1]:
+                continue
+            gaps.add(g)
+            k = int(np.clip(self.ends.searchsorted(at, side="left"), 1, len(self.ends) - 1))
+            lo, hi = max(float(t[g]), float(self.ends[k - 1])), min(float(t[g + 1]), float(self.ends[k]))
+            self.extra.append((_Job(lo, at, self.margin, self.quantity, 1.0, True),
+                               _Job(at, hi, self.margin, self.quantity, -1.0, True)))
+        return [job for pair in self.extra for job in pair]
 
     def report(self) -> None:
         row, t = self.row, self.t
@@ -344,17 +378,19 @@ class _Condition:
         total = float(weights.sum()) or 1.0
         violated = float(weights[self.bad].sum())
         starts = []
-        for (g, was_bad), job in zip(self.gaps, self.crossing_jobs):
-            if job.found is None:
+        for (g, was_bad), jobs in zip(self.gaps, self.crossing_jobs):
+            job = _crossing(jobs)
+            if job is None:
                 continue
             x = _instant(job)
             violated += (x - t[g] if was_bad else t[g + 1] - x) - 0.5 * (t[g + 1] - t[g])
             if not was_bad:
                 starts.append(job)
-        if self.extra and all(job.found is not None for job in self.extra):
-            violated += _instant(self.extra[1]) - _instant(self.extra[0])
-            row["violated_between_rows"] = True
-            starts.append(self.extra[0])
+        for into, out in self.extra:
+            if into.found is not None and out.found is not None:
+                violated += _instant(out) - _instant(into)
+                row["violated_between_rows"] = True
+                starts.append(into)
         row["violated_share"] = float(violated / total)
         # the first violation: the earliest crossing into it, or the first violating row where none lies before it
         # (the run's first row, or a row after one the condition does not apply to)

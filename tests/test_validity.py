@@ -198,3 +198,22 @@ def test_the_thermal_conditions_are_located_too():
     for step in ("2.3 ms", "10 ms"):
         for name, value in got["1 ms"].items():
             assert got[step][name] == pytest.approx(value, rel=1e-9), (step, name)
+
+
+def test_violations_narrower_than_a_row_count_at_any_output_step():
+    """A Geneva pin of 0.06338 mm: the Hertz band exceeds 0.1 R by 3e-5 of it at each engagement's force peak, for
+    about 1.4 ms, so most output steps put no row inside one. Each such dip between rows that hold is located
+    (the worst's and every other row minimum's that may reach the bound), and a crossing next to an event is
+    searched in each smooth interval between the rows: the violated share and the first violation the same at 1,
+    2.3, 3.7 and 7.3 ms rows to 1e-9 (before: a share of 3, 2, 1 and 6 such dips' time, whichever rows fell inside)."""
+    got = []
+    for step in ("1 ms", "2.3 ms", "3.7 ms", "7.3 ms"):
+        r = run(load("geneva-lc1", NO_PLOTS + ["duration='3 s'", "mechanism.pin_radius='0.06338 mm'",
+                                                f"output_step='{step}'"]))
+        band = _condition(r.summary, "hertz_half_width")
+        assert band["how"] == "located" and 0.1 < band["worst"]["value"] < 0.1 * (1 + 1e-4)
+        got.append((band["violated_share"], band["first_violation_t_s"]))
+    assert _condition(r.summary, "hertz_half_width").get("violated_between_rows")
+    for share, first in got[1:]:
+        assert share == pytest.approx(got[0][0], abs=1e-9) and first == pytest.approx(got[0][1], abs=1e-9)
+    assert got[0][0] > 0
