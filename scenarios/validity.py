@@ -124,6 +124,9 @@ GUESS_SHRINK = 64.0
 SETTLED = 1e-13
 #: row minima of a condition's margin refined (`located`), the lowest first
 CANDIDATES = 4
+#: other row minima that hold but may dip below the bound between their neighbours refined at most (`located`), those
+#: that may reach deepest first: a run's resources stay bounded however many turns it has
+DIPS = 256
 #: the worst value counts as unbounded where its magnitude grew by more than this in each of the last two passes
 UNBOUNDED_GROWTH = 3.0
 
@@ -312,9 +315,11 @@ class _Condition:
         # no more than its rise to the higher neighbour (a violation narrower than a row, that no row sees)
         every = np.flatnonzero(lower)
         up = np.maximum(mm[np.maximum(every - 1, 0)], mm[np.minimum(every + 1, len(t) - 1)])
-        held = (mm[every] >= 0) & np.isfinite(up) & (mm[every] - (up - mm[every]) < 0)
+        reach = mm[every] - (up - mm[every])           # the least a dip between the neighbours may reach
+        dips = every[(mm[every] >= 0) & np.isfinite(up) & (reach < 0) & ~np.isin(every, rows)]
+        dips = dips[np.argsort(reach[np.searchsorted(every, dips)], kind="stable")][:DIPS]   # the deepest first
         self.dip_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
-                              quantity) for i in every[held] if int(i) not in set(rows.tolist())]
+                              quantity) for i in dips]
         # every sign change of the margin between two applying rows: into a violation (the margin's first
         # negative sample) or out of one (the negated margin's), each smooth interval between the two rows searched
         # in time order (a sign change at an event between them: its one-sided limits, `_crossing`)
