@@ -135,3 +135,35 @@ def test_another_fork_does_not_hold_the_workers_pipes():
     assert out.returncode == 0, out.stderr
     assert "worker exit status: 0" in out.stdout
     assert "other alive: True" in out.stdout
+
+
+_INTERRUPTED_SCRIPT = """
+import threading
+from mechsim.scenarios import api
+from mechsim.scenarios.output.figure_worker import FigureWorker
+worker = FigureWorker.start()
+assert worker is not None
+result = api.run("geneva-lc1", set=["duration='0.3 s'", "output_step='5 ms'", "output.plots=false"])
+start = threading.Thread.start
+
+
+def interrupted(self):
+    raise KeyboardInterrupt         # a Ctrl-C as the thread feeding the job pipe starts
+threading.Thread.start = interrupted
+try:
+    with worker:
+        worker.draw(result, result.mechanism, "/nonexistent")
+except KeyboardInterrupt:
+    print("interrupted, closed")
+"""
+
+
+def test_a_ctrl_c_as_the_job_is_handed_over_leaves_no_traceback():
+    """`mechsim run` interrupted while it hands the figures' job to the worker (the sender thread not started yet):
+    closing the worker waits for no thread, stops the worker and lets the KeyboardInterrupt through (the CLI then
+    says so in one line, exit 130); it raised "cannot join thread before it is started" (a traceback, exit 1)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    out = subprocess.run([sys.executable, "-c", _INTERRUPTED_SCRIPT], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr[-2000:]
+    assert "interrupted, closed" in out.stdout

@@ -141,8 +141,7 @@ class FigureWorker:
             self.report_fd = None
             while chunk := pipe.read(4096):
                 chunks.append(chunk)
-        if self.sender is not None:
-            self.sender.join()
+        self._join_sender()
         reports = []
         for line in b"".join(chunks).decode("ascii", "replace").splitlines():
             try:
@@ -186,8 +185,17 @@ class FigureWorker:
             if fd is not None:
                 _close(fd)
                 setattr(self, name, None)
-        if self.sender is not None:
+        self._join_sender()
+
+    def _join_sender(self) -> None:
+        """Wait for the thread feeding the job pipe, if it started: a Ctrl-C inside its `start` leaves one that never
+        ran (nothing to wait for; the process is ending)."""
+        if self.sender is None:
+            return
+        try:
             self.sender.join()
+        except RuntimeError:            # "cannot join thread before it is started"
+            pass
 
     def __enter__(self) -> "FigureWorker":
         return self
