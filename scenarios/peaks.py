@@ -590,14 +590,15 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     tn = t[:n]
     raw = read
     read = _Readings(raw) if raw is not None else None
+    locate_turns = None                 # where the drive's turns are located on the continuous solution
     if raw is not None and source.method != "closed-form":
         windows = [(float(t[0]), t_end, "run")]
         if speed_column in cols and not source.drive.is_prescribed:
             # the regime's turns located on the continuous solution first: its windows and turn start there
             whole = (_intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), raw)
                      if angle_column in source.columns and speed_column in source.columns else [])
-            regime = periodic_regime(tn, angles[:n], np.asarray(cols[speed_column], float)[:n],
-                                     _located_turns(read, whole, tn, angle_column, speed_column) if whole else None,
+            locate_turns = _located_turns(read, whole, tn, angle_column, speed_column) if whole else None
+            regime = periodic_regime(tn, angles[:n], np.asarray(cols[speed_column], float)[:n], locate_turns,
                                      {c: np.asarray(cols[c], float)[:n] for c in cols.names
                                       if c.startswith("work_") and c.endswith("_J") and c in source.columns})
     elif source is not None and len(t) > 1:
@@ -608,12 +609,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if regime is None and raw is not None and speed_column in cols:
         cycle = source.mech.drive_cycle()
         if cycle is not None and cycle.column == angle_column:
-            locating = (source.method != "closed-form" and not source.drive.is_prescribed
-                        and angle_column in source.columns and speed_column in source.columns)
-            whole = _intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), raw) if locating else []
             mean_over = last_drive_cycle(tn, angles[:n], np.asarray(cols[speed_column], float)[:n], cycle,
-                                         _located_turns(read, whole, tn, angle_column, speed_column) if whole
-                                         else None)
+                                         locate_turns)
     if regime is not None and regime["startup_turns"] > 0:
         windows = [(regime["from_t_s"], t_end, "periodic"), (float(t[0]), regime["from_t_s"], "startup")]
     kinds = {"run": ("start", "end"), "periodic": ("start of the periodic regime", "end"),

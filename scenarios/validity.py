@@ -338,9 +338,13 @@ class _Condition:
 
     def _within(self, centre: int, i: int, j: int) -> tuple[float, float]:
         """[t_i, t_j] clipped to the smooth interval holding row `centre` (a row at an event: the one before)."""
-        t, ends = self.t, self.ends
-        k = int(np.clip(ends.searchsorted(t[centre], side="left"), 1, len(ends) - 1))
-        return max(float(t[i]), float(ends[k - 1])), min(float(t[j]), float(ends[k]))
+        return self._clipped(float(self.t[centre]), float(self.t[i]), float(self.t[j]))
+
+    def _clipped(self, at: float, lo: float, hi: float) -> tuple[float, float]:
+        """[lo, hi] clipped to the smooth interval holding the instant `at` (one at an event: the one before)."""
+        ends = self.ends
+        k = int(np.clip(ends.searchsorted(at, side="left"), 1, len(ends) - 1))
+        return max(lo, float(ends[k - 1])), min(hi, float(ends[k]))
 
     def _best(self):
         best = None
@@ -365,8 +369,7 @@ class _Condition:
             if g in gaps or not (self.applies[g] and self.applies[g + 1]) or self.bad[g] or self.bad[g + 1]:
                 continue
             gaps.add(g)
-            k = int(np.clip(self.ends.searchsorted(at, side="left"), 1, len(self.ends) - 1))
-            lo, hi = max(float(t[g]), float(self.ends[k - 1])), min(float(t[g + 1]), float(self.ends[k]))
+            lo, hi = self._clipped(at, float(t[g]), float(t[g + 1]))
             self.extra.append((_Job(lo, at, self.margin, self.quantity, 1.0, True),
                                _Job(at, hi, self.margin, self.quantity, -1.0, True)))
         return [job for pair in self.extra for job in pair]
