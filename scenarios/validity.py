@@ -264,7 +264,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     interval holding each), or unbounded (`_unbounded`: value None); its first violation the instant the margin
     crosses zero (between the last row that holds and the first that does not); its violated share with every
     crossing between rows located (the rows' half-gap weights elsewhere); a violation between two rows that hold,
-    which the worst reveals, counted as well. Every condition's brackets are narrowed together (`_refine`)
+    which the worst or a dip reveals, counted as well, and a return to holding between two rows that violate, which a
+    rise reveals, taken off. Every condition's brackets are narrowed together (`_refine`)
     (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
@@ -274,7 +275,7 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
             zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     work = [w for w in work if w.applies.any()]
     _refine(read_at, [job for w in work
-                      for job in w.worst_jobs + w.dip_jobs + [j for jobs in w.crossing_jobs for j in jobs]])
+                      for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]])
     _refine(read_at, [job for w in work for job in w.between_jobs()])
     for w in work:
         w.report()
@@ -320,6 +321,17 @@ class _Condition:
         dips = dips[np.argsort(reach[np.searchsorted(every, dips)], kind="stable")][:DIPS]   # the deepest first
         self.dip_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
                               quantity) for i in dips]
+        # the converse: every row maximum that violates, between rows that violate, and may rise to the bound between
+        # them, by no more than its fall to the lower neighbour (a return to holding narrower than a row); its job
+        # narrows to the greatest margin (the least of the negated one)
+        nn = np.where(applies, m, -np.inf)
+        tops = np.flatnonzero(np.r_[True, nn[1:] >= nn[:-1]] & np.r_[nn[:-1] >= nn[1:], True] & self.bad)
+        down = np.minimum(nn[np.maximum(tops - 1, 0)], nn[np.minimum(tops + 1, len(t) - 1)])
+        high = nn[tops] + (nn[tops] - down)             # the most a rise between the neighbours may reach
+        able = np.isfinite(down) & (high >= 0)
+        tops = tops[able][np.argsort(-high[able], kind="stable")][:DIPS]                 # the highest first
+        self.rise_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
+                               quantity, -1.0) for i in tops]
         # every sign change of the margin between two applying rows: into a violation (the margin's first
         # negative sample) or out of one (the negated margin's), each smooth interval between the two rows searched
         # in time order (a sign change at an event between them: its one-sided limits, `_crossing`)
@@ -329,6 +341,7 @@ class _Condition:
         self.crossing_jobs = [[_Job(lo, hi, margin, quantity, -1.0 if was_bad else 1.0, True)
                                for lo, hi in self._pieces(float(t[g]), float(t[g + 1]))] for g, was_bad in self.gaps]
         self.extra: list[tuple[_Job, _Job]] = []
+        self.holds: list[tuple[_Job, _Job]] = []
 
     def _pieces(self, a: float, b: float) -> list[tuple[float, float]]:
         """[a, b] split at the smooth intervals' ends inside it, in time order."""
@@ -359,7 +372,8 @@ class _Condition:
 
     def between_jobs(self) -> list[_Job]:
         """Each least margin below zero between two rows that hold (the worst's, a dip's): the crossings into and out
-        of it, within its smooth interval (one gap between rows counted once)."""
+        of it; each greatest margin above zero between two rows that violate (a rise's): the crossings out of and back
+        into the violation; within its smooth interval (one gap between rows counted once)."""
         t, gaps = self.t, set()
         for job in self.worst_jobs + self.dip_jobs:
             if job.found is None or not job.scores or job.scores[-1] >= 0 or _unbounded(job.scores):
@@ -372,7 +386,19 @@ class _Condition:
             lo, hi = self._clipped(at, float(t[g]), float(t[g + 1]))
             self.extra.append((_Job(lo, at, self.margin, self.quantity, 1.0, True),
                                _Job(at, hi, self.margin, self.quantity, -1.0, True)))
-        return [job for pair in self.extra for job in pair]
+        gaps = set()
+        for job in self.rise_jobs:          # a greatest margin above zero between two rows that violate: its ends
+            if job.found is None or not job.scores or job.scores[-1] >= 0 or _unbounded(job.scores):
+                continue
+            at = job.found[0]
+            g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
+            if g in gaps or not (self.bad[g] and self.bad[g + 1]):
+                continue
+            gaps.add(g)
+            lo, hi = self._clipped(at, float(t[g]), float(t[g + 1]))
+            self.holds.append((_Job(lo, at, self.margin, self.quantity, -1.0, True),
+                               _Job(at, hi, self.margin, self.quantity, 1.0, True)))
+        return [job for pair in self.extra + self.holds for job in pair]
 
     def report(self) -> None:
         row, t = self.row, self.t
@@ -399,6 +425,10 @@ class _Condition:
                 violated += _instant(out) - _instant(into)
                 row["violated_between_rows"] = True
                 starts.append(into)
+        for out, back in self.holds:
+            if out.found is not None and back.found is not None:
+                violated -= _instant(back) - _instant(out)
+                row["held_between_rows"] = True
         row["violated_share"] = float(violated / total)
         # the first violation: the earliest crossing into it, or the first violating row where none lies before it
         # (the run's first row, or a row after one the condition does not apply to)

@@ -217,3 +217,39 @@ def test_violations_narrower_than_a_row_count_at_any_output_step():
     for share, first in got[1:]:
         assert share == pytest.approx(got[0][0], abs=1e-9) and first == pytest.approx(got[0][1], abs=1e-9)
     assert got[0][0] > 0
+
+
+@pytest.mark.parametrize("case", ["a violation inside holding", "a return to holding inside a violation"])
+def test_a_crossing_pair_narrower_than_a_row_is_located_against_the_closed_form(case):
+    """q(t) = c + s 0.1003 exp(-((t - 0.4137 s) / 5 ms)^2) against q <= 0.9, read exactly between rows (a closed form):
+    with c = 0.8, s = 1 the condition is violated for 2 w sqrt(ln 1.003) = 0.547 ms around the peak, with c = 1,
+    s = -1 it holds for that long inside a violation; no row falls inside that stretch at any of these output steps,
+    while the rows show the peak's approach. The violated share is the closed form's (0.547 ms of the 1 s run, or
+    all of it but those) to 1e-9 at 1, 2.3, 3.7 and 7.3 ms rows; before the return to holding was located, its share
+    was 1 (every row violates)."""
+    from mechsim.mechanisms.base import ValidityCondition
+    from mechsim.scenarios import validity
+    centre, width, height, bound = 0.4137, 5e-3, 0.1003, 0.9
+    base, sign = (0.8, 1.0) if case.startswith("a violation") else (1.0, -1.0)
+
+    def q(columns):
+        return base + sign * height * np.exp(-((np.asarray(columns["t_s"], float) - centre) / width) ** 2)
+
+    condition = ValidityCondition("q", "a closed form", q, bound, "max", "", "closed form", ("t_s",))
+    stretch = 2 * width * np.sqrt(np.log(height / (bound - 0.8)))       # where q crosses 0.9 (either case)
+    exact = stretch if sign > 0 else 1.0 - stretch
+    for step in (1e-3, 2.3e-3, 3.7e-3, 7.3e-3):
+        t = np.r_[np.arange(0.0, 1.0, step), 1.0]
+        inside = np.abs(t - centre) < 0.5 * stretch
+        assert not inside.any()             # no row sees it
+        section = validity.evaluate([condition], {"t_s": t})
+        validity.located(section, [condition], {"t_s": t},
+                         (lambda grids, groups=True: [{"t_s": np.asarray(g, float)} for g in grids],
+                          np.array([0.0, 1.0])), {"t_s"})
+        row = section["conditions"][0]
+        assert row["how"] == "located"
+        assert row["violated_share"] == pytest.approx(exact, abs=1e-9), step
+        assert row.get("violated_between_rows" if sign > 0 else "held_between_rows")
+        if sign > 0:
+            assert row["worst"]["value"] == pytest.approx(0.8 + height, rel=1e-12)
+            assert row["first_violation_t_s"] == pytest.approx(centre - 0.5 * stretch, abs=1e-9)
