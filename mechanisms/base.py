@@ -130,7 +130,10 @@ class ValidityCondition:
     (`sense` "max") or quantity >= bound (`sense` "min"). `margin` is the signed distance to the bound, >= 0 where
     valid; the worst row is the one of least margin. `needs` names the columns `quantity` reads (the condition is
     not evaluated where the table lacks one); `unit` is the quantity's unit ("" if dimensionless); `source` where
-    the condition comes from (paper and equation, or docs section)."""
+    the condition comes from (paper and equation, or docs section). `signed(columns)`, where given, is a continuous
+    signed quantity that passes zero exactly where `quantity` does (a magnitude's own sign: the traction of a friction
+    demand |F_t|/|N|): where it changes sign between two rows of a smooth interval, the quantity reaches zero
+    between them, however narrow that stretch (`scenarios/validity.py` `located` searches there)."""
 
     name: str
     description: str
@@ -140,6 +143,7 @@ class ValidityCondition:
     unit: str
     source: str
     needs: tuple[str, ...] = ()
+    signed: object = None       # Callable[[Mapping[str, np.ndarray]], np.ndarray] | None
 
     def __post_init__(self) -> None:
         if self.sense not in ("max", "min"):

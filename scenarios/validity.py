@@ -265,7 +265,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     crosses zero (between the last row that holds and the first that does not); its violated share with every
     crossing between rows located (the rows' half-gap weights elsewhere); a violation between two rows that hold,
     which the worst or a dip reveals, counted as well, and a return to holding between two rows that violate, which a
-    rise reveals, taken off. Every condition's brackets are narrowed together (`_refine`)
+    rise reveals, taken off (a dip or rise: a row extremum that may reach the bound between its neighbours, or a
+    gap where the condition's signed quantity changes sign, `ValidityCondition.signed`). Every condition's brackets are narrowed together (`_refine`)
     (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
@@ -332,6 +333,22 @@ class _Condition:
         tops = tops[able][np.argsort(-high[able], kind="stable")][:DIPS]                 # the highest first
         self.rise_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
                                quantity, -1.0) for i in tops]
+        # where the condition's signed quantity changes sign between two rows of a smooth interval, the quantity
+        # passes zero between them (`ValidityCondition.signed`): a return to holding there between two rows that
+        # violate, or a violation between two that hold, whatever the rows show; the gap searched as a rise or dip
+        if c.signed is not None:
+            s = np.broadcast_to(np.asarray(c.signed(columns), dtype=float), t.shape)
+            with np.errstate(invalid="ignore"):
+                change = applies[:-1] & applies[1:] & (s[:-1] * s[1:] < 0)
+            holds_at_zero = bool(c.margin(0.0) >= 0)
+            change &= (self.bad[:-1] & self.bad[1:]) if holds_at_zero else ~(self.bad[:-1] | self.bad[1:])
+            change &= ends.searchsorted(t[:-1], side="right") == ends.searchsorted(t[1:], side="left")  # no event
+            jobs = [_Job(float(t[g]), float(t[g + 1]), margin, quantity, -1.0 if holds_at_zero else 1.0)
+                    for g in np.flatnonzero(change)[:DIPS]]
+            if holds_at_zero:
+                self.rise_jobs += jobs
+            else:
+                self.dip_jobs += jobs
         # every sign change of the margin between two applying rows: into a violation (the margin's first
         # negative sample) or out of one (the negated margin's), each smooth interval between the two rows searched
         # in time order (a sign change at an event between them: its one-sided limits, `_crossing`)
@@ -340,8 +357,8 @@ class _Condition:
         self.gaps = [(int(g), bool(bad[g])) for g in np.flatnonzero(both & (bad[:-1] != bad[1:]))]
         self.crossing_jobs = [[_Job(lo, hi, margin, quantity, -1.0 if was_bad else 1.0, True)
                                for lo, hi in self._pieces(float(t[g]), float(t[g + 1]))] for g, was_bad in self.gaps]
-        self.extra: list[tuple[_Job, _Job]] = []
-        self.holds: list[tuple[_Job, _Job]] = []
+        self.extra: list[tuple[list[_Job], list[_Job]]] = []      # (`between_jobs`)
+        self.holds: list[tuple[list[_Job], list[_Job]]] = []
 
     def _pieces(self, a: float, b: float) -> list[tuple[float, float]]:
         """[a, b] split at the smooth intervals' ends inside it, in time order."""
@@ -373,32 +390,32 @@ class _Condition:
     def between_jobs(self) -> list[_Job]:
         """Each least margin below zero between two rows that hold (the worst's, a dip's): the crossings into and out
         of it; each greatest margin above zero between two rows that violate (a rise's): the crossings out of and back
-        into the violation; within its smooth interval (one gap between rows counted once)."""
-        t, gaps = self.t, set()
-        for job in self.worst_jobs + self.dip_jobs:
+        into the violation (`_pairs`)."""
+        self.extra = self._pairs(self.worst_jobs + self.dip_jobs, holding=True)
+        self.holds = self._pairs(self.rise_jobs, holding=False)
+        return [job for pair in self.extra + self.holds for side in pair for job in side]
+
+    def _pairs(self, found_by: list[_Job], holding: bool) -> list[tuple[list[_Job], list[_Job]]]:
+        """For each job whose extremum lies beyond the bound between two rows that hold (`holding`) or that violate:
+        the searches for the crossing before it and the one after it, each side's stretch between the extremum and
+        the row split at the smooth intervals' ends (`_pieces`; `_crossing` picks, so a stretch that runs on across
+        an event, a dead point's, is followed into the next interval); one gap between rows counted once."""
+        t, gaps, out = self.t, set(), []
+        sign = 1.0 if holding else -1.0         # the first crossing: into the violation, or out of it
+        for job in found_by:
             if job.found is None or not job.scores or job.scores[-1] >= 0 or _unbounded(job.scores):
                 continue
             at = job.found[0]
             g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
-            if g in gaps or not (self.applies[g] and self.applies[g + 1]) or self.bad[g] or self.bad[g + 1]:
+            rows_alike = (self.applies[g] and self.applies[g + 1] and not (self.bad[g] or self.bad[g + 1])
+                          if holding else self.bad[g] and self.bad[g + 1])
+            if g in gaps or not rows_alike:
                 continue
             gaps.add(g)
-            lo, hi = self._clipped(at, float(t[g]), float(t[g + 1]))
-            self.extra.append((_Job(lo, at, self.margin, self.quantity, 1.0, True),
-                               _Job(at, hi, self.margin, self.quantity, -1.0, True)))
-        gaps = set()
-        for job in self.rise_jobs:          # a greatest margin above zero between two rows that violate: its ends
-            if job.found is None or not job.scores or job.scores[-1] >= 0 or _unbounded(job.scores):
-                continue
-            at = job.found[0]
-            g = int(np.clip(t.searchsorted(at, side="right") - 1, 0, len(t) - 2))
-            if g in gaps or not (self.bad[g] and self.bad[g + 1]):
-                continue
-            gaps.add(g)
-            lo, hi = self._clipped(at, float(t[g]), float(t[g + 1]))
-            self.holds.append((_Job(lo, at, self.margin, self.quantity, -1.0, True),
-                               _Job(at, hi, self.margin, self.quantity, 1.0, True)))
-        return [job for pair in self.extra + self.holds for job in pair]
+            out.append(([_Job(lo, hi, self.margin, self.quantity, sign, True) for lo, hi in self._pieces(float(t[g]), at)],
+                        [_Job(lo, hi, self.margin, self.quantity, -sign, True)
+                         for lo, hi in self._pieces(at, float(t[g + 1]))]))
+        return out
 
     def report(self) -> None:
         row, t = self.row, self.t
@@ -420,15 +437,14 @@ class _Condition:
             violated += (x - t[g] if was_bad else t[g + 1] - x) - 0.5 * (t[g + 1] - t[g])
             if not was_bad:
                 starts.append(job)
-        for into, out in self.extra:
-            if into.found is not None and out.found is not None:
-                violated += _instant(out) - _instant(into)
-                row["violated_between_rows"] = True
-                starts.append(into)
-        for out, back in self.holds:
-            if out.found is not None and back.found is not None:
-                violated -= _instant(back) - _instant(out)
-                row["held_between_rows"] = True
+        for held, (before, after) in [(False, pair) for pair in self.extra] + [(True, pair) for pair in self.holds]:
+            first, second = _crossing(before), _crossing(after)
+            if first is None or second is None:
+                continue
+            violated += (_instant(first) - _instant(second)) if held else (_instant(second) - _instant(first))
+            row["held_between_rows" if held else "violated_between_rows"] = True
+            if not held:
+                starts.append(first)
         row["violated_share"] = float(violated / total)
         # the first violation: the earliest crossing into it, or the first violating row where none lies before it
         # (the run's first row, or a row after one the condition does not apply to)

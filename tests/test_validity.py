@@ -253,3 +253,62 @@ def test_a_crossing_pair_narrower_than_a_row_is_located_against_the_closed_form(
         if sign > 0:
             assert row["worst"]["value"] == pytest.approx(0.8 + height, rel=1e-12)
             assert row["first_violation_t_s"] == pytest.approx(centre - 0.5 * stretch, abs=1e-9)
+
+
+def test_a_sign_change_between_rows_finds_a_return_to_holding_no_row_hints_at():
+    """|x| <= 0.05 with x(t) = tanh((t - 0.4137 s) / 0.1 ms): every row violates (|x| = 1 to round-off), the condition
+    holds for 2 w atanh(0.05) = 10 us around the zero of x, and the rows show no sign of it but x's sign, which
+    changes between two rows (`ValidityCondition.signed`, as the rolling pair's friction demand declares its
+    traction): the violated share is the closed form's to 1e-9 at four output steps; without `signed` it is 1."""
+    from mechsim.mechanisms.base import ValidityCondition
+    from mechsim.scenarios import validity
+    centre, width, bound = 0.4137, 1e-4, 0.05
+
+    def x(columns):
+        return np.tanh((np.asarray(columns["t_s"], float) - centre) / width)
+
+    def magnitude(columns):
+        return np.abs(x(columns))
+
+    exact = 1.0 - 2 * width * np.arctanh(bound)
+    for signed in (x, None):
+        condition = ValidityCondition("x", "a closed form", magnitude, bound, "max", "", "closed form", ("t_s",),
+                                      signed)
+        for step in (1e-3, 2.3e-3, 3.7e-3, 7.3e-3):
+            t = np.r_[np.arange(0.0, 1.0, step), 1.0]
+            section = validity.evaluate([condition], {"t_s": t})
+            validity.located(section, [condition], {"t_s": t},
+                             (lambda grids, groups=True: [{"t_s": np.asarray(g, float)} for g in grids],
+                              np.array([0.0, 1.0])), {"t_s"})
+            row = section["conditions"][0]
+            assert row["violated_rows"] == len(t)
+            if signed is None:
+                assert row["violated_share"] == 1.0
+            else:
+                assert row["violated_share"] == pytest.approx(exact, abs=1e-9), step
+                assert row["held_between_rows"]
+
+
+def test_a_violation_across_an_event_between_rows_counts_on_both_sides():
+    """|t - t_e| / tau >= 0.5 with an event at t_e = 0.4137 s (a dead point: the quantity's least, zero, is the event's
+    one-sided limit) and tau = 1 ms: violated for tau around the event, between two rows that hold at these output
+    steps. The stretch after the event is searched in the next smooth interval: the share is tau / 1 s to 1e-9 (before,
+    the half before the event alone: rolling-b-components' dead points at 7 ms rows, 5.0e-4 against 1.0e-3)."""
+    from mechsim.mechanisms.base import ValidityCondition
+    from mechsim.scenarios import validity
+    event, tau = 0.4137, 1e-3
+
+    def distance(columns):
+        return np.abs(np.asarray(columns["t_s"], float) - event) / tau
+
+    condition = ValidityCondition("d", "a closed form", distance, 0.5, "min", "", "closed form", ("t_s",))
+    for step in (1.7e-3, 2.9e-3, 3.7e-3, 7.3e-3):
+        t = np.r_[np.arange(0.0, 1.0, step), 1.0]
+        section = validity.evaluate([condition], {"t_s": t})
+        assert section["conditions"][0]["violated_rows"] == 0
+        validity.located(section, [condition], {"t_s": t},
+                         (lambda grids, groups=True: [{"t_s": np.asarray(g, float)} for g in grids],
+                          np.array([0.0, event, 1.0])), {"t_s"})
+        row = section["conditions"][0]
+        assert row["violated_share"] == pytest.approx(tau, abs=1e-9), step
+        assert row["first_violation_t_s"] == pytest.approx(event - 0.5 * tau, abs=1e-9)

@@ -476,16 +476,20 @@ class ChainDwell(Mechanism):
         is regular only while the dyad is neither stretched nor folded, |sin(theta - phi)| >= DEAD_CENTRE_MARGIN;
         near there the coupler force grows without bound. The dwell and swing modes carry their own regular rows
         (not evaluated there)."""
-        def sine(c):
-            values = np.abs(np.sin(np.asarray(c["coupler_angle_rad"], dtype=float)
-                                   - np.asarray(c["crank_angle_rad"], dtype=float)))
+        def signed_sine(c):
+            values = np.sin(np.asarray(c["coupler_angle_rad"], dtype=float)
+                            - np.asarray(c["crank_angle_rad"], dtype=float))
             modes = np.asarray(c["mode"], dtype=object)
             return np.where((modes == "line") | (modes == "arc"), values, np.nan)
+
+        def sine(c):
+            return np.abs(signed_sine(c))
         return (ValidityCondition(
             "dead_centre_distance", f"|sin(theta - phi)| >= {DEAD_CENTRE_MARGIN:g} on the chain's lines and arcs: "
             "away from the dead centres (dyad stretched or folded), where the loop closure is singular and the "
             "coupler force grows without bound", sine, DEAD_CENTRE_MARGIN, "min", "",
-            "docs/theory.md §K1.5; docs/chain_dwell.md, 'Validity'", ("coupler_angle_rad", "crank_angle_rad", "mode")),)
+            "docs/theory.md §K1.5; docs/chain_dwell.md, 'Validity'", ("coupler_angle_rad", "crank_angle_rad", "mode"),
+            signed_sine),)
 
     def drive_cycle(self) -> DriveCycle:
         """A chain circuit of the driving sprocket (El-Shakery eq. 31)."""

@@ -677,13 +677,15 @@ class RollingPairFourBar(Mechanism):
                 "rolling_without_slip", f"friction demand |F_t|/|N| within the friction available, contact.friction "
                 f"= {self.friction:g}: rolling without slip needs it (the model does not slip)",
                 lambda c: np.asarray(c["friction_demand"], dtype=float), float(self.friction), "max", "",
-                "Coulomb's law of static friction; docs/rolling_pair.md, 'Validity'", ("friction_demand",)),
+                "Coulomb's law of static friction; docs/rolling_pair.md, 'Validity'",
+                ("friction_demand", "traction_force_N"), lambda c: np.asarray(c["traction_force_N"], dtype=float)),
             ValidityCondition(
                 "dead_point_distance", f"|{trans}| >= mechanism.dead_point_margin = {self.dead_point_margin:g}: "
                 f"away from the dead points ({where}), where the driven link's speed must vanish and the joint "
                 "forces grow without bound",
                 lambda c: np.abs(np.asarray(c[trans], dtype=float)), float(self.dead_point_margin), "min", "",
-                "docs/theory.md §K4 point 4; docs/rolling_pair.md, 'Validity'", (trans,)),
+                "docs/theory.md §K4 point 4; docs/rolling_pair.md, 'Validity'", (trans,),
+                lambda c: np.asarray(c[trans], dtype=float)),
         )
 
     def drive_cycle(self) -> DriveCycle:
