@@ -152,6 +152,24 @@ class _Job:
         self.end = self.hi                 # the bracket's end as given (the search narrows hi)
 
 
+@dataclass
+class _Edge:
+    """A gap between rows with an event inside where the condition starts or stops applying, or where it applies only
+    between the rows (a smooth interval without rows): its pieces between the smooth intervals' ends, the crossing
+    searched in the first and the last where that row's side applies and its status may change before the event
+    (None: it applies throughout at the row's status, or does not apply), each rowless piece's least margin, and
+    after those (`_Condition.between_jobs`) each rowless violation's crossings and the instant a violation begins at
+    the event, where one does."""
+
+    g: int
+    pieces: list
+    first: _Job | None = None
+    last: _Job | None = None
+    middle: list = field(default_factory=list)      # (least margin's job, (a, b)) of each rowless piece searched
+    pairs: list = field(default_factory=list)        # (into, out) of each rowless piece's violation
+    begins: _Job | None = None                       # the last piece's start, violated there, read
+
+
 def _refine(read_at, jobs: list[_Job]) -> None:
     """Every job's bracket narrowed on readings, all jobs in one pass of `read_at` (with groups) per step: SAMPLES
     instants evenly over it (its ends included); the next bracket is 1/GUESS_SHRINK of a spacing either side of the
@@ -201,7 +219,8 @@ def _refine(read_at, jobs: list[_Job]) -> None:
                 w = (grid[1] - grid[0]) / GUESS_SHRINK
                 job.lo, job.hi = max(lo, guess - w), min(hi, guess + w)
         live = [job for job in live if job not in failed and (job.first or not (_unbounded(job.scores)
-                                                                                 or _settled(job.scores)))]
+                                                                                 or _settled(job.scores)
+                                                                                 or job.scores[-1] == np.inf))]
 
 
 def _crossing(jobs: list[_Job]) -> _Job | None:
@@ -266,7 +285,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     crossing between rows located (the rows' half-gap weights elsewhere); a violation between two rows that hold,
     which the worst or a dip reveals, counted as well, and a return to holding between two rows that violate, which a
     rise reveals, taken off (a dip or rise: a row extremum that may reach the bound between its neighbours, or a
-    gap where the condition's signed quantity changes sign, `ValidityCondition.signed`). Every condition's brackets are narrowed together (`_refine`)
+    gap where the condition's signed quantity changes sign, `ValidityCondition.signed`); where it starts or stops
+    applying at an event between rows, its applying and violated shares counted to the event (`_Edge`). Every condition's brackets are narrowed together (`_refine`)
     (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
@@ -276,7 +296,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
             zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     work = [w for w in work if w.applies.any()]
     _refine(read_at, [job for w in work
-                      for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]])
+                      for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]
+                      + w.edge_jobs()])
     _refine(read_at, [job for w in work for job in w.between_jobs()])
     for w in work:
         w.report()
@@ -357,8 +378,51 @@ class _Condition:
         self.gaps = [(int(g), bool(bad[g])) for g in np.flatnonzero(both & (bad[:-1] != bad[1:]))]
         self.crossing_jobs = [[_Job(lo, hi, margin, quantity, -1.0 if was_bad else 1.0, True)
                                for lo, hi in self._pieces(float(t[g]), float(t[g + 1]))] for g, was_bad in self.gaps]
+        self.m = m
+        self.edges = self._edges()
         self.extra: list[tuple[list[_Job], list[_Job]]] = []      # (`between_jobs`)
         self.holds: list[tuple[list[_Job], list[_Job]]] = []
+
+    def _edges(self) -> list[_Edge]:
+        """The gaps between rows with an event inside where the condition starts or stops applying, or where neither
+        row applies and a smooth interval lies wholly inside (it may apply there, as a brief contact no row sees):
+        each an `_Edge` with its searches (at most DIPS rowless pieces a condition)."""
+        t, applies, bad, ends = self.t, self.applies, self.bad, self.ends
+        # the ends in each gap, its rows' instants included (a row at an event reads one side of it)
+        held = ends.searchsorted(t[1:], side="right") - ends.searchsorted(t[:-1], side="left")
+        edges, rowless = [], 0
+        for g in np.flatnonzero((held > 0) & (applies[:-1] != applies[1:]) | (held > 1) & ~applies[:-1]
+                                & ~applies[1:]).tolist():
+            a, b = float(t[g]), float(t[g + 1])
+            cuts = [a, *ends[(ends >= a) & (ends <= b)].tolist(), b]
+            pieces = list(zip(cuts[:-1], cuts[1:]))     # (a piece of no length where a row is at an event)
+            edge = _Edge(g, pieces)
+            (lo, hi), (lo_m, hi_m) = pieces[0], pieces[-1]
+            if applies[g] and hi > lo and not self._steady(g, g - 1, hi - lo):
+                edge.first = _Job(lo, hi, self.margin, self.quantity, -1.0 if bad[g] else 1.0, True)
+            if applies[g + 1] and hi_m > lo_m and (bad[g + 1] or not self._steady(g + 1, g + 2, hi_m - lo_m)):
+                edge.last = _Job(lo_m, hi_m, self.margin, self.quantity, 1.0 if bad[g + 1] else -1.0, True)
+            for a, b in pieces[1:-1]:
+                if rowless < DIPS and b > a:
+                    edge.middle.append((_Job(a, b, self.margin, self.quantity), (a, b)))
+                    rowless += 1
+            edges.append(edge)
+        return edges
+
+    def _steady(self, i: int, j: int, length: float) -> bool:
+        """Whether row i's status (holding or violating) surely lasts `length` beyond it toward the event: its margin
+        further from zero than twice its slope from its neighbour j (in the same smooth interval, applying) over
+        that length; False where j is no such neighbour."""
+        t, ends = self.t, self.ends
+        if not (0 <= j < len(t)) or not self.applies[j] or \
+                ends.searchsorted(min(t[i], t[j]), side="right") != ends.searchsorted(max(t[i], t[j]), side="left"):
+            return False
+        slope = abs(self.m[i] - self.m[j]) / abs(t[i] - t[j])
+        return bool(abs(self.m[i]) > 2.0 * slope * length)
+
+    def edge_jobs(self) -> list[_Job]:
+        """The edges' searches of the first pass (`_edges`)."""
+        return [job for e in self.edges for job in (e.first, e.last, *(j for j, _ in e.middle)) if job is not None]
 
     def _pieces(self, a: float, b: float) -> list[tuple[float, float]]:
         """[a, b] split at the smooth intervals' ends inside it, in time order."""
@@ -378,8 +442,8 @@ class _Condition:
 
     def _best(self):
         best = None
-        for job in self.worst_jobs:
-            if job.found is None:
+        for job in self.worst_jobs + [j for e in self.edges for j, _ in e.middle]:
+            if job.found is None or job.scores[-1] == np.inf:       # (a rowless piece where it does not apply)
                 continue
             if _unbounded(job.scores):
                 return job, True
@@ -393,7 +457,18 @@ class _Condition:
         into the violation (`_pairs`)."""
         self.extra = self._pairs(self.worst_jobs + self.dip_jobs, holding=True)
         self.holds = self._pairs(self.rise_jobs, holding=False)
-        return [job for pair in self.extra + self.holds for side in pair for job in side]
+        more = []
+        for e in self.edges:            # a rowless piece's violation: its crossings; a violation from the event on
+            for job, (a, b) in e.middle:
+                if job.found is not None and job.scores and job.scores[-1] < 0 and not _unbounded(job.scores):
+                    at = job.found[0]
+                    e.pairs.append((_Job(a, at, self.margin, self.quantity, 1.0, True),
+                                    _Job(at, b, self.margin, self.quantity, -1.0, True)))
+            if e.last is not None and not self.bad[e.g + 1] and e.last.found is not None and \
+                    _instant(e.last) > e.pieces[-1][0]:         # violated from the event on: read there
+                e.begins = _Job(e.pieces[-1][0], _instant(e.last), self.margin, self.quantity, 1.0, True)
+            more += [job for pair in e.pairs for job in pair] + ([e.begins] if e.begins is not None else [])
+        return [job for pair in self.extra + self.holds for side in pair for job in side] + more
 
     def _pairs(self, found_by: list[_Job], holding: bool) -> list[tuple[list[_Job], list[_Job]]]:
         """For each job whose extremum lies beyond the bound between two rows that hold (`holding`) or that violate:
@@ -445,6 +520,37 @@ class _Condition:
             row["held_between_rows" if held else "violated_between_rows"] = True
             if not held:
                 starts.append(first)
+        applied = float(weights[self.applies].sum())
+        for e in self.edges:                # each edge's pieces located, in place of its rows' half gaps
+            g, half = e.g, 0.5 * (t[e.g + 1] - t[e.g])
+            (lo, hi), (lo_m, hi_m) = e.pieces[0], e.pieces[-1]
+            applied -= half * (self.applies[g] + self.applies[g + 1])
+            violated -= half * (self.bad[g] + self.bad[g + 1])
+            for side, job, was_bad, a, b in ((0, e.first, self.bad[g], lo, hi), (1, e.last, self.bad[g + 1], lo_m, hi_m)):
+                if not self.applies[g + side]:
+                    continue
+                applied += b - a
+                if job is None:
+                    violated += (b - a) * was_bad
+                elif job.found is None:             # its reading failed: the rows' half gap
+                    violated += half * was_bad
+                else:
+                    x = _instant(job)
+                    # the first piece: row g's status until x; the last: row g + 1's from x
+                    violated += ((x - a) if was_bad else (b - x)) if side == 0 else ((b - x) if was_bad else (x - a))
+                    if (side == 1 and was_bad) or (side == 0 and not was_bad and x < job.end):     # one begins
+                        starts.append(job)
+            if e.begins is not None and e.begins.found is not None:
+                starts.append(e.begins)
+            for job, (a, b) in e.middle:
+                if job.found is not None and job.scores and job.scores[-1] < np.inf:
+                    applied += b - a
+            for into, out in e.pairs:
+                if into.found is not None and out.found is not None:
+                    violated += _instant(out) - _instant(into)
+                    row["violated_between_rows"] = True
+                    starts.append(into)
+        row["applies_share"] = float(applied / total)
         row["violated_share"] = float(violated / total)
         # the first violation: the earliest crossing into it, or the first violating row where none lies before it
         # (the run's first row, or a row after one the condition does not apply to)

@@ -312,3 +312,35 @@ def test_a_violation_across_an_event_between_rows_counts_on_both_sides():
         row = section["conditions"][0]
         assert row["violated_share"] == pytest.approx(tau, abs=1e-9), step
         assert row["first_violation_t_s"] == pytest.approx(event - 0.5 * tau, abs=1e-9)
+
+
+def test_where_a_condition_starts_and_stops_applying_is_located_at_the_events():
+    """A condition that applies on two contacts only (NaN elsewhere), each begun and ended by an event: [0.3, 0.6] s
+    with q = 100 (t - 0.3) + 0.05 >= 0.1, violated from the contact's start for 0.5 ms, and [0.7003, 0.7008] s, a
+    contact no row falls in, with q = 0.01 + 100 (t - 0.7005)^2, violated throughout, its least 0.01 at 0.7005 s.
+    The share it applies is 0.3005 and the violated share 0.001 of the 1 s run, to 1e-12, at five output steps (one of
+    them with rows at the events themselves); the first violation is the first contact's start, q = 0.05 there, and
+    the worst value the second contact's least. On the rows the applying share was within half a row of each event
+    (0.2987 to 0.3066) and the second contact unseen."""
+    from mechsim.mechanisms.base import ValidityCondition
+    from mechsim.scenarios import validity
+
+    def q(columns):
+        t = np.asarray(columns["t_s"], float)
+        return np.where((t >= 0.3) & (t <= 0.6), 100 * (t - 0.3) + 0.05,
+                        np.where((t >= 0.7003) & (t <= 0.7008), 0.01 + 100 * (t - 0.7005) ** 2, np.nan))
+
+    condition = ValidityCondition("q", "a closed form", q, 0.1, "min", "", "closed form", ("t_s",))
+    ends = np.array([0.0, 0.3, 0.6, 0.7003, 0.7008, 1.0])
+    for step in (1e-3, 1.7e-3, 2.9e-3, 3.7e-3, 7.3e-3):
+        t = np.r_[np.arange(0.0, 1.0, step), 1.0]
+        section = validity.evaluate([condition], {"t_s": t})
+        validity.located(section, [condition], {"t_s": t},
+                         (lambda grids, groups=True: [{"t_s": np.asarray(g, float)} for g in grids], ends), {"t_s"})
+        row = section["conditions"][0]
+        assert row["applies_share"] == pytest.approx(0.3005, abs=1e-12), step
+        assert row["violated_share"] == pytest.approx(0.001, abs=1e-12), step
+        assert row["first_violation_t_s"] == pytest.approx(0.3, abs=1e-12)
+        assert row["first_violation_value"] == pytest.approx(0.05, rel=1e-9)
+        assert row["worst"]["value"] == pytest.approx(0.01, rel=1e-9)
+        assert row["worst"]["t_s"] == pytest.approx(0.7005, abs=1e-9)
