@@ -147,6 +147,7 @@ class _Job:
     scores: list = field(default_factory=list)
     root: float | None = None          # a crossing's instant, interpolated between the samples around it
     value: float | None = None         # the quantity there, interpolated the same way
+    decides: bool = False              # only whether the least passes the bound (a dip's, a rise's): `_decided`
 
     def __post_init__(self):
         self.end = self.hi                 # the bracket's end as given (the search narrows hi)
@@ -220,7 +221,17 @@ def _refine(read_at, jobs: list[_Job]) -> None:
                 job.lo, job.hi = max(lo, guess - w), min(hi, guess + w)
         live = [job for job in live if job not in failed and (job.first or not (_unbounded(job.scores)
                                                                                  or _settled(job.scores)
-                                                                                 or job.scores[-1] == np.inf))]
+                                                                                 or job.scores[-1] == np.inf
+                                                                                 or job.decides and _decided(job)))]
+
+
+def _decided(job: _Job) -> bool:
+    """Whether a dip's or rise's search has its answer: a sample past the bound (its crossings are searched from
+    there, `_Condition.between_jobs`), or a least that cannot get there: it came closer in the last pass by less
+    than half its distance (each pass narrows the bracket 32-fold: what a smooth extremum or a kink still gains
+    falls at least twofold a pass)."""
+    s = job.scores
+    return s[-1] < 0 or (len(s) >= 2 and s[-1] > 2.0 * (s[-2] - s[-1]))
 
 
 def _crossing(jobs: list[_Job]) -> _Job | None:
@@ -342,7 +353,7 @@ class _Condition:
         dips = every[(mm[every] >= 0) & np.isfinite(up) & (reach < 0) & ~np.isin(every, rows)]
         dips = dips[np.argsort(reach[np.searchsorted(every, dips)], kind="stable")][:DIPS]   # the deepest first
         self.dip_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
-                              quantity) for i in dips]
+                              quantity, decides=True) for i in dips]
         # the converse: every row maximum that violates, between rows that violate, and may rise to the bound between
         # them, by no more than its fall to the lower neighbour (a return to holding narrower than a row); its job
         # narrows to the greatest margin (the least of the negated one)
@@ -353,7 +364,7 @@ class _Condition:
         able = np.isfinite(down) & (high >= 0)
         tops = tops[able][np.argsort(-high[able], kind="stable")][:DIPS]                 # the highest first
         self.rise_jobs = [_Job(*self._within(int(i), max(int(i) - 1, 0), min(int(i) + 1, len(t) - 1)), margin,
-                               quantity, -1.0) for i in tops]
+                               quantity, -1.0, decides=True) for i in tops]
         # where the condition's signed quantity changes sign between two rows of a smooth interval, the quantity
         # passes zero between them (`ValidityCondition.signed`): a return to holding there between two rows that
         # violate, or a violation between two that hold, whatever the rows show; the gap searched as a rise or dip
@@ -364,7 +375,7 @@ class _Condition:
             holds_at_zero = bool(c.margin(0.0) >= 0)
             change &= (self.bad[:-1] & self.bad[1:]) if holds_at_zero else ~(self.bad[:-1] | self.bad[1:])
             change &= ends.searchsorted(t[:-1], side="right") == ends.searchsorted(t[1:], side="left")  # no event
-            jobs = [_Job(float(t[g]), float(t[g + 1]), margin, quantity, -1.0 if holds_at_zero else 1.0)
+            jobs = [_Job(float(t[g]), float(t[g + 1]), margin, quantity, -1.0 if holds_at_zero else 1.0, decides=True)
                     for g in np.flatnonzero(change)[:DIPS]]
             if holds_at_zero:
                 self.rise_jobs += jobs
