@@ -898,13 +898,38 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             continue
         found = singular_approaches(c, f, edge, sense, intervals, read, h, events, coordinates, e.interval)
         if found:
-            entry[name] = dict(entry[name], value=None, unbounded=True, t_s=found[0]["t_s"],
-                               at=f"grows without bound toward the event at t = {found[0]['t_s']:.9g} s",
+            t_e = found[0]["t_s"]
+            angle = _event_angle(events, t_e, angle_column, t, angles)
+            entry[name] = dict(entry[name], value=None, unbounded=True, t_s=t_e, drive_angle_rad=angle,
+                               drive_angle_wrapped_deg=_wrapped_deg(angle), limit=edge,
+                               at=f"grows without bound toward the event at t = {t_e:.9g} s",
                                growth_exponent=found[0]["growth_exponent"])
             entry[name].pop("best_row_value", None)
             entry["abs_max"] = dict(entry[name], side=name)
             entry.setdefault("singular", []).extend(dict(x, extremum=name) for x in found)
+            # the other extremum taken as the limit at one of those events from the same side is no value there
+            # (the state at the event gives the column to round-off, of either sign): the rows' stands
+            other = "min" if name == "max" else "max"
+            if entry[other].get("limit") == edge and entry[other]["t_s"] in {x["t_s"] for x in found}:
+                rows = np.flatnonzero(inside & np.isfinite(f))
+                if len(rows):
+                    i = int(rows[(np.argmin if other == "min" else np.argmax)(f[rows])])
+                    entry[other] = _entry(f[i], t[i], angles[i], f"output row (the limit at the event at t = "
+                                          f"{entry[other]['t_s']:.9g} s is no value: the column grows without "
+                                          "bound toward it)")
     return entry
+
+
+def _event_angle(events: pd.DataFrame | None, t_e: float, angle_column: str, t: np.ndarray,
+                 angles: np.ndarray) -> float:
+    """The drive angle at an event: the events table's own (`<coordinate>_q`, the state at the event), else
+    interpolated between the rows."""
+    q = angle_column.removesuffix("_angle_rad") + "_q"
+    if events is not None and len(events) and q in events:
+        at = events["t_s"].to_numpy(float) == t_e
+        if at.any():
+            return float(events[q].to_numpy(float)[np.flatnonzero(at)[0]])
+    return float(np.interp(t_e, t, angles))
 
 
 #: the columns the console's peaks line names, where the run has them

@@ -93,3 +93,18 @@ def test_coupler_force_toward_the_crank_stop_is_unbounded_not_a_row():
     # what is bounded stays located: the crank speed's maximum does not move with the output step
     speeds = [x.summary["peaks"]["crank_speed_rad_s"]["max"]["value"] for x in runs.values()]
     assert speeds[0] == pytest.approx(speeds[1], rel=1e-7)
+
+
+def test_a_limit_at_a_stop_the_column_grows_toward_is_no_extremum():
+    """chain-mech1-torque: the coupler force grows without bound toward each crank stop (from before). At 0.5 s rows
+    the state held at the stop at 21.74 s gave it as -2.1e8 N (round-off of a singular KKT system), and that limit
+    was reported as the minimum; it is no value, so the rows' minimum stands (0 N, the dwell's, as the located one at
+    10 ms rows). The maximum's instant is the first stop's, and its drive angle now that stop's own (the events
+    table's drive_q there), not the angle of the stop whose bracket held the extremum (7.07 rad against 3.14)."""
+    for step in ("10 ms", "0.5 s"):
+        r = runner.run(mechsim.load("chain-mech1-torque", set=[f"output_step={step}"]))
+        force = r.summary["peaks"]["coupler_force_N"]
+        assert force["max"]["value"] is None and force["max"]["unbounded"]
+        at = r.events["t_s"].to_numpy(float) == force["max"]["t_s"]
+        assert force["max"]["drive_angle_rad"] == float(r.events.loc[at, "drive_q"].iloc[0]), step
+        assert force["min"]["value"] == 0.0, (step, force["min"])
