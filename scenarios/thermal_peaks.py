@@ -664,10 +664,31 @@ class ClosedFormThermalReader(_KeptReadings):
 
 class _InterpolatedStates:
     """`ClosedFormThermalReader.sampler` where the columns need the network's states: the closed form read at the
-    instants, the states interpolated linearly between the window's rows, the finish's thermal columns there."""
+    instants, the states interpolated linearly between the window's rows and the heat input's switches (a contact's
+    start and end: the states kink there, a bulk temperature peaks as a contact ends; integrated exactly there, so
+    no sample interpolates across one), the finish's thermal columns there."""
 
     def __init__(self, reader: ClosedFormThermalReader):
         self.reader = reader
+        self._nodes = None
+
+    def _states(self, times: np.ndarray) -> np.ndarray:
+        """The network's states at the instants, interpolated linearly between the nodes (`_nodes`: the rows and the
+        switches inside the simulated window, made at the first call)."""
+        r = self.reader
+        if self._nodes is None:
+            breaks = np.asarray(r.breaks, dtype=float)
+            breaks = breaks[(breaks > r.t_win[0]) & (breaks < r.t_sim)]
+            breaks = breaks[~np.isin(breaks, r.t_win)]
+            t, states = r.t_win, r.states
+            if len(breaks):
+                at = r._networks([breaks])[0]
+                t = np.concatenate([t, breaks])
+                order = np.argsort(t, kind="stable")
+                t, states = t[order], np.concatenate([states, at])[order]
+            self._nodes = (t, states)
+        t, states = self._nodes
+        return np.column_stack([np.interp(times, t, states[:, j]) for j in range(states.shape[1])])
 
     def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[Mapping | None]:
         """Each request's columns, or None where its closed form could not be read."""
@@ -680,7 +701,7 @@ class _InterpolatedStates:
                 out.append(None)
                 continue
             inner = iv.inside(times)
-            states = np.column_stack([np.interp(inner, r.t_win, r.states[:, j]) for j in range(r.states.shape[1])])
+            states = self._states(inner)
             frames.append(({k: _column(v) for k, v in reading.items()}, states, r.thermal._time_since(inner, r.starts)))
             out.append(len(frames) - 1)
         tables = r._thermal(frames) if frames else []

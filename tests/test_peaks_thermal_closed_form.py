@@ -111,3 +111,19 @@ def test_pointwise_readings_equal_the_readings_on_the_interval_rows(name, extra,
     assert fast.summary["peaks"] == general.summary["peaks"]
     assert fast.timeseries.equals(general.timeseries) and fast.events.equals(general.events)
     assert any("located" in entry.get("how", "") for entry in fast.summary["peaks"].values())
+
+
+def test_a_bulk_temperature_peaking_as_a_contact_ends_is_found_at_coarse_rows():
+    """geneva-seed-lc3-mu030: the pin's bulk temperature peaks as each contact ends (the heat input stops) and is
+    largest at the last exit, 2.7209 s. The candidates between rows take the network's states interpolated between
+    the rows and the heat input's switches (integrated exactly there): interpolated across the exit, 7.3 ms rows
+    apart, the samples after it rose where the temperature falls, so the exit's limit was never read and 22.46925
+    C, 1.3 ms after it, was reported. The maximum is the exit's limit at every step, 22.4699505223 C to 1e-10 of it."""
+    got = {}
+    for step in ("1 ms", "7.3 ms", "10 ms"):
+        r = runner.run(mechsim.load("geneva-seed-lc3-mu030", set=[f"output_step={step}", "output.plots=false"]))
+        got[step] = r.summary["peaks"]["temp_bulk_pin_C"]["max"]
+        exit_t = float(r.events.loc[r.events["kind"] == "exit", "t_s"].max())
+        assert got[step]["t_s"] == exit_t, step
+    for step in ("7.3 ms", "10 ms"):
+        assert got[step]["value"] == pytest.approx(got["1 ms"]["value"], rel=1e-10), step
