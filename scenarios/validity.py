@@ -297,7 +297,8 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     which the worst or a dip reveals, counted as well, and a return to holding between two rows that violate, which a
     rise reveals, taken off (a dip or rise: a row extremum that may reach the bound between its neighbours, or a
     gap where the condition's signed quantity changes sign, `ValidityCondition.signed`); where it starts or stops
-    applying at an event between rows, its applying and violated shares counted to the event (`_Edge`). Every condition's brackets are narrowed together (`_refine`)
+    applying at an event between rows, its applying and violated shares counted to the event (`_Edge`). Every
+    condition's brackets are narrowed together (`_refine`)
     (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
@@ -498,7 +499,8 @@ class _Condition:
             if g in gaps or not rows_alike:
                 continue
             gaps.add(g)
-            out.append(([_Job(lo, hi, self.margin, self.quantity, sign, True) for lo, hi in self._pieces(float(t[g]), at)],
+            out.append(([_Job(lo, hi, self.margin, self.quantity, sign, True)
+                         for lo, hi in self._pieces(float(t[g]), at)],
                         [_Job(lo, hi, self.margin, self.quantity, -sign, True)
                          for lo, hi in self._pieces(at, float(t[g + 1]))]))
         return out
@@ -537,7 +539,8 @@ class _Condition:
             (lo, hi), (lo_m, hi_m) = e.pieces[0], e.pieces[-1]
             applied -= half * (self.applies[g] + self.applies[g + 1])
             violated -= half * (self.bad[g] + self.bad[g + 1])
-            for side, job, was_bad, a, b in ((0, e.first, self.bad[g], lo, hi), (1, e.last, self.bad[g + 1], lo_m, hi_m)):
+            for side, job, was_bad, a, b in ((0, e.first, self.bad[g], lo, hi),
+                                             (1, e.last, self.bad[g + 1], lo_m, hi_m)):
                 if not self.applies[g + side]:
                     continue
                 applied += b - a
