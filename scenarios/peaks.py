@@ -389,7 +389,45 @@ def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event
     intervals = _intervals(tn, breaks, float(t[0]), t_end, ("start", "end"), read)
     if not intervals:
         return None
-    return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals]), read
+
+    def samples(angle_column: str):
+        return _samples_between_rows(source, read, intervals, tn, cols, angle_column)
+    return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals]), read, samples
+
+
+def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np.ndarray, cols, angle_column: str):
+    """(instants, their columns) of a finished run sampled between its rows as its located peaks are
+    (`with_rowless`'s finest: CLOSED_STEP_RAD of drive angle on a closed form, read exactly; DAE_STEP_RAD on a DAE
+    run, its states interpolated between its rows or its dense output, `TrajectoryReader.sampler`), or None where no
+    two rows lie farther apart than that: the validity's candidates between rows (`validity.located`, which reads
+    every number it reports on the continuous solution)."""
+    from mechsim.dynamics.extrema import _samples
+    if source.method == "closed-form":
+        finest, sampler = _finest(source, t), None
+    elif angle_column in cols:
+        finest = _rows_finest(t, np.asarray(cols[angle_column], dtype=float)[:len(t)])
+        sampler = read.sampler() if finest is not None else None
+        if sampler is None:
+            return None
+    else:
+        return None
+    if finest is None:
+        return None
+    at, of = _samples(t, intervals, {}, finest)
+    if not len(at):
+        return None
+    ks = np.unique(of).tolist()
+    if sampler is not None:
+        cuts = of.searchsorted(np.arange(len(intervals) + 1))
+        return at, sampler.read_at(at, [(intervals[k], cuts[k], cuts[k + 1]) for k in ks])
+    tables = read_tables(read, [(intervals[k], 0, at[of == k]) for k in ks])
+    got = [(k, table) for k, table in zip(ks, tables) if table is not None]
+    if not got:
+        return None
+    names = set.intersection(*(set(table) for _, table in got))
+    return (np.concatenate([at[of == k] for k, _ in got]),
+            {c: np.concatenate([np.asarray(table[c], dtype=float) if c != "mode" else np.asarray(table[c])
+                                for _, table in got]) for c in names})
 
 
 def thermal_point_reader(source: Source | None, cols, events: pd.DataFrame | None,

@@ -453,7 +453,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         from mechsim.scenarios.peaks import point_reader       # the validity's numbers on the continuous solution
         reader = point_reader(done.source, cols, events, event_cols)
         if reader is not None:
-            validity.located(valid, conditions, cols, reader[:2], done.source.columns)
+            validity.located(valid, conditions, cols, reader[:2], done.source.columns,
+                             lambda: reader[3](done.angle_col))
     if failure is None and thermal is not None and any(validity.locatable(valid, conditions, cols.names)):
         from mechsim.scenarios.peaks import thermal_point_reader     # those on the thermal columns
         reader = thermal_point_reader(done.source, cols, events, event_cols)

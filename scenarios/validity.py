@@ -285,7 +285,7 @@ def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[b
 
 
 def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str, np.ndarray], reader,
-            readable) -> None:
+            readable, samples: Callable | None = None) -> None:
     """The section's numbers (`evaluate`, on the rows) located on the run's continuous solution, in place, for each
     condition whose columns the reader reads (`readable`; `scenarios/peaks.py` `point_reader`: (read_at, the smooth
     intervals' ends), the mechanics'; then `thermal_point_reader`, the thermal columns', for those left; a
@@ -298,7 +298,9 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     rise reveals, taken off (a dip or rise: a row extremum that may reach the bound between its neighbours, or a
     gap where the condition's signed quantity changes sign, `ValidityCondition.signed`); where it starts or stops
     applying at an event between rows, its applying and violated shares counted to the event (`_Edge`). Every
-    condition's brackets are narrowed together (`_refine`)
+    condition's brackets are narrowed together (`_refine`). samples: where given, () -> (instants, columns) of the
+    run sampled between rows that lie far apart (`peaks._samples_between_rows`) or None: a sample beyond the bound
+    between two rows that hold, or within it between two that violate, is a dip or rise to search as well
     (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
@@ -307,6 +309,10 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     work = [_Condition(c, row, t, columns, ends) for c, row, ok in
             zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     work = [w for w in work if w.applies.any()]
+    got = samples() if samples is not None and work else None
+    if got is not None:
+        for w in work:
+            w.sampled(*got)
     _refine(read_at, [job for w in work
                       for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]
                       + w.edge_jobs()])
@@ -369,8 +375,9 @@ class _Condition:
         # where the condition's signed quantity changes sign between two rows of a smooth interval, the quantity
         # passes zero between them (`ValidityCondition.signed`): a return to holding there between two rows that
         # violate, or a violation between two that hold, whatever the rows show; the gap searched as a rise or dip
+        self.signs = None
         if c.signed is not None:
-            s = np.broadcast_to(np.asarray(c.signed(columns), dtype=float), t.shape)
+            s = self.signs = np.broadcast_to(np.asarray(c.signed(columns), dtype=float), t.shape)
             with np.errstate(invalid="ignore"):
                 change = applies[:-1] & applies[1:] & (s[:-1] * s[1:] < 0)
             holds_at_zero = bool(c.margin(0.0) >= 0)
@@ -394,6 +401,42 @@ class _Condition:
         self.edges = self._edges()
         self.extra: list[tuple[list[_Job], list[_Job]]] = []      # (`between_jobs`)
         self.holds: list[tuple[list[_Job], list[_Job]]] = []
+
+    def sampled(self, ts: np.ndarray, table: Mapping) -> None:
+        """Dips and rises the samples between rows show (`located`'s samples): in each gap between two rows that
+        hold (violate) where a sample violates (holds), the sample furthest beyond, its gap within its smooth
+        interval searched as a dip (rise); at most DIPS of each."""
+        if not all(n in table for n in self.c.needs) or not len(ts):
+            return
+        t = self.t
+        m = np.broadcast_to(np.asarray(self.c.margin(self.quantity(table)), dtype=float), ts.shape)
+        g = np.clip(t.searchsorted(ts, side="right") - 1, 0, len(t) - 2)
+        alike = self.applies[g] & self.applies[g + 1] & (self.bad[g] == self.bad[g + 1])
+        with np.errstate(invalid="ignore"):
+            dips, rises = alike & ~self.bad[g] & (m < 0), alike & self.bad[g] & (m >= 0)
+        for found, sign, jobs in ((dips, 1.0, self.dip_jobs), (rises, -1.0, self.rise_jobs)):
+            i = np.flatnonzero(found)
+            i = i[np.argsort(sign * m[i], kind="stable")]                  # the furthest beyond first
+            _, first = np.unique(g[i], return_index=True)                 # one a gap
+            for k in sorted(i[first].tolist(), key=lambda k: sign * m[k])[:DIPS]:
+                jobs.append(_Job(*self._clipped(float(ts[k]), float(t[g[k]]), float(t[g[k] + 1])), self.margin,
+                                 self.quantity, sign, decides=True))
+        if self.signs is None:
+            return
+        # the signed quantity's sign changes between neighbouring instants of a gap (its rows and samples): a zero
+        # of the quantity there (`ValidityCondition.signed`), searched as the rows' own sign changes are
+        s = np.broadcast_to(np.asarray(self.c.signed(table), dtype=float), ts.shape)
+        before = np.where(np.r_[False, g[1:] == g[:-1]], np.r_[0.0, s[:-1]], self.signs[g])
+        with np.errstate(invalid="ignore"):
+            change = (before * s < 0) | (s * np.where(np.r_[g[1:] != g[:-1], True], self.signs[g + 1], 0.0) < 0)
+        holds_at_zero = bool(self.c.margin(0.0) >= 0)
+        change &= alike & (self.bad[g] if holds_at_zero else ~self.bad[g])
+        k = np.flatnonzero(change)
+        _, first = np.unique(g[k], return_index=True)
+        jobs = self.rise_jobs if holds_at_zero else self.dip_jobs
+        for j in k[first][:DIPS].tolist():
+            jobs.append(_Job(*self._clipped(float(ts[j]), float(t[g[j]]), float(t[g[j] + 1])), self.margin,
+                             self.quantity, -1.0 if holds_at_zero else 1.0, decides=True))
 
     def _edges(self) -> list[_Edge]:
         """The gaps between rows with an event inside where the condition starts or stops applying, or where neither
