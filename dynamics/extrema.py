@@ -1015,10 +1015,11 @@ SPARSE_ROWS = 3
 ROWLESS_READINGS = 9
 
 
-def _samples(t: np.ndarray, intervals: list[Interval], rowless: dict[int, np.ndarray], finest
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """(instants, their interval) of `with_rowless`'s samples: each interval's instants (its ends, rows and
-    `rowless` readings) spaced by `between` at `finest`, every interval's in one pass."""
+def sample_instants(t: np.ndarray, intervals: list[Interval], rowless: dict[int, np.ndarray], finest
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(instants, their interval) of `with_rowless`'s samples (and the validity's, scenarios/peaks.py
+    `_samples_between_rows`): each interval's instants (its ends, rows and `rowless` readings) spaced by `between`
+    at `finest`, every interval's in one pass."""
     ids = [k for k, iv in enumerate(intervals) if iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))]
     if not ids:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
@@ -1091,7 +1092,8 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
     t = np.asarray(t, dtype=float)
     rowless = {k: np.linspace(iv.lo, iv.hi, ROWLESS_READINGS) for k, iv in enumerate(intervals)
                if len(iv.rows) < SPARSE_ROWS and iv.hi - iv.lo > 1e-12 * max(1.0, abs(iv.hi))}
-    at, of = _samples(t, intervals, rowless, finest) if finest is not None else (np.zeros(0), np.zeros(0, int))
+    at, of = (sample_instants(t, intervals, rowless, finest) if finest is not None else
+              (np.zeros(0), np.zeros(0, int)))
     if sampler is None:                    # the samples read with the interval's rowless readings
         cuts = of.searchsorted(np.arange(len(intervals) + 1))      # each interval's samples: at[cuts[k]:cuts[k + 1]]
         asked = {k: np.sort(np.r_[rowless.get(k, ()), at[cuts[k]:cuts[k + 1]]])

@@ -401,7 +401,7 @@ def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np
     run, its states interpolated between its rows or its dense output, `TrajectoryReader.sampler`), or None where no
     two rows lie farther apart than that: the validity's candidates between rows (`validity.located`, which reads
     every number it reports on the continuous solution)."""
-    from mechsim.dynamics.extrema import _samples
+    from mechsim.dynamics.extrema import sample_instants
     if source.method == "closed-form":
         finest, sampler = _finest(source, t), None
     elif angle_column in cols:
@@ -413,7 +413,7 @@ def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np
         return None
     if finest is None:
         return None
-    at, of = _samples(t, intervals, {}, finest)
+    at, of = sample_instants(t, intervals, {}, finest)
     if not len(at):
         return None
     ks = np.unique(of).tolist()
