@@ -375,20 +375,15 @@ class _Condition:
         # where the condition's signed quantity changes sign between two rows of a smooth interval, the quantity
         # passes zero between them (`ValidityCondition.signed`): a return to holding there between two rows that
         # violate, or a violation between two that hold, whatever the rows show; the gap searched as a rise or dip
-        self.signs = None
+        self.signs, self.holds_at_zero = None, bool(c.margin(0.0) >= 0)
         if c.signed is not None:
             s = self.signs = np.broadcast_to(np.asarray(c.signed(columns), dtype=float), t.shape)
             with np.errstate(invalid="ignore"):
                 change = applies[:-1] & applies[1:] & (s[:-1] * s[1:] < 0)
-            holds_at_zero = bool(c.margin(0.0) >= 0)
-            change &= (self.bad[:-1] & self.bad[1:]) if holds_at_zero else ~(self.bad[:-1] | self.bad[1:])
+            change &= (self.bad[:-1] & self.bad[1:]) if self.holds_at_zero else ~(self.bad[:-1] | self.bad[1:])
             change &= ends.searchsorted(t[:-1], side="right") == ends.searchsorted(t[1:], side="left")  # no event
-            jobs = [_Job(float(t[g]), float(t[g + 1]), margin, quantity, -1.0 if holds_at_zero else 1.0, decides=True)
-                    for g in np.flatnonzero(change)[:DIPS]]
-            if holds_at_zero:
-                self.rise_jobs += jobs
-            else:
-                self.dip_jobs += jobs
+            for g in np.flatnonzero(change)[:DIPS].tolist():
+                self._search_gap(g, 0.5 * float(t[g] + t[g + 1]), self.holds_at_zero)
         # every sign change of the margin between two applying rows: into a violation (the margin's first
         # negative sample) or out of one (the negated margin's), each smooth interval between the two rows searched
         # in time order (a sign change at an event between them: its one-sided limits, `_crossing`)
@@ -414,13 +409,12 @@ class _Condition:
         alike = self.applies[g] & self.applies[g + 1] & (self.bad[g] == self.bad[g + 1])
         with np.errstate(invalid="ignore"):
             dips, rises = alike & ~self.bad[g] & (m < 0), alike & self.bad[g] & (m >= 0)
-        for found, sign, jobs in ((dips, 1.0, self.dip_jobs), (rises, -1.0, self.rise_jobs)):
+        for found, sign in ((dips, 1.0), (rises, -1.0)):
             i = np.flatnonzero(found)
             i = i[np.argsort(sign * m[i], kind="stable")]                  # the furthest beyond first
             _, first = np.unique(g[i], return_index=True)                 # one a gap
             for k in sorted(i[first].tolist(), key=lambda k: sign * m[k])[:DIPS]:
-                jobs.append(_Job(*self._clipped(float(ts[k]), float(t[g[k]]), float(t[g[k] + 1])), self.margin,
-                                 self.quantity, sign, decides=True))
+                self._search_gap(int(g[k]), float(ts[k]), rise=sign < 0)
         if self.signs is None:
             return
         # the signed quantity's sign changes between neighbouring instants of a gap (its rows and samples): a zero
@@ -429,14 +423,19 @@ class _Condition:
         before = np.where(np.r_[False, g[1:] == g[:-1]], np.r_[0.0, s[:-1]], self.signs[g])
         with np.errstate(invalid="ignore"):
             change = (before * s < 0) | (s * np.where(np.r_[g[1:] != g[:-1], True], self.signs[g + 1], 0.0) < 0)
-        holds_at_zero = bool(self.c.margin(0.0) >= 0)
-        change &= alike & (self.bad[g] if holds_at_zero else ~self.bad[g])
+        change &= alike & (self.bad[g] if self.holds_at_zero else ~self.bad[g])
         k = np.flatnonzero(change)
         _, first = np.unique(g[k], return_index=True)
-        jobs = self.rise_jobs if holds_at_zero else self.dip_jobs
         for j in k[first][:DIPS].tolist():
-            jobs.append(_Job(*self._clipped(float(ts[j]), float(t[g[j]]), float(t[g[j] + 1])), self.margin,
-                             self.quantity, -1.0 if holds_at_zero else 1.0, decides=True))
+            self._search_gap(int(g[j]), float(ts[j]), self.holds_at_zero)
+
+    def _search_gap(self, g: int, at: float, rise: bool) -> None:
+        """The gap between rows g and g + 1, within the smooth interval holding the instant `at`, searched as a rise
+        (its greatest margin: `rise_jobs`) or a dip (its least: `dip_jobs`), to decide whether it passes the bound."""
+        t = self.t
+        job = _Job(*self._clipped(at, float(t[g]), float(t[g + 1])), self.margin, self.quantity,
+                   -1.0 if rise else 1.0, decides=True)
+        (self.rise_jobs if rise else self.dip_jobs).append(job)
 
     def _edges(self) -> list[_Edge]:
         """The gaps between rows with an event inside where the condition starts or stops applying, or where neither
