@@ -1555,17 +1555,17 @@ class TrajectoryReader:
                 self._ahead.clear()
         return self._read_out(got)
 
-    def sampler(self):
+    def sampler(self, trusted: float | None = None):
         """What samples the columns between the rows (`with_rowless`'s `sampler`): on a dense output its own
         readings (`_DenseSamples`: exact, and costing no integration), else the run's states interpolated between
-        its own (`_RowInterpolation`); None where a piece keeps no y' to interpolate with, or the run no segment
-        starts."""
+        its own (`_RowInterpolation`, a gap re-integrated where the interpolation's estimated error exceeds
+        `trusted`); None where a piece keeps no y' to interpolate with, or the run no segment starts."""
         traj = self.traj
         if getattr(traj, "dense", None) is not None:
             return _DenseSamples(self)
         if not traj.starts or any(p.yp is None for p in traj.pieces + traj.starts):
             return None
-        return _RowInterpolation(self)
+        return _RowInterpolation(self, trusted)
 
     def _stored_limit(self, iv: Interval, position: int, times: np.ndarray) -> Mapping | None:
         """The read-out of the state the run holds at the interval's end (`stage_limits`) where a request asks for
@@ -2018,16 +2018,18 @@ class TrajectoryReader:
 
 
 class _RowInterpolation:
-    """A DAE run's columns between its output rows, approximated: each segment's states (its start, its rows, its
-    end: y and y' as the integrator left them) joined by cubic Hermite interpolation, read out as the rows are
+    """A DAE run's columns between its output rows: each segment's states (its start, its rows, its end: y and y' as
+    the integrator left them) joined by cubic Hermite interpolation, read out as the rows are
     (`TrajectoryReader._read_out`: one read-out per mode). A state's error is of order h^4 |y^(4)| / 384 over rows
     h apart, while a column's narrow peak comes from the read-out's sharp dependence on a smooth state (a contact
     force through an engagement), so the samples rank the candidates; every located value is then read by
-    re-integration (docs/theory.md §K5)."""
+    re-integration (docs/theory.md §K5). Where rows lie so far apart that the interpolation cannot be trusted to
+    rank (a reversal within one gap: `gap_errors` above `trusted`), that gap's samples are re-integrated as a
+    reading is; trusted None: none is."""
 
-    def __init__(self, reader: TrajectoryReader):
+    def __init__(self, reader: TrajectoryReader, trusted: float | None = None):
         traj = reader.traj
-        self.reader = reader
+        self.reader, self.trusted = reader, trusted
         self.start_t = np.array([float(p.t[0]) for p in traj.starts])
         parts: list[list] = [[p] for p in traj.starts]           # each segment's states in time order
         for piece in traj.pieces:
@@ -2071,9 +2073,33 @@ class _RowInterpolation:
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> Mapping:
         return self.read_many([(iv, position, times)])[0]
 
+    def gap_errors(self, j: np.ndarray) -> np.ndarray:
+        """The estimated error of the interpolation over each gap j (between states j and j + 1), its largest over
+        the coordinates: in radians for an angle coordinate, relative to the largest magnitude the run holds of any
+        other. Two estimates: the cubic's error in q from the quintic through q, v and a at both ends (their
+        difference at mid-gap, h (v0 - v1)/32 + h^2 (a0 + a1)/64, is the cubic's leading error h^4 q^(4)/384), and
+        the cubic in v integrated against q1 - q0 (the Hermite-corrected trapezoidal rule
+        h (v0 + v1)/2 + h^2 (a0 - a1)/12, exact to h^5 q^(5)/720); docs/theory.md §K5."""
+        nq = len(self.reader.traj.model.coordinates)
+        k = np.minimum(j + 1, len(self.t) - 1)
+        h = (self.t[k] - self.t[j])[:, None]
+        q0, q1 = self.y[j, :nq], self.y[k, :nq]
+        v0, v1 = self.y[j, nq:2 * nq], self.y[k, nq:2 * nq]
+        a0, a1 = self.yp[j, nq:2 * nq], self.yp[k, nq:2 * nq]
+        scale = np.ones(nq)
+        other = [i for i in range(nq) if i not in self.reader.angle_coordinates]
+        if other:
+            scale[other] = np.maximum(np.nanmax(np.abs(self.y[:, other]), axis=0, initial=0.0), 1e-300)
+        with np.errstate(invalid="ignore"):
+            cubic = np.abs(h * (v0 - v1) / 32 + h * h * (a0 + a1) / 64)
+            moved = np.abs(q1 - q0 - h * (v0 + v1) / 2 - h * h * (a0 - a1) / 12)
+            return np.nanmax(np.maximum(cubic, moved) / scale, axis=1, initial=0.0)
+
     def read_at(self, times: np.ndarray, spans: list[tuple[Interval, int, int]]) -> Mapping:
         """Every column at `times` (in order; NaN where no segment's states bracket one), each in the segment
-        started last at or before it (`spans`, the interval of each stretch times[a:b], is not needed)."""
+        started last at or before it; the instants of a gap whose interpolation cannot be trusted (`gap_errors` above
+        `trusted`) re-integrated from the latest row of its interval (`spans`: the interval of each stretch
+        times[a:b]; without them, none is)."""
         from mechsim.dynamics.hybrid import Piece
         times = np.asarray(times, dtype=float)
         seg = self.start_t.searchsorted(times, side="right") - 1
@@ -2082,6 +2108,15 @@ class _RowInterpolation:
         a = self.first[seg]
         # the state at or before each instant within its segment (its last gap where it lies beyond: NaN below)
         j = np.clip(self.t.searchsorted(times, side="right") - 1, a, a + self.size[seg] - 2)
+        found = self._reintegrated(times, j, ok, spans) if spans and self.trusted is not None else []
+        if found:
+            keep = np.ones(len(times), dtype=bool)
+            for _, _, at in found:
+                keep[at] = False
+            if not keep.any():
+                return Gathered(found)
+            inner = self.read_at(times[keep], [])
+            return Gathered(found + [(inner, None, np.flatnonzero(keep))])
         t0, t1 = self.t[j], self.t[np.minimum(j + 1, len(self.t) - 1)]
         h = (t1 - t0)[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -2104,6 +2139,33 @@ class _RowInterpolation:
             at.append(np.arange(i, e))
         model, angles = self.reader.traj.model, self.reader.angle_coordinates
         return Gathered([(_ReadOut(model, pieces, angles), None, np.concatenate(at)) for pieces, at in modes.values()])
+
+    def _reintegrated(self, times: np.ndarray, j: np.ndarray, ok: np.ndarray, spans: list[tuple[Interval, int, int]]
+                      ) -> list[tuple[Mapping, None, np.ndarray]]:
+        """(columns, None, their instants' positions) of the stretches of each span whose gap's interpolation cannot
+        be trusted (`gap_errors`), each re-integrated from the latest row of its interval at or before it (one
+        reading per gap, read together by the reader); a reading that fails keeps the interpolation."""
+        gaps = np.unique(j[ok])
+        bad = gaps[self.gap_errors(gaps) > self.trusted]
+        if not len(bad):
+            return []
+        untrusted = ok & np.isin(j, bad)
+        requests, where = [], []
+        t_flat, offsets = self.reader._row_times()
+        for iv, lo, hi in spans:
+            mine = lo + np.flatnonzero(untrusted[lo:hi])
+            if not len(mine):
+                continue
+            anchors = np.asarray(iv.anchors, dtype=np.int64).reshape(-1, 2)
+            rows_t = t_flat[offsets[anchors[:, 0]] + anchors[:, 1]] if len(anchors) else np.zeros(0)
+            cuts = np.r_[0, np.flatnonzero(np.diff(j[mine])) + 1, len(mine)]
+            for c0, c1 in zip(cuts[:-1], cuts[1:]):
+                at = mine[c0:c1]
+                position = max(int(rows_t.searchsorted(times[at[0]], side="right")) - 1, 0)
+                requests.append((iv, position, times[at]))
+                where.append(at)
+        got = self.reader.read_many(requests) if requests else []
+        return [(table, None, at) for table, at in zip(got, where) if table is not None]
 
 
 class _DenseSamples:

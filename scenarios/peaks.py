@@ -29,7 +29,8 @@ HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 o
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
 #: what `how` adds where a DAE run's columns were sampled between its rows (`_rows_finest`)
 SAMPLED_DENSE = "; its candidates also read between output rows at most 1° of drive angle apart"
-SAMPLED_STATES = "; its candidates also from the states interpolated between output rows at most 1° of drive angle apart"
+SAMPLED_STATES = ("; its candidates also from the states interpolated between output rows at most 1° of drive angle "
+                  "apart (re-integrated where the interpolation's estimated error exceeds 1e-3 of that)")
 HOW_DENSE_SAMPLED = HOW_DENSE + SAMPLED_DENSE
 HOW_DAE_SAMPLED = HOW_DAE + SAMPLED_STATES
 HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart "
@@ -42,6 +43,10 @@ CLOSED_READINGS = 100_000
 #: a DAE run's columns are sampled (beside its rows) at least this often in drive angle (rad) where its rows are
 #: farther apart (`_rows_finest`), from its states interpolated between its rows; as many samples at most
 DAE_STEP_RAD = math.radians(1.0)
+#: a gap between those rows whose interpolated states may err by more than this (rad of any coordinate angle) has its
+#: samples re-integrated (`TrajectoryReader.sampler`): a thousandth of the samples' spacing, far below what moves a
+#: peak a few degrees wide from one candidate to another, far above what rows a few degrees apart err by
+TRUSTED_RAD = 1e-3 * DAE_STEP_RAD
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 #: a turn's mean not read on the continuous solution (a column not read between rows, or a reading there failed)
 HOW_ROWS_MEAN = "the trapezoidal rule on the output rows (not read between them, or a reading there failed)"
@@ -251,23 +256,33 @@ def _breaks(events: pd.DataFrame, ev: TableColumns | None = None) -> list[tuple[
 PERIODIC_RTOL = 1e-3
 
 
-def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=None, works: dict | None = None
-                    ) -> dict | None:
+def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=None, works: dict | None = None,
+                    speed_column: str | None = None) -> dict | None:
     """Where a run reaches a periodic regime: the first turn of the drive (from the run's first angle) from which
     every turn lasts as long as the last turn and starts at the same drive speed, to PERIODIC_RTOL (against the last
     turn, so that a slow drift is not taken for periodic); at least two such turns. None without (a prescribed or
-    accelerating drive, a stall, fewer than three turns). The turns' ends from the rows (`turns.crossings`, O(h^4));
-    locate(times, levels): (the regime's start and its last turn's ends where the angle reaches `levels`, located on
-    the continuous solution; their column tables and the instants those were read at, within a Newton step of
-    them), as `_located_turns` makes it. The reported ends are then those, and the last turn's work of each power
-    flow (`last_turn_work_J`) the `works` columns ({name: rows}) read there (`turns.carried` over the step)."""
+    accelerating drive, a stall, fewer than three turns). The turns' ends from the rows (`turns.crossings`, O(h^4)),
+    each turn's starting speed interpolated there; locate(times, levels): (the instants the angle reaches `levels`,
+    located on the continuous solution from those estimates; their column tables and the instants those were read
+    at, within a Newton step of them), as `_located_turns` makes it. Every turn's end and starting speed (the table's
+    `speed_column`) are then those, so that whether and where the regime begins does not depend on the output step,
+    and the last turn's work of each power flow (`last_turn_work_J`) is the `works` columns ({name: rows}) read there
+    (`turns.carried` over the step)."""
     from mechsim.scenarios.turns import carried, crossings
     bounds = crossings(t, angle, speed, float(angle[0]))
     if len(bounds) < 3:
         return None
     b = np.concatenate([[t[0]], bounds])
-    periods = b[1:] - b[:-1]
     w = np.interp(b, t, speed)
+    located = tables = read = None
+    if locate is not None:
+        located, tables, read = locate(bounds, float(angle[0]) + 2 * np.pi * np.arange(1, len(b), dtype=float))
+        for i, (x, table) in enumerate(zip(located, tables), start=1):
+            if table is not None:
+                b[i] = x
+                if speed_column is not None and speed_column in table:
+                    w[i] = float(np.asarray(table[speed_column])[0])
+    periods = b[1:] - b[:-1]
     scale = max(float(np.abs(speed).max()), 1e-300)
     same = ((np.abs(periods - periods[-1]) <= PERIODIC_RTOL * periods[-1])
             & (np.abs(w[:-1] - w[-2]) <= PERIODIC_RTOL * scale))          # each turn against the last
@@ -277,20 +292,12 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
     if len(same) - k < 3:
         return None
     work = {}
-    if locate is not None:
-        at = sorted({i for i in (k, len(b) - 2, len(b) - 1) if i > 0})
-        located, tables, read = locate(b[at], float(angle[0]) + 2 * np.pi * np.array(at, dtype=float))
-        b = b.copy()
-        for i, x, table in zip(at, located, tables):
-            if table is not None:
-                b[i] = x
-        ends = [at.index(len(b) - 2), len(at) - 1]
-        if all(tables[e] is not None for e in ends):
-            ia, ib = ends
+    if located is not None:
+        ia, ib = len(b) - 3, len(b) - 2              # the last turn's ends among the located (b[1:])
+        if tables[ia] is not None and tables[ib] is not None:
             work = {c[5:-2]: carried(t, f, float(np.asarray(tables[ib][c])[0]), read[ib], located[ib])
                     - carried(t, f, float(np.asarray(tables[ia][c])[0]), read[ia], located[ia])
                     for c, f in (works or {}).items()}
-        periods = b[1:] - b[:-1]
     out = {"from_t_s": float(b[k]), "startup_turns": int(k), "periodic_turns": int(len(periods) - k),
            "period_s": float(periods[-1]), "last_turn": (float(b[-2]), float(b[-1])),
            "criterion": (f"every drive turn from here equal to the last in duration and in starting drive speed to "
@@ -390,12 +397,13 @@ def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event
     if not intervals:
         return None
 
-    def samples(angle_column: str):
-        return _samples_between_rows(source, read, intervals, tn, cols, angle_column)
+    def samples(angle_column: str, speed_column: str | None = None):
+        return _samples_between_rows(source, read, intervals, tn, cols, angle_column, speed_column)
     return _reads_at(read, intervals, tn), np.array([intervals[0].lo] + [iv.hi for iv in intervals]), read, samples
 
 
-def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np.ndarray, cols, angle_column: str):
+def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np.ndarray, cols, angle_column: str,
+                          speed_column: str | None = None):
     """(instants, their columns) of a finished run sampled between its rows as its located peaks are
     (`with_rowless`'s finest: CLOSED_STEP_RAD of drive angle on a closed form, read exactly; DAE_STEP_RAD on a DAE
     run, its states interpolated between its rows or its dense output, `TrajectoryReader.sampler`), or None where no
@@ -405,8 +413,9 @@ def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np
     if source.method == "closed-form":
         finest, sampler = _finest(source, t), None
     elif angle_column in cols:
-        finest = _rows_finest(t, np.asarray(cols[angle_column], dtype=float)[:len(t)])
-        sampler = read.sampler() if finest is not None else None
+        finest = _rows_finest(t, np.asarray(cols[angle_column], dtype=float)[:len(t)],
+                              np.asarray(cols[speed_column], dtype=float)[:len(t)] if speed_column in cols else None)
+        sampler = read.sampler(TRUSTED_RAD) if finest is not None else None
         if sampler is None:
             return None
     else:
@@ -622,6 +631,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             coordinates = tuple(f"{c}_N_m_s" if i in source.mech.angle_coordinates else f"{c}_N_s"
                                 for i, c in enumerate(model.coordinates))
     h = _median_step(t[:n]) if n > 1 else 0.0
+    speeds = np.asarray(cols[speed_column], float)[:n] if speed_column in cols else None
     values = {c: np.asarray(cols[c], float)[:n] for c in readable}
     # every window's candidates, and the periodic regime's turn, read in one pass of the reader (`read_many`)
     breaks = _breaks(events, event_cols) if read is not None else []
@@ -638,7 +648,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             locate_turns = _located_turns(read, whole, tn, angle_column, speed_column) if whole else None
             regime = periodic_regime(tn, angles[:n], np.asarray(cols[speed_column], float)[:n], locate_turns,
                                      {c: np.asarray(cols[c], float)[:n] for c in cols.names
-                                      if c.startswith("work_") and c.endswith("_J") and c in source.columns})
+                                      if c.startswith("work_") and c.endswith("_J") and c in source.columns},
+                                     speed_column)
     elif source is not None and len(t) > 1:
         windows = [(float(t[0]), t_end, "run")]
     # the turn the means are taken over: the periodic regime's last, else (a prescribed drive, a run that does not
@@ -664,8 +675,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         finest = _finest(source, tn)
     elif read is not None and angle_column.endswith("_rad"):
         # a DAE run's: its dense output's readings, else its states interpolated between its rows
-        finest = _rows_finest(tn, angles[:n])
-        sampler = raw.sampler() if finest is not None else None
+        finest = _rows_finest(tn, angles[:n], speeds)
+        sampler = raw.sampler(TRUSTED_RAD) if finest is not None else None
         if sampler is None:
             finest = None
         else:
@@ -676,7 +687,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     turn = means_asked = spacing = None
     if mean_over is not None and read is not None:
         turn = _intervals(tn, breaks, *mean_over, ("turn start", "turn end"), raw)
-        spacing = finest if finest is not None else _rows_finest(tn, angles[:n])
+        spacing = finest if finest is not None else _rows_finest(tn, angles[:n], speeds)
         means_asked = _turn_mean_requests(tn, turn, spacing if spacing is not None else np.inf)
     # a dense output's readings cost no integration: the one-sided limits at every end (`stored_limits` ranks the ends
     # by them), those `end_limits` may read and the growth toward the events an extremum may lie next to (what the
@@ -734,8 +745,6 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                        g)
         if e is not None:
             got.setdefault(c, {})[name] = e
-    if how == HOW_DAE_SAMPLED:
-        _rows_alone_too(plans, located, spans, tn, values, read, source.settings.rtol)
     # the growth toward an event where an extremum lies next to one: every window's and column's first approach
     # read together (already read on a dense output)
     if read is not None:
@@ -818,24 +827,33 @@ def _finest(source: Source, t: np.ndarray) -> float | None:
     return max(CLOSED_STEP_RAD / speed, span / CLOSED_READINGS)
 
 
-def _rows_finest(t: np.ndarray, angles: np.ndarray):
+def _rows_finest(t: np.ndarray, angles: np.ndarray, speeds: np.ndarray | None = None):
     """A DAE run's sampling between its rows (`with_rowless`'s `finest`), as a closed form's (`_finest`): the
-    spacing in each gap between instants that keeps the drive angle DAE_STEP_RAD apart at the rows' pace there
-    (at most CLOSED_READINGS samples a run); None where no two rows are farther apart than that. Coarser than a
-    closed form's: the samples are read-outs of interpolated states, one per sample, and a peak a few degrees
-    wide still has samples inside it (docs/theory.md §K5)."""
+    spacing in each gap between instants that keeps the drive angle DAE_STEP_RAD apart at the rows' pace there: the
+    net turn across the gap, or the drive's speed at either end (`speeds` on the rows, where given) where that is
+    faster, since a gap whose ends show little net turning may hold a reversal (a rocking crank through its dead
+    points); at most CLOSED_READINGS samples a run; None where no gap needs a sample. Coarser than a closed form's:
+    the samples are read-outs of interpolated states, one per sample, and a peak a few degrees wide still has samples
+    inside it (docs/theory.md §K5)."""
     if len(t) < 2:
         return None
-    turned = np.abs(np.diff(angles))
+    h = np.diff(t)
     with np.errstate(invalid="ignore"):
-        total = float(np.nansum(turned))
-        step = max(DAE_STEP_RAD, total / CLOSED_READINGS)
-        if not np.nanmax(turned, initial=0.0) > step:
+        pace = np.abs(np.diff(angles)) / np.where(h > 0, h, np.inf)
+        if speeds is not None:
+            fast = np.abs(speeds)
+            pace = np.fmax(pace, np.fmax(fast[1:], fast[:-1]))
+        step = max(DAE_STEP_RAD, float(np.nansum(pace * h)) / CLOSED_READINGS)
+        if not np.nanmax(pace * h, initial=0.0) > step:
             return None
 
     def spacing(knots: np.ndarray) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.diff(knots) * step / np.abs(np.diff(np.interp(knots, t, angles)))
+            turn = np.abs(np.diff(np.interp(knots, t, angles))) / np.diff(knots)
+            if speeds is not None:
+                fast = np.interp(knots, t, np.abs(speeds))
+                turn = np.fmax(turn, np.fmax(fast[1:], fast[:-1]))
+            return step / turn
     return spacing
 
 
@@ -885,35 +903,6 @@ class _Readings:
 
     def __getattr__(self, name):
         return getattr(self.read, name)
-
-
-#: `_rows_alone_too` keeps the rows' extremum where it is better by more than this many times the run's rtol of the
-#: value (two readings of one peak from different rows differ by the integration's error, not by this)
-ROW_SLACK = 100.0
-
-
-def _rows_alone_too(plans, located, spans, t: np.ndarray, values: dict, read, rtol: float) -> None:
-    """Each window's located extrema (`located`, in place) against those located from its output rows alone
-    (`extrema.locate`), the better of the two kept, where its candidates were sampled between rows from a DAE run's
-    states interpolated between them (`_RowInterpolation`, rows more than 1 degree of drive angle apart): those
-    samples rank the candidates, but far apart the interpolation is poor, and a stretch it ranks above the one the
-    rows show best is then refined in a bracket of the samples' spacing that need not hold the peak (rolling-a-torque
-    at 60 to 100 ms rows: the crank speed's maximum 11.42, 9.93, 11.47 and 11.56 rad/s against 11.6385)."""
-    from mechsim.dynamics.extrema import locate
-    for p, got, intervals in zip(plans, located, spans):
-        columns = [c for c in (p.values if p is not None else ()) if c in values]
-        if not columns or not intervals:
-            continue
-        again = locate(t, {c: values[c] for c in columns}, intervals, read)
-        for c in columns:
-            for name, sense in (("max", 1.0), ("min", -1.0)):
-                e = again.get(c, {}).get(name)
-                if e is None or not np.isfinite(e.value):
-                    continue
-                old = got.setdefault(c, {}).get(name)
-                slack = max(p.ties.get(c, 0.0), ROW_SLACK * rtol * abs(e.value))
-                if old is None or sense * (e.value - old.value) > slack:
-                    got[c][name] = e
 
 
 def _best_rows(table: np.ndarray, inside: np.ndarray) -> list[dict]:

@@ -454,7 +454,7 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         reader = point_reader(done.source, cols, events, event_cols)
         if reader is not None:
             validity.located(valid, conditions, cols, reader[:2], done.source.columns,
-                             lambda: reader[3](done.angle_col))
+                             lambda: reader[3](done.angle_col, done.speed_col))
     if failure is None and thermal is not None and any(validity.locatable(valid, conditions, cols.names)):
         from mechsim.scenarios.peaks import thermal_point_reader     # those on the thermal columns
         reader = thermal_point_reader(done.source, cols, events, event_cols)
