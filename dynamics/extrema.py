@@ -2061,13 +2061,14 @@ class _RowInterpolation:
 
     def read_many(self, requests: list[tuple[Interval, int, np.ndarray]]) -> list[Mapping]:
         """Each (interval, position, times)'s columns, as a reader's (`read_at` of every request's instants at
-        once, each request its rows of it): a thermal reader's mechanics between rows (scenarios/thermal_peaks.py
-        `ThermalReader.sampler`)."""
+        once, each in its interval, each request its rows of it): a thermal reader's mechanics between rows
+        (scenarios/thermal_peaks.py `ThermalReader.sampler`)."""
         sizes = [len(times) for _, _, times in requests]
         if not sizes:
             return []
-        table = self.read_at(np.concatenate([np.asarray(times, dtype=float) for _, _, times in requests]), [])
         ends = np.cumsum(sizes).tolist()
+        table = self.read_at(np.concatenate([np.asarray(times, dtype=float) for _, _, times in requests]),
+                             [(iv, e - n, e) for (iv, _, _), n, e in zip(requests, sizes, ends)])
         return [_Part(table, e - n, e) for n, e in zip(sizes, ends)]
 
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> Mapping:

@@ -764,7 +764,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         from mechsim.scenarios.thermal_peaks import locate_thermal
         heats = locate_thermal(treader, t, cols, thermal, events, [(lo, hi if label == "startup" else float(t[-1]),
                                                                     kinds[label]) for lo, hi, label in windows],
-                               finest)
+                               finest, TRUSTED_RAD)
         # the growth toward the event next to a thermal column's extremum: every window's and column's first approach
         # read together (the thermal reader keeps them for `singular_approaches`)
         firsts = [x for heat in heats for c, (got, intervals) in heat.items()

@@ -311,15 +311,16 @@ class ThermalReader(_KeptReadings):
         self.scale = max(1.0, abs(t_table_end))
         self.how = HOW_THERMAL_CYCLE if self.cycle else HOW_THERMAL
 
-    def sampler(self):
+    def sampler(self, trusted: float | None = None):
         """What samples the thermal columns between rows for the candidates (`locate_thermal`'s `finest`), or None
         (a cycle-averaged run, whose later rows repeat the simulated turns; a run without the states to
         interpolate): this reader itself on a dense output (its readings cost no integration), else a copy of it
         that reads the mechanics and the network's states, DAE states of the run, interpolated between the run's
-        own (`TrajectoryReader.sampler`). They rank the candidates; every located value is read by this reader."""
+        own (`TrajectoryReader.sampler`, a gap re-integrated where the interpolation may err by more than
+        `trusted`). They rank the candidates; every located value is read by this reader."""
         if self.cycle:
             return None
-        states = self.reader.sampler()
+        states = self.reader.sampler(trusted)
         if states is None or not hasattr(states, "read_many"):
             return None if states is None else self
         clone = copy.copy(self)
@@ -335,7 +336,7 @@ class ThermalReader(_KeptReadings):
         lo, hi = np.empty(len(times)), np.empty(len(times))
         for iv, a, b in spans:
             lo[a:b], hi[a:b] = iv.lo, iv.hi
-        at, parts, before = self._window_asks(times, lo, hi)
+        at, parts, before = self._window_asks(times, lo, hi, rowless=True)
         asks = [(wiv, pos, distinct) for _, wiv, pos, distinct, _ in parts]
         got = [r if r is not None else self.reader(*ask) for r, ask in zip(self.reader.read_many(asks), asks)]
         return self._thermal([self._framed(times, at, parts, got, before)])[0]
@@ -384,12 +385,12 @@ class ThermalReader(_KeptReadings):
             out.append(self._framed(times, at, parts, got, before))
         return out
 
-    def _window_asks(self, times: np.ndarray, lo, hi) -> tuple:
+    def _window_asks(self, times: np.ndarray, lo, hi, rowless: bool = False) -> tuple:
         """(the window instants standing for `times` in (lo, hi) (one for all, or each its own), the window readings
         to ask for them (`_frame_asks`), which are limits from before an end (`_before`)); ReadingFailed where a
-        window interval has no row."""
+        window interval has no row, unless `rowless` (a sampler's reader, which reads any instant of the run)."""
         at, which = self._window_instants(times, lo, hi)
-        return at, self._frame_asks(at, which), self._before(at, which)
+        return at, self._frame_asks(at, which, rowless), self._before(at, which)
 
     def _framed(self, times: np.ndarray, at: np.ndarray, parts: list, got: list, before: np.ndarray) -> tuple:
         """`_columns`' value from the window readings `got` of `_window_asks`' `parts`."""
@@ -486,16 +487,17 @@ class ThermalReader(_KeptReadings):
         return _frame_columns([(pick, _reading_columns(self.reader(wiv, pos, distinct), back))
                                for pick, wiv, pos, distinct, back in self._frame_asks(at, which)], len(at))
 
-    def _frame_asks(self, at: np.ndarray, which: np.ndarray) -> list[tuple]:
+    def _frame_asks(self, at: np.ndarray, which: np.ndarray, rowless: bool = False) -> list[tuple]:
         """The readings `frame_columns` takes: (the instants' positions, window interval, its output row to read
         from, the distinct window instants in order, each instant's index among them or None where they are the
-        instants themselves), per window interval the instants lie in; ReadingFailed where one has no row."""
+        instants themselves), per window interval the instants lie in; ReadingFailed where one has no row, unless
+        `rowless` (the sampler's reader, its interpolated states or a dense output, starts from no row: row 0)."""
         parts = []
         one = len(which) and which.min() == which.max()
         for w in ([int(which[0])] if one else np.unique(which).tolist()):
             pick = np.arange(len(which)) if one else np.flatnonzero(which == w)
             wiv = self.windows[w]
-            if not len(wiv.rows):
+            if not len(wiv.rows) and not rowless:
                 raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
             # each distinct window instant read once (instants a period apart, or clipped to an end, coincide): in
             # increasing order already (as the readings ask), the instants themselves
@@ -505,7 +507,7 @@ class ThermalReader(_KeptReadings):
             else:
                 distinct, back = np.unique(x, return_inverse=True)
                 back, ordered = np.ravel(back), np.sort(x)
-            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(ordered))))
+            pos = int(np.argmin(np.abs(self.t_win[wiv.rows] - _median(ordered)))) if len(wiv.rows) else 0
             parts.append((pick, wiv, pos, distinct, back))
         return parts
 
@@ -569,14 +571,15 @@ class ClosedFormThermalReader(_KeptReadings):
         self.starts = np.asarray(mech.contact_starts(window, win_events), dtype=float)
         self.how = HOW_THERMAL_CYCLE_CLOSED if self.cycle else HOW_THERMAL_CLOSED
 
-    def sampler(self):
+    def sampler(self, trusted: float | None = None):
         """What samples the thermal columns between rows for the candidates (`locate_thermal`'s `finest`), or None
         (a cycle-averaged run: its later rows repeat the simulated turns): this reader itself where the columns
         need no network states (the flash model), else one that reads the closed form at the instants and takes
         the network's states there by linear interpolation between the window's rows. The bulk temperatures
         change slowly against the output step, and the sharp part of a contact temperature, the flash rise, is
         algebraic in the contact read exactly, so the samples rank the candidates; every located value is then
-        read as any reading is (`_KeptReadings`)."""
+        read as any reading is (`_KeptReadings`). trusted: a DAE sampler's (`ThermalReader.sampler`); the
+        mechanics here are exact."""
         if self.cycle:
             return None
         return self if self.states is None else _InterpolatedStates(self)
@@ -785,7 +788,8 @@ def heat_breaks(reader, breaks: list[tuple[float, str]], lo: float, hi: float) -
 
 
 def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str], events: pd.DataFrame,
-                   windows: list[tuple[float, float, tuple[str, str]]], finest: float | None = None) -> list[dict]:
+                   windows: list[tuple[float, float, tuple[str, str]]], finest: float | None = None,
+                   trusted: float | None = None) -> list[dict]:
     """For each window (lo, hi, the kinds of its ends) of the table: {column: ({'max', 'min'} located by
     `dynamics/extrema.py` `locate` with the reader, the intervals searched)} for the thermal columns over [lo, hi],
     between its events (a cycle-averaged run's repeated ones included) and the heat input's own switches where the
@@ -794,8 +798,8 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     column's readings are read in one pass of the reader (`read_many`), then every one-sided limit the checks may
     read in another. finest: the columns are also sampled between the rows at most this far apart (a time, or one
     per gap: `with_rowless`), by the reader's `sampler`, as the mechanical columns are (scenarios/peaks.py
-    `_finest`, `_rows_finest`), the samples candidates beside the rows; the intervals handed back are the table's
-    own."""
+    `_finest`, `_rows_finest`), the samples candidates beside the rows (`trusted`: the sampler's, scenarios/peaks.py
+    TRUSTED_RAD); the intervals handed back are the table's own."""
     from mechsim.dynamics.extrema import (column_plans, end_guesses, end_limit_requests, end_limits, end_lines,
                                           finish_all, refine_further, stored_limits, with_rowless)
     values = {c: np.asarray(cols[c], float) for c in columns}
@@ -803,7 +807,7 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
     events_breaks = _breaks(events)
     tables = [intervals_of(t, heat_breaks(reader, events_breaks, lo, hi), lo, hi, *kinds) for lo, hi, kinds in windows]
     sampler = getattr(reader, "sampler", None) if finest is not None else None
-    sampler = sampler() if sampler is not None else None
+    sampler = sampler(trusted) if sampler is not None else None
     own = [iv for intervals in tables for iv in intervals]              # the table's intervals, every window's
     back = {id(iv): iv for iv in own}
     if sampler is not None and own:
