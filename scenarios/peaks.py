@@ -280,7 +280,7 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
         for i, (x, table) in enumerate(zip(located, tables), start=1):
             if table is not None:
                 b[i] = x
-                if speed_column is not None and speed_column in table:
+                if speed_column is not None:        # (a state column: read without the reading's read-out)
                     w[i] = float(np.asarray(table[speed_column])[0])
     periods = b[1:] - b[:-1]
     scale = max(float(np.abs(speed).max()), 1e-300)
