@@ -28,9 +28,9 @@ from mechsim.dynamics.tables import TableColumns
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"
 #: what `how` adds where a DAE run's columns were sampled between its rows (`_rows_finest`)
-SAMPLED_DENSE = "; its candidates also read between output rows at most 1° of drive angle apart"
-SAMPLED_STATES = ("; its candidates also from the states interpolated between output rows at most 1° of drive angle "
-                  "apart (re-integrated where the interpolation's estimated error exceeds 1e-3 of that)")
+SAMPLED_DENSE = "; its candidates also read between output rows at most 0.5° of drive angle apart"
+SAMPLED_STATES = ("; its candidates also from the states interpolated between output rows at most 0.5° of drive angle "
+                  "apart (re-integrated where the interpolation's estimated error exceeds 0.001°)")
 HOW_DENSE_SAMPLED = HOW_DENSE + SAMPLED_DENSE
 HOW_DAE_SAMPLED = HOW_DAE + SAMPLED_STATES
 HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart "
@@ -41,12 +41,13 @@ HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled a
 CLOSED_STEP_RAD = math.radians(0.5)
 CLOSED_READINGS = 100_000
 #: a DAE run's columns are sampled (beside its rows) at least this often in drive angle (rad) where its rows are
-#: farther apart (`_rows_finest`), from its states interpolated between its rows; as many samples at most
-DAE_STEP_RAD = math.radians(1.0)
+#: farther apart (`_rows_finest`), from its states interpolated between its rows (or its dense output), as a closed
+#: form's are; as many samples at most
+DAE_STEP_RAD = CLOSED_STEP_RAD
 #: a gap between those rows whose interpolated states may err by more than this (rad of any coordinate angle) has its
-#: samples re-integrated (`TrajectoryReader.sampler`): a thousandth of the samples' spacing, far below what moves a
-#: peak a few degrees wide from one candidate to another, far above what rows a few degrees apart err by
-TRUSTED_RAD = 1e-3 * DAE_STEP_RAD
+#: samples re-integrated (`TrajectoryReader.sampler`): a thousandth of a degree, far below what moves a peak a
+#: degree wide from one candidate to another, far above what rows a few degrees apart err by
+TRUSTED_RAD = math.radians(1e-3)
 HOW_ROWS = "output rows (not located: a column computed after the run from the rows)"
 #: a turn's mean not read on the continuous solution (a column not read between rows, or a reading there failed)
 HOW_ROWS_MEAN = "the trapezoidal rule on the output rows (not read between them, or a reading there failed)"

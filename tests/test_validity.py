@@ -349,7 +349,7 @@ def test_where_a_condition_starts_and_stops_applying_is_located_at_the_events():
 def test_the_samples_between_far_apart_rows_find_what_the_rows_do_not_show():
     """rolling-a-torque's contact pulls for 24 ms at 3.013 s inside a stretch where it presses: at 31 ms rows no row
     shows it (nor a row minimum near it), and the violated share was 0.461858 against 0.4564866 at 10 ms rows. The
-    run's states sampled between its rows (1 degree of drive angle, as its located peaks sample them) show it, and it
+    run's states sampled between its rows (0.5 degree of drive angle, as its located peaks sample them) show it, and it
     is searched as any dip: the shares equal to 1e-9 at 10 and 31 ms rows."""
     shares = {}
     for step in ("10 ms", "31 ms"):
