@@ -2158,7 +2158,11 @@ class _RowInterpolation:
             if not len(mine):
                 continue
             anchors = np.asarray(iv.anchors, dtype=np.int64).reshape(-1, 2)
-            rows_t = t_flat[offsets[anchors[:, 0]] + anchors[:, 1]] if len(anchors) else np.zeros(0)
+            # each row's instant (a reading's row, anchor (-1, -1), none: the one before it stands), non-decreasing
+            own = anchors[:, 0] >= 0
+            rows_t = np.full(len(anchors), -np.inf)
+            rows_t[own] = t_flat[offsets[anchors[own, 0]] + anchors[own, 1]]
+            rows_t = np.maximum.accumulate(rows_t) if len(rows_t) else rows_t
             cuts = np.r_[0, np.flatnonzero(np.diff(j[mine])) + 1, len(mine)]
             for c0, c1 in zip(cuts[:-1], cuts[1:]):
                 at = mine[c0:c1]
