@@ -284,6 +284,24 @@ def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[b
             for c, row in zip(conds, section["conditions"])]
 
 
+def _with_samples(t: np.ndarray, columns: Mapping[str, np.ndarray], ts: np.ndarray, table: Mapping,
+                  needs: set[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(instants, columns) of the rows and the samples between them together, in time order (the columns the
+    conditions need, and the instants): every crossing, dip, rise and least margin the samples show between two
+    rows is then searched as one between rows is, however many a gap between rows holds (one a gap before: the
+    second excursion of rolling-a-torque's friction demand within one 50 ms gap went uncounted). A column the samples
+    lack is NaN there (the condition does not apply)."""
+    order = np.argsort(np.concatenate([t, ts]), kind="stable")
+    merged = {}
+    for n in (n for n in needs if n in columns):
+        rows = np.asarray(columns[n])
+        rows = rows if rows.dtype == object else rows.astype(float)       # (a mode's name stays a string)
+        more = np.asarray(table[n]) if n in table else np.full(len(ts), None if rows.dtype == object else np.nan)
+        merged[n] = np.concatenate([rows, more.astype(rows.dtype)])[order]
+    merged["t_s"] = np.concatenate([t, np.asarray(ts, dtype=float)])[order]
+    return merged["t_s"], merged
+
+
 def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str, np.ndarray], reader,
             readable, samples: Callable | None = None) -> None:
     """The section's numbers (`evaluate`, on the rows) located on the run's continuous solution, in place, for each
@@ -299,20 +317,18 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     gap where the condition's signed quantity changes sign, `ValidityCondition.signed`); where it starts or stops
     applying at an event between rows, its applying and violated shares counted to the event (`_Edge`). Every
     condition's brackets are narrowed together (`_refine`). samples: where given, () -> (instants, columns) of the
-    run sampled between rows that lie far apart (`peaks._samples_between_rows`) or None: a sample beyond the bound
-    between two rows that hold, or within it between two that violate, is a dip or rise to search as well
-    (docs/theory.md, "Validity")."""
+    run sampled between rows that lie far apart (`peaks._samples_between_rows`) or None: the samples join the rows
+    (`_with_samples`), so that every excursion between rows they show is searched (docs/theory.md, "Validity")."""
     read_at, ends = reader
     t = np.asarray(columns["t_s"], dtype=float)
     if len(t) < 2:
         return
-    work = [_Condition(c, row, t, columns, ends) for c, row, ok in
-            zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
+    chosen = [(c, row) for c, row, ok in zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
+    got = samples() if samples is not None and chosen else None
+    if got is not None:         # the samples between far-apart rows searched as rows are (`_with_samples`)
+        t, columns = _with_samples(t, columns, *got, {n for c, _ in chosen for n in c.needs})
+    work = [_Condition(c, row, t, columns, ends) for c, row in chosen]
     work = [w for w in work if w.applies.any()]
-    got = samples() if samples is not None and work else None
-    if got is not None:
-        for w in work:
-            w.sampled(*got)
     _refine(read_at, [job for w in work
                       for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]
                       + w.edge_jobs()])
@@ -397,38 +413,6 @@ class _Condition:
         self.extra: list[tuple[list[_Job], list[_Job]]] = []      # (`between_jobs`)
         self.holds: list[tuple[list[_Job], list[_Job]]] = []
 
-    def sampled(self, ts: np.ndarray, table: Mapping) -> None:
-        """Dips and rises the samples between rows show (`located`'s samples): in each gap between two rows that
-        hold (violate) where a sample violates (holds), the sample furthest beyond, its gap within its smooth
-        interval searched as a dip (rise); at most DIPS of each."""
-        if not all(n in table for n in self.c.needs) or not len(ts):
-            return
-        t = self.t
-        m = np.broadcast_to(np.asarray(self.c.margin(self.quantity(table)), dtype=float), ts.shape)
-        g = np.clip(t.searchsorted(ts, side="right") - 1, 0, len(t) - 2)
-        alike = self.applies[g] & self.applies[g + 1] & (self.bad[g] == self.bad[g + 1])
-        with np.errstate(invalid="ignore"):
-            dips, rises = alike & ~self.bad[g] & (m < 0), alike & self.bad[g] & (m >= 0)
-        for found, sign in ((dips, 1.0), (rises, -1.0)):
-            i = np.flatnonzero(found)
-            i = i[np.argsort(sign * m[i], kind="stable")]                  # the furthest beyond first
-            _, first = np.unique(g[i], return_index=True)                 # one a gap
-            for k in sorted(i[first].tolist(), key=lambda k: sign * m[k])[:DIPS]:
-                self._search_gap(int(g[k]), float(ts[k]), rise=sign < 0)
-        if self.signs is None:
-            return
-        # the signed quantity's sign changes between neighbouring instants of a gap (its rows and samples): a zero
-        # of the quantity there (`ValidityCondition.signed`), searched as the rows' own sign changes are
-        s = np.broadcast_to(np.asarray(self.c.signed(table), dtype=float), ts.shape)
-        before = np.where(np.r_[False, g[1:] == g[:-1]], np.r_[0.0, s[:-1]], self.signs[g])
-        with np.errstate(invalid="ignore"):
-            change = (before * s < 0) | (s * np.where(np.r_[g[1:] != g[:-1], True], self.signs[g + 1], 0.0) < 0)
-        change &= alike & (self.bad[g] if self.holds_at_zero else ~self.bad[g])
-        k = np.flatnonzero(change)
-        _, first = np.unique(g[k], return_index=True)
-        for j in k[first][:DIPS].tolist():
-            self._search_gap(int(g[j]), float(ts[j]), self.holds_at_zero)
-
     def _search_gap(self, g: int, at: float, rise: bool) -> None:
         """The gap between rows g and g + 1, within the smooth interval holding the instant `at`, searched as a rise
         (its greatest margin: `rise_jobs`) or a dip (its least: `dip_jobs`), to decide whether it passes the bound."""
@@ -495,15 +479,19 @@ class _Condition:
         return max(lo, float(ends[k - 1])), min(hi, float(ends[k]))
 
     def _best(self):
-        best = None
+        """(the job holding the least margin, whether it is unbounded): the earliest unbounded one where there are
+        several (a friction demand at each instant its normal force passes zero), so that which is reported does
+        not depend on the order the rows rank them in."""
+        best, unbounded = None, None
         for job in self.worst_jobs + [j for e in self.edges for j, _ in e.middle]:
             if job.found is None or job.scores[-1] == np.inf:       # (a rowless piece where it does not apply)
                 continue
             if _unbounded(job.scores):
-                return job, True
-            if best is None or job.scores[-1] < best.scores[-1]:
+                if unbounded is None or job.found[0] < unbounded.found[0]:
+                    unbounded = job
+            elif best is None or job.scores[-1] < best.scores[-1]:
                 best = job
-        return best, False
+        return (unbounded, True) if unbounded is not None else (best, False)
 
     def between_jobs(self) -> list[_Job]:
         """Each least margin below zero between two rows that hold (the worst's, a dip's): the crossings into and out
