@@ -288,9 +288,8 @@ def _with_samples(t: np.ndarray, columns: Mapping[str, np.ndarray], ts: np.ndarr
                   needs: set[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(instants, columns) of the rows and the samples between them together, in time order (the columns the
     conditions need, and the instants): every crossing, dip, rise and least margin the samples show between two
-    rows is then searched as one between rows is, however many a gap between rows holds (one a gap before: the
-    second excursion of rolling-a-torque's friction demand within one 50 ms gap went uncounted). A column the samples
-    lack is NaN there (the condition does not apply)."""
+    rows is then searched as one between rows is, however many a gap between rows holds (docs/theory.md,
+    "Validity"). A column the samples lack is NaN there (the condition does not apply)."""
     order = np.argsort(np.concatenate([t, ts]), kind="stable")
     merged = {}
     for n in (n for n in needs if n in columns):
