@@ -406,31 +406,36 @@ def point_reader(source: Source | None, cols, events: pd.DataFrame | None, event
 def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np.ndarray, cols, angle_column: str,
                           speed_column: str | None = None):
     """(instants, their columns) of a finished run sampled between its rows as its located peaks are
-    (`with_rowless`'s finest: CLOSED_STEP_RAD of drive angle on a closed form, read exactly; DAE_STEP_RAD on a DAE
-    run, its states interpolated between its rows or its dense output, `TrajectoryReader.sampler`), or None where no
-    two rows lie farther apart than that: the validity's candidates between rows (`validity.located`, which reads
-    every number it reports on the continuous solution)."""
+    (`with_rowless`'s finest: CLOSED_STEP_RAD of drive angle on a closed form, DAE_STEP_RAD on a DAE run), or None
+    where no two rows lie farther apart than that: the validity's candidates between rows (`validity.located`, which
+    reads every number it reports on the continuous solution). read: the mechanics' reader (`point_reader`), or the
+    thermal one (`thermal_point_reader`): read by its `sampler` where it has one (a DAE run's states interpolated
+    between its rows or its dense output, `TrajectoryReader.sampler`; a thermal reader's), else itself (a closed
+    form, exact); none on a cycle-averaged thermal reader, whose table repeats the simulated turns."""
     from mechsim.dynamics.extrema import sample_instants
+    if getattr(read, "cycle", False):
+        return None
     if source.method == "closed-form":
-        finest, sampler = _finest(source, t), None
+        finest = _finest(source, t)
     elif angle_column in cols:
         finest = _rows_finest(t, np.asarray(cols[angle_column], dtype=float)[:len(t)],
                               np.asarray(cols[speed_column], dtype=float)[:len(t)] if speed_column in cols else None)
-        sampler = read.sampler(TRUSTED_RAD) if finest is not None else None
-        if sampler is None:
-            return None
     else:
         return None
     if finest is None:
+        return None
+    make = getattr(read, "sampler", None)
+    sampler = make(TRUSTED_RAD) if make is not None else read
+    if sampler is None:
         return None
     at, of = sample_instants(t, intervals, {}, finest)
     if not len(at):
         return None
     ks = np.unique(of).tolist()
-    if sampler is not None:
+    if hasattr(sampler, "read_at"):
         cuts = of.searchsorted(np.arange(len(intervals) + 1))
         return at, sampler.read_at(at, [(intervals[k], cuts[k], cuts[k + 1]) for k in ks])
-    tables = read_tables(read, [(intervals[k], 0, at[of == k]) for k in ks])
+    tables = read_tables(sampler, [(intervals[k], 0, at[of == k]) for k in ks])
     got = [(k, table) for k, table in zip(ks, tables) if table is not None]
     if not got:
         return None
@@ -442,8 +447,9 @@ def _samples_between_rows(source: Source, read, intervals: list[Interval], t: np
 
 def thermal_point_reader(source: Source | None, cols, events: pd.DataFrame | None,
                          event_cols: TableColumns | None = None):
-    """(read_at, the smooth intervals' ends, the columns it reads) of a finished run's thermal columns, as
-    `point_reader` (`_reads_at` on the thermal reader that locates their peaks, `thermal_peaks.thermal_reader`, over
+    """(read_at, the smooth intervals' ends, the columns it reads, samples(angle column, speed column)) of a finished
+    run's thermal columns, as `point_reader` (`_reads_at` on the thermal reader that locates their peaks,
+    `thermal_peaks.thermal_reader`, over
     the whole table, its intervals split at the events and the heat input's own switches: the thermal columns
     jump where a contact starts and ends); None where they are not read between rows (no thermal model, a failed
     run)."""
@@ -465,8 +471,10 @@ def thermal_point_reader(source: Source | None, cols, events: pd.DataFrame | Non
                              lo, hi, "start", "end")
     if not intervals:
         return None
+    def samples(angle_column: str, speed_column: str | None = None):
+        return _samples_between_rows(source, reader, intervals, t, cols, angle_column, speed_column)
     return (_reads_at(reader, intervals, t), np.array([intervals[0].lo] + [iv.hi for iv in intervals]),
-            frozenset(source.columns) | frozenset(cols.names))
+            frozenset(source.columns) | frozenset(cols.names), samples)
 
 
 def _intervals(t: np.ndarray, breaks: list[tuple[float, str]], lo: float, hi: float, kinds: tuple[str, str],

@@ -459,7 +459,8 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
         from mechsim.scenarios.peaks import thermal_point_reader     # those on the thermal columns
         reader = thermal_point_reader(done.source, cols, events, event_cols)
         if reader is not None:
-            validity.located(valid, conditions, cols, reader[:2], reader[2])
+            validity.located(valid, conditions, cols, reader[:2], reader[2],
+                             lambda: reader[3](done.angle_col, done.speed_col))
     warnings += singular_warnings(peak_summary)
     wall = time.perf_counter() - wall0 + the_plan.seconds
     tables = done.stats.get("tables_time_s", 0.0) + time.perf_counter() - post0

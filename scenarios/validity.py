@@ -285,11 +285,11 @@ def locatable(section: dict, conds: list[ValidityCondition], readable) -> list[b
 
 
 def _with_samples(t: np.ndarray, columns: Mapping[str, np.ndarray], ts: np.ndarray, table: Mapping,
-                  needs: set[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """(instants, columns) of the rows and the samples between them together, in time order (the columns the
-    conditions need, and the instants): every crossing, dip, rise and least margin the samples show between two
-    rows is then searched as one between rows is, however many a gap between rows holds (docs/theory.md,
-    "Validity"). A column the samples lack is NaN there (the condition does not apply)."""
+                  needs: set[str]) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+    """(instants, columns, which are output rows) of the rows and the samples between them together, in time order
+    (the columns the conditions need, and the instants): every crossing, dip, rise and least margin the samples
+    show between two rows is then searched as one between rows is, however many a gap between rows holds
+    (docs/theory.md, "Validity"). A column the samples lack is NaN there (the condition does not apply)."""
     order = np.argsort(np.concatenate([t, ts]), kind="stable")
     merged = {}
     for n in (n for n in needs if n in columns):
@@ -298,7 +298,7 @@ def _with_samples(t: np.ndarray, columns: Mapping[str, np.ndarray], ts: np.ndarr
         more = np.asarray(table[n]) if n in table else np.full(len(ts), None if rows.dtype == object else np.nan)
         merged[n] = np.concatenate([rows, more.astype(rows.dtype)])[order]
     merged["t_s"] = np.concatenate([t, np.asarray(ts, dtype=float)])[order]
-    return merged["t_s"], merged
+    return merged["t_s"], merged, order < len(t)
 
 
 def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str, np.ndarray], reader,
@@ -324,9 +324,10 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
         return
     chosen = [(c, row) for c, row, ok in zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     got = samples() if samples is not None and chosen else None
-    if got is not None:         # the samples between far-apart rows searched as rows are (`_with_samples`)
-        t, columns = _with_samples(t, columns, *got, {n for c, _ in chosen for n in c.needs})
-    work = [_Condition(c, row, t, columns, ends) for c, row in chosen]
+    # the samples between far-apart rows searched as rows are (`_with_samples`), for each condition they hold
+    sampled = [c for c, _ in chosen if got is not None and all(n in got[1] for n in c.needs)]
+    merged = _with_samples(t, columns, *got, {n for c in sampled for n in c.needs}) if sampled else None
+    work = [_Condition(c, row, *(merged if c in sampled else (t, columns, None)), ends) for c, row in chosen]
     work = [w for w in work if w.applies.any()]
     _refine(read_at, [job for w in work
                       for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]
@@ -342,8 +343,11 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
 class _Condition:
     """One condition's rows, its brackets to narrow (`_Job`) and what it reports from them (`located`)."""
 
-    def __init__(self, c: ValidityCondition, row: dict, t: np.ndarray, columns, ends: np.ndarray):
-        self.c, self.row, self.t, self.ends = c, row, t, ends
+    def __init__(self, c: ValidityCondition, row: dict, t: np.ndarray, columns, is_row: np.ndarray | None,
+                 ends: np.ndarray):
+        """t, columns: the output rows', or the rows and the samples between them together (`_with_samples`), is_row
+        saying which are rows (None: all)."""
+        self.c, self.row, self.t, self.ends, self.is_row = c, row, t, ends, is_row
         values = np.broadcast_to(np.asarray(c.quantity(columns), dtype=float), t.shape)
         m = c.margin(values)
         self.applies = applies = np.isfinite(m)
@@ -534,6 +538,21 @@ class _Condition:
                          for lo, hi in self._pieces(at, float(t[g + 1]))]))
         return out
 
+    def _between_rows(self) -> None:
+        """`violated_between_rows` (`held_between_rows`) where a sample violates (holds) between two output rows that
+        hold (violate) and apply: what the rows do not show, as a dip (rise) between them says (`report`)."""
+        if self.is_row is None or self.is_row.all():
+            return
+        rows = np.flatnonzero(self.is_row)
+        k = np.clip(rows.searchsorted(np.arange(len(self.t)), side="right") - 1, 0, len(rows) - 1)
+        before, after = rows[k], rows[np.minimum(k + 1, len(rows) - 1)]
+        inside = ~self.is_row & (before < np.arange(len(self.t))) & (np.arange(len(self.t)) < after)
+        both = self.applies[before] & self.applies[after] & inside & self.applies
+        if np.any(both & self.bad & ~self.bad[before] & ~self.bad[after]):
+            self.row["violated_between_rows"] = True
+        if np.any(both & ~self.bad & self.bad[before] & self.bad[after]):
+            self.row["held_between_rows"] = True
+
     def report(self) -> None:
         row, t = self.row, self.t
         row["how"] = "located"
@@ -595,6 +614,7 @@ class _Condition:
                     starts.append(into)
         row["applies_share"] = float(applied / total)
         row["violated_share"] = float(violated / total)
+        self._between_rows()
         # the first violation: the earliest crossing into it, or the first violating row where none lies before it
         # (the run's first row, or a row after one the condition does not apply to)
         first = min(starts, key=_instant) if starts else None
