@@ -71,6 +71,20 @@ def test_rows_closer_than_the_step_are_not_sampled():
         "peaks"]["contact_force_N"]["how"] == HOW_DAE
 
 
+def test_a_gap_is_sampled_at_the_drive_speed_its_ends_show():
+    """Two rows at one angle a second apart, the drive turning at 2 rad/s at either end (a swing out and back in
+    between): the net turn says nothing, the speed at the ends gives the spacing DAE_STEP_RAD / 2 rad/s; where the
+    ends are slower than the net turn, the net turn's pace stands."""
+    t = np.array([0.0, 1.0, 2.0])
+    spacing = _rows_finest(t, np.array([0.0, 0.0, 1.0]), np.array([2.0, -2.0, 0.5]))
+    gaps = spacing(t)
+    assert gaps[0] == pytest.approx(DAE_STEP_RAD / 2.0)
+    assert gaps[1] == pytest.approx(DAE_STEP_RAD / 2.0)       # the faster end (|-2|) over the net turn (1 rad/s)
+    assert _rows_finest(t, np.array([0.0, 0.0, 0.0]), None) is None
+    slow = _rows_finest(t, np.array([0.0, 0.5, 1.0]), np.array([0.1, 0.1, 0.1]))
+    assert slow(t)[0] == pytest.approx(DAE_STEP_RAD / 0.5)
+
+
 def test_interpolated_states_are_the_rows_at_the_rows_and_near_the_solution_between():
     """The sampler at a row's instant reads that row's own state (the cubic Hermite's end), and between rows at
     2.3 ms agrees with a run at 0.1 ms rows to the interpolant's error, h^4 |y''''| / 384 (about 1e-4 of the
