@@ -325,9 +325,10 @@ def located(section: dict, conds: list[ValidityCondition], columns: Mapping[str,
     chosen = [(c, row) for c, row, ok in zip(conds, section["conditions"], locatable(section, conds, readable)) if ok]
     got = samples() if samples is not None and chosen else None
     # the samples between far-apart rows searched as rows are (`_with_samples`), for each condition they hold
-    sampled = [c for c, _ in chosen if got is not None and all(n in got[1] for n in c.needs)]
-    merged = _with_samples(t, columns, *got, {n for c in sampled for n in c.needs}) if sampled else None
-    work = [_Condition(c, row, *(merged if c in sampled else (t, columns, None)), ends) for c, row in chosen]
+    sampled = [got is not None and all(n in got[1] for n in c.needs) for c, _ in chosen]
+    merged = (_with_samples(t, columns, *got, {n for (c, _), s in zip(chosen, sampled) if s for n in c.needs})
+              if any(sampled) else None)
+    work = [_Condition(c, row, *(merged if s else (t, columns, None)), ends) for (c, row), s in zip(chosen, sampled)]
     work = [w for w in work if w.applies.any()]
     _refine(read_at, [job for w in work
                       for job in w.worst_jobs + w.dip_jobs + w.rise_jobs + [j for jobs in w.crossing_jobs for j in jobs]
@@ -482,9 +483,9 @@ class _Condition:
         return max(lo, float(ends[k - 1])), min(hi, float(ends[k]))
 
     def _best(self):
-        """(the job holding the least margin, whether it is unbounded): the earliest unbounded one where there are
-        several (a friction demand at each instant its normal force passes zero), so that which is reported does
-        not depend on the order the rows rank them in."""
+        """(the job holding the least margin, whether it is unbounded): the earliest unbounded one the searches found
+        where there are several (a friction demand at each instant its normal force passes zero); which ones the
+        searches hold still depends on the rows' ranking of the candidates."""
         best, unbounded = None, None
         for job in self.worst_jobs + [j for e in self.edges for j, _ in e.middle]:
             if job.found is None or job.scores[-1] == np.inf:       # (a rowless piece where it does not apply)
