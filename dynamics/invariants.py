@@ -13,8 +13,9 @@ first such row instead of writing it. Checked once per run on the finished table
   system) = change of kinetic energy + energy lost in impacts up to that row. Integrated runs: within
   K (rtol S + atol max(1, S)), S = sum of the largest |work| of each kind + the largest kinetic energy (the
   work states are integrated with the motion under the same weights); closed-form runs: within
-  QUADRATURE_FACTOR times the trapezoidal rule's own error estimate (`trapezoid_error_estimate`), since there
-  the works are quadratures of exact powers.
+  QUADRATURE_FACTOR times the quadrature's own error estimate, since there the works are quadratures of exact
+  powers (dynamics/quadrature.py's, given; for a table without it, the trapezoidal rule's on its rows,
+  `trapezoid_error_estimate`).
 
 K = 1000 (GLOBAL_FACTOR): integrators control the local error per step to rtol; the global error of a run is a
 modest multiple of it (docs/stability.md measures it over the built-ins and the robustness grid). A violation is
@@ -31,9 +32,12 @@ from mechsim.dynamics.tables import TableColumns
 
 #: global error of a run in units of the local tolerance (see the module docstring)
 GLOBAL_FACTOR = 1000.0
-#: the closed form's energy bound in units of the trapezoidal rule's error estimate, with a margin: at a jump of
-#: the power inside a panel the error reaches 4 times the estimate (`trapezoid_error_estimate`)
+#: the closed form's energy bound in units of its quadrature's error estimate, with a margin: the trapezoidal
+#: rule's error reaches 4 times its estimate at a jump of the power inside a panel (`trapezoid_error_estimate`)
 QUADRATURE_FACTOR = 10.0
+#: where a closed-form table carries its works' quadrature error estimate per row from its making to its check
+#: (scenarios/runner.py `_closed_form_table`, `_finished`: an attrs entry, removed there)
+QUADRATURE_ERROR = "work_quadrature_error_J"
 #: lever arm (m) turning atol on angular speeds (rad/s) into a slip-speed resolution (m/s)
 LEVER_M = 1.0
 
@@ -146,14 +150,17 @@ def trapezoid_error_estimate(work: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(panel)])
 
 
-def _energy(df, events, rtol, atol, exact, names=None):
+def _energy(df, events, rtol, atol, exact, names=None, quadrature=None):
     work_names = _works(df, names)
     w = _matrix(df, work_names) if work_names else None
     closure = energy_closure(df, events, names, w)
     if closure is None:
         return None
     if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
-        bound = QUADRATURE_FACTOR * trapezoid_error_estimate(w.sum(axis=1)) + 1e-12 * np.max(np.abs(w), initial=1.0)
+        estimate = quadrature
+        if estimate is None or len(estimate) != len(w):     # works by the trapezoidal rule on the rows
+            estimate = trapezoid_error_estimate(w.sum(axis=1))
+        bound = QUADRATURE_FACTOR * estimate + 1e-12 * np.max(np.abs(w), initial=1.0)
     else:
         scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
         bound = np.full(len(w), GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale)))
@@ -161,8 +168,10 @@ def _energy(df, events, rtol, atol, exact, names=None):
 
 
 def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, atol: float,
-                    exact: bool = False, columns: list[str] | None = None) -> Violation | None:
-    """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature);
+                    exact: bool = False, columns: list[str] | None = None, quadrature: np.ndarray | None = None
+                    ) -> Violation | None:
+    """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature, whose
+    error estimate per row `quadrature` is, dynamics/quadrature.py; without it the trapezoidal rule's on the rows);
     columns: check only the invariants these columns carry (default: every column). df: a frame or its
     TableColumns."""
     if df is None or not len(df if not isinstance(df, TableColumns) else df.frame):
@@ -172,7 +181,7 @@ def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, 
     names = None if columns is None else [c for c in columns if c in df]
     checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names),
               _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names),
-              _heat_generated(df, rtol, atol, names), _energy(df, events, rtol, atol, exact, names)]
+              _heat_generated(df, rtol, atol, names), _energy(df, events, rtol, atol, exact, names, quadrature)]
     worst = None
     for check in checks:
         if check is None:

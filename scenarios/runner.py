@@ -17,7 +17,8 @@ import numpy as np
 import pandas as pd
 
 from mechsim.dynamics.drives import Drive
-from mechsim.dynamics.invariants import event_floats, first_violation
+from mechsim.dynamics.invariants import QUADRATURE_ERROR, event_floats, first_violation
+from mechsim.dynamics.quadrature import cumulative_integrals
 from mechsim.dynamics.result import Failure, FailureCode, Result
 from mechsim.dynamics.settings import SolverSettings
 from mechsim.dynamics.stats import new_stats
@@ -27,7 +28,7 @@ from mechsim.mechanisms.base import Mechanism
 from mechsim.scenarios import validity
 from mechsim.scenarios.console import group_warnings, warning_time
 from mechsim.scenarios.loader import Scenario, build_mechanism
-from mechsim.scenarios.peaks import Source as PeakSource, singular_warnings
+from mechsim.scenarios.peaks import CLOSED_READINGS, CLOSED_STEP_RAD, Source as PeakSource, singular_warnings
 from mechsim.scenarios.units import ScenarioError
 
 VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
@@ -82,18 +83,37 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     t = output_times(si["duration"], si["output_step"])      # as the DAE's rows: k step, and the end itself
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
-    powers = cols.pop("powers")
+    cols.pop("powers")          # (integrated between the rows below)
     events = cols.pop("events", None)
     if events is None:   # a mechanism may list the closed form's transitions apart from its columns
         listing = getattr(mech, "closed_form_events", None)
         events = listing(t, angle0, drive.speed) if listing else []
-    works = {}
-    for name, power in powers.items():
-        p = np.broadcast_to(np.asarray(power, dtype=float), t.shape)      # the trapezoidal rule, cumulative
-        works[f"work_{name}_J"] = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(t))])
-    df = pd.DataFrame({"t_s": t, **cols, **works})      # one constructor, not a column at a time
+    works, error = _closed_form_works(mech, t, angle0, drive.speed, [float(e["t_s"]) for e in events])
+    df = pd.DataFrame({"t_s": t, **cols, **{f"work_{name}_J": w for name, w in works.items()}})   # one constructor
     df.attrs["events"] = events
+    df.attrs[QUADRATURE_ERROR] = error
     return df
+
+
+def _closed_form_works(mech: Mechanism, t: np.ndarray, angle0: float, speed: float, breaks: list[float]
+                       ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """({flow: its work at each row}, the quadrature's error estimate of their sum per row): the closed form's
+    exact powers integrated between the rows (`dynamics.quadrature.cumulative_integrals`), cut where the run changes
+    mode (a power jumps there: a Geneva's engagement, a chain's arc entry) and into panels of at most
+    CLOSED_STEP_RAD of drive angle, the powers read at the instants in order from the run's start (a closed form
+    counts its angles from its first instant)."""
+    def powers(at: np.ndarray) -> dict[str, np.ndarray]:
+        order = np.argsort(at, kind="stable")
+        got = mech.closed_form(np.concatenate([t[:1], at[order]]), angle0, speed)["powers"]
+        out = {}
+        for name, p in got.items():
+            values = np.broadcast_to(np.asarray(p, dtype=float), (len(at) + 1,))[1:]
+            out[name] = np.empty(len(at))
+            out[name][order] = values
+        return out
+    pace = abs(float(speed))
+    widest = CLOSED_STEP_RAD / pace if pace > 0.0 and np.isfinite(pace) else np.inf
+    return cumulative_integrals(powers, t, np.asarray(breaks, dtype=float), widest, CLOSED_READINGS)
 
 
 def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None,
@@ -167,12 +187,13 @@ def event_counts(events: pd.DataFrame, event_cols: TableColumns | None = None) -
 
 def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
              exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None,
-             event_cols: TableColumns | None = None):
+             event_cols: TableColumns | None = None, quadrature: np.ndarray | None = None):
     """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
     becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept.
-    cols, event_cols: df's and the events' TableColumns, if at hand."""
+    cols, event_cols: df's and the events' TableColumns, if at hand; quadrature: a closed form's works' error
+    estimate per row (`_closed_form_works`)."""
     v = first_violation(df if cols is None else cols, events if event_cols is None else _event_columns(
-        events, event_cols), settings.rtol, settings.atol, exact, columns)
+        events, event_cols), settings.rtol, settings.atol, exact, columns, quadrature)
     if v is None or (failure is not None and failure.time <= v.time):
         return df, events, failure
     failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver",
@@ -404,8 +425,10 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
     cols = TableColumns(df)
     source = PeakSource(method, traj, mech, drive, settings, si, frozenset(cols.names), thermal, df)
     event_cols = TableColumns(events)
+    # (the closed form's quadrature error travels with its table to here, not beyond: no writer keeps an array)
+    quadrature = df.attrs.pop(QUADRATURE_ERROR, None)
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols,
-                                        event_cols=event_cols)
+                                        event_cols=event_cols, quadrature=quadrature)
     if checked is not df:
         df, cols = checked, TableColumns(checked)
     if keep is not None and thermal is not None:
