@@ -252,13 +252,16 @@ def _breaks(events: pd.DataFrame, ev: TableColumns | None = None) -> list[tuple[
     return sorted((t, f"event '{k}' at t = {t:.9g} s") for t, k in zip(np.asarray(ev["t_s"], float).tolist(), kinds))
 
 
+#: a gap between rows wider than this much drive angle has the turns' ends estimated from samples between the rows
+#: (`_turn_estimates`); rows four a turn estimate them well enough for Newton's method to converge
+ESTIMATE_RAD = math.pi / 2
 #: consecutive crank turns agree to this (their durations, and the drive speed at their starts, relative) where the
 #: motion counts as periodic
 PERIODIC_RTOL = 1e-3
 
 
 def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=None, works: dict | None = None,
-                    speed_column: str | None = None) -> dict | None:
+                    speed_column: str | None = None, estimates: tuple | None = None) -> dict | None:
     """Where a run reaches a periodic regime: the first turn of the drive (from the run's first angle) from which
     every turn lasts as long as the last turn and starts at the same drive speed, to PERIODIC_RTOL (against the last
     turn, so that a slow drift is not taken for periodic); at least two such turns. None without (a prescribed or
@@ -268,13 +271,16 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
     at, within a Newton step of them), as `_located_turns` makes it. Every turn's end and starting speed (the table's
     `speed_column`) are then those, so that whether and where the regime begins does not depend on the output step,
     and the last turn's work of each power flow (`last_turn_work_J`) is the `works` columns ({name: rows}) read there
-    (`turns.carried` over the step)."""
+    (`turns.carried` over the step). estimates: (instants, drive angle, drive speed) the turns' ends are estimated
+    from instead of the rows (`_turn_estimates`: the rows with the samples between them, where the rows lie turns
+    apart)."""
     from mechsim.scenarios.turns import carried, crossings
-    bounds = crossings(t, angle, speed, float(angle[0]))
+    te, ae, we = (t, angle, speed) if estimates is None else estimates
+    bounds = crossings(te, ae, we, float(angle[0]))
     if len(bounds) < 3:
         return None
     b = np.concatenate([[t[0]], bounds])
-    w = np.interp(b, t, speed)
+    w = np.interp(b, te, we)
     located = tables = read = None
     if locate is not None:
         located, tables, read = locate(bounds, float(angle[0]) + 2 * np.pi * np.arange(1, len(b), dtype=float))
@@ -307,6 +313,30 @@ def periodic_regime(t: np.ndarray, angle: np.ndarray, speed: np.ndarray, locate=
     if work:
         out["last_turn_work_J"] = work
     return out
+
+
+def _turn_estimates(source: Source, read, intervals: list[Interval], t: np.ndarray, cols, angle_column: str,
+                    speed_column: str) -> tuple | None:
+    """(instants, drive angle, drive speed): the rows with the samples between them (`_samples_between_rows`, as
+    the located peaks sample) where a gap between rows spans more than ESTIMATE_RAD of the drive's angle, for
+    `periodic_regime`'s first estimates of the turns' ends; None where none does (the rows' cubic Hermite then
+    estimates a crossing to O(h^4), and Newton's method converges from there). Rows turns apart (three rows a
+    run) place a crossing nowhere near it, and Newton's method from there does not reach it: the regime was not
+    found and the start-up's extremes were reported as the run's."""
+    angle, speed = np.asarray(cols[angle_column], float)[:len(t)], np.asarray(cols[speed_column], float)[:len(t)]
+    h = np.diff(t)
+    with np.errstate(invalid="ignore"):
+        spans = np.fmax(np.abs(np.diff(angle)), np.fmax(np.abs(speed[1:]), np.abs(speed[:-1])) * h)
+    if not np.nanmax(spans, initial=0.0) > ESTIMATE_RAD:
+        return None
+    got = _samples_between_rows(source, read, intervals, t, cols, angle_column, speed_column)
+    if got is None or angle_column not in got[1] or speed_column not in got[1]:
+        return None
+    at, table = got
+    instants = np.concatenate([t, at])
+    order = np.argsort(instants, kind="stable")
+    return (instants[order], np.concatenate([angle, table[angle_column]])[order],
+            np.concatenate([speed, table[speed_column]])[order])
 
 
 def last_drive_cycle(t: np.ndarray, angle: np.ndarray, speed: np.ndarray | None, cycle, locate=None
@@ -658,7 +688,8 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
             regime = periodic_regime(tn, angles[:n], np.asarray(cols[speed_column], float)[:n], locate_turns,
                                      {c: np.asarray(cols[c], float)[:n] for c in cols.names
                                       if c.startswith("work_") and c.endswith("_J") and c in source.columns},
-                                     speed_column)
+                                     speed_column, _turn_estimates(source, raw, whole, tn, cols, angle_column,
+                                                                   speed_column) if whole else None)
     elif source is not None and len(t) > 1:
         windows = [(float(t[0]), t_end, "run")]
     # the turn the means are taken over: the periodic regime's last, else (a prescribed drive, a run that does not
