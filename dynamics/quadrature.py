@@ -34,13 +34,16 @@ ROUNDOFF = 64 * np.finfo(float).eps
 
 
 def cumulative_integrals(rates: Callable[[np.ndarray], dict[str, np.ndarray]], rows: np.ndarray,
-                         breaks: np.ndarray, widest: float, most: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+                         breaks: np.ndarray, widest: float, most: int, at_rows: dict | None = None
+                         ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """({name: its integral from rows[0] to each row}, the error estimate of their sum at each row: the
     accumulated |Lobatto - Simpson| of its panels). rates(instants): each named rate at the instants (any order);
     breaks: instants where a rate may jump (those outside the rows' span ignored); widest: the widest panel; most:
     at most this many panels at the start (wider ones where the rows' span needs more), and REFINED times as many
-    integrated in all (the halving ends there)."""
+    integrated in all (the halving ends there). at_rows: {name: the rate at the rows} where read already (the
+    table's own columns: a panel's ends are mostly rows)."""
     rows = np.asarray(rows, dtype=float)
+    known = None if at_rows is None else (rows, at_rows)
     edges, at_break = _edges(rows, np.asarray(breaks, dtype=float), widest, most)
     lo, hi = edges[:-1], edges[1:]
     inside = np.stack([at_break[:-1], at_break[1:]], axis=1)       # a panel's ends read just inside it
@@ -53,7 +56,7 @@ def cumulative_integrals(rates: Callable[[np.ndarray], dict[str, np.ndarray]], r
     for level in range(LEVELS + 1):
         if not len(lo):
             break
-        five, three, magnitude = _rules(rates, lo, hi, inside, reach)
+        five, three, magnitude = _rules(rates, lo, hi, inside, reach, known if level == 0 else None)
         names = list(five)
         if not names:
             break
@@ -82,9 +85,11 @@ def cumulative_integrals(rates: Callable[[np.ndarray], dict[str, np.ndarray]], r
     return cumulative, np.concatenate([[0.0], np.cumsum(error)])
 
 
-def _rules(rates, lo: np.ndarray, hi: np.ndarray, inside: np.ndarray, reach: np.ndarray) -> tuple[dict, dict, dict]:
+def _rules(rates, lo: np.ndarray, hi: np.ndarray, inside: np.ndarray, reach: np.ndarray, known: tuple | None = None
+           ) -> tuple[dict, dict, dict]:
     """Each rate's integral over every panel [lo, hi] by the 5-point Gauss-Lobatto rule, by Simpson's on the same
-    nodes, and its magnitude's by the first: three {rate: per panel}, from one call of `rates` for all nodes.
+    nodes, and its magnitude's by the first: three {rate: per panel}, from one call of `rates` for all nodes but
+    those `known` gives ((instants, {rate: its values there})).
     inside: per panel, whether its start and its end are breaks, read `reach` inside the panel there (its one-sided
     limit: the rate jumps at a break, and the instant itself has one side's value, which for the panel on the
     other side is an error of the jump times the end's weight however fine the panel; a closed form switches
@@ -94,8 +99,21 @@ def _rules(rates, lo: np.ndarray, hi: np.ndarray, inside: np.ndarray, reach: np.
     at = mid[:, None] + half[:, None] * _X
     at[:, 0] = np.where(inside[:, 0], lo + reach, at[:, 0])
     at[:, -1] = np.where(inside[:, 1], hi - reach, at[:, -1])
-    got = {name: np.broadcast_to(np.asarray(v, dtype=float), at.size).reshape(at.shape)
-           for name, v in rates(at.ravel()).items()}
+    # each instant read once (a panel's end is its neighbour's start), and not at all where it is given (`known`)
+    instants, where = np.unique(at.ravel(), return_inverse=True)
+    ask = np.ones(len(instants), dtype=bool)
+    if known is not None:
+        pos = np.clip(known[0].searchsorted(instants), 0, len(known[0]) - 1)
+        hit = known[0][pos] == instants
+        ask = ~hit
+    asked = rates(instants[ask]) if ask.any() else {name: np.zeros(0) for name in known[1]}
+    got = {}
+    for name, v in asked.items():
+        full = np.empty(len(instants))
+        full[ask] = np.broadcast_to(np.asarray(v, dtype=float), int(ask.sum()))
+        if known is not None:
+            full[hit] = np.broadcast_to(np.asarray(known[1][name], dtype=float), known[0].shape)[pos[hit]]
+        got[name] = full[where].reshape(at.shape)
     return ({name: half * (v @ _W) for name, v in got.items()}, {name: half * (v @ _SIMPSON) for name, v in got.items()},
             {name: np.abs(half) * (np.abs(v) @ _W) for name, v in got.items()})
 

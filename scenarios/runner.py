@@ -83,25 +83,25 @@ def _closed_form_table(mech: Mechanism, si: dict, drive: Drive) -> pd.DataFrame:
     t = output_times(si["duration"], si["output_step"])      # as the DAE's rows: k step, and the end itself
     angle0 = si["initial"][mech.initial_keys[0]]
     cols = mech.closed_form(t, angle0, drive.speed)
-    cols.pop("powers")          # (integrated between the rows below)
+    powers = cols.pop("powers")
     events = cols.pop("events", None)
     if events is None:   # a mechanism may list the closed form's transitions apart from its columns
         listing = getattr(mech, "closed_form_events", None)
         events = listing(t, angle0, drive.speed) if listing else []
-    works, error = _closed_form_works(mech, t, angle0, drive.speed, [float(e["t_s"]) for e in events])
+    works, error = _closed_form_works(mech, t, angle0, drive.speed, [float(e["t_s"]) for e in events], powers)
     df = pd.DataFrame({"t_s": t, **cols, **{f"work_{name}_J": w for name, w in works.items()}})   # one constructor
     df.attrs["events"] = events
     df.attrs[QUADRATURE_ERROR] = error
     return df
 
 
-def _closed_form_works(mech: Mechanism, t: np.ndarray, angle0: float, speed: float, breaks: list[float]
-                       ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def _closed_form_works(mech: Mechanism, t: np.ndarray, angle0: float, speed: float, breaks: list[float],
+                       at_rows: dict | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """({flow: its work at each row}, the quadrature's error estimate of their sum per row): the closed form's
     exact powers integrated between the rows (`dynamics.quadrature.cumulative_integrals`), cut where the run changes
     mode (a power jumps there: a Geneva's engagement, a chain's arc entry) and into panels of at most
     CLOSED_STEP_RAD of drive angle, the powers read at the instants in order from the run's start (a closed form
-    counts its angles from its first instant)."""
+    counts its angles from its first instant). at_rows: the powers at the rows t, where read already."""
     def powers(at: np.ndarray) -> dict[str, np.ndarray]:
         order = np.argsort(at, kind="stable")
         got = mech.closed_form(np.concatenate([t[:1], at[order]]), angle0, speed)["powers"]
@@ -113,7 +113,7 @@ def _closed_form_works(mech: Mechanism, t: np.ndarray, angle0: float, speed: flo
         return out
     pace = abs(float(speed))
     widest = CLOSED_STEP_RAD / pace if pace > 0.0 and np.isfinite(pace) else np.inf
-    return cumulative_integrals(powers, t, np.asarray(breaks, dtype=float), widest, CLOSED_READINGS)
+    return cumulative_integrals(powers, t, np.asarray(breaks, dtype=float), widest, CLOSED_READINGS, at_rows)
 
 
 def peaks(df: pd.DataFrame, angle_column: str, columns: tuple[str, ...], cols: TableColumns | None = None,
