@@ -11,6 +11,7 @@ toward an event has no value there, and its events, growth, impulse and energy l
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -815,16 +816,22 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if treader is not None and mean_over is not None and thermal:
         means.update(_thermal_turn_means(treader, t, cols, thermal, events, *mean_over, spacing))
     table = np.array([np.asarray(cols[c], dtype=float) for c in present]).reshape(len(present), len(t))
-    for (lo, hi, label), got, intervals, heat in zip(windows, located, spans, heats):
+    for (lo, hi, label), got, intervals, heat, p in zip(windows, located, spans, heats,
+                                                        plans if plans else [None] * len(windows)):
         # rows the unlocated columns are read on: the periodic regime runs to the table's end (a cycle-averaged
         # run's table continues the simulated window periodically)
         inside = (np.ones(len(t), bool) if label == "run" else t >= lo if label == "periodic"
                   else (t >= lo) & (t <= hi))
         bests = _best_rows(table, inside)
+        cut = _between_ends(p.t, p.intervals) if p is not None else None
         for c, f, best in zip(present, table, bests):
             mine, own = ((heat[c][0], (treader.how + sampled, heat[c][1], treader)) if c in heat else
                          (got.get(c, {}), (how, intervals, read)))
-            entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates, best)
+            # the growth toward an event is judged on the window's table with its samples between the rows where
+            # it has them (an interval between events may hold no two rows)
+            sampled_rows = (p.values[c], cut) if c not in heat and p is not None and c in p.values else None
+            entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates, best,
+                                  sampled_rows)
             if label == "startup":
                 out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
                 if "singular" in entry:
@@ -960,10 +967,24 @@ def _best_rows(table: np.ndarray, inside: np.ndarray) -> list[dict]:
             for a, b in zip(top, least)]
 
 
+def _between_ends(t: np.ndarray, intervals: list[Interval]) -> list[Interval]:
+    """The intervals without their rows at their ends (a plan's table holds an interval's one-sided limits at its
+    events as rows: at an event the column grows without bound toward, that limit is a round-off value of either
+    sign, which says nothing of the approach the rows before it show)."""
+    out = []
+    for iv in intervals:
+        rows = np.asarray(iv.rows)
+        keep = (t[rows] > iv.lo) & (t[rows] < iv.hi) if len(rows) else np.zeros(0, bool)
+        out.append(iv if keep.all() else dataclasses.replace(iv, rows=rows[keep]))
+    return out
+
+
 def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates,
-                  best: dict) -> dict:
+                  best: dict, sampled_rows: tuple | None = None) -> dict:
     """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window);
-    best: its best rows in the window (`_best_rows`), reported beside a located extremum."""
+    best: its best rows in the window (`_best_rows`), reported beside a located extremum; sampled_rows: (the column,
+    the intervals) of the table the extrema were located on (its samples between rows among its rows), on which
+    the growth toward an event is judged (`singular_approaches`)."""
     entry: dict = {}
     rows = None                     # the rows inside the window with a value: read where a column is not located
     for name, pick in (("max", np.argmax), ("min", np.argmin)):
@@ -994,7 +1015,8 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
         edge = _edge(e)
         if edge is None or read is None:
             continue
-        found = singular_approaches(c, f, edge, sense, intervals, read, h, events, coordinates, e.interval)
+        g, ivs = sampled_rows if sampled_rows is not None else (f, intervals)
+        found = singular_approaches(c, g, edge, sense, ivs, read, h, events, coordinates, e.interval)
         if found:
             t_e = found[0]["t_s"]
             angle = _event_angle(events, t_e, angle_column, t, angles)

@@ -221,3 +221,21 @@ def test_the_thermal_validity_between_far_apart_rows(lumped_runs):
     own, other = band("1 ms"), band("31 ms")
     assert other["applies_share"] == pytest.approx(own["applies_share"], rel=1e-7)
     assert other["worst"]["value"] == pytest.approx(own["worst"]["value"], rel=1e-7)
+
+
+@pytest.mark.parametrize("step", ["0.7 s", "1.3 s", "2.3 s"])
+def test_an_unbounded_approach_between_far_apart_rows(step):
+    """chain-mech1-torque's coupler force grows like 1/distance toward each stop impact (exponent 1.000). At its own
+    10 ms rows the maximum is unbounded toward the first, at 3.15176 s. Rows 0.7-2.3 s apart leave no two rows
+    between a stop and the event before it, and the growth was judged on the rows only: the stops' one-sided
+    limits, values of round-off at a pole, were reported, a maximum of +2.4e7 N and a minimum of -2.4e10 N. The
+    growth is now judged on the rows with the samples between them (the plan's table, without its rows at the
+    events themselves): the maximum is unbounded toward the same stop at every step, and the minimum is the rows'
+    (the coupler carries nothing in the dwell: 0 N)."""
+    own = mechsim.run(mechsim.load("chain-mech1-torque", set=["output.plots=false"])).summary["peaks"]
+    got = _peaks("chain-mech1-torque", step)[0]["coupler_force_N"]
+    first = own["coupler_force_N"]["max"]
+    assert first["value"] is None and got["max"]["value"] is None
+    assert got["max"]["t_s"] == pytest.approx(first["t_s"], abs=1e-9)
+    assert got["max"]["growth_exponent"] == pytest.approx(1.0, abs=1e-2)
+    assert abs(got["min"]["value"]) <= 1e-9
