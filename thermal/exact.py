@@ -27,6 +27,12 @@ from mechsim.thermal.linear import LinearThermalSystem
 
 #: Gauss-Legendre nodes per (sub-)interval
 QUADRATURE_NODES = 6
+#: rows farther apart than this much drive angle have the contact's switches searched between them on instants
+#: SWITCH_STEP_RAD apart (at most SWITCH_INSTANTS a run): an engagement spans tens of degrees, its switches (entry,
+#: slip reversal, flank switch, exit) apart by as much, and every built-in's own rows lie within 0.61 degree
+WIDEST_GAP_RAD = np.radians(1.0)
+SWITCH_STEP_RAD = np.radians(0.5)
+SWITCH_INSTANTS = 200_000
 #: bisection halvings per closed-form call in switch_times
 SEARCH_LEVELS = 6
 #: rows per block of `ModalNetwork.constant`'s elementwise work
@@ -167,8 +173,13 @@ def contact_switches(mech, angle0: float, speed: float, t_grid: np.ndarray, grid
     a run: its thermal integration (`integrate_closed_form`) and its located peaks (scenarios/peaks.py
     `_contact_switches`, with the events `known`) search the same brackets. The brackets holding a known instant
     are left out afterwards, as `switch_times` leaves them out before (each bracket's bisection is its own: the
-    same times to the bit)."""
+    same times to the bit). Rows more than WIDEST_GAP_RAD of drive angle apart are searched on instants
+    SWITCH_STEP_RAD apart between them (`_switch_grid`): a gap holding an engagement's entry, slip reversal and exit
+    shows the same code at both its rows."""
     t_grid = np.asarray(t_grid, dtype=float)
+    finer = _switch_grid(t_grid, speed)
+    if finer is not None:
+        t_grid, grid_columns = finer, None
     key = (id(mech), float(angle0), float(speed), len(t_grid), hash(t_grid.tobytes()))
     hit = _SWITCHES.get(key)
     if hit is None or hit[0]() is not mech:
@@ -179,6 +190,26 @@ def contact_switches(mech, angle0: float, speed: float, t_grid: np.ndarray, grid
         hit = _SWITCHES[key] = (weakref.ref(mech), idx, times)
     _, idx, times = hit
     return sorted(times[_unknown(idx, t_grid, known)].tolist())
+
+
+def _switch_grid(t: np.ndarray, speed: float) -> np.ndarray | None:
+    """The rows with each gap wider than WIDEST_GAP_RAD of drive angle (at the prescribed speed) cut into equal
+    parts of at most SWITCH_STEP_RAD (coarser where that would make more than SWITCH_INSTANTS instants), the rows
+    themselves kept exactly; None where no gap is that wide."""
+    pace = abs(float(speed))
+    if len(t) < 2 or not (pace > 0.0 and np.isfinite(pace)):
+        return None
+    h = np.diff(t)
+    if not np.max(h) * pace > WIDEST_GAP_RAD:
+        return None
+    step = max(SWITCH_STEP_RAD / pace, float(t[-1] - t[0]) / SWITCH_INSTANTS)
+    parts = np.maximum(np.ceil(h / step), 1).astype(np.int64)
+    first = np.concatenate([[0], np.cumsum(parts)])
+    gap = np.repeat(np.arange(len(parts)), parts)
+    within = np.arange(first[-1]) - first[gap]
+    grid = np.concatenate([t[gap] + h[gap] * (within / parts[gap]), t[-1:]])
+    grid[first] = t
+    return grid
 
 
 @functools.lru_cache(maxsize=8)
