@@ -123,6 +123,16 @@ def _edges(rows: np.ndarray, breaks: np.ndarray, widest: float, most: int) -> tu
     `widest` (wider where that would make more than `most`), whether each is a break)."""
     inside = breaks[(breaks > rows[0]) & (breaks < rows[-1])]
     points = np.unique(np.concatenate([rows, inside]))
+    edges, first = split_gaps(points, widest, most)
+    at_break = np.zeros(len(edges), dtype=bool)
+    at_break[first] = np.isin(points, inside)
+    return edges, at_break
+
+
+def split_gaps(points: np.ndarray, widest: float, most: int) -> tuple[np.ndarray, np.ndarray]:
+    """(instants, each point's position among them): the increasing `points` with each gap between them cut into
+    equal parts of at most `widest` (wider where that would make more than `most` parts), the points themselves
+    kept exactly."""
     width = np.diff(points)
     parts = np.ceil(width / widest) if widest > 0 else np.ones(len(width))
     if parts.sum() > most:
@@ -131,8 +141,6 @@ def _edges(rows: np.ndarray, breaks: np.ndarray, widest: float, most: int) -> tu
     first = np.concatenate([[0], np.cumsum(parts)])
     piece = np.repeat(np.arange(len(parts)), parts)
     within = np.arange(first[-1]) - first[piece]
-    edges = np.concatenate([points[piece] + width[piece] * (within / parts[piece]), points[-1:]])
-    edges[first] = points
-    at_break = np.zeros(len(edges), dtype=bool)
-    at_break[first] = np.isin(points, inside)
-    return edges, at_break
+    instants = np.concatenate([points[piece] + width[piece] * (within / parts[piece]), points[-1:]])
+    instants[first] = points
+    return instants, first

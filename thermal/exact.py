@@ -195,21 +195,12 @@ def contact_switches(mech, angle0: float, speed: float, t_grid: np.ndarray, grid
 def _switch_grid(t: np.ndarray, speed: float) -> np.ndarray | None:
     """The rows with each gap wider than WIDEST_GAP_RAD of drive angle (at the prescribed speed) cut into equal
     parts of at most SWITCH_STEP_RAD (coarser where that would make more than SWITCH_INSTANTS instants), the rows
-    themselves kept exactly; None where no gap is that wide."""
+    themselves kept exactly (`dynamics.quadrature.split_gaps`); None where no gap is that wide."""
+    from mechsim.dynamics.quadrature import split_gaps
     pace = abs(float(speed))
-    if len(t) < 2 or not (pace > 0.0 and np.isfinite(pace)):
+    if len(t) < 2 or not (pace > 0.0 and np.isfinite(pace)) or not np.max(np.diff(t)) * pace > WIDEST_GAP_RAD:
         return None
-    h = np.diff(t)
-    if not np.max(h) * pace > WIDEST_GAP_RAD:
-        return None
-    step = max(SWITCH_STEP_RAD / pace, float(t[-1] - t[0]) / SWITCH_INSTANTS)
-    parts = np.maximum(np.ceil(h / step), 1).astype(np.int64)
-    first = np.concatenate([[0], np.cumsum(parts)])
-    gap = np.repeat(np.arange(len(parts)), parts)
-    within = np.arange(first[-1]) - first[gap]
-    grid = np.concatenate([t[gap] + h[gap] * (within / parts[gap]), t[-1:]])
-    grid[first] = t
-    return grid
+    return split_gaps(t, SWITCH_STEP_RAD / pace, SWITCH_INSTANTS)[0]
 
 
 @functools.lru_cache(maxsize=8)
