@@ -1,8 +1,9 @@
 """The layer contract (docs/architecture.md, "The import rule"): imports run one way and only through the
 `mechsim` namespace.
 
-- `mechanisms/` and `thermal/` import nothing of ours outside themselves, but the one emitter from sympy to
-  callables (`mechsim.dynamics.codegen`, a leaf that imports nothing of ours);
+- `mechanisms/` and `thermal/` import nothing of ours outside themselves, but the leaves: the one emitter from
+  sympy to callables (`mechsim.dynamics.codegen`) and the one quadrature between instants
+  (`mechsim.dynamics.quadrature`), which import nothing of ours;
 - `dynamics/` imports neither `scenarios/` nor `benchmarks/`;
 - the scenario pipeline (every module of `scenarios/` but the studies and the two faces, api.py and cli.py)
   never imports `scenarios/studies/`;
@@ -27,7 +28,7 @@ FORBIDDEN = {  # importer -> subpackages it must not import
     "dynamics": {"scenarios", "benchmarks"},
 }
 #: modules every layer may import: leaves below all of them (they import nothing of ours, checked below)
-LEAVES = ("mechsim.dynamics.codegen",)
+LEAVES = ("mechsim.dynamics.codegen", "mechsim.dynamics.quadrature")
 #: the faces of the studies: the only modules outside scenarios/studies/ that import it
 STUDY_FACES = ("scenarios/api.py", "scenarios/cli.py")
 #: the one product module outside benchmarks/ that imports it (`mechsim bench`, `mechsim report`)
