@@ -156,7 +156,7 @@ def _energy(df, events, rtol, atol, exact, names=None, quadrature=None):
     closure = energy_closure(df, events, names, w)
     if closure is None:
         return None
-    if exact:   # closed form: the trapezoidal rule's error, estimated from the work increments
+    if exact:   # closed form: its quadrature's own error estimate
         estimate = quadrature
         if estimate is None or len(estimate) != len(w):     # works by the trapezoidal rule on the rows
             estimate = trapezoid_error_estimate(w.sum(axis=1))

@@ -9,6 +9,9 @@ panel holds or after `LEVELS` halvings. Both rules hold the panel's ends among t
 (a friction force reversing with the slip: the power's |slip|) between an end and the next node is seen by both
 with different weights. With Gauss-Legendre's nodes, all inside, a kink before the first node is extrapolated
 over by a rule and by its halves alike (their difference nil, both a micro-joule off).
+
+`split_gaps` cuts the gaps between instants into equal parts: the panels here, and the instants a closed form's
+contact switches are searched on (thermal/exact.py).
 """
 from __future__ import annotations
 
