@@ -467,6 +467,10 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
 EVERY = 1 << 62
 #: candidates refined per column and sense in the second round at most (`second_round`): the largest bounds
 SECOND_ROUND = 2
+#: located values this close, relative to the column's largest magnitude, are one peak repeated (`refine_further`):
+#: a run's turns repeat a peak to its located values' own error (the refinement's polynomial, about 1e-10; the
+#: readings' tolerance, a tenth of the run's rtol), where the peaks the bounds rank wrongly differ by 1e-4 to 1e-2
+REPEAT = 1e-6
 
 
 def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
@@ -479,7 +483,9 @@ def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
 
 def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]],
                  ends: list[tuple[EndLines, int | None] | None] | None = None,
-                 edges_only: list[tuple[float, float] | None] | None = None) -> list[Plan | None]:
+                 edges_only: list[tuple[float, float] | None] | None = None,
+                 taken: list[set] | None = None, series: set | None = None, count: int = SECOND_ROUND
+                 ) -> list[Plan | None]:
     """For each plan, a plan of its reserve candidates that may still beat the extremum located from its first ones
     (None where none may): a bracket's extremum may reach its row plus twice its parabola estimate's gain (the
     bound `_candidates_bounds` keeps candidates by), so a candidate whose bound exceeds the located value by more
@@ -497,7 +503,9 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
     that the row does not show is refined (rolling-b-components' crank speed at 23 ms rows, 1.5 % short).
     edges_only: per plan, None, or (a, b): only those within [a, b] are refined (a periodic regime's last turn: its
     turns repeat the same peaks, so its first candidates are the regime's, but an extremum next to an event in every
-    turn is in none of them)."""
+    turn is in none of them). taken: per plan, the candidates refined already (`refine_further`'s earlier rounds:
+    skipped, and those chosen here added); series: the (plan, column, 'max' | 'min') to refine further (None:
+    all); count: the candidates refined per column and sense at most."""
     out: list[Plan | None] = []
     for n_plan, (p, got) in enumerate(zip(plans, located)):
         only = edges_only[n_plan] if edges_only is not None else None
@@ -514,12 +522,14 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
         for m, rest in enumerate(p.reserve or [()] * (2 * len(names))):
             c, sense = names[m >> 1], -1.0 if m & 1 else 1.0
             e = got.get(c, {}).get("min" if m & 1 else "max")
-            if e is None:
+            if e is None or (series is not None and (n_plan, c, "min" if m & 1 else "max") not in series):
                 continue
             # (not next to an event where a constant stretch holds the extremum: exact, where the limits at the events
             # around it equal it only to the integration's tolerance, as `end_limits` leaves it)
             rest = ([] if only is not None else list(rest or ())) + (list(edges[m]) if edges is not None and
                                                                       not e.constant else [])
+            if taken is not None:
+                rest = [x for x in rest if (m, *x[1:5]) not in taken[n_plan]]
             if rest:
                 asks.append((m, rest))
         every = _ReserveBounds(p.t, p.intervals, *(ends[n_plan] if has_ends else ())).bounds(F, names, asks)
@@ -527,7 +537,9 @@ def second_round(plans: list[Plan | None], located: list[dict[str, dict[str, Ext
             c, sense = names[m >> 1], -1.0 if m & 1 else 1.0
             v = sense * got[c]["min" if m & 1 else "max"].value
             able = [(-u, n) for n, u in enumerate(bounds) if u > v + ties[c]]
-            found[m] = [rest[n] for _, n in sorted(able)[:SECOND_ROUND]]
+            found[m] = [rest[n] for _, n in sorted(able)[:count]]
+            if taken is not None:
+                taken[n_plan].update((m, *x[1:5]) for x in found[m])
         if not any(found):
             out.append(None)
             continue
@@ -608,28 +620,50 @@ class _ReserveBounds:
         return [part.tolist() for part in np.split(out, cuts)]
 
 
-def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None], again: list[dict]) -> None:
+def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None], again: list[dict]
+           ) -> set[tuple[int, str, str]]:
     """`located` with each extremum the second round (`more`, its results `again`, in order of the plans that are
-    not None) found better in its place (`_beats`: larger by more than the tie, or tied and earlier)."""
+    not None) found better in its place (`_beats`: larger by more than the tie, or tied and earlier); the (plan,
+    column, 'max' | 'min') whose round found no repeat of the located extremum (within REPEAT: a larger one, or only
+    smaller ones; `refine_further`)."""
     results = iter(again)
-    for p, got in zip(more, located):
+    untied = set()
+    for n_plan, (p, got) in enumerate(zip(more, located)):
         if p is None:
             continue
         for c, found in next(results).items():
             for name, e in found.items():
-                if _beats(e, got.get(c, {}).get(name), 1.0 if name == "max" else -1.0, p.ties[c]):
+                old = got.get(c, {}).get(name)
+                if old is None or abs(e.value - old.value) > max(p.ties[c], REPEAT * p.ties[c] / TIE_ROUNDOFF):
+                    untied.add((n_plan, c, name))
+                if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
                     got.setdefault(c, {})[name] = e
+    return untied
 
 
 def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader,
                    ends: list[tuple[EndLines, int | None] | None] | None = None,
                    edges_only: list[tuple[float, float] | None] | None = None) -> None:
     """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`, the plans' `ends`,
-    `edges_only`) read in one pass of `read` and refined, each better extremum in its place (`merged`)."""
-    more = second_round(plans, located, ends, edges_only)
-    again = [p for p in more if p is not None]
-    if again:
-        merged(located, more, finish_all(again, read_all(read, [r for p in again for r in p.requests]), read))
+    `edges_only`) read in one pass of `read` and refined, each better extremum in its place (`merged`). A column
+    whose round found no repeat of its located extremum (`merged`, REPEAT) has its next candidates whose bounds still
+    exceed it refined in another round, until none does (branch and bound): the bounds rank the candidates only
+    roughly where peaks are narrow against the rows, so runs whose peaks differ by less than their estimates' error
+    are ranked by chance (chain-mech2-detuned's coupler force at 1 s rows: two candidates of higher bounds, both
+    lower, before its largest peak). A round that finds the located extremum again (a run whose turns repeat one
+    peak, each candidate's bound above it) ends it. Each
+    round takes twice the candidates of the one before, so that the passes of `read` grow only like the logarithm
+    of the candidates refined."""
+    taken: list[set] = [set() for _ in plans]
+    series, count = None, SECOND_ROUND
+    while series is None or series:
+        more = second_round(plans, located, ends, edges_only, taken, series, count)
+        count *= 2
+        again = [p for p in more if p is not None]
+        if not again:
+            return
+        series = merged(located, more, finish_all(again, read_all(read, [r for p in again for r in p.requests]),
+                                                  read))
 
 
 def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple[str, list[Interval]]],
