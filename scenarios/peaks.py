@@ -645,7 +645,10 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
     if not len(t):
         return out, None
     angles = np.asarray(cols[angle_column], dtype=float)
-    present = [c for c in peak_columns if c in cols and _valued(np.asarray(cols[c], float))]
+    # (a column no row holds a value of is located all the same where the run's readings hold it: a thermal one
+    # defined in contact only, whose engagements lie between rows a turn apart)
+    present = [c for c in peak_columns if c in cols and (_valued(np.asarray(cols[c], float)) or (
+        source is not None and len(t) > 1 and c not in source.columns))]
     how = HOW_ROWS
     read, coordinates, readable, n = None, (), [], len(t)
     regime = None
@@ -829,10 +832,14 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
                          (got.get(c, {}), (how, intervals, read)))
             # the growth toward an event is judged on the window's table with its samples between the rows where
             # it has them (an interval between events may hold no two rows)
-            sampled_rows = (p.values[c], cut) if c not in heat and p is not None and c in p.values else None
+            sampled_rows = (p.t, p.values[c], cut) if c not in heat and p is not None and c in p.values else None
             entry = _column_entry(c, f, t, angles, inside, angle_column, mine, *own, h, events, coordinates, best,
                                   sampled_rows)
+            if entry["max"]["at"] == entry["min"]["at"] == "no rows" and not _valued(f):
+                continue                    # no row and no reading holds a value of it: no entry
             if label == "startup":
+                if c not in out:
+                    continue
                 out[c]["startup"] = {k: entry[k] for k in ("max", "min") if k in entry}
                 if "singular" in entry:
                     out[c].setdefault("singular", []).extend(entry["singular"])
@@ -982,9 +989,10 @@ def _between_ends(t: np.ndarray, intervals: list[Interval]) -> list[Interval]:
 def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, read, h, events, coordinates,
                   best: dict, sampled_rows: tuple | None = None) -> dict:
     """One column's {max, min, abs_max, how[, singular]} from its located extrema (or its rows inside the window);
-    best: its best rows in the window (`_best_rows`), reported beside a located extremum; sampled_rows: (the column,
-    the intervals) of the table the extrema were located on (its samples between rows among its rows), on which
-    the growth toward an event is judged (`singular_approaches`)."""
+    best: its best rows in the window (`_best_rows`), reported beside a located extremum; sampled_rows: (the times,
+    the column, the intervals) of the table the extrema were located on (its samples between rows among its rows),
+    on which the growth toward an event is judged (`singular_approaches`) and the other extremum taken where the
+    located one is a limit at such an event (`_beside_poles`)."""
     entry: dict = {}
     rows = None                     # the rows inside the window with a value: read where a column is not located
     for name, pick in (("max", np.argmax), ("min", np.argmin)):
@@ -1015,7 +1023,7 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
         edge = _edge(e)
         if edge is None or read is None:
             continue
-        g, ivs = sampled_rows if sampled_rows is not None else (f, intervals)
+        g, ivs = sampled_rows[1:] if sampled_rows is not None else (f, intervals)
         found = singular_approaches(c, g, edge, sense, ivs, read, h, events, coordinates, e.interval)
         if found:
             t_e = found[0]["t_s"]
@@ -1028,16 +1036,43 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             entry["abs_max"] = dict(entry[name], side=name)
             entry.setdefault("singular", []).extend(dict(x, extremum=name) for x in found)
             # the other extremum taken as the limit at one of those events from the same side is no value there
-            # (the state at the event gives the column to round-off, of either sign): the rows' stands
+            # (the state at the event gives the column to round-off, of either sign): the best of the table without
+            # those limits stands
             other = "min" if name == "max" else "max"
-            if entry[other].get("limit") == edge and entry[other]["t_s"] in {x["t_s"] for x in found}:
-                rows = np.flatnonzero(inside & np.isfinite(f))
-                if len(rows):
-                    i = int(rows[(np.argmin if other == "min" else np.argmax)(f[rows])])
-                    entry[other] = _entry(f[i], t[i], angles[i], f"output row (the limit at the event at t = "
-                                          f"{entry[other]['t_s']:.9g} s is no value: the column grows without "
-                                          "bound toward it)")
+            poles = {x["t_s"] for x in found}
+            if entry[other].get("limit") == edge and entry[other]["t_s"] in poles:
+                entry[other] = _beside_poles(other, entry[other]["t_s"], f, t, angles, inside, edge, poles,
+                                             sampled_rows)
     return entry
+
+
+def _beside_poles(name: str, t_limit: float, f: np.ndarray, t: np.ndarray, angles: np.ndarray, inside: np.ndarray,
+                  side: str, poles: set, sampled_rows: tuple | None) -> dict:
+    """The entry of a column's extremum `name` ('max' or 'min') where the located one was the limit on `side` at an
+    event the column grows without bound toward (`poles`, their times): the best of the table the extrema were
+    located on (its rows and its readings between them, `sampled_rows`) without the limits at those events, else
+    of the rows inside the window. A reading between rows is the continuous solution's (a dwell's constant value
+    between rows a turn apart), which the rows alone miss."""
+    pick = np.argmin if name == "min" else np.argmax
+    why = (f"the limit at the event at t = {t_limit:.9g} s is no value: the column grows without bound toward it")
+    if sampled_rows is not None:
+        ts, g, intervals = sampled_rows
+        ends = [iv.hi if side == "before" else iv.lo for iv in intervals]
+        rows = [np.asarray(iv.rows, dtype=np.int64) for iv in intervals]
+        keep = [r[ts[r] != end] if end in poles else r for r, end in zip(rows, ends)]
+        idx = np.unique(np.concatenate(keep)) if keep else np.zeros(0, np.int64)
+        idx = idx[np.isfinite(g[idx])] if len(idx) else idx
+        if len(idx):
+            i = int(idx[pick(g[idx])])
+            rows = np.flatnonzero(t == ts[i])
+            at = "output row" if len(rows) else "reading between the rows"
+            angle = float(angles[rows[0]]) if len(rows) else float(np.interp(ts[i], t, angles))
+            return _entry(float(g[i]), float(ts[i]), angle, f"{at} ({why})")
+    rows = np.flatnonzero(inside & np.isfinite(f))
+    if not len(rows):
+        return _entry(np.nan, np.nan, np.nan, "no rows")
+    i = int(rows[pick(f[rows])])
+    return _entry(f[i], t[i], angles[i], f"output row ({why})")
 
 
 def _event_angle(events: pd.DataFrame | None, t_e: float, angle_column: str, t: np.ndarray,

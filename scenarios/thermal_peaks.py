@@ -7,8 +7,9 @@ time since the contact began), the contact temperature is the share-weighted bul
 thermal column can be evaluated at any instant from the mechanical state and the network's states there:
 
 - up to the end of the mechanics run (a resolved run, or a cycle-averaged run's mechanics window), a DAE run holds
-  the network's states in the same DAE as the mechanics: the mode re-integrated from an output row
-  (`dynamics/extrema.py` `TrajectoryReader`) gives both, and the finish's own formulas the columns;
+  the network's states in the same DAE as the mechanics: the mode re-integrated from an output row, or where a
+  smooth stretch holds none, from the state its segment started from (`dynamics/extrema.py` `TrajectoryReader`)
+  gives both, and the finish's own formulas the columns;
 - after it (cycle averaging, thermal/cycle.py), the mechanics is the window's last full turn at the instant's
   phase (re-integrated there, not interpolated between its rows) and the network's states the cycle-averaged
   solution at the instant itself (`bulk_response`: the mean curve, exact in the network's modes, plus the
@@ -284,6 +285,9 @@ class ThermalReader(_KeptReadings):
     def __init__(self, thermal, traj, window: pd.DataFrame, events: pd.DataFrame, mech, settings, t_table_end: float):
         self.thermal, self.mech = thermal, mech
         self.reader = TrajectoryReader(traj, mech.angle_coordinates, settings)
+        #: the mechanics' reader starts where the window has no row (`TrajectoryReader._anchor`: the state the run's
+        #: segment started from, or its dense output)
+        self.anywhere = bool(getattr(traj, "starts", None)) or getattr(traj, "dense", None) is not None
         columns = TableColumns(window)          # the window's column arrays, each read from the frame once
         t_win = np.asarray(columns["t_s"], dtype=float)
         self.t_sim_end = float(traj.pieces[-1].t[-1])
@@ -497,7 +501,7 @@ class ThermalReader(_KeptReadings):
         for w in ([int(which[0])] if one else np.unique(which).tolist()):
             pick = np.arange(len(which)) if one else np.flatnonzero(which == w)
             wiv = self.windows[w]
-            if not len(wiv.rows) and not rowless:
+            if not len(wiv.rows) and not (rowless or self.anywhere):
                 raise ReadingFailed(f"no output row between t = {wiv.lo:.9g} and {wiv.hi:.9g} s to read from")
             # each distinct window instant read once (instants a period apart, or clipped to an end, coincide): in
             # increasing order already (as the readings ask), the instants themselves

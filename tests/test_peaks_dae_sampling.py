@@ -223,15 +223,17 @@ def test_the_thermal_validity_between_far_apart_rows(lumped_runs):
     assert other["worst"]["value"] == pytest.approx(own["worst"]["value"], rel=1e-7)
 
 
-@pytest.mark.parametrize("step", ["0.7 s", "1.3 s", "2.3 s"])
+@pytest.mark.parametrize("step", ["0.7 s", "1.3 s", "2.3 s", "10 s"])
 def test_an_unbounded_approach_between_far_apart_rows(step):
     """chain-mech1-torque's coupler force grows like 1/distance toward each stop impact (exponent 1.000). At its own
     10 ms rows the maximum is unbounded toward the first, at 3.15176 s. Rows 0.7-2.3 s apart leave no two rows
     between a stop and the event before it, and the growth was judged on the rows only: the stops' one-sided
     limits, values of round-off at a pole, were reported, a maximum of +2.4e7 N and a minimum of -2.4e10 N. The
     growth is now judged on the rows with the samples between them (the plan's table, without its rows at the
-    events themselves): the maximum is unbounded toward the same stop at every step, and the minimum is the rows'
-    (the coupler carries nothing in the dwell: 0 N)."""
+    events themselves): the maximum is unbounded toward the same stop at every step. The minimum was then a stop's
+    limit from the same side, no value either: it is the best of that table without those limits (the coupler
+    carries nothing in the dwell: 0 N). At 10 s rows (three a run) no row lies in a dwell, and the rows alone gave
+    0.0213 N; the readings between them hold the dwell's 0."""
     own = mechsim.run(mechsim.load("chain-mech1-torque", set=["output.plots=false"])).summary["peaks"]
     got = _peaks("chain-mech1-torque", step)[0]["coupler_force_N"]
     first = own["coupler_force_N"]["max"]
@@ -239,3 +241,23 @@ def test_an_unbounded_approach_between_far_apart_rows(step):
     assert got["max"]["t_s"] == pytest.approx(first["t_s"], abs=1e-9)
     assert got["max"]["growth_exponent"] == pytest.approx(1.0, abs=1e-2)
     assert abs(got["min"]["value"]) <= 1e-9
+
+
+@pytest.fixture(scope="module")
+def internal_motor_own():
+    return _peaks("internal-geneva-motor", "1 ms")[0]["temp_contact_C"]
+
+
+@pytest.mark.parametrize("step", ["0.68 s", "1.6667 s"])
+def test_the_contact_temperature_between_rows_a_turn_apart(internal_motor_own, step):
+    """internal-geneva-motor's contact temperature is defined in contact only (NaN between engagements). At 0.68 s
+    rows most engagements hold no row: the thermal reader refused to read a smooth stretch without a row of its own,
+    so the located maximum fell back to a sample 1.1 ms before the exit (32.6914 against 32.7328 C). At 1.6667 s
+    rows (three a run) no row holds a value at all, and the column had no entry. The reader now starts such a
+    stretch from the state the run's segment started from, as the mechanics' reader does; the maximum is the limit
+    at an exit, the minimum at a slip reversal, as at 1 ms rows. Readings from other starting states carry the
+    run's own error (rtol 1e-7; measured 7.5e-10 of the value): 1e-7 is the margin."""
+    got = _peaks("internal-geneva-motor", step)[0]["temp_contact_C"]
+    for name in ("max", "min"):
+        assert got[name]["value"] == pytest.approx(internal_motor_own[name]["value"], rel=1e-7)
+        assert got[name]["t_s"] == pytest.approx(internal_motor_own[name]["t_s"], abs=1e-6)
