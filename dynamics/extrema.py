@@ -34,6 +34,12 @@ FIRST_GRID = 33
 STENCIL = 7
 #: candidates refined per column and sense (the best by the rows' parabola estimate)
 CANDIDATES = 2
+#: a refined interior value is trusted where the polynomial through the STENCIL readings and the one through the
+#: LOWER readings nearest its instant agree to this fraction of the column's largest magnitude (`_refine`); else the
+#: bracket is narrowed to the grid's two steps around the best reading and read again, at most NARROWINGS times
+AGREE = 1e-9
+LOWER = 5
+NARROWINGS = 4
 #: brackets whose rows lie within this many rows of each other are read together
 CLUSTER_ROWS = 8
 #: a table of more values than this has its candidates found one column at a time (`_candidates_bounds`): the
@@ -103,6 +109,8 @@ class _Job:
     edge: str | None = None
     tie: float = 0.0
     constant: bool = False
+    #: (the best grid instant, the grid's step) where the polynomial's value is not yet to be trusted (`_refine`)
+    unsure: tuple[float, float] | None = None
 
 
 def _estimates(t: np.ndarray, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, i: np.ndarray) -> np.ndarray:
@@ -385,8 +393,8 @@ class Plan:
 
 def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> list[dict[str, dict[str, Extremum]]]:
     """`Plan.finish` of each plan, from the readings of their requests one plan after another (`tables`), every
-    bracket refined in one pass (`_refine`)."""
-    ready, a = [], 0
+    bracket refined in one pass (`_refine`), those whose value is not yet to be trusted narrowed (`_narrowed`)."""
+    ready, positions, a = [], [], 0
     for p in plans:
         t, values, intervals = p.t, p.values, p.intervals
         n = len(p.clusters)
@@ -397,6 +405,7 @@ def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> li
         for group, grids, request, table in zip(p.clusters, p.grids, p.requests[:n], mine[:n]):
             try:
                 ready.append((request[0], group, grids, table if table is not None else read(*request)))
+                positions.append(request[1])
             except ReadingFailed:          # the rows' value stands, and says so
                 for j in group:
                     r = intervals[j.interval].rows[j.anchor]
@@ -404,6 +413,7 @@ def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> li
                     j.best_row = {c: v[r] for c, v in values.items()}
                     j.where = "output row (the re-integration between rows failed)"
     _refine(ready)
+    _narrowed(ready, positions, read)
     located = []
     for p in plans:
         out: dict[str, dict[str, Extremum]] = {}
@@ -417,6 +427,37 @@ def finish_all(plans: list[Plan], tables: list[dict | None], read: Reader) -> li
                 slot[name] = e
         located.append(out)
     return located
+
+
+def _narrowed(ready: list[tuple], positions: list[int], read: Reader) -> None:
+    """The refined jobs of `ready` whose polynomial is not yet to be trusted (`_Job.unsure`: its value and a lower
+    one's differ by more than AGREE of the column's scale, where the bracket's grid is coarse against the peak: a
+    bracket spanning a whole interval between events a turn apart), refined again on the grid's two steps around
+    their best reading, all of them read in one pass, at most NARROWINGS times; a reading that fails leaves the
+    job as it was."""
+    for _ in range(NARROWINGS):
+        asks = [(iv, pos, j) for (iv, group, _, _), pos in zip(ready, positions) for j in group
+                if j.unsure is not None]
+        if not asks:
+            return
+        grids, requests = [], []
+        for iv, pos, j in asks:
+            centre, step = j.unsure
+            lo, hi = max(j.lo, centre - step), min(j.hi, centre + step)
+            grid = np.empty(FIRST_GRID + 1)
+            grid[:FIRST_GRID] = np.arange(FIRST_GRID) * ((hi - lo) / (FIRST_GRID - 1)) + lo
+            grid[FIRST_GRID - 1] = hi
+            grid[FIRST_GRID] = centre          # the best reading so far stands as the job's row
+            grids.append(grid)
+            requests.append((iv, pos, np.unique(grid)))
+            j.unsure = None
+        again = []
+        for (iv, _, j), grid, request, table in zip(asks, grids, requests, read_all(read, requests)):
+            try:
+                again.append((iv, [j], grid[None, :], table if table is not None else read(*request)))
+            except ReadingFailed:
+                continue
+        _refine(again)
 
 
 def plan(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[Interval], limit: int = CANDIDATES) -> Plan:
@@ -467,10 +508,14 @@ def plans(windows: list[tuple | None], limit: int = CANDIDATES) -> list[Plan | N
 EVERY = 1 << 62
 #: candidates refined per column and sense in the second round at most (`second_round`): the largest bounds
 SECOND_ROUND = 2
-#: located values this close, relative to the column's largest magnitude, are one peak repeated (`refine_further`):
-#: a run's turns repeat a peak to its located values' own error (the refinement's polynomial, about 1e-10; the
-#: readings' tolerance, a tenth of the run's rtol), where the peaks the bounds rank wrongly differ by 1e-4 to 1e-2
+#: a second round's located value within (REPEAT, RIVAL] of the located extremum, relative to the column's largest
+#: magnitude, calls for another round (`refine_further`): closer, it is one peak repeated (a run's turns repeat a peak
+#: to its located values' own error: the refinement's polynomial, about 1e-10; the readings' tolerance, a tenth of
+#: the run's rtol); farther, the bounds that ranked it are loose there (an extremum at an event's limit, far from the
+#: located one), where the peaks the bounds rank wrongly differ by 1e-5 to 1e-3 (a bulk temperature rising turn by
+#: turn, narrow peaks of a drive that does not repeat)
 REPEAT = 1e-6
+RIVAL = 1e-2
 
 
 def _first(got: list[tuple], limit: int) -> tuple[list[tuple], list[tuple]]:
@@ -624,8 +669,8 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
            ) -> set[tuple[int, str, str]]:
     """`located` with each extremum the second round (`more`, its results `again`, in order of the plans that are
     not None) found better in its place (`_beats`: larger by more than the tie, or tied and earlier); the (plan,
-    column, 'max' | 'min') whose round found no repeat of the located extremum (within REPEAT: a larger one, or only
-    smaller ones; `refine_further`)."""
+    column, 'max' | 'min') whose round found a rival of the located extremum (no repeat of it, and within RIVAL of
+    it: a larger one, or only smaller ones; `refine_further`)."""
     results = iter(again)
     untied = set()
     for n_plan, (p, got) in enumerate(zip(more, located)):
@@ -634,7 +679,8 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
         for c, found in next(results).items():
             for name, e in found.items():
                 old = got.get(c, {}).get(name)
-                if old is None or abs(e.value - old.value) > max(p.ties[c], REPEAT * p.ties[c] / TIE_ROUNDOFF):
+                scale = p.ties[c] / TIE_ROUNDOFF
+                if old is None or max(p.ties[c], REPEAT * scale) < abs(e.value - old.value) <= RIVAL * scale:
                     untied.add((n_plan, c, name))
                 if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
                     got.setdefault(c, {})[name] = e
@@ -961,7 +1007,25 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
         # each job's dot product (a stack of 1 x n by n x 1 products: numpy's dot of each pair, as w @ f)
         value[poly] = np.matmul(W[poly][:, None, :], part[poly][:, :, None])[:, 0, 0]
     better = poly & (value >= best_f)
-    t_star = (G[every, c0] + x * (G[:, 1] - G[:, 0])).tolist()
+    step = G[:, 1] - G[:, 0]
+    # the value's error estimate: the polynomial through the LOWER readings nearest x* against the STENCIL one's
+    unsure = np.zeros(len(jobs), dtype=bool)
+    if better.any():
+        m = better.nonzero()[0]
+        low = np.clip(np.round(x[m]).astype(int) - LOWER // 2, 0, STENCIL - LOWER)
+        nodes = low[:, None] + np.arange(LOWER)
+        d = x[m][:, None] - nodes
+        w = np.ones((len(m), LOWER))
+        for i in range(LOWER):
+            for k in range(LOWER):
+                if k != i:
+                    w[:, i] *= d[:, k] / (i - k)
+        lower = (w * part[m[:, None], nodes]).sum(axis=1)
+        with np.errstate(invalid="ignore"):
+            unsure[m] = ~(np.abs(lower - value[m]) <= AGREE * sense_tie[m] / TIE_ROUNDOFF)
+    t_star = (G[every, c0] + x * step).tolist()
+    grid_best = G[every, b].tolist()
+    unsure, step = unsure.tolist(), step.tolist()
     value, best_f, best_t = value.tolist(), best_f.tolist(), best_t.tolist()
     best_pos, c0, better, end, at_lo, at_hi = (a.tolist() for a in (best_pos, c0, better, end, at_lo, at_hi))
     for m in held.nonzero()[0].tolist():
@@ -970,7 +1034,9 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
             j.best_f, j.where, j.best_t = value[m], "interior", t_star[m]
             j.best_row = _Row(tables[m], P[m, c0[m]:c0[m] + STENCIL], W[m])
             j.best_row["t_s"] = j.best_t
+            j.unsure = (grid_best[m], step[m]) if unsure[m] else None
             continue
+        j.unsure = None
         j.best_f, j.best_t = best_f[m], best_t[m]
         j.best_row = _Row(tables[m], best_pos[m], None)
         if end[m]:

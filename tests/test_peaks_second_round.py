@@ -165,3 +165,17 @@ def test_a_minimum_within_a_step_of_a_dead_point():
     assert fine["t_s"] == pytest.approx(5.3697, abs=1e-3)
     assert coarse["value"] == pytest.approx(fine["value"], rel=1e-7)
     assert coarse["t_s"] == pytest.approx(fine["t_s"], abs=1e-6)
+
+
+def test_a_contact_temperature_rising_with_the_bulk_peaks_in_the_last_turn():
+    """geneva-seed-lc1-mu015 for an hour, cycle-averaged: the bulk rises to the end, so each turn's contact
+    temperature peak is a little higher than the turn's before (about 1e-5 of it), and the hour's maximum lies in
+    the last turn. At 3.27 ms rows (the seed report's, one degree of crank) the second round's two candidates were
+    earlier turns, and 48.78685 C at t = 3552.9 s was reported. The rounds go on while a round's value differs from
+    the located one by more than a repeat's (REPEAT) and less than a rival's (RIVAL): the last turn's, as at 5 ms."""
+    period = 2 * np.pi / 5.34
+    got = [_peak("geneva-seed-lc1-mu015", ["duration=3600 s"], step, "temp_contact_C", "max")
+           for step in ("0.0032684068389406923 s", "5 ms")]
+    for e in got:
+        assert e["t_s"] > 3600.0 - period
+    assert got[0]["value"] == pytest.approx(got[1]["value"], rel=1e-9)
