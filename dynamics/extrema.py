@@ -672,7 +672,7 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
     column, 'max' | 'min') whose round found a rival of the located extremum (no repeat of it, and within RIVAL of
     it: a larger one, or only smaller ones; `refine_further`)."""
     results = iter(again)
-    untied = set()
+    rivals = set()
     for n_plan, (p, got) in enumerate(zip(more, located)):
         if p is None:
             continue
@@ -681,10 +681,10 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
                 old = got.get(c, {}).get(name)
                 scale = p.ties[c] / TIE_ROUNDOFF
                 if old is None or max(p.ties[c], REPEAT * scale) < abs(e.value - old.value) <= RIVAL * scale:
-                    untied.add((n_plan, c, name))
+                    rivals.add((n_plan, c, name))
                 if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
                     got.setdefault(c, {})[name] = e
-    return untied
+    return rivals
 
 
 def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader,
@@ -692,12 +692,13 @@ def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, E
                    edges_only: list[tuple[float, float] | None] | None = None) -> None:
     """`located` (the plans' `finish_all`) with the second round's candidates (`second_round`, the plans' `ends`,
     `edges_only`) read in one pass of `read` and refined, each better extremum in its place (`merged`). A column
-    whose round found no repeat of its located extremum (`merged`, REPEAT) has its next candidates whose bounds still
-    exceed it refined in another round, until none does (branch and bound): the bounds rank the candidates only
-    roughly where peaks are narrow against the rows, so runs whose peaks differ by less than their estimates' error
-    are ranked by chance (chain-mech2-detuned's coupler force at 1 s rows: two candidates of higher bounds, both
-    lower, before its largest peak). A round that finds the located extremum again (a run whose turns repeat one
-    peak, each candidate's bound above it) ends it. Each
+    whose round found a rival of its located extremum (`merged`: neither a repeat of it, REPEAT, nor far from it,
+    RIVAL) has its next candidates whose bounds still exceed it refined in another round, until none does (branch
+    and bound): the bounds rank the candidates only roughly where peaks are narrow against the rows, so runs whose
+    peaks differ by less than their estimates' error are ranked by chance (chain-mech2-detuned's coupler force at
+    1 s rows: two candidates of higher bounds, both lower, before its largest peak). A round that finds the located
+    extremum again (a run whose turns repeat one peak, each candidate's bound above it), or only values far from it
+    (loose bounds: a limit at an event), ends it. Each
     round takes twice the candidates of the one before, so that the passes of `read` grow only like the logarithm
     of the candidates refined."""
     taken: list[set] = [set() for _ in plans]
