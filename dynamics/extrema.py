@@ -1534,7 +1534,8 @@ class TrajectoryReader:
     which the run crossed in a few steps; where IDA at the tighter tolerances needs a thousand steps for it, it is
     not resolving the solution but stalling at the event the mode ends at (tolerances the residual cannot meet
     there, which would otherwise cost the whole `max_steps` per reading), and the run's own tolerances read it, as
-    on any failure of the tighter try. A reading asked for again (several columns' limits at one end) is the kept
+    on any failure of the tighter try; on scikit-sundae's IDA a start's stall is kept, and a later reading from it
+    that reaches as far goes to the run's own tolerances at once (`_stalls`). A reading asked for again (several columns' limits at one end) is the kept
     one: the same start, instants and tries give the same states."""
 
     #: steps the tighter try may take per output instant (the run's own try keeps `settings.max_steps`)
@@ -1557,6 +1558,7 @@ class TrajectoryReader:
         self.reintegrations = self.dense_readings = 0
         self._starts: dict = {}
         self._own_failed: set = set()        # (piece, row) whose own state IDA failed from
+        self._stalls: dict = {}              # a start's (mode, parameters, t0, y0) -> how far its tighter try got
         self._solvers: dict = {}
         self._compiled: list | None = None       # per try: the compiled IDA backend (a compiled run's readings)
         self._anchors = None
@@ -2094,7 +2096,15 @@ class TrajectoryReader:
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])
+            # a tighter try that stalled from this start (its step budget spent short of an instant: at the event
+            # the mode ends at, `TIGHT_STEPS`) stalls again on any reading from it that reaches as far: such a
+            # reading goes to the run's own tolerances at once (rows a turn apart read many instants from one start)
+            start = (id(mf), np.asarray(p, dtype=float).tobytes(), float(t0), y0.tobytes())
+            stalled = self._stalls.get(start)
+            first = 1 if stalled is not None and n_tries > 1 and abs(out_t[-1] - t0) >= stalled else 0
             for n, s in enumerate(self.tries[:n_tries]):
+                if n < first:
+                    continue
                 # one solver per mode, parameter values and try, re-initialised at each solve
                 key = (id(mf), np.asarray(p, dtype=float).tobytes(), n)
                 solver = self._solvers.get(key)
@@ -2107,6 +2117,10 @@ class TrajectoryReader:
                 sol = solver.solve(tspan, y0, yp0)
                 if sol.success:
                     break
+                if n == 0:
+                    reached = np.asarray(sol.t, dtype=float)
+                    far = float(np.abs(reached - t0).max()) if len(reached) else 0.0
+                    self._stalls[start] = min(far, self._stalls.get(start, np.inf))
             else:
                 raise ReadingFailed(f"re-integration between rows failed: {sol.message}")
             keep = np.isin(np.asarray(sol.t), out_t)
