@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (ROWLESS_READINGS, TIE_ROUNDOFF, Extremum, Interval, ReadingFailed,
+from mechsim.dynamics.extrema import (ROWLESS_READINGS, Extremum, Interval, ReadingFailed,
                                       TrajectoryReader, apart, between, end_guesses, end_limit_requests, end_limits,
                                       end_lines, every_end, finish_all, intervals_of, read_all, refine_further,
                                       read_tables, stored_limits, with_rowless)
@@ -1011,10 +1011,10 @@ def _column_entry(c, f, t, angles, inside, angle_column, got, how, intervals, re
             entry[name] = _entry(f[i], t[i], angles[i], "output row")
         else:
             entry[name] = _entry(np.nan, np.nan, np.nan, "no rows")
-    # the larger magnitude; magnitudes equal to round-off (a motion symmetric in sign) go to the maximum, so the
-    # signed value reported and differentiated does not follow the rounding
+    # the larger magnitude; magnitudes equal to the located values' accuracy (a motion symmetric in sign) go to the
+    # maximum, so the signed value reported and differentiated follows neither the rounding nor the output rows
     big, small = abs(entry["max"]["value"]), abs(entry["min"]["value"])
-    side = "max" if big >= small - TIE_ROUNDOFF * max(big, small) or not math.isfinite(small) else "min"
+    side = "max" if big >= small - SYMMETRIC * max(big, small) or not math.isfinite(small) else "min"
     entry["abs_max"] = dict(entry[side], value=abs(entry[side]["value"]), side=side)
     entry["how"] = how if got else HOW_ROWS
     for name, sense in (("max", 1.0), ("min", -1.0)):
@@ -1086,6 +1086,12 @@ def _event_angle(events: pd.DataFrame | None, t_e: float, angle_column: str, t: 
             return float(events[q].to_numpy(float)[np.flatnonzero(at)[0]])
     return float(np.interp(t_e, t, angles))
 
+
+#: a column's largest and least located values whose magnitudes are this close (relative) are equal for its largest
+#: magnitude (`abs_max`, the maximum's): a motion symmetric in sign has them equal to its located values' accuracy
+#: (a DAE run's, its tolerance: geneva-lc1's wheel acceleration as the sensitivities' DAE, 1.2e-9 apart, the side
+#: following the output rows), where a motion that is not differs by far more
+SYMMETRIC = 1e-6
 
 #: the columns the console's peaks line names, where the run has them
 CONSOLE_COLUMNS = ("contact_force_N", "coupler_force_N", "drive_torque_N_m", "temp_contact_C")

@@ -80,3 +80,20 @@ def test_event_limit_is_the_closed_forms_value_at_the_event():
     after = mech.closed_form(np.r_[0.0, low["t_s"] + 1e-9], sc.si["initial"]["crank_angle"], drive.speed)
     assert low["value"] == pytest.approx(float(after["slip_speed_m_s"][1]), rel=1e-7)
     assert low["value"] < r.timeseries["slip_speed_m_s"].min()
+
+
+def test_a_motion_symmetric_in_sign_reports_its_maximum_at_any_step():
+    """geneva-lc1's wheel acceleration at constant crank speed is antisymmetric about the wheel's mid-index: the
+    closed form's located maximum and minimum have equal magnitudes to round-off. As a DAE (the run the sensitivities
+    differentiate) they are equal to the integration's error only (1e-10 to 1e-9 relative), and which was larger,
+    so the signed peak `mechsim sensitivity` reports and differentiates, followed the output rows: the minimum at
+    10 ms, 1 s and 0.41 s rows here, the maximum at 1 ms. Magnitudes equal to 1e-6 (peaks.SYMMETRIC) go to the
+    maximum."""
+    closed = mechsim.run(mechsim.load("geneva-lc1", set=["output.plots=false"])).summary["peaks"]["wheel_accel_rad_s2"]
+    assert abs(closed["min"]["value"]) == pytest.approx(closed["max"]["value"], rel=1e-13)
+    for step in ("1 ms", "10 ms", "1 s", "0.41 s"):
+        dae = mechsim.run(mechsim.load("geneva-lc1", set=["output.plots=false", "solver.method='dae'",
+                                                          f"output_step={step!r}"])).summary["peaks"]
+        entry = dae["wheel_accel_rad_s2"]["abs_max"]
+        assert entry["side"] == "max", step
+        assert entry["value"] == pytest.approx(closed["max"]["value"], rel=1e-8)

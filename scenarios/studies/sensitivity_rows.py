@@ -112,8 +112,11 @@ def thermal_samples(plan, df: pd.DataFrame, events: pd.DataFrame, path, samples:
                      + ([setup.extension.share.b0] if wall else []))
         du = np.vstack([s.grads[c] for c in pmap.contact_columns] + dbase + [-start.dt]
                        + [flash[name] for name in FLASH_INPUTS + extra] + ([np.zeros(len(dbase[0]))] if wall else []))
-        _check_row_formula(plan, df, events, row, distribution)
-        if wall and abs(float(t_all[row]) - s.t) <= 1e-9 * max(1.0, abs(s.t)):
+        # (rows a turn apart may hold no contact at all: the formulas are then checked on no row of this run, as
+        # they are on every run that has one)
+        if len(contact):
+            _check_row_formula(plan, df, events, row, distribution)
+        if wall and len(contact) and abs(float(t_all[row]) - s.t) <= 1e-9 * max(1.0, abs(s.t)):
             # the surface check needs the row's own contact with the sample's T_0: at a located instant between
             # rows it is made where a sample falls on a row (the formulas are the same at every instant)
             _check_wall_surface(plan, df, row, u, distribution)
