@@ -93,7 +93,10 @@ def _located(peaks: dict, column: str, side: str | None = None) -> dict | None:
     t = e["sample_t_s"] = e.get("window_t_s", e["t_s"])
     if e.get("unbounded"):
         e["samples"] = []
-    elif e.get("limit") is None or e["at"].startswith(("start", "end")):   # interior, or the run's fixed ends
+    elif e.get("limit") is None and not e["at"].startswith(("start", "end")):      # interior
+        e["samples"] = [t]
+        e["beside"] = [t - EVENT_OFFSET_S, t + EVENT_OFFSET_S]
+    elif e.get("limit") is None or e["at"].startswith(("start", "end")):           # the run's fixed ends
         e["samples"] = [t]
     else:
         step = EVENT_OFFSET_S if e["limit"] == "after" else -EVENT_OFFSET_S
@@ -125,14 +128,17 @@ def _closed_form_thermal(run_plan, located: dict) -> dict:
 
 def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[float, np.ndarray, float]:
     """(value, gradient, the traced pass's value) of a located extremum F* = F(t*, p) (docs/sensitivity.md,
-    "Peaks"). Interior: dF/dt = 0 at t*, so dF*/dp is the gradient of F at the fixed instant t* (the envelope rule).
-    At an event tau (the one-sided limit there): dF*/dp = dF/dp + F'(tau) dtau/dp, with F' from the two samples
-    inside the interval and dtau/dp the event time's derivative (its implicit-function rule); dF/dp at tau is
+    "Peaks"). Interior: dF/dt = 0 at t*, so dF*/dp is the gradient of F at the fixed instant t* (the envelope rule),
+    carried to the traced pass's own extremum (`_to_traced_extremum`). At an event tau (the one-sided limit there):
+    dF*/dp = dF/dp + F'(tau) dtau/dp, with F' extrapolated from the exact rates at the two samples inside the
+    interval and dtau/dp the event time's derivative (its implicit-function rule); dF/dp at tau is
     extrapolated from the two samples as the value is (dF/dp changes at the rate dF'/dp there, which a sample
     EVENT_OFFSET_S inside would otherwise add: 1e-5 of an elasticity after a Geneva entry)."""
     first = by_time[e["samples"][0]]
     g = np.asarray(first.grads[column], dtype=float)
     traced = first.values[column]
+    if e.get("beside") and all(t in by_time for t in e["beside"]):
+        g = g + _to_traced_extremum(first, *(by_time[t] for t in e["beside"]), column, events)
     if len(e["samples"]) == 2:
         second = by_time[e["samples"][1]]
         h = e["samples"][0] - e["samples"][1]
@@ -143,8 +149,35 @@ def _located_derivative(e: dict, column: str, by_time: dict, events) -> tuple[fl
         ev = min(events, key=lambda x: abs(x.t - t), default=None)
         if ev is None or abs(ev.t - t) > EVENT_OFFSET_S:
             raise ValueError(f"no traced event at t = {t:.9g} s for the limit of {column}")
-        g = g + slope * np.asarray(ev.dt, dtype=float)
+        # F'(tau) extrapolated from the exact rates at the two samples where the traced pass has them (the
+        # mechanical columns): the difference quotient's error, F'' times 1.5 EVENT_OFFSET_S, multiplies dtau/dp,
+        # which grows with every cycle where the drive's speed moves with p
+        rates = first.rates.get(column, np.nan), second.rates.get(column, np.nan)
+        rate = rates[0] + (rates[0] - rates[1]) / h * (t - e["samples"][0]) if np.isfinite(rates).all() else slope
+        g = g + rate * np.asarray(ev.dt, dtype=float)
     return float(e["value"]), g, float(traced)
+
+
+def _to_traced_extremum(at, before, after, column: str, events) -> np.ndarray:
+    """The change of dF/dp (fixed time) from the run's extremum t* to the traced pass's own, t' = t* - F'/F''
+    (docs/theory.md §K5): the envelope rule holds where the traced pass's F' = 0, and the two integrations'
+    extrema differ by their tolerances, dt ~ rtol times the time scale. dF/dp at a fixed time carries the phase's
+    sensitivity, -F' dtau/dp, which grows with every cycle where the period moves with p; so its change over dt,
+    F'' (dtau/dp) dt, is not small where the extremum is sharp and late (a near-dwell's crank acceleration after
+    many turns: 3e-4 of the derivative at the default tolerances). F'' and d(dF/dp)/dt from the samples
+    EVENT_OFFSET_S either side, with their exact rates; zero where an event lies between them (the sides are in
+    other modes) or the traced pass has no rates (the thermal columns)."""
+    span = (before.t, after.t)
+    rates = np.array([at.rates.get(column, np.nan), before.rates.get(column, np.nan),
+                      after.rates.get(column, np.nan)])
+    if not np.isfinite(rates).all() or any(span[0] <= ev.t <= span[1] for ev in events):
+        return np.zeros_like(np.asarray(at.grads[column], dtype=float))
+    curvature = (rates[2] - rates[1]) / (span[1] - span[0])
+    if curvature == 0.0:
+        return np.zeros_like(np.asarray(at.grads[column], dtype=float))
+    drift = (np.asarray(after.grads[column], dtype=float) - np.asarray(before.grads[column], dtype=float)) / (
+        span[1] - span[0])
+    return -rates[0] / curvature * drift
 
 
 def _near_peaks(q: str, wrt: list[str], relative: list[bool], df, rows: list[int], by_time: dict, column: str,
@@ -279,7 +312,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     peak_rows = {q: _peak_rows(peak_values(q)) for q in of if q in peak_columns and peak_columns[q] in df
                  and q not in located and q not in named and np.nanmax(np.abs(peak_values(q)), initial=0.0) > 0}
     sample_times = sorted({float(df["t_s"].iloc[i]) for rows in peak_rows.values() for i in rows}
-                          | {t for e in located.values() for t in e["samples"]})
+                          | {t for e in located.values() for t in e["samples"]}
+                          | {t for q, e in located.items() if q not in THERMAL_PEAKS for t in e.get("beside", ())})
     thermal_times = sorted({float(df["t_s"].iloc[i]) for q, rows in peak_rows.items() if q in THERMAL_PEAKS
                             for i in rows} | {t for q, e in located.items() if q in THERMAL_PEAKS
                                               for t in e["samples"]})
@@ -303,7 +337,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     # in the background (dynamics/backends/compiled_model.py), so a later process's run would stay on `ida`
     from mechsim.dynamics.sensitivity import path_sensitivities
     path = path_sensitivities(mech, drive, settings, events.to_dict("records"), seed, sample_times, sorted(columns),
-                              t_end, si["output_step"], angle0, speed0, ext, ext_initial, rates=bool(repeats))
+                              t_end, si["output_step"], angle0, speed0, ext, ext_initial,
+                              rates=bool(repeats) or any(len(e["samples"]) == 2 or e.get("beside")
+                                                         for e in located.values()))
     by_time = {s.t: s for s in path.samples}
     if turn is not None and thermal_times and ext is not None:       # (the flash model's base is the ambient)
         cycle_bulk_samples(plan, df, turn, by_time, seed, model, [by_time[t] for t in thermal_times], path.stats)
