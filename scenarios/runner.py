@@ -219,6 +219,10 @@ class Plan:
     why: str
     thermal: object = None   # mechsim.thermal.ThermalPlan, or None without a thermal model
     seconds: float = 0.0     # wall time spent planning (counted in the run's wall_time_s)
+    #: where the run is computed at a step `thin` times finer than the scenario's output step (`rows_every`): the
+    #: scenario as asked, whose rows the run's table keeps (`execute`); `scenario` then holds the finer step
+    asked: Scenario | None = None
+    thin: int = 1
 
     @property
     def mechanics_duration(self) -> float:
@@ -226,8 +230,48 @@ class Plan:
         return self.scenario.si["duration"] if self.thermal is None else self.thermal.mechanics_duration
 
 
+#: a cycle-averaged run's rows are at most this fraction of a nominal crank turn apart while it runs: its window's
+#: turns are compared for periodicity on them (thermal/plan.py `ThermalPlan.extend`), which rows a turn or more
+#: apart cannot tell (docs/thermal.md, "Cycle averaging")
+ROWS_PER_TURN = 16
+
+
+def rows_every(si: dict, thermal) -> int:
+    """How many times finer than the output step a run is computed: 1, or for a cycle-averaged run whose output rows
+    are more than 1/ROWS_PER_TURN of a nominal turn apart the least integer that brings them within it (the output
+    rows are then every `rows_every`-th row, `execute`)."""
+    if thermal is None or thermal.averaging != "cycle":
+        return 1
+    return max(1, int(np.ceil(si["output_step"] * ROWS_PER_TURN / thermal.setup.period - 1e-9)))
+
+
 def plan(scenario: Scenario) -> Plan:
-    """Build the mechanism, drive, settings and thermal model and choose the method (ValueError on bad input)."""
+    """Build the mechanism, drive, settings and thermal model and choose the method (ValueError on bad input). A
+    cycle-averaged run whose output rows are too coarse for its averaging is planned at a finer step
+    (`rows_every`), its table thinned back to the output step by `execute`."""
+    made = _plan(scenario)
+    thin = rows_every(scenario.si, made.thermal)
+    if thin == 1:
+        return made
+    fine = dataclasses.replace(scenario, si={**scenario.si, "output_step": scenario.si["output_step"] / thin})
+    _check_rows(fine.si, made.thermal.setup.period)
+    return dataclasses.replace(_plan(fine), asked=scenario, thin=thin)
+
+
+def _check_rows(si: dict, period: float) -> None:
+    """The finer step's rows bounded as the output step's are (scenarios/schema.py `check_derived`), before any
+    work: ScenarioError naming the output step."""
+    from mechsim.scenarios.schema import BYTES_PER_ROW, MAX_OUTPUT_ROWS, memory_budget
+    rows = si["duration"] / si["output_step"]
+    if rows > MAX_OUTPUT_ROWS or rows * BYTES_PER_ROW > memory_budget():
+        raise ScenarioError("output_step", f"cycle averaging compares the crank turns on rows at most 1/"
+                                           f"{ROWS_PER_TURN} of a {period:.4g} s turn apart, {rows:.3g} rows over "
+                                           f"{si['duration']:g} s: more than this machine allows (at most "
+                                           f"{MAX_OUTPUT_ROWS:,}, {memory_budget() / 2**30:.1f} GiB); shorten "
+                                           "duration or set thermal.averaging = 'resolved'")
+
+
+def _plan(scenario: Scenario) -> Plan:
     si = scenario.si
     wall0 = time.perf_counter()
     mech = build_mechanism(si)
@@ -520,4 +564,26 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
     extra_tables = {**mech.extra_outputs(df, events), **done.thermal_tables}
     if hasattr(mech, "extra_summary"):              # the mechanism's own figures of its tables (impacts)
         summary.update(mech.extra_summary(extra_tables))
+    if the_plan.asked is not None:
+        df, si = _thinned(df, the_plan.thin, the_plan.asked.si), the_plan.asked.si
+        summary["solver"]["output_rows"] = len(df)
     return Result(df, events, summary, si, failure, extra_tables=extra_tables)
+
+
+def _thinned(df: pd.DataFrame, every: int, si: dict) -> pd.DataFrame:
+    """The rows of the output step `si` asks for, of a table computed at a step `every` times finer (`rows_every`):
+    every `every`-th row and the last (the end itself, or where a failure stopped the run), their times those of
+    the output grid (k step: k (step / every) every differs from it by round-off)."""
+    keep = np.zeros(len(df), dtype=bool)
+    keep[::every] = True
+    keep[-1:] = True
+    out = df.loc[keep].reset_index(drop=True)
+    from mechsim.thermal.cycle import output_times
+    grid = output_times(float(si["duration"]), float(si["output_step"]))[:len(out)]
+    t = out["t_s"].to_numpy(float)
+    on_grid = np.abs(t[:len(grid)] - grid) <= 1e-9 * np.maximum(np.abs(grid), si["output_step"])
+    if on_grid.any():
+        t = t.copy()
+        t[:len(grid)][on_grid] = grid[on_grid]
+        out["t_s"] = t
+    return out

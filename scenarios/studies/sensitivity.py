@@ -242,6 +242,8 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     if not 0 < change < 1:
         raise ScenarioError("--change", f"must be a relative change in (0, 1), got {change}")
     plan = runner.plan(scenario)
+    if plan.asked is not None:      # run at the finer step its cycle averaging needs: its rows are read there too
+        scenario, plan = plan.scenario, dataclasses.replace(plan, asked=None, thin=1)
     notes = []
     cycle = plan.thermal is not None and plan.thermal.averaging == "cycle"
     run_plan = plan            # the run's own plan: at a prescribed speed, its closed form reports the value
