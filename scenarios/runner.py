@@ -458,7 +458,7 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
     the_plan, (df, events, stats, warnings, failure, traj) = _settled(the_plan, progress, integrate)
     post0 = time.perf_counter()
     scenario, mech, drive, settings = the_plan.scenario, the_plan.mechanism, the_plan.drive, the_plan.settings
-    method, why, thermal = the_plan.method, the_plan.why, the_plan.thermal
+    method, thermal = the_plan.method, the_plan.thermal
     if thermal is not None and thermal.averaging == "cycle" and traj is not None \
             and failure is None:       # the cycle averaging reads the periodic turn on the window's solution
         from mechsim.scenarios.thermal_peaks import window_readings

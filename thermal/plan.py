@@ -440,7 +440,7 @@ class ThermalPlan:
         u_of_phase, phase_breaks = self._period_input(df, states, inputs, breaks, means, readings)
         t = df["t_s"].to_numpy(float)
         own = (t > means.t_start) & (t <= means.t_start + means.period)
-        if own.sum() < 2:       # rows a turn apart cannot say (a planned run's are not: scenarios/runner.py `rows_every`)
+        if own.sum() < 2:       # rows a turn apart cannot say (scenarios/runner.py `rows_every` keeps a plan off them)
             return math.inf
         again = cyc.bulk_response(self.setup.system, means, u_of_phase, phase_breaks, t[own])[1]
         miss = np.max(np.abs(again - states[own, :again.shape[1]]), axis=0)
