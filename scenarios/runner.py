@@ -236,13 +236,13 @@ class Plan:
 ROWS_PER_TURN = 16
 
 
-def rows_every(si: dict, thermal) -> int:
+def rows_every(si: dict, thermal, per_turn: int = ROWS_PER_TURN) -> int:
     """How many times finer than the output step a run is computed: 1, or for a cycle-averaged run whose output rows
-    are more than 1/ROWS_PER_TURN of a nominal turn apart the least integer that brings them within it (the output
+    are more than 1/per_turn of a nominal turn apart the least integer that brings them within it (the output
     rows are then every `rows_every`-th row, `execute`)."""
     if thermal is None or thermal.averaging != "cycle":
         return 1
-    return max(1, int(np.ceil(si["output_step"] * ROWS_PER_TURN / thermal.setup.period - 1e-9)))
+    return max(1, int(np.ceil(si["output_step"] * per_turn / thermal.setup.period - 1e-9)))
 
 
 def plan(scenario: Scenario) -> Plan:
