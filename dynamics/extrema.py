@@ -1238,13 +1238,16 @@ def with_rowless(t: np.ndarray, values: dict[str, np.ndarray], intervals: list[I
 #: one-sided limits read per column and sense at most (`end_limits`): the best guesses (the limits themselves where
 #: the reader holds the state there: `stored_limits`)
 LIMITS = 8
+#: at most this many ends read by `end_limits`' further passes and its first together (its resources bounded)
+FURTHER_LIMITS = 256
 
 
 def _end_guesses(e: Extremum | None, sense: float, t: np.ndarray, f: np.ndarray, intervals: list[Interval],
-                 tie: float) -> list[tuple[int, str, float]]:
+                 tie: float, limit: int | None = LIMITS) -> list[tuple[int, str, float]]:
     """(interval, side, instant) of the intervals' ends whose one-sided limit may beat `e` (`end_limits`), the
-    LIMITS best guesses first (the earliest of equal ones)."""
-    return end_guesses(t, {None: f}, intervals, [(None, sense, None if e is None else e.value)], {None: tie})[0]
+    `limit` best guesses first (the earliest of equal ones; None: all)."""
+    return end_guesses(t, {None: f}, intervals, [(None, sense, None if e is None else e.value)], {None: tie},
+                       limit=limit)[0]
 
 
 def every_end(intervals: list[Interval]) -> list[tuple[int, str, float]]:
@@ -1390,26 +1393,45 @@ def end_limits(e: Extremum | None, column: str, sense: float, t: np.ndarray, f: 
     best = e
     if guesses is None:
         guesses = _end_guesses(e, sense, t, f, intervals, tie)
-    for k, side, te in guesses:
-        iv = intervals[k]
-        if best is not None and te == best.t and best.limit == side:
-            continue
-        try:
-            table = reader(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([te]))
-        except ReadingFailed:
-            continue
-        if column not in table:
-            continue
-        value = float(np.asarray(table[column], float)[0])
-        if not np.isfinite(value) or (best is not None and sense * (value - best.value) <= tie):
-            continue
-        at = next((i for i, x in enumerate(own) if x is iv), None)
-        if at is None:
-            own.append(iv)
-            at = len(own) - 1
-        kind = iv.lo_kind if side == "after" else iv.hi_kind
-        row = _Row(table, 0, None)
-        best = Extremum(value, te, f"{kind} (limit from {side})", row, side, side, at, False)
+    tried: set[tuple[int, str]] = set()
+    batch = list(guesses)
+    scale = float(np.nanmax(np.abs(f), initial=0.0))
+    while batch:
+        values = []
+        for k, side, te in batch:
+            tried.add((k, side))
+            iv = intervals[k]
+            if best is not None and te == best.t and best.limit == side:
+                continue
+            try:
+                table = reader(iv, 0 if side == "after" else len(iv.rows) - 1, np.array([te]))
+            except ReadingFailed:
+                continue
+            if column not in table:
+                continue
+            value = float(np.asarray(table[column], float)[0])
+            values.append(value)
+            if not np.isfinite(value) or (best is not None and sense * (value - best.value) <= tie):
+                continue
+            at = next((i for i, x in enumerate(own) if x is iv), None)
+            if at is None:
+                own.append(iv)
+                at = len(own) - 1
+            kind = iv.lo_kind if side == "after" else iv.hi_kind
+            row = _Row(table, 0, None)
+            best = Extremum(value, te, f"{kind} (limit from {side})", row, side, side, at, False)
+        gaps = np.abs(np.array(values, dtype=float) - best.value) if best is not None else np.zeros(0)
+        if best is None or len(tried) >= FURTHER_LIMITS or not np.any(gaps > REPEAT * scale):
+            break
+        # a pass that read a limit other than a repeat of the best (more than REPEAT of the column's scale from it,
+        # as `refine_further`: a periodic run's repeated peaks stop here): branch and bound, the ends whose guess,
+        # with its margin, still beats the best found, the next best twice as many as the pass before (a
+        # temperature rising with the bulk over hundreds of exits: the guesses from rows a few degrees apart rank
+        # the limits after earlier entries above the last exit's, the largest)
+        rest = [g for g in _end_guesses(best, sense, t, f, intervals, tie, limit=None) if (g[0], g[1]) not in tried]
+        batch = rest[:min(2 * len(batch), FURTHER_LIMITS - len(tried))]
+        if batch:
+            read_all(reader, end_limit_requests(intervals, batch))
     return best
 
 

@@ -65,6 +65,22 @@ def test_a_motor_driven_geneva_at_any_step():
         assert got["t_s"] == pytest.approx(fine["t_s"], abs=1e-6), step
 
 
+def test_the_last_exit_among_hundreds_whose_limits_are_guessed_from_rows():
+    """The one-sided limits beside the rows' guesses (dynamics/extrema.py `end_limits`): with friction 0.15015 at
+    0.05 s rows the eight best guesses were limits after earlier entries (read about 28 C, guessed above 35.2 C from
+    rows 0.05 s apart) and the last exit's, the largest, was not read: 35.18399 C at t = 292.0 s was reported
+    against 35.22494 C at 299.32 s. A pass whose limits are no repeat of the best now reads the next guesses, twice
+    as many each pass, while they may beat it. The two runs' cycle averagings differ by 2.5e-8 of the value."""
+    sets = ["contact.friction=0.15015"]
+    fine = _contact_max(mechsim.run(mechsim.load("internal-geneva-motor", set=[
+        "output.plots=false", "duration=300 s", "output_step=5 ms", *sets])))
+    got = _contact_max(mechsim.run(mechsim.load("internal-geneva-motor", set=[
+        "output.plots=false", "duration=300 s", "output_step=0.05 s", *sets])))
+    assert fine["t_s"] > 299.0
+    assert got["value"] == pytest.approx(fine["value"], rel=1e-7)
+    assert got["t_s"] == pytest.approx(fine["t_s"], abs=1e-5)
+
+
 def test_the_hours_contact_temperature_derivative_at_rows_minutes_apart():
     """`mechsim sensitivity` of the hour at 7 s rows against central differences of the run's located peak: a
     closed form's cycle bulk is traced on its input linear between the window's rows, so the window is traced on
