@@ -598,8 +598,15 @@ def _event_fn(jmod):
         f = jmod.rates(k, t, z, p)
         g0, gdot = jax.jvp(lambda tt, zz: g(tt, zz, p), (t, z), (jnp.ones_like(t), f))
         delta = jnp.where(jnp.abs(g0) < 1e-6 * jnp.abs(gdot) * jnp.maximum(1.0, jnp.abs(t)), -g0 / gdot, 0.0)
+        # the sensitivities carried over the step too, by their variational equation S' = f_z S + f_p P: they
+        # grow with the phase where p moves the period, so S at the run's event time, a tolerance away from this
+        # path's own, is not S at the event (geneva-torque's cycle time by the drive torque, 33 engagements in:
+        # 2e-3 of the derivative)
+        Sdot = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: jmod.rates(k, t, zz, pp), (z, p), (s, dp))[1],
+                        in_axes=(1, 1), out_axes=1)(S, P)
         t = t + delta
         z = z + f * delta
+        S = S + Sdot * delta
         f = jmod.rates(k, t, z, p)
         gdot = jax.jvp(lambda tt, zz: g(tt, zz, p), (t, z), (jnp.ones_like(t), f))[1]
         dg = jax.vmap(lambda s, dp: jax.jvp(lambda zz, pp: g(t, zz, pp), (z, p), (s, dp))[1], in_axes=(1, 1))(S, P)

@@ -61,3 +61,22 @@ def test_a_near_dwell_late_in_its_run_at_any_output_step():
     assert tables[1]["derivative"] == pytest.approx(tables[0]["derivative"], rel=DERIVATIVE_REL)
     fd = _central("chain-mech2-detuned", "drive.torque", 2.4e-3, "N*m", 1e-3, ["crank_accel_rad_s2"])
     assert tables[0]["derivative"] == pytest.approx(fd["crank_accel_rad_s2"], rel=DERIVATIVE_REL)
+
+
+def test_event_times_late_in_an_accelerating_run():
+    """geneva-torque over its own 5 s (33 engagements, the crank speeding up under a constant torque): the traced
+    pass integrates each segment to the run's event time and refines it by a Newton step on its own guard; the
+    sensitivities are carried over that step by their variational equation (dynamics/sensitivity.py `_event_fn`).
+    They were not, and grow with the phase: the energy per cycle, exactly 2 pi in the torque (the torque's work over
+    one turn), came out 6.287050 (6e-4), the cycle time 2e-3 from the central difference. Now 1.4e-8 and 2e-7."""
+    table = sensitivity(mechsim.load("geneva-torque"), ["drive.torque"],
+                        ["energy_per_cycle_J", "cycle_time_s"]).set_index("quantity")
+    assert table.loc["energy_per_cycle_J", "derivative"] == pytest.approx(2 * 3.141592653589793, rel=1e-6)
+    ends = []
+    for torque in (6.0 * (1 - 1e-4), 6.0 * (1 + 1e-4)):
+        result = mechsim.run(mechsim.load("geneva-torque", set=[f'drive.torque="{torque!r} N*m"', *TIGHT,
+                                                                "output.plots=false"]))
+        entries = result.events.loc[result.events["kind"] == "entry", "t_s"].to_numpy(float)
+        ends.append(entries[32] - entries[31])      # the run's last cycle (its last entry is 7 ms before the end)
+    fd = (ends[1] - ends[0]) / (2 * 6.0e-4)
+    assert table.loc["cycle_time_s", "derivative"] == pytest.approx(fd, rel=DERIVATIVE_REL)
