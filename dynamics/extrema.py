@@ -21,6 +21,8 @@ re-integration's error from the row's state (the run's own error at that row).
 """
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -2136,7 +2138,13 @@ class TrajectoryReader:
                         algebraic_idx=mf.algebraic or None, jacfn=mf.jacobian if s.jacobian == "exact" else None,
                         max_num_steps=s.max_steps, linsolver="dense")
                     self._keep.append(mf)          # the id stays this mode's while the reader lives
-                sol = solver.solve(tspan, y0, yp0)
+                # a tighter try that fails falls back to the next: scikit-sundae's error handler would print its
+                # failure ("[IDASolve, Error: -22] ... mxstep steps") to the user's stdout, for a reading that is read
+                if n + 1 < n_tries:
+                    with contextlib.redirect_stdout(io.StringIO()):
+                        sol = solver.solve(tspan, y0, yp0)
+                else:
+                    sol = solver.solve(tspan, y0, yp0)
                 if sol.success:
                     break
                 if n == 0:
