@@ -253,22 +253,20 @@ def plan(scenario: Scenario) -> Plan:
     thin = rows_every(scenario.si, made.thermal)
     if thin == 1:
         return made
-    fine = dataclasses.replace(scenario, si={**scenario.si, "output_step": scenario.si["output_step"] / thin})
-    _check_rows(fine.si, made.thermal.setup.period)
-    return dataclasses.replace(_plan(fine), asked=scenario, thin=thin)
+    return dataclasses.replace(_plan(finer(scenario, thin)), asked=scenario, thin=thin)
 
 
-def _check_rows(si: dict, period: float) -> None:
-    """The finer step's rows bounded as the output step's are (scenarios/schema.py `check_derived`), before any
-    work: ScenarioError naming the output step."""
-    from mechsim.scenarios.schema import BYTES_PER_ROW, MAX_OUTPUT_ROWS, memory_budget
-    rows = si["duration"] / si["output_step"]
-    if rows > MAX_OUTPUT_ROWS or rows * BYTES_PER_ROW > memory_budget():
-        raise ScenarioError("output_step", f"cycle averaging compares the crank turns on rows at most 1/"
-                                           f"{ROWS_PER_TURN} of a {period:.4g} s turn apart, {rows:.3g} rows over "
-                                           f"{si['duration']:g} s: more than this machine allows (at most "
-                                           f"{MAX_OUTPUT_ROWS:,}, {memory_budget() / 2**30:.1f} GiB); shorten "
-                                           "duration or set thermal.averaging = 'resolved'")
+def finer(scenario: Scenario, every: int) -> Scenario:
+    """The scenario with an output step `every` times finer, its rows bounded as the scenario's are before any
+    work (scenarios/schema.py `rows_problem`: ScenarioError naming the output step)."""
+    from mechsim.scenarios.schema import rows_problem
+    si = {**scenario.si, "output_step": scenario.si["output_step"] / every}
+    problem = rows_problem(si["duration"] / si["output_step"])
+    if problem:
+        raise ScenarioError("output_step", f"cycle averaging compares the crank turns on rows "
+                                           f"{si['output_step']:.3g} s apart over {si['duration']:g} s, {problem}: "
+                                           "shorten duration or set thermal.averaging = 'resolved'")
+    return dataclasses.replace(scenario, si=si)
 
 
 def _plan(scenario: Scenario) -> Plan:

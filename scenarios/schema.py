@@ -269,17 +269,22 @@ def check_derived(si: dict) -> None:
         if switches > MAX_SWITCHES:
             raise ScenarioError("drive.duty_on", f"{switches:.3g} switches over the duration; at most "
                                                  f"{MAX_SWITCHES:,} (each one stops and restarts the integrator)")
-    rows = si["duration"] / si["output_step"]
-    if rows > MAX_OUTPUT_ROWS:
+    problem = rows_problem(si["duration"] / si["output_step"])
+    if problem:
         raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "
-                                           f"{rows:.3g} output steps; at most {MAX_OUTPUT_ROWS:,}: raise output_step "
-                                           "or shorten duration")
+                                           f"{problem}: raise output_step or shorten duration")
+
+
+def rows_problem(rows: float) -> str | None:
+    """What is wrong with a table of `rows` rows (more than MAX_OUTPUT_ROWS, or more memory than `memory_budget`),
+    or None."""
+    if rows > MAX_OUTPUT_ROWS:
+        return f"{rows:.3g} output steps; at most {MAX_OUTPUT_ROWS:,}"
     need, budget = rows * BYTES_PER_ROW, memory_budget()
     if need > budget:
-        raise ScenarioError("output_step", f"{si['output_step']:g} s over a duration of {si['duration']:g} s gives "
-                                           f"{rows:.3g} rows, about {need / 2**30:.1f} GiB of memory; this machine "
-                                           f"allows {budget / 2**30:.1f} GiB ({MEMORY_SHARE:.0%} of its memory): raise "
-                                           "output_step or shorten duration")
+        return (f"{rows:.3g} rows, about {need / 2**30:.1f} GiB of memory; this machine allows {budget / 2**30:.1f} "
+                f"GiB ({MEMORY_SHARE:.0%} of its memory)")
+    return None
 
 
 def memory_budget() -> float:

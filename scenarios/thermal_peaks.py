@@ -276,6 +276,20 @@ class _KeptReadings:
         return out
 
 
+def turn_spacing(finest, period: float, spans: list[tuple[float, float]]):
+    """A cycle-averaged run's sample spacing per gap (`with_rowless`'s `finest`, a time or a function of the
+    knots): at most 1/720 of the turn (0.5 degree of drive) on the gaps that reach into one of `spans` (lo, hi),
+    none elsewhere (`cycle_finest`)."""
+    def spacing(knots: np.ndarray) -> np.ndarray:
+        lo, hi = knots[:-1], knots[1:]
+        step = np.minimum(finest(knots) if callable(finest) else finest, period / 720.0)
+        near = np.zeros(len(lo), dtype=bool)
+        for a, b in spans:
+            near |= (hi > a) & (lo < b)
+        return np.where(near, step, np.inf)
+    return spacing
+
+
 class ThermalReader(_KeptReadings):
     """Every column of the finished table (mechanical and thermal) at any instants of a smooth interval of it,
     read as module docstring says: `read(interval, position, times)` as `dynamics/extrema.py` readers are (the
@@ -340,12 +354,7 @@ class ThermalReader(_KeptReadings):
         over 300 s at 0.05 s rows: the contact temperature's maximum was another turn's, 35.1367 C at t = 286.3 s,
         against 35.2099 C at the last exit."""
         P = self.solution["period"]
-
-        def spacing(knots: np.ndarray) -> np.ndarray:
-            lo, hi = knots[:-1], knots[1:]
-            step = np.minimum(finest(knots) if callable(finest) else finest, P / 720.0)
-            return np.where(((hi > self.t_sim_end) & (lo < self.t_sim_end + P)) | (hi > t_end - P), step, np.inf)
-        return spacing
+        return turn_spacing(finest, P, [(self.t_sim_end, self.t_sim_end + P), (t_end - P, np.inf)])
 
     def read_at(self, times: np.ndarray, spans: list[tuple[Interval, int, int]]) -> Mapping:
         """Every column at `times`, times[a:b] in the interval of each (interval, a, b) of `spans`, read as one
@@ -611,13 +620,7 @@ class ClosedFormThermalReader(_KeptReadings):
         which the rows' estimates rank among turns that differ by a fraction of the bulk's rise per turn (an hour
         of geneva-seed-lc1-mu015 at 0.1 s rows: another turn's engagement, 2.2 mK below the last turn's)."""
         P = self.solution["period"]
-        near = (self.t_sim + P, t_end - P)
-        step = min(finest, P / 720.0)
-
-        def spacing(knots: np.ndarray) -> np.ndarray:
-            lo, hi = knots[:-1], knots[1:]
-            return np.where((lo < near[0]) | (hi > near[1]), step, np.inf)
-        return spacing
+        return turn_spacing(finest, P, [(-np.inf, self.t_sim + P), (t_end - P, np.inf)])
 
     def kinks(self, lo: float, hi: float) -> list[tuple[float, str]]:
         """The heat input's switches inside (lo, hi) that are no event of the table (thermal/exact.py

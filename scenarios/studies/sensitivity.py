@@ -98,11 +98,11 @@ def _located(peaks: dict, column: str, side: str | None = None) -> dict | None:
     t = e["sample_t_s"] = e.get("window_t_s", e["t_s"])
     if e.get("unbounded"):
         e["samples"] = []
-    elif e.get("limit") is None and not e["at"].startswith(("start", "end")):      # interior
+    elif e["at"].startswith(("start", "end")):                  # the run's fixed ends
+        e["samples"] = [t]
+    elif e.get("limit") is None:                                 # interior
         e["samples"] = [t]
         e["beside"] = [t - EVENT_OFFSET_S, t + EVENT_OFFSET_S]
-    elif e.get("limit") is None or e["at"].startswith(("start", "end")):           # the run's fixed ends
-        e["samples"] = [t]
     else:
         step = EVENT_OFFSET_S if e["limit"] == "after" else -EVENT_OFFSET_S
         e["samples"] = [t + step, t + 2 * step]
@@ -249,9 +249,9 @@ def sensitivity(scenario, wrt: list[str], of: list[str] | None = None, change: f
     plan = runner.plan(scenario)
     if plan.asked is not None:      # run at the finer step its cycle averaging needs: its rows are read there too
         scenario, plan = plan.scenario, dataclasses.replace(plan, asked=None, thin=1)
-    finer = runner.rows_every(scenario.si, plan.thermal, CLOSED_CYCLE_ROWS) if plan.method == "closed-form" else 1
-    if finer > 1:       # a closed form's cycle bulk is traced on its input linear between the window's rows
-        scenario = dataclasses.replace(scenario, si={**scenario.si, "output_step": scenario.si["output_step"] / finer})
+    every = runner.rows_every(scenario.si, plan.thermal, CLOSED_CYCLE_ROWS) if plan.method == "closed-form" else 1
+    if every > 1:       # a closed form's cycle bulk is traced on its input linear between the window's rows
+        scenario = runner.finer(scenario, every)
         plan = runner.plan(scenario)
     notes = []
     cycle = plan.thermal is not None and plan.thermal.averaging == "cycle"
