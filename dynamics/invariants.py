@@ -17,9 +17,12 @@ first such row instead of writing it. Checked once per run on the finished table
   powers (dynamics/quadrature.py's, given; for a table without it, the trapezoidal rule's on its rows,
   `trapezoid_error_estimate`).
 
-K = 1000 (GLOBAL_FACTOR): integrators control the local error per step to rtol; the global error of a run is a
-modest multiple of it (docs/stability.md measures it over the built-ins and the robustness grid). A violation is
-far outside it: a missed stall makes a power balance miss by watts, not round-off.
+K = 1000 (GLOBAL_FACTOR), or the run's accepted steps where it took more (`global_factor`): integrators control
+the local error per step to rtol, and the global error of a run is their sum at most, where the motion does not
+amplify them. Over the built-ins it is a modest multiple of the tolerance (docs/stability.md measures it over them
+and the robustness grid); a long run's grows with its steps (a crank run up for 40 s: 0.4-0.9 % of its steps,
+docs/stability.md "Long runs"). A violation is far outside it: a missed stall makes a power balance miss by
+watts, not round-off.
 """
 from __future__ import annotations
 
@@ -30,7 +33,7 @@ import pandas as pd
 
 from mechsim.dynamics.tables import TableColumns
 
-#: global error of a run in units of the local tolerance (see the module docstring)
+#: global error of a run in units of the local tolerance, its least (see the module docstring)
 GLOBAL_FACTOR = 1000.0
 #: the closed form's energy bound in units of its quadrature's error estimate, with a margin: the trapezoidal
 #: rule's error reaches 4 times its estimate at a jump of the power inside a panel (`trapezoid_error_estimate`)
@@ -57,6 +60,13 @@ class Violation:
                 f"{self.bound:.3g} from the solver tolerances; the rows from here on are not written")
 
 
+def global_factor(steps: int | None = None) -> float:
+    """A run's global error in units of its local tolerance (K of the module docstring): GLOBAL_FACTOR, or the
+    run's accepted steps where more (each step's local error is within the tolerance, and a run's global error is
+    at most their sum where the motion does not amplify them). steps: None for a run without steps (a closed form)."""
+    return max(GLOBAL_FACTOR, float(steps or 0))
+
+
 def _columns(df) -> TableColumns:
     """The table's columns, each read once (dynamics/tables.py TableColumns); a TableColumns passes through."""
     return df if isinstance(df, TableColumns) else TableColumns(df)
@@ -77,26 +87,26 @@ def _matrix(df: TableColumns, names: list[str]) -> np.ndarray:
     return np.stack([np.asarray(df[c], dtype=float) for c in names], axis=0).T
 
 
-def _friction(df, rtol, atol, power_col, label, names=None):
+def _friction(df, rtol, atol, power_col, label, names=None, factor=GLOBAL_FACTOR):
     power = _column(df, power_col, names)
     if power is None:
         return None
     force, slip = _column(df, "friction_force_N", names), _column(df, "slip_speed_m_s", names)
     if force is not None and slip is not None:
-        du = GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(slip), initial=0.0)) + atol * LEVER_M)
+        du = factor * (rtol * float(np.nanmax(np.abs(slip), initial=0.0)) + atol * LEVER_M)
         bound = -np.abs(force) * du
     else:
-        bound = np.full(len(power), -GLOBAL_FACTOR * (rtol * float(np.nanmax(np.abs(power), initial=0.0)) + atol))
+        bound = np.full(len(power), -factor * (rtol * float(np.nanmax(np.abs(power), initial=0.0)) + atol))
     return label, power, bound
 
 
-def _heat_generated(df, rtol, atol, names=None):
+def _heat_generated(df, rtol, atol, names=None, factor=GLOBAL_FACTOR):
     heat = _column(df, "heat_generated_J", names)
     if heat is None:
         return None
     scale = float(np.nanmax(np.abs(heat), initial=0.0))
     gained = heat - heat[0]
-    return "heat generated since the start (J)", gained, np.full(len(heat), -GLOBAL_FACTOR * (
+    return "heat generated since the start (J)", gained, np.full(len(heat), -factor * (
         rtol * scale + atol * max(1.0, scale)))
 
 
@@ -150,7 +160,7 @@ def trapezoid_error_estimate(work: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(panel)])
 
 
-def _energy(df, events, rtol, atol, exact, names=None, quadrature=None):
+def _energy(df, events, rtol, atol, exact, names=None, quadrature=None, factor=GLOBAL_FACTOR):
     work_names = _works(df, names)
     w = _matrix(df, work_names) if work_names else None
     closure = energy_closure(df, events, names, w)
@@ -163,25 +173,26 @@ def _energy(df, events, rtol, atol, exact, names=None, quadrature=None):
         bound = QUADRATURE_FACTOR * estimate + 1e-12 * np.max(np.abs(w), initial=1.0)
     else:
         scale = float(np.sum(np.max(np.abs(w - w[0]), axis=0)) + np.max(np.abs(df["kinetic_energy_J"])))
-        bound = np.full(len(w), GLOBAL_FACTOR * (rtol * scale + atol * max(1.0, scale)))
+        bound = np.full(len(w), factor * (rtol * scale + atol * max(1.0, scale)))
     return "energy balance closure error (J)", np.abs(closure), bound
 
 
 def first_violation(df: pd.DataFrame, events: pd.DataFrame | None, rtol: float, atol: float,
-                    exact: bool = False, columns: list[str] | None = None, quadrature: np.ndarray | None = None
-                    ) -> Violation | None:
+                    exact: bool = False, columns: list[str] | None = None, quadrature: np.ndarray | None = None,
+                    steps: int | None = None) -> Violation | None:
     """The earliest row breaking an invariant, or None. exact: a closed-form table (works by quadrature, whose
     error estimate per row `quadrature` is, dynamics/quadrature.py; without it the trapezoidal rule's on the rows);
     columns: check only the invariants these columns carry (default: every column). df: a frame or its
-    TableColumns."""
+    TableColumns; steps: the run's accepted steps (`global_factor`), None for a closed form."""
     if df is None or not len(df if not isinstance(df, TableColumns) else df.frame):
         return None
     df = _columns(df)
     frame = df.frame
     names = None if columns is None else [c for c in columns if c in df]
-    checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names),
-              _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names),
-              _heat_generated(df, rtol, atol, names), _energy(df, events, rtol, atol, exact, names, quadrature)]
+    k = global_factor(steps)
+    checks = [_friction(df, rtol, atol, "friction_power_W", "friction power (W)", names, k),
+              _friction(df, rtol, atol, "heat_rate_W", "frictional heat rate (W)", names, k),
+              _heat_generated(df, rtol, atol, names, k), _energy(df, events, rtol, atol, exact, names, quadrature, k)]
     worst = None
     for check in checks:
         if check is None:

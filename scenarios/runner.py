@@ -187,13 +187,14 @@ def event_counts(events: pd.DataFrame, event_cols: TableColumns | None = None) -
 
 def _checked(df: pd.DataFrame, events: pd.DataFrame, failure: Failure | None, settings: SolverSettings,
              exact: bool = False, columns: list[str] | None = None, cols: TableColumns | None = None,
-             event_cols: TableColumns | None = None, quadrature: np.ndarray | None = None):
+             event_cols: TableColumns | None = None, quadrature: np.ndarray | None = None, steps: int | None = None):
     """(table, events, failure) after the physical invariants of `dynamics.invariants`: a row that breaks one
     becomes the run's failure (when earlier than the one it has) and the rows from it on are not kept.
     cols, event_cols: df's and the events' TableColumns, if at hand; quadrature: a closed form's works' error
-    estimate per row (`_closed_form_works`)."""
+    estimate per row (`_closed_form_works`); steps: an integrated run's accepted steps (its global error's bound,
+    `invariants.global_factor`)."""
     v = first_violation(df if cols is None else cols, events if event_cols is None else _event_columns(
-        events, event_cols), settings.rtol, settings.atol, exact, columns, quadrature)
+        events, event_cols), settings.rtol, settings.atol, exact, columns, quadrature, steps)
     if v is None or (failure is not None and failure.time <= v.time):
         return df, events, failure
     failure = Failure(time=v.time, mode=v.mode, reason=v.reason(), kind="solver",
@@ -469,8 +470,10 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
     event_cols = TableColumns(events)
     # (the closed form's quadrature error travels with its table to here, not beyond: no writer keeps an array)
     quadrature = df.attrs.pop(QUADRATURE_ERROR, None)
+    # (scikit-sundae's IDA counts no steps: its residual evaluations, at least one a step, bound them)
+    steps = None if method == "closed-form" else stats.get("accepted_steps") or stats.get("residual_evaluations")
     checked, events, failure = _checked(df, events, failure, settings, exact=method == "closed-form", cols=cols,
-                                        event_cols=event_cols, quadrature=quadrature)
+                                        event_cols=event_cols, quadrature=quadrature, steps=steps)
     if checked is not df:
         df, cols = checked, TableColumns(checked)
     if keep is not None and thermal is not None:
@@ -485,7 +488,7 @@ def _finished(the_plan: Plan, progress, integrate, keep=None):
                 if c in df]
         cols = TableColumns(df)
         checked, events, failure = _checked(df, events, failure, settings, columns=heat, cols=cols,
-                                            event_cols=event_cols)
+                                            event_cols=event_cols, steps=steps)
         if checked is not df:
             df, cols = checked, TableColumns(checked)
     stats = dict(stats, tables_time_s=stats.get("tables_time_s", 0.0) + time.perf_counter() - post0)

@@ -144,3 +144,23 @@ def test_a_closed_form_chain_closes_its_energy_on_a_fine_grid(step):
     closure = energy_closure(r.timeseries, r.events)
     work = r.timeseries[[c for c in r.timeseries if c.startswith("work_")]].to_numpy().sum(axis=1)
     assert np.max(np.abs(closure)[1:] / trapezoid_error_estimate(work)[1:]) < QUADRATURE_FACTOR / 2
+
+
+def test_a_long_run_up_keeps_its_energy_balance_within_its_steps():
+    """rolling-crank-torque run up for 40 s, ten times its own duration: the crank speeds up all the way, so IDA
+    takes 1.7e5 steps, about 100 times the 4 s run's. Its energy closure error grows with them: 2.6e-4 J near 38 s,
+    about 1100 tolerance units, past GLOBAL_FACTOR (1000). Until the bound counted the run's steps, the run stopped
+    there with "physical invariant broken". The error is the integration's: it scales with rtol. It is within the
+    sum of the steps' local errors (`invariants.global_factor`), so both runs complete."""
+    closure = {}
+    for rtol in (1e-9, 1e-10):
+        r = run(mechsim.load("rolling-crank-torque", set=[
+            "duration=40 s", "output.plots=false", 'solver.backend="ida-compiled"', f"solver.rtol={rtol}",
+            f"solver.atol={rtol / 10}"]))
+        assert r.failure is None, r.failure.message()
+        df, steps = r.timeseries, r.summary["solver"]["accepted_steps"]
+        works = df[[c for c in df if c.startswith("work_")]].to_numpy(float)
+        scale = float(np.abs(works - works[0]).max(axis=0).sum() + df["kinetic_energy_J"].abs().max())
+        closure[rtol] = abs(energy_closure(df, r.events)[-1])
+        assert steps > 1e5 and closure[rtol] <= steps * (rtol + rtol / 10) * scale
+    assert 3.0 < closure[1e-9] / closure[1e-10] < 30.0, closure
