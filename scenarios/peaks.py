@@ -773,6 +773,7 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
               for name, sense in (("max", 1.0), ("min", -1.0))
               if not getattr(got.get(c, {}).get(name), "constant", False)]
     guesses = {}                    # each check's ends to read (`end_guesses`), all of a table's plans' at once
+    ranked_by = {}                  # each check's lines and window in them (`end_limits`' further passes)
     for ws, x in lines if read is not None else ():
         mine = [(n, q) for n, check in enumerate(checks) for q, w in enumerate(ws) if check[0] is plans[w]]
         p = plans[ws[0]]
@@ -781,12 +782,13 @@ def located_peaks(df: pd.DataFrame, angle_column: str, peak_columns, events: pd.
         if mine:
             guesses.update(zip((n for n, _ in mine), end_guesses(p.t, p.values, p.intervals, asks, p.ties, lines=x,
                                                                  windows=[q for _, q in mine])))
+            ranked_by.update((n, (x, q if x is not None and x.window is not None else None)) for n, q in mine)
     guesses = [guesses[n] for n in range(len(checks))] if read is not None else []
     if read is not None and checks:
         read.prefetch([r for (p, *_), g in zip(checks, guesses) for r in end_limit_requests(p.intervals, g)])
-    for (p, got, c, name, sense), g in zip(checks, guesses):
+    for n, ((p, got, c, name, sense), g) in enumerate(zip(checks, guesses)):
         e = end_limits(got.get(c, {}).get(name), c, sense, p.t, p.values[c], p.intervals, p.intervals, read, p.ties[c],
-                       g)
+                       g, *ranked_by.get(n, (None, None)))
         if e is not None:
             got.setdefault(c, {})[name] = e
     # the growth toward an event where an extremum lies next to one: every window's and column's first approach

@@ -890,15 +890,15 @@ def locate_thermal(reader: ThermalReader, t: np.ndarray, cols, columns: list[str
         for (c, sense, _), g in zip(asks, guesses):
             e = found[c].get("max" if sense > 0 else "min")
             ahead += end_limit_requests(intervals, [x for x in g if e is None or x[2] != e.t or e.limit != x[1]])
-        checks.append((intervals, owns, found, asks, guesses))
+        checks.append((intervals, owns, found, asks, guesses, lines))
     read_all(reader, ahead)
     out = []
-    for intervals, owns, found, asks, guesses in checks:
+    for intervals, owns, found, asks, guesses, lines in checks:
         located = {}
         for (c, sense, _), g in zip(asks, guesses):
             name = "max" if sense > 0 else "min"
             got = found[c]
-            e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g)
+            e = end_limits(got.get(name), c, sense, t, values[c], owns[c], intervals, reader, ties[c], g, lines)
             if e is not None:
                 got[name] = e
             located[c] = (got, [back[id(iv)] for iv in owns[c]])
