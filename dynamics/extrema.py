@@ -134,13 +134,20 @@ def tie_of(f: np.ndarray) -> float:
 
 
 def _ties(F: np.ndarray, finite: bool | None = None) -> np.ndarray:
-    """`tie_of` of each row of F (finite: whether every value of F is finite, where known)."""
+    """`tie_of` of each row of F (finite: whether every value of F is finite, where known), a row at a time (an
+    hour's temporaries a row's, not the table's). The largest finite magnitude is the larger of the largest finite
+    value and the negated least (|x| and -x are exact); 0 where none is finite."""
+    out = np.zeros(len(F))
     if not F.shape[-1]:
-        return np.zeros(len(F))
-    if finite if finite is not None else np.isfinite(F).all():            # the largest magnitude is the larger of the largest and the negated least
-        return TIE_ROUNDOFF * np.abs(np.maximum(F.max(axis=-1), -F.min(axis=-1)))
-    with np.errstate(invalid="ignore"):
-        return TIE_ROUNDOFF * np.where(np.isfinite(F), np.abs(F), 0.0).max(axis=-1)
+        return out
+    for i, f in enumerate(F):
+        if finite or (finite is None and np.isfinite(f).all()):
+            out[i] = abs(max(float(f.max()), -float(f.min())))
+        else:
+            ok = np.isfinite(f)
+            if ok.any():
+                out[i] = abs(max(float(f.max(where=ok, initial=-np.inf)), -float(f.min(where=ok, initial=np.inf))))
+    return TIE_ROUNDOFF * out
 
 
 def _beats(new: Extremum, old: Extremum | None, sense: float, tie: float) -> bool:

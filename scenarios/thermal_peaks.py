@@ -783,35 +783,42 @@ def _promising(F: np.ndarray, intervals: list[Interval]) -> list[list[Interval]]
     """For each column (a row of F): the intervals that may hold its maximum or minimum: those whose best row is
     within twice the largest change between neighbouring rows of the interval (the most an extremum between rows,
     or at an end's one-sided limit, can add to its rows: one step at that slope, twice for margin) of the best row;
-    every column's rows compared in one pass. Every such interval, not the best few by their rows: where the rows
-    under-sample a peak its interval ranks low (geneva-torque with friction 0.15 and lumped temperatures at 2.3 ms
-    rows: the contact temperature's maximum, 134.985 C, lay in an interval below the best 8, and 134.589 C was
-    reported); the brackets refined among them are bounded by `dynamics/extrema.py` (CANDIDATES and its second
-    round), however many intervals a long cycle-averaged run has."""
+    a column at a time (an hour's temporaries a column's, not the table's). Every such interval, not the best few
+    by their rows: where the rows under-sample a peak its interval ranks low (geneva-torque with friction 0.15 and
+    lumped temperatures at 2.3 ms rows: the contact temperature's maximum, 134.985 C, lay in an interval below the
+    best 8, and 134.589 C was reported); the brackets refined among them are bounded by `dynamics/extrema.py`
+    (CANDIDATES and its second round), however many intervals a long cycle-averaged run has."""
     ks, first, last = _interval_rows(intervals)
     if not ks:
         return [[] for _ in F]
-    valued = np.isfinite(F)
-    # each column's largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
-    largest = np.maximum(F.max(axis=1, where=valued, initial=-np.inf), -F.min(axis=1, where=valued, initial=np.inf))
-    ties = np.where(np.isfinite(largest), 1e-13 * largest, 0.0).tolist()
-    step = np.zeros(F.shape)                    # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
-    with np.errstate(invalid="ignore"):         # (inf - inf: not finite, so 0 below)
-        np.subtract(F[:, 1:], F[:, :-1], out=step[:, :-1])
-    np.abs(step, out=step)
-    step[~np.isfinite(step)] = 0.0
-    # the largest change between neighbours inside each interval (the step leaving its last row excluded)
-    step[:, last] = 0.0
-    slope = np.maximum.reduceat(step, first, axis=1)
     keep: list[set] = [set() for _ in F]
-    for sense in (1.0, -1.0):
-        top = np.maximum.reduceat(np.where(valued, sense * F, -np.inf), first, axis=1)
-        top = np.where(last >= first, top, -np.inf)
-        for c, (tc, ok, tie) in enumerate(zip(top, np.isfinite(top), ties)):
+    for c, f in enumerate(F):         # a column at a time: an hour's temporaries are a column's, not the table's
+        valued = np.isfinite(f)
+        every = bool(valued.all())
+        # its largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
+        largest = (max(float(f.max()), -float(f.min())) if every else
+                   max(float(f.max(where=valued, initial=-np.inf)), -float(f.min(where=valued, initial=np.inf))))
+        tie = 1e-13 * largest if np.isfinite(largest) else 0.0
+        step = np.zeros(len(f))                 # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
+        with np.errstate(invalid="ignore"):     # (inf - inf: not finite, so 0 below)
+            np.subtract(f[1:], f[:-1], out=step[:-1])
+        np.abs(step, out=step)
+        if not every or not np.isfinite(step).all():
+            step[~np.isfinite(step)] = 0.0
+        # the largest change between neighbours inside each interval (the step leaving its last row excluded)
+        step[last] = 0.0
+        slope = np.maximum.reduceat(step, first)
+        for sense in (1.0, -1.0):           # (the largest of -f is minus the least of f, exactly)
+            if every:
+                top = np.maximum.reduceat(f, first) if sense > 0 else -np.minimum.reduceat(f, first)
+            else:
+                top = np.maximum.reduceat(np.where(valued, sense * f, -np.inf), first)
+            top = np.where(last >= first, top, -np.inf)
+            ok = np.isfinite(top)
             if not ok.any():
                 continue
-            floor = float(tc[ok].max()) - tie
-            keep[c].update(ks[i] for i in np.flatnonzero(ok & (tc + 2.0 * slope[c] >= floor)).tolist())
+            floor = float(top[ok].max()) - tie
+            keep[c].update(ks[i] for i in np.flatnonzero(ok & (top + 2.0 * slope >= floor)).tolist())
     return [[intervals[k] for k in sorted(mine)] for mine in keep]
 
 
