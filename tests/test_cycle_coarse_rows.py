@@ -42,9 +42,15 @@ def _check_rows(result, duration: float, step: float) -> None:
     assert result.summary["solver"]["output_rows"] == len(t)
 
 
+@pytest.fixture(scope="module")
+def fine_hour():
+    """The hour's located contact temperature at 0.1 s rows, the reference of every coarser step."""
+    return _contact_max(_run("geneva-seed-lc1-mu015", "1 h", "0.1 s"))
+
+
 @pytest.mark.parametrize("step, seconds", [("7 s", 7.0), ("100 s", 100.0)])
-def test_an_hour_of_the_seed_at_rows_minutes_apart(step, seconds):
-    fine = _contact_max(_run("geneva-seed-lc1-mu015", "1 h", "0.1 s"))
+def test_an_hour_of_the_seed_at_rows_minutes_apart(fine_hour, step, seconds):
+    fine = fine_hour
     coarse = _run("geneva-seed-lc1-mu015", "1 h", step)
     _check_rows(coarse, 3600.0, seconds)
     got = _contact_max(coarse)
