@@ -4,6 +4,7 @@ tabulate, summarise). `run` is both."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import platform
 import time
 from collections import Counter
@@ -337,11 +338,27 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
             from mechsim.dynamics.backend import backend_class
             # names the cause where the backend gives a symptom
             f = backend_class(settings.backend).explain(traj, settings, si["duration"])
-            where = ", ".join(f"{k} = {v:.6g}" for k, v in f.get("where", {}).items())
-            failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"] + (f" at {where}" if where else ""),
+            where = configuration_text(f.get("where", {}), mech)
+            failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"].rstrip(". ") + (f" at {where}" if where else ""),
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),
                               code=f.get("code", FailureCode.INTEGRATOR_FAILED))
     return df, events, stats, warnings, failure, traj
+
+
+def configuration_text(where: dict, mech: Mechanism) -> str:
+    """The configuration a run stopped at, as its failure message gives it: each coordinate with its unit, an angle
+    also as its place in the turn in degrees (-180 to 180, the mechanisms' own convention: the Geneva's entry at
+    -45 deg), where a designer finds it on the drawing: a run stopped after 57 turns reads 'crank = 361.023 rad
+    (165.1 deg in its turn)', not a bare 361.023."""
+    angles = {mech.coordinates[i] for i in mech.angle_coordinates}
+    parts = []
+    for name, value in where.items():
+        if name in angles:
+            turn = math.remainder(math.degrees(value), 360.0) if math.isfinite(value) else value
+            parts.append(f"{name} = {value:.6g} rad ({turn:.1f} deg in its turn)")
+        else:
+            parts.append(f"{name} = {value:.6g} m")
+    return ", ".join(parts)
 
 
 def _settled(the_plan: Plan, progress, integrate):

@@ -2,6 +2,7 @@
 that names the cause, or a warning and an event row - never a hang and never silent garbage."""
 import json
 import importlib.util
+import re
 
 import numpy as np
 import pandas as pd
@@ -28,6 +29,13 @@ def test_index3_on_ida_exits_3_naming_the_formulation(tmp_path):
     r = invoke_case(CASE["index-3 on IDA"], tmp_path / "o")
     assert r.exit_code == 3, r.output
     assert "index-3" in r.stderr and "formulation = 'index2'" in r.stderr
+    # where it stopped, with units, each angle also in its turn (where a designer finds it on the drawing): the
+    # entry, crank and wheel both at -pi/4, -45 deg
+    where = dict((name, (float(rad), float(deg))) for name, rad, deg in
+                 re.findall(r"(\w+) = (\S+) rad \((\S+) deg in its turn\)", " ".join(r.stderr.split())))
+    assert set(where) == {"crank", "wheel"}
+    for rad, deg in where.values():
+        assert rad == pytest.approx(-np.pi / 4, abs=1e-5) and deg == pytest.approx(-45.0, abs=0.1)
     # what ran is kept, and it stops at the first restart (entry at crank angle -pi/4, docs/theory.md §K4):
     # the last row is the output step before it
     df = pd.read_csv(tmp_path / "o" / "timeseries.csv")
