@@ -339,7 +339,8 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
             # names the cause where the backend gives a symptom
             f = backend_class(settings.backend).explain(traj, settings, si["duration"])
             where = configuration_text(f.get("where", {}), mech)
-            failure = Failure(time=f["time"], mode=f["mode"], reason=f["reason"].rstrip(". ") + (f" at {where}" if where else ""),
+            reason = f"{f['reason'].rstrip('. ')} at {where}" if where else f["reason"]
+            failure = Failure(time=f["time"], mode=f["mode"], reason=reason,
                               hint=f.get("hint", ""), kind=f.get("kind", "solver"),
                               code=f.get("code", FailureCode.INTEGRATOR_FAILED))
     return df, events, stats, warnings, failure, traj
