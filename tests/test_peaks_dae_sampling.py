@@ -12,6 +12,8 @@ Both runs' located values carry the re-integration's error from different rows' 
 tenth of it): measured 1.3e-7 of the column's largest magnitude between 1, 0.37 and 2.3 ms rows for geneva-torque,
 3e-11 for the chain. 1e-6 is the margin, far below the errors this closes.
 """
+import functools
+
 import numpy as np
 import pytest
 
@@ -21,8 +23,12 @@ from mechsim.scenarios import runner
 from mechsim.scenarios.peaks import DAE_STEP_RAD, HOW_DAE, HOW_DAE_SAMPLED, _rows_finest
 
 
-def _peaks(name, step):
-    r = mechsim.run(mechsim.load(name, set=["output.plots=false", f'output_step="{step}"']))
+@functools.cache
+def _peaks(name, step=None):
+    """(located peaks, table) of the scenario at output_step `step` (None: its own), run once for the module: the
+    reference runs are read by several tests (only read, never changed)."""
+    sets = ["output.plots=false"] + ([f'output_step="{step}"'] if step is not None else [])
+    r = mechsim.run(mechsim.load(name, set=sets))
     assert r.success
     return r.summary["peaks"], r.timeseries
 
@@ -234,7 +240,7 @@ def test_an_unbounded_approach_between_far_apart_rows(step):
     limit from the same side, no value either: it is the best of that table without those limits (the coupler
     carries nothing in the dwell: 0 N). At 10 s rows (three a run) no row lies in a dwell, and the rows alone gave
     0.0213 N; the readings between them hold the dwell's 0."""
-    own = mechsim.run(mechsim.load("chain-mech1-torque", set=["output.plots=false"])).summary["peaks"]
+    own = _peaks("chain-mech1-torque")[0]
     got = _peaks("chain-mech1-torque", step)[0]["coupler_force_N"]
     first = own["coupler_force_N"]["max"]
     assert first["value"] is None and got["max"]["value"] is None
