@@ -2152,12 +2152,10 @@ class TrajectoryReader:
                         algebraic_idx=mf.algebraic or None, jacfn=mf.jacobian if s.jacobian == "exact" else None,
                         max_num_steps=s.max_steps, linsolver="dense")
                     self._keep.append(mf)          # the id stays this mode's while the reader lives
-                # a tighter try that fails falls back to the next: scikit-sundae's error handler would print its
-                # failure ("[IDASolve, Error: -22] ... mxstep steps") to the user's stdout, for a reading that is read
-                if n + 1 < n_tries:
-                    with contextlib.redirect_stdout(io.StringIO()):
-                        sol = solver.solve(tspan, y0, yp0)
-                else:
+                # scikit-sundae's error handler would print a failure ("[IDASolve, Error: -22] ... mxstep steps")
+                # to the user's stdout: a tighter try's falls back to the next, the last try's is the ReadingFailed
+                # below (its message), which the peaks handle (another start, or the rows, said in their `at`)
+                with contextlib.redirect_stdout(io.StringIO()):
                     sol = solver.solve(tspan, y0, yp0)
                 if sol.success:
                     break

@@ -301,6 +301,33 @@ def test_a_stalled_tighter_try_is_not_repeated_from_the_same_start(capfd, monkey
             assert got == pytest.approx(want, abs=1e-5 * _scale(own, column)), (column, name)
 
 
+def test_a_reading_that_fails_at_the_runs_own_tolerances_prints_nothing(capfd, monkeypatch):
+    """geneva-torque with the lumped thermal model at rtol 1e-12 on scikit-sundae's IDA (`ida`, the default until a
+    model's compiled callbacks are cached), friction 0.15, E 0.025 % above the library's: readings that reach the
+    exit at 0.3663 s fail at every try, the run's own tolerances too (the peaks then read from another start or the
+    rows). The binding's error handler printed each such failure on the user's stdout ("[IDASolve, Error: -22] At t
+    = 0.366316491708924, mxstep steps taken before reaching tout.", four lines from one mechsim.run); the
+    failure is the reading's ReadingFailed, and nothing is printed."""
+    from mechsim.dynamics.extrema import ReadingFailed
+    failed, integrate = [], TrajectoryReader._integrate
+
+    def recorded(self, *args, **kwargs):
+        try:
+            return integrate(self, *args, **kwargs)
+        except ReadingFailed as exc:
+            failed.append(str(exc))
+            raise
+    monkeypatch.setattr(TrajectoryReader, "_integrate", recorded)
+    capfd.readouterr()
+    r = mechsim.run(mechsim.load("geneva-torque", set=[
+        "output.plots=false", "thermal.model=lumped", "thermal.averaging=resolved", "duration=0.5 s",
+        "output_step=0.1 ms", "contact.friction=0.15", "solver.rtol=1e-12", "solver.atol=1e-14",
+        'solver.backend="ida"', f"thermal.E={207e9 * (1 + 2.5e-4)!r} Pa"]))
+    out = capfd.readouterr().out
+    assert r.success and failed, failed
+    assert "IDASolve" not in out, out
+
+
 def test_the_contact_temperatures_derivatives_between_rows_a_turn_apart():
     """`mechsim sensitivity internal-geneva-motor` at 1.6667 s rows (three a run) exited 3: the traced thermal
     formulas are checked against the run's own on the row in contact nearest the located peak, and no row is in
