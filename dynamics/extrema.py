@@ -128,9 +128,10 @@ def _estimates(t: np.ndarray, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, i:
     return f1 + np.where(np.isfinite(gain), gain, 0.0)
 
 
-def tie_of(f: np.ndarray) -> float:
-    """The round-off tie of a column: TIE_ROUNDOFF of its largest finite magnitude (values closer are equal)."""
-    return float(_ties(np.asarray(f, dtype=float)[None, :])[0])
+def tie_of(f: np.ndarray, finite: bool | None = None) -> float:
+    """The round-off tie of a column: TIE_ROUNDOFF of its largest finite magnitude (values closer are equal);
+    finite: whether every value is finite, where the caller knows."""
+    return float(_ties(np.asarray(f, dtype=float)[None, :], finite)[0])
 
 
 def _ties(F: np.ndarray, finite: bool | None = None) -> np.ndarray:

@@ -795,10 +795,7 @@ def _promising(F: np.ndarray, intervals: list[Interval]) -> list[list[Interval]]
     for c, f in enumerate(F):         # a column at a time: an hour's temporaries are a column's, not the table's
         valued = np.isfinite(f)
         every = bool(valued.all())
-        # its largest finite magnitude, max(max f, -min f) over the finite rows (|x| and -x are exact)
-        largest = (max(float(f.max()), -float(f.min())) if every else
-                   max(float(f.max(where=valued, initial=-np.inf)), -float(f.min(where=valued, initial=np.inf))))
-        tie = 1e-13 * largest if np.isfinite(largest) else 0.0
+        tie = tie_of(f, every)
         step = np.zeros(len(f))                 # |f[i+1] - f[i]|, 0 where not finite, and 0 after the last row
         with np.errstate(invalid="ignore"):     # (inf - inf: not finite, so 0 below)
             np.subtract(f[1:], f[:-1], out=step[:-1])
