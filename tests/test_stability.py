@@ -148,3 +148,18 @@ def test_refined_thermal_mesh_stops_the_explicit_solver():
     assert bdf.loc[2.5e-6, "rhs_evaluations"] < 2 * bdf.loc[8e-5, "rhs_evaluations"]
     assert rk.loc[8e-5, "final_surface_temp_K"] == pytest.approx(bdf.loc[8e-5, "final_surface_temp_K"], rel=1e-4)
     assert sweep.fastest_time_constant_s.min() < 1e-6 < 1e-4 < sweep.fastest_time_constant_s.max()
+
+
+def test_a_failing_ida_run_through_the_api_prints_nothing(capfd):
+    """scikit-sundae prints each IDA failure ("[IDASolve, Error: -22] At t = ...") on stdout; a user of the API
+    reads it from the result instead: the failure with its time, and the loop's recoveries before it."""
+    import mechsim
+    case = CASE["index-3 on IDA"]
+    sc = mechsim.load(case.scenario, set=[*case.overrides, "solver.backend=ida", "output.plots=false"])
+    r = mechsim.run(sc)
+    printed = capfd.readouterr()
+    assert printed.out == "" and "IDASolve" not in printed.err
+    assert r.summary["failure_code"] in ("max_steps", "integrator_failed")
+    # where index-3 breaks down: the first restart, the entry at crank angle -pi/4 (docs/theory.md §K4)
+    assert r.summary["solver"]["recoveries"] >= 1
+    assert "index-3" in r.summary["failure"] and "crank = -0.785398 rad" in r.summary["failure"]

@@ -6,6 +6,8 @@ parameter tuple travels as IDA's userdata.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 
 import numpy as np
@@ -117,7 +119,10 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
         eventsfn.direction = list(mf.guard_directions)
         opts.update(eventsfn=eventsfn, num_events=n_ev)
     solver = IDA(mf.residual, **opts)
-    sol = solver.solve(tspan, y0, yp0)
+    # scikit-sundae's error handler prints a failure ("[IDASolve, Error: -22] At t = ...") on the caller's stdout;
+    # the Segment carries it (its message and end time), recovered (`hybrid.recover`) or reported as the failure
+    with contextlib.redirect_stdout(io.StringIO()):
+        sol = solver.solve(tspan, y0, yp0)
     for observe in SOLVE_OBSERVERS:
         observe(solver, sol, len(y0))
     t, y, yp = np.asarray(sol.t), np.asarray(sol.y), np.asarray(sol.yp)
