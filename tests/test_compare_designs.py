@@ -134,6 +134,24 @@ def test_the_work_per_periodic_turn_closes_the_energy_balance(motors):
         assert abs(sum(works)) <= 10 * spread * abs(works[0])
 
 
+def test_a_mean_that_vanishes_over_a_periodic_turn_has_no_relative_difference(motors):
+    """Over a periodic turn each speed returns to its value, so its mean acceleration, the speed's change over the
+    turn divided by T, is zero exactly: what a run reports is its integrator's error (here below ten times the
+    regime's periodicity or rtol, times the speed's scale, per turn), and (b - a)/|a| would be a ratio of two
+    errors. It is NaN and the notes name it; a mean that does not vanish (the drive torque's) keeps its ratio."""
+    r = motors.a.summary
+    period = r["regime"]["period_s"]
+    accuracy = 10 * max(r["regime"]["turn_spread"], motors.a.scenario["solver"]["rtol"])
+    for body in ("crank", "wheel"):
+        row = _row(motors, f"cycle_mean_{body}_accel_rad_s2")
+        speed = r["peaks"][f"{body}_speed_rad_s"]["max"]["value"]
+        assert 0 < abs(row.a) * period <= accuracy * speed
+        assert math.isnan(row.relative_difference) and row.difference == row.b - row.a
+        assert f"cycle_mean_{body}_accel_rad_s2 (|A| = " in motors.notes[-1]
+    row = _row(motors, "cycle_mean_drive_torque_N_m")
+    assert row.relative_difference == row.difference / abs(row.a) and row.relative_difference > 0.1
+
+
 def test_the_figures_overlay_both_runs(torques):
     """A's lines solid and B's dashed in one colour: each line's data are its run's column; folded per crank turn
     both lie within one turn."""

@@ -9,7 +9,9 @@ located on the continuous solution; the trapezoidal mean of the output rows only
 continuous solution to read, as one that failed), the cycle time and the work of each power flow per cycle, the
 heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares
 (docs/limits.md). Each row holds both values, the difference b - a and the relative difference (b - a) / |a|; the
-quantity's name ends in its unit.
+quantity's name ends in its unit. A figure of A that is zero at A's accuracy (`zero_levels`: the mean
+acceleration over a periodic turn, a dwell's least speed) has no relative difference (NaN, named in the notes):
+its |a| is the integrator's error, and a ratio to it is noise.
 
 Runs of different mechanisms share only some columns: what both have is compared, what one lacks is listed
 (`only_a`, `only_b`); nothing in common is a user error.
@@ -109,9 +111,38 @@ def headline(result) -> dict[str, float]:
     return out
 
 
-def headline_table(a: dict[str, float], b: dict[str, float]) -> pd.DataFrame:
-    """One row per quantity both runs have (in a's order): both values, b - a, (b - a) / |a| (0 where both are 0,
-    NaN where a is 0 and b is not)."""
+#: the headline quantities read from one column, by the prefix of their names (`headline`)
+COLUMN_FIGURES = ("startup_peak_max_", "startup_peak_min_", "peak_max_", "peak_min_", "cycle_mean_")
+#: a located figure's error, in units of the run's rtol times its column's largest |peak|: the integrator's
+#: global error over a turn, a few times its local error test's (docs/api.md "Comparing two designs")
+ZERO_WITHIN = 10.0
+
+
+def figure_column(quantity: str) -> str | None:
+    """The column a headline quantity is read from (`peak_max_contact_force_N`: `contact_force_N`), else None."""
+    return next((quantity[len(p):] for p in COLUMN_FIGURES if quantity.startswith(p)), None)
+
+
+def zero_levels(result) -> dict[str, float]:
+    """Per column with located peaks: ZERO_WITHIN x rtol x its largest finite |peak|, the size below which a figure
+    read from it is zero at the run's accuracy."""
+    s = result.summary
+    rtol = (s.get("model") or {}).get("rtol")
+    if not rtol:
+        return {}
+    out = {}
+    for col, e in (s.get("peaks") or {}).items():
+        values = [abs(_number(e[side]["value"])) for side in ("max", "min") if side in e]
+        values = [v for v in values if math.isfinite(v)]
+        if values:
+            out[col] = ZERO_WITHIN * float(rtol) * max(values)
+    return out
+
+
+def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, float] | None = None) -> pd.DataFrame:
+    """One row per quantity both runs have (in a's order): both values, b - a, (b - a) / |a| (0 where both are
+    equal, NaN where a is 0 and b is not, or where |a| is within A's zero level of its column, `zero_a`)."""
+    zero_a = zero_a or {}
     rows = []
     for q, x in a.items():
         if q not in b:
@@ -119,8 +150,21 @@ def headline_table(a: dict[str, float], b: dict[str, float]) -> pd.DataFrame:
         y = b[q]
         d = y - x
         rel = (0.0 if d == 0 else math.nan) if x == 0 else d / abs(x)
+        if d != 0 and x != 0 and abs(x) <= zero_a.get(figure_column(q), 0.0):
+            rel = math.nan
         rows.append((q, x, y, d, rel))
     return pd.DataFrame(rows, columns=list(COLUMNS)).astype({c: float for c in COLUMNS[1:]})
+
+
+def zero_figures(table: pd.DataFrame, zero_a: dict[str, float]) -> list[str]:
+    """The table's quantities whose A value is nonzero but within A's zero level (no relative difference), with
+    both sizes."""
+    out = []
+    for r in table.itertuples():
+        level = zero_a.get(figure_column(r.quantity))
+        if level is not None and r.a != r.b and r.a != 0 and abs(r.a) <= level:
+            out.append(f"{r.quantity} (|A| = {abs(r.a):.2g} <= {level:.2g})")
+    return out
 
 
 @dataclass
@@ -280,13 +324,17 @@ def compare_runs(ra, rb, name_a: str, name_b: str) -> Comparison:
     cols_only_a, cols_only_b = [c for c in cols_a if c not in cols_b], [c for c in cols_b if c not in cols_a]
     only_a = cols_only_a + [q for q in ha if q not in hb and not _of(q, cols_only_a)]
     only_b = cols_only_b + [q for q in hb if q not in ha and not _of(q, cols_only_b)]
-    table = headline_table(ha, hb)
+    zero_a = zero_levels(ra)
+    table = headline_table(ha, hb, zero_a)
     common = [c for c in cols_a if c in cols_b and c not in ("t_s", "mode")]
     if table.empty and not common:
         raise ScenarioError("compare", f"{name_a} and {name_b} have no column or headline figure in common "
                                        f"({ra.summary.get('mechanism', '?')} and {rb.summary.get('mechanism', '?')})")
     comparison = Comparison(ra, rb, (name_a, name_b), table, only_a, only_b)
     comparison.notes = _notes(comparison)
+    if zeros := zero_figures(table, zero_a):
+        comparison.notes.append(f"zero at A's accuracy ({ZERO_WITHIN:g} x rtol x the column's largest |peak|), "
+                                f"so no relative difference: {', '.join(zeros)}")
     return comparison
 
 
