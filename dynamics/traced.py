@@ -12,8 +12,10 @@ the same program. The disk key adds to the process's key (dynamics/programs.py: 
 the options that shape the program) what one process takes for granted: mechsim's code
 (`user_cache.code_fingerprint`), the versions of the libraries traced in, equinox's error mode and the example
 arguments' shapes and types. What tracing records on the host beside the program (the compiled run's output
-layout) is kept with it (`Record`). A program that cannot be exported (host callbacks: equinox's checks in a
-process that is not mechsim's CLI) or a key that names an object by its address is compiled as before. The folder
+layout) is kept with it (`Record`). equinox's checks are NaN-returning while a program is traced, in the CLI and
+in a library process alike (`xla_options.library_checks_without_callbacks`); a program that cannot be exported all
+the same (host callbacks: a user's EQX_ON_ERROR=raise) or a key that names an object by its address is compiled as
+before. The folder
 never decides a result: a file that is missing, unreadable or corrupt is traced again and written anew.
 
 One process at a time traces and compiles a given program (a lock file per program in the cache's `locks` folder,
@@ -25,7 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import time
 from contextlib import contextmanager
 from importlib import metadata
@@ -67,10 +68,11 @@ def disk_name(kind: str, key, example: tuple) -> str | None:
     """The file name a program of `kind` under `key`, traced for `example`'s shapes, is kept under; None where
     `key` holds an object's address (not the same object in another process)."""
     import jax
+    from mechsim.dynamics.backends.xla_options import checks_mode
     from mechsim.dynamics.user_cache import code_fingerprint
     avals = tuple((tuple(np.shape(x)), str(x.dtype if hasattr(x, "dtype") else np.result_type(x)), type(x).__name__)
                   for x in jax.tree_util.tree_leaves(example))
-    text = repr((FORMAT, kind, key, avals, code_fingerprint(), _versions(), os.environ.get("EQX_ON_ERROR"),
+    text = repr((FORMAT, kind, key, avals, code_fingerprint(), _versions(), checks_mode(),
                  bool(jax.config.jax_enable_x64)))
     if " at 0x" in text:
         return None
@@ -159,13 +161,15 @@ def compile_ahead(kind: str, key, make: Callable, example: tuple, record: Record
     exported = _load(name, record)
     if exported is not None:
         return _compiled(exported, example)
+    from mechsim.dynamics.backends.xla_options import library_checks_without_callbacks
     with _one_at_a_time(name):
         exported = _load(name, record)          # kept by a process this one waited for
         if exported is not None:
             return _compiled(exported, example)
         jitted = make()
         try:
-            exported = export.export(jitted)(*example)
+            with library_checks_without_callbacks():    # traced here, under the mode its name says (`disk_name`)
+                exported = export.export(jitted)(*example)
             body = bytes(exported.serialize())
         except (ValueError, NotImplementedError):   # what jax.export refuses (host callbacks): compiled as it is,
             from mechsim.dynamics.user_cache import write_atomically    # and no process waits for it again

@@ -127,6 +127,41 @@ def test_host_callbacks_and_keys_by_identity_are_compiled_not_kept(cache):
     assert not cache.exists()
 
 
+def test_a_library_process_keeps_a_program_with_equinox_checks_and_its_user_keeps_them(cache, monkeypatch):
+    """mechsim imported as a library (no EQX_ON_ERROR chosen, equinox at its default "raise", where each runtime
+    check is a host callback): a diffrax solve with save times, whose input checks would keep it from being
+    exported, is traced with the checks NaN-returning, as the CLI traces it, and kept under the CLI's name; it
+    computes the solution; the user's own checks raise again afterwards."""
+    import diffrax
+    import equinox
+    from equinox import _errors
+
+    monkeypatch.delenv("EQX_ON_ERROR", raising=False)
+    monkeypatch.setattr(_errors, "EQX_ON_ERROR", "raise")
+    ts = np.linspace(0.1, 1.0, 4)
+
+    def make():
+        """A new function each time, as mechsim's programs are made (jit keeps a trace per function)."""
+        def solve(y0, k):
+            sol = diffrax.diffeqsolve(diffrax.ODETerm(lambda t, y, kk: -kk * y), diffrax.Tsit5(), 0.0, 1.0, 0.01,
+                                      y0, args=k, saveat=diffrax.SaveAt(ts=jnp.asarray(ts)),
+                                      stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-12), throw=False)
+            return sol.ys
+        return jax.jit(solve)
+    example = (np.float64(2.0), np.float64(0.7))
+    with pytest.raises(NotImplementedError, match="host_callbacks"):      # at equinox's default: not exportable
+        jax.export.export(make())(*example)
+    fn = traced.compile_ahead("test_library_solve", ("structure", 2), make, example)
+    np.testing.assert_allclose(np.asarray(fn(*example)), 2.0 * np.exp(-0.7 * ts), rtol=1e-8)
+    name = traced.disk_name("test_library_solve", ("structure", 2), example)
+    assert (cache / name).exists() and not list((cache.parent / "locks").glob("*.unkept"))
+    monkeypatch.setenv("EQX_ON_ERROR", "nan")                              # the CLI's process names it the same
+    assert traced.disk_name("test_library_solve", ("structure", 2), example) == name
+    assert _errors.EQX_ON_ERROR == "raise"
+    with pytest.raises(Exception, match="x must be >= 0"):
+        jax.jit(lambda x: equinox.error_if(x, x < 0, "x must be >= 0"))(jnp.float64(-1.0)).block_until_ready()
+
+
 def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monkeypatch):
     """A diffrax run and a sensitivity pass keep their programs; with the process's programs forgotten (as in a new
     process) and tracing made to fail (jax.export.export raises, and so does lambdifying the model's jax

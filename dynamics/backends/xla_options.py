@@ -26,6 +26,7 @@ loops are lowered and in which order independent kernels are scheduled, not what
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 
 LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 #: loops whose state (buffers included) is below this many bytes become one kernel: mechsim's largest, the
@@ -91,6 +92,45 @@ def state() -> str:
 EQX_VARIABLE = "EQX_ON_ERROR"
 
 
+def checks_mode() -> str:
+    """The equinox error mode mechsim's programs are traced under: the user's EQX_ON_ERROR where set, else "nan"
+    (the CLI sets it, `checks_without_callbacks`; a library process traces under it, `library_checks_without_callbacks`)."""
+    return os.environ.get(EQX_VARIABLE) or "nan"
+
+
+@contextmanager
+def library_checks_without_callbacks():
+    """While mechsim traces a program of its own in a process whose user chose no EQX_ON_ERROR (mechsim imported
+    as a library, equinox at its default "raise"): equinox's checks NaN-returning, as in the CLI, so that the
+    program holds no host callback and is kept for later processes (dynamics/traced.py); equinox's default again
+    afterwards. The checks' one shared trace cache (`branched_error_if_impl_jit`, keyed by message and shapes) is
+    emptied before and after, so that neither mechsim nor the user's own code reuses a check traced under the other's
+    mode. Where equinox's internals are not those this was written for, nothing is changed: the programs are
+    compiled and not kept, as before (a notebook then pays the tracing and compilation in every process).
+
+    Why it is safe: the only checks inside mechsim's programs are diffrax's checks of a solve's inputs, which mechsim
+    makes on the host before each call (`diffrax_common.save_times`); none fires, so the results are the same."""
+    errors = None
+    if os.environ.get(EQX_VARIABLE) is None:
+        try:
+            from equinox import _errors as errors
+            evict = errors.branched_error_if_impl_jit._cached.clear_cache
+            if errors.EQX_ON_ERROR != "raise":
+                errors = None
+        except (ImportError, AttributeError):
+            errors = None
+    if errors is None:
+        yield
+        return
+    evict()
+    errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        errors.EQX_ON_ERROR = "raise"
+        evict()
+
+
 def checks_without_callbacks() -> None:
     """Make equinox's runtime checks NaN-returning (EQX_ON_ERROR=nan) in a process mechsim starts (its CLI, the
     test session), unless the user set the variable; to be called before equinox is imported.
@@ -100,5 +140,6 @@ def checks_without_callbacks() -> None:
     pass's segment solve were compiled again in every process (docs/diffrax.md, 'Compilation'). Their only runtime
     checks are diffrax's checks of its inputs (save times ordered and inside [t0, t1], the first step heading to
     t1); mechsim checks those inputs before each call (`diffrax_common.save_times`), so no check of theirs fires
-    and the results are the same. A process that imports mechsim as a library keeps equinox's default."""
+    and the results are the same. A process that imports mechsim as a library keeps equinox's default, but for the
+    tracing of mechsim's own programs (`library_checks_without_callbacks`)."""
     os.environ.setdefault(EQX_VARIABLE, "nan")
