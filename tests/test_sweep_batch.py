@@ -100,3 +100,23 @@ def test_sweep_batch_matches_serial_and_says_what_ran_how(tmp_path):
 def test_cases_that_cannot_batch_say_why(overrides, reason):
     assert reason in _batch_reason(CaseTask("k", load("geneva-lc1", overrides)))
     assert _batch_reason(CaseTask("k", load("geneva-motor", ["solver.backend='diffrax'"]))) is None
+
+
+def test_a_process_where_a_batch_can_hang_runs_the_cases_one_by_one(monkeypatch):
+    """JAX's backend started before mechsim was imported (a notebook that ran JAX first): XLA's concurrency-optimised
+    scheduler stays on, under which the vmapped solve hung in about one call in five (xla_options point 2). Every
+    diffrax case then goes to the fallback runner, and the note says why."""
+    from mechsim.dynamics.backends import xla_options
+    from mechsim.scenarios.studies.sweep.execute import BatchRunner
+
+    class Recording(SerialRunner):
+        def run(self, tasks, on_result):
+            self.got = list(tasks)
+    monkeypatch.setattr(xla_options, "_state", "off: JAX's CPU backend was started before mechsim was imported")
+    tasks = [CaseTask(f"k{n}", load("geneva-motor", ["solver.backend='diffrax'", f"contact.friction={f}"]))
+             for n, f in enumerate((0.1, 0.2, 0.3))]
+    runner = BatchRunner(Recording())
+    runner.run(tasks, lambda outcome: None)
+    assert runner.fallback.got == tasks
+    assert runner.batching_note.startswith("batched: none; 3 case(s) ran one by one")
+    assert "scheduler" in runner.batching_note and "import mechsim before running JAX code" in runner.batching_note

@@ -82,6 +82,15 @@ def request() -> str:
     return _state
 
 
+def batching_hazard() -> str | None:
+    """Why a batched (vmapped) diffrax solve may hang in this process (point 2 above), or None: XLA's concurrency-
+    optimised scheduler left on because JAX's backend started before mechsim could switch it off."""
+    if request().startswith("off"):
+        return ("XLA's concurrency-optimised scheduler is on in this process (JAX ran before mechsim was "
+                "imported), under which a batched solve can hang; import mechsim before running JAX code to batch")
+    return None
+
+
 def state() -> str:
     """'on', 'on (<option> as XLA_FLAGS set it)', 'off: <why>', or 'not requested' (JAX not imported by
     mechsim yet)."""

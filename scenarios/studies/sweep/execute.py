@@ -436,8 +436,9 @@ class BatchRunner:
     """diffrax DAE cases grouped by derived model structure (the `derive` key), diffrax options and output step;
     each group of two or more runs as one vmapped hybrid integration (dynamics.backends.diffrax_batch) in this process,
     then each case's tables and summary are built as `run_case` builds them. Everything else (closed-form cases,
-    the IDA backend, a structure with a single case, a group whose batch raised) goes to the fallback runner;
-    `batching_note` says what ran how and why.
+    the IDA backend, a structure with a single case, a group whose batch raised, every case in a process where a
+    batched solve can hang: `xla_options.batching_hazard`) goes to the fallback runner; `batching_note` says what
+    ran how and why.
 
     The runner's call into the backend is captured once per case (the arguments it would pass: duration after
     the thermal plan, initial state, state extension), then answered from the batch's trajectories.
@@ -465,6 +466,14 @@ class BatchRunner:
                 reasons[why] += 1
             else:
                 candidates.append(task)
+        hazard = None
+        if candidates:
+            from mechsim.dynamics.backends.xla_options import batching_hazard
+            hazard = batching_hazard()
+        if hazard:                      # never a hang: these cases run one by one, and the note says why
+            rest += candidates
+            reasons[hazard] += len(candidates)
+            candidates = []
         groups: dict = {}
         for task in candidates:
             call = self._capture(task)
