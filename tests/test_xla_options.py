@@ -60,6 +60,17 @@ def test_the_users_values_are_kept():
 
 
 def test_a_backend_started_first_is_reported_and_left_alone():
-    got = run_fresh("import jax; jax.devices()\n" + textwrap.dedent(IMPORT_MECHSIM), None)
+    """Reported in the state the summaries carry, and once as a warning the user sees (a notebook that ran JAX code
+    before it imported mechsim)."""
+    got = run_fresh("import jax, warnings; jax.devices(); warnings.simplefilter('always')\n"
+                    "with warnings.catch_warnings(record=True) as caught:\n"
+                    "    import mechsim.dynamics.jax_model\n"
+                    "    from mechsim.dynamics.backends import xla_options\n"
+                    "    xla_options.request()\n"
+                    "import json, os\n"
+                    "print(json.dumps({'state': xla_options.state(), 'flags': os.environ.get('XLA_FLAGS'),\n"
+                    "                  'warned': [str(w.message) for w in caught if w.category is RuntimeWarning]}))",
+                    None)
     assert got["flags"] is None
     assert got["state"].startswith("off: JAX's CPU backend was started before mechsim")
+    assert got["warned"] == [f"mechsim: XLA options {got['state']}"]

@@ -26,6 +26,7 @@ loops are lowered and in which order independent kernels are scheduled, not what
 from __future__ import annotations
 
 import os
+import warnings
 from contextlib import contextmanager
 
 LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
@@ -75,6 +76,8 @@ def request() -> str:
             _state = ("off: JAX's CPU backend was started before mechsim was imported, so XLA keeps its defaults "
                       "(same results; compiled runs several times slower, batched sweeps can hang); "
                       "import mechsim first")
+            # once, where a user can see it (a notebook that ran JAX code first): the summaries say it too
+            warnings.warn(f"mechsim: XLA options {_state}", RuntimeWarning, stacklevel=2)
         else:
             os.environ["XLA_FLAGS"] = with_options(flags)
             kept = [name for name in (LOOP_OPTION, SCHEDULER_FLAG.lstrip("-")) if name in flags]
