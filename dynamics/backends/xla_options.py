@@ -117,8 +117,9 @@ def library_checks_without_callbacks():
     program holds no host callback and is kept for later processes (dynamics/traced.py); equinox's default again
     afterwards. The checks' one shared trace cache (`branched_error_if_impl_jit`, keyed by message and shapes) is
     emptied before and after, so that neither mechsim nor the user's own code reuses a check traced under the other's
-    mode. Where equinox's internals are not those this was written for, nothing is changed: the programs are
-    compiled and not kept, as before (a notebook then pays the tracing and compilation in every process).
+    mode (JAX code the user traces in another thread during those seconds would see the NaN mode too). Where
+    equinox's internals are not those this was written for, nothing is changed: the programs are compiled and not
+    kept, as before (a notebook then pays the tracing and compilation in every process).
 
     Why it is safe: the only checks inside mechsim's programs are diffrax's checks of a solve's inputs, which mechsim
     makes on the host before each call (`diffrax_common.save_times`); none fires, so the results are the same."""
