@@ -139,6 +139,13 @@ def zero_levels(result) -> dict[str, float]:
     return out
 
 
+def _zero_level(quantity: str, a: float, b: float, zero_a: dict[str, float]) -> float | None:
+    """A's zero level of the quantity's column where a differs from b and is nonzero but within it (the figure
+    has no relative difference), else None."""
+    level = zero_a.get(figure_column(quantity))
+    return level if level is not None and a != b and a != 0 and abs(a) <= level else None
+
+
 def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, float] | None = None) -> pd.DataFrame:
     """One row per quantity both runs have (in a's order): both values, b - a, (b - a) / |a| (0 where both are
     equal, NaN where a is 0 and b is not, or where |a| is within A's zero level of its column, `zero_a`)."""
@@ -150,19 +157,19 @@ def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, f
         y = b[q]
         d = y - x
         rel = (0.0 if d == 0 else math.nan) if x == 0 else d / abs(x)
-        if d != 0 and x != 0 and abs(x) <= zero_a.get(figure_column(q), 0.0):
+        if _zero_level(q, x, y, zero_a) is not None:
             rel = math.nan
         rows.append((q, x, y, d, rel))
     return pd.DataFrame(rows, columns=list(COLUMNS)).astype({c: float for c in COLUMNS[1:]})
 
 
 def zero_figures(table: pd.DataFrame, zero_a: dict[str, float]) -> list[str]:
-    """The table's quantities whose A value is nonzero but within A's zero level (no relative difference), with
-    both sizes."""
+    """The table's quantities with no relative difference because A's value is zero at A's accuracy, with both
+    sizes."""
     out = []
     for r in table.itertuples():
-        level = zero_a.get(figure_column(r.quantity))
-        if level is not None and r.a != r.b and r.a != 0 and abs(r.a) <= level:
+        level = _zero_level(r.quantity, r.a, r.b, zero_a)
+        if level is not None:
             out.append(f"{r.quantity} (|A| = {abs(r.a):.2g} <= {level:.2g})")
     return out
 
