@@ -162,6 +162,32 @@ def test_a_library_process_keeps_a_program_with_equinox_checks_and_its_user_keep
         jax.jit(lambda x: equinox.error_if(x, x < 0, "x must be >= 0"))(jnp.float64(-1.0)).block_until_ready()
 
 
+def test_where_equinox_internals_differ_nothing_is_switched_and_the_program_is_compiled(cache, monkeypatch):
+    """An equinox whose checks are not where `library_checks_without_callbacks` looks for them: the mode is left
+    alone and the program with host callbacks is compiled (not kept), computing the same, as before the switch."""
+    import diffrax
+    from equinox import _errors
+
+    monkeypatch.delenv("EQX_ON_ERROR", raising=False)
+    monkeypatch.setattr(_errors, "EQX_ON_ERROR", "raise")
+    original = _errors.branched_error_if_impl_jit
+    monkeypatch.setattr(_errors, "branched_error_if_impl_jit",                   # the same, with no `_cached`
+                        lambda *args, **kwargs: original(*args, **kwargs))
+    ts = np.linspace(0.1, 1.0, 4)
+
+    def make():
+        def solve(y0, k):
+            return diffrax.diffeqsolve(diffrax.ODETerm(lambda t, y, kk: -kk * y), diffrax.Tsit5(), 0.0, 1.0, 0.01,
+                                       y0, args=k, saveat=diffrax.SaveAt(ts=jnp.asarray(ts)),
+                                       stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-12),
+                                       throw=False).ys
+        return jax.jit(solve)
+    example = (np.float64(2.0), np.float64(0.7))
+    fn = traced.compile_ahead("test_library_solve_unswitched", ("structure", 3), make, example)
+    np.testing.assert_allclose(np.asarray(fn(*example)), 2.0 * np.exp(-0.7 * ts), rtol=1e-8)
+    assert not cache.exists() and _errors.EQX_ON_ERROR == "raise"
+
+
 def test_the_runs_programs_loaded_compute_what_they_computed_traced(cache, monkeypatch):
     """A diffrax run and a sensitivity pass keep their programs; with the process's programs forgotten (as in a new
     process) and tracing made to fail (jax.export.export raises, and so does lambdifying the model's jax
