@@ -21,8 +21,6 @@ re-integration's error from the row's state (the run's own error at that row).
 """
 from __future__ import annotations
 
-import contextlib
-import io
 from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -2131,7 +2129,7 @@ class TrajectoryReader:
         if len(out_t):
             from sksundae.ida import IDA
 
-            from mechsim.dynamics.backends.ida import atol_vector
+            from mechsim.dynamics.backends.ida import atol_vector, solve_quietly
             tspan = np.concatenate([[t0], out_t])
             if len(tspan) == 2:
                 tspan = np.array([t0, 0.5 * (t0 + out_t[0]), out_t[0]])
@@ -2153,11 +2151,9 @@ class TrajectoryReader:
                         algebraic_idx=mf.algebraic or None, jacfn=mf.jacobian if s.jacobian == "exact" else None,
                         max_num_steps=s.max_steps, linsolver="dense")
                     self._keep.append(mf)          # the id stays this mode's while the reader lives
-                # scikit-sundae's error handler would print a failure ("[IDASolve, Error: -22] ... mxstep steps")
-                # to the user's stdout: a tighter try's falls back to the next, the last try's is the ReadingFailed
-                # below (its message), which the peaks handle (another start, or the rows, said in their `at`)
-                with contextlib.redirect_stdout(io.StringIO()):
-                    sol = solver.solve(tspan, y0, yp0)
+                # a tighter try's failure falls back to the next, the last try's is the ReadingFailed below (its
+                # message), which the peaks handle (another start, or the rows, said in their `at`)
+                sol = solve_quietly(solver, tspan, y0, yp0)
                 if sol.success:
                     break
                 if n == 0:

@@ -92,6 +92,13 @@ def resolving_first_step(settings: SolverSettings, atol: np.ndarray, t0: float, 
     return 0.0 if t0 + h != t0 else FRESH_STEP_FRACTION * (t_end - t0)
 
 
+def solve_quietly(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray):
+    """`solver.solve` (scikit-sundae's IDA) without its error handler's lines ("[IDASolve, Error: -22] At t = ...")
+    on the caller's stdout: its solution's flag and message say the same, and the callers report them."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return solver.solve(tspan, y0, yp0)
+
+
 def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp0: np.ndarray,
                       t_out: np.ndarray, t_end: float, settings: SolverSettings, first_step: float = 0.0) -> Segment:
     """Integrate from t0 through the output times t_out (all > t0, <= t_end) until a guard or t_end.
@@ -119,10 +126,7 @@ def integrate_segment(mf: ModeFunctions, p: tuple, t0: float, y0: np.ndarray, yp
         eventsfn.direction = list(mf.guard_directions)
         opts.update(eventsfn=eventsfn, num_events=n_ev)
     solver = IDA(mf.residual, **opts)
-    # scikit-sundae's error handler prints a failure ("[IDASolve, Error: -22] At t = ...") on the caller's stdout;
-    # the Segment carries it (its message and end time), recovered (`hybrid.recover`) or reported as the failure
-    with contextlib.redirect_stdout(io.StringIO()):
-        sol = solver.solve(tspan, y0, yp0)
+    sol = solve_quietly(solver, tspan, y0, yp0)     # the Segment carries a failure: recovered or reported
     for observe in SOLVE_OBSERVERS:
         observe(solver, sol, len(y0))
     t, y, yp = np.asarray(sol.t), np.asarray(sol.y), np.asarray(sol.yp)
