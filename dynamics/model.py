@@ -93,6 +93,9 @@ class DerivedModel:
     formulation: str
     prescribed: bool
     key: tuple = ()      # the derivation key: the structure its compiled programs are kept under (dynamics/programs.py)
+    #: (mechanism, formulation, prescribed, extension) it was derived from: what derives it again in another process
+    #: (the default backend's background compilation where this process cannot fork: compiled_model.py)
+    recipe: tuple | None = field(default=None, repr=False, compare=False)
 
 
 def _as_list(x) -> list:
@@ -271,6 +274,7 @@ def _derive_cached(key, mech_ref, formulation, prescribed, ext_ref):
     if model is None:
         model = _derive_fresh(key, mech, formulation, prescribed, ext)
         derivation_cache.store(key, model)
+    model.recipe = (mech, formulation, prescribed, ext)
     return model
 
 

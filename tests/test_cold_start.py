@@ -110,8 +110,8 @@ def test_a_dae_run_from_the_caches_without_figures_loads_no_figure_or_fallback_s
 
 def test_a_sensitivity_runs_its_run_before_loading_jax(tmp_path):
     """`mechsim sensitivity` runs the scenario before it imports JAX: the default backend compiles a model's callbacks
-    in a forked background process only while JAX's threads are not loaded, so a sensitivity that imported JAX first
-    left every later process's run on `ida` (dynamics/backends/compiled_model.py `compile_in_background`)."""
+    in a forked background process while JAX's threads are not loaded, in a fresh interpreter (~70 ms more of the
+    run's wall time) once they are (dynamics/backends/compiled_model.py `compile_in_background`)."""
     code = ("import sys, mechsim\nfrom mechsim.scenarios import runner\n"
             "from mechsim.scenarios.studies.sensitivity import sensitivity\n"
             "def stop(plan):\n    print('jax' in sys.modules)\n    raise SystemExit(0)\n"

@@ -262,13 +262,16 @@ def _cache_without_ready_marks(tmp_path) -> dict:
     return dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="1")
 
 
-def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_done(tmp_path):
+@pytest.mark.parametrize("first", ["", "import jax\n"], ids=["forked", "jax-loaded"])
+def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_done(tmp_path, first):
     """A fresh cache folder: the first process runs the model on `ida` and compiles its callbacks in a background
     process; a process started after that runs it compiled, loading everything from the cache (nothing compiled
     in it), with the first run's events and motion within the runs' accuracy. Within a process the first choice is
-    kept. The first process never imports numba: its run costs what an `ida` run costs."""
+    kept. The first process never imports numba: its run costs what an `ida` run costs. Where JAX is loaded first
+    (a notebook that ran diffrax: no fork is safe), the background process is a fresh interpreter that derives the
+    model again from the pickled mechanism, with the same outcome."""
     env = _cache_without_ready_marks(tmp_path)
-    code = ("import sys, mechsim, numpy as np\n"
+    code = (first + "import sys, mechsim, numpy as np\n"
             "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
             "runs = [mechsim.run('geneva-motor', set={'duration': '0.5 s', 'output.plots': False}) for _ in (0, 1)]\n"
             "native = sys.modules.get('mechsim.dynamics.backends.native')\n"

@@ -212,19 +212,24 @@ def ready(modes, folder: Path) -> bool:
             and all((folder / f"{name}{_READY}").exists() for name in names))
 
 
-def compile_in_background(modes, folder: Path) -> bool:
+def compile_in_background(modes, folder: Path, recipe: tuple | None = None) -> bool:
     """Compile the modes' callbacks and the segment loop into numba's on-disk cache in a detached, lowest-priority
-    process (a fork of this one, which holds the modes' expressions), then mark them ready; this process goes on
-    at once. Not done where a fork is unsafe or impossible (no os.fork; JAX's threads loaded), for modes whose
-    expressions have no derivation key (their module name needs the generated source), once per model and
-    process, nor when $MECHSIM_BACKGROUND_COMPILE is "0". Returns whether a compilation was started."""
+    process, then mark them ready; this process goes on at once. The process is a fork of this one (which holds the
+    modes' expressions), or, where a fork is unsafe (JAX's threads loaded: a notebook that ran diffrax), a fresh
+    interpreter that derives the model again from its `recipe` (`DerivedModel.recipe`: the mechanism, pickled) and
+    compiles the same modules (`_spawn_compiler`). Not done where there is no os.fork, for modes whose expressions
+    have no derivation key (their module name needs the generated source), once per model and process, nor when
+    $MECHSIM_BACKGROUND_COMPILE is "0". Returns whether a compilation was started."""
     modes = list(modes)
     key = tuple(sorted(repr(programs.structure(mf)) for mf in modes))
-    if (os.environ.get(BACKGROUND_ENV, "1") == "0" or not hasattr(os, "fork") or "jax" in sys.modules
+    fork_unsafe = "jax" in sys.modules
+    if (os.environ.get(BACKGROUND_ENV, "1") == "0" or not hasattr(os, "fork") or (fork_unsafe and recipe is None)
             or key in _STARTED or not all(mf.cache_key for mf in modes)
             or any((folder / f"{module_name(mf)}{_FAILED}").exists() for mf in modes)):
         return False
     _STARTED.add(key)
+    if fork_unsafe:
+        return _spawn_compiler(recipe, modes, folder)
     try:
         pid = os.fork()
     except OSError:                   # no process to spare: the run goes on, on `ida`
@@ -236,6 +241,70 @@ def compile_in_background(modes, folder: Path) -> bool:
         if os.fork():
             os._exit(0)
         _compile_detached(modes, folder)
+    finally:
+        os._exit(0)
+
+
+#: how long this process waits for the spawned interpreter to take the recipe and leave its worker (`_spawn_compiler`)
+_SPAWN_WAIT_S = 60.0
+#: what the spawned interpreter runs: it reads this process's import path and the recipe, forks its worker (no
+#: thread of its own yet: the fork is safe) and leaves, so that this process waits for its start only and leaves no
+#: zombie behind; the worker imports mechsim as this process did
+_SPAWNED = """import os, pickle, sys
+path = pickle.load(sys.stdin.buffer)
+data = sys.stdin.buffer.read()
+if os.fork():
+    os._exit(0)
+sys.path[:] = path
+from mechsim.dynamics.backends.compiled_model import compile_pickled
+compile_pickled(data)
+"""
+
+
+def _spawn_compiler(recipe: tuple, modes: list, folder: Path) -> bool:
+    """`compile_in_background` where this process cannot fork: a fresh interpreter (its own session, no terminal)
+    is handed this process's import path, the pickled recipe, the modes' names and their modules' names on its
+    standard input, and its worker compiles them as a fork's would (`compile_pickled`). This process pays for
+    pickling the mechanism and the interpreter's start (tens of ms), once per model. Returns whether the worker was
+    started."""
+    import pickle
+    import subprocess
+    if not sys.executable:            # an embedding interpreter: no Python to start
+        return False
+    try:
+        data = pickle.dumps([str(p) for p in sys.path]) + pickle.dumps(
+            (recipe, [mf.name for mf in modes], [module_name(mf) for mf in modes], str(folder)))
+    except Exception:                 # a mechanism that does not pickle: the run goes on, on `ida`
+        return False
+    try:
+        spawned = subprocess.Popen([sys.executable, "-c", _SPAWNED], stdin=subprocess.PIPE,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    except OSError:
+        return False
+    try:
+        spawned.communicate(data, timeout=_SPAWN_WAIT_S)
+    except subprocess.TimeoutExpired:
+        spawned.kill()
+        spawned.wait()
+        return False
+    return spawned.returncode == 0
+
+
+def compile_pickled(data: bytes) -> None:
+    """The spawned worker of `_spawn_compiler`: derive the model from its recipe (from the derivation cache where it
+    is there), and compile the modes as `_compile_detached` does, where their modules' names are the ones asked for
+    (the same code and structure as the process that asked); never returns."""
+    try:
+        import pickle
+
+        from mechsim.dynamics.model import derive
+        (mech, formulation, prescribed, ext), names, modules, folder = pickle.loads(data)
+        model = derive(mech, formulation, prescribed, ext)
+        modes = [model.modes[name] for name in names]
+        if [module_name(mf) for mf in modes] == modules:
+            _compile_detached(modes, Path(folder))
+    except BaseException:           # a worker's failure must never reach anyone: the modes stay on `ida`
+        pass
     finally:
         os._exit(0)
 

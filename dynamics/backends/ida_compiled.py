@@ -444,7 +444,7 @@ class AutoBackend(Backend):
                 folder = cache_dir() / "compiled"
                 compiled = compiled_model.ready(model.modes.values(), folder)
                 if not compiled:
-                    compiled_model.compile_in_background(model.modes.values(), folder)
+                    compiled_model.compile_in_background(model.modes.values(), folder, model.recipe)
             self._CHOSEN[key] = (compiled, model)     # the model kept alive: a structure by identity stays valid
         compiled = compiled and self._compiled   # another instance may have chosen where this one can't
         if compiled and not isinstance(self._inner, IdaCompiledBackend):
