@@ -297,6 +297,32 @@ def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_d
     assert np.abs(a[:, 1:] - b[:, 1:]).max() <= GLOBAL_FACTOR * (rtol * np.abs(a[:, 1:]).max() + atol)
 
 
+def test_a_spawned_worker_compiles_only_the_modules_it_was_asked_for(tmp_path):
+    """The background compilation where JAX is loaded runs in a fresh interpreter that derives the model again from
+    its pickled recipe (`compiled_model.compile_pickled`); it compiles only where the modules' names it derives are
+    the ones the asking process computed (the same code and structure), so that another install on the import path
+    can never mark ready what the asking process would load. Asked with other names it marks nothing; asked with
+    the model's own it marks its modes and the segment loop ready."""
+    env = _cache_without_ready_marks(tmp_path)
+    folder = tmp_path / "cache" / "compiled"
+    code = ("import pickle, sys\n"
+            "from mechsim.dynamics.backends.compiled_model import module_name\n"
+            "from mechsim.dynamics.model import derive\n"
+            "from mechsim.scenarios.loader import build_mechanism, load\n"
+            "model = derive(build_mechanism(load('geneva-motor').si), 'index2', False)\n"
+            "names = list(model.modes)\n"
+            "own = [module_name(model.modes[n]) for n in names]\n"
+            "modules = own if sys.argv[1] == 'own' else ['x' + m for m in own]\n"
+            "sys.stdout.buffer.write(pickle.dumps((model.recipe, names, modules, sys.argv[2])))\n")
+    worker = ("import sys\nfrom mechsim.dynamics.backends.compiled_model import compile_pickled\n"
+              "compile_pickled(sys.stdin.buffer.read())\n")
+    for asked, marks in (("other", 0), ("own", 3)):
+        data = subprocess.run([sys.executable, "-c", code, asked, str(folder)], capture_output=True, env=env,
+                              timeout=600, check=True).stdout
+        subprocess.run([sys.executable, "-c", worker], input=data, env=env, timeout=600, check=True)
+        assert len(list(folder.glob("*.ready"))) == marks, asked
+
+
 def _holders(path) -> list[int]:
     """The processes (not this one) with `path` open (Linux: /proc)."""
     out = []
