@@ -65,6 +65,7 @@ def test_each_lane_equals_its_own_run():
         assert tb.stats["segments"] == ts.stats["segments"] and set(tb.stats) == set(ts.stats)
         slips.append([e["t_s"] for e in tb.events if "slip" in e["kind"]][0])
     assert last_batch["lanes"] == 3 and last_batch["rounds"] == max(t.stats["segments"] for t in batch)
+    assert 0.0 < last_batch["calls_time_s"] <= last_batch["solve_time_s"]     # the vmapped calls: a part of the solve
     assert max(slips) - min(slips) > 0.03          # events at case-dependent times: not lock-step
 
 

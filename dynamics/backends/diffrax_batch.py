@@ -46,7 +46,8 @@ class _Batched:
     compile_cpu_time: float
 
 
-#: the latest batch: lanes, rounds (vmapped calls), compile_time_s (0 if cached), solve_time_s
+#: the latest batch: lanes, rounds (vmapped calls), compile_time_s (0 if cached), solve_time_s, and calls_time_s: the
+#: part of the solve inside the vmapped calls, their outputs fetched (the rest is the lanes' hybrid loops in Python)
 last_batch: dict = {}
 
 
@@ -79,7 +80,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
     Statistics per lane are that lane's own (segments, steps, events); compile_time_s is the batch compilation
     divided by the number of lanes, and solve_time_s the batch's solve time divided likewise (the lanes share
     every call); the same keys as a single run, so per-case tables keep their format. The batch's own figures
-    (lanes, rounds, compile and solve time) are in `last_batch`.
+    (lanes, rounds, compile and solve time, the solve's time inside the vmapped calls) are in `last_batch`.
     """
     n = len(mech_list)
     if not n:
@@ -108,7 +109,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
     masked: list = [idle] * n       # a finished lane's last call with t1 = t0 (it takes no step)
     for j, loop in enumerate(loops):
         requests[j] = _advance(loop, None, results, j)
-    rounds = 0
+    rounds, calls = 0, 0.0
     while any(r is not None for r in requests):
         rounds += 1
         per_lane = []
@@ -120,7 +121,9 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
                 masked[j] = args[:2] + (args[1],) + args[3:6] + (np.full_like(args[6], args[1]),) + args[7:]
                 per_lane.append((args, n_chunk))
         batched = tuple(np.stack(col) for col in zip(*(a for a, _ in per_lane)))
+        call0 = _time.perf_counter()
         out = jax.device_get(entry.fn(*batched))
+        calls += _time.perf_counter() - call0
         for j, request in enumerate(requests):
             if request is not None:
                 seg = backend.segment(request, jmod, {key: val[j] for key, val in out.items()}, per_lane[j][1])
@@ -131,7 +134,7 @@ def simulate_batch(mech_list: Sequence[Mechanism], drive_list: Sequence[Drive], 
         traj.stats["compile_cpu_time_s"] = compile_cpu / n
         traj.stats["compilations"] = 1 if fresh else 0
         traj.stats["solve_time_s"] = solve / n
-    last_batch.update(lanes=n, rounds=rounds, compile_time_s=compile_time, solve_time_s=solve)
+    last_batch.update(lanes=n, rounds=rounds, compile_time_s=compile_time, solve_time_s=solve, calls_time_s=calls)
     return results
 
 
