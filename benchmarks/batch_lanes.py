@@ -17,6 +17,10 @@ and CPU time a case, so one core's rate; a pool of W workers does at most W time
 such). The crank angle at the end of each such case is compared with its lane's (they agree to the tolerances:
 the batch runs the segment loop, the single run the compiled whole run, docs/diffrax.md "The compiled run").
 
+--whole 64,256,...: also the compiled whole run (transitions inside the program) vmapped over that many lanes, its
+first call per case against the same calls one by one on the same device, within --memory-gb of step buffers: the
+kernel a batched whole run would call (none is built).
+
 Writes batch_lanes.csv (one row per N, and the single runs' row), batch_lanes.json (the rows, the device, JAX's
 version, the host's cores) and batch_lanes.png (cases per second against lanes) into --out (default: a folder
 `batch_lanes` beside this file), and prints the table.
@@ -26,7 +30,8 @@ scipy, pandas, pyarrow, matplotlib; pint and SUNDIALS are not imported on this p
 (the package's own folder, made importable as `mechsim`):
 
     mkdir -p /tmp/p && ln -sfn "$PWD" /tmp/p/mechsim && export PYTHONPATH=/tmp/p;
-    PYTHONUNBUFFERED=1 python3 benchmarks/batch_lanes.py --budget 420 --out $OUT
+    PYTHONUNBUFFERED=1 python3 benchmarks/batch_lanes.py --budget 300 --whole 256,1024,4096,16384 --memory-gb 100 \
+        --out $OUT
 """
 from __future__ import annotations
 
@@ -93,6 +98,56 @@ def batch(n: int, duration: float, sets: list[str]) -> dict:
             "crank_end_rad": [crank_end(t) if t.failure is None else float("nan") for t in trajs]}
 
 
+def whole(n: int, duration: float, sets: list[str], memory_gb: float) -> dict | None:
+    """The compiled whole run (`diffrax_run.make_run`: transitions inside, no Python between events) vmapped over n
+    lanes, each lane the first call of its case's run, against the same n calls one by one on the same device: the
+    kernel a batched whole run would call (no such runner is built; docs/sweeps.md). None where the lanes' step
+    buffers would take more than memory_gb."""
+    import jax
+
+    from mechsim.dynamics import kkt
+    from mechsim.dynamics.backends import diffrax_run
+    from mechsim.dynamics.backends.diffrax_backend import DiffraxBackend
+    from mechsim.dynamics.backends.diffrax_common import DT0_FIRST, mode_z
+    from mechsim.dynamics.backends.jax_transitions import jax_transitions
+    from mechsim.dynamics.hybrid import prepare
+    made = cases(n, duration, sets)
+    o = DiffraxBackend(made[0][2]).o
+    args, entry = [], None
+    for mech, drive, settings, t_end, dt_out, angle0, speed0 in made:
+        start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0)
+        entry = entry or diffrax_run.compiled_run(mech, start.model, o)[0]
+        args.append(diffrax_run.run_arguments(entry.jmod.index(start.mode), 0.0, t_end,
+                                              mode_z(start.model.modes[start.mode], start.y), start.p, DT0_FIRST,
+                                              (o.rtol, o.atol), o.max_steps, 0))
+    lane_bytes = (diffrax_run.STEPS_PER_CALL + 1) * entry.steps.width * 8
+    if n * lane_bytes > memory_gb * 2**30:
+        return None
+    stacked = tuple(np.stack([a[j] for a in args]) for j in range(len(args[0])))
+    run = diffrax_run.make_run(entry.jmod, jax_transitions(made[0][0], prepare(*made[0]).model, entry.jmod), o,
+                               diffrax_run.EVENTS_PER_CALL, diffrax_run.STEPS_PER_CALL, entry.steps.record)
+    compile_s = time.perf_counter()
+    with kkt.unrolled_solves():     # as the single run's program is traced (diffrax_run.compiled_run)
+        vmapped = jax.jit(jax.vmap(lambda *a: entry.outputs.pack(run(*a)))).lower(*stacked).compile()
+    compile_s = time.perf_counter() - compile_s
+    batched, one_by_one = [], []
+    for _ in range(3):              # alternated, medians
+        t = time.perf_counter()
+        out = jax.device_get(vmapped(*stacked))
+        batched.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        singles = [jax.device_get(entry.fn(*a)) for a in args]
+        one_by_one.append(time.perf_counter() - t)
+    ends = np.asarray(out["floats"])                    # the lanes' packed floats against each single call's
+    worst = float(np.nanmax(np.abs(ends - np.stack([np.asarray(x["floats"]) for x in singles]))
+                            / np.maximum(1.0, np.abs(ends))))
+    vm, ob = statistics.median(batched), statistics.median(one_by_one)
+    return {"what": "vmapped whole run (first call of each case)", "lanes": n, "device": str(jax.devices()[0]),
+            "compile_s": compile_s, "vmapped_call_s": vm, "one_by_one_s": ob, "cases_per_s": n / vm,
+            "cases_per_s_one_by_one": n / ob, "step_buffer_mb_a_lane": lane_bytes / 2**20,
+            "largest_relative_difference_of_outputs": worst}
+
+
 def single(n: int, duration: float, sets: list[str]) -> dict:
     """n of the same cases as single compiled whole runs one after another, in this process (the child's)."""
     from mechsim.dynamics.hybrid import simulate
@@ -133,6 +188,10 @@ def chart(rows: list[dict], cores: int, path: Path) -> None:
     ax.loglog(lanes, [r["cases_per_s_inside_calls"] for r in runs], "s--", label="batch: inside the vmapped calls")
     ax.loglog(lanes, [r["lanes"] / r["host_loops_s"] for r in runs], "^:",
               label="batch: the lanes' loops alone (its bound on any device)")
+    kernel = [r for r in rows if r["what"].startswith("vmapped whole run")]
+    if kernel:
+        ax.loglog([r["lanes"] for r in kernel], [r["cases_per_s"] for r in kernel], "D-",
+                  label="vmapped whole run: its first call (no runner built)")
     one = next((r for r in rows if r["what"].startswith("single")), None)
     if one is not None:
         ax.axhline(one["cases_per_s"], color="k", lw=1, label="single compiled runs, one CPU core")
@@ -155,6 +214,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--single", type=int, default=64, help="cases run one by one on the CPU (0: none)")
     parser.add_argument("--set", action="append", default=[], help="a scenario override, as `mechsim run --set`")
     parser.add_argument("--out", type=Path, default=HERE / "batch_lanes")
+    parser.add_argument("--whole", default="", help="lane counts for the vmapped whole run's kernel (e.g. 64,256)")
+    parser.add_argument("--memory-gb", type=float, default=4.0, help="the vmapped whole run's step buffers at most")
     parser.add_argument("--single-only", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.single_only:
@@ -184,6 +245,16 @@ def main(argv: list[str] | None = None) -> None:
         print(f"single compiled runs on the CPU: {one['case_wall_s'] * 1e3:.2f} ms wall ({one['case_cpu_s'] * 1e3:.2f} "
               f"ms CPU) a case, {one['cases_per_s']:.0f} cases/s on one core; crank angle at the end within "
               f"{one['largest_crank_end_difference_rad']:.1e} rad of the batch's", flush=True)
+    for n in sorted(int(x) for x in args.whole.split(",") if x):
+        got = whole(n, args.duration, args.set, args.memory_gb)
+        if got is None:
+            print(f"vmapped whole run: {n} lanes' step buffers pass --memory-gb {args.memory_gb:g}", flush=True)
+            break
+        rows.append(got)
+        print(f"vmapped whole run, {n} lanes on {got['device']}: compile {got['compile_s']:.1f} s, one call "
+              f"{got['vmapped_call_s'] * 1e3:.1f} ms ({got['cases_per_s']:.0f} cases/s) against "
+              f"{got['one_by_one_s'] * 1e3:.1f} ms one by one ({got['cases_per_s_one_by_one']:.0f} cases/s); outputs "
+              f"within {got['largest_relative_difference_of_outputs']:.1e} relative", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     table = [{k: v for k, v in r.items() if k != "crank_end_rad"} for r in rows]
     import pandas as pd

@@ -141,10 +141,20 @@ class JaxMode:
         return jnp.concatenate([v, a, powers, xp]), a, lam, guards
 
     @cached_property
+    def _jitted(self) -> Callable:
+        # (the KKT solve's mode is a static argument: jit's trace cache is keyed by the function and the arguments,
+        # not by the `kkt.unrolled_solves` switch the trace reads)
+        return jax.jit(lambda t, z, p, unrolled: self.evaluate(t, z, p), static_argnums=3)
+
+    @property
     def traced_once(self) -> Callable:
         """`evaluate` as a jitted function: traced once per argument types and reused wherever a program calls it
-        again (every stage of a step, the guards, the event location), instead of retraced at each call site."""
-        return jax.jit(self.evaluate)
+        again (every stage of a step, the guards, the event location), instead of retraced at each call site. Once
+        per KKT solve too (`kkt.unrolled_solves` or not): a trace made outside the switch (a batched sweep's segment
+        solve) reused inside it put LAPACK's solve into the compiled whole run, several times slower, which was
+        then kept so on disk for every later process."""
+        jitted, unrolled = self._jitted, kkt.unrolled()
+        return lambda t, z, p: jitted(t, z, p, unrolled)
 
     def rates(self, t, z, p):
         """The vector field z' = f(t, z)."""

@@ -93,6 +93,11 @@ def unrolled_solves():
         _UNROLLED = before
 
 
+def unrolled() -> bool:
+    """Whether traced solves are unrolled here (inside `unrolled_solves`): what a cached trace must be keyed by."""
+    return _UNROLLED
+
+
 def _linear_solve(K, b, xp, spd_block: int = 0):
     """K x = b; within `unrolled_solves`, traced single systems are solved unrolled (`unrolled_solve`, whose
     leading spd_block columns are a symmetric positive definite block taken without pivoting)."""

@@ -159,3 +159,29 @@ def test_the_step_records_of_several_calls_read_as_one_joined_table():
         rec.take(steps, out)
         assert np.array_equal(out, table[steps])
         assert all(np.array_equal(rec.column(k), table[:, k]) for k in range(5))
+
+
+def test_a_mode_traced_outside_the_unrolled_kkt_solves_is_traced_again_inside():
+    """The compiled whole run traces each mode's vector field with the KKT solve unrolled (`kkt.unrolled_solves`),
+    the segment solve with LAPACK's. jit's trace cache does not see that switch: a batched sweep's segment solve
+    traced first in a process had the whole run reuse its trace, LAPACK's LU inside the whole run (3-5x slower a
+    0.8 s geneva-motor run), kept so on disk for every later process. Each switch now gets its own trace of the
+    mode, whichever comes first."""
+    import re
+
+    import jax
+
+    from mechsim.dynamics import kkt
+    from mechsim.dynamics.model import derive
+    from mechsim.scenarios.loader import build_mechanism, load
+    model = derive(build_mechanism(load("geneva-motor").si), "index2", False)
+    jm = jax_model(model).modes[0]
+    args = (0.0, np.zeros(jm.nz), np.zeros(len(model.parameter_names)))
+
+    def primitives():
+        return set(re.findall(r"= (\w+)", str(jax.make_jaxpr(jm.traced_once)(*args))))
+    outside = primitives()
+    with kkt.unrolled_solves():
+        inside = primitives()
+    assert "lu" in outside and "lu" not in inside
+    assert "lu" in primitives()                 # and outside again: the first trace is kept for its own switch
