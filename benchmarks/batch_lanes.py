@@ -116,7 +116,8 @@ def whole(n: int, duration: float, sets: list[str], memory_gb: float) -> dict | 
     args, entry = [], None
     for mech, drive, settings, t_end, dt_out, angle0, speed0 in made:
         start = prepare(mech, drive, settings, t_end, dt_out, angle0, speed0)
-        entry = entry or diffrax_run.compiled_run(mech, start.model, o)[0]
+        model = start.model                             # (one structure: every case's is the same model)
+        entry = entry or diffrax_run.compiled_run(mech, model, o)[0]
         args.append(diffrax_run.run_arguments(entry.jmod.index(start.mode), 0.0, t_end,
                                               mode_z(start.model.modes[start.mode], start.y), start.p, DT0_FIRST,
                                               (o.rtol, o.atol), o.max_steps, 0))
@@ -124,7 +125,7 @@ def whole(n: int, duration: float, sets: list[str], memory_gb: float) -> dict | 
     if n * lane_bytes > memory_gb * 2**30:
         return None
     stacked = tuple(np.stack([a[j] for a in args]) for j in range(len(args[0])))
-    run = diffrax_run.make_run(entry.jmod, jax_transitions(made[0][0], prepare(*made[0]).model, entry.jmod), o,
+    run = diffrax_run.make_run(entry.jmod, jax_transitions(made[0][0], model, entry.jmod), o,
                                diffrax_run.EVENTS_PER_CALL, diffrax_run.STEPS_PER_CALL, entry.steps.record)
     compile_s = time.perf_counter()
     with kkt.unrolled_solves():     # as the single run's program is traced (diffrax_run.compiled_run)
