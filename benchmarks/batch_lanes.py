@@ -19,7 +19,7 @@ the batch runs the segment loop, the single run the compiled whole run, docs/dif
 
 --whole 64,256,...: also the compiled whole run (transitions inside the program) vmapped over that many lanes, its
 first call per case against the same calls one by one on the same device, within --memory-gb of step buffers: the
-kernel a batched whole run would call (none is built).
+kernel a batched whole run would call (no such runner is built yet: docs/sweeps.md).
 
 Writes batch_lanes.csv (one row per N, and the single runs' row), batch_lanes.json (the rows, the device, JAX's
 version, the host's cores) and batch_lanes.png (cases per second against lanes) into --out (default: a folder

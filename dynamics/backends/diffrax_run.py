@@ -1,6 +1,6 @@
 """The whole hybrid run as ONE compiled call on diffrax's stepping pieces (docs/diffrax.md, 'The compiled run').
 
-One `lax.while_loop` takes steps with diffrax's explicit solver (`solver.step`, its error estimate judged by
+One while loop (`_loop`: equinox's, the step buffer written in place) takes steps with diffrax's explicit solver (`solver.step`, its error estimate judged by
 `PIDController.adapt_step_size`) in the active mode (a `lax.switch` on the mode number, `jax_model`). After each
 accepted step the mode's guards are evaluated at its end; a sign change in the direction of heading is located
 by bisection on the step's dense interpolant (to `event_rtol`/`event_atol`, the upper end of the bracket, as
@@ -253,6 +253,16 @@ def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
     return jnp.where(keep, q, qp), jnp.where(keep, v, vp)
 
 
+def _loop(cond, body, init, buffer):
+    """`lax.while_loop` with the step buffer (`buffer(carry)`) written in place rather than carried: equinox's
+    while loop (as diffrax's own saved outputs are kept). The same program for one run; under `vmap` a plain while
+    loop selects its whole carry, the 2.5 MB buffer included, between the lanes still stepping and those done at
+    every step, which made a vmapped run of 64 lanes about 200x slower than the same calls one by one
+    (docs/sweeps.md, "Lanes from 64 up")."""
+    import equinox.internal as eqxi
+    return eqxi.while_loop(cond, body, init, buffers=buffer, kind="lax")
+
+
 def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: int, record: StepRecord
              ) -> Callable:
     """run(k0, t0, t_end, z0, p0, dt0, tol, max_steps, seg_steps0) -> dict of arrays; to be jitted.
@@ -436,7 +446,8 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             s, b = c
             x0 = dict(crossed=jnp.bool_(False), t=s["t"], t1=s["t"],
                       dense=jax.tree_util.tree_map(lambda d: jnp.zeros(d.shape, d.dtype), record.struct))
-            s, b, x = jax.lax.while_loop(lambda c: (c[0]["code"] == Code.RUNNING) & ~c[2]["crossed"], step, (s, b, x0))
+            s, b, x = _loop(lambda c: (c[0]["code"] == Code.RUNNING) & ~c[2]["crossed"], step, (s, b, x0),
+                            lambda c: c[1]["st"])
             interp = solver.interpolation_cls(t0=x["t"], t1=x["t1"], **x["dense"])
             full = b["n_ev"] >= n_events
             ev = {key: b[key] for key in EVENT_KEYS}
@@ -446,7 +457,7 @@ def make_run(jmod: JaxModel, table: JaxTransitions, o, n_events: int, n_steps: i
             b = record_step(b, x["t"], x["t1"], t_acc, x["dense"])
             return codes(s, dict(b, **ev)), dict(b, **ev)
 
-        s, b = jax.lax.while_loop(lambda c: c[0]["code"] == Code.RUNNING, segment, c)
+        s, b = _loop(lambda c: c[0]["code"] == Code.RUNNING, segment, c, lambda c: c[1]["st"])
         c = dict(s, **b)
         zp_end, a_end, lam_end, _ = jmod.evaluate(c["k"], c["t"], c["z"], c["p"])
         keys = ("hand", "dt", "seg_steps", "t", "z", "k", "p", "code", "fired", "n_ev", "ev_t", "ev_guard", "ev_z",
