@@ -2,7 +2,8 @@
 
 A run's warnings are strings "t = <time> s: <message>" (or a plain message); their kind is the message up to
 its first colon with the numbers taken out, so 52 flank switches make one line with the count and the first
-and last time (the line keeps the numbers every message shares, such as a formula's "= 0"). SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
+and last time (the line keeps the numbers every message shares, such as a formula's "= 0", and shows each number
+that differs as the range its messages span, "5.9 .. 20.6"). SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
 points those at a temporary file for the length of a run while Python's own streams keep the terminal.
 """
 from __future__ import annotations
@@ -46,9 +47,10 @@ def warning_time(message: str) -> float | None:
 def group_warnings(messages: list[str]) -> list[dict]:
     """One dict per kind, in order of first appearance: kind, count, first and last time (s, None if the
     warnings carry none) and the first message in full. The kind shown keeps the numbers that are the same in
-    every message of the group (a formula's "= 0", a limit) and writes only those that differ as '#'."""
+    every message of the group (a formula's "= 0", a limit) and writes each that differs as the range of its
+    values over the group, "least .. largest" (each as its message wrote it), as the console's peaks line does."""
     groups: dict[str, dict] = {}
-    numbers: dict[str, tuple[str, list[str], list[bool]]] = {}     # key -> (first head, its numbers, differ)
+    numbers: dict[str, tuple[str, list[list[str]]]] = {}     # key -> (first head, each number's least and largest)
     for message in messages:
         key = warning_kind(message)
         t = warning_time(message)
@@ -56,18 +58,20 @@ def group_warnings(messages: list[str]) -> list[dict]:
         head = _head(message)
         found = _NUMBER.findall(head)
         if key not in numbers:
-            numbers[key] = (head, found, [False] * len(found))
+            numbers[key] = (head, [[value, value] for value in found])
         else:
-            _, values, differ = numbers[key]
-            for i, value in enumerate(found):
-                differ[i] = differ[i] or value != values[i]
+            for span, value in zip(numbers[key][1], found):
+                if float(value) < float(span[0]):
+                    span[0] = value
+                elif float(value) > float(span[1]):
+                    span[1] = value
         g["count"] += 1
         if t is not None:
             g["first_t_s"] = t if g["first_t_s"] is None else min(g["first_t_s"], t)
             g["last_t_s"] = t if g["last_t_s"] is None else max(g["last_t_s"], t)
-    for key, (head, _, differ) in numbers.items():
-        flags = iter(differ)
-        groups[key]["kind"] = _NUMBER.sub(lambda m: "#" if next(flags) else m.group(0), head).strip()
+    for key, (head, spans) in numbers.items():
+        shown = iter(a if float(a) == float(b) else f"{a} .. {b}" for a, b in spans)
+        groups[key]["kind"] = _NUMBER.sub(lambda m: next(shown), head).strip()
     return list(groups.values())
 
 
