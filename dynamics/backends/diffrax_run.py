@@ -256,9 +256,8 @@ def _reinitialise(parts, k_old, k, t, q, v, p_old, p):
 def _loop(cond, body, init, buffer):
     """`lax.while_loop` with the step buffer (`buffer(carry)`) written in place rather than carried: equinox's
     while loop (as diffrax's own saved outputs are kept). The same program for one run; under `vmap` a plain while
-    loop selects its whole carry, the 2.5 MB buffer included, between the lanes still stepping and those done at
-    every step, which made a vmapped run of 64 lanes about 200x slower than the same calls one by one
-    (docs/sweeps.md, "Lanes from 64 up")."""
+    loop selects its whole carry, the megabytes of step buffer included, between the lanes still stepping and
+    those done, at every step (docs/sweeps.md, "Lanes from 64 up")."""
     import equinox.internal as eqxi
     return eqxi.while_loop(cond, body, init, buffers=buffer, kind="lax")
 
