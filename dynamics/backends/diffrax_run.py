@@ -1,18 +1,18 @@
 """The whole hybrid run as ONE compiled call on diffrax's stepping pieces (docs/diffrax.md, 'The compiled run').
 
-One while loop (`_loop`: equinox's, the step buffer written in place) takes steps with diffrax's explicit solver (`solver.step`, its error estimate judged by
-`PIDController.adapt_step_size`) in the active mode (a `lax.switch` on the mode number, `jax_model`). After each
-accepted step the mode's guards are evaluated at its end; a sign change in the direction of heading is located
-by bisection on the step's dense interpolant (to `event_rtol`/`event_atol`, the upper end of the bracket, as
-the segment backend's `FirstCrossing`). The guard that fired picks a branch of the transition table
-(`jax_transitions`): next mode and parameters, then the consistent re-initialisation of `dynamics/consistent.py`
-in jax (positions by Gauss-Newton onto Phi = 0, velocities by the kinetic-energy-metric projection; an index-1
-restart into the same mode with the same constraints keeps q and v, `transitions.same_constraints`). Every
-accepted step's dense output goes into a preallocated buffer (one row per step: its interval, its segment and
-its interpolant's coefficients, written with one update), events into another; a second, small compiled function
-(`make_rows`) interpolates the output rows' states on the requested grid from the step buffer afterwards.
-Accelerations and multipliers are not evaluated on the rows: the read-outs solve the KKT system at every row
-from (q, v) anyway (`tables.kkt_rows`), so the pieces carry states only (`hybrid.Piece`).
+One while loop (`_loop`: equinox's, the step buffer written in place) takes steps with diffrax's explicit solver
+(`solver.step`, its error estimate judged by `PIDController.adapt_step_size`) in the active mode (a `lax.switch` on
+the mode number, `jax_model`). After each accepted step the mode's guards are evaluated at its end; a sign change in
+the direction of heading is located by bisection on the step's dense interpolant (to `event_rtol`/`event_atol`, the
+upper end of the bracket, as the segment backend's `FirstCrossing`). The guard that fired picks a branch of the
+transition table (`jax_transitions`): next mode and parameters, then the consistent re-initialisation of
+`dynamics/consistent.py` in jax (positions by Gauss-Newton onto Phi = 0, velocities by the kinetic-energy-metric
+projection; an index-1 restart into the same mode with the same constraints keeps q and v,
+`transitions.same_constraints`). Every accepted step's dense output goes into a preallocated buffer (one row per
+step: its interval, its segment and its interpolant's coefficients, written with one update), events into another; a
+second, small compiled function (`make_rows`) interpolates the output rows' states on the requested grid from the
+step buffer afterwards. Accelerations and multipliers are not evaluated on the rows: the read-outs solve the KKT
+system at every row from (q, v) anyway (`tables.kkt_rows`), so the pieces carry states only (`hybrid.Piece`).
 
 The loop ends at t_end, at a failure (code), or where the table says the transition is the Python loop's (a
 stop or an impact, guards firing together, the event buffer full): the driver (`simulate_run`) then applies that
