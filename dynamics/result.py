@@ -3,8 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import TYPE_CHECKING
 
-import pandas as pd
+if TYPE_CHECKING:          # (the tables' type only: a scenario's loading and checking import no pandas)
+    import pandas as pd
 
 
 @dataclass

@@ -28,6 +28,27 @@ def test_the_cli_module_and_its_help_import_only_typer(tmp_path):
     assert lines[0] == "[]" and lines[1] == "True"
 
 
+@pytest.mark.parametrize("command", [["list"], ["show", "geneva-lc1"], ["show", "geneva-seed-lc3-mu015"],
+                                     ["run", "geneva-lc1", "--set", "duration=-1"]])
+def test_listing_showing_and_refusing_a_scenario_import_neither_pandas_nor_scipy(command, tmp_path):
+    """What a user does before any run (list the built-ins, print one, have a bad value refused) reads scenarios
+    and the thermal models' fields only: no tables (pandas) and no thermal network (scipy.sparse) are imported
+    (pint, on an empty unit cache, imports scipy's top level only). A refused run writes nothing."""
+    code = ("import sys, io, contextlib\nfrom mechsim.scenarios import cli\n"
+            "buf = io.StringIO()\ncode = 0\n"
+            "with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):\n"
+            f"    try:\n        cli.app({command!r})\n    except SystemExit as e:\n        code = e.code\n"
+            "print(sorted(m for m in ('pandas', 'scipy.sparse', 'sympy', 'jax', 'numba') if m in sys.modules))"
+            "; print(code)"
+            "; print(len(buf.getvalue()))")
+    lines = fresh(code, tmp_path / "cache", tmp_path).split("\n")
+    assert lines[0] == "[]"
+    if command[0] == "run":
+        assert lines[1] == "2" and not (tmp_path / "results").exists()
+    else:
+        assert lines[1] in ("0", "None") and int(lines[2]) > 100       # it printed the list, or the scenario
+
+
 def test_a_second_process_converts_units_from_the_disk_cache(tmp_path):
     cache = tmp_path / "cache"
     code = ("import sys\nfrom mechsim.scenarios.units import to_si\n"

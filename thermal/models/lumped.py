@@ -1,10 +1,10 @@
 """thermal.model = 'lumped': bulk temperatures of the driver's contact body (pin), its arm (crank) and the driven
 body (wheel) as states (docs/theory.md §G5), plus the flash rise on top."""
 from mechsim.thermal.models.base import ThermalModel
-from mechsim.thermal.network import assemble, bulk_bodies
 
 
 def build(setup) -> None:
+    from mechsim.thermal.network import assemble, bulk_bodies     # (scipy: only where a run builds it)
     assemble(setup, bulk_bodies(setup))
 
 

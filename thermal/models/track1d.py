@@ -2,10 +2,10 @@
 body (each slot wall of a Geneva; docs/theory.md §G6), plus the flash rise on top. Every engagement is resolved
 (the track meshes follow each one), so it is never cycle-averaged."""
 from mechsim.thermal.models.base import ThermalModel
-from mechsim.thermal.network import assemble, bulk_bodies, track_mesh
 
 
 def build(setup) -> None:
+    from mechsim.thermal.network import assemble, bulk_bodies, track_mesh     # (scipy: only where a run builds it)
     bodies = bulk_bodies(setup)
     mesh = track_mesh(setup, bodies[-1])
     assemble(setup, bodies, mesh)
