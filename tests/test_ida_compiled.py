@@ -59,10 +59,6 @@ def both(request):
     return request.param, ida, compiled, settings, recorder.requests
 
 
-def _call(cfunc, *args):
-    return cfunc.ctypes(*args)
-
-
 def test_callbacks_equal_the_generated_python_functions(both):
     """Residual, exact Jacobian (column-major dense SUNMatrix) and guards of every mode met in the run, at the
     run's own restart states and at states moved off the constraint manifold (where no term cancels), through
@@ -78,7 +74,13 @@ def test_callbacks_equal_the_generated_python_functions(both):
     for mode, reqs in seen.items():
         mf = reqs[0].mf
         cm, _ = compiled_mode(mf, cache_dir() / "compiled")
-        m = cm.module
+        # (IDA's prototypes: the addresses IDA calls, whether numba or the kept object code gave them)
+        res = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_double, *[ctypes.c_void_p] * 3,
+                               ctypes.POINTER(ctypes.c_double))(cm.residual)
+        jac = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_double, ctypes.c_double, *[ctypes.c_void_p] * 4,
+                               ctypes.POINTER(ctypes.c_double), *[ctypes.c_void_p] * 3)(cm.jacobian)
+        roots = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p,
+                                 ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double))(cm.guards)
         for r in reqs[:3]:
             p = np.array(r.p, dtype=float)
             for shift in (0.0, 1e-2):
@@ -92,12 +94,12 @@ def test_callbacks_equal_the_generated_python_functions(both):
                 try:
                     pp = ctypes.cast(p.ctypes.data, ctypes.POINTER(ctypes.c_double))
                     ptr = ctypes.c_void_p
-                    assert m.residual.ctypes(t, ptr(vy), ptr(vyp), ptr(vr), pp) == 0
-                    assert m.jacobian.ctypes(t, cj, ptr(vy), ptr(vyp), ptr(vr), ptr(mat), pp, None, None, None) == 0
+                    assert res(t, ptr(vy), ptr(vyp), ptr(vr), pp) == 0
+                    assert jac(t, cj, ptr(vy), ptr(vyp), ptr(vr), ptr(mat), pp, None, None, None) == 0
                     jac_c[:] = np.ctypeslib.as_array(ctypes.cast(lib.SUNDenseMatrix_Data(mat),
                                                                   ctypes.POINTER(ctypes.c_double)), (ny * ny,))
                     gp = ctypes.cast(g_c.ctypes.data, ctypes.POINTER(ctypes.c_double))
-                    assert m.guards.ctypes(t, ptr(vy), ptr(vyp), gp, pp) == 0
+                    assert roots(t, ptr(vy), ptr(vyp), gp, pp) == 0
                 finally:
                     for v in (vy, vyp, vr):
                         lib.N_VDestroy(v)
@@ -198,6 +200,61 @@ def test_a_new_process_loads_the_callbacks_from_the_cache():
     assert second.stdout.split() == ["True", "2", "False"], second.stderr[-2000:]
 
 
+_RUN_AND_SAVE = ("import sys, mechsim, numpy as np\n"
+                 "from mechsim.dynamics.backends.compiled_model import loaded_modes\n"
+                 "r = mechsim.run('geneva-motor', set={'solver.backend': 'ida-compiled', 'duration': '1 s',"
+                 " 'output.plots': False})\n"
+                 "np.save(sys.argv[1], r.timeseries.select_dtypes('number').to_numpy())\n"
+                 "print('numba' in sys.modules, [cm.module is None for cm in loaded_modes()])\n")
+
+
+def test_a_new_process_runs_on_the_kept_object_code_without_numba_to_the_bit(tmp_path):
+    """numba's object code is kept beside what it compiled (dynamics/backends/native_objects.py): a new process
+    loads the modes' callbacks and the segment loop from it without importing numba, and its run equals the run of
+    the process that compiled them, every column to the bit (the same machine code). Damaged files are passed
+    over: the callbacks and the loop are compiled again (their object code kept anew), with the same run."""
+    env = dict(os.environ, MECHSIM_CACHE_DIR=str(tmp_path / "cache"), MECHSIM_BACKGROUND_COMPILE="0")
+
+    def run(name: str):
+        out = subprocess.run([sys.executable, "-c", _RUN_AND_SAVE, str(tmp_path / name)], capture_output=True,
+                             text=True, env=env, timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout.split("\n")[0], np.load(tmp_path / name)
+
+    first, a = run("a.npy")                          # a fresh cache folder: everything compiled here
+    objects = sorted((tmp_path / "cache" / "compiled").glob("*.objects"))
+    assert len(objects) == 3                         # the two modes' callbacks and the loop
+    second, b = run("b.npy")
+    assert first == "True [False, False]" and second == "False [True, True]"
+    assert np.array_equal(a, b, equal_nan=True)
+    for f in objects:
+        f.write_bytes(f.read_bytes()[:100])
+    third, c = run("c.npy")
+    assert third == "True [False, False]" and np.array_equal(a, c, equal_nan=True)
+
+
+def test_object_code_for_another_machine_or_naming_an_unknown_symbol_is_not_loaded(tmp_path):
+    """A kept object file is loaded only where it was made for this numba, llvmlite and CPU, and where every
+    symbol its code calls can be bound (an unbound one would stop the process when the code is linked)."""
+    import pickle
+
+    from mechsim.dynamics.backends import native_objects
+    mechsim.run("geneva-motor", set={"solver.backend": "ida-compiled", "duration": "0.3 s"})
+    kept = sorted((cache_dir() / "compiled").glob("loop_*.objects"), key=os.path.getmtime)[-1]
+    data = pickle.loads(kept.read_bytes())
+    assert set(data["functions"]) == {"segment", "read_rows"}
+    (tmp_path / "same.objects").write_bytes(kept.read_bytes())
+    assert set(native_objects.load(tmp_path / "same.objects")) == {"segment", "read_rows"}
+    other = dict(data, key=data["key"].replace(data["key"].split("|")[3], "another-cpu"))
+    (tmp_path / "other.objects").write_bytes(pickle.dumps(other))
+    assert native_objects.load(tmp_path / "other.objects") is None
+    name, (native, obj, externals) = next(iter(data["functions"].items()))
+    unknown = dict(data, functions={name: (native, obj, externals + ["mechsim_no_such_symbol"])})
+    (tmp_path / "unknown.objects").write_bytes(pickle.dumps(unknown))
+    assert native_objects.load(tmp_path / "unknown.objects") is None
+    assert native_objects.load(tmp_path / "missing.objects") is None
+
+
 def test_without_the_sundials_libraries_the_backend_says_so_in_one_line(monkeypatch):
     """An installation whose scikit-sundae ships no usable SUNDIALS libraries: a ValueError naming the backend,
     the reason and the way out (the CLI prints it as one line, exit 2), not a crash inside a run."""
@@ -266,7 +323,8 @@ def _cache_without_ready_marks(tmp_path) -> dict:
 def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_done(tmp_path, first):
     """A fresh cache folder: the first process runs the model on `ida` and compiles its callbacks in a background
     process; a process started after that runs it compiled, loading everything from the cache (nothing compiled
-    in it), with the first run's events and motion within the runs' accuracy. Within a process the first choice is
+    in it, and numba not imported: the object code is loaded as it is), with the first run's events and motion
+    within the runs' accuracy. Within a process the first choice is
     kept. The first process never imports numba: its run costs what an `ida` run costs. Where JAX is loaded first
     (a notebook that ran diffrax: no fork is safe), the background process is a fresh interpreter that derives the
     model again from the pickled mechanism, with the same outcome."""
@@ -290,7 +348,8 @@ def test_the_default_runs_ida_then_compiled_once_the_background_compilation_is_d
         time.sleep(0.5)
     second = subprocess.run([sys.executable, "-c", code, str(tmp_path / "b.npy")], capture_output=True, text=True,
                             env=env, timeout=600)
-    assert second.stdout.split() == ["ida-compiled", "ida-compiled", "True", "True", "True"], second.stderr[-2000:]
+    # (the callbacks and the segment loop loaded as the object code numba left: numba is not imported at all)
+    assert second.stdout.split() == ["ida-compiled", "ida-compiled", "False", "True", "True"], second.stderr[-2000:]
     a, b = np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy")
     assert np.array_equal(a[:, 0], b[:, 0])
     rtol, atol = 1e-8, 1e-10                # the scenario's solver tolerances

@@ -6,9 +6,9 @@ elimination, and compiled by numba into C-callable functions with IDA's callback
 guide: IDAResFn, IDALsJacFn, IDARootFn). Each reads its N_Vectors' and the dense matrix's data in place; the
 mode's parameter values travel as IDA's user data (a float64 array).
 
-Compiled code is cached on disk by numba (in the user's cache folder, `dynamics/user_cache.py`), keyed by the
-derivation key of the mode and a fingerprint of the code that derives it: a later process loads it instead of
-generating and compiling it again.
+Compiled code is kept on disk in the user's cache folder (`dynamics/user_cache.py`), keyed by the derivation key of
+the mode and a fingerprint of the code that derives it: as the object code numba compiled, which a later process
+loads without importing numba (`native_objects`), or, where that cannot be kept, in numba's own cache.
 """
 from __future__ import annotations
 
@@ -17,10 +17,12 @@ import importlib.util
 import os
 import sys
 import tempfile
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
 from mechsim.dynamics import programs
+from mechsim.dynamics.backends import native_objects
 from mechsim.dynamics.backends.sundials_c import sundials
 from mechsim.dynamics.user_cache import code_fingerprint, write_atomically
 
@@ -68,7 +70,8 @@ def guards(t, yy, yp, gout, ud):
 
 @dataclass
 class CompiledMode:
-    """Addresses of one mode's native callbacks (kept alive by `module`)."""
+    """Addresses of one mode's native callbacks (kept alive by `module`, numba's; None where they were loaded as
+    object code, `native_objects`, which keeps them for the process's life)."""
 
     residual: int
     jacobian: int
@@ -77,9 +80,10 @@ class CompiledMode:
 
     @property
     def loaded_from_cache(self) -> bool:
-        """Whether numba loaded all three callbacks from its on-disk cache instead of compiling them."""
+        """Whether the three callbacks were loaded (as object code, or by numba from its on-disk cache) instead of
+        compiled."""
         m = self.module
-        return all(fn.cache_hits for fn in (m.residual, m.jacobian, m.guards))
+        return m is None or all(fn.cache_hits for fn in (m.residual, m.jacobian, m.guards))
 
 
 def module_source(mf) -> str:
@@ -158,16 +162,89 @@ def compiled_mode(mf, folder: Path) -> tuple[CompiledMode, bool]:
     structure: dynamics/programs.py), and whether this call built them."""
 
     def build() -> CompiledMode:
+        name = module_name(mf)
+        objects = folder / f"{name[:-3]}{_OBJECTS}" if name else None
+        got = native_objects.load(objects) if objects is not None else None
+        if got is not None:                   # the object code numba made, loaded without numba
+            _mark_ready(mf, folder)
+            return CompiledMode(got["residual"], got["jacobian"], got["guards"], None)
         path = _module_path(folder, mf)
+        keep = objects is not None and path.parent == folder and _keeps_objects(folder)
         spec = importlib.util.spec_from_file_location(f"mechsim_compiled_{path.stem}", path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module      # numba's cache resolves the kernels' globals through it
-        spec.loader.exec_module(module)
-        if path.parent == folder and module_name(mf):
+        with _fresh_numba_cache() if keep else nullcontext():
+            spec.loader.exec_module(module)
+        made = CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
+        if keep:
+            _keep_objects(folder, objects, {f: getattr(module, f) for f in ("residual", "jacobian", "guards")})
+        if path.parent == folder and name:
             _mark_ready(mf, folder)
-        return CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
+        return made
 
     return programs.program(PROGRAM, mf, (str(folder),), build)
+
+
+def loop_entries(folder: Path) -> tuple[int, int]:
+    """The addresses of the compiled segment loop's entry points (`native.native_entries`: the segment, the
+    readings), once per process: loaded as object code from `folder` (`native_objects`), else compiled (and their
+    object code kept there, `_keeps_objects`) or loaded by numba from its own cache."""
+    def build() -> tuple[int, int]:
+        # (keyed by the loop's own source, and by what `_cache_key` names: numba, Python, the SUNDIALS build)
+        source = hashlib.sha256((Path(__file__).parent / "native.py").read_bytes()).hexdigest()
+        objects = folder / f"loop_{_cache_key('loop|' + source)}{_OBJECTS}"
+        got = native_objects.load(objects)
+        if got is not None:
+            return got["segment"], got["read_rows"]
+        from mechsim.dynamics.backends.native import native_entries
+        keep = _keeps_objects(folder)
+        with _fresh_numba_cache() if keep else nullcontext():
+            made = native_entries()
+        if keep:
+            _keep_objects(folder, objects, dict(zip(("segment", "read_rows"), made)))
+        return made[0].address, made[1].address
+
+    return programs.program("loop_entries", None, (str(folder),), build)[0]
+
+
+def _keeps_objects(folder: Path) -> bool:
+    """Whether compiled code is kept as object code in `folder` (`native_objects`): it can be written, and this
+    numba was not found to keep none (`_keep_objects`). Then numba compiles afresh where the object code is missing
+    (a function numba loads from its own cache comes without its object code) and its own cache is not used."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(folder, os.W_OK) and not _no_objects_mark(folder).exists()
+
+
+def _no_objects_mark(folder: Path) -> Path:
+    return folder / f"objects_{_cache_key('objects')}.unsupported"
+
+
+def _keep_objects(folder: Path, objects: Path, functions: dict) -> None:
+    """Write the object code of `functions` (just compiled) to `objects`; where that fails, mark `folder` so that
+    this numba's functions go through its own cache from then on (`_keeps_objects`) instead of compiling afresh in
+    every process."""
+    if not native_objects.save(objects, functions):
+        try:
+            _no_objects_mark(folder).touch()
+        except OSError:
+            pass
+
+
+@contextmanager
+def _fresh_numba_cache():
+    """numba's cache in a fresh temporary folder within the block: what it decorates there is compiled, not loaded,
+    so numba holds its object code (`native_objects.save`)."""
+    import numba
+    before = numba.config.CACHE_DIR
+    with tempfile.TemporaryDirectory(prefix="mechsim-numba-") as fresh:
+        numba.config.CACHE_DIR = fresh
+        try:
+            yield
+        finally:
+            numba.config.CACHE_DIR = before
 
 
 def loaded_modes() -> list[CompiledMode]:
@@ -179,6 +256,7 @@ def loaded_modes() -> list[CompiledMode]:
 #: set to "0" to never compile in the background (the `auto` backend then runs on `ida` until callbacks are ready)
 BACKGROUND_ENV = "MECHSIM_BACKGROUND_COMPILE"
 _READY, _FAILED = ".ready", ".failed"      # a mode that failed to compile is not tried again in the background
+_OBJECTS = ".objects"                       # a module's (or the loop's) object code (`native_objects`)
 #: how long a background compilation waits for another one to finish before it gives up
 _LOCK_WAIT_S = 600.0
 _STARTED: set = set()
@@ -192,8 +270,7 @@ def _mark_ready(mf, folder: Path) -> None:
     """Mark the mode's callbacks and the segment loop compiled into `folder`'s cache (`ready`), wherever they were
     compiled: in the background, or in a process that ran `ida-compiled` (so that `auto` runs the model compiled
     in later processes, also where no background compilation can start)."""
-    from mechsim.dynamics.backends.native import compile_advance
-    compile_advance()                  # loaded or compiled once per process; the loop a run compiles anyway
+    loop_entries(folder)               # loaded or compiled once per process; the loop a run compiles anyway
     for marker in (folder / f"{module_name(mf)}{_READY}", _advance_marker(folder)):
         try:
             marker.touch()

@@ -128,8 +128,9 @@ class IdaCompiledBackend(Backend):
     def __init__(self, settings: SolverSettings):
         self.settings = settings
         self.solver = f"IDA (BDF, {settings.formulation}; compiled callbacks)"
-        from mechsim.dynamics.backends.native import segment      # numba: imported where it is used
-        self._segment = segment
+        from mechsim.dynamics.backends.compiled_model import loop_entries
+        segment, read_rows = loop_entries(cache_dir() / "compiled")
+        self._segment, self._read_rows = _ENTRY(segment), _ENTRY(read_rows)
         self.lib = sundials()
         self._memories = _kept_memories(settings, self.lib)
         self._tret = np.zeros(1)
@@ -141,6 +142,7 @@ class IdaCompiledBackend(Backend):
         self._segment_addresses = np.concatenate([self._read_addresses, np.array(
             [ctypes.cast(getattr(self.lib, name), ctypes.c_void_p).value for name in _COUNTERS], dtype=np.int64)])
         self._counts = np.zeros(len(_COUNTERS), dtype=_C_LONG)
+        self._no_reals = np.zeros(1)
         self._counts_address = self._counts.ctypes.data
 
     def hint(self, code: FailureCode) -> str:
@@ -238,17 +240,20 @@ class IdaCompiledBackend(Backend):
         t0) with the start itself, the others by IDA (IDAReInit with IDA's own first step, the stop time its last
         instant, IDASolve in IDA_NORMAL mode at each instant, as `integrate` runs a segment). (t, y, y') of all
         rows, and per reading whether IDA reached all its instants (else it failed first)."""
-        from mechsim.dynamics.backends.native import read_rows
         n = len(t0)
         hit = self._memories.get(id(mf))
         m = hit[1] if hit is not None and hit[0] is mf else self._first_use(mf, {}, p.shape[1])
         rows_t = np.array(rows_t, dtype=float)            # a copy: IDA's times are written over it
         rows_y, rows_yp = np.empty((len(rows_t), mf.ny)), np.empty((len(rows_t), mf.ny))
         written = np.empty(n, dtype=np.int64)
-        read_rows(self._read_addresses, m.mem, m.yy_nv, m.yp_nv, self._tret_address, m.y, m.yp, m.p, self._tret,
-                  np.ascontiguousarray(t0, dtype=float), np.ascontiguousarray(y0, dtype=float),
-                  np.ascontiguousarray(yp0, dtype=float), np.ascontiguousarray(p, dtype=float),
-                  np.zeros(n), np.ascontiguousarray(bounds, dtype=np.int64), rows_t, rows_y, rows_yp, written)
+        t0, y0, yp0, p = (np.ascontiguousarray(a, dtype=float) for a in (t0, y0, yp0, p))
+        first, bounds = np.zeros(n), np.ascontiguousarray(bounds, dtype=np.int64)
+        ints = np.array([self._read_addresses.ctypes.data, len(self._read_addresses), m.mem, m.yy_nv, m.yp_nv,
+                         self._tret_address, m.y.ctypes.data, m.y.size, m.yp.ctypes.data, m.p.ctypes.data, m.p.size,
+                         self._tret_address, t0.ctypes.data, n, y0.ctypes.data, yp0.ctypes.data, p.ctypes.data,
+                         first.ctypes.data, bounds.ctypes.data, written.ctypes.data, rows_t.ctypes.data,
+                         len(rows_t), rows_y.ctypes.data, rows_yp.ctypes.data], dtype=np.int64)
+        self._read_rows(ints.ctypes.data, self._no_reals.ctypes.data)
         m.p_from = None                       # m.p holds the last reading's parameters
         if np.any(written == -2):
             raise RuntimeError("IDAReInit, IDASetInitStep or IDASetStopTime failed")
@@ -263,10 +268,13 @@ class IdaCompiledBackend(Backend):
             t_out = np.append(t_out, r.t_end)
         m, first_step = self._begin(r.mf, r.p, r.t0, r.y0, r.yp0, r.first_step, r.t_end, counts, float(t_out[0]))
         rows_t, rows_y, rows_yp = m.scratch(len(t_out))
-        flag, k = self._segment(self._segment_addresses, m.mem, r.t0, first_step, r.t_end, t_out, self._tret_address,
-                                m.yy_nv, m.yp_nv, m.y, m.yp, self._tret, rows_t, rows_y, rows_yp, self._counts_address,
-                                _C_LONG.itemsize)
-        flag, k = int(flag), int(k)
+        ints = np.array([self._segment_addresses.ctypes.data, len(self._segment_addresses), m.mem, t_out.ctypes.data,
+                         len(t_out), self._tret_address, m.yy_nv, m.yp_nv, m.y.ctypes.data, m.y.size,
+                         m.yp.ctypes.data, self._tret_address, rows_t.ctypes.data, len(rows_t), rows_y.ctypes.data,
+                         rows_yp.ctypes.data, self._counts_address, _C_LONG.itemsize, 0, 0], dtype=np.int64)
+        reals = np.array([r.t0, first_step, r.t_end])
+        self._segment(ints.ctypes.data, reals.ctypes.data)
+        flag, k = int(ints[18]), int(ints[19])
         if k < 0:                                       # a setter failed: IDA was not run
             self._check(flag, ("IDAReInit", "IDASetInitStep", "IDASetStopTime")[-1 - k])
         counts.update(self._counters())
@@ -326,6 +334,8 @@ def _ahead(t_out: np.ndarray, t0: float, t_end: float) -> np.ndarray:
 _COUNTERS = ("IDAGetNumSteps", "IDAGetNumErrTestFails", "IDAGetNumNonlinSolvConvFails", "IDAGetNumResEvals",
              "IDAGetNumJacEvals")
 _C_LONG = np.dtype(ctypes.c_long)
+#: the compiled segment loop's entry points (`native.ENTRY`), called with the GIL held as numba's own calls were
+_ENTRY = ctypes.PYFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_void_p)
 
 
 class _Memories(dict):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 import numpy as np
-from numba import njit, types
+from numba import carray, cfunc, njit, types
 from numba.extending import intrinsic
 
 from mechsim.dynamics.backends.sundials_c import sundials
@@ -36,6 +36,25 @@ def vector_data(typingctx, nvector):
 def matrix_data(typingctx, matrix):
     """double* data (column-major) of a dense SUNMatrix (SUNDenseMatrix_Data, inlined)."""
     return _data_pointer(sundials().matrix_data_offset)
+
+
+def _cast_to(pointer_type):
+    """(signature, codegen) of an intrinsic reading an address (an int64) as a typed pointer."""
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+    return pointer_type(types.int64), codegen
+
+
+@intrinsic
+def float_pointer(typingctx, address):
+    """The address (an int64) as a double*."""
+    return _cast_to(types.CPointer(types.float64))
+
+
+@intrinsic
+def int_pointer(typingctx, address):
+    """The address (an int64) as an int64*."""
+    return _cast_to(types.CPointer(types.int64))
 
 
 @intrinsic
@@ -166,18 +185,18 @@ def _read_rows(addresses, mem, yy, yp, tret_address, y_view, yp_view, p_view, tr
         written[i] = -1 if flag < 0 else k
 
 
-def _cached_in_the_user_cache_folder(py_func):
-    """`njit(cache=True)` with numba's cache in mechsim's user-cache folder (dynamics/user_cache.py, numba/) instead
-    of beside this module, like the compiled callbacks: one folder holds what mechsim compiles. numba picks the
-    folder when the function is decorated, so its setting is changed only for this decoration; a folder that
-    cannot be written falls back to numba's own choice."""
+def _cached_in_the_user_cache_folder(py_func, decorate=None):
+    """`njit(cache=True)` (or `decorate`) with numba's cache in mechsim's user-cache folder (dynamics/user_cache.py,
+    numba/) instead of beside this module, like the compiled callbacks: one folder holds what mechsim compiles.
+    numba picks the folder when the function is decorated, so its setting is changed only for this decoration; a
+    folder that cannot be written falls back to numba's own choice."""
     import numba
     from mechsim.dynamics.user_cache import cache_dir
     before = numba.config.CACHE_DIR
     if not before:                    # a NUMBA_CACHE_DIR the user set is kept
         numba.config.CACHE_DIR = str(cache_dir() / "numba")
     try:
-        return njit(cache=True)(py_func)
+        return (decorate or njit(cache=True))(py_func)
     finally:
         numba.config.CACHE_DIR = before
 
@@ -187,15 +206,47 @@ read_rows = _cached_in_the_user_cache_folder(_read_rows)
 segment = _cached_in_the_user_cache_folder(_segment)
 
 
-def compile_advance() -> None:
-    """Compile `advance`, `segment` and `read_rows` for the argument types `IdaCompiledBackend.integrate` and
-    `read_many` pass (numba caches them on disk): calls with no output time and no reading, which return before
-    calling IDA."""
-    advance(0, 0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros((0, 1)),
-            np.zeros((0, 1)))
-    read_rows(np.zeros(4, dtype=np.int64), 0, 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1),
-              np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0),
-              np.zeros((0, 3), dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)),
-              np.zeros(0, dtype=np.int64))
-    segment(np.zeros(0, dtype=np.int64), 0, 0.0, 0.0, 0.0, np.zeros(0), 0, 0, 0, np.zeros(1), np.zeros(1), np.zeros(1),
-            np.zeros(0), np.zeros((0, 1)), np.zeros((0, 1)), 0, 8)
+#: the signature of the loop's entry points: (int64 arguments, float64 arguments) -> 0; results written into the
+#: int64 arguments' last slots. C-callable, so that a caller needs no numba (compiled_model.loop_entries)
+ENTRY = types.int32(types.CPointer(types.int64), types.CPointer(types.float64))
+
+
+def _segment_entry(ints, reals):
+    """`segment` on arrays given by address. ints: addresses (of IDASolve, ...) and their count, mem, t_out and its
+    count, tret_address, yy, yp, y_view and its size, yp_view, tret, rows_t and its count, rows_y, rows_yp,
+    counts_address, count_size, then (flag, rows written) are written to ints[18], ints[19]. reals: t0, first_step,
+    t_stop."""
+    n_out, ny, n_rows = ints[4], ints[9], ints[13]
+    flag, k = segment(carray(int_pointer(ints[0]), (ints[1],)), ints[2], reals[0], reals[1], reals[2],
+                      carray(float_pointer(ints[3]), (n_out,)), ints[5], ints[6], ints[7],
+                      carray(float_pointer(ints[8]), (ny,)), carray(float_pointer(ints[10]), (ny,)),
+                      carray(float_pointer(ints[11]), (1,)), carray(float_pointer(ints[12]), (n_rows,)),
+                      carray(float_pointer(ints[14]), (n_rows, ny)), carray(float_pointer(ints[15]), (n_rows, ny)),
+                      ints[16], ints[17])
+    ints[18] = flag
+    ints[19] = k
+    return 0
+
+
+def _read_rows_entry(ints, reals):
+    """`read_rows` on arrays given by address. ints: addresses and their count, mem, yy, yp, tret_address, y_view
+    and its size, yp_view, p_view and its size, tret, the readings' t0 and their count, y0, yp0, p, first_step,
+    bounds, written, rows_t and its count, rows_y, rows_yp. reals: not read."""
+    ny, n_p, n, n_rows = ints[7], ints[10], ints[13], ints[21]
+    read_rows(carray(int_pointer(ints[0]), (ints[1],)), ints[2], ints[3], ints[4], ints[5],
+              carray(float_pointer(ints[6]), (ny,)), carray(float_pointer(ints[8]), (ny,)),
+              carray(float_pointer(ints[9]), (n_p,)), carray(float_pointer(ints[11]), (1,)),
+              carray(float_pointer(ints[12]), (n,)), carray(float_pointer(ints[14]), (n, ny)),
+              carray(float_pointer(ints[15]), (n, ny)), carray(float_pointer(ints[16]), (n, n_p)),
+              carray(float_pointer(ints[17]), (n,)), carray(int_pointer(ints[18]), (n, 3)),
+              carray(float_pointer(ints[20]), (n_rows,)), carray(float_pointer(ints[22]), (n_rows, ny)),
+              carray(float_pointer(ints[23]), (n_rows, ny)), carray(int_pointer(ints[19]), (n,)))
+    return 0
+
+
+def native_entries() -> tuple:
+    """(the segment entry, the read_rows entry): numba's C callbacks, compiled, or loaded from numba's cache (in
+    mechsim's user-cache folder, or where numba.config.CACHE_DIR points: compiled_model.loop_entries)."""
+    entry = cfunc(ENTRY, cache=True)
+    return (_cached_in_the_user_cache_folder(_segment_entry, entry),
+            _cached_in_the_user_cache_folder(_read_rows_entry, entry))
