@@ -75,16 +75,19 @@ def load(path: Path) -> dict | None:
             return None
         if not isinstance(data, dict) or data.get("key") != machine_key():
             return None
-        import llvmlite.binding as llvm
-        _bind_helpers()
-        functions = data["functions"]
-        if not all(_bound(name) for _, _, externals in functions.values() for name in externals):
-            return None               # (an unbound symbol would stop the process when the code is linked)
-        engine = _engine()
-        for _, obj, _ in functions.values():
-            engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
-        engine.finalize_object()
-        got = {name: engine.get_function_address(native) for name, (native, _, _) in functions.items()}
+        try:
+            import llvmlite.binding as llvm
+            _bind_helpers()
+            functions = data["functions"]
+            if not all(_bound(name) for _, _, externals in functions.values() for name in externals):
+                return None           # (an unbound symbol would stop the process when the code is linked)
+            engine = _engine()
+            for _, obj, _ in functions.values():
+                engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+            engine.finalize_object()
+            got = {name: engine.get_function_address(native) for name, (native, _, _) in functions.items()}
+        except Exception:             # noqa: BLE001  (a platform or llvmlite that differs: numba's path stands)
+            return None
         if not all(got.values()):
             return None
         _LOADED[str(path)] = got
@@ -98,7 +101,7 @@ def _bound(name: str) -> bool:
         return True
     try:
         address = ctypes.cast(getattr(ctypes.CDLL(None), name), ctypes.c_void_p).value
-    except (AttributeError, OSError):
+    except Exception:                 # noqa: BLE001  (not in the process, or no process handle on this platform)
         return False
     llvm.add_symbol(name, address)
     return True
