@@ -20,6 +20,7 @@ import tempfile
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from mechsim.dynamics import programs
 from mechsim.dynamics.backends import native_objects
@@ -163,24 +164,21 @@ def compiled_mode(mf, folder: Path) -> tuple[CompiledMode, bool]:
 
     def build() -> CompiledMode:
         name = module_name(mf)
-        objects = folder / f"{name[:-3]}{_OBJECTS}" if name else None
-        got = native_objects.load(objects) if objects is not None else None
-        if got is not None:                   # the object code numba made, loaded without numba
-            _mark_ready(mf, folder)
-            return CompiledMode(got["residual"], got["jacobian"], got["guards"], None)
-        path = _module_path(folder, mf)
-        keep = objects is not None and path.parent == folder and _keeps_objects(folder)
-        spec = importlib.util.spec_from_file_location(f"mechsim_compiled_{path.stem}", path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module      # numba's cache resolves the kernels' globals through it
-        with _fresh_numba_cache() if keep else nullcontext():
+        loaded: dict = {}                    # the generated module numba compiled or loaded, where it did
+
+        def compile_module() -> dict:
+            path = _module_path(folder, mf)
+            spec = importlib.util.spec_from_file_location(f"mechsim_compiled_{path.stem}", path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[spec.name] = module      # numba's cache resolves the kernels' globals through it
             spec.loader.exec_module(module)
-        made = CompiledMode(module.residual.address, module.jacobian.address, module.guards.address, module)
-        if keep:
-            _keep_objects(folder, objects, {f: getattr(module, f) for f in ("residual", "jacobian", "guards")})
-        if path.parent == folder and name:
+            loaded["module"] = module
+            return {f: getattr(module, f) for f in ("residual", "jacobian", "guards")}
+
+        got, _ = _loaded_or_compiled(folder, folder / f"{name[:-3]}{_OBJECTS}" if name else None, compile_module)
+        if name:
             _mark_ready(mf, folder)
-        return made
+        return CompiledMode(got["residual"], got["jacobian"], got["guards"], loaded.get("module"))
 
     return programs.program(PROGRAM, mf, (str(folder),), build)
 
@@ -192,19 +190,30 @@ def loop_entries(folder: Path) -> tuple[int, int]:
     def build() -> tuple[int, int]:
         # (keyed by the loop's own source, and by what `_cache_key` names: numba, Python, the SUNDIALS build)
         source = hashlib.sha256((Path(__file__).parent / "native.py").read_bytes()).hexdigest()
-        objects = folder / f"loop_{_cache_key('loop|' + source)}{_OBJECTS}"
-        got = native_objects.load(objects)
-        if got is not None:
-            return got["segment"], got["read_rows"]
-        from mechsim.dynamics.backends.native import native_entries
-        keep = _keeps_objects(folder)
-        with _fresh_numba_cache() if keep else nullcontext():
-            made = native_entries()
-        if keep:
-            _keep_objects(folder, objects, dict(zip(("segment", "read_rows"), made)))
-        return made[0].address, made[1].address
+
+        def compile_loop() -> dict:
+            from mechsim.dynamics.backends.native import native_entries
+            return dict(zip(("segment", "read_rows"), native_entries()))
+
+        got, _ = _loaded_or_compiled(folder, folder / f"loop_{_cache_key('loop|' + source)}{_OBJECTS}", compile_loop)
+        return got["segment"], got["read_rows"]
 
     return programs.program("loop_entries", None, (str(folder),), build)[0]
+
+
+def _loaded_or_compiled(folder: Path, objects: Path | None, compile: Callable[[], dict]) -> tuple[dict, dict | None]:
+    """({name: address}, numba's compiled functions, None where loaded): the functions loaded as object code from `objects`
+    (`native_objects`), else `compile()`d by numba ({name: its C callback}): afresh, their object code kept in
+    `objects`, where `folder` keeps object code (`_keeps_objects`), else through numba's own cache."""
+    got = native_objects.load(objects) if objects is not None else None
+    if got is not None:
+        return got, None
+    keep = objects is not None and _keeps_objects(folder)
+    with _fresh_numba_cache() if keep else nullcontext():
+        made = compile()
+    if keep:
+        _keep_objects(folder, objects, made)
+    return {name: fn.address for name, fn in made.items()}, made
 
 
 def _keeps_objects(folder: Path) -> bool:
