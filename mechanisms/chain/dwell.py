@@ -187,7 +187,7 @@ class ChainDwellMechanism:
 
     # --- branches --------------------------------------------------------------------------------------------
 
-    def sigma(self, s, branch: str = "leading", side: int = +1, start_branch: str = "leading",
+    def sigma(self, s, branch: str = "leading", side=+1, start_branch: str = "leading",
               start: float = 0.0) -> np.ndarray:
         """Root sign (-1 leading, +1 lagging) at chain travel s (cumulative, m).
 
@@ -217,7 +217,7 @@ class ChainDwellMechanism:
             n_lt = np.searchsorted(t, xm - snap, side="left")
             return cyc * len(t) + (n_le if inclusive else n_lt)
 
-        n = count(s, side >= 0) - count(start, True)
+        n = np.where(np.asarray(side) >= 0, count(s, True), count(s, False)) - count(start, True)
         return np.where(np.mod(n, 2) == 0, s0, -s0).astype(int)
 
     # --- kinematics in the chain travel ----------------------------------------------------------------------
@@ -238,7 +238,17 @@ class ChainDwellMechanism:
                 kind[m] = k
         return s, kind
 
-    def state(self, s, branch: str = "leading", side: int = +1, start_branch: str = "leading",
+    def sides_of(self, s, side: int = +1) -> np.ndarray:
+        """Per travel value, the side (`state`'s) whose one-sided limit is its own state: -1 for a value within the
+        snap just before a touch or a junction (`_snap_touch`, `ChainPath.locate` put it onto that point, where
+        `side` would pick the state after it), +1 just after one, `side` on one or near none. A closed form read
+        a hair before a stop then reads the swing there, not the dwell that follows (docs/theory.md §K5)."""
+        s = np.atleast_1d(np.asarray(s, float))
+        shift = self._snap_touch(s)[0] - s
+        shift = np.where(shift != 0.0, shift, self.path.snap_shift(s))
+        return np.where(shift > 0.0, -1, np.where(shift < 0.0, +1, side))
+
+    def state(self, s, branch: str = "leading", side=+1, start_branch: str = "leading",
               start: float = 0.0) -> dict:
         """Dyad configuration and its s-derivatives at chain travel s (m, cumulative).
 

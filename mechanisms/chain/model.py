@@ -551,26 +551,30 @@ class ChainDwell(Mechanism):
                                                list(mode.readouts.values()), "numpy")
         return fns, {"readouts": {name: list(mode.readouts) for name, mode in md["modes"].items()}}
 
-    def prescribed_branch(self, s: np.ndarray, s_start: float) -> dict:
+    def prescribed_branch(self, s: np.ndarray, s_start: float, side=+1) -> dict:
         """Closed-form dyad state along the motion a prescribed chain speed produces under the apex law.
 
         stop: the starting root up to the first apex, the leading root after it (a stop turns F into D, and D
         is never left at an apex); smooth: the analytic continuation (chain_dwell 'smooth') from the start;
-        detuned: the starting root (no apex exists). Sources: docs/theory.md §K1.2, §1.5; docs/chain_dwell.md §7.
+        detuned: the starting root (no apex exists). side: at a junction or apex, the limit from before (-1) or
+        after (+1), one for all values or one per value (`ChainDwellMechanism.sides_of`). Sources: docs/theory.md §K1.2,
+        §1.5; docs/chain_dwell.md §7.
         """
         k = self.kin
         if self.apex == "smooth":
-            st = k.state(s, "smooth", +1, self.branch, s_start)
+            st = k.state(s, "smooth", side, self.branch, s_start)
         else:
-            st = k.state(s, self.branch, +1)
+            st = k.state(s, self.branch, side)
             if self.apex == "stop" and self.branch != "leading" and len(k.touches):
                 apexes = k.touches[k.touch_kind > 0]
                 Lc = self.path.length
                 later = [a + c * Lc for c in range(int(s_start // Lc), int(s_start // Lc) + 2) for a in apexes
                          if a + c * Lc >= s_start - 1e-12 * Lc]
                 if later:
-                    after = s >= min(later) - 1e-12 * Lc
-                    lead = k.state(s, "leading", +1)
+                    first = min(later)
+                    # (a value snapped onto the apex from before it, or the apex read from before: not yet after)
+                    after = np.where(np.asarray(side) < 0, s > first, s >= first - 1e-12 * Lc)
+                    lead = k.state(s, "leading", side)
                     st = {key: (np.where(after.reshape(after.shape + (1,) * (np.ndim(val) - 1)), lead[key], val)
                                 if isinstance(val, np.ndarray) and np.shape(val)[:1] == s.shape else val)
                           for key, val in st.items()}
@@ -591,7 +595,8 @@ class ChainDwell(Mechanism):
         r1 = self.path.r1
         th1 = angle0 + speed * (t - t[0])
         s = r1 * th1
-        st = self.prescribed_branch(s, s[0] if len(s) else 0.0)
+        # each instant's own side of a junction or apex it lies a snap from (an interval's end read just inside it)
+        st = self.prescribed_branch(s, s[0] if len(s) else 0.0, self.kin.sides_of(s))
         w = r1 * speed
         n = len(t)
         q = np.stack([th1, st["phi"], st["theta"]])
@@ -633,7 +638,10 @@ class ChainDwell(Mechanism):
             A[..., 0, 2] = -1.0
             x = np.linalg.solve(A, rhs[idx][..., None])[..., 0]
             lam[:, idx], torque[idx] = x[:, :2].T, x[:, 2]
-            vals_ro = fm["readouts"](t[idx], qi, vi, ai, lam[:, idx], Pi)
+            # (a read-out with a pole at an apex, the coupler force read from before a crank stop, is inf there: the
+            # value, which the peaks report as unbounded (docs/theory.md §K5), not a fault)
+            with np.errstate(divide="ignore"):
+                vals_ro = fm["readouts"](t[idx], qi, vi, ai, lam[:, idx], Pi)
             for nm, val in zip(fm["names"], vals_ro):
                 ro.setdefault(nm, np.zeros(n))[idx] = np.broadcast_to(np.asarray(val, float), idx.shape)
         ke = 0.5 * np.einsum("in,nij,jn->n", v, M_all, v)

@@ -450,13 +450,25 @@ class ChainPath:
         """The arc piece of sprocket `sprocket` (0-based)."""
         return next(p for p in self.pieces if p.kind == "arc" and p.sprocket == sprocket)
 
-    def locate(self, s, side: int = +1):
+    def locate(self, s, side=+1):
         """(piece index, local travel in [s0, s1]) for chain travel s (any real, wrapped by the length).
 
-        At a junction side=+1 picks the piece starting there, side=-1 the piece ending there. Values within
-        SNAP*length of a junction are snapped onto it.
+        At a junction side=+1 picks the piece starting there, side=-1 the piece ending there (side: one for all
+        values, or one per value). Values within SNAP*length of a junction are snapped onto it.
         """
         s = np.asarray(s, float)
+        sm = self._snapped(s)
+        b = self.boundaries
+        after = np.searchsorted(b, sm, side="right") - 1
+        before = np.searchsorted(b, sm, side="left") - 1
+        k = np.where(np.asarray(side) >= 0, np.where(after >= len(self.pieces), 0, after),
+                     np.where(before < 0, len(self.pieces) - 1, before))
+        sm = np.where(np.asarray(side) >= 0, np.where(sm >= self.length, 0.0, sm),
+                      np.where(before < 0, self.length, sm))
+        return k.astype(int), sm
+
+    def _snapped(self, s: np.ndarray) -> np.ndarray:
+        """The travel s wrapped into [0, length], each value within SNAP*length of a junction put onto it."""
         Lc = self.length
         sm = np.mod(s, Lc)
         b = self.boundaries
@@ -464,16 +476,13 @@ class ChainPath:
         near = np.abs(b[j] - sm) <= self.SNAP * Lc
         jm = np.clip(j - 1, 0, len(b) - 1)
         near_m = np.abs(b[jm] - sm) <= self.SNAP * Lc
-        sm = np.where(near, b[j], np.where(near_m, b[jm], sm))
-        if side >= 0:
-            k = np.searchsorted(b, sm, side="right") - 1
-            k = np.where(k >= len(self.pieces), 0, k)
-            sm = np.where(sm >= Lc, 0.0, sm)
-        else:
-            k = np.searchsorted(b, sm, side="left") - 1
-            sm = np.where(k < 0, Lc, sm)
-            k = np.where(k < 0, len(self.pieces) - 1, k)
-        return k.astype(int), sm
+        return np.where(near, b[j], np.where(near_m, b[jm], sm))
+
+    def snap_shift(self, s) -> np.ndarray:
+        """How far each travel value s is moved by its snap onto a junction (`locate`): positive for a value just
+        before one, negative just after, zero on one or near none."""
+        s = np.asarray(s, float)
+        return self._snapped(s) - np.mod(s, self.length)
 
     def _by_piece(self, k, sm, fns):
         """Apply each fn(piece, s_local) of `fns` piecewise; each returns arrays shaped like s_local (+ trailing
@@ -489,10 +498,10 @@ class ChainPath:
                 outs[j][m] = val
         return [np.zeros(sm.shape + (2,)) if out is None else out for out in outs]
 
-    def derivatives(self, s, order: int = 2, side: int = +1):
+    def derivatives(self, s, order: int = 2, side=+1):
         """B and its s-derivatives up to `order` at travel s: list [B, B', B'', ...], each shape s.shape+(2,)."""
         s = np.asarray(s, float)
-        k, sm = self.locate(s.ravel(), side)
+        k, sm = self.locate(s.ravel(), np.broadcast_to(side, s.shape).ravel())
         res = self._by_piece(k, sm, [lambda p, x, o=o: p.derivative(x, o) for o in range(order + 1)])
         return [r.reshape(s.shape + (2,)) for r in res]
 
@@ -500,13 +509,13 @@ class ChainPath:
         """Position of joint B (m) at chain travel s."""
         return self.derivatives(s, 0, side)[0]
 
-    def piece_index(self, s, side: int = +1):
+    def piece_index(self, s, side=+1):
         return self.locate(np.asarray(s, float), side)[0]
 
-    def radial(self, s, Q, c_outer: float, c_inner: float, side: int = +1):
+    def radial(self, s, Q, c_outer: float, c_inner: float, side=+1):
         """(c_outer^2 - |B-Q|^2, |B-Q|^2 - c_inner^2, (B-Q).B') at travel s, cancellation-free per piece."""
         s = np.asarray(s, float)
-        k, sm = self.locate(s.ravel(), side)
+        k, sm = self.locate(s.ravel(), np.broadcast_to(side, s.shape).ravel())
         gp, gm, rr = self._by_piece(k, sm, [lambda p, x: p.sq_dist_minus(x, Q, c_outer),
                                             lambda p, x: p.sq_dist_minus(x, Q, c_inner),
                                             lambda p, x: p.radial_rate(x, Q)])
