@@ -1005,6 +1005,7 @@ def _refine(ready: list[tuple[Interval, list[_Job], np.ndarray, dict]]) -> None:
     at_lo = (b == 0) & (G[:, 0] == lo)
     at_hi = (b == n_g - 1) & (G[every, n_g - 1] == hi)
     end = at_lo | at_hi | (n_g < STENCIL)            # the one-sided limit at the interval's end
+    at_lo, at_hi = at_lo & ~row, at_hi & ~row        # (where the row itself beats them, no limit is the best)
     c0 = np.minimum(np.maximum(b - STENCIL // 2, 0), np.maximum(n_g - STENCIL, 0))
     part = F[every[:, None], np.minimum(c0[:, None] + np.arange(STENCIL), FIRST_GRID - 1)]
     poly = ~end & np.isfinite(part).all(axis=1) & held
