@@ -205,7 +205,7 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
         rows = [[f"work: {k}", v, "J"] for k, v in energy.get("work_J", {}).items()]
         rows += [["kinetic energy change", energy["kinetic_energy_change_J"], "J"],
                  ["impact losses", energy["impact_losses_J"], "J"], ["closure error", energy["closure_error_J"], "J"],
-                 ["closure error / drive work", energy["closure_error_relative"], "1"]]
+                 ["closure error / the largest energy term", energy["closure_error_relative"], "1"]]
         parts += ["<h2>Energy balance (J)</h2>", _table(["term", "value", "unit"], rows)]
     if s.get("impacts"):
         parts += ["<h2>Impacts</h2>", "<p>pin-flank impacts of the slot clearance (docs/geneva.md, 'Clearance and "
