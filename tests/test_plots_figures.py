@@ -117,3 +117,29 @@ def test_geneva_wheel_outline_has_slots_2R_wide_and_locking_arcs():
     disc = locking_disc_outline(g)
     assert np.hypot(*disc.T).max() == pytest.approx(locking_radius(g), rel=1e-12)
     assert locking_radius(g) < r - R             # the arc clears the slot flanks (r - R from the arc centre)
+
+
+def test_a_column_unbounded_toward_events_is_drawn_clipped_with_its_events_marked():
+    """chain-mech2-kinematic's coupler force grows like 1/distance toward each crank stop (summary peaks,
+    `singular`): at 10 ms rows the last row before a stop reaches 3 to 83 N depending on how near it fell, against
+    0.02-0.03 N elsewhere. The forces panel is ranged on every line's rows farther than POLE_GUARD of the run from
+    the stops, so it holds them all and stops far below the rows next to a stop; each stop is dotted, and the
+    panel says which column is unbounded."""
+    from mechsim.scenarios.output.plots import POLE_GUARD
+    sc = load("chain-mech2-kinematic", [])
+    result = run(sc)
+    figs = figures(result, build_mechanism(sc.si))
+    ax = next(a for a in figs["forces_vs_time"].axes if a.get_ylabel() == "force (N)")
+    df, events = result.timeseries, result.events
+    stops = np.sort(events.loc[events["kind"] == "stop impact", "t_s"].to_numpy(float))
+    assert len(stops) == 4 and [s["t_s"] for s in result.summary["peaks"]["coupler_force_N"]["singular"]] == list(stops)
+    t = df["t_s"].to_numpy(float)
+    far = np.min(np.abs(t[:, None] - stops[None, :]), axis=1) > POLE_GUARD * (t[-1] - t[0])
+    forces = df[["coupler_force_N", "coupler_shear_N", "joint_force_N"]].to_numpy(float)
+    lo, hi = ax.get_ylim()
+    assert lo <= forces[far].min() and hi >= forces[far].max()
+    assert hi < 0.05 * forces.max()
+    (marks,) = [c for c in ax.collections if c.get_label() == "_poles"]
+    dotted = sorted(float(segment[0, 0]) for segment in marks.get_segments())
+    np.testing.assert_allclose(dotted, stops, rtol=0, atol=1e-12)
+    assert any("coupler force: grows without bound toward 4 events" in text.get_text() for text in ax.texts)

@@ -163,9 +163,57 @@ def artist_colours(ax) -> dict[str, str]:
     return out
 
 
-def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None) -> Figure | None:
+#: a column that grows without bound toward an event is drawn to the height it reaches this share of the run (of
+#: the cycle, against angle) away from those events, and clipped nearer
+POLE_GUARD = 0.02
+
+
+def poles_of(summary: dict) -> dict[str, np.ndarray]:
+    """{column: the instants of the events it grows without bound toward} (the summary's peaks, `singular`:
+    docs/theory.md §K5), for the columns that have any."""
+    out = {}
+    for column, entry in (summary.get("peaks") or {}).items():
+        times = sorted({float(s["t_s"]) for s in entry.get("singular") or () if s.get("t_s") is not None})
+        if times:
+            out[column] = np.array(times)
+    return out
+
+
+def clip_poles(ax, x: np.ndarray, lines: list[tuple[str, str, np.ndarray]], poles: dict[str, np.ndarray],
+               guard: float) -> None:
+    """Where a line's column grows without bound toward events (`poles`: {column: their x}), the panel's y-range is
+    what its lines reach farther than `guard` from those events, each event is marked by a dotted line and the
+    panel says so: the rows next to a pole reach a height set by how near the last row fell to it (the chain's
+    coupler force 3 to 83 N before four alike stops at 10 ms rows), which is no property of the design. Every line
+    of the panel is ranged so (the chain's joint force, no located column, shares the coupler force's pole).
+    lines: (column, label, values as drawn at x)."""
+    unbounded = [(c, label) for c, label, _ in lines if c in poles]
+    if not unbounded:
+        return
+    marks = np.unique(np.concatenate([poles[c] for c, _ in unbounded]))
+    i = np.clip(np.searchsorted(marks, x), 1, max(len(marks) - 1, 1))
+    nearest = np.minimum(np.abs(x - marks[i - 1]), np.abs(x - marks[np.minimum(i, len(marks) - 1)]))
+    far = nearest > guard
+    kept = [y[far & np.isfinite(y)] for _, _, y in lines]
+    kept = [y for y in kept if len(y)]
+    if kept:
+        lo, hi = min(float(y.min()) for y in kept), max(float(y.max()) for y in kept)
+        pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.1
+        ax.set_ylim(lo - pad, hi + pad)
+    ax.vlines(marks, 0.0, 1.0, transform=ax.get_xaxis_transform(), colors="0.45", linestyles=":", linewidths=0.9,
+              zorder=0, label="_poles")        # (a collection without gid: no column's line among the data's)
+    names = ", ".join(label for _, label in unbounded)
+    ax.text(0.005, 0.98, f"{names}: grows without bound toward {len(marks)} event{'s' if len(marks) != 1 else ''} "
+            "(dotted); drawn clipped near them", transform=ax.transAxes, ha="left", va="top", fontsize=8,
+            color="0.3")
+
+
+def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None,
+                poles: dict[str, np.ndarray] | None = None) -> Figure | None:
     """One panel per unit against time (the panels of `figure`, or `rows` as `column_panels` makes them); a
-    line with more rows than ROWS_PER_COLUMN per pixel column as its envelope (`trace`), which the title says."""
+    line with more rows than ROWS_PER_COLUMN per pixel column as its envelope (`trace`), which the title says.
+    poles: {column: instants} of the events a column grows without bound toward (`poles_of`), drawn clipped
+    (`clip_poles`)."""
     rows = panels(df, figure) if rows is None else rows
     if not rows:
         return None
@@ -174,9 +222,13 @@ def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | No
     t = df["t_s"].to_numpy(float)
     enveloped = False
     for ax, panel in zip(axes, rows):
+        drawn = []
         for j, (col, label) in enumerate(panel["lines"]):
-            enveloped |= trace(ax, t, df[col].to_numpy(float) * panel["scale"], pixel_columns(fig, ax),
-                               f"C{j % 10}", lw=1.0, label=label, gid=col)
+            y = df[col].to_numpy(float) * panel["scale"]
+            enveloped |= trace(ax, t, y, pixel_columns(fig, ax), f"C{j % 10}", lw=1.0, label=label, gid=col)
+            drawn.append((col, label, y))
+        if poles and len(t) > 1:
+            clip_poles(ax, t, drawn, poles, POLE_GUARD * (t[-1] - t[0]))
         ax.set_ylabel(f"{panel['quantity']} ({panel['unit']})")
         ax.grid(alpha=0.3)
         legend_outside(ax)
@@ -200,11 +252,12 @@ MAX_CYCLE_LINES = 40
 
 
 def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
-                 rows: list[dict] | None = None) -> Figure | None:
+                 rows: list[dict] | None = None, poles: dict[str, np.ndarray] | None = None) -> Figure | None:
     """One panel per unit against the driven member's angle within its cycle, a line per cycle (later cycles
     darker); above MAX_CYCLE_LINES cycles, the envelope over all of them (min to max per pixel column of the
     angle) with the last cycle as a line. Angles of the other members are shown as their change since the cycle
-    started. The panels of `figure`, or `rows` as `column_panels` makes them."""
+    started. The panels of `figure`, or `rows` as `column_panels` makes them. poles: as `time_figure`'s, each
+    event at its place in the cycle."""
     rows = panels(df, figure, exclude=(cycle.column,)) if rows is None else rows
     if not rows or cycle.column not in df:
         return None
@@ -220,9 +273,15 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
     last = (complete or spans)[-1]                   # the last complete cycle drawn as a line among many
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.9), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    if poles and cycle.period:          # each pole at its place in the cycle, as the rows' x
+        t = df["t_s"].to_numpy(float)
+        poles = {c: np.sort((cycle_index(np.interp(p, t, drive), cycle)[1] + cycle.start) * DEG)
+                 for c, p in poles.items()}
     for ax, panel in zip(axes, rows):
+        drawn = []
         for j, (col, label) in enumerate(panel["lines"]):
             y = df[col].to_numpy(float) * panel["scale"]
+            drawn.append((col, label, y))
             colour = f"C{j % 10}"
             if panel["unit"] == "deg" and col.endswith("_angle_rad"):
                 y = y - np.repeat([cycle_start_value(drive, y, a, b, cycle) for a, b in zip(bounds[:-1], bounds[1:])],
@@ -241,6 +300,8 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
                 shade = 0.35 + 0.65 * (n + 1) / len(cycles)
                 ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
                         label=label if n == len(cycles) - 1 else "_nolegend_")
+        if poles and cycle.period:
+            clip_poles(ax, x, drawn, poles, POLE_GUARD * cycle.period * DEG)
         since = "the cycle start" if cycle.period else "the start"
         quantity = f"angle turned since {since}" if panel["unit"] == "deg" else panel["quantity"]
         ax.set_ylabel(f"{quantity} ({panel['unit']})")
@@ -330,10 +391,11 @@ def figure_makers(result: Result, mechanism=None) -> list:
         return make
 
     makers = []
+    poles = poles_of(result.summary)
     for group in FIGURES:
-        makers.append(one(f"{group}_vs_time", time_figure, df, group, f"{name}: {group}"))
+        makers.append(one(f"{group}_vs_time", time_figure, df, group, f"{name}: {group}", None, poles))
         if cycle is not None and group in PER_CYCLE:
-            makers.append(one(f"{group}_vs_angle", angle_figure, df, group, f"{name}: {group}", cycle))
+            makers.append(one(f"{group}_vs_angle", angle_figure, df, group, f"{name}: {group}", cycle, None, poles))
     instants = result.scenario.get("output", {}).get("drawing_instants", 4)
     makers.append(one("mechanism", drawing_figure, df, mechanism, instants, cycle))
     if mechanism is not None:
