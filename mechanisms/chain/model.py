@@ -557,8 +557,8 @@ class ChainDwell(Mechanism):
         stop: the starting root up to the first apex, the leading root after it (a stop turns F into D, and D
         is never left at an apex); smooth: the analytic continuation (chain_dwell 'smooth') from the start;
         detuned: the starting root (no apex exists). side: at a junction or apex, the limit from before (-1) or
-        after (+1), one for all values or one per value (`ChainDwellMechanism.sides_of`). Sources: docs/theory.md §K1.2,
-        §1.5; docs/chain_dwell.md §7.
+        after (+1), one for all values or one per value (`ChainDwellMechanism.sides_of`). Sources: docs/theory.md
+        §K1.2, §1.5; docs/chain_dwell.md §7.
         """
         k = self.kin
         if self.apex == "smooth":
