@@ -1113,10 +1113,16 @@ def console_lines(summary: dict) -> list[str]:
     return ([line] if line else []) + out
 
 
+#: the console shows a number this small against its column's largest as 0 (`console_line`)
+ROUNDOFF_SHOWN = 1e-12
+
+
 def console_line(peaks: dict) -> str | None:
     """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
     instant, its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
-    whether they are located or the rows' (the full entries are in summary.json)."""
+    whether they are located or the rows' (the full entries are in summary.json). A number within ROUNDOFF_SHOWN of
+    the column's largest shown magnitude is shown as 0: a closed form's zero (a chain's drive torque in a dwell,
+    -3.3e-19 N m) is round-off of the terms it is computed from, not a value."""
     parts = []
     for col in CONSOLE_COLUMNS:
         e = peaks.get(col)
@@ -1124,14 +1130,19 @@ def console_line(peaks: dict) -> str | None:
             continue
         hi, lo = e["max"], e["min"]
         tag = "" if e["how"].startswith("located") else " (rows)"
+        start = e.get("startup", {}).get("max")
+        turn = e.get("periodic") or e.get("cycle") or {}
+        scale = max((abs(v) for v in (hi["value"], lo["value"], (start or {}).get("value"), turn.get("mean"))
+                     if v is not None and math.isfinite(v)), default=0.0)
+
+        def number(v: float) -> str:
+            return "0" if abs(v) <= ROUNDOFF_SHOWN * scale else f"{v:.5g}"
 
         def shown(x):
-            return "unbounded" if x["value"] is None else f"{x['value']:.5g}"
-        start = e.get("startup", {}).get("max")
+            return "unbounded" if x["value"] is None else number(x["value"])
         beside = f", start-up max {shown(start)}" if start else ""
-        turn = e.get("periodic") or e.get("cycle") or {}
         if turn.get("mean") is not None or turn.get("unbounded"):
-            mean = "unbounded" if turn.get("unbounded") else f"{turn['mean']:.5g}"
+            mean = "unbounded" if turn.get("unbounded") else number(turn["mean"])
             beside += f", mean {mean} over the last turn"
         parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{beside}){tag}")
     return "peaks, min .. max: " + "; ".join(parts) if parts else None

@@ -144,3 +144,16 @@ def test_a_sweep_row_carries_the_located_means():
     np.testing.assert_allclose(w * table["cycle_mean_drive_torque_N_m"],
                                table["load.wheel_torque_N_m"] * w / 4 + table["cycle_mean_friction_power_W"], rtol=1e-9)
     assert table["cycle_mean_temp_contact_C"].isna().all()
+
+
+def test_the_console_shows_a_closed_form_zero_as_zero():
+    """chain-mech2-kinematic's drive torque is zero in a dwell (the crank held, the chain unloaded): its located
+    minimum is -3.3e-19 N m, the round-off of the inverse dynamics' terms, and the console shows 0 for it (the
+    summary keeps the number); a value above round-off of the column's scale keeps its digits."""
+    from mechsim.scenarios.peaks import ROUNDOFF_SHOWN, console_lines
+    r = mechsim.run(mechsim.load("chain-mech2-kinematic", set=["output.plots=false"]))
+    torque = r.summary["peaks"]["drive_torque_N_m"]
+    assert 0.0 < abs(torque["min"]["value"]) <= ROUNDOFF_SHOWN * torque["max"]["value"]
+    line = console_lines(r.summary)[0]
+    assert f"drive_torque_N_m 0 .. {torque['max']['value']:.5g} (max at" in line
+    assert f"mean {torque['cycle']['mean']:.5g} over the last turn" in line
