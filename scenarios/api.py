@@ -102,15 +102,16 @@ class Result(RunResult):
     def _columns_figure(self, columns: list[str], x: str):
         import pandas as pd
 
-        from mechsim.scenarios.output.plots import angle_figure, column_panels, time_figure
+        from mechsim.scenarios.output.plots import angle_figure, column_panels, poles_of, time_figure
         df = self.timeseries
         bad = [c for c in columns if not pd.api.types.is_numeric_dtype(df[c])]
         if bad:
             raise ValueError(f"column {', '.join(map(repr, bad))} is not numeric; plot takes numeric columns")
         title = f"{self.summary.get('scenario', '')}: {', '.join(columns)}"
         rows = column_panels(df, columns)
+        poles = poles_of(self.summary)             # a column unbounded toward events: drawn clipped
         if x == "time":
-            return time_figure(df, "", title, rows=rows)
+            return time_figure(df, "", title, rows=rows, poles=poles)
         mechanism = self.mechanism
         if mechanism is None and self.scenario:
             from mechsim.scenarios.loader import build_mechanism
@@ -118,7 +119,7 @@ class Result(RunResult):
         cycle = mechanism.drive_cycle() if mechanism is not None else None
         if cycle is None or cycle.column not in df:
             raise ValueError("plot(x=\"angle\"): this run has no drive cycle to fold over; use x=\"time\"")
-        return angle_figure(df, "", title, cycle, rows=rows)
+        return angle_figure(df, "", title, cycle, rows=rows, poles=poles)
 
     def output_size(self):
         """The size of this run's tables as `save` writes them, measured from the table (an OutputSize,
