@@ -143,3 +143,6 @@ def test_a_column_unbounded_toward_events_is_drawn_clipped_with_its_events_marke
     dotted = sorted(float(segment[0, 0]) for segment in marks.get_segments())
     np.testing.assert_allclose(dotted, stops, rtol=0, atol=1e-12)
     assert any("coupler force: grows without bound toward 4 events" in text.get_text() for text in ax.texts)
+    import mechsim
+    own = mechsim.run(sc).plot(["coupler_force_N"]).axes[0]   # a figure of chosen columns draws it so too
+    assert own.get_ylim()[1] < 0.05 * forces.max() and any("grows without bound" in x.get_text() for x in own.texts)
