@@ -123,6 +123,8 @@ def test_solver_failure_exits_3(tmp_path):
     r = invoke("run", "geneva-motor", "--out", out, "--quiet", "--set", "solver.max_steps=3")
     assert r.exit_code == 3
     assert "IDA failed" in r.stderr
+    # the hint names the budget that ran out and its value, what a user changes first
+    assert "raise solver.max_steps" in r.stderr and "solver.max_steps = 3 steps" in r.stderr
     assert json.loads((out / "summary.json").read_text())["failure_code"] == "max_steps"
 
 

@@ -58,10 +58,14 @@ class IdaBackend(Backend):
 
     def hint(self, code: FailureCode) -> str:
         formulation = self.settings.formulation
-        if formulation == "index3":
+        if formulation == "index3":             # the likely cause, whichever way IDA gave up
             return ("the index-3 form is the likely cause: its Newton matrix is conditioned like h^-3 and the "
                     "error test breaks down at restarts and tight tolerances (docs/theory.md §K4); use "
                     "formulation = 'index2'")
+        if code is FailureCode.MAX_STEPS:       # IDA_TOO_MUCH_WORK: its step budget between two output rows spent
+            return (f"IDA took solver.max_steps = {self.settings.max_steps} steps without reaching the next output "
+                    "row: raise solver.max_steps, or shorten output_step; if it is spent at any budget, check for a "
+                    "singular configuration at this point")
         other = "index2" if formulation == "index1" else "index1"
         return (f"tighten or loosen rtol; formulation = '{other}' (or solver.backend = 'diffrax') where "
                 f"{formulation} fails; check for a singular configuration at this point")
