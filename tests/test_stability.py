@@ -163,3 +163,16 @@ def test_a_failing_ida_run_through_the_api_prints_nothing(capfd):
     # where index-3 breaks down: the first restart, the entry at crank angle -pi/4 (docs/theory.md §K4)
     assert r.summary["solver"]["recoveries"] >= 1
     assert "index-3" in r.summary["failure"] and "crank = -0.785398 rad" in r.summary["failure"]
+
+
+@pytest.mark.skipif(importlib.util.find_spec("diffrax") is None, reason="diffrax not installed")
+def test_a_small_step_budget_is_not_called_stiffness(tmp_path):
+    """geneva-motor on Tsit5 with solver.max_steps = 50: the first segment spends its 50 steps in 0.09 s (mean
+    1.8 ms, what rtol 1e-8 asks for) while the fastest eigenvalue (250 1/s) would allow 14 ms: the budget ran out,
+    stiffness did not hold the steps. The message says to raise solver.max_steps and does not send the user to
+    an implicit solver or to lower Baumgarte gains that are already 10."""
+    r = runner.invoke(app, ["run", "geneva-motor", "--out", str(tmp_path / "o"), "--quiet", "--set",
+                            "output.plots=false", "--set", 'solver.backend="diffrax"', "--set", "solver.max_steps=50"])
+    assert r.exit_code == 3, r.output
+    assert "raise solver.max_steps" in r.stderr
+    assert "stiff" not in r.stderr and "Baumgarte" not in r.stderr

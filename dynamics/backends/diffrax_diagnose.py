@@ -6,7 +6,8 @@ controller keeps it stable by taking steps near c/|lambda_max| (c ~ 2-3.5, the e
 on the negative real axis; Hairer & Wanner II, IV.2), so it "only" runs out of steps. When such a run stops on
 its step limit, the fastest eigenvalue of the vector field at the last output is computed (jax.jacfwd of the
 same jax vector field diffrax integrated); if the steps it implies for the remaining time exceed the limit, the
-failure is reported as stiffness, with the time constant, the states that carry it and what works instead.
+failure is reported as stiffness, with the time constant, the states that carry it and what works instead, where
+the segment's steps were held near that bound (`HELD`).
 """
 from __future__ import annotations
 
@@ -18,6 +19,10 @@ from mechsim.dynamics.result import FailureCode
 #: stability limit |h lambda| of explicit methods on the negative real axis (approximate; Hairer & Wanner II)
 STABILITY_LIMIT = {"Euler": 2.0, "Heun": 2.0, "Midpoint": 2.0, "Ralston": 2.0, "Bosh3": 2.5, "Tsit5": 3.5,
                    "Dopri5": 3.3, "Dopri8": 6.0}
+#: a segment whose mean step is at least this share of the stability-limited step was held there (a step
+#: controller on a stiff problem hovers near that bound); one whose steps were far shorter ran out of its budget
+#: on the steps its accuracy asked for (a start's first steps, a budget of a few steps), not on stiffness
+HELD = 0.2
 
 
 def explain(traj, settings, t_end: float) -> dict | None:
@@ -37,15 +42,17 @@ def explain(traj, settings, t_end: float) -> dict | None:
     c = STABILITY_LIMIT[settings.diffrax_solver]
     h = c / size
     needed = (t_end - f["time"]) / h
-    if needed < 0.5 * settings.max_steps:
-        return f
+    if needed < 0.5 * settings.max_steps or _mean_step(traj, f["time"], settings.max_steps) < HELD * h:
+        return f        # the budget ran out on the steps the accuracy asked for: the backend's hint (raise it)
     cause = (f"; cause: the problem is stiff for the explicit {settings.diffrax_solver}: the fastest eigenvalue "
              f"of the vector field has |lambda| = {size:.3g} 1/s, real part {real:.3g} (time constant "
              f"{1 / size:.2g} s, mostly in "
              f"{', '.join(names)}), which holds an explicit step below about {h:.2g} s, so the remaining "
              f"{t_end - f['time']:.3g} s need about {needed:.2g} steps (solver.max_steps = {settings.max_steps})")
-    gains = max(2 * settings.baumgarte_alpha, settings.baumgarte_beta)
-    baumgarte = mechanical and size >= 0.2 * gains
+    alpha, beta = settings.baumgarte_alpha, settings.baumgarte_beta
+    # the gains' own eigenvalues, the roots of s^2 + 2 alpha s + beta^2 (the constraint's violation), largest |s|
+    gains = alpha + np.sqrt(alpha * alpha - beta * beta) if alpha >= beta else beta
+    baumgarte = mechanical and 0.5 * gains <= size <= 2.0 * gains
     hint = "use an implicit integrator: solver.backend = 'ida' (BDF), or solver.diffrax_solver = 'Kvaerno5'"
     if baumgarte:
         cause += (f"; it comes from the Baumgarte gains (baumgarte_alpha = {settings.baumgarte_alpha:g}, "
@@ -53,6 +60,15 @@ def explain(traj, settings, t_end: float) -> dict | None:
         hint += ("; or lower solver.baumgarte_alpha/beta (about 10 suffices here), or use IDA with formulation = "
                  "'index2', which needs no gains")
     return dict(f, reason=f["reason"] + cause, hint=hint)
+
+
+def _mean_step(traj, t_fail: float, steps: int) -> float:
+    """The mean step of the segment that spent its budget of `steps` (diffrax's max_steps is a segment's): from
+    its start (the last event at or before the failure, else the run's first instant) to the failure."""
+    before = [float(e["t_s"]) for e in traj.events if float(e["t_s"]) <= t_fail]
+    first = next((p for p in traj.pieces if len(p.t)), None)
+    start = max(before) if before else (float(first.t[0]) if first is not None else t_fail)
+    return (t_fail - start) / max(steps, 1)
 
 
 def fastest_mode(traj) -> tuple[float, float, list[str], bool] | None:
