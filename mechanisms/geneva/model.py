@@ -371,13 +371,16 @@ class Geneva(Mechanism):
             "slot": 0.0, "lock_angle": values["lock_angle"] - k * pitch, "slot_base": values["slot_base"] + k}
 
     # the rules that read the state and the parameters only, the same for every Geneva: built once (`transitions`)
+    #: what a user changes after a stall: the scenario's own keys
+    STALL_HINT = ("raise the drive's torque (drive.torque; a motor's drive.stall_torque) or lower the load on the "
+                  "wheel (load.wheel_torque)")
     _STALL = TransitionRule(kind="stall", fields=lambda q, v, p: {"angle": np.degrees(q[0])}, stop=(
         "crank stalled: its speed fell to zero at crank angle {angle:.2f} deg ({mode}); the drive cannot "
-        "carry the load past this point"))
+        "carry the load past this point"), hint=STALL_HINT)
     _REST = TransitionRule(kind="rest", fields=lambda q, v, p: {"angle": np.degrees(q[0]), "speed": v[0]}, stop=(
         "crank stalled: it crept to rest at crank angle {angle:.4f} deg ({mode}), speed {speed:.2e} rad/s with "
         f"speed + {REST_TIME:g} s x |acceleration| below {REST_SPEED:g} rad/s; it settles where the "
-        "drive's torque at zero speed balances the load"))
+        "drive's torque at zero speed balances the load"), hint=STALL_HINT)
     _EXIT = TransitionRule("dwell", lambda q, v, p, xp: {
         "slot": p["slot"] + 1, "lock_angle": (p["slot"] + 0.5) * p["pitch"]}, kind="exit")
     _SLIP_REVERSAL = TransitionRule("engaged", lambda q, v, p, xp: {"slide": -p["slide"]}, kind="slip reversal")
