@@ -430,8 +430,8 @@ class ChainDwell(Mechanism):
                 f"chain stalled and would reverse at drive angle {deg:.5f} deg{where} ({mode}, segment "
                 f"{self.path.pieces[int(values['seg'])].name}); the drive cannot carry the mechanism past this "
                 "point"), kind="reversal",
-                hint="raise the sprocket torque or lower the crank load; with a detuned design (detuning < 0) "
-                     "the fold cannot be passed at all")
+                hint="raise the sprocket torque (drive.torque; a motor's drive.stall_torque) or lower the crank "
+                     "load (load.crank_torque); with a detuned design (detuning < 0) the fold cannot be passed at all")
         if guard == "dead_centre":
             folded = math.cos(q[2] - q[1]) < 0
             return Transition(mode, stop=(
