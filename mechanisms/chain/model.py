@@ -438,7 +438,8 @@ class ChainDwell(Mechanism):
                 f"dyad {'folded' if folded else 'stretched'} (dead centre) at drive angle {deg:.5f} deg on "
                 f"{self.path.pieces[int(values['seg'])].name}: a fold, where the chain must stall and reverse "
                 f"(chain speed {v[0] * self.path.r1:.3g} m/s); the run is not continued through it"),
-                kind="dead centre", hint="set mechanism.detuning >= 0, or mechanism.apex = 'stop' / 'smooth' for an exact design")
+                kind="dead centre",
+                hint="set mechanism.detuning >= 0, or mechanism.apex = 'stop' / 'smooth' for an exact design")
         if guard == "apex":
             far = values["s1"] + self.path.length
             if mode == "swing" and self.apex == "stop":
