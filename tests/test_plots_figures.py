@@ -146,3 +146,29 @@ def test_a_column_unbounded_toward_events_is_drawn_clipped_with_its_events_marke
     import mechsim
     own = mechsim.run(sc).plot(["coupler_force_N"]).axes[0]   # a figure of chosen columns draws it so too
     assert own.get_ylim()[1] < 0.05 * forces.max() and any("grows without bound" in x.get_text() for x in own.texts)
+
+
+def test_a_comparison_clips_the_unbounded_column_of_either_run():
+    """`mechsim compare` overlays two runs: the forces panel is ranged on both runs' rows away from their own stops,
+    each run's stops are dotted (in time: A's four and B's five; in the cycle: the same four places), and both
+    runs' rows farther from them are inside the range."""
+    import mechsim
+    from mechsim.scenarios.output.plots import POLE_GUARD
+    c = mechsim.compare("chain-mech2-kinematic", "chain-mech2-kinematic", set_b={"drive.speed": "1.2 rad/s"})
+    figs = c.plot()
+    stops = [np.sort(r.events.loc[r.events["kind"] == "stop impact", "t_s"].to_numpy(float)) for r in (c.a, c.b)]
+    assert [len(s) for s in stops] == [4, 5]
+    ax = next(a for a in figs["forces_vs_time"].axes if a.get_ylabel() == "force (N)")
+    (marks,) = [m for m in ax.collections if m.get_label() == "_poles"]
+    np.testing.assert_allclose(sorted(float(s[0, 0]) for s in marks.get_segments()), np.sort(np.r_[stops[0], stops[1]]),
+                               rtol=0, atol=1e-12)
+    lo, hi = ax.get_ylim()
+    span = max(r.timeseries["t_s"].iloc[-1] for r in (c.a, c.b))
+    for r, s in zip((c.a, c.b), stops):
+        t = r.timeseries["t_s"].to_numpy(float)
+        f = r.timeseries[["coupler_force_N", "coupler_shear_N", "joint_force_N"]].to_numpy(float)
+        far = np.min(np.abs(t[:, None] - s[None, :]), axis=1) > POLE_GUARD * span
+        assert lo <= f[far].min() and f[far].max() <= hi < 0.05 * f.max()
+    angle = next(a for a in figs["forces_vs_angle"].axes if a.get_ylabel() == "force (N)")
+    (marks,) = [m for m in angle.collections if m.get_label() == "_poles"]
+    assert len(marks.get_segments()) == 4

@@ -179,22 +179,34 @@ def poles_of(summary: dict) -> dict[str, np.ndarray]:
     return out
 
 
-def clip_poles(ax, x: np.ndarray, lines: list[tuple[str, str, np.ndarray]], poles: dict[str, np.ndarray],
+def clip_poles(ax, runs: list[tuple[np.ndarray, list[tuple[str, str, np.ndarray]], dict[str, np.ndarray]]],
                guard: float) -> None:
-    """Where a line's column grows without bound toward events (`poles`: {column: their x}), the panel's y-range is
-    what its lines reach farther than `guard` from those events, each event is marked by a dotted line and the
-    panel says so: the rows next to a pole reach a height set by how near the last row fell to it (the chain's
-    coupler force 3 to 83 N before four alike stops at 10 ms rows), which is no property of the design. Every line
-    of the panel is ranged so (the chain's joint force, no located column, shares the coupler force's pole).
-    lines: (column, label, values as drawn at x)."""
-    unbounded = [(c, label) for c, label, _ in lines if c in poles]
-    if not unbounded:
+    """Where a line's column grows without bound toward events, the panel's y-range is what its lines reach
+    farther than `guard` from those events, each event is marked by a dotted line and the panel says so: the rows
+    next to a pole reach a height set by how near the last row fell to it (the chain's coupler force 3 to 83 N
+    before four alike stops at 10 ms rows), which is no property of the design. Every line of a run that has such
+    a column is ranged so (the chain's joint force, no located column, shares the coupler force's pole).
+    runs: per run drawn on the panel (one, or a comparison's two), (its x, its lines as (column, label, values as
+    drawn at x), its poles: {column: the events' x}, `poles_of`)."""
+    names, marks, kept = {}, [], []
+    for x, lines, poles in runs:
+        own = []
+        for c, label, _ in lines:
+            if c in poles:
+                names.setdefault(label, None)           # (each column named once, in the panel's order)
+                own.append(poles[c])
+        at = np.unique(np.concatenate(own)) if own else np.zeros(0)
+        far = np.ones(len(x), dtype=bool)
+        if len(at):
+            i = np.clip(np.searchsorted(at, x), 1, max(len(at) - 1, 1))
+            far = np.minimum(np.abs(x - at[i - 1]), np.abs(x - at[np.minimum(i, len(at) - 1)])) > guard
+        marks.append(at)
+        kept += [y[far & np.isfinite(y)] for _, _, y in lines]
+    marks = np.unique(np.concatenate(marks)) if marks else np.zeros(0)
+    if not len(marks):
         return
-    marks = np.unique(np.concatenate([poles[c] for c, _ in unbounded]))
-    i = np.clip(np.searchsorted(marks, x), 1, max(len(marks) - 1, 1))
-    nearest = np.minimum(np.abs(x - marks[i - 1]), np.abs(x - marks[np.minimum(i, len(marks) - 1)]))
-    far = nearest > guard
-    kept = [y[far & np.isfinite(y)] for _, _, y in lines]
+    # (the same place of two runs' cycles, read from each run's rows, is one mark)
+    marks = marks[np.r_[True, np.diff(marks) > 1e-6 * max(float(np.ptp(marks)), guard)]]
     kept = [y for y in kept if len(y)]
     if kept:
         lo, hi = min(float(y.min()) for y in kept), max(float(y.max()) for y in kept)
@@ -202,10 +214,17 @@ def clip_poles(ax, x: np.ndarray, lines: list[tuple[str, str, np.ndarray]], pole
         ax.set_ylim(lo - pad, hi + pad)
     ax.vlines(marks, 0.0, 1.0, transform=ax.get_xaxis_transform(), colors="0.45", linestyles=":", linewidths=0.9,
               zorder=0, label="_poles")        # (a collection without gid: no column's line among the data's)
-    names = ", ".join(label for _, label in unbounded)
-    ax.text(0.005, 0.98, f"{names}: grows without bound toward {len(marks)} event{'s' if len(marks) != 1 else ''} "
-            "(dotted); drawn clipped near them", transform=ax.transAxes, ha="left", va="top", fontsize=8,
-            color="0.3")
+    ax.text(0.005, 0.98, f"{', '.join(names)}: grows without bound toward {len(marks)} "
+            f"event{'s' if len(marks) != 1 else ''} (dotted); drawn clipped near them", transform=ax.transAxes,
+            ha="left", va="top", fontsize=8, color="0.3")
+
+
+def poles_in_cycle(poles: dict[str, np.ndarray], t: np.ndarray, drive: np.ndarray,
+                   cycle: DriveCycle) -> dict[str, np.ndarray]:
+    """`poles_of`'s instants as places in the drive cycle (deg, the x of `angle_figure`), sorted (each instant's own
+    place: not `cycle_index`, whose last row closes the cycle before it)."""
+    return {c: np.sort((np.mod(np.interp(p, t, drive) - cycle.start, cycle.period) + cycle.start) * DEG)
+            for c, p in poles.items()}
 
 
 def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | None = None,
@@ -228,7 +247,7 @@ def time_figure(df: pd.DataFrame, figure: str, title: str, rows: list[dict] | No
             enveloped |= trace(ax, t, y, pixel_columns(fig, ax), f"C{j % 10}", lw=1.0, label=label, gid=col)
             drawn.append((col, label, y))
         if poles and len(t) > 1:
-            clip_poles(ax, t, drawn, poles, POLE_GUARD * (t[-1] - t[0]))
+            clip_poles(ax, [(t, drawn, poles)], POLE_GUARD * (t[-1] - t[0]))
         ax.set_ylabel(f"{panel['quantity']} ({panel['unit']})")
         ax.grid(alpha=0.3)
         legend_outside(ax)
@@ -274,9 +293,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.9), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     if poles and cycle.period:          # each pole at its place in the cycle, as the rows' x
-        t = df["t_s"].to_numpy(float)
-        poles = {c: np.sort((cycle_index(np.interp(p, t, drive), cycle)[1] + cycle.start) * DEG)
-                 for c, p in poles.items()}
+        poles = poles_in_cycle(poles, df["t_s"].to_numpy(float), drive, cycle)
     for ax, panel in zip(axes, rows):
         drawn = []
         for j, (col, label) in enumerate(panel["lines"]):
@@ -301,7 +318,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
                 ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
                         label=label if n == len(cycles) - 1 else "_nolegend_")
         if poles and cycle.period:
-            clip_poles(ax, x, drawn, poles, POLE_GUARD * cycle.period * DEG)
+            clip_poles(ax, [(x, drawn, poles)], POLE_GUARD * cycle.period * DEG)
         since = "the cycle start" if cycle.period else "the start"
         quantity = f"angle turned since {since}" if panel["unit"] == "deg" else panel["quantity"]
         ax.set_ylabel(f"{quantity} ({panel['unit']})")

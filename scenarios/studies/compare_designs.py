@@ -243,19 +243,26 @@ class Comparison:
         return figs
 
     def _time(self, rows, title):
-        from mechsim.scenarios.output.plots import artist_colours, pixel_columns, time_figure, trace
+        from mechsim.scenarios.output.plots import (POLE_GUARD, artist_colours, clip_poles, pixel_columns, poles_of,
+                                                    time_figure, trace)
         fig = time_figure(self.a.timeseries, "", title, rows=rows)
-        t = self.b.timeseries["t_s"].to_numpy(float)
+        ta, t = self.a.timeseries["t_s"].to_numpy(float), self.b.timeseries["t_s"].to_numpy(float)
+        poles = poles_of(self.a.summary), poles_of(self.b.summary)
+        span = max(ta[-1] - ta[0], t[-1] - t[0]) if len(ta) and len(t) else 0.0
         for ax, panel in zip(fig.axes, rows):
             colours = artist_colours(ax)              # a long run's lines are envelopes (plots.trace)
             for col, label in panel["lines"]:
                 trace(ax, t, self.b.timeseries[col].to_numpy(float) * panel["scale"], pixel_columns(fig, ax),
                       colours[col], lw=1.0, ls="--", label=f"{label} (B)", gid=f"B:{col}")
+            if any(poles) and span > 0:               # a column unbounded toward events in either run
+                clip_poles(ax, _drawn(panel, [(ta, self.a.timeseries, poles[0]), (t, self.b.timeseries, poles[1])]),
+                           POLE_GUARD * span)
             _relabel(ax)
         return fig
 
     def _angle(self, rows, title):
-        from mechsim.scenarios.output.plots import DEG, angle_figure, cycle_index, cycle_start_value
+        from mechsim.scenarios.output.plots import (DEG, POLE_GUARD, angle_figure, clip_poles, cycle_index,
+                                                    cycle_start_value, poles_in_cycle, poles_of)
         ca, cb = self._cycles()
         fig = angle_figure(self.a.timeseries, "", title, ca, rows=rows)
         df = self.b.timeseries
@@ -263,6 +270,12 @@ class Comparison:
         k, within = cycle_index(drive, cb)
         xb = (within + cb.start) * DEG
         bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+        # a column unbounded toward events in either run, each event at its place in its run's cycle
+        da = self.a.timeseries
+        drive_a = da[ca.column].to_numpy(float)
+        poles = [poles_in_cycle(poles_of(r.summary), d["t_s"].to_numpy(float), dr, c) if c.period else {}
+                 for r, d, dr, c in ((self.a, da, drive_a, ca), (self.b, df, drive, cb))]
+        xa = (cycle_index(drive_a, ca)[1] + ca.start) * DEG
         for ax, panel in zip(fig.axes, rows):
             colours = {line.get_gid().split("#")[0]: line.get_color() for line in ax.get_lines()}
             for col, label in panel["lines"]:
@@ -274,6 +287,9 @@ class Comparison:
                     ax.plot(xb[lo:hi], yy, lw=1.0, ls="--", color=colours[col], gid=f"B:{col}#cycle{k[lo]}",
                             alpha=0.35 + 0.65 * (n + 1) / (len(bounds) - 1),
                             label=f"{label} (B)" if n == len(bounds) - 2 else "_nolegend_")
+            if any(poles) and panel["unit"] != "deg":       # (an angle panel shows turns since the cycle start)
+                clip_poles(ax, _drawn(panel, [(xa, da, poles[0]), (xb, df, poles[1])]),
+                           POLE_GUARD * max(ca.period or 0.0, cb.period or 0.0) * DEG)
             _relabel(ax)
         return fig
 
@@ -291,6 +307,12 @@ class Comparison:
             for stem, fig in figs.items():
                 save_png(fig, tmp / f"{stem}.png")
         return folder
+
+
+def _drawn(panel: dict, runs: list[tuple]) -> list[tuple]:
+    """`plots.clip_poles`' runs: per (x, table, poles), the panel's columns of that table as drawn at x."""
+    return [(x, [(c, label, df[c].to_numpy(float) * panel["scale"]) for c, label in panel["lines"]], poles)
+            for x, df, poles in runs]
 
 
 def _relabel(ax) -> None:
