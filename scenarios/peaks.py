@@ -1113,16 +1113,30 @@ def console_lines(summary: dict) -> list[str]:
     return ([line] if line else []) + out
 
 
-#: the console shows a number this small against its column's largest as 0 (`console_line`)
+#: the console and the report show a number this small against its column's largest as 0 (`as_shown`)
 ROUNDOFF_SHOWN = 1e-12
+
+
+def column_scale(entry: dict) -> float:
+    """The largest finite magnitude a column's entry shows: its max, min, start-up max and min and turn mean."""
+    turn = entry.get("periodic") or entry.get("cycle") or {}
+    shown = [entry.get("max", {}).get("value"), entry.get("min", {}).get("value"), turn.get("mean")]
+    shown += [x.get("value") for x in (entry.get("startup") or {}).values() if isinstance(x, dict)]
+    return max((abs(v) for v in shown if v is not None and math.isfinite(v)), default=0.0)
+
+
+def as_shown(value: float, scale: float) -> float:
+    """A peak or mean as a designer reads it: 0 where it is within ROUNDOFF_SHOWN of its column's `scale`
+    (`column_scale`; a closed form's zero is round-off of the terms it is computed from, a chain's drive torque in a
+    dwell -3.3e-19 N m), else the value itself; summary.json keeps every number as computed."""
+    return 0.0 if abs(value) <= ROUNDOFF_SHOWN * scale else value
 
 
 def console_line(peaks: dict) -> str | None:
     """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
     instant, its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
-    whether they are located or the rows' (the full entries are in summary.json). A number within ROUNDOFF_SHOWN of
-    the column's largest shown magnitude is shown as 0: a closed form's zero (a chain's drive torque in a dwell,
-    -3.3e-19 N m) is round-off of the terms it is computed from, not a value."""
+    whether they are located or the rows' (the full entries are in summary.json); a round-off zero as 0
+    (`as_shown`)."""
     parts = []
     for col in CONSOLE_COLUMNS:
         e = peaks.get(col)
@@ -1132,11 +1146,10 @@ def console_line(peaks: dict) -> str | None:
         tag = "" if e["how"].startswith("located") else " (rows)"
         start = e.get("startup", {}).get("max")
         turn = e.get("periodic") or e.get("cycle") or {}
-        scale = max((abs(v) for v in (hi["value"], lo["value"], (start or {}).get("value"), turn.get("mean"))
-                     if v is not None and math.isfinite(v)), default=0.0)
+        scale = column_scale(e)
 
         def number(v: float) -> str:
-            return "0" if abs(v) <= ROUNDOFF_SHOWN * scale else f"{v:.5g}"
+            return f"{as_shown(v, scale):.5g}"
 
         def shown(x):
             return "unbounded" if x["value"] is None else number(x["value"])

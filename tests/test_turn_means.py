@@ -157,3 +157,6 @@ def test_the_console_shows_a_closed_form_zero_as_zero():
     line = console_lines(r.summary)[0]
     assert f"drive_torque_N_m 0 .. {torque['max']['value']:.5g} (max at" in line
     assert f"mean {torque['cycle']['mean']:.5g} over the last turn" in line
+    from mechsim.scenarios.output.report_html import report_html
+    html = report_html(r, {})                         # report.html's peaks table alike
+    assert f"{torque['min']['value']:.6g}" not in html and f"{torque['max']['value']:.6g}" in html

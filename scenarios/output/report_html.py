@@ -185,18 +185,21 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
                       "are the periodic regime's, the start-up's are listed beside them</p>"]
         else:
             parts += ["<h2>Peaks</h2>"]
+        from mechsim.scenarios.peaks import as_shown, column_scale
         rows = []
         for c, p in peaks.items():
             picks = [(side, p[side]) for side in ("max", "min")]
             picks += [(f"start-up {side}", x) for side, x in p.get("startup", {}).items()]
             words, unit = quantity(c)
-            rows += [[words, side, "unbounded" if x["value"] is None else x["value"], unit or "1", x["t_s"],
-                      x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
+            scale = column_scale(p)                 # a round-off zero shown as 0 (summary.json keeps it)
+            rows += [[words, side, "unbounded" if x["value"] is None else as_shown(x["value"], scale), unit or "1",
+                      x["t_s"], x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
             turn = p.get("periodic") or p.get("cycle")
             if turn and (turn.get("mean") is not None or turn.get("unbounded")):   # (none: defined only in contact)
                 a, b = turn["mean_over"]
                 rows.append([words, "mean over the periodic turn" if "periodic" in p else "mean over the last drive "
-                             "cycle", "unbounded" if turn.get("unbounded") else turn["mean"], unit or "1",
+                             "cycle", "unbounded" if turn.get("unbounded") else as_shown(turn["mean"], scale),
+                             unit or "1",
                              f"{a:.6g} .. {b:.6g}", "", "", turn.get("how", p.get("how", ""))])
         parts += [_table(["quantity", "", "value", "unit", "t (s)", "drive angle, wrapped (deg)", "at", "how"], rows)]
     parts += _validity(s.get("validity"))
