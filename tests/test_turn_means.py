@@ -160,3 +160,5 @@ def test_the_console_shows_a_closed_form_zero_as_zero():
     from mechsim.scenarios.output.report_html import report_html
     html = report_html(r, {})                         # report.html's peaks table alike
     assert f"{torque['min']['value']:.6g}" not in html and f"{torque['max']['value']:.6g}" in html
+    start = r.summary["peaks"]["crank_speed_rad_s"]["min"]    # at the run's start: drive angle 1.35e-10 deg
+    assert 0.0 < abs(start["drive_angle_wrapped_deg"]) < 1e-9 and f"{start['drive_angle_wrapped_deg']:.6g}" not in html

@@ -162,6 +162,13 @@ def _validity(section: dict | None) -> list[str]:
     return ["<h2>Validity</h2>", head, f"<table><tr>{header}</tr>{''.join(rows)}</table>"]
 
 
+def _angle_shown(deg):
+    """A wrapped drive angle (-180..180 deg) as read: round-off of 0 shown as 0 (`peaks.as_shown` over half a
+    turn: a Geneva's mid-engagement at 1.5e-11 deg)."""
+    from mechsim.scenarios.peaks import as_shown
+    return deg if deg is None else as_shown(deg, 180.0)
+
+
 def report_html(result: Result, pngs: dict[str, bytes]) -> str:
     """The page as a string; `pngs` maps figure stems to PNG bytes."""
     s = result.summary
@@ -193,7 +200,8 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
             words, unit = quantity(c)
             scale = column_scale(p)                 # a round-off zero shown as 0 (summary.json keeps it)
             rows += [[words, side, "unbounded" if x["value"] is None else as_shown(x["value"], scale), unit or "1",
-                      x["t_s"], x["drive_angle_wrapped_deg"], x.get("at", ""), p.get("how", "")] for side, x in picks]
+                      x["t_s"], _angle_shown(x["drive_angle_wrapped_deg"]), x.get("at", ""), p.get("how", "")]
+                     for side, x in picks]
             turn = p.get("periodic") or p.get("cycle")
             if turn and (turn.get("mean") is not None or turn.get("unbounded")):   # (none: defined only in contact)
                 a, b = turn["mean_over"]
