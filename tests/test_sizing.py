@@ -426,3 +426,52 @@ def test_a_sizing_limit_may_name_the_maximum(scenario_file):
     (check,) = result.summary["verification"]["limits"]
     assert check["quantity"] == "max_contact_force_N" and check["holds"]
     assert check["run_value"] == pytest.approx(N_MAX, rel=1e-6)
+
+
+class _Trace:
+    """A sizing problem's callback face (`record`, `f`, `violation`) replaying given objectives and violations."""
+
+    def __init__(self, objectives, violations):
+        self.objectives, self.violations, self.rows = iter(objectives), iter(violations), []
+
+    def record(self, u):
+        self.rows.append(u)
+
+    def f(self, u):
+        return next(self.objectives)
+
+    def violation(self, u):
+        return next(self.violations)
+
+
+def test_slsqp_is_stopped_where_its_iterates_settle_at_a_feasible_design():
+    """scipy's SLSQP since 1.16 went on cycling in its line search at the optimum of a sizing whose values carry a
+    run's integration noise (docs/sensitivity.md's first example: 43 iterations and 62 runs where scipy 1.15 took 7
+    and 9). The callback ends it once SETTLED iterations in a row changed the normalised objective by at most the
+    tolerance at a feasible design, the classic SLSQP test; not while a limit is still broken, nor on one small
+    change."""
+    from mechsim.scenarios.studies.sizing import FEASIBLE, SETTLED, _Settled, _settling
+    assert SETTLED == 2
+    callback = _settling(_Trace([1.0, 0.6, 0.6 + 1e-9, 0.6 + 2e-9], [0.1, 0.0, 0.0, 0.0]), 1e-7)
+    for u in range(3):
+        callback(np.array([u]))
+    with pytest.raises(_Settled) as stop:
+        callback(np.array([3.0]))
+    assert stop.value.u.tolist() == [3.0]
+    broken = _settling(_Trace([0.6, 0.6, 0.6, 0.6, 0.6], [0.0, 10 * FEASIBLE, 0.0, 10 * FEASIBLE, 0.0]), 1e-7)
+    for u in range(5):                # every other iterate breaks a limit: never two feasible in a row
+        broken(np.array([u]))
+
+
+def test_a_sizing_on_noisy_runs_converges_in_few_runs():
+    """docs/sensitivity.md's first sizing (geneva-motor for 2 s: the smallest crank radius with the peak contact
+    force <= 200 N and the index time <= 0.3 s, varying the motor's stall torque too; runs at rtol 1e-8, whose
+    values carry 1e-9 of noise) converges within a dozen iterations and runs with both limits met, whichever
+    scipy: SLSQP of scipy 1.17 alone took 43 iterations and 62 runs to the same design."""
+    result = mechsim.size("geneva-motor", vary=["mechanism.crank_radius=40:120 mm", "drive.stall_torque=20:80 N*m"],
+                          minimize="mechanism.crank_radius",
+                          subject_to=["peak_contact_force_N <= 200", "index_time_s <= 0.3"], set=["duration=2 s"])
+    h = result.history
+    assert len(h) - 1 <= 12 and h["evaluations"].iloc[-1] <= 16
+    assert result.values["mechanism.crank_radius"] == pytest.approx(0.0855134545, rel=1e-7)
+    assert all(c["value"] <= c["limit"] * (1 + 1e-8) for c in result.constraints)
