@@ -9,6 +9,10 @@ heat maps over the first two varied parameters; drawn half in a forked process w
                                  parameters share a cell, reduced by the aggregate the title names (max of a
                                  peak_max_*, min of a peak_min_*, else mean); plus heatmap_success.png (share
                                  of cases that ran to the end)
+
+Cases are compared only as finely as their runs resolve them (`resolution`): a quantity whose cases differ by less
+than TOLERANCES_RESOLVED x the runs' rtol of its column's scale is drawn as one value,
+its panel or colour scale not stretched over integration noise, and says so.
 """
 from __future__ import annotations
 
@@ -25,6 +29,10 @@ from mechsim.scenarios.studies.sweep.rows import KEY_FIGURES
 MAX_LINES = 8
 #: at most this many small multiples (values of the third parameter); beyond, it joins the aggregated ones
 MAX_PANELS = 16
+#: cases whose values differ by less than this many of the runs' rtol (times the column's scale) are not resolved
+TOLERANCES_RESOLVED = 10
+#: figures that are no computed physical quantity: every difference between cases is real
+EXACT_FIGURES = ("case_wall_time_s", "impacts_per_turn_max")
 
 
 def _safe(name: str) -> str:
@@ -64,7 +72,45 @@ def figure_columns(df: pd.DataFrame) -> list[str]:
     return [c for c in KEY_FIGURES if c in df and _numeric(df[c]) and df[c].notna().any()]
 
 
-def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[str], log_x: bool = False) -> Figure:
+def run_tolerance(pl) -> float:
+    """The largest solver.rtol among a sweep's cases (a closed form's columns are exact to round-off, but its
+    thermal states are integrated at that rtol; below it no difference between cases matters in a figure)."""
+    return max((float(c.scenario.si["solver"]["rtol"]) for c in pl.cases), default=0.0)
+
+
+def resolution(df: pd.DataFrame, figure: str, tolerance: float) -> float:
+    """The smallest difference between cases' `figure` that their runs resolve: TOLERANCES_RESOLVED x `tolerance`
+    (`run_tolerance`) of the column's scale, the largest magnitude its peaks and turn mean reach over the successful
+    cases (a peak's error is the integration's, relative to the column it is a peak of, not to itself: a motor's
+    least torque 0.016 N m is 40 (1 - w/w0) for a crank speed near the no-load speed, good to rtol x 40 N m); 0
+    for EXACT_FIGURES."""
+    if figure in EXACT_FIGURES:
+        return 0.0
+    ok = df[df["success"].astype(bool)]
+    column = re.sub(r"^(startup_)?(peak_max_|peak_min_)", "", figure)
+    related = [f"{s}{k}_{column}" for s in ("", "startup_") for k in ("peak_max", "peak_min")] + [f"cycle_mean_{column}"]
+    shown = [c for c in dict.fromkeys([figure] + (related if column != figure else [])) if c in ok and _numeric(ok[c])]
+    values = np.abs(ok[shown].to_numpy(float)) if shown else np.empty(0)
+    scale = float(np.nanmax(values)) if np.isfinite(values).any() else 0.0
+    return TOLERANCES_RESOLVED * tolerance * scale
+
+
+def unresolved(values: np.ndarray, floor: float) -> float | None:
+    """The spread of `values` where it is positive but below `floor` (`resolution`): cases equal within their runs'
+    tolerance; else None."""
+    finite = values[np.isfinite(values)]
+    if len(finite) < 2:
+        return None
+    spread = float(finite.max() - finite.min())
+    return spread if 0.0 < spread <= floor else None
+
+
+def _unresolved_note(spread: float) -> str:
+    return f"equal in every case within the runs' tolerance (spread {spread:.2g})"
+
+
+def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[str], log_x: bool = False,
+                 tolerance: float = 0.0) -> Figure:
     ok = df[df["success"].astype(bool)]
     bad = df[~df["success"].astype(bool)]
     n = len(figures)
@@ -92,6 +138,12 @@ def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[
                     label="failed case")
         if log_x:
             ax.set_xscale("log")
+        spread = unresolved(ok[figname].to_numpy(float), resolution(df, figname, tolerance))
+        if spread is not None:
+            middle = float(np.nanmedian(ok[figname].to_numpy(float)))
+            ax.set_ylim(ax.yaxis.get_major_locator().nonsingular(middle, middle))
+            ax.text(0.5, 0.95, _unresolved_note(spread), transform=ax.transAxes, ha="center", va="top", fontsize=7,
+                    color="0.3")
         ax.set_ylabel(_label(figname), fontsize=8)
         ax.set_xlabel(_label(param), fontsize=8)
         ax.grid(alpha=0.3)
@@ -100,7 +152,7 @@ def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles and len(handles) > 1:
         fig.legend(handles, labels, loc="upper center", ncol=min(4, len(handles)), fontsize=7, frameon=False)
-        fig.tight_layout(rect=(0, 0, 1, 0.93))
+        fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))     # the legend's two lines above
     else:
         fig.tight_layout()
     return fig
@@ -135,11 +187,12 @@ def _tick(v) -> str:
 
 
 def heatmap(df: pd.DataFrame, a: str, b: str, value: str, facet: str | None = None, hidden: list[str] = (),
-            aggregate: str = "auto") -> Figure:
+            aggregate: str = "auto", tolerance: float = 0.0) -> Figure:
     """`value` over (a, b): one panel, or with `facet` one panel per value of that parameter (small multiples on
     one colour scale). Cases that differ only in the `hidden` parameters share a cell and are reduced by
     `aggregate` (aggregate_for), which the title names with the parameters it runs over; a cell without a case
-    is left blank, one whose cases all failed says so."""
+    is left blank, one whose cases all failed says so. Cells equal within the runs' tolerance (`resolution`) take
+    one colour, as equal ones do."""
     data = df.copy()
     data["success"] = data["success"].astype(float)
     how = aggregate_for(value, aggregate)
@@ -155,10 +208,12 @@ def heatmap(df: pd.DataFrame, a: str, b: str, value: str, facet: str | None = No
                        counts.reindex(index=rows_b, columns=cols_a).to_numpy(float)))
     finite = np.concatenate([t[np.isfinite(t)] for t, _ in tables]) if tables else np.empty(0)
     lo, hi = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    spread = None if value == "success" else unresolved(finite, resolution(df, value, tolerance))
     if value == "success":
         lo, hi = 0.0, 1.0
-    elif hi == lo:                                   # one value everywhere: one colour, not a stretched scale
-        lo, hi = lo - max(abs(lo), 1.0), hi + max(abs(hi), 1.0)
+    elif hi == lo or spread is not None:             # one value everywhere: one colour, not a stretched scale
+        middle = 0.5 * (lo + hi)
+        lo, hi = middle - max(abs(middle), 1.0), middle + max(abs(middle), 1.0)
     n = len(panels)
     ncols = min(n, 4)
     nrows = int(np.ceil(n / ncols))
@@ -167,7 +222,8 @@ def heatmap(df: pd.DataFrame, a: str, b: str, value: str, facet: str | None = No
     annotate = len(cols_a) * len(rows_b) <= 64
     im = None
     for ax, (key, _), (table, count) in zip(axes.flat, panels, tables):
-        im = ax.imshow(table, origin="lower", aspect="auto", cmap="viridis", vmin=lo, vmax=hi)
+        drawn = table if spread is None else np.where(np.isfinite(table), 0.5 * (lo + hi), table)   # one value
+        im = ax.imshow(drawn, origin="lower", aspect="auto", cmap="viridis", vmin=lo, vmax=hi)
         if annotate:
             for (i, j), v in np.ndenumerate(table):
                 text = _tick(v) if np.isfinite(v) else ("all failed" if count[i, j] > 0 else "")
@@ -187,7 +243,8 @@ def heatmap(df: pd.DataFrame, a: str, b: str, value: str, facet: str | None = No
     name = "share of cases that succeeded" if value == "success" else _label(value)
     fig.colorbar(im, ax=axes, label=name, shrink=0.9 if nrows > 1 else 1.0)
     fig.suptitle(name + ("" if value == "success" else " (successful cases)") + "\n" + _reduction(how, value, hidden,
-                 data, [a, b] + ([facet] if facet else [])), fontsize=9)
+                 data, [a, b] + ([facet] if facet else [])) + ("" if spread is None else "; " + _unresolved_note(spread)),
+                 fontsize=9)
     return fig
 
 
@@ -217,8 +274,9 @@ def write_plots(df: pd.DataFrame, pl, folder: Path, aggregate: str = "auto") -> 
     if not params or not figures:
         return []
     logs = _log_axes(pl)
+    tolerance = run_tolerance(pl)
     makers = [functools.partial(_one, f"vs_{_safe(p)}", plot_against, df, p, [o for o in params if o != p], figures,
-                                log_x=p in logs) for p in params]
+                                log_x=p in logs, tolerance=tolerance) for p in params]
     if len(params) >= 2 and pl.spec.mode == "grid":
         a, b = params[0], params[1]
         facet = params[2] if len(params) >= 3 and df[params[2]].nunique() <= MAX_PANELS else None
@@ -226,7 +284,7 @@ def write_plots(df: pd.DataFrame, pl, folder: Path, aggregate: str = "auto") -> 
         ok = df[df["success"].astype(bool)]
         if len(ok):
             makers += [functools.partial(_one, f"heatmap_{_safe(value)}", heatmap, df, a, b, value, facet, hidden,
-                                         aggregate) for value in figures]
+                                         aggregate, tolerance) for value in figures]
         makers.append(functools.partial(_one, "heatmap_success", heatmap, df, a, b, "success", facet, hidden,
                                         aggregate))
     with FigureWriter(makers, folder) as writer:
