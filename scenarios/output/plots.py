@@ -8,6 +8,7 @@ names the quantity and the unit), legends sit outside the data to the right.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -130,6 +131,34 @@ def envelope(x: np.ndarray, y: np.ndarray, columns: int) -> tuple[np.ndarray, np
         before = np.clip(start - 1, 0, None)
         lo[keep] = np.fmin(lo[keep], y[before[keep]])
         hi[keep] = np.fmax(hi[keep], y[before[keep]])
+    return edges, lo, hi
+
+
+def lines_envelope(x: np.ndarray, y: np.ndarray, line: np.ndarray, columns: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(column edges, min, max) over `columns` equal spans of x of several lines at once (`line`: each sample's
+    line, a line's samples consecutive in drawing order, x in any order): each column's extremes over the samples in
+    it and over every segment of a line that crosses one of its edges (its value there, linear between the two
+    samples), so that the band holds every line where the columns are finer than a line's samples (many drive
+    cycles sampled at other phases: the column's samples alone miss the cycles that have none in it). NaN ignored."""
+    ok = np.isfinite(x)
+    edges = np.linspace(np.min(x[ok]), np.max(x[ok]), columns + 1)
+    lo, hi = np.full(columns, np.nan), np.full(columns, np.nan)
+    column = np.clip(np.searchsorted(edges, x[ok], side="right") - 1, 0, columns - 1)
+    np.fmin.at(lo, column, y[ok])
+    np.fmax.at(hi, column, y[ok])
+    i = np.flatnonzero((line[1:] == line[:-1]) & ok[1:] & ok[:-1])          # the segments of each line
+    x0, x1, y0, y1 = x[i], x[i + 1], y[i], y[i + 1]
+    first = np.searchsorted(edges, np.minimum(x0, x1), side="right")        # the edges strictly inside a segment
+    n = np.maximum(np.searchsorted(edges, np.maximum(x0, x1), side="left") - first, 0)
+    seg = np.repeat(np.arange(len(i)), n)
+    edge = np.repeat(first - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+    with np.errstate(invalid="ignore"):
+        at = y0[seg] + (edges[edge] - x0[seg]) * (y1[seg] - y0[seg]) / (x1[seg] - x0[seg])
+    for c in (edge - 1, edge):                       # an edge bounds the column on each side of it
+        inside = (c >= 0) & (c < columns)
+        np.fmin.at(lo, c[inside], at[inside])
+        np.fmax.at(hi, c[inside], at[inside])
     return edges, lo, hi
 
 
@@ -270,6 +299,60 @@ def cycle_index(angle: np.ndarray, cycle: DriveCycle) -> tuple[np.ndarray, np.nd
 MAX_CYCLE_LINES = 40
 
 
+@dataclass(frozen=True)
+class Cycles:
+    """A run's rows split into its drive cycles, as the angle figures draw them: x (deg, the drive angle within
+    its cycle from the cycle's start angle), k (each row's cycle), bounds (row spans), last (the last complete
+    cycle's rows, drawn as a line among many)."""
+
+    cycle: DriveCycle
+    drive: np.ndarray
+    x: np.ndarray
+    k: np.ndarray
+    bounds: np.ndarray
+    last: tuple[int, int]
+
+    @classmethod
+    def of(cls, drive: np.ndarray, cycle: DriveCycle) -> "Cycles":
+        k, within = cycle_index(drive, cycle)
+        bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+        spans = list(zip(bounds[:-1], bounds[1:]))
+        complete = [(a, b) for a, b in spans if cycle.period and np.ptp(within[a:b]) >= 0.98 * cycle.period]
+        return cls(cycle, drive, (within + cycle.start) * DEG, k, bounds, (complete or spans)[-1])
+
+    @property
+    def count(self) -> int:
+        return len(self.bounds) - 1
+
+    @property
+    def many(self) -> bool:
+        return self.count > MAX_CYCLE_LINES
+
+    def draw(self, ax, fig: Figure, panel: dict, col: str, y: np.ndarray, label: str, colour, gid: str,
+             ls: str = "-") -> None:
+        """Column `col` (values y, in the panel's unit) against the angle on ax: a line per cycle, later cycles
+        darker; above MAX_CYCLE_LINES cycles, the envelope over all of them (`lines_envelope`) and the last
+        complete cycle as a line. An angle is shown as its change since its cycle started."""
+        from matplotlib.colors import to_rgba
+        bounds, x, k = self.bounds, self.x, self.k
+        if panel["unit"] == "deg" and col.endswith("_angle_rad"):
+            y = y - np.repeat([cycle_start_value(self.drive, y, a, b, self.cycle)
+                               for a, b in zip(bounds[:-1], bounds[1:])], np.diff(bounds))
+        if self.many:
+            edges, lo, hi = lines_envelope(x, y, k, pixel_columns(fig, ax))
+            xs = np.repeat(edges, 2)[1:-1]
+            ax.fill_between(xs, np.repeat(lo, 2), np.repeat(hi, 2), facecolor=to_rgba(colour, 0.3),
+                            edgecolor=to_rgba(colour, 0.6), linewidth=0.5, linestyle=ls, gid=f"{gid}#envelope",
+                            label=f"{label}, all cycles (envelope)")
+            a, b = self.last
+            ax.plot(x[a:b], y[a:b], lw=1.0, ls=ls, color=colour, gid=f"{gid}#cycle{k[a]}",
+                    label=f"{label}, last cycle")
+            return
+        for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+            ax.plot(x[a:b], y[a:b], lw=1.0, ls=ls, color=colour, alpha=0.35 + 0.65 * (n + 1) / self.count,
+                    gid=f"{gid}#cycle{k[a]}", label=label if n == self.count - 1 else "_nolegend_")
+
+
 def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
                  rows: list[dict] | None = None, poles: dict[str, np.ndarray] | None = None) -> Figure | None:
     """One panel per unit against the driven member's angle within its cycle, a line per cycle (later cycles
@@ -281,15 +364,8 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
     if not rows or cycle.column not in df:
         return None
     drive = df[cycle.column].to_numpy(float)
-    k, within = cycle_index(drive, cycle)
-    x, x0 = (within + cycle.start) * DEG, cycle.start * DEG
-    cycles = np.unique(k)
-    bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
-    many = len(cycles) > MAX_CYCLE_LINES
-    order = np.argsort(x, kind="stable") if many else None
-    spans = list(zip(bounds[:-1], bounds[1:]))
-    complete = [(a, b) for a, b in spans if cycle.period and np.ptp(within[a:b]) >= 0.98 * cycle.period]
-    last = (complete or spans)[-1]                   # the last complete cycle drawn as a line among many
+    cycles = Cycles.of(drive, cycle)
+    x, x0 = cycles.x, cycle.start * DEG
     fig = Figure(figsize=(10, 2.4 * len(rows) + 0.9), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     if poles and cycle.period:          # each pole at its place in the cycle, as the rows' x
@@ -299,24 +375,7 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
         for j, (col, label) in enumerate(panel["lines"]):
             y = df[col].to_numpy(float) * panel["scale"]
             drawn.append((col, label, y))
-            colour = f"C{j % 10}"
-            if panel["unit"] == "deg" and col.endswith("_angle_rad"):
-                y = y - np.repeat([cycle_start_value(drive, y, a, b, cycle) for a, b in zip(bounds[:-1], bounds[1:])],
-                                  np.diff(bounds))
-            if many:
-                from matplotlib.colors import to_rgba
-                edges, lo, hi = envelope(x[order], y[order], pixel_columns(fig, ax))
-                xs = np.repeat(edges, 2)[1:-1]
-                ax.fill_between(xs, np.repeat(lo, 2), np.repeat(hi, 2), facecolor=to_rgba(colour, 0.3),
-                                edgecolor=to_rgba(colour, 0.6), linewidth=0.5, gid=f"{col}#envelope",
-                                label=f"{label}, all cycles (envelope)")
-                a, b = last
-                ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, gid=f"{col}#cycle{k[a]}", label=f"{label}, last cycle")
-                continue
-            for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
-                shade = 0.35 + 0.65 * (n + 1) / len(cycles)
-                ax.plot(x[a:b], y[a:b], lw=1.0, color=colour, alpha=shade, gid=f"{col}#cycle{k[a]}",
-                        label=label if n == len(cycles) - 1 else "_nolegend_")
+            cycles.draw(ax, fig, panel, col, y, label, f"C{j % 10}", col)
         if poles and cycle.period:
             clip_poles(ax, [(x, drawn, poles)], POLE_GUARD * cycle.period * DEG)
         since = "the cycle start" if cycle.period else "the start"
@@ -326,13 +385,13 @@ def angle_figure(df: pd.DataFrame, figure: str, title: str, cycle: DriveCycle,
         legend_outside(ax)
     axes[-1].set_xlim(*((x0, x0 + cycle.period * DEG) if cycle.period else (np.nanmin(x), np.nanmax(x))))
     axes[-1].set_xlabel(cycle.label)
-    n = len(cycles)
+    n = cycles.count
     if not cycle.period:
-        fig.suptitle(f"{title} (no period: the whole run)")
-    elif many:
-        fig.suptitle(f"{title} ({n:,} cycles: their envelope, min to max per pixel column, and the last complete one as a line)")
+        fig.suptitle(f"{title}\n(no period: the whole run)")     # the note on a line of its own, as time figures'
+    elif cycles.many:
+        fig.suptitle(f"{title}\n({n:,} cycles: their envelope, min to max per pixel column, and the last complete one as a line)")
     else:
-        fig.suptitle(f"{title} ({n} cycle{'s' if n != 1 else ''}, a line each, later darker)")
+        fig.suptitle(f"{title}\n({n} cycle{'s' if n != 1 else ''}, a line each, later darker)")
     return fig
 
 

@@ -261,15 +261,13 @@ class Comparison:
         return fig
 
     def _angle(self, rows, title):
-        from mechsim.scenarios.output.plots import (DEG, POLE_GUARD, angle_figure, clip_poles, cycle_index,
-                                                    cycle_start_value, poles_in_cycle, poles_of)
+        from mechsim.scenarios.output.plots import (DEG, POLE_GUARD, Cycles, angle_figure, clip_poles,
+                                                    cycle_index, poles_in_cycle, poles_of)
         ca, cb = self._cycles()
         fig = angle_figure(self.a.timeseries, "", title, ca, rows=rows)
         df = self.b.timeseries
         drive = df[cb.column].to_numpy(float)
-        k, within = cycle_index(drive, cb)
-        xb = (within + cb.start) * DEG
-        bounds = np.r_[0, np.flatnonzero(np.diff(k)) + 1, len(k)]
+        cycles = Cycles.of(drive, cb)
         # a column unbounded toward events in either run, each event at its place in its run's cycle
         da = self.a.timeseries
         drive_a = da[ca.column].to_numpy(float)
@@ -279,16 +277,11 @@ class Comparison:
         for ax, panel in zip(fig.axes, rows):
             colours = {line.get_gid().split("#")[0]: line.get_color() for line in ax.get_lines()}
             for col, label in panel["lines"]:
-                y = df[col].to_numpy(float) * panel["scale"]
-                for n, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
-                    yy = y[lo:hi]
-                    if panel["unit"] == "deg" and col.endswith("_angle_rad"):
-                        yy = yy - cycle_start_value(drive, y, lo, hi, cb)
-                    ax.plot(xb[lo:hi], yy, lw=1.0, ls="--", color=colours[col], gid=f"B:{col}#cycle{k[lo]}",
-                            alpha=0.35 + 0.65 * (n + 1) / (len(bounds) - 1),
-                            label=f"{label} (B)" if n == len(bounds) - 2 else "_nolegend_")
+                # as A's: a line per cycle, or the envelope of many and the last complete cycle, dashed
+                cycles.draw(ax, fig, panel, col, df[col].to_numpy(float) * panel["scale"], label, colours[col],
+                            f"B:{col}", ls="--")
             if any(poles) and panel["unit"] != "deg":       # (an angle panel shows turns since the cycle start)
-                clip_poles(ax, _drawn(panel, [(xa, da, poles[0]), (xb, df, poles[1])]),
+                clip_poles(ax, _drawn(panel, [(xa, da, poles[0]), (cycles.x, df, poles[1])]),
                            POLE_GUARD * max(ca.period or 0.0, cb.period or 0.0) * DEG)
             _relabel(ax)
         return fig
@@ -316,12 +309,16 @@ def _drawn(panel: dict, runs: list[tuple]) -> list[tuple]:
 
 
 def _relabel(ax) -> None:
-    """A's lines named "(A)" beside B's, the legend redrawn (plots.py's placement)."""
+    """Each run's lines named "(A)" or "(B)" (B's by their gid "B:..."), the legend redrawn (plots.py's
+    placement)."""
     from mechsim.scenarios.output.plots import legend_outside
     for line in [*ax.get_lines(), *ax.collections]:           # lines, and the envelopes of long runs
-        label = line.get_label()
-        if not (line.get_gid() or "B:").startswith("B:") and not label.startswith("_") and not label.endswith(" (A)"):
-            line.set_label(f"{label} (A)")
+        label, gid = line.get_label(), line.get_gid()
+        if gid is None or label.startswith("_"):
+            continue
+        run = " (B)" if gid.startswith("B:") else " (A)"
+        if not label.endswith(run):
+            line.set_label(label + run)
     legend_outside(ax)
 
 
