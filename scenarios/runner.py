@@ -136,8 +136,9 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
     """Drive work = d(kinetic energy) - (load + friction + damping work) + energy lost in impacts (events table;
     all works signed into the system). closure_error_relative: the closure error over the largest energy any term
     of the balance reaches over the run (a work or the kinetic energy's change from the first row, the impact
-    losses), not over the net drive work: over whole periods of a prescribed motion against conservative forces
-    the net works are round-off themselves (rolling-a-speed's 1.5e-14 J), though the run exchanges joules. cols,
+    losses: largest_term_J), not over the net drive work: over whole periods of a prescribed motion against
+    conservative forces the net works are round-off themselves (rolling-a-speed's 1.5e-14 J), though the run
+    exchanges joules. cols,
     event_cols: the table's and the events' TableColumns, if at hand."""
     cols = TableColumns(df) if cols is None else cols
     if "work_drive_J" not in cols or len(df) < 2:
@@ -168,7 +169,7 @@ def energy_balance(df: pd.DataFrame, events: pd.DataFrame | None = None, cols: T
     closure = sum(works.values()) - dke - lost
     scale = max(reach, abs(lost), 1e-300)
     return {"work_J": works, "kinetic_energy_change_J": dke, "impact_losses_J": lost, "closure_error_J": closure,
-            "closure_error_relative": closure / scale}
+            "closure_error_relative": closure / scale, "largest_term_J": scale}
 
 
 def _largest_magnitude(values) -> float:

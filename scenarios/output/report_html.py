@@ -213,9 +213,12 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
     parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
     if energy:
-        rows = [[f"work: {k}", v, "J"] for k, v in energy.get("work_J", {}).items()]
-        rows += [["kinetic energy change", energy["kinetic_energy_change_J"], "J"],
-                 ["impact losses", energy["impact_losses_J"], "J"], ["closure error", energy["closure_error_J"], "J"],
+        from mechsim.scenarios.peaks import as_shown
+        largest = energy.get("largest_term_J", 0.0)      # a term within round-off of it shown as 0 (the json keeps it)
+        rows = [[f"work: {k}", as_shown(v, largest), "J"] for k, v in energy.get("work_J", {}).items()]
+        rows += [["kinetic energy change", as_shown(energy["kinetic_energy_change_J"], largest), "J"],
+                 ["impact losses", as_shown(energy["impact_losses_J"], largest), "J"],
+                 ["closure error", energy["closure_error_J"], "J"],
                  ["closure error / the largest energy term", energy["closure_error_relative"], "1"]]
         parts += ["<h2>Energy balance (J)</h2>", _table(["term", "value", "unit"], rows)]
     if s.get("impacts"):
