@@ -233,6 +233,15 @@ def test_infeasible_limits_exit_3_with_the_history(scenario_file, tmp_path):
     s = json.loads((out / "summary.json").read_text())["sizing"]
     assert not s["success"] and s["max_violation_relative"] > 1
     assert (out / "convergence.csv").exists() and not (out / "design.toml").exists()
+    # the least violation: the force falls as 1/r, so the largest crank, at the closed form's force for its speed
+    x = {d["key"]: d["value"] for d in s["design"]}
+    _, w_star, r_star = closed_form()
+    phi = r_star * N_MAX / (J2 * w_star**2)
+    assert x["mechanism.crank_radius"] == pytest.approx(0.12, rel=1e-9)
+    assert s["quantities_at_optimum"]["peak_contact_force_N"] == pytest.approx(
+        J2 * x["drive.speed"] ** 2 * phi / 0.12, rel=1e-6)
+    # ended where its iterates settled there (SLSQP alone went on for 17 iterations and 40 runs to the same design)
+    assert s["iterations"] <= 6 and "the least violation it reaches" in s["message"]
 
 
 # ------------------------------------------------------------------------------------------------ verification
@@ -461,6 +470,17 @@ def test_slsqp_is_stopped_where_its_iterates_settle_at_a_feasible_design():
     broken = _settling(_Trace([0.6, 0.6, 0.6, 0.6, 0.6], [0.0, 10 * FEASIBLE, 0.0, 10 * FEASIBLE, 0.0]), 1e-7)
     for u in range(5):                # every other iterate breaks a limit: never two feasible in a row
         broken(np.array([u]))
+    # a limit broken throughout: ended where neither the objective nor the violation moves any more ...
+    stuck = _settling(_Trace([1.0, 0.7, 0.7 + 1e-9, 0.7 + 2e-9], [0.5, 0.07, 0.07 + 1e-9, 0.07]), 1e-7)
+    for u in range(3):
+        stuck(np.array([u]))
+    with pytest.raises(_Settled) as stop:
+        stuck(np.array([3.0]))
+    assert not stop.value.feasible and stop.value.u.tolist() == [3.0]
+    # ... not while the violation still falls, though the objective stands still
+    falling = _settling(_Trace([0.7] * 5, [0.5, 0.4, 0.3, 0.2, 0.1]), 1e-7)
+    for u in range(5):
+        falling(np.array([u]))
 
 
 def test_a_sizing_on_noisy_runs_converges_in_few_runs():
