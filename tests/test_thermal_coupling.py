@@ -334,6 +334,9 @@ def test_wall_track_surface_matches_duhamel(one_d_pair):
         exact = duhamel_surface(ti - t0, lambda s: float(np.interp(t0 + s, t, flux)), STEEL, breakpoints=kinks)
         rise = float(np.interp(ti, t, df["temp_wall_surface_C"])) - float(np.interp(ti, t, df["temp_bulk_wheel_C"]))
         assert rise == pytest.approx(exact, rel=0.03, abs=1e-3)
-    # and the validity of the 1-D model is reported: not a flash model at the Geneva's Peclet numbers
-    assert any("not valid as a flash model" in w for w in cf.summary["warnings"])
+    # and the validity of the 1-D model is reported: not a flash model at the Geneva's Peclet numbers, the flash
+    # rise taken from the moving band instead; no advice names a module as if it were a scenario key
+    assert any("would neglect lateral conduction" in w and "exact moving-band solution" in w
+               for w in cf.summary["warnings"])
+    assert not any("thermal.band_source" in w for w in cf.summary["warnings"])
     assert th["track_peclet"] > 5

@@ -215,4 +215,5 @@ def validity(peclet_number) -> tuple[bool, str]:
     if L >= VALID_PECLET_MIN:
         return True, f"1-D conduction valid as a flash model (L = {L:.3g} >= {VALID_PECLET_MIN:g})"
     return False, (f"1-D conduction not valid as a flash model at L = {L:.3g} < {VALID_PECLET_MIN:g}: lateral conduction "
-                   "is neglected and the rise is over-predicted; use the moving-band solution (thermal.band_source)")
+                   "is neglected and the rise is over-predicted; use the exact moving-band solution (docs/theory.md "
+                   "§G4.3, mechsim.thermal.band_source)")

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 import mechsim.thermal.cycle as cyc
-from mechsim.thermal.conduction1d import validity
+from mechsim.thermal.conduction1d import VALID_PECLET_MIN, validity
 from mechsim.thermal.exact import ModalNetwork, closed_form_columns, integrate_closed_form, states_between_rows
 from mechsim.thermal.flash import flash_temperature
 from mechsim.thermal.hertz import effective_modulus, half_width, peak_pressure
@@ -757,19 +757,20 @@ class ThermalPlan:
         U = np.abs(contact["source_speed_driven"][engaged])
         L_contact = df["peclet_wheel"].to_numpy(float)[engaged]
         if len(L_contact):
-            ok, msg = validity(np.max(L_contact))
-            if not ok:
-                out.append(f"thermal (1d): {msg}. So the 1-D mesh is not the flash model here: it carries only the "
-                           "track-scale heating (the wall's heat spread over its swept track), and the flash rise "
-                           "on top comes from the moving-band solution")
+            L = float(np.max(L_contact))
+            if not validity(L)[0]:
+                out.append(f"thermal (1d): the wheel's Peclet number reaches only {L:.3g} (< {VALID_PECLET_MIN:g}), "
+                           "where a 1-D mesh would neglect lateral conduction and over-predict the flash rise "
+                           "(docs/theory.md §G6): here it carries only the track-scale heating (the wall's heat "
+                           "spread over its swept track), and the flash rise on top comes from the exact moving-band "
+                           "solution (§G4.3)")
         if len(U):
             L_track = float(np.mean(U)) * 0.5 * geo.track_length / (2 * mat.diffusivity)
-            ok, msg = validity(L_track)
             summary["track_peclet"] = L_track
-            if not ok:
+            if not validity(L_track)[0]:
                 out.append(f"thermal (1d): the contact sweeps the slot-wall track slowly (track Peclet number "
-                           f"{L_track:.3g} < 5), so conduction along the track is not negligible and the 1-D depth "
-                           f"model of the track does not hold [{msg}]")
+                           f"{L_track:.3g} < {VALID_PECLET_MIN:g}), so conduction along the track is not negligible "
+                           "and the 1-D depth model of the track does not hold (docs/theory.md §G6)")
         penetration = math.sqrt(mat.diffusivity * setup.engagement_time)
         if setup.mesh.widths[0] > 0.25 * penetration:
             out.append(f"thermal (1d): first cell {setup.mesh.widths[0]:.3g} m is coarse against the depth heated "
