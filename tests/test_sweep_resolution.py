@@ -1,6 +1,6 @@
 """Sweep figures compare cases only as finely as their runs resolve them: a quantity that is the same in every case
 but for integration noise is drawn as one value (its panel not stretched over the noise, its heat map one colour)
-and says so, while one that changes between cases keeps its range.
+and says so, while one that changes between cases keeps its range; failed cases are marked and the mark named.
 
 The case: internal-geneva-motor over the wheel load and the friction. In every dwell the wheel is locked and the
 crank runs free, settling (time constant J / (Ts/w0 + c), 4 ms, against a dwell of about 0.27 s) where the motor
@@ -76,3 +76,15 @@ def test_an_unresolved_heat_map_is_one_colour_and_says_so(table):
     image = next(ax.images[0] for ax in fig.axes if ax.images)
     np.testing.assert_allclose(image.get_clim(), [table["peak_max_contact_force_N"].min(),
                                                   table["peak_max_contact_force_N"].max()])
+
+
+def test_failed_cases_are_marked_and_the_mark_is_named():
+    """A one-parameter sweep with failed cases (too little torque: the crank stalls in the engagement) marks them
+    with a red x on the parameter axis, and the legend says what the mark is, though there is only one line."""
+    import pandas as pd
+    table = pd.DataFrame({"drive.torque_N_m": [1.0, 2.0, 6.0, 9.0], "success": [False, False, True, True],
+                          "peak_max_contact_force_N": [np.nan, np.nan, 560.0, 1170.0]})
+    fig = plot_against(table, "drive.torque_N_m", [], ["peak_max_contact_force_N"])
+    (marks,) = [line for line in fig.axes[0].get_lines() if line.get_marker() == "x"]
+    np.testing.assert_array_equal(marks.get_xdata(), [1.0, 2.0])
+    assert [t.get_text() for legend in fig.legends for t in legend.get_texts()] == ["failed case"]

@@ -150,7 +150,7 @@ def plot_against(df: pd.DataFrame, param: str, others: list[str], figures: list[
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    if handles and len(handles) > 1:
+    if handles:                               # the combinations of the other parameters, and the failed cases' mark
         fig.legend(handles, labels, loc="upper center", ncol=min(4, len(handles)), fontsize=7, frameon=False)
         fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))     # the legend's two lines above
     else:
