@@ -138,3 +138,5 @@ def test_two_runs_of_many_cycles_compared_against_angle_are_both_envelopes():
     labels = [a.get_label() for a in (*ax.get_lines(), *ax.collections) if not a.get_label().startswith("_")]
     assert labels and all(label.endswith((" (A)", " (B)")) for label in labels), labels
     assert sum(label.endswith(" (B)") for label in labels) == 2       # B's envelope and its last cycle
+    from figure_images import titles_outside
+    assert not titles_outside(fig)          # the two names and the cycle note fit: the note on a line of its own

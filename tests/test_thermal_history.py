@@ -96,6 +96,8 @@ def test_the_per_cycle_figure_covers_the_run(motor_120s):
     touched = ~np.isnan(contact)
     assert touched.sum() >= len(table) - 1                  # every whole turn has an engagement
     assert np.all(contact[touched] > table["temp_bulk_pin_mean_C"].to_numpy()[touched])   # hotter than the pin
+    from figure_images import titles_outside
+    assert not titles_outside(fig)              # the title within the figure (its detail on a line of its own)
 
 
 def test_the_period_means_stretches_are_numpys_linspaces_to_the_bit():

@@ -64,7 +64,7 @@ def thermal_cycle_figure(result) -> Figure | None:
     ax = fig.add_subplot()
     t_mid, columns = table["t_mid_s"].to_numpy(float), pixel_columns(fig, ax)
     enveloped = trace(ax, t_mid, table["temp_contact_peak_C"].to_numpy(float), columns, "C3", lw=1.2,
-                      label="contact, peak of the cycle")
+                      label="contact, the cycle's highest row")
     for i, c in enumerate(c for c in table.columns if c.startswith("temp_bulk_")):
         body = c[len("temp_bulk_"):-len("_mean_C")]
         enveloped |= trace(ax, t_mid, table[c].to_numpy(float), columns, f"C{i}", lw=1.2,
@@ -73,7 +73,6 @@ def thermal_cycle_figure(result) -> Figure | None:
     ax.set_ylabel("temperature (°C)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax.set_title(f"{result.summary.get('scenario', '')}: temperatures per drive cycle ({len(table)} cycles; "
-                 f"periodic from {float(cycle['period_s']):.4g} s per cycle)"
-                 + (f"\n({ENVELOPE_NOTE})" if enveloped else ""))
+    ax.set_title(f"{result.summary.get('scenario', '')}: temperatures per drive cycle\n({len(table)} cycles of "
+                 f"{float(cycle['period_s']):.4g} s" + (f"; {ENVELOPE_NOTE})" if enveloped else ")"))
     return fig
