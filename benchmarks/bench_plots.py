@@ -10,6 +10,7 @@ import pandas as pd
 from matplotlib import colormaps, rcParams
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator, NullFormatter
 
 STYLE = {"mechsim IDA": ("-", "o"), "mechsim diffrax": (":", "D"), "scipy": ("--", "s"), "CasADi": ("-.", "^")}
 
@@ -29,8 +30,11 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
         color = colors[i % len(colors)]
         ok = d[(d.status == "ok") & (d.error_rad > 0)]
         bad = d[(d.status != "ok") & np.isfinite(d.cpu_time_s)]
-        ax1.plot(ok.cpu_time_s, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
-        ax2.plot(ok.rtol, ok.error_rad, ls=ls, marker=marker, color=color, label=name)
+        # IDA's compiled callbacks compute what its Python ones compute: dashed with open markers, so that the line
+        # it lies on stays visible
+        style = dict(ls="--", mfc="white") if "compiled" in name else dict(ls=ls)
+        ax1.plot(ok.cpu_time_s, ok.error_rad, marker=marker, color=color, label=name, **style)
+        ax2.plot(ok.rtol, ok.error_rad, marker=marker, color=color, label=name, **style)
         if len(bad):
             ax1.plot(bad.cpu_time_s, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
             ax2.plot(bad.rtol, bad.error_rad.fillna(np.pi), ls="none", marker="x", color=color, ms=8)
@@ -55,8 +59,12 @@ def work_precision_figure(rows: pd.DataFrame, summary: dict, path=None) -> Figur
     setup = setup[np.isfinite(setup.setup) & (setup.setup > 0)]
     y = np.arange(len(setup))
     ax3.barh(y, setup.setup, color=[colors[methods.index(m) % len(colors)] for m in setup.index])
-    ax3.set_yticks(y, [f"{m} ({s})" for m, s in zip(setup.index, setup.scope)], fontsize=8)
+    ax3.set_yticks(y, [f"{m}: {s}" for m, s in zip(setup.index, setup.scope)], fontsize=8)
     ax3.set_xscale("log")
+    # labels at 1, 2 and 5 of each decade only: matplotlib labels every minor tick of a span near a decade, and
+    # they ran into each other
+    ax3.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+    ax3.xaxis.set_minor_formatter(NullFormatter())
     ax3.set_xlabel("cold setup time (s)")
     ax3.set_title("derivation / compilation / construction,\nnot in the run times", fontsize=10)
     ax3.invert_yaxis()
