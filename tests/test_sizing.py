@@ -219,6 +219,15 @@ def test_minimising_a_quantity_with_a_bound_active(scenario_file):
     assert radius["shadow_price"] == pytest.approx(-n_star / 0.12, rel=1e-6)
     assert result.constraints[0]["active"]
     assert result.constraints[0]["shadow_price"] == pytest.approx(-2 * n_star / T_MAX, rel=1e-6)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from mechsim.scenarios.studies.sizing import convergence_figure
+    import dataclasses
+    long = result.history.iloc[np.arange(18) % len(result.history)].reset_index(drop=True)
+    long["iteration"] = np.arange(18)                   # 18 iterations: matplotlib ticked every 2.5 of them
+    fig = convergence_figure(dataclasses.replace(result, history=long))
+    FigureCanvasAgg(fig).draw()
+    ticks = fig.axes[-1].get_xticks()                   # the convergence plot counts iterations in whole numbers
+    assert len(ticks) >= 2 and np.all(ticks == np.round(ticks))
 
 
 def test_infeasible_limits_exit_3_with_the_history(scenario_file, tmp_path):

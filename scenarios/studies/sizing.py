@@ -653,4 +653,6 @@ def convergence_figure(result: SizingResult):
             ax.axvline(k - 0.5, color="0.5", lw=0.8, ls=":")
     ax4.set_xlabel("iteration (values below 1e-16 drawn at 1e-16; dashed: feasible"
                    + ("; dotted: re-solve, tightened)" if len(starts) else ")"))
+    from matplotlib.ticker import MaxNLocator
+    ax4.xaxis.set_major_locator(MaxNLocator(integer=True))     # iterations are counted, not 2.5
     return fig
