@@ -378,8 +378,8 @@ def compare(
 
 
 def _print_designs(comparison, fmt: str, target: Path) -> None:
-    """The headline table on stdout (rich on a terminal, full-precision plain text when piped, or csv/json); the
-    notes and the folder on stderr, so stdout holds data only."""
+    """The headline table on stdout (rich on a terminal, a difference the runs do not resolve said so; full-precision
+    plain text when piped, or csv/json); the notes and the folder on stderr, so stdout holds data only."""
     from mechsim.scenarios.studies.compare_designs import render
     title = f"A: {comparison.names[0]}   B: {comparison.names[1]}"
     if fmt == "table" and out.is_terminal:
@@ -389,8 +389,10 @@ def _print_designs(comparison, fmt: str, target: Path) -> None:
             view.add_column(name, justify="left" if name == "quantity" else "right", no_wrap=name == "quantity")
         for r in comparison.table.itertuples():
             rel = r.relative_difference
+            shown = ("within accuracy" if r.difference and not r.resolved else
+                     "" if rel != rel else f"{100 * rel:+.3g} %" if rel else "0")
             view.add_row(r.quantity, f"{r.a:.6g}", f"{r.b:.6g}", f"{r.difference:+.4g}" if r.difference else "0",
-                         "" if rel != rel else f"{100 * rel:+.3g} %" if rel else "0")
+                         shown)
         out.print(view)
     elif fmt == "table":
         sys.stdout.write(f"{title}\n{render(comparison, 'text')}")

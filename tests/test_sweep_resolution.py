@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import mechsim
-from mechsim.scenarios.studies.sweep.plots import TOLERANCES_RESOLVED, heatmap, plot_against, resolution
+from mechsim.scenarios.studies.resolution import TOLERANCES_RESOLVED
+from mechsim.scenarios.studies.sweep.plots import heatmap, plot_against, resolution
 
 AXES = {"load.wheel_torque": "4,10 N*m", "contact.friction": "0.1,0.3"}
 LOAD, FRICTION = "load.wheel_torque_N_m", "contact.friction"

@@ -8,10 +8,12 @@ one, the start-up's beside them as `startup_peak_...`; docs/theory.md §K5), the
 located on the continuous solution; the trapezoidal mean of the output rows only for a run that has no
 continuous solution to read, as one that failed), the cycle time and the work of each power flow per cycle, the
 heat generated (`thermal_heat_generated_J`), and the validity conditions' worst values and violated shares
-(docs/limits.md). Each row holds both values, the difference b - a and the relative difference (b - a) / |a|; the
-quantity's name ends in its unit. A figure of A that is zero at A's accuracy (`zero_levels`: the mean
-acceleration over a periodic turn, a dwell's least speed) has no relative difference (NaN, named in the notes):
-its |a| is the integrator's error, and a ratio to it is noise.
+(docs/limits.md). Each row holds both values, the difference b - a, the relative difference (b - a) / |a| and
+whether the runs resolve that difference (`resolved`: it exceeds their accuracy, scenarios/studies/resolution.py;
+two designs whose figure is the same closed form differ by the integrator's error, which is no difference between
+them, and the notes name those); the quantity's name ends in its unit. A figure of A that is zero at A's accuracy
+(`zero_levels`: the mean acceleration over a periodic turn, a dwell's least speed) has no relative difference (NaN,
+named in the notes): its |a| is the integrator's error, and a ratio to it is noise.
 
 Runs of different mechanisms share only some columns: what both have is compared, what one lacks is listed
 (`only_a`, `only_b`); nothing in common is a user error.
@@ -25,10 +27,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mechsim.scenarios.studies.resolution import (EXACT_FIGURES, TOLERANCES_RESOLVED, column_scale, figure_column,
+                                                     floor)
 from mechsim.scenarios.units import ScenarioError
 
-#: the table's columns: the quantity (its name ends in its unit), both values, b - a and (b - a) / |a|
-COLUMNS = ("quantity", "a", "b", "difference", "relative_difference")
+#: the table's columns: the quantity (its name ends in its unit), both values, b - a, (b - a) / |a| and whether the
+#: runs resolve b - a
+COLUMNS = ("quantity", "a", "b", "difference", "relative_difference", "resolved")
 #: the two sides, as notes and figure legends name them
 SIDES = ("A", "B")
 
@@ -111,32 +116,37 @@ def headline(result) -> dict[str, float]:
     return out
 
 
-#: the headline quantities read from one column, by the prefix of their names (`headline`)
-COLUMN_FIGURES = ("startup_peak_max_", "startup_peak_min_", "peak_max_", "peak_min_", "cycle_mean_")
-#: a located figure's error, in units of the run's rtol times its column's largest |peak|: the integrator's
-#: global error over a turn, a few times its local error test's (docs/api.md "Comparing two designs")
-ZERO_WITHIN = 10.0
-
-
-def figure_column(quantity: str) -> str | None:
-    """The column a headline quantity is read from (`peak_max_contact_force_N`: `contact_force_N`), else None."""
-    return next((quantity[len(p):] for p in COLUMN_FIGURES if quantity.startswith(p)), None)
-
-
-def zero_levels(result) -> dict[str, float]:
-    """Per column with located peaks: ZERO_WITHIN x rtol x its largest finite |peak|, the size below which a figure
-    read from it is zero at the run's accuracy."""
+def run_scales(result) -> tuple[float, dict[str, float]]:
+    """A run's rtol (0 where it has none) and, per column with located peaks, its largest finite |peak|: what its
+    figures' accuracy is measured in (scenarios/studies/resolution.py)."""
     s = result.summary
-    rtol = (s.get("model") or {}).get("rtol")
-    if not rtol:
-        return {}
-    out = {}
+    rtol = (s.get("model") or {}).get("rtol") or ((result.scenario or {}).get("solver") or {}).get("rtol") or 0.0
+    scales = {}
     for col, e in (s.get("peaks") or {}).items():
         values = [abs(_number(e[side]["value"])) for side in ("max", "min") if side in e]
         values = [v for v in values if math.isfinite(v)]
         if values:
-            out[col] = ZERO_WITHIN * float(rtol) * max(values)
-    return out
+            scales[col] = column_scale(col, max(values))
+    return float(rtol), scales
+
+
+def zero_levels(result) -> dict[str, float]:
+    """Per column with located peaks: the size below which a figure read from it is zero at the run's accuracy."""
+    rtol, scales = run_scales(result)
+    return {col: floor(rtol, scale) for col, scale in scales.items()} if rtol else {}
+
+
+def difference_floor(quantity: str, a: float, b: float, scales_a: tuple, scales_b: tuple) -> float:
+    """The smallest b - a of `quantity` that both runs resolve (`run_scales` of each): the larger rtol of the larger
+    scale, a column's largest |peak| for a figure read from it, else the figure's own larger magnitude; 0 for a
+    count."""
+    if quantity in EXACT_FIGURES:
+        return 0.0
+    column = figure_column(quantity)
+    scales = [sc[1][column] for sc in (scales_a, scales_b) if column in sc[1]]
+    if not scales:
+        scales = [abs(v) for v in (a, b) if math.isfinite(v)]
+    return floor(max(scales_a[0], scales_b[0]), max(scales, default=0.0))
 
 
 def _zero_level(quantity: str, a: float, b: float, zero_a: dict[str, float]) -> float | None:
@@ -146,10 +156,19 @@ def _zero_level(quantity: str, a: float, b: float, zero_a: dict[str, float]) -> 
     return level if level is not None and a != b and a != 0 and abs(a) <= level else None
 
 
-def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, float] | None = None) -> pd.DataFrame:
+def _resolved(a: float, b: float, level: float) -> bool:
+    """Whether b differs from a by more than `level` (one value NaN and the other not differs; two NaN do not)."""
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) != math.isnan(b)
+    return abs(b - a) > level
+
+
+def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, float] | None = None,
+                   floors: dict[str, float] | None = None) -> pd.DataFrame:
     """One row per quantity both runs have (in a's order): both values, b - a, (b - a) / |a| (0 where both are
-    equal, NaN where a is 0 and b is not, or where |a| is within A's zero level of its column, `zero_a`)."""
-    zero_a = zero_a or {}
+    equal, NaN where a is 0 and b is not, or where |a| is within A's zero level of its column, `zero_a`), and
+    whether |b - a| exceeds the quantity's floor (`difference_floor`; 0 where `floors` lacks it)."""
+    zero_a, floors = zero_a or {}, floors or {}
     rows = []
     for q, x in a.items():
         if q not in b:
@@ -159,8 +178,14 @@ def headline_table(a: dict[str, float], b: dict[str, float], zero_a: dict[str, f
         rel = (0.0 if d == 0 else math.nan) if x == 0 else d / abs(x)
         if _zero_level(q, x, y, zero_a) is not None:
             rel = math.nan
-        rows.append((q, x, y, d, rel))
-    return pd.DataFrame(rows, columns=list(COLUMNS)).astype({c: float for c in COLUMNS[1:]})
+        rows.append((q, x, y, d, rel, _resolved(x, y, floors.get(q, 0.0))))
+    return pd.DataFrame(rows, columns=list(COLUMNS)).astype({c: float for c in COLUMNS[1:-1]} | {"resolved": bool})
+
+
+def within_accuracy(table: pd.DataFrame) -> list[str]:
+    """The table's quantities whose values differ, but by no more than the runs resolve."""
+    return [r.quantity for r in table.itertuples() if r.difference != 0 and not r.resolved
+            and not (math.isnan(r.a) and math.isnan(r.b))]
 
 
 def zero_figures(table: pd.DataFrame, zero_a: dict[str, float]) -> list[str]:
@@ -351,7 +376,9 @@ def compare_runs(ra, rb, name_a: str, name_b: str) -> Comparison:
     only_a = cols_only_a + [q for q in ha if q not in hb and not _of(q, cols_only_a)]
     only_b = cols_only_b + [q for q in hb if q not in ha and not _of(q, cols_only_b)]
     zero_a = zero_levels(ra)
-    table = headline_table(ha, hb, zero_a)
+    scales_a, scales_b = run_scales(ra), run_scales(rb)
+    floors = {q: difference_floor(q, x, hb[q], scales_a, scales_b) for q, x in ha.items() if q in hb}
+    table = headline_table(ha, hb, zero_a, floors)
     common = [c for c in cols_a if c in cols_b and c not in ("t_s", "mode")]
     if table.empty and not common:
         raise ScenarioError("compare", f"{name_a} and {name_b} have no column or headline figure in common "
@@ -359,8 +386,12 @@ def compare_runs(ra, rb, name_a: str, name_b: str) -> Comparison:
     comparison = Comparison(ra, rb, (name_a, name_b), table, only_a, only_b)
     comparison.notes = _notes(comparison)
     if zeros := zero_figures(table, zero_a):
-        comparison.notes.append(f"zero at A's accuracy ({ZERO_WITHIN:g} x rtol x the column's largest |peak|), "
-                                f"so no relative difference: {', '.join(zeros)}")
+        comparison.notes.append(f"zero at A's accuracy ({TOLERANCES_RESOLVED:g} x rtol x the column's largest "
+                                f"|peak|), so no relative difference: {', '.join(zeros)}")
+    if equal := within_accuracy(table):
+        comparison.notes.append(f"equal within the runs' accuracy ({TOLERANCES_RESOLVED:g} x the larger rtol x the "
+                                f"column's largest |peak|, or x the figure for one not read from a column; "
+                                f"resolved = False): {', '.join(equal)}")
     return comparison
 
 
@@ -432,5 +463,5 @@ def render(c: Comparison, fmt: str) -> str:
     if fmt != "text":
         raise ValueError(f"format must be csv, json or text, got {fmt!r}")
     cells = [list(COLUMNS)] + [[r.quantity] + [f"{v:.17g}" for v in (r.a, r.b, r.difference, r.relative_difference)]
-                               for r in c.table.itertuples()]
+                               + [str(r.resolved)] for r in c.table.itertuples()]
     return aligned(cells, left=(0,))

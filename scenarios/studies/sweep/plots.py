@@ -10,9 +10,9 @@ heat maps over the first two varied parameters; drawn half in a forked process w
                                  peak_max_*, min of a peak_min_*, else mean); plus heatmap_success.png (share
                                  of cases that ran to the end)
 
-Cases are compared only as finely as their runs resolve them (`resolution`): a quantity whose cases differ by less
-than TOLERANCES_RESOLVED x the runs' rtol of its column's scale is drawn as one value,
-its panel or colour scale not stretched over integration noise, and says so.
+Cases are compared only as finely as their runs resolve them (`resolution`, the rule of scenarios/studies/
+resolution.py): a quantity whose cases differ by less than TOLERANCES_RESOLVED x the runs' rtol of its column's
+scale is drawn as one value, its panel or colour scale not stretched over integration noise, and says so.
 """
 from __future__ import annotations
 
@@ -24,15 +24,12 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from mechsim.scenarios.studies.resolution import EXACT_FIGURES, column_scale, figure_column, floor
 from mechsim.scenarios.studies.sweep.rows import KEY_FIGURES
 
 MAX_LINES = 8
 #: at most this many small multiples (values of the third parameter); beyond, it joins the aggregated ones
 MAX_PANELS = 16
-#: cases whose values differ by less than this many of the runs' rtol (times the column's scale) are not resolved
-TOLERANCES_RESOLVED = 10
-#: figures that are no computed physical quantity: every difference between cases is real
-EXACT_FIGURES = ("case_wall_time_s", "impacts_per_turn_max")
 
 
 def _safe(name: str) -> str:
@@ -79,20 +76,20 @@ def run_tolerance(pl) -> float:
 
 
 def resolution(df: pd.DataFrame, figure: str, tolerance: float) -> float:
-    """The smallest difference between cases' `figure` that their runs resolve: TOLERANCES_RESOLVED x `tolerance`
-    (`run_tolerance`) of the column's scale, the largest magnitude its peaks and turn mean reach over the successful
-    cases (a peak's error is the integration's, relative to the column it is a peak of, not to itself: a motor's
-    least torque 0.016 N m is 40 (1 - w/w0) for a crank speed near the no-load speed, good to rtol x 40 N m); 0
+    """The smallest difference between cases' `figure` that their runs resolve (scenarios/studies/resolution.py):
+    TOLERANCES_RESOLVED x `tolerance` (`run_tolerance`) of the figure's scale, for a figure read from a column the
+    largest magnitude the column's peaks and turn mean reach over the successful cases, else the figure's own; 0
     for EXACT_FIGURES."""
     if figure in EXACT_FIGURES:
         return 0.0
     ok = df[df["success"].astype(bool)]
-    column = re.sub(r"^(startup_)?(peak_max_|peak_min_)", "", figure)
-    related = [f"{s}{k}_{column}" for s in ("", "startup_") for k in ("peak_max", "peak_min")] + [f"cycle_mean_{column}"]
-    shown = [c for c in dict.fromkeys([figure] + (related if column != figure else [])) if c in ok and _numeric(ok[c])]
+    column = figure_column(figure)
+    related = ([f"{s}{k}_{column}" for s in ("", "startup_") for k in ("peak_max", "peak_min")]
+               + [f"cycle_mean_{column}"] if column else [])
+    shown = [c for c in dict.fromkeys([figure] + related) if c in ok and _numeric(ok[c])]
     values = np.abs(ok[shown].to_numpy(float)) if shown else np.empty(0)
     scale = float(np.nanmax(values)) if np.isfinite(values).any() else 0.0
-    return TOLERANCES_RESOLVED * tolerance * scale
+    return floor(tolerance, column_scale(column or figure, scale))
 
 
 def unresolved(values: np.ndarray, floor: float) -> float | None:
