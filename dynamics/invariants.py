@@ -122,16 +122,22 @@ def energy_closure(df: pd.DataFrame, events: pd.DataFrame | None = None, names=N
     t = np.asarray(df["t_s"], dtype=float)
     w = _matrix(df, work_names) if works is None else works
     ke = np.asarray(df["kinetic_energy_J"], dtype=float)
-    lost = np.zeros(len(t))
+    lost = impact_losses(t, events)
+    return (w - w[0]).sum(axis=1) - (ke - ke[0]) - (0.0 if lost is None else lost)
+
+
+def impact_losses(t: np.ndarray, events: pd.DataFrame | None) -> np.ndarray | None:
+    """Per row at times t: the energy lost in the impacts at or before it, after the first row (J); None where the
+    events hold no losses. events: a frame or its TableColumns."""
     ev = None if events is None else _columns(events)
-    if ev is not None and len(ev.frame) and "energy_lost_J" in ev:
-        te, el = event_floats(ev, "t_s"), event_floats(ev, "energy_lost_J")
-        el = np.where(np.isnan(el), 0.0, el)                   # an event without a loss loses nothing
-        order = np.argsort(te)
-        te, cum = te[order], np.concatenate([[0.0], np.cumsum(el[order])])     # cum[k]: the first k impacts' loss
-        k = np.searchsorted(te, t, side="right")               # impacts at or before each row, after the start
-        lost = cum[k] - cum[k[0]]
-    return (w - w[0]).sum(axis=1) - (ke - ke[0]) - lost
+    if ev is None or not len(ev.frame) or "energy_lost_J" not in ev or not len(t):
+        return None
+    te, el = event_floats(ev, "t_s"), event_floats(ev, "energy_lost_J")
+    el = np.where(np.isnan(el), 0.0, el)                   # an event without a loss loses nothing
+    order = np.argsort(te)
+    te, cum = te[order], np.concatenate([[0.0], np.cumsum(el[order])])     # cum[k]: the first k impacts' loss
+    k = np.searchsorted(te, t, side="right")               # impacts at or before each row, after the start
+    return cum[k] - cum[k[0]]
 
 
 def event_floats(events: TableColumns, name: str) -> np.ndarray:

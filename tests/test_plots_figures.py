@@ -172,3 +172,25 @@ def test_a_comparison_clips_the_unbounded_column_of_either_run():
     angle = next(a for a in figs["forces_vs_angle"].axes if a.get_ylabel() == "force (N)")
     (marks,) = [m for m in angle.collections if m.get_label() == "_poles"]
     assert len(marks.get_segments()) == 4
+
+
+def test_the_energy_figure_counts_the_impacts_work(case):
+    """The chain's crank stops are impacts that take energy (e = 0; docs/chain_dwell.md): the energy figure's work
+    panel draws their work on the system, minus the energy lost up to each row, so its lines add up to the kinetic
+    energy's change on every row as the summary's balance does at the end. Runs without impacts draw no such line."""
+    kind, result, figs, *_ = case
+    lines = {line.get_gid(): line.get_ydata() for ax in figs["energy_vs_time"].axes for line in ax.get_lines()}
+    lost = result.summary["energy"]["impact_losses_J"]
+    if kind != "chain":
+        assert "work_impacts_J" not in lines and lost == pytest.approx(0, abs=1e-12)
+        return
+    impacts = result.events[result.events.energy_lost_J.fillna(0) > 1e-12 * lost]
+    drawn = lines["work_impacts_J"]
+    # (an arc entry's loss is round-off, 5e-20 J: a step of its size)
+    assert len(impacts) >= 3 and np.count_nonzero(np.abs(np.diff(drawn)) > 1e-12 * lost) == len(impacts)
+    assert drawn[-1] == pytest.approx(-lost, rel=1e-12) and lost == pytest.approx(impacts.energy_lost_J.sum(), rel=1e-12)
+    works = sum(y - y[0] for gid, y in lines.items() if gid.startswith("work_"))
+    change = lines["kinetic_energy_J"] - lines["kinetic_energy_J"][0]
+    scale = max(np.abs(y - y[0]).max() for gid, y in lines.items() if gid.startswith("work_"))
+    closure = result.summary["energy"]["closure_error_relative"]
+    assert np.abs(works - change).max() <= max(10 * abs(closure), 1e-12) * scale

@@ -502,7 +502,8 @@ def figure_makers(result: Result, mechanism=None) -> list:
     makers = []
     poles = poles_of(result.summary)
     for group in FIGURES:
-        makers.append(one(f"{group}_vs_time", time_figure, df, group, f"{name}: {group}", None, poles))
+        rows = with_impacts(df, result.events) if group == "energy" else df
+        makers.append(one(f"{group}_vs_time", time_figure, rows, group, f"{name}: {group}", None, poles))
         if cycle is not None and group in PER_CYCLE:
             makers.append(one(f"{group}_vs_angle", angle_figure, df, group, f"{name}: {group}", cycle, None, poles))
     instants = result.scenario.get("output", {}).get("drawing_instants", 4)
@@ -510,6 +511,17 @@ def figure_makers(result: Result, mechanism=None) -> list:
     if mechanism is not None:
         makers.append(lambda: mechanism.extra_figures(df, result.extra_tables))
     return makers
+
+
+def with_impacts(df: pd.DataFrame, events: pd.DataFrame | None) -> pd.DataFrame:
+    """The rows with `work_impacts_J`, the work the impacts did on the system up to each row (minus the energy they
+    took, dynamics/invariants.py `impact_losses`), where the run lost energy in impacts and has work columns: the
+    energy figure's works then add up to the kinetic energy's change, as summary.json's energy balance (docs/api.md)."""
+    if not any(c.startswith("work_") for c in df.columns) or "t_s" not in df:
+        return df
+    from mechsim.dynamics.invariants import impact_losses
+    lost = impact_losses(df["t_s"].to_numpy(float), events)
+    return df if lost is None or not lost.any() else df.assign(work_impacts_J=-lost)
 
 
 def figures(result: Result, mechanism=None) -> dict[str, Figure]:
