@@ -673,12 +673,13 @@ class _ReserveBounds:
         return [part.tolist() for part in np.split(out, cuts)]
 
 
-def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None], again: list[dict]
-           ) -> set[tuple[int, str, str]]:
+def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None], again: list[dict],
+           ties: set | None = None) -> set[tuple[int, str, str]]:
     """`located` with each extremum the second round (`more`, its results `again`, in order of the plans that are
     not None) found better in its place (`_beats`: larger by more than the tie, or tied and earlier); the (plan,
     column, 'max' | 'min') whose round found a rival of the located extremum (no repeat of it, and within RIVAL of
-    it: a larger one, or only smaller ones; `refine_further`)."""
+    it: a larger one, or only smaller ones; `refine_further`). ties: where given, the (plan, column, 'max' | 'min')
+    whose round found the located value again within the tie (a peak repeated to round-off) are added to it."""
     results = iter(again)
     rivals = set()
     for n_plan, (p, got) in enumerate(zip(more, located)):
@@ -690,6 +691,8 @@ def merged(located: list[dict[str, dict[str, Extremum]]], more: list[Plan | None
                 scale = p.ties[c] / TIE_ROUNDOFF
                 if old is None or max(p.ties[c], REPEAT * scale) < abs(e.value - old.value) <= RIVAL * scale:
                     rivals.add((n_plan, c, name))
+                if ties is not None and old is not None and abs(e.value - old.value) <= p.ties[c]:
+                    ties.add((n_plan, c, name))
                 if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
                     got.setdefault(c, {})[name] = e
     return rivals
@@ -711,14 +714,75 @@ def refine_further(plans: list[Plan | None], located: list[dict[str, dict[str, E
     of the candidates refined."""
     taken: list[set] = [set() for _ in plans]
     series, count = None, SECOND_ROUND
+    repeated: set = set()
     while series is None or series:
         more = second_round(plans, located, ends, edges_only, taken, series, count)
         count *= 2
         again = [p for p in more if p is not None]
         if not again:
-            return
+            break
         series = merged(located, more, finish_all(again, read_all(read, [r for p in again for r in p.requests]),
-                                                  read))
+                                                  read), repeated)
+    earliest_ties(plans, located, read, taken, repeated)
+
+
+#: candidates `earliest_ties` refines per column and sense at most, one a pass
+EARLIEST_TRIES = 3
+
+
+def earliest_ties(plans: list[Plan | None], located: list[dict[str, dict[str, Extremum]]], read: Reader,
+                  taken: list[set], repeated: set[tuple[int, str, str]]) -> None:
+    """A tie goes to the earliest instant (`_beats`), but only among the candidates refined: where a column repeats
+    its extremum to round-off (`repeated`: a prescribed motion's turns, `merged`), which of its turns the first
+    rounds refined hangs on where the output rows fall, and so would the reported instant. So the earliest
+    candidate before the located instant whose bound (`_ReserveBounds`, the rows': its row plus twice its
+    estimate's gain) reaches the located value less the tie is refined, and takes its place where it ties; where
+    it does not, the next earliest, EARLIEST_TRIES at most (candidates refined already, `taken`, skipped). No
+    earlier candidate's bound reaching the value, the located instant is the earliest the rows allow."""
+    pending = set(repeated)
+    for _ in range(EARLIEST_TRIES):
+        more: list[Plan | None] = []
+        for n_plan, p in enumerate(plans):
+            mine = sorted(x for x in pending if x[0] == n_plan)
+            if p is None or not mine or not p.reserve:
+                more.append(None)
+                continue
+            values, F, names, ties = p.table
+            asks = []
+            for _, c, name in mine:
+                m = 2 * names.index(c) + (name == "min")
+                e = located[n_plan][c][name]
+                rest = [x for x in p.reserve[m] if x[4] <= e.t and (m, *x[1:5]) not in taken[n_plan]]
+                if rest and not e.constant and e.limit is None:
+                    asks.append((m, rest))
+                else:
+                    pending.discard((n_plan, c, name))
+            found: list[list[tuple]] = [[] for _ in range(2 * len(names))]
+            for (m, rest), bounds in zip(asks, _ReserveBounds(p.t, p.intervals).bounds(F, names, asks)):
+                c, name = names[m >> 1], "min" if m & 1 else "max"
+                v = (-1.0 if m & 1 else 1.0) * located[n_plan][c][name].value
+                able = [x for x, u in zip(rest, bounds) if u >= v - ties[c]]
+                if able:
+                    first = min(able, key=lambda x: x[3])
+                    found[m] = [first]
+                    taken[n_plan].add((m, *first[1:5]))
+                else:
+                    pending.discard((n_plan, c, name))
+            more.append(_planned(p.t, [p.table], [p.intervals], [found], [p.bounds])[0] if any(found) else None)
+        again = [p for p in more if p is not None]
+        if not again:
+            return
+        results = iter(finish_all(again, read_all(read, [r for p in again for r in p.requests]), read))
+        for n_plan, p in enumerate(more):
+            if p is None:
+                continue
+            for c, got in next(results).items():
+                for name, e in got.items():
+                    old = located[n_plan][c][name]
+                    if abs(e.value - old.value) <= p.ties[c]:
+                        pending.discard((n_plan, c, name))
+                        if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
+                            located[n_plan][c][name] = e
 
 
 def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple[str, list[Interval]]],

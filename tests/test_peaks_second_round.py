@@ -179,3 +179,22 @@ def test_a_contact_temperature_rising_with_the_bulk_peaks_in_the_last_turn():
     for e in got:
         assert e["t_s"] > 3600.0 - period
     assert got[0]["value"] == pytest.approx(got[1]["value"], rel=1e-9)
+
+
+@pytest.mark.parametrize("column", ["drive_torque_N_m", "contact_force_N", "slip_speed_m_s"])
+def test_a_peak_repeated_every_turn_is_reported_at_its_first_turn_on_any_grid(column):
+    """At a prescribed constant crank speed every turn repeats the same closed form, so each turn's peak is the
+    located value to round-off, a tie, and a tie goes to the earliest instant (`_beats`). Which turns the first
+    rounds refine hangs on where the rows fall: over 20 s (about 17 turns) the drive torque's maximum was reported
+    at 2.94, 7.65, 1.77 and 5.30 s at 1, 0.7, 2.3 and 0.37 ms rows. Now at the first turn (`earliest_ties`): on
+    every grid the same instant, within the crank's first turn after the start, at the same drive angle."""
+    period = 2 * np.pi / 5.34
+    got = [_peak("geneva-lc1", ["duration=20 s"], step, column, "max") for step in ("1 ms", "0.7 ms", "2.3 ms",
+                                                                                    "0.37 ms")]
+    assert max(g["t_s"] for g in got) - min(g["t_s"] for g in got) <= 1e-6
+    assert got[0]["t_s"] < period
+    assert max(g["value"] for g in got) - min(g["value"] for g in got) <= 1e-12 * got[0]["value"]
+    # the next turn reaches the same value one period later: the instant is that of a repeated peak
+    one_turn = _peak("geneva-lc1", [f'duration="{got[0]["t_s"] + 0.6 * period} s"'], "1 ms", column, "max")
+    assert one_turn["value"] == pytest.approx(got[0]["value"], rel=1e-12)
+    assert one_turn["t_s"] == pytest.approx(got[0]["t_s"], abs=1e-6)
