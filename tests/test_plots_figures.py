@@ -194,3 +194,30 @@ def test_the_energy_figure_counts_the_impacts_work(case):
     scale = max(np.abs(y - y[0]).max() for gid, y in lines.items() if gid.startswith("work_"))
     closure = result.summary["energy"]["closure_error_relative"]
     assert np.abs(works - change).max() <= max(10 * abs(closure), 1e-12) * scale
+
+
+def test_the_drawing_shows_the_largest_force_its_arrows_are_scaled_to(case):
+    """The drawing's arrows share one scale, so evenly spaced instants may all fall where the force is a hundredth
+    of it (rolling-b-components' panels showed 0.2-0.6 N of a 55 N run). One panel is at the row of the largest
+    force of the stretch drawn, titled so: no other panel's force is larger, and over these runs, whose drive
+    repeats or is drawn whole, it is the run's largest row."""
+    from figure_images import titles_outside
+    kind, result, figs, *_ = case
+    fig = figs["mechanism"]
+    column = build_mechanism(result.scenario).drawing_class().force_column
+    df = result.timeseries
+    t = df["t_s"].to_numpy(float)
+    force = np.abs(df[column].to_numpy(float))
+    shown = {}
+    for ax in fig.axes:
+        m = re.match(r"t = ([0-9.]+) s", ax.get_title())
+        if m:
+            shown[ax.get_title()] = force[np.argmin(np.abs(t - float(m.group(1))))]
+    largest = [title for title in shown if title.endswith("its largest force")]
+    assert len(largest) == 1 and shown[largest[0]] == max(shown.values())
+    # a turn's best row lies within half a row of its peak: below the run's best row by at most |f''| h^2 / 8 (the
+    # second difference at the best row, twice over for the curvature's change between turns)
+    i = int(np.nanargmax(np.where(np.isfinite(force), force, -np.inf)))
+    miss = 2 * abs(force[i + 1] - 2 * force[i] + force[i - 1]) / 8 if 0 < i < len(force) - 1 else 0.0
+    assert shown[largest[0]] >= force[i] - miss
+    assert titles_outside(fig) == []

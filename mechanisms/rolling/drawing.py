@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.patches import Circle, Polygon
 
-from mechsim.mechanisms.drawing import CRANK, MM, STEEL, STEEL_EDGE, arrow_length, finish_axes
+from mechsim.mechanisms.drawing import ARROW_CLIP, CRANK, MM, STEEL, STEEL_EDGE, arrow_length, finish_axes
 
 
 class RollingDrawing:
@@ -52,10 +52,12 @@ class RollingDrawing:
         if p.kind == "circle":
             box += [(np.asarray(p.O) - p.R) * MM, (np.asarray(p.O) + p.R) * MM]
         if trace is not None and "contact_x_m" in trace:
+            # around the contact: the disc, and the force arrow at its full length
+            margin = max(2.2 * p.r * MM, ARROW_CLIP * self.arrow_nominal)
             for pre in ("coupler_point", "contact"):
                 xy = trace[[f"{pre}_x_m", f"{pre}_y_m"]].to_numpy(float) * MM
-                box += [np.nanmin(xy, axis=0) - 2.2 * p.r * MM * (pre == "contact"),
-                        np.nanmax(xy, axis=0) + 2.2 * p.r * MM * (pre == "contact")]
+                box += [np.nanmin(xy, axis=0) - margin * (pre == "contact"),
+                        np.nanmax(xy, axis=0) + margin * (pre == "contact")]
         else:
             box += [self.a0 - reach, self.a0 + reach]
         lo, hi = np.min(box, axis=0), np.max(box, axis=0)

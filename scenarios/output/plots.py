@@ -8,6 +8,7 @@ names the quantity and the unit), legends sit outside the data to the right.
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from matplotlib.figure import Figure
 
 from mechsim.dynamics.result import Result
 from mechsim.mechanisms.base import DriveCycle
+from mechsim.mechanisms.drawing import ARROW_CLIP
 
 DEG = 180.0 / math.pi
 DPI = 110
@@ -441,7 +443,9 @@ def cycle_start_value(drive: np.ndarray, y: np.ndarray, a: int, b: int, cycle: D
 
 def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | None) -> Figure | None:
     """The mechanism at `instants` over the last complete cycle of the run (over the run if no cycle): evenly over
-    the contact and once in the contact-free part (`_instants`)."""
+    the contact and once in the contact-free part (`_instants`), the nearest of them moved to the row of the largest
+    force in that stretch (the arrows are drawn to one scale: evenly spaced instants may all fall where the
+    force is a hundredth of it), its panel titled so."""
     from mechsim.scenarios.output.drawings import drawing_for
     drawing_class = mech.drawing_class() if mech is not None else None
     if drawing_class is None or not instants or not len(df):
@@ -452,7 +456,10 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
         last = np.flatnonzero(k == (complete[-1] if complete else k[-1]))
         idx = _instants(df.iloc[last], instants, drawing_class.force_column) + last[0]
     else:
-        idx = list(np.linspace(0, len(df) - 1, instants).astype(int))
+        last = np.arange(len(df))
+        idx = np.linspace(0, len(df) - 1, instants).astype(int)
+    peak = _largest_force_row(df, drawing_class.force_column, last)
+    idx = _with_row(np.asarray(idx, dtype=int), peak)
     fig = Figure(figsize=(3.6 * instants, 3.9), layout="constrained")
     axes = fig.subplots(1, instants, squeeze=False)[0]
     for ax, i in zip(axes, idx):
@@ -460,9 +467,32 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
         drawing = drawing_for(ax, mech, df)
         drawing.update(row)
         where = f", {cycle.column.split('_')[0]} {math.degrees(float(row[cycle.column])):.0f}°" if cycle else ""
-        ax.set_title(f"t = {row['t_s']:.3f} s{where}", fontsize=9)
-    fig.suptitle(f"mechanism (mm); arrow: {drawing_class.force_label}, scaled to the run's peak")
+        ax.set_title(f"t = {row['t_s']:.3f} s{where}" + ("\nits largest force" if i == peak else ""), fontsize=9)
+    note = (f"mechanism (mm); arrow: {drawing_class.force_label}, one scale (the run's 99th percentile force at "
+            f"full length, longer ones cut at {ARROW_CLIP:g}x)")
+    fig.suptitle(textwrap.fill(note, 30 * instants))        # (as wide as the panels allow: 3.6 in each)
     return fig
+
+
+def _largest_force_row(df: pd.DataFrame, force_column: str | None, rows: np.ndarray) -> int | None:
+    """The row among `rows` where |force| is largest (the drawing's arrow at full length), None where the force is
+    nowhere finite and nonzero."""
+    if force_column not in df or not len(rows):
+        return None
+    f = np.abs(df[force_column].to_numpy(float)[rows])
+    if not np.isfinite(f).any() or not np.nanmax(f) > 0:
+        return None
+    return int(rows[int(np.nanargmax(f))])
+
+
+def _with_row(idx: np.ndarray, row: int | None) -> np.ndarray:
+    """The drawing's rows with `row` in place of the nearest of them (kept in order), so one panel shows the
+    largest force the arrow is scaled to."""
+    if row is None or not len(idx) or row in idx:
+        return idx
+    out = idx.copy()
+    out[int(np.argmin(np.abs(idx - row)))] = row
+    return np.sort(out)
 
 
 def _instants(rows: pd.DataFrame, n: int, force_column: str | None) -> np.ndarray:
