@@ -7,7 +7,7 @@ import math
 import numpy as np
 from matplotlib.patches import Circle
 
-from mechsim.mechanisms.drawing import CRANK, MM, STEEL, STEEL_EDGE, arrow_length, finish_axes
+from mechsim.mechanisms.drawing import ARROW_CLIP, CRANK, MM, STEEL, STEEL_EDGE, arrow_length, finish_axes
 
 
 class ChainDrawing:
@@ -43,7 +43,7 @@ class ChainDrawing:
                                width=0.012, zorder=5)
         span = np.vstack([loop, self.Q + 1.2 * kin.R * MM * np.array([[1, 1], [-1, -1]])])
         lo, hi = span.min(axis=0), span.max(axis=0)
-        pad = 0.08 * (hi - lo).max()
+        pad = max(0.08 * (hi - lo).max(), ARROW_CLIP * self.arrow_nominal)     # (an arrow at full length)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         finish_axes(ax)

@@ -470,7 +470,7 @@ def drawing_figure(df: pd.DataFrame, mech, instants: int, cycle: DriveCycle | No
         ax.set_title(f"t = {row['t_s']:.3f} s{where}" + ("\nits largest force" if i == peak else ""), fontsize=9)
     note = (f"mechanism (mm); arrow: {drawing_class.force_label}, one scale (the run's 99th percentile force at "
             f"full length, longer ones cut at {ARROW_CLIP:g}x)")
-    fig.suptitle(textwrap.fill(note, 30 * instants))        # (as wide as the panels allow: 3.6 in each)
+    fig.suptitle(textwrap.fill(note, 26 * instants))        # (as wide as the panels allow: 3.6 in each)
     return fig
 
 
