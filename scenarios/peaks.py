@@ -1134,7 +1134,8 @@ def as_shown(value: float, scale: float) -> float:
 
 def console_line(peaks: dict) -> str | None:
     """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
-    instant, its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
+    instant and drive angle within its turn (what a periodic regime's turns share: its instant may be any of
+    them), its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
     whether they are located or the rows' (the full entries are in summary.json); a round-off zero as 0
     (`as_shown`)."""
     parts = []
@@ -1157,7 +1158,9 @@ def console_line(peaks: dict) -> str | None:
         if turn.get("mean") is not None or turn.get("unbounded"):
             mean = "unbounded" if turn.get("unbounded") else number(turn["mean"])
             beside += f", mean {mean} over the last turn"
-        parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{beside}){tag}")
+        angle = hi.get("drive_angle_wrapped_deg")
+        at = f", drive angle {as_shown(angle, 360.0):.4g}°" if angle is not None and math.isfinite(angle) else ""
+        parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{at}{beside}){tag}")
     return "peaks, min .. max: " + "; ".join(parts) if parts else None
 
 

@@ -156,6 +156,8 @@ def test_the_console_shows_a_closed_form_zero_as_zero():
     assert 0.0 < abs(torque["min"]["value"]) <= ROUNDOFF_SHOWN * torque["max"]["value"]
     line = console_lines(r.summary)[0]
     assert f"drive_torque_N_m 0 .. {torque['max']['value']:.5g} (max at" in line
+    # where in its turn: the drive angle, which every turn shares
+    assert f"drive angle {torque['max']['drive_angle_wrapped_deg']:.4g}°, mean" in line
     assert f"mean {torque['cycle']['mean']:.5g} over the last turn" in line
     from mechsim.scenarios.output.report_html import report_html
     html = report_html(r, {})                         # report.html's peaks table alike
