@@ -736,8 +736,8 @@ def earliest_ties(plans: list[Plan | None], located: list[dict[str, dict[str, Ex
     its extremum to round-off (`repeated`: a prescribed motion's turns, `merged`), which of its turns the first
     rounds refined hangs on where the output rows fall, and so would the reported instant. So the earliest
     candidate before the located instant whose bound (`_ReserveBounds`, the rows': its row plus twice its
-    estimate's gain) reaches the located value less the tie is refined, and takes its place where it ties; where
-    it does not, the next earliest, EARLIEST_TRIES at most (candidates refined already, `taken`, skipped). No
+    estimate's gain) reaches the located value less the tie is refined, and takes its place where it ties (or where
+    it is larger, which the first rounds' bounds should have ruled out); where it is smaller, the next earliest, EARLIEST_TRIES at most (candidates refined already, `taken`, skipped). No
     earlier candidate's bound reaching the value, the located instant is the earliest the rows allow."""
     pending = set(repeated)
     for _ in range(EARLIEST_TRIES):
@@ -747,7 +747,7 @@ def earliest_ties(plans: list[Plan | None], located: list[dict[str, dict[str, Ex
             if p is None or not mine or not p.reserve:
                 more.append(None)
                 continue
-            values, F, names, ties = p.table
+            _, F, names, ties = p.table
             asks = []
             for _, c, name in mine:
                 m = 2 * names.index(c) + (name == "min")
@@ -779,10 +779,10 @@ def earliest_ties(plans: list[Plan | None], located: list[dict[str, dict[str, Ex
             for c, got in next(results).items():
                 for name, e in got.items():
                     old = located[n_plan][c][name]
-                    if abs(e.value - old.value) <= p.ties[c]:
+                    if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):   # tied and earlier, or larger
+                        located[n_plan][c][name] = e
+                    if abs(e.value - old.value) <= p.ties[c] or located[n_plan][c][name] is e:
                         pending.discard((n_plan, c, name))
-                        if _beats(e, old, 1.0 if name == "max" else -1.0, p.ties[c]):
-                            located[n_plan][c][name] = e
 
 
 def column_plans(t: np.ndarray, values: dict[str, np.ndarray], spans: list[tuple[str, list[Interval]]],
