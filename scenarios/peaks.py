@@ -19,12 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (ROWLESS_READINGS, Extremum, Interval, ReadingFailed,
-                                      TrajectoryReader, apart, between, end_guesses, end_limit_requests, end_limits,
-                                      end_lines, every_end, finish_all, intervals_of, read_all, refine_further,
-                                      read_tables, stored_limits, with_rowless)
+from mechsim.dynamics.extrema import (ROWLESS_READINGS, Extremum, Interval, ReadingFailed, apart, between,
+                                      end_guesses, end_limit_requests, end_limits, end_lines, every_end, finish_all,
+                                      intervals_of, read_all, refine_further, read_tables, stored_limits, with_rowless)
 from mechsim.dynamics.extrema import plans as plan_windows
 from mechsim.dynamics.tables import TableColumns
+from mechsim.dynamics.trajectory_reader import TrajectoryReader
 
 HOW_DAE = "located: the mode re-integrated from the nearest output row at 1/10 of the run's tolerances"
 HOW_DENSE = "located: the run's own dense output (the step interpolants its output rows come from)"

@@ -8,8 +8,8 @@ thermal column can be evaluated at any instant from the mechanical state and the
 
 - up to the end of the mechanics run (a resolved run, or a cycle-averaged run's mechanics window), a DAE run holds
   the network's states in the same DAE as the mechanics: the mode re-integrated from an output row, or where a
-  smooth stretch holds none, from the state its segment started from (`dynamics/extrema.py` `TrajectoryReader`)
-  gives both, and the finish's own formulas the columns;
+  smooth stretch holds none, from the state its segment started from (dynamics/trajectory_reader.py
+  `TrajectoryReader`) gives both, and the finish's own formulas the columns;
 - after it (cycle averaging, thermal/cycle.py), the mechanics is the window's last full turn at the instant's
   phase (re-integrated there, not interpolated between its rows) and the network's states the cycle-averaged
   solution at the instant itself (`bulk_response`: the mean curve, exact in the network's modes, plus the
@@ -33,9 +33,9 @@ from collections.abc import Mapping, MutableMapping
 import numpy as np
 import pandas as pd
 
-from mechsim.dynamics.extrema import (Interval, ReadingFailed, TrajectoryReader, apart, intervals_of, read_all,
-                                      tie_of)
+from mechsim.dynamics.extrema import Interval, ReadingFailed, apart, intervals_of, read_all, tie_of
 from mechsim.dynamics.tables import TableColumns
+from mechsim.dynamics.trajectory_reader import TrajectoryReader
 
 HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's tolerances "
                "(the network's states in the same DAE) and the thermal formulas evaluated there")

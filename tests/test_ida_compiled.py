@@ -484,7 +484,7 @@ def test_readings_run_ahead_together_are_each_reading_run_alone(monkeypatch):
     (`TrajectoryReader._read_ahead`, `IdaCompiledBackend.read_many`): IDA is re-initialised at every reading's own
     start, so each reading's rows are, to the last bit, those of that reading run alone (`_reading`, one
     `IdaCompiledBackend.read`), whatever ran on the IDA memory before it."""
-    from mechsim.dynamics.extrema import TrajectoryReader
+    from mechsim.dynamics.trajectory_reader import TrajectoryReader
     calls = []
     real = TrajectoryReader.read_many
     monkeypatch.setattr(TrajectoryReader, "read_many",
@@ -513,7 +513,7 @@ def test_limits_read_out_with_the_first_readings_are_those_read_out_alone(monkey
     LAPACK's solve of the limits' short stack alone: the accelerations and forces then differ by round-off of a
     3 x 3 solve (measured up to 2e-15 of the column's largest value on geneva-torque; 1e-12 bounds it for a
     condition number up to ~1e3), every other column to the last bit."""
-    from mechsim.dynamics.extrema import TrajectoryReader
+    from mechsim.dynamics.trajectory_reader import TrajectoryReader
     calls = []
     real = TrajectoryReader.stored_columns
     monkeypatch.setattr(TrajectoryReader, "stored_columns", lambda self, ends, read_many=None: calls.append(
@@ -538,7 +538,7 @@ def test_a_stored_limit_asked_for_again_is_the_one_read_out_with_the_first_readi
     `end_limits` asks for) is the read-out staged with the first readings (`TrajectoryReader._stored_limit`), not a
     reading and read-out of its own, and equals the reading of that instant by a reader that staged nothing (the
     same state; the accelerations and forces to the round-off of the stacked KKT solve, as above)."""
-    from mechsim.dynamics.extrema import TrajectoryReader
+    from mechsim.dynamics.trajectory_reader import TrajectoryReader
     staged = []
     real = TrajectoryReader.stage_limits
     monkeypatch.setattr(TrajectoryReader, "stage_limits",

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import mechsim
-from mechsim.dynamics.extrema import TrajectoryReader
+from mechsim.dynamics.trajectory_reader import TrajectoryReader
 from mechsim.scenarios import runner
 from mechsim.scenarios.peaks import DAE_STEP_RAD, HOW_DAE, HOW_DAE_SAMPLED, _rows_finest
 
@@ -177,7 +177,7 @@ def test_the_interpolations_error_estimate_is_the_cubics_error():
     a relative (h w)^2/120), at most that plus the integrated v's error, and scales as h^4."""
     from types import SimpleNamespace
 
-    from mechsim.dynamics.extrema import _RowInterpolation
+    from mechsim.dynamics.trajectory_reader import _RowInterpolation
 
     w, largest = 7.0, {}
     for h in (0.02, 0.04):

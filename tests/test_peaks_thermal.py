@@ -46,7 +46,7 @@ def test_a_thermal_readers_requests_are_read_in_one_pass_as_each_alone(monkeypat
     """The thermal reader's readings of many requests (scenarios/thermal_peaks.py `ThermalReader._columns_many`) take
     the mechanics' window readings of all of them in one pass of the run's reader (one read-out per mode, not one per
     reading), and every column of every request is the same to the last bit as that request read alone."""
-    from mechsim.dynamics.extrema import TrajectoryReader
+    from mechsim.dynamics.trajectory_reader import TrajectoryReader
     from mechsim.scenarios import thermal_peaks
     readers = []
     locate = thermal_peaks.locate_thermal
