@@ -264,8 +264,7 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
         solver = s["solver"]
         out.print(f"{name}: {s['model']['method']} ({s['model']['why']}); {solver['output_rows']} rows, "
                   f"{len(result.events)} events -> {target}", markup=False, highlight=False, soft_wrap=True)
-        from mechsim.scenarios.peaks import console_lines
-        from mechsim.scenarios.console import impacts_line
+        from mechsim.scenarios.console import console_lines, impacts_line
         for line in [*console_lines(s), impacts_line(s)]:
             if line:
                 out.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -3,12 +3,15 @@
 A run's warnings are strings "t = <time> s: <message>" (or a plain message); their kind is the message up to
 its first colon with the numbers taken out, so 52 flank switches make one line with the count and the first
 and last time (the line keeps the numbers every message shares, such as a formula's "= 0", and shows each number
-that differs as the range its messages span, "5.9 .. 20.6"). SUNDIALS (and other native code) print straight to file descriptors 1 and 2; `native_output`
-points those at a temporary file for the length of a run while Python's own streams keep the terminal.
+that differs as the range its messages span, "5.9 .. 20.6"). SUNDIALS (and other native code) print straight to
+file descriptors 1 and 2; `native_output` points those at a temporary file for the length of a run while Python's
+own streams keep the terminal. A run's headline lines (its peaks, its impacts) are written from its summary here,
+numbers within round-off of zero shown as 0 (`as_shown`, also the report's).
 """
 from __future__ import annotations
 
 import io
+import math
 import os
 import re
 import sys
@@ -180,6 +183,76 @@ class RunProgress:
             self.bar.reset(self.task, total=1.0)
         self.bar.update(self.task, completed=fraction, description=f"{self.name}: writing {what}",
                         where=f"{100 * fraction:.0f} %")
+
+
+#: the columns the console's peaks line names, where the run has them
+CONSOLE_COLUMNS = ("contact_force_N", "coupler_force_N", "drive_torque_N_m", "temp_contact_C")
+
+
+def console_lines(summary: dict) -> list[str]:
+    """The console's peaks: the headline line, and where the run reaches a periodic regime, when and how many
+    start-up turns (the headline is the periodic regime's; the start-up's is beside it in summary.json)."""
+    from mechsim.scenarios.peaks import PERIODIC_RTOL
+    out = []
+    line = console_line(summary.get("peaks", {}))
+    regime = summary.get("regime")
+    if regime:
+        out.append(f"periodic from t = {regime['from_t_s']:.6g} s after {regime['startup_turns']} start-up turn(s) "
+                   f"(period {regime['period_s']:.6g} s; every turn since equals the last in duration and start speed to "
+                   f"{PERIODIC_RTOL:g}, the durations to {regime['turn_spread']:.1g}); the peaks are the periodic regime's, "
+                   "the start-up's are beside them in summary.json")
+    return ([line] if line else []) + out
+
+
+#: the console and the report show a number this small against its column's largest as 0 (`as_shown`)
+ROUNDOFF_SHOWN = 1e-12
+
+
+def column_scale(entry: dict) -> float:
+    """The largest finite magnitude a column's entry shows: its max, min, start-up max and min and turn mean."""
+    turn = entry.get("periodic") or entry.get("cycle") or {}
+    shown = [entry.get("max", {}).get("value"), entry.get("min", {}).get("value"), turn.get("mean")]
+    shown += [x.get("value") for x in (entry.get("startup") or {}).values() if isinstance(x, dict)]
+    return max((abs(v) for v in shown if v is not None and math.isfinite(v)), default=0.0)
+
+
+def as_shown(value: float, scale: float) -> float:
+    """A peak or mean as a designer reads it: 0 where it is within ROUNDOFF_SHOWN of its column's `scale`
+    (`column_scale`; a closed form's zero is round-off of the terms it is computed from, a chain's drive torque in a
+    dwell -3.3e-19 N m), else the value itself; summary.json keeps every number as computed."""
+    return 0.0 if abs(value) <= ROUNDOFF_SHOWN * scale else value
+
+
+def console_line(peaks: dict) -> str | None:
+    """One line of the headline peaks for the console: each column's minimum and maximum with the maximum's
+    instant and drive angle within its turn (what a periodic regime's turns share: its instant may be any of
+    them), its mean over the last turn (the periodic regime's, else the last drive cycle) where it has one, and
+    whether they are located or the rows' (the full entries are in summary.json); a round-off zero as 0
+    (`as_shown`)."""
+    parts = []
+    for col in CONSOLE_COLUMNS:
+        e = peaks.get(col)
+        if not e:
+            continue
+        hi, lo = e["max"], e["min"]
+        tag = "" if e["how"].startswith("located") else " (rows)"
+        start = e.get("startup", {}).get("max")
+        turn = e.get("periodic") or e.get("cycle") or {}
+        scale = column_scale(e)
+
+        def number(v: float) -> str:
+            return f"{as_shown(v, scale):.5g}"
+
+        def shown(x):
+            return "unbounded" if x["value"] is None else number(x["value"])
+        beside = f", start-up max {shown(start)}" if start else ""
+        if turn.get("mean") is not None or turn.get("unbounded"):
+            mean = "unbounded" if turn.get("unbounded") else number(turn["mean"])
+            beside += f", mean {mean} over the last turn"
+        angle = hi.get("drive_angle_wrapped_deg")
+        at = f", drive angle {as_shown(angle, 360.0):.4g}°" if angle is not None and math.isfinite(angle) else ""
+        parts.append(f"{col} {shown(lo)} .. {shown(hi)} (max at t = {hi['t_s']:.6g} s{at}{beside}){tag}")
+    return "peaks, min .. max: " + "; ".join(parts) if parts else None
 
 
 def impacts_line(summary: dict) -> str | None:

@@ -188,10 +188,10 @@ def test_the_relative_closure_error_is_against_the_energy_the_run_exchanges(name
 def test_the_report_shows_a_round_off_energy_term_as_zero():
     """internal-geneva-motor has no impacts: its pin enters and leaves the slot tangentially, so each restart's
     projection loses only round-off of kinetic energy (1.1e-16 J against the 52 J its drive does in 5 s).
-    report.html shows that term as 0, within 1e-12 of the largest energy term (`peaks.as_shown`); summary.json
+    report.html shows that term as 0, within 1e-12 of the largest energy term (`console.as_shown`); summary.json
     keeps the number, and the terms above round-off and the closure error keep their digits."""
     from mechsim.scenarios.output.report_html import report_html
-    from mechsim.scenarios.peaks import ROUNDOFF_SHOWN
+    from mechsim.scenarios.console import ROUNDOFF_SHOWN
     r = run(mechsim.load("internal-geneva-motor", set=["output.plots=false", "duration=2 s"]))
     energy = r.summary["energy"]
     assert 0.0 < abs(energy["impact_losses_J"]) <= ROUNDOFF_SHOWN * energy["largest_term_J"]

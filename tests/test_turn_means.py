@@ -125,7 +125,7 @@ def test_the_console_and_the_report_show_the_mean_over_the_turn(prescribed):
     """What a designer reads first carries the mean beside the peaks: the console's peaks line and report.html's peaks
     table each show the summary's located mean of the contact force over the last drive cycle, and its span."""
     from mechsim.scenarios.output.report_html import report_html
-    from mechsim.scenarios.peaks import console_lines
+    from mechsim.scenarios.console import console_lines
     r = prescribed["1 ms"]
     cycle = r.summary["peaks"]["contact_force_N"]["cycle"]
     assert f"mean {cycle['mean']:.5g} over the last turn" in console_lines(r.summary)[0]
@@ -150,7 +150,7 @@ def test_the_console_shows_a_closed_form_zero_as_zero():
     """chain-mech2-kinematic's drive torque is zero in a dwell (the crank held, the chain unloaded): its located
     minimum is -3.3e-19 N m, the round-off of the inverse dynamics' terms, and the console shows 0 for it (the
     summary keeps the number); a value above round-off of the column's scale keeps its digits."""
-    from mechsim.scenarios.peaks import ROUNDOFF_SHOWN, console_lines
+    from mechsim.scenarios.console import ROUNDOFF_SHOWN, console_lines
     r = mechsim.run(mechsim.load("chain-mech2-kinematic", set=["output.plots=false"]))
     torque = r.summary["peaks"]["drive_torque_N_m"]
     assert 0.0 < abs(torque["min"]["value"]) <= ROUNDOFF_SHOWN * torque["max"]["value"]

@@ -163,9 +163,9 @@ def _validity(section: dict | None) -> list[str]:
 
 
 def _angle_shown(deg):
-    """A wrapped drive angle (-180..180 deg) as read: round-off of 0 shown as 0 (`peaks.as_shown` over half a
+    """A wrapped drive angle (-180..180 deg) as read: round-off of 0 shown as 0 (`console.as_shown` over half a
     turn: a Geneva's mid-engagement at 1.5e-11 deg)."""
-    from mechsim.scenarios.peaks import as_shown
+    from mechsim.scenarios.console import as_shown
     return deg if deg is None else as_shown(deg, 180.0)
 
 
@@ -192,7 +192,7 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
                       "are the periodic regime's, the start-up's are listed beside them</p>"]
         else:
             parts += ["<h2>Peaks</h2>"]
-        from mechsim.scenarios.peaks import as_shown, column_scale
+        from mechsim.scenarios.console import as_shown, column_scale
         rows = []
         for c, p in peaks.items():
             picks = [(side, p[side]) for side in ("max", "min")]
@@ -213,7 +213,7 @@ def report_html(result: Result, pngs: dict[str, bytes]) -> str:
     parts += _validity(s.get("validity"))
     energy = s.get("energy", {})
     if energy:
-        from mechsim.scenarios.peaks import as_shown
+        from mechsim.scenarios.console import as_shown
         largest = energy.get("largest_term_J", 0.0)      # a term within round-off of it shown as 0 (the json keeps it)
         rows = [[f"work: {k}", as_shown(v, largest), "J"] for k, v in energy.get("work_J", {}).items()]
         rows += [["kinetic energy change", as_shown(energy["kinetic_energy_change_J"], largest), "J"],
