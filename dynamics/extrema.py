@@ -1394,7 +1394,7 @@ def stored_limits(lines: EndLines | None, intervals: list[Interval], reader) -> 
     (from the next row to the nearest, per column and end: `EndLines.f1`, `f0`), or equals the nearest row: a
     column unbounded toward the event (a force growing like 1/distance) has at the event itself a value of
     round-off, of either sign; one that continues its rows is checked for growth next to the extremum as any other
-    (`scenarios/peaks.py` `singular_approaches`), and the others are ranked by the extrapolation, as where the run
+    (`scenarios/singular.py` `singular_approaches`), and the others are ranked by the extrapolation, as where the run
     holds no state."""
     limits = getattr(reader, "limits", None)
     if lines is None or limits is None:

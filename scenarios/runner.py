@@ -29,7 +29,8 @@ from mechsim.mechanisms.base import Mechanism
 from mechsim.scenarios import validity
 from mechsim.scenarios.console import group_warnings, warning_time
 from mechsim.scenarios.loader import Scenario, build_mechanism
-from mechsim.scenarios.peaks import CLOSED_READINGS, CLOSED_STEP_RAD, Source as PeakSource, singular_warnings
+from mechsim.scenarios.peaks import CLOSED_READINGS, CLOSED_STEP_RAD, Source as PeakSource
+from mechsim.scenarios.singular import singular_warnings
 from mechsim.scenarios.units import ScenarioError
 
 VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
