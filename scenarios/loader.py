@@ -247,7 +247,10 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
 
 def drop_replaced(raw: dict, given: dict, overrides: list[str]) -> dict:
     """The overridden scenario without the file's values of keys an override gives in place of (`Field.replaces`):
-    setting wheel_torque_profile on a scenario that gives wheel_torque replaces it, unless both are overridden."""
+    setting wheel_torque_profile on a scenario that gives wheel_torque replaces it, unless both are overridden; and
+    without the file's values of a variant's keys (`Field.only_if`) that the overridden variant leaves without
+    meaning: `--set drive.type=motor` on a prescribed-speed scenario drops its drive.speed, unless that is
+    overridden too (then `check_section` refuses it, as it refuses such a key given with its variant)."""
     paths = {tuple(parse_override(text)[0]) for text in overrides}
     mtype = raw.get("mechanism", {}).get("type") if isinstance(raw.get("mechanism"), dict) else None
     if not isinstance(mtype, str) or mtype not in MECHANISMS:
@@ -261,6 +264,10 @@ def drop_replaced(raw: dict, given: dict, overrides: list[str]) -> dict:
             continue
         for other in sections[path[0]][path[1]].replaces:
             if (path[0], other) not in paths and other in before:
+                node.pop(other, None)
+        for other, spec in sections[path[0]].items():
+            if (spec.only_if and spec.only_if[0] == path[1] and not spec.applies_with(node.get(path[1]))
+                    and (path[0], other) not in paths and other in before):
                 node.pop(other, None)
     return raw
 
@@ -419,14 +426,18 @@ def _default_text(spec: Field) -> str:
     return literal(_as_text(spec, spec.default))
 
 
-def key_comment(spec: Field, key: str) -> str:
-    """A key's comment: its meaning, SI unit, choices and the variant it belongs to."""
+def key_comment(spec: Field, key: str, fields: dict[str, Field] | None = None) -> str:
+    """A key's comment: its meaning, SI unit, choices and the variants it belongs to (`fields`: its section's, where
+    a key read under every variant but one says "not with" that one)."""
     head = (spec.help or key.replace("_", " ")) + (f" [{spec.unit}]" if spec.unit else "")
     parts = [head]
     if spec.choices and len(spec.choices) > 1:
         parts.append("one of " + ", ".join(map(str, spec.choices)))
     if spec.only_if:
-        parts.append(f"only with {spec.only_if[0]} = {literal(spec.only_if[1])}")
+        sibling, wanted = spec.only_if[0], spec.only_if[1] if isinstance(spec.only_if[1], tuple) else (spec.only_if[1],)
+        rest = [c for c in (fields[sibling].choices if fields and sibling in fields else ()) if c not in wanted]
+        parts.append(f"not with {sibling} = {literal(rest[0])}" if len(rest) == 1 and len(wanted) > 1 else
+                     f"only with {sibling} = {' or '.join(literal(w) for w in wanted)}")
     if spec.required:
         parts.append("required")
     return "; ".join(parts)
@@ -482,7 +493,7 @@ def annotated_toml(scenario: Scenario) -> str:
             if key in values:
                 out.append(_line(f"{key_name(key)} = {literal(values[key])}", comment))
         for key, spec in fields.items():
-            comment = key_comment(spec, key)
+            comment = key_comment(spec, key, fields)
             if key in values:
                 written, value = own.get((section, key), ("", None))
                 if written and value == values[key]:

@@ -26,10 +26,13 @@ TOP = {
 COMMON_SECTIONS: dict[str, dict[str, Field]] = {
     "drive": {
         "type": Field("str", required=True, choices=("speed", "torque", "motor"), help="drive model"),
-        "speed": Field("quantity", "rad/s", default=None, positive=True, help="prescribed speed (type = speed)"),
-        "torque": Field("quantity", "N*m", default=None, help="constant torque (type = torque)"),
-        "stall_torque": Field("quantity", "N*m", default=None, positive=True, help="motor stall torque"),
-        "no_load_speed": Field("quantity", "rad/s", default=None, positive=True, help="motor no-load speed"),
+        "speed": Field("quantity", "rad/s", default=None, positive=True, help="prescribed speed",
+                       only_if=("type", "speed")),
+        "torque": Field("quantity", "N*m", default=None, help="constant torque", only_if=("type", "torque")),
+        "stall_torque": Field("quantity", "N*m", default=None, positive=True, help="motor stall torque",
+                              only_if=("type", "motor")),
+        "no_load_speed": Field("quantity", "rad/s", default=None, positive=True, help="motor no-load speed",
+                               only_if=("type", "motor")),
         "duty_on": Field("quantity", "s", default=None, positive=True, help=(
             "duty cycle (torque or motor drive): on for duty_on, then off for duty_off, repeated from t = 0; off "
             "is no torque at all (the drive coasts), not a brake")),
@@ -313,9 +316,11 @@ def check_section(name: str, fields: dict[str, Field], data) -> dict:
         else:
             out[key] = spec.default
     for key, spec in fields.items():
-        if spec.only_if and key in data and out[key] != spec.default and out[spec.only_if[0]] != spec.only_if[1]:
+        if spec.only_if and key in data and out[key] != spec.default and not spec.applies_with(out[spec.only_if[0]]):
             sibling, wanted = spec.only_if
+            named = f"{name}.{sibling}" if name else sibling
+            values = " or ".join(repr(w) for w in (wanted if isinstance(wanted, tuple) else (wanted,)))
             raise ScenarioError(f"{name}.{key}" if name else key,
-                                f"applies only with {sibling} = {wanted!r}; with {sibling} = {out[sibling]!r} it "
-                                "would be ignored: remove it")
+                                f"applies only with {named} = {values}; with {named} = {out[sibling]!r} it "
+                                f"would be ignored (remove it, or set {named} as well)")
     return out

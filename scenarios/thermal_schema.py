@@ -3,6 +3,8 @@ body geometry and 1-D mesh. Absent keys get sound defaults (derived from the mec
 it, see thermal/network.py and docs/thermal.md "Coupling"); values are SI after validation."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 from mechsim.mechanisms.base import Field, Mechanism
 from mechsim.thermal import MATERIALS, Material
 from mechsim.thermal.materials import MATERIAL_KEYS, material_with_overrides
@@ -16,12 +18,31 @@ AVERAGING = ("resolved", "cycle", "auto")
 MESH_DIRECTIONS = ("depth",)
 
 
+#: the thermal keys each model reads (measured: a key outside its set leaves every thermal column of a run the same to
+#: the bit); a key given under a model that does not read it is refused (`Field.only_if`), so is any under 'none'
+BULK_KEYS = ("convection_pin", "convection_wheel", "pin_crank_conductance", "pin_exposed_length", "crank_volume",
+             "crank_area", "wheel_radius", "wheel_thickness")
+MESH_KEYS = ("mesh_direction", "mesh_first_cell", "mesh_growth", "mesh_depth")
+
+
+def _by_model(fields: dict[str, Field]) -> dict[str, Field]:
+    """The [thermal] fields with the models that read each (`Field.only_if` on thermal.model): the flash rise's
+    material and band every model; the bulk bodies' keys the models with bulk states (every one with a `build`);
+    the 1-D mesh's the models that resolve every engagement in the depth (`every_cycle`)."""
+    states = tuple(name for name, m in MODELS.items() if m.build is not None)
+    mesh = tuple(name for name, m in MODELS.items() if m.every_cycle)
+    readers = {key: mesh if key in MESH_KEYS else states if key in BULK_KEYS else tuple(MODELS) for key in fields}
+    return {key: spec if key == "model" else replace(spec, only_if=("model", readers[key]))
+            for key, spec in fields.items()}
+
+
+
 def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
     """Keys of [thermal] for this mechanism (a mechanism without sliding contact accepts only 'none')."""
     if not mech_cls.has_sliding_contact:
         return {"model": Field("str", default="none", choices=("none",),
                                help="thermal model: none (this mechanism has no sliding contact)")}
-    return {
+    return _by_model({
         "model": Field("str", default="none", choices=("none", *MODELS),
                        help="none; " + "; ".join(f"{name} ({m.short})" for name, m in MODELS.items())),
         "flash": Field("str", default="jaeger", choices=FLASH_METHODS,
@@ -67,7 +88,7 @@ def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
                              why="beyond 10x per cell the 1-D mesh is a handful of cells, no longer a mesh", help="cell growth ratio of the 1-D mesh"),
         "mesh_depth": Field("quantity", "m", default=None, positive=True,
                             help="1-D mesh depth (default 3 sqrt(chi n T_cycle / pi), the periodic penetration)"),
-    }
+    })
 
 
 def thermal_material(section: dict) -> Material:

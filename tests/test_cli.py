@@ -74,6 +74,7 @@ MALFORMED = [
     ("unreadable quantity", lambda r: r.update(duration="three seconds"), "duration"),
     ("motor without curve", lambda r: r.update(drive={"type": "motor", "stall_torque": "5 N*m"}),
      "drive.no_load_speed"),
+    ("key of another drive type", lambda r: r["drive"].update(torque="5 N*m"), "drive.torque"),
     ("unknown mechanism", lambda r: r["mechanism"].update(type="cam"), "mechanism.type"),
     ("bad formulation", lambda r: r["solver"].update(formulation="index7"), "solver.formulation"),
     ("pin too big", lambda r: r["mechanism"].update(pin_radius="40 mm"), "pin_radius"),

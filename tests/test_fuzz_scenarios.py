@@ -216,7 +216,7 @@ def test_valid_values_are_not_refused(monkeypatch):
     si = load("geneva-lc1", ["mechanism.slots=72", "contact.friction=2", "initial.crank_angle=-180 deg",
                              "mechanism.wheel_inertia=1e-15 kg*m^2", "duration=10000 s", "output_step=1 ms",
                              "solver.baumgarte_beta=1e6", "output.drawing_instants=24",
-                             "thermal.mesh_growth=10"]).si
+                             "thermal.model=1d", "thermal.mesh_growth=10"]).si
     # accepted, and held in SI as given (the angle in radians)
     assert (si["mechanism"]["slots"], si["contact"]["friction"], si["output"]["drawing_instants"]) == (72, 2.0, 24)
     assert si["initial"]["crank_angle"] == pytest.approx(-math.pi, rel=1e-15)

@@ -166,6 +166,42 @@ def test_a_bare_number_is_hinted_in_the_fields_usual_unit(key, value, hint):
     assert err.value.field == key and str(err.value).endswith(f"needs a unit, e.g. {hint}")
 
 
+def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_files_own():
+    """A drive key that the drive's type does not read (a speed on a motor, a torque on a prescribed speed) changed
+    nothing before: the run was the same to the bit. It is refused naming the key and the type it needs. Switching
+    the type by an override drops the file's keys of the old type, so `--set drive.type=motor` with the motor's
+    curve runs without removing drive.speed by hand; the thermal models' keys and the rolling pair's profile
+    variants behave the same way."""
+    for name, key, value, needs in (("geneva-motor", "drive.speed", "200 rad/s", "speed"),
+                                    ("geneva-motor", "drive.torque", "5 N*m", "torque"),
+                                    ("geneva-lc1", "drive.stall_torque", "40 N*m", "motor")):
+        with pytest.raises(mechsim.ScenarioError) as err:
+            mechsim.load(name, set={key: value})
+        assert err.value.field == key and f"applies only with drive.type = '{needs}'" in str(err.value)
+    motor = mechsim.load("geneva-lc1", set=["drive.type=motor", "drive.stall_torque=40 N*m",
+                                            "drive.no_load_speed=8 rad/s"])
+    assert "speed" not in motor.raw["drive"] and motor.si["drive"]["speed"] is None
+    assert mechsim.load("geneva-lc1").raw["drive"]["speed"]           # the file's own value, untouched
+    with pytest.raises(mechsim.ScenarioError, match=r"^drive\.speed: applies only with drive\.type = 'speed'"):
+        mechsim.load("geneva-lc1", set=["drive.type=motor", "drive.speed=5 rad/s", "drive.stall_torque=40 N*m",
+                                        "drive.no_load_speed=8 rad/s"])
+    # the thermal keys by the models that read them (a key outside a model's set left every thermal column of a
+    # geneva-lc1 run the same to the bit under that model)
+    for name, key, value, needs in (("geneva-motor", "thermal.conductivity", "30 W/(m*K)", "'flash' or 'lumped' or '1d'"),
+                                    ("geneva-lc1", "thermal.mesh_growth", 1.5, "'1d'")):
+        with pytest.raises(mechsim.ScenarioError) as err:
+            mechsim.load(name, set={key: value})
+        assert err.value.field == key and f"applies only with thermal.model = {needs};" in str(err.value)
+    flash = mechsim.load("geneva-lc1", set=["thermal.convection_pin=30 W/(m^2*K)"]).set(["thermal.model=flash"])
+    assert flash.si["thermal"]["model"] == "flash" and "convection_pin" not in flash.raw["thermal"]
+    from mechsim.scenarios.loader import apply_overrides, drop_replaced, read_raw
+    circle = read_raw("rolling-a-speed")[0]
+    assert circle["mechanism"]["profile"] == "circle" and {"fixed_radius", "profile_centre"} <= set(circle["mechanism"])
+    switch = ["mechanism.profile=line", "mechanism.line_point=[0, -2]"]
+    line = drop_replaced(apply_overrides(circle, switch), circle, switch)["mechanism"]
+    assert not {"fixed_radius", "profile_centre"} & set(line) and line["disc_radius"] == circle["mechanism"]["disc_radius"]
+
+
 def test_set_takes_lists_and_tables_and_one_way_of_a_value_replaces_another(tmp_path):
     """Scenario.set writes a Python list as a TOML array and a dict as an inline table; giving the wheel torque
     another way (per station, a profile) replaces the way the file gave it, while giving two ways at once is

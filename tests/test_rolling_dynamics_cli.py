@@ -110,7 +110,10 @@ USER_ERRORS = [
     ("dyad cannot close", "rolling-a-torque", ["mechanism.crank_length=0.5 m"], "initial.drive_angle"),
     ("circle without radius", "rolling-d-line", ["mechanism.profile=circle", "mechanism.line_point=[\"0 m\", \"0 m\"]",
                                                  "mechanism.line_angle=0 deg"], "mechanism.fixed_radius"),
-    ("a line's keys on a circle", "rolling-d-line", ["mechanism.profile=circle"], "mechanism.line_point"),
+    ("a line's key on a circle", "rolling-d-line", ["mechanism.profile=circle", "mechanism.fixed_radius=2 m",
+                                                     "mechanism.line_angle=10 deg"], "mechanism.line_angle"),
+    # switching the profile drops the file's line keys: what the circle still needs is named
+    ("switched to a circle", "rolling-d-line", ["mechanism.profile=circle"], "mechanism.fixed_radius"),
     ("bad branch", "rolling-a-torque", ["mechanism.branch=2"], "mechanism.branch"),
     ("bad driven link", "rolling-a-torque", ["mechanism.driven_link=coupler"], "mechanism.driven_link"),
     ("crank cannot assemble", "rolling-crank-torque", ["mechanism.crank_length=20 m"], "initial.drive_angle"),

@@ -21,8 +21,11 @@ BAD = [
     ("bad averaging", "thermal.averaging=sometimes", "thermal.averaging"),
     ("cycle with 1d", "thermal.model=1d --set thermal.averaging=cycle", "thermal.averaging"),
     ("growth below 1", "thermal.mesh_growth=0.9", "thermal.mesh_growth"),
-    ("first cell over depth", 'thermal.mesh_first_cell="5 mm" --set thermal.mesh_depth="1 mm"',
+    ("first cell over depth", 'thermal.model=1d --set thermal.mesh_first_cell="5 mm" --set thermal.mesh_depth="1 mm"',
      "thermal.mesh_first_cell"),
+    ("a mesh without the 1-D model", 'thermal.mesh_depth="1 mm"', "thermal.mesh_depth"),
+    ("a bulk key on the flash model", 'thermal.model=flash --set thermal.convection_pin="25 W/(m^2*K)"',
+     "thermal.convection_pin"),
     ("crank volume alone", 'thermal.crank_volume="1 cm^3"', "thermal.crank_area"),
     ("direction", "thermal.mesh_direction=track", "thermal.mesh_direction"),
 ]
