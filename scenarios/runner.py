@@ -71,7 +71,8 @@ def choose_method(si: dict, mech: Mechanism, drive: Drive, settings: SolverSetti
     if drive.is_prescribed:
         probe = mech.closed_form(np.array([0.0]), 0.0, 1.0) is not None
         if probe and settings.method in ("auto", "closed-form"):
-            return "closed-form", "prescribed speed: the motion is known in closed form, no DAE needed"
+            return "closed-form", ("prescribed speed: the motion is known in closed form, no DAE needed, and the "
+                                   "[solver] settings are unused; solver.method = 'dae' integrates it with them")
         if settings.method == "closed-form":
             raise ValueError("solver.method = 'closed-form' but this mechanism has no closed form")
         return "dae", "prescribed speed, but this mechanism has no closed form: the DAE with a speed constraint"

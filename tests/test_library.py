@@ -202,6 +202,19 @@ def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_fi
     assert not {"fixed_radius", "profile_centre"} & set(line) and line["disc_radius"] == circle["mechanism"]["disc_radius"]
 
 
+def test_a_closed_form_run_says_the_solver_settings_are_not_its():
+    """A prescribed speed runs in closed form, thermal states included (exact in time), so no [solver] setting moves
+    a number of it: the tables of two runs with other tolerances, formulation and backend are the same to the bit,
+    and the run's `why` (the console's first line) says the settings are unused."""
+    base = ["duration=0.6 s", "output.plots=false"]
+    a = mechsim.run(mechsim.load("geneva-lc1", set=base))
+    b = mechsim.run(mechsim.load("geneva-lc1", set=base + ["solver.rtol=1e-4", "solver.formulation=index1",
+                                                           "solver.backend=diffrax"]))
+    assert a.summary["model"]["method"] == b.summary["model"]["method"] == "closed-form"
+    assert "the [solver] settings are unused; solver.method = 'dae' integrates it" in a.summary["model"]["why"]
+    pd.testing.assert_frame_equal(a.timeseries, b.timeseries, check_exact=True)
+
+
 def test_set_takes_lists_and_tables_and_one_way_of_a_value_replaces_another(tmp_path):
     """Scenario.set writes a Python list as a TOML array and a dict as an inline table; giving the wheel torque
     another way (per station, a profile) replaces the way the file gave it, while giving two ways at once is
