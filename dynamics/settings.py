@@ -1,7 +1,7 @@
 """Solver settings: a policy object rather than flags scattered through the code."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from mechsim.dynamics.backend import REGISTRY
 from mechsim.dynamics.formulation import FORMULATIONS
@@ -55,6 +55,27 @@ class SolverSettings:
             raise ValueError(f"solver.rtol must be in (0, 1), got {self.rtol}")
         if not self.atol > 0:
             raise ValueError(f"solver.atol must be positive, got {self.atol}")
+
+    def unused(self) -> list[tuple[str, str]]:
+        """(key, why) of each setting given another value than its default that this backend and formulation do not
+        read, so that it changes nothing in a DAE run (measured: each leaves the tables of geneva-motor the same to
+        the bit there): diffrax's own keys on IDA, the Baumgarte gains on IDA's index-2 and index-3 forms, and on
+        diffrax, which integrates the index-1 ODE with those gains, the formulation and IDA's own keys."""
+        diffrax = self.backend == "diffrax"
+        readers = {
+            "diffrax_solver": (not diffrax, "it chooses the diffrax backend's solver"),
+            "diffrax_compiled_run": (not diffrax, "it is the diffrax backend's"),
+            "baumgarte_alpha": (not diffrax and self.formulation != "index1",
+                                "the Baumgarte terms are the index-1 form's and diffrax's"),
+            "baumgarte_beta": (not diffrax and self.formulation != "index1",
+                               "the Baumgarte terms are the index-1 form's and diffrax's"),
+            "formulation": (diffrax, "diffrax integrates the index-1 ODE with the Baumgarte terms"),
+            "multiplier_atol": (diffrax, "it is IDA's tolerance on the constraint forces"),
+            "jacobian": (diffrax, "it is IDA's Jacobian"),
+        }
+        defaults = {f.name: f.default for f in fields(self)}
+        return [(key, why) for key, (ignored, why) in readers.items()
+                if ignored and getattr(self, key) != defaults[key]]
 
     @property
     def lam_atol(self) -> float:

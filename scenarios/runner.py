@@ -345,6 +345,8 @@ def _mechanics(the_plan: Plan, duration: float, progress, integrate):
         # reports beside the solve, apart from loading the model and the solver
         stats = dict(traj.stats, tables_time_s=time.perf_counter() - tables0)
         warnings += traj.warnings
+        warnings += [f"solver.{key} = {getattr(settings, key)!r} is unused on backend '{settings.backend}' "
+                     f"(formulation '{settings.formulation}'): {why}" for key, why in settings.unused()]
         if traj.failure:
             from mechsim.dynamics.backend import backend_class
             # names the cause where the backend gives a symptom

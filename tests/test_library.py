@@ -215,6 +215,24 @@ def test_a_closed_form_run_says_the_solver_settings_are_not_its():
     pd.testing.assert_frame_equal(a.timeseries, b.timeseries, check_exact=True)
 
 
+def test_a_solver_setting_the_backend_does_not_read_is_warned():
+    """A DAE run on IDA's index-2 form reads neither the Baumgarte gains nor diffrax's solver: given, they leave the
+    table the same to the bit, and the run warns that each is unused (console and summary.json). On diffrax, the
+    formulation and IDA's Jacobian and multiplier tolerance are the unused ones; a default value is never named."""
+    from mechsim.dynamics.settings import SolverSettings
+    base = ["duration=0.3 s", "output.plots=false"]
+    a = mechsim.run(mechsim.load("geneva-motor", set=base))
+    b = mechsim.run(mechsim.load("geneva-motor", set=base + ["solver.baumgarte_alpha=20", "solver.diffrax_solver=Dopri5"]))
+    pd.testing.assert_frame_equal(a.timeseries, b.timeseries, check_exact=True)
+    unused = [w for w in b.summary["warnings"] if " is unused on backend " in w]
+    assert [w.split(" = ")[0] for w in unused] == ["solver.diffrax_solver", "solver.baumgarte_alpha"]
+    assert not [w for w in a.summary["warnings"] if " is unused on backend " in w]
+    diffrax = SolverSettings(backend="diffrax", formulation="index1", jacobian="fd", multiplier_atol=1e3,
+                             baumgarte_alpha=20.0, diffrax_solver="Dopri5")
+    assert [key for key, _ in diffrax.unused()] == ["formulation", "multiplier_atol", "jacobian"]
+    assert SolverSettings(formulation="index1", baumgarte_beta=5.0).unused() == []
+
+
 def test_set_takes_lists_and_tables_and_one_way_of_a_value_replaces_another(tmp_path):
     """Scenario.set writes a Python list as a TOML array and a dict as an inline table; giving the wheel torque
     another way (per station, a profile) replaces the way the file gave it, while giving two ways at once is
