@@ -51,6 +51,12 @@ class Field:
     #: (sibling key, value or tuple of values): the key means something only when that sibling has that value (a
     #: variant's key); a value other than the default under another variant is refused, since it would be ignored
     only_if: tuple[str, object] | None = None
+    #: kind "profile" (a piecewise-linear function of time, a table {t = [times], <profile_key> = [values]}): the
+    #: name of its value list; the values are in `unit`, the times in s, strictly increasing
+    profile_key: str = "value"
+    #: sibling keys this one is given in place of: an override (`--set`, `Scenario.set`) of this key drops the
+    #: file's values of those siblings unless they are overridden too, so one way of giving a value replaces another
+    replaces: tuple[str, ...] = ()
 
     def applies_with(self, sibling_value) -> bool:
         """Whether the key means something when its `only_if` sibling has this value (always without `only_if`)."""
@@ -58,12 +64,6 @@ class Field:
             return True
         wanted = self.only_if[1]
         return sibling_value in wanted if isinstance(wanted, tuple) else sibling_value == wanted
-    #: kind "profile" (a piecewise-linear function of time, a table {t = [times], <profile_key> = [values]}): the
-    #: name of its value list; the values are in `unit`, the times in s, strictly increasing
-    profile_key: str = "value"
-    #: sibling keys this one is given in place of: an override (`--set`, `Scenario.set`) of this key drops the
-    #: file's values of those siblings unless they are overridden too, so one way of giving a value replaces another
-    replaces: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

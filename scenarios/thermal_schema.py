@@ -36,7 +36,6 @@ def _by_model(fields: dict[str, Field]) -> dict[str, Field]:
             for key, spec in fields.items()}
 
 
-
 def thermal_section(mech_cls: type[Mechanism]) -> dict[str, Field]:
     """Keys of [thermal] for this mechanism (a mechanism without sliding contact accepts only 'none')."""
     if not mech_cls.has_sliding_contact:
