@@ -58,9 +58,9 @@ class SolverSettings:
 
     def unused(self) -> list[tuple[str, str]]:
         """(key, why) of each setting given another value than its default that this backend and formulation do not
-        read, so that it changes nothing in a DAE run (measured: each leaves the tables of geneva-motor the same to
-        the bit there): diffrax's own keys on IDA, the Baumgarte gains on IDA's index-2 and index-3 forms, and on
-        diffrax, which integrates the index-1 ODE with those gains, the formulation and IDA's own keys."""
+        read, so that it changes nothing in a DAE run (docs/limits.md, "Values"): diffrax's own keys on IDA, the
+        Baumgarte gains on IDA's index-2 and index-3 forms, and on diffrax, which integrates the index-1 ODE with
+        those gains, the formulation and IDA's own keys."""
         diffrax = self.backend == "diffrax"
         readers = {
             "diffrax_solver": (not diffrax, "it chooses the diffrax backend's solver"),

@@ -18,8 +18,8 @@ AVERAGING = ("resolved", "cycle", "auto")
 MESH_DIRECTIONS = ("depth",)
 
 
-#: the thermal keys each model reads (measured: a key outside its set leaves every thermal column of a run the same to
-#: the bit); a key given under a model that does not read it is refused (`Field.only_if`), so is any under 'none'
+#: the thermal keys by the models that read them (docs/thermal.md, "The [thermal] section"); a key given under a model
+#: that does not read it is refused (`Field.only_if`), so is any under 'none'
 BULK_KEYS = ("convection_pin", "convection_wheel", "pin_crank_conductance", "pin_exposed_length", "crank_volume",
              "crank_area", "wheel_radius", "wheel_thickness")
 MESH_KEYS = ("mesh_direction", "mesh_first_cell", "mesh_growth", "mesh_depth")
