@@ -23,16 +23,20 @@ MESH_DIRECTIONS = ("depth",)
 BULK_KEYS = ("convection_pin", "convection_wheel", "pin_crank_conductance", "pin_exposed_length", "crank_volume",
              "crank_area", "wheel_radius", "wheel_thickness")
 MESH_KEYS = ("mesh_direction", "mesh_first_cell", "mesh_growth", "mesh_depth")
+#: the parts' material and elastic constants: read by every thermal model and, whatever the model, by a compliant
+#: contact's stiffness E* l (scenarios/loader.py `_with_contact_modulus`), so never refused
+MATERIAL_ELASTIC = ("material", "E", "nu")
 
 
 def _by_model(fields: dict[str, Field]) -> dict[str, Field]:
     """The [thermal] fields with the models that read each (`Field.only_if` on thermal.model): the flash rise's
-    material and band every model; the bulk bodies' keys the models with bulk states (every one with a `build`);
-    the 1-D mesh's the models that resolve every engagement in the depth (`every_cycle`)."""
+    thermal properties and band every model; the bulk bodies' keys the models with bulk states (every one with a
+    `build`); the 1-D mesh's the models that resolve every engagement in the depth (`every_cycle`); the material
+    and elastic constants any (`MATERIAL_ELASTIC`)."""
     states = tuple(name for name, m in MODELS.items() if m.build is not None)
     mesh = tuple(name for name, m in MODELS.items() if m.every_cycle)
     readers = {key: mesh if key in MESH_KEYS else states if key in BULK_KEYS else tuple(MODELS) for key in fields}
-    return {key: spec if key == "model" else replace(spec, only_if=("model", readers[key]))
+    return {key: spec if key == "model" or key in MATERIAL_ELASTIC else replace(spec, only_if=("model", readers[key]))
             for key, spec in fields.items()}
 
 

@@ -192,6 +192,8 @@ def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_fi
         with pytest.raises(mechsim.ScenarioError) as err:
             mechsim.load(name, set={key: value})
         assert err.value.field == key and f"applies only with thermal.model = {needs};" in str(err.value)
+    # the material's elastic constants are the compliant contact's too, whatever the thermal model
+    assert mechsim.load("geneva-motor", set={"thermal.E": "150 GPa"}).si["thermal"]["E"] == 150e9
     flash = mechsim.load("geneva-lc1", set=["thermal.convection_pin=30 W/(m^2*K)"]).set(["thermal.model=flash"])
     assert flash.si["thermal"]["model"] == "flash" and "convection_pin" not in flash.raw["thermal"]
     from mechsim.scenarios.loader import apply_overrides, drop_replaced, read_raw
