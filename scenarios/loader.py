@@ -233,6 +233,13 @@ def _override_value(text: str):
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
+    """The scenario with `overrides` ("section.key=value") set, and without the file's values they replace or leave
+    without meaning (`drop_replaced`): what every override of a scenario goes through (--set, a sweep's case, a
+    sizing's design, a comparison's side)."""
+    return drop_replaced(_with_values(raw, overrides), raw, overrides)
+
+
+def _with_values(raw: dict, overrides: list[str]) -> dict:
     out = copy.deepcopy(raw)
     for text in overrides:
         keys, value = parse_override(text)
@@ -269,6 +276,14 @@ def drop_replaced(raw: dict, given: dict, overrides: list[str]) -> dict:
             if (spec.only_if and spec.only_if[0] == path[1] and not spec.applies_with(node.get(path[1]))
                     and (path[0], other) not in paths and other in before):
                 node.pop(other, None)
+    # a prescribed speed overridden (its value, or the drive's type made 'speed') carries the drive from t = 0: the
+    # file's initial speed, which it leaves unused (`validate`), goes with it unless that is overridden too
+    speed_key = MECHANISMS[mtype].initial_keys[1]
+    drive, initial, before = raw.get("drive"), raw.get("initial"), given.get("initial")
+    if (paths & {("drive", "speed"), ("drive", "type")} and isinstance(drive, dict) and drive.get("type") == "speed"
+            and isinstance(initial, dict) and isinstance(before, dict) and speed_key in before
+            and ("initial", speed_key) not in paths):
+        initial.pop(speed_key, None)
     return raw
 
 
@@ -348,6 +363,12 @@ def validate(raw: dict) -> dict:
     if (drive.get("duty_on") is None) != (drive.get("duty_off") is None):
         missing = "duty_off" if drive.get("duty_off") is None else "duty_on"
         raise ScenarioError(f"drive.{missing}", "missing (a duty cycle needs both duty_on and duty_off)")
+    speed_key = MECHANISMS[mtype].initial_keys[1]
+    start = si["initial"][speed_key]
+    if drive["type"] == "speed" and start != 0.0 and abs(start - drive["speed"]) > 1e-9 * abs(drive["speed"]):
+        raise ScenarioError(f"initial.{speed_key}", f"{start!r} rad/s would be ignored: a prescribed drive turns at "
+                                                    f"drive.speed = {drive['speed']!r} rad/s from t = 0 (remove it, "
+                                                    "or give it the drive's speed)")
     if drive.get("duty_on") is not None and drive["type"] == "speed":
         raise ScenarioError("drive.duty_on", "a duty cycle needs drive.type 'torque' or 'motor' (a prescribed "
                                              "speed has no torque to switch off)")
@@ -395,7 +416,7 @@ def load(name_or_path: str, overrides: list[str] | None = None) -> Scenario:
 
 def from_raw(raw: dict, source: str, overrides: list[str] | None = None) -> Scenario:
     """Override and validate a parsed scenario (`read_raw`), e.g. once per sweep case."""
-    raw = drop_replaced(apply_overrides(raw, overrides or []), raw, overrides or [])
+    raw = apply_overrides(raw, overrides or [])
     si = validate(raw)
     build_mechanism(si)  # geometry checks now, before anything runs
     return Scenario(si["name"], raw, si, source)

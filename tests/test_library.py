@@ -171,7 +171,7 @@ def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_fi
     nothing before: the run was the same to the bit. It is refused naming the key and the type it needs. Switching
     the type by an override drops the file's keys of the old type, so `--set drive.type=motor` with the motor's
     curve runs without removing drive.speed by hand; the thermal models' keys and the rolling pair's profile
-    variants behave the same way."""
+    variants behave the same way, and so does a prescribed drive's unused initial speed."""
     for name, key, value, needs in (("geneva-motor", "drive.speed", "200 rad/s", "speed"),
                                     ("geneva-motor", "drive.torque", "5 N*m", "torque"),
                                     ("geneva-lc1", "drive.stall_torque", "40 N*m", "motor")):
@@ -182,6 +182,15 @@ def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_fi
                                             "drive.no_load_speed=8 rad/s"])
     assert "speed" not in motor.raw["drive"] and motor.si["drive"]["speed"] is None
     assert mechsim.load("geneva-lc1").raw["drive"]["speed"]           # the file's own value, untouched
+    assert motor.si["initial"]["crank_speed"] == 5.34                   # the motor starts at the file's speed
+    # a prescribed drive turns at its speed from t = 0: another initial speed is refused, and a new drive speed
+    # takes the file's initial speed (equal to the old one) with it
+    with pytest.raises(mechsim.ScenarioError, match=r"^initial\.crank_speed: 3\.0 rad/s would be ignored"):
+        mechsim.load("geneva-lc1", set=["initial.crank_speed=3 rad/s"])
+    faster = mechsim.load("geneva-lc1", set=["drive.speed=51 rpm"])
+    assert "crank_speed" not in faster.raw["initial"] and faster.si["drive"]["speed"] == pytest.approx(51 * np.pi / 30)
+    assert mechsim.load("geneva-lc1", set=["drive.speed=51 rpm", "initial.crank_speed=51 rpm"]).si["initial"][
+        "crank_speed"] == faster.si["drive"]["speed"]
     with pytest.raises(mechsim.ScenarioError, match=r"^drive\.speed: applies only with drive\.type = 'speed'"):
         mechsim.load("geneva-lc1", set=["drive.type=motor", "drive.speed=5 rad/s", "drive.stall_torque=40 N*m",
                                         "drive.no_load_speed=8 rad/s"])
@@ -196,11 +205,11 @@ def test_a_key_of_another_variant_is_refused_and_a_switched_variant_drops_the_fi
     assert mechsim.load("geneva-motor", set={"thermal.E": "150 GPa"}).si["thermal"]["E"] == 150e9
     flash = mechsim.load("geneva-lc1", set=["thermal.convection_pin=30 W/(m^2*K)"]).set(["thermal.model=flash"])
     assert flash.si["thermal"]["model"] == "flash" and "convection_pin" not in flash.raw["thermal"]
-    from mechsim.scenarios.loader import apply_overrides, drop_replaced, read_raw
+    from mechsim.scenarios.loader import apply_overrides, read_raw
     circle = read_raw("rolling-a-speed")[0]
     assert circle["mechanism"]["profile"] == "circle" and {"fixed_radius", "profile_centre"} <= set(circle["mechanism"])
     switch = ["mechanism.profile=line", "mechanism.line_point=[0, -2]"]
-    line = drop_replaced(apply_overrides(circle, switch), circle, switch)["mechanism"]
+    line = apply_overrides(circle, switch)["mechanism"]
     assert not {"fixed_radius", "profile_centre"} & set(line) and line["disc_radius"] == circle["mechanism"]["disc_radius"]
 
 

@@ -24,7 +24,7 @@ import pandas as pd
 from mechsim.dynamics.result import Result
 from mechsim.dynamics.tables import coordinate_columns
 
-from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, load, validate
+from mechsim.scenarios.loader import Scenario, build_mechanism, from_raw, load
 from mechsim.scenarios.runner import run
 
 
@@ -57,10 +57,7 @@ def _scenario(scenario: str | Scenario, overrides: list[str], backend: str, rtol
     if solver:
         extra.append(f"solver.diffrax_solver='{solver}'")
     if isinstance(scenario, Scenario):
-        raw = apply_overrides(scenario.raw, list(overrides) + extra)
-        si = validate(raw)
-        build_mechanism(si)
-        return Scenario(si["name"], raw, si, scenario.source)
+        return from_raw(scenario.raw, scenario.source, list(overrides) + extra)
     return load(scenario, list(overrides) + extra)
 
 

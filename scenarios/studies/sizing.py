@@ -553,13 +553,10 @@ def _attach(result: SizingResult, stages: list, histories: list, original: list)
 
 
 def _with(scenario, overrides: list[str]):
-    from mechsim.scenarios.loader import Scenario, apply_overrides, build_mechanism, validate
+    from mechsim.scenarios.loader import from_raw
     if not overrides:
         return scenario
-    raw = apply_overrides(scenario.raw, overrides)
-    si = validate(raw)
-    build_mechanism(si)
-    return Scenario(si["name"], raw, si, scenario.source)
+    return from_raw(scenario.raw, scenario.source, overrides)
 
 
 def _solve(problem: Problem, method: str, tolerance: float, max_iterations: int, start, progress, slots):
