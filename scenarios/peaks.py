@@ -947,6 +947,11 @@ class _Readings:
                 self.kept[k] = got
         return [self.kept.get(k) for k in keys]
 
+    def read_many(self, requests: list[tuple]) -> list[dict | None]:
+        """`prefetch`: what a caller reads many at once is kept too (`end_limits`' further passes read their
+        requests ahead, then each alone)."""
+        return self.prefetch(requests)
+
     def __call__(self, iv: Interval, position: int, times: np.ndarray) -> dict:
         got = self.kept.get(self._key(iv, position, times))
         return got if got is not None else self.read(iv, position, times)
