@@ -57,6 +57,9 @@ STEADY_DURATION_S = 3600.0
 #: million for LC3 (4.2 GiB by the bound), every 3 deg 0.73 million. Each is a multiple of every grid the report
 #: uses and divides 45 deg, so mid-stroke stays one of its rows; the grid's rows between them are left empty
 STEADY_STEPS_DEG = (1.0, 3.0, 5.0, 9.0)
+#: the small report's (CI): an hour every 1 deg is a million rows, most of that report's time; every 3 deg keeps
+#: the flash's dip before mid-stroke (at 42 deg) one of its rows
+SMALL_STEADY_STEP_DEG = 3.0
 #: fine grid for the energy per index of the analytic models (deg)
 ENERGY_STEP_DEG = 0.01
 
@@ -77,7 +80,7 @@ class ReportConfig:
     def describe(self) -> str:
         if self.small:
             return (f"--small: one index (crank from -50 deg to +50 deg, first engagement), output every "
-                    f"{self.phi_step_deg:g} deg of crank")
+                    f"{self.phi_step_deg:g} deg of crank, the hour's run every {SMALL_STEADY_STEP_DEG:g} deg")
         return (f"full: {self.turns} crank turns from the scenario's start (-180 deg), last engagement shown, output "
                 f"every {self.phi_step_deg:g} deg of crank")
 
@@ -267,10 +270,12 @@ def _last_engagement(df: pd.DataFrame, case: Case, phi: np.ndarray, step_deg: fl
 
 def _hour_run(case: Case, config: ReportConfig):
     """(output step in deg, the loaded scenario) of the hour's run: the first of STEADY_STEPS_DEG the loader accepts
-    (its bound on the rows' memory, scenarios/schema.py `check_derived`); the last one's refusal as it is."""
+    (its bound on the rows' memory, scenarios/schema.py `check_derived`), from SMALL_STEADY_STEP_DEG on for the
+    small report; the last one's refusal as it is."""
     from mechsim.scenarios.loader import load
     from mechsim.scenarios.units import ScenarioError
-    steps = [s for s in STEADY_STEPS_DEG if s >= config.phi_step_deg - 1e-12]
+    finest = max(config.phi_step_deg, SMALL_STEADY_STEP_DEG if config.small else 0.0)
+    steps = [s for s in STEADY_STEPS_DEG if s >= finest - 1e-12]
     for step in steps:
         try:
             return step, load(case.name, _overrides(case, config, True, step))

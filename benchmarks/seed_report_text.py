@@ -290,8 +290,9 @@ def _hour_rows(report) -> str:
     if not coarser:
         return ""
     which = ", ".join(f"{name} every {step:g}°" for name, step in coarser.items())
-    return (f" Its rows: {which} (the finest the runner's memory bound allowed on the machine that made this report, "
-            f"of 1°, 3°, 5°, 9°); the φ grid's rows between them are left empty in its columns.")
+    why = ("a small report's, of 1°, 3°, 5°, 9°" if report.config.small else
+           "the finest the runner's memory bound allowed on the machine that made this report, of 1°, 3°, 5°, 9°")
+    return f" Its rows: {which} ({why}); the φ grid's rows between them are left empty in its columns."
 
 
 def markdown(report, figures: dict) -> str:
