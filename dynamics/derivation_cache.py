@@ -7,7 +7,14 @@ Jacobian and guards of `codegen.emit`, and the numpy functions of `codegen.lambd
 each lambdified function reads, and the mode's layout. Loading executes the same source in the same namespace, so
 a loaded model computes bit for bit what a fresh derivation computes. The sympy expressions themselves
 (`ModeFunctions.symbolic`, which the diffrax backend, the compiled IDA callbacks and the sensitivities build on)
-are not stored: they are derived on first use.
+are kept beside it as a pickle (`store_symbolic`) and loaded on first use (0.01-0.06 s against 1-6 s of derivation
+a model): the same expression trees, node for node (rebuilt unevaluated); the heat share's opaque functions,
+classes made at run time, are pickled by their origin and made again (thermal/coupling.py `opaque_class`). What is
+traced or emitted from them later can differ in round-off from what a process that has just derived them traces:
+sympy's cache of the derivation's intermediate results shapes what a later differentiation returns (equal
+expressions, other trees; measured 2e-15 relative on internal-geneva-motor's diffrax run, three other models the
+same to the bit; docs/benchmarks.md). The pickle is read from the user's own cache folder only, as the stored
+source above is executed.
 
 One JSON file per derivation and per target in the user's cache folder (`dynamics/user_cache.py`), named by a
 hash of everything the stored functions depend on: the derivation key (mechanism structure, formulation, drive
@@ -22,6 +29,7 @@ import builtins
 import hashlib
 import json
 import linecache
+import pickle
 import sys
 import types
 from pathlib import Path
@@ -137,6 +145,46 @@ def load_functions(key: tuple) -> tuple[dict, dict] | None:
                 record["meta"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError, SyntaxError):
         return None
+
+
+def _symbolic_file(key: tuple) -> Path:
+    return file_for(key).with_suffix(".symbolic.pickle")
+
+
+class _SymbolicPickler(pickle.Pickler):
+    """Pickles the opaque function classes (thermal/coupling.py `opaque_function`) by their origin."""
+
+    def reducer_override(self, obj):
+        origin = getattr(obj, "opaque_origin", None) if isinstance(obj, type) else None
+        if origin is None:
+            return NotImplemented
+        from mechsim.thermal.coupling import opaque_class
+        return opaque_class, (origin,)
+
+
+def store_symbolic(key: tuple, pieces: dict[str, dict]) -> Path | None:
+    """Write every mode's sympy pieces ({mode: ModeFunctions.symbolic}) of the derivation `key` (atomically); None
+    where they cannot be pickled or written."""
+    import io
+    try:
+        buffer = io.BytesIO()
+        _SymbolicPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump((FORMAT, repr(key), pieces))
+        path = _symbolic_file(key)
+        return path if write_atomically(path, buffer.getvalue(), prefix=".derived-") else None
+    except (pickle.PicklingError, TypeError, AttributeError, ValueError, RecursionError, OSError):
+        return None
+
+
+def load_symbolic(key: tuple) -> dict[str, dict] | None:
+    """The sympy pieces `store_symbolic` wrote for `key`, or None where there is no usable file."""
+    from sympy.core.parameters import evaluate
+    try:
+        data = _symbolic_file(key).read_bytes()
+        with evaluate(False):           # each node rebuilt from its arguments as stored, not simplified again
+            stored_format, stored_key, pieces = pickle.loads(data)
+    except Exception:               # a missing, damaged or foreign file: derived again, never an error
+        return None
+    return pieces if stored_format == FORMAT and stored_key == repr(key) and isinstance(pieces, dict) else None
 
 
 class FunctionStore:

@@ -266,14 +266,19 @@ def _derive_cached(key, mech_ref, formulation, prescribed, ext_ref):
     fresh: dict = {}
 
     def symbolic_of(mode: str) -> dict:
-        if "model" not in fresh:
-            fresh["model"] = _derive_fresh(key, mech, formulation, prescribed, ext)
-        return fresh["model"].modes[mode].symbolic
+        if "pieces" not in fresh:
+            fresh["pieces"] = derivation_cache.load_symbolic(key)
+            if fresh["pieces"] is None or set(fresh["pieces"]) != set(model.modes):
+                derived = _derive_fresh(key, mech, formulation, prescribed, ext)
+                fresh["pieces"] = {name: mf.symbolic for name, mf in derived.modes.items()}
+                derivation_cache.store_symbolic(key, fresh["pieces"])
+        return fresh["pieces"][mode]
 
     model = derivation_cache.load(key, symbolic_of)
     if model is None:
         model = _derive_fresh(key, mech, formulation, prescribed, ext)
         derivation_cache.store(key, model)
+        derivation_cache.store_symbolic(key, {name: mf.symbolic for name, mf in model.modes.items()})
     model.recipe = (mech, formulation, prescribed, ext)
     return model
 

@@ -68,7 +68,7 @@ def test_a_loaded_model_is_the_derived_one_bit_for_bit(name, overrides, tmp_path
         p = np.asarray(start.p, float) * (1.0 + 0.1 * np.random.default_rng(1).random(len(start.p)))
         for mine, theirs in zip(_outputs(other, p, np.random.default_rng(2)), _outputs(mf, p, np.random.default_rng(2))):
             np.testing.assert_array_equal(mine, theirs)
-    # the sympy pieces are derived on demand, the same expressions as the derivation's own
+    # the sympy pieces are loaded on demand (test_the_sympy_pieces_are_the_stored_trees), the derivation's own
     mode = next(iter(loaded.modes))
     assert [str(r) for r in loaded.modes[mode].symbolic["residual_rows"]] == [
         str(r) for r in start.model.modes[mode].symbolic["residual_rows"]]
@@ -91,6 +91,64 @@ def test_a_damaged_or_foreign_file_is_derived_again(tmp_path, monkeypatch):
                                       _outputs(ref, start.p, np.random.default_rng(3))[0])
         # and stored again (the same file but for sympy's numbering of its dummy argument names)
         assert re.sub(r"_Dummy_\d+", "_Dummy", path.read_text()) == re.sub(r"_Dummy_\d+", "_Dummy", good)
+    model_module._derive_cached.cache_clear()
+
+
+def _tree(x):
+    """A sympy piece as comparable text: every expression's full tree (`srepr`), containers and objects entry by
+    entry."""
+    import sympy as sp
+    if isinstance(x, (sp.Basic, sp.MatrixBase)):
+        return sp.srepr(x)
+    if isinstance(x, dict):
+        return {k: _tree(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_tree(v) for v in x]
+    if hasattr(x, "__dict__"):
+        return {k: _tree(v) for k, v in vars(x).items()}
+    return repr(x)
+
+
+def test_the_sympy_pieces_are_the_stored_trees(tmp_path, monkeypatch):
+    """The modes' sympy pieces (what diffrax, the compiled callbacks and the sensitivities trace) are kept beside
+    the model and loaded on first use, not derived: the stored expression trees, to the last node, with the heat
+    share's opaque functions (classes made at run time) made again from their origin, so that a loaded piece
+    differentiates as the stored one does. A damaged file is derived again and written anew."""
+    import sympy as sp
+    monkeypatch.setenv("MECHSIM_CACHE_DIR", str(tmp_path))
+    sets = ['thermal.model="lumped"', 'thermal.averaging="resolved"']
+    model_module._derive_cached.cache_clear()
+    start = _prepared("geneva-torque", sets).model            # derived, and stored
+    (pickled,) = (tmp_path / "derived").glob("*.symbolic.pickle")
+    fresh = model_module._derive_fresh
+
+    def loaded_model():
+        model_module._derive_cached.cache_clear()
+        return _prepared("geneva-torque", sets).model
+
+    def refused(*args):
+        raise AssertionError("derived, not loaded")
+    monkeypatch.setattr(model_module, "_derive_fresh", refused)
+    loaded = loaded_model()
+    opaque = 0
+    for mode, mf in start.modes.items():
+        mine, theirs = loaded.modes[mode].symbolic, mf.symbolic
+        assert _tree(mine) == _tree(theirs)
+        rows, states = sp.Matrix(mine["residual_rows"]), list(mine["y"])
+        assert _tree(rows.jacobian(states)) == _tree(sp.Matrix(theirs["residual_rows"]).jacobian(list(theirs["y"])))
+        opaque += sum(getattr(type(f), "opaque_origin", None) is not None
+                      for f in rows.atoms(sp.Function))
+    assert opaque                           # the heat share's opaque function is among the loaded pieces
+    pickled.write_bytes(b"not a pickle")
+    calls = []
+
+    def counted(*args):
+        calls.append(args)
+        return fresh(*args)
+    monkeypatch.setattr(model_module, "_derive_fresh", counted)
+    assert next(iter(loaded_model().modes.values())).symbolic and len(calls) == 1     # derived again
+    monkeypatch.setattr(model_module, "_derive_fresh", refused)
+    assert next(iter(loaded_model().modes.values())).symbolic      # and written anew: loaded, not derived
     model_module._derive_cached.cache_clear()
 
 

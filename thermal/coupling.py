@@ -76,13 +76,16 @@ def _abs(x, xp):
     return xp.Abs(x) if _is_sympy(xp) else xp.abs(x)
 
 
-def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> type[sp.Function]:
+def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...],
+                    origin: tuple | None = None) -> type[sp.Function]:
     """`expr(args)` as an opaque sympy function whose derivatives are opaque functions too (made on demand).
 
     sympy's Jacobian and common-subexpression passes then see one call instead of nested powers and logs
     (for the heat share this cut the model derivation several times: docs/benchmarks.md, "Costs behind the
     code"); every code printer (plain Python, numpy, jax, lambdify) prints the explicit expression with the call's
-    arguments substituted.
+    arguments substituted. `origin`: how `opaque_class` makes the class again in another process (a class made at
+    run time has no name pickle can find it by: dynamics/derivation_cache.py keeps the sympy pieces that hold it);
+    its derivatives' origins are its own with the argument's index appended.
     """
     import sympy as sp
     cache: dict[int, type[sp.Function]] = {}
@@ -90,14 +93,29 @@ def opaque_function(name: str, expr: sp.Expr, args: tuple[sp.Symbol, ...]) -> ty
     def fdiff(self, argindex=1):
         i = argindex - 1
         if i not in cache:
-            cache[i] = opaque_function(f"{name}_d{i}", sp.diff(expr, args[i]), args)
+            cache[i] = opaque_function(f"{name}_d{i}", sp.diff(expr, args[i]), args,
+                                       None if origin is None else (*origin, i))
         return cache[i](*self.args)
 
     def printer_method(self, printer, **kwargs):      # parenthesised: the caller treats a call as an atom
         return "(" + printer._print(expr.xreplace(dict(zip(args, self.args)))) + ")"
 
     return type(name, (sp.Function,), {"nargs": len(args), "fdiff": fdiff, "_pythoncode": printer_method,
-                                       "_lambdacode": printer_method, "_numpycode": printer_method})
+                                       "_lambdacode": printer_method, "_numpycode": printer_method,
+                                       "opaque_origin": origin})
+
+
+def opaque_class(origin: tuple) -> type[sp.Function]:
+    """The opaque function class of `origin` (`opaque_function`): ("share", distribution, i, j, ...) is the heat
+    share's function differentiated in its arguments i, then j, ... This process's own class, the one a
+    derivation here would use."""
+    kind, distribution, *indices = origin
+    if kind != "share":
+        raise ValueError(f"unknown opaque function origin {origin!r}")
+    cls, args = _share_function(distribution)
+    for i in indices:
+        cls = cls(*args).fdiff(i + 1).func
+    return cls
 
 
 @functools.lru_cache(maxsize=None)
@@ -110,7 +128,8 @@ def _share_function(distribution: str) -> tuple[type[sp.Function], tuple[sp.Symb
     contact = {"normal_force": N, "source_speed_driver": u_pin, "source_speed_driven": u_wheel}
     expr = _share_expression(contact, by_name.__getitem__, distribution, sp)
     args = (N, u_pin, u_wheel) + params
-    return opaque_function(f"heat_share_pin_{distribution.replace('-', '_')}", expr, args), args
+    name = f"heat_share_pin_{distribution.replace('-', '_')}"
+    return opaque_function(name, expr, args, ("share", distribution)), args
 
 
 def _share_expression(contact: dict, P: Callable[[str], object], distribution: str, xp=np):
