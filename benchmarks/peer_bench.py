@@ -19,7 +19,9 @@ Two times per mechsim row: the solve (`hybrid.simulate`, what the peers do) and,
 rounds, the warm `mechsim.run` of the same scenario and settings end to end (tables, located peaks, checks,
 summary; `run_cpu_time_s`, its own error in `run_error_rad`), plus `mechsim-default`: the run with the
 scenario's default backend and formulation at each tolerance (end to end only). Both are divided by each
-peer's solve at equal error.
+peer's solve at equal error. Of each end-to-end run, its located peaks are timed from inside it
+(`runner.PEAKS_OBSERVERS`; `run_peaks_cpu_time_s`) and the run without them (`run_less_peaks_cpu_time_s`, the
+median of each round's difference) is divided by the peers' solves too: the peers locate nothing.
 
 Error: max crank-angle difference (rad) at the output times from the reduced-coordinate reference
 (`Mechanism.reference_solution`, DOP853 at rtol 1e-12; thermal states do not act on the mechanics).
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import random
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -65,7 +68,8 @@ TARGETS = (1e-6, 1e-8)
 #: the peer's error target on case A (issue: <= 1e-6 rad within 25 ms CPU on the 2-core machine)
 PEER_TARGET_ERROR = 1e-6
 COLUMNS = ["case", "method", "family", "rtol", "atol", "status", "error_rad", "cpu_time_s", "cpu_time_min_s",
-           "wall_time_s", "run_error_rad", "run_cpu_time_s", "run_cpu_time_min_s", "rounds", "setup_time_s",
+           "wall_time_s", "run_error_rad", "run_cpu_time_s", "run_cpu_time_min_s", "run_peaks_cpu_time_s",
+           "run_less_peaks_cpu_time_s", "rounds", "setup_time_s",
            "setup_scope", "steps", "rejected_steps",
            "residual_evaluations", "jacobian_evaluations", "events", "segments", "output_points", "failure"]
 
@@ -174,6 +178,7 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
         atol = rtol * config.atol_factor
         handles, runs, cpu, wall = {}, {}, {n: [] for n in names}, {n: [] for n in names}
         e2e, e2e_runs, e2e_cpu = {}, {}, {n: [] for n in names}
+        e2e_peaks = {n: [] for n in names}          # the located peaks' CPU inside each end-to-end run
         for n in names:
             try:
                 with quiet_sundials():
@@ -191,19 +196,22 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
         live = [n for n in names if n != DEFAULT and not isinstance(runs[n], Exception) and not runs[n].failure]
         calls = [(n, False) for n in live] + [(n, True) for n in e2e if not isinstance(runs.get(n), Exception)
                                               and not e2e_runs[n].failure]
-        for order in round_orders(calls, config.rounds):
-            for n, end_to_end in order:
-                w, c = time.perf_counter(), time.process_time()
-                with quiet_sundials():
+        with located_peaks_timed() as located:
+            for order in round_orders(calls, config.rounds):
+                for n, end_to_end in order:
+                    located.clear()
+                    w, c = time.perf_counter(), time.process_time()
+                    with quiet_sundials():
+                        if end_to_end:
+                            e2e[n]()
+                        else:
+                            METHODS[n].run(handles[n][0], problem, rtol, atol)
                     if end_to_end:
-                        e2e[n]()
-                    else:
-                        METHODS[n].run(handles[n][0], problem, rtol, atol)
-                if end_to_end:
-                    e2e_cpu[n].append(time.process_time() - c)
-                    continue
-                cpu[n].append(time.process_time() - c)
-                wall[n].append(time.perf_counter() - w)
+                        e2e_cpu[n].append(time.process_time() - c)
+                        e2e_peaks[n].append(sum(located))
+                        continue
+                    cpu[n].append(time.process_time() - c)
+                    wall[n].append(time.perf_counter() - w)
         for n in names:
             r = runs.get(n, e2e_runs.get(n))
             row = dict(case=case, method=n, family=METHODS[n].family if n != DEFAULT else "mechsim default",
@@ -212,7 +220,9 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
                 rows.append({**row, "status": "error", "failure": f"{type(r).__name__}: {r}"})
                 continue
             if n in e2e_runs:
-                row.update(run_error_rad=_error(e2e_runs[n], ref), **_times("run_cpu_time", e2e_cpu[n]))
+                row.update(run_error_rad=_error(e2e_runs[n], ref), **_times("run_cpu_time", e2e_cpu[n]),
+                           run_peaks_cpu_time_s=_median(e2e_peaks[n]),
+                           run_less_peaks_cpu_time_s=_median([r - p for r, p in zip(e2e_cpu[n], e2e_peaks[n])]))
             if n == DEFAULT:     # its error is the run's; no solve of its own
                 row.update(status="failed" if r.failure else "ok", error_rad=row["run_error_rad"],
                            rounds=len(e2e_cpu[n]), output_points=len(r.t), failure=r.failure or "")
@@ -238,6 +248,23 @@ def measure_case(case: str, config: PeerConfig, say: Callable[[str], None]) -> l
             say(f"{case:<16} {n:<19} rtol {rtol:7.0e}: error {row['error_rad']:.2e} rad, cpu median "
                 f"{1e3 * row['cpu_time_s']:.1f} ms (min {1e3 * row['cpu_time_min_s']:.1f}){run_part}")
     return rows
+
+
+@contextmanager
+def located_peaks_timed():
+    """Within it, each run's located peaks are timed from inside the run (`runner.PEAKS_OBSERVERS`): their process
+    CPU is appended to the yielded list, which the caller clears before each run."""
+    from mechsim.scenarios import runner
+    located: list[float] = []
+    runner.PEAKS_OBSERVERS.append(located.append)
+    try:
+        yield located
+    finally:
+        runner.PEAKS_OBSERVERS.remove(located.append)
+
+
+def _median(samples: list[float]) -> float:
+    return float(np.median(samples)) if samples else NAN
 
 
 def _times(prefix: str, samples: list[float]) -> dict:
@@ -278,10 +305,13 @@ def run_peer_bench(config: PeerConfig, progress: Callable[[str], None] | None = 
         "time": f"process CPU time of a warm run, median of {config.rounds} interleaved rounds",
         "rtols": list(config.rtols), "atol": f"{config.atol_factor:g} x rtol", "peer": PEER,
         "ratios_at_equal_error_cpu": ratios(df), "peer_target": _peer_target(df),
-        "ratios_by_peer": {p: {"solve": ratios(df, p), "end_to_end": ratios(df, p, "run_cpu_time_s")}
+        "ratios_by_peer": {p: {"solve": ratios(df, p), "end_to_end": ratios(df, p, "run_cpu_time_s"),
+                               "end_to_end_without_located_peaks": ratios(df, p, "run_less_peaks_cpu_time_s")}
                            for p in PEERS if p in set(df.method)},
         "end_to_end": "warm mechsim.run of the same scenario and settings (tables, located peaks, checks, "
-                      "summary), process CPU, interleaved with the solves; its own error (run_error_rad)",
+                      "summary), process CPU, interleaved with the solves; its own error (run_error_rad); "
+                      "end_to_end_without_located_peaks: the same runs less their located peaks (runner.peaks, "
+                      "timed from inside each run), which the peers do not compute",
         "default_backend": default_backend(), "load_average": list(_load()),
         "versions": versions(),
     }
@@ -335,8 +365,8 @@ def report_lines(result: PeerResult) -> list[str]:
 
 
 def comparison_lines(summary: dict) -> list[str]:
-    """Per case and error: each method's solve and warm end-to-end run (CPU at equal error) and both as ratios
-    to every peer's solve."""
+    """Per case and error: each method's solve, warm end-to-end run and that run without its located peaks (CPU
+    at equal error), each as ratios to every peer's solve."""
     by_peer = summary.get("ratios_by_peer", {})
     peers = list(by_peer)
     if not peers:
@@ -348,26 +378,32 @@ def comparison_lines(summary: dict) -> list[str]:
             key = f"{target:.0e}"
             solve = {p: by_peer[p]["solve"].get(case, {}).get(key, {}) for p in peers}
             run = {p: by_peer[p]["end_to_end"].get(case, {}).get(key, {}) for p in peers}
+            bare = {p: by_peer[p].get("end_to_end_without_located_peaks", {}).get(case, {}).get(key, {})
+                    for p in peers}
             t_peer = {p: solve[p].get("time_s", {}).get(p, NAN) for p in peers}
             if not any(np.isfinite(v) for v in t_peer.values()):
                 continue
             lines.append(f"{case}, error {key} rad, CPU at equal error; peers: "
                          + ", ".join(f"{p} {1e3 * t_peer[p]:.2f} ms" for p in peers if np.isfinite(t_peer[p])))
-            lines.append(f"  {'method':<20} {'solve':>9}{head}   {'end to end':>10}{head}")
+            lines.append(f"  {'method':<20} {'solve':>9}{head}   {'end to end':>10}{head}   "
+                         f"{'less peaks':>10}{head}")
             names = dict.fromkeys(m for p in peers for m in {**solve[p].get("time_s", {}),
                                                               **run[p].get("time_s", {})} if m not in peers)
             for m in names:
                 ts = solve[peers[0]].get("time_s", {}).get(m, NAN)
                 tr = run[peers[0]].get("time_s", {}).get(m, NAN)
+                tb = bare[peers[0]].get("time_s", {}).get(m, NAN)
                 if not (np.isfinite(ts) or np.isfinite(tr)):
                     continue
-                cells = ([_ms(ts)] + [_x(ts / t_peer[p]) for p in peers] + [_ms(tr)]
-                         + [_x(tr / t_peer[p]) for p in peers])
-                lines.append(f"  {m:<20} {cells[0]:>9}" + "".join(f" {c:>17}" for c in cells[1:1 + len(peers)])
-                             + f"   {cells[1 + len(peers)]:>10}" + "".join(f" {c:>17}" for c in cells[2 + len(peers):]))
+                line = f"  {m:<20}"
+                for width, t in ((9, ts), (10, tr), (10, tb)):
+                    line += (f" {_ms(t):>{width}}" if width == 9 else f"   {_ms(t):>{width}}")
+                    line += "".join(f" {_x(t / t_peer[p]):>17}" for p in peers)
+                lines.append(line)
     if "default_backend" in summary:
         lines.append(f"{DEFAULT}: the scenario's default ({summary['default_backend']}); end to end = a warm "
-                     "mechsim.run, everything included")
+                     "mechsim.run, everything included; less peaks = the same run without its located peaks "
+                     "(timed from inside it), which the peers do not compute")
     return lines
 
 

@@ -6,7 +6,9 @@ of crank-angle error on case A, the scenario's own solver settings (`default idx
 CasADi IDAS peer of `peer_bench` at rtol 1e-6
 (5.6e-7 rad). Interleaved rounds, the order shuffled anew each round (`peer_bench.round_orders`: no method always
 runs after the same one), process CPU time, medians. Each run is split into the integration (`hybrid.simulate`,
-its process CPU) and the rest: tables, invariant checks and summary.
+its process CPU), the summary's located peaks (timed from inside each run: `peer_bench.located_peaks_timed`) and
+the rest: tables, invariant checks and the summary's other entries; and the run without its located peaks is set
+against the peer, which locates nothing.
 
     python benchmarks/warm_run.py [rounds] [case]
 
@@ -22,7 +24,7 @@ import time
 import mechsim
 from mechsim.benchmarks.bench import BenchConfig, make_problem
 from mechsim.benchmarks.bench_methods import quiet_sundials
-from mechsim.benchmarks.peer_bench import CASES, METHODS, PEER, round_orders
+from mechsim.benchmarks.peer_bench import CASES, METHODS, PEER, located_peaks_timed, round_orders
 
 #: backend: (scenario overrides, the bench method integrating the same, rtol)
 BACKENDS = {
@@ -52,23 +54,28 @@ def main(rounds: int = 9, case: str = "A") -> None:
         handle = peer.setup(problem, 1e-6, 1e-8)[0]
     calls[PEER] = lambda: peer.run(handle, problem, 1e-6, 1e-8)
     names = list(calls)
-    with quiet_sundials():
+    with quiet_sundials(), located_peaks_timed() as located:
         for name in names:                      # warm: compiled, derived, cached
             calls[name]()
             calls[name]()
         cpu: dict[str, list[float]] = {name: [] for name in names}
+        peaks: dict[str, list[float]] = {name: [] for name in names}
         for order in round_orders(names, rounds):
             for name in order:
+                located.clear()
                 c = time.process_time()
                 calls[name]()
                 cpu[name].append(time.process_time() - c)
+                peaks[name].append(sum(located))
     ms = {name: 1e3 * statistics.median(x) for name, x in cpu.items()}
+    peak_ms = {name: 1e3 * statistics.median(peaks[name]) for name in BACKENDS}
     print(f"case {case}; {PEER} (rtol 1e-6): {ms[PEER]:.1f} ms CPU, median of {rounds}")
     for name in BACKENDS:
         run, solve = ms[name], ms[f"{name} solve"]
         print(f"{name:13s} warm run {run:5.1f} ms CPU = {run / ms[PEER]:.2f}x the peer; its integration alone "
-              f"{solve:4.1f} ms, the rest (tables, checks, summary) {run - solve:4.1f} ms ({(run - solve) / solve:.2f}x "
-              "the integration)")
+              f"{solve:4.1f} ms, the rest (tables, checks, summary) {run - solve:4.1f} ms "
+              f"({(run - solve) / solve:.2f}x the integration), of it the located peaks {peak_ms[name]:4.1f} ms; without them "
+              f"{run - peak_ms[name]:5.1f} ms = {(run - peak_ms[name]) / ms[PEER]:.2f}x the peer")
 
 
 if __name__ == "__main__":

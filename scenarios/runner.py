@@ -34,6 +34,10 @@ from mechsim.scenarios.singular import singular_warnings
 from mechsim.scenarios.units import ScenarioError
 
 VERSION_PACKAGES = ("mechsim", "numpy", "scipy", "sympy", "scikit-sundae", "jax", "diffrax", "pandas")
+#: callables `observer(cpu_seconds)` run after a run's located peaks (`peaks` in `execute`) with their process CPU
+#: time: the documented way for a benchmark to time them from inside a run (`benchmarks/peer_bench.py`
+#: `located_peaks_timed`), as `ida.SOLVE_OBSERVERS` is for IDA's counters
+PEAKS_OBSERVERS: list = []
 
 
 def solver_settings(si: dict) -> SolverSettings:
@@ -546,8 +550,11 @@ def execute(the_plan: Plan, progress: Callable[[float], None] | None = None,
             df, cols = checked, TableColumns(checked)
             valid = validity.evaluate(conditions, cols)
             warnings = [w for w in warnings if (tw := warning_time(w)) is None or tw <= failure.time]
+    peaks0 = time.process_time()
     peak_summary, regime = peaks(df, done.angle_col, mech.peak_columns + (thermal.PEAK_COLUMNS if thermal else ()),
                                  cols, events, done.source if failure is None else None, done.speed_col, event_cols)
+    for observe in PEAKS_OBSERVERS:
+        observe(time.process_time() - peaks0)
     if failure is None and any(validity.locatable(valid, conditions, done.source.columns)):
         from mechsim.scenarios.peaks import point_reader       # the validity's numbers on the continuous solution
         reader = point_reader(done.source, cols, events, event_cols)

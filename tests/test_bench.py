@@ -167,6 +167,20 @@ def test_peer_bench_reaches_its_target_and_ratios_come_from_the_curves(tmp_path)
                 assert ratio is None or np.isnan(ratio)
         assert np.isfinite(entry["ratio_to_peer"]["ida-compiled-index1"])
     assert "end to end" in r.stdout
+    # the located peaks, timed from inside the same end-to-end runs: each round's run less its located peaks is
+    # below that round's run, so every order statistic is too (the medians); the ratios without them come from their
+    # own curves as the others do
+    timed = rows[np.isfinite(rows.run_cpu_time_s)]
+    assert (timed.run_peaks_cpu_time_s > 0).all()
+    assert (timed.run_less_peaks_cpu_time_s < timed.run_cpu_time_s).all()
+    bare = rows.assign(error_rad=rows.run_error_rad)
+    for target, entry in summary["ratios_by_peer"][PEER]["end_to_end_without_located_peaks"]["A"].items():
+        t_peer = time_at_error(rows, PEER, float(target), "cpu_time_s")
+        for method, ratio in entry["ratio_to_peer"].items():
+            t = time_at_error(bare, method, float(target), "run_less_peaks_cpu_time_s")
+            if np.isfinite(t):
+                assert ratio == pytest.approx(t / t_peer, rel=1e-12)
+    assert "less peaks" in r.stdout
     if METHODS["diffsol-tsit45"].available():
         assert set(summary["ratios_by_peer"]) == {PEER, "diffsol-tsit45"}
     else:
