@@ -337,6 +337,8 @@ def validate(raw: dict) -> dict:
     if not isinstance(mech_raw, dict):
         raise ScenarioError("mechanism", "missing (required table with at least `type`)")
     mtype = mech_raw.get("type")
+    if "type" not in mech_raw:
+        raise ScenarioError("mechanism.type", f"missing (required: one of {', '.join(MECHANISMS)})")
     if not isinstance(mtype, str) or mtype not in MECHANISMS:
         shown = repr(mtype) if isinstance(mtype, (str, int, float, bool, type(None))) else type(mtype).__name__
         raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {shown[:80]}")

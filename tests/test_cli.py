@@ -76,6 +76,7 @@ MALFORMED = [
      "drive.no_load_speed"),
     ("key of another drive type", lambda r: r["drive"].update(torque="5 N*m"), "drive.torque"),
     ("unknown mechanism", lambda r: r["mechanism"].update(type="cam"), "mechanism.type"),
+    ("no mechanism type", lambda r: r["mechanism"].pop("type"), "mechanism.type: missing (required: one of"),
     ("bad formulation", lambda r: r["solver"].update(formulation="index7"), "solver.formulation"),
     ("pin too big", lambda r: r["mechanism"].update(pin_radius="40 mm"), "pin_radius"),
 ]
