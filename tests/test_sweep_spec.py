@@ -28,6 +28,8 @@ def test_range_is_inclusive_linspace_with_optional_unit():
     assert parse_vary("load.wheel_torque=0:10:3 N*m").values == ("0 N*m", "5 N*m", "10 N*m")
     assert parse_vary("mechanism.slots=3:6:4").values == (3, 4, 5, 6)   # integer ends, integer points
     assert parse_vary("contact.friction=0.2:0.2:1").values == (0.2,)
+    assert parse_vary("mechanism.crank_radius=60mm:90mm:4").values == ("60 mm", "70 mm", "80 mm", "90 mm")
+    assert parse_vary("drive.speed=log:1 rad/s:100 rad/s:3").values == ("1 rad/s", "10 rad/s", "100 rad/s")
 
 
 def test_log_range_is_geometric():
@@ -46,6 +48,8 @@ def test_log_range_is_geometric():
     ("contact.friction=0.1:0.4:0", "at least 1"),
     ("solver.rtol=log:0:1:3", "positive ends"),
     ("load.wheel_torque=5 N*m,7", "unit once"),
+    ("mechanism.crank_radius=60 mm:0.09 m:4", "same on both ends"),
+    ("mechanism.crank_radius=60 mm:90:4", "same on both ends"),
     ("contact.friction=0.1,,0.2", "empty item"),
     (".friction=0.1", "section.key"),
 ])

@@ -4,6 +4,7 @@ A SPEC is one of
     5,7,14 N*m          a list; a unit after the last item applies to every item ("5 N*m, 7 N*m" also works)
     dae,closed-form     a list of words (strings), true/false (booleans) or bare numbers
     0.1:0.4:7           7 evenly spaced points from 0.1 to 0.4 inclusive (numpy.linspace), optional unit
+                        (after the count, or the same unit on both ends: "60 mm:90 mm:4")
     log:1e-3:1e-1:5     5 points evenly spaced in log from 1e-3 to 1e-1 (numpy.geomspace), optional unit
 Axes combine as a full grid (itertools.product, the first axis varying slowest) or zipped (equal lengths).
 
@@ -33,6 +34,8 @@ MAX_CASES = 100_000
 NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _ITEM = re.compile(rf"^\s*({NUMBER})\s*(.*?)\s*$")
 _RANGE = re.compile(rf"^\s*(log\s*:)?\s*({NUMBER})\s*:\s*({NUMBER})\s*:\s*([^\s:]+)\s*(.*?)\s*$")
+#: a range with a unit on each end ("60 mm:90 mm:4"), as a list may have one on every item
+_RANGE_ENDS = re.compile(rf"^\s*(log\s*:)?\s*({NUMBER})\s*([^:]*?)\s*:\s*({NUMBER})\s*([^:]*?)\s*:\s*(\d+)\s*$")
 MODES = ("grid", "zip")
 
 
@@ -81,6 +84,12 @@ def parse_values(key: str, spec: str) -> tuple[tuple, str]:
     text = spec.strip()
     if not text:
         raise ScenarioError(where, "empty SPEC (expected a list 5,7 N*m, a range 0.1:0.4:7 or log:1e-3:1e-1:5)")
+    ends = _RANGE_ENDS.match(text) if "," not in text else None
+    if ends and (ends.group(3) or ends.group(5)):
+        is_log, start_t, start_unit, stop_t, stop_unit, n_t = ends.groups()
+        if start_unit != stop_unit:
+            raise ScenarioError(where, f"give the unit once after the count or the same on both ends: {spec!r}")
+        text = f"{is_log or ''}{start_t}:{stop_t}:{n_t} {start_unit}"
     m = _RANGE.match(text)
     if m and "," not in text:
         is_log, start_t, stop_t, n_t, unit = m.groups()
