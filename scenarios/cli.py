@@ -274,6 +274,12 @@ def _report_run(result, name: str, target: Path, quiet: bool) -> None:
                   soft_wrap=True)
 
 
+def seconds_text(seconds: float) -> str:
+    """A part of a command's time as a user reads it: milliseconds below a tenth of a second (a warm solve of a few
+    ms is not "0.00 s"), else seconds to the hundredth."""
+    return f"{1e3 * seconds:.1f} ms" if seconds < 0.1 else f"{seconds:.2f} s"
+
+
 def time_line(solver: dict, total: float, plots: bool = True, thermal: bool = False) -> str:
     """Where the command's wall time went: within the run, the solve, compiling the model's code (or loading it
     from the cache of an earlier process), loading the model and the solver (the derived model, the solver's
@@ -282,14 +288,15 @@ def time_line(solver: dict, total: float, plots: bool = True, thermal: bool = Fa
     run, solve = solver["wall_time_s"], solver.get("solve_time_s") or 0.0
     compile_ = solver.get("compile_time_s") or 0.0
     tables = solver.get("tables_time_s")
-    parts = [f"solve {solve:.2f} s"] + ([f"compile or load compiled code {compile_:.2f} s"] if compile_ else [])
+    parts = [f"solve {seconds_text(solve)}"] + (
+        [f"compile or load compiled code {seconds_text(compile_)}"] if compile_ else [])
     if tables is None:        # a summary written before the tables were timed on their own
-        parts.append(f"tables and summary {max(run - solve - compile_, 0.0):.2f} s")
+        parts.append(f"tables and summary {seconds_text(max(run - solve - compile_, 0.0))}")
     else:
         setup = run - solve - compile_ - tables
-        parts += ([f"loading the model and solver {setup:.2f} s"] if setup >= 0.005 else []) + [
-            f"tables{', thermal' if thermal else ''} and summary {tables:.2f} s"]
-    parts.append(f"start-up, files and figures {max(total - run, 0.0):.2f} s")
+        parts += ([f"loading the model and solver {seconds_text(setup)}"] if setup >= 0.0005 else []) + [
+            f"tables{', thermal' if thermal else ''} and summary {seconds_text(tables)}"]
+    parts.append(f"start-up, files and figures {seconds_text(max(total - run, 0.0))}")
     tip = "; `--set output.plots=false` skips the figures" if plots and total - run > run else ""
     return f"time: {total:.2f} s in all ({', '.join(parts)}){tip}"
 
@@ -501,8 +508,8 @@ def sweep(
     _saying_why()
     if not quiet:                # what the user waited for: the cases, and the rest (start-up, tables and figures)
         total, cases = time.perf_counter() - STARTED, table.attrs["cases_wall_time_s"]
-        out.print(f"time: {total:.2f} s in all (cases {cases:.2f} s, start-up, tables and figures "
-                  f"{max(total - cases, 0.0):.2f} s)", markup=False, highlight=False, soft_wrap=True)
+        out.print(f"time: {total:.2f} s in all (cases {seconds_text(cases)}, start-up, tables and figures "
+                  f"{seconds_text(max(total - cases, 0.0))})", markup=False, highlight=False, soft_wrap=True)
     raise typer.Exit(table.attrs["exit_code"])
 
 
@@ -647,9 +654,9 @@ def sensitivity(
               + f") -> {target}", markup=False, highlight=False, soft_wrap=True)
     total = time.perf_counter() - STARTED
     rest = max(total - c["run_wall_time_s"] - c["sensitivity_wall_time_s"], 0.0)
-    out.print(f"time: {total:.2f} s in all (run {c['run_wall_time_s']:.2f} s, sensitivities "
-              f"{c['sensitivity_wall_time_s']:.2f} s, start-up, files and figure {rest:.2f} s)", markup=False,
-              highlight=False, soft_wrap=True)
+    out.print(f"time: {total:.2f} s in all (run {seconds_text(c['run_wall_time_s'])}, sensitivities "
+              f"{seconds_text(c['sensitivity_wall_time_s'])}, start-up, files and figure {seconds_text(rest)})",
+              markup=False, highlight=False, soft_wrap=True)
 
 
 def _print_sensitivity(table) -> None:

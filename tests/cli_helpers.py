@@ -19,3 +19,10 @@ def one_line_error(result):
     assert len(lines) == 1, text
     assert lines[0].startswith("error: ")
     return lines[0]
+
+
+def durations(line: str) -> list[float]:
+    """The durations a `time:` line states, in seconds, in order ("4.2 ms" and "0.13 s" alike)."""
+    import re
+    return [float(x) * (1e-3 if unit == "ms" else 1.0) for x, unit in re.findall(r"(\d+\.\d+) (ms|s)\b", line)]
+

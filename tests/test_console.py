@@ -90,6 +90,11 @@ def test_the_time_line_splits_the_whole_command():
         "tables and summary 0.75 s, start-up, files and figures 8.00 s)")
     assert "loading" not in time_line(dict(no_compilation, tables_time_s=0.5), 1.5)
     assert "tables, thermal and summary 0.75 s" in time_line(timed, 10.0, thermal=True)
+    # a warm part of a few milliseconds reads in ms, not as "0.00 s"
+    fast = {"wall_time_s": 0.0135, "solve_time_s": 0.0042, "tables_time_s": 0.0061}
+    assert time_line(fast, 1.0135).startswith(
+        "time: 1.01 s in all (solve 4.2 ms, loading the model and solver 3.2 ms, tables and summary 6.1 ms, "
+        "start-up, files and figures 1.00 s)")
 
 
 def test_the_run_bar_moves_from_simulated_time_to_the_share_of_tables_written():
