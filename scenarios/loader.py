@@ -20,7 +20,7 @@ from pathlib import Path
 from mechsim.mechanisms import MECHANISMS, Mechanism
 from mechsim.mechanisms.base import Field
 
-from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_derived, check_section
+from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_derived, check_section, did_you_mean
 from mechsim.scenarios.units import ScenarioError
 
 BUILTIN_PACKAGE = "mechsim.scenarios.builtin"
@@ -122,7 +122,8 @@ def builtin_names() -> list[str]:
 def builtin_text(name: str) -> str:
     path = resources.files(BUILTIN_PACKAGE) / f"{name}.toml"
     if not path.is_file():
-        raise ScenarioError("scenario", f"no built-in scenario or file named {name!r} "
+        raise ScenarioError("scenario", f"no built-in scenario or file named {name!r}"
+                                        f"{did_you_mean(name, builtin_names())} "
                                         f"(built-in: {', '.join(builtin_names())})")
     return path.read_text()
 
@@ -349,6 +350,11 @@ def validate(raw: dict) -> dict:
         if isinstance(value, dict) and name not in sections:
             raise ScenarioError(name, f"unknown section (known: {', '.join(sorted(sections))})")
     top_raw = {k: v for k, v in raw.items() if not isinstance(v, dict)}
+    for key in top_raw:         # a section's key written without its section (--set crank_radius=75mm)
+        owners = [name for name, fields in sections.items() if key in fields]
+        if key not in TOP and owners:
+            raise ScenarioError(key, f"not a top-level key: it belongs in [{owners[0]}] "
+                                     f"({owners[0]}.{key} with --set)")
     si = check_section("", TOP, top_raw)
     for name, fields in sections.items():
         data = raw.get(name, {})

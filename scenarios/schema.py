@@ -7,9 +7,9 @@ sizes (output rows) are bounded before anything runs. The limits and their reaso
 """
 from __future__ import annotations
 
-import os
-
+import difflib
 import math
+import os
 
 from mechsim.dynamics.settings import BACKENDS
 from mechsim.mechanisms.base import Field
@@ -298,6 +298,13 @@ def memory_budget() -> float:
         return 2.0 * 2**30
 
 
+def did_you_mean(word: str, choices) -> str:
+    """' (did you mean X?)' for the closest of `choices` to a misspelt `word` (difflib's ratio at least 0.75),
+    else ''."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.75)
+    return f" (did you mean {close[0]}?)" if close else ""
+
+
 def check_section(name: str, fields: dict[str, Field], data) -> dict:
     """Validate one table: unknown keys rejected, required keys present, defaults filled."""
     if not isinstance(data, dict):
@@ -305,7 +312,8 @@ def check_section(name: str, fields: dict[str, Field], data) -> dict:
     for key in data:
         if key not in fields:
             known = ", ".join(sorted(fields))
-            raise ScenarioError(f"{name}.{key}" if name else key, f"unknown key (known keys: {known})")
+            raise ScenarioError(f"{name}.{key}" if name else key,
+                                f"unknown key{did_you_mean(str(key), fields)} (known keys: {known})")
     out = {}
     for key, spec in fields.items():
         where = f"{name}.{key}" if name else key

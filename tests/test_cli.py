@@ -63,7 +63,10 @@ def test_existing_output_needs_force(tmp_path):
 
 MALFORMED = [
     ("missing field", lambda r: r["mechanism"].pop("crank_radius"), "mechanism.crank_radius"),
-    ("unknown key", lambda r: r["mechanism"].update(crank_raduis="75 mm"), "mechanism.crank_raduis"),
+    ("unknown key", lambda r: r["mechanism"].update(crank_raduis="75 mm"),
+     "mechanism.crank_raduis: unknown key (did you mean crank_radius?)"),
+    ("a section's key at the top", lambda r: r.update(crank_radius="75 mm"),
+     "crank_radius: not a top-level key: it belongs in [mechanism]"),
     ("unknown section", lambda r: r.update(motor={"x": 1}), "motor"),
     ("wrong unit", lambda r: r["mechanism"].update(crank_radius="75 kg"), "mechanism.crank_radius"),
     ("missing unit", lambda r: r["mechanism"].update(pin_radius=4), "mechanism.pin_radius"),
@@ -98,6 +101,8 @@ def test_malformed_toml_and_missing_file(tmp_path):
     assert r.exit_code == 2 and "malformed TOML" in one_line_error(r)
     r = invoke("run", tmp_path / "nope.toml", "--quiet")
     assert r.exit_code == 2 and "not found" in one_line_error(r)
+    r = invoke("run", "geneva-lc", "--quiet", "--out", tmp_path / "o")      # a built-in's name, misspelt
+    assert r.exit_code == 2 and "(did you mean geneva-lc1?)" in one_line_error(r)
     r = invoke("run", "geneva-lc1", "--set", "solver.rtol=abc", "--quiet", "--out", tmp_path / "o")
     assert r.exit_code == 2 and "solver.rtol" in one_line_error(r)
 
