@@ -35,8 +35,8 @@ SAMPLED_STATES = ("; its candidates also from the states interpolated between ou
                   "apart (re-integrated where the interpolation's estimated error exceeds 0.001°)")
 HOW_DENSE_SAMPLED = HOW_DENSE + SAMPLED_DENSE
 HOW_DAE_SAMPLED = HOW_DAE + SAMPLED_STATES
-HOW_CLOSED = ("located: the closed form evaluated between output rows, sampled at most 0.5° of drive angle apart "
-              "(100 000 samples a run at most)")
+HOW_CLOSED = ("located: the closed form's extremum between output rows, its candidates sampled at most 0.5° of drive "
+              "angle apart (100 000 samples a run at most)")
 
 #: a closed-form run's columns are sampled (beside its rows) at least this often in drive angle (rad) before their
 #: candidates are ranked (`_finest`); at most CLOSED_READINGS samples a run (its resources bounded before any work)

@@ -42,10 +42,10 @@ HOW_THERMAL = ("located: the mechanics re-integrated from the nearest output row
 HOW_THERMAL_CYCLE = ("located: the mechanics re-integrated from the nearest output row at 1/10 of the run's "
                      "tolerances (after the simulated window at the periodic turn's phase), the network's states "
                      "the DAE's, then the cycle-averaged solution at the instant, and the thermal formulas there")
-HOW_THERMAL_CLOSED = ("located: the closed form evaluated between output rows (sampled at most 0.5° of drive angle "
-                      "apart, 100 000 samples a run at most), the network's states integrated exactly in its modes "
+HOW_THERMAL_CLOSED = ("located: the closed form's extremum between output rows (its candidates sampled at most 0.5° "
+                      "of drive angle apart, 100 000 samples a run at most), the network's states integrated exactly in its modes "
                       "from the output row before the instant, and the thermal formulas there")
-HOW_THERMAL_CYCLE_CLOSED = ("located: the closed form evaluated between output rows, the network's states integrated "
+HOW_THERMAL_CYCLE_CLOSED = ("located: the closed form's extremum between output rows, the network's states integrated "
                             "exactly in its modes from the output row before the instant, after the simulated window "
                             "the cycle-averaged solution at the instant, and the thermal formulas there")
 #: instants this close to an interval's end (relative to the run's time scale) count as its one-sided limit
