@@ -55,7 +55,8 @@ class Scenario:
                 section = key.split(".")[0]
                 known = (sorted(f"{section}.{k}" for k in self.si[section]) if isinstance(self.si.get(section), dict)
                          else sorted(k for k in self.si))
-                raise KeyError(f"{key!r} is not a key of this scenario; known: {', '.join(known)}")
+                raise KeyError(f"{key!r} is not a key of this scenario{did_you_mean(key, known)}; "
+                               f"known: {', '.join(known)}")
             node = node[part]
         return node
 

@@ -99,6 +99,8 @@ def test_scenario_set_to_toml_and_keys(tmp_path):
     assert err.value.field == "mechanism.crank_radius"
     with pytest.raises(KeyError, match="mechanism.crank_radius"):    # an unknown key lists the section's keys
         sc["mechanism.crank_radus"]
+    with pytest.raises(KeyError, match=r"\(did you mean mechanism\.crank_radius\?\)"):      # and the likely one
+        sc["mechanism.crank_radus"]
     path = tmp_path / "wider.toml"
     path.write_text(wider.to_toml())
     again = mechsim.load(path)
