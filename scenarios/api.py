@@ -24,6 +24,7 @@ from mechsim.dynamics.result import Result as RunResult
 from mechsim.scenarios.loader import Scenario, builtin_names
 from mechsim.scenarios.loader import load as _load_scenario
 from mechsim.scenarios.loader import override_strings as _override_list
+from mechsim.scenarios.schema import did_you_mean
 from mechsim.scenarios.units import ScenarioError
 
 __all__ = ["Result", "Scenario", "ScenarioError", "builtins", "compare", "compare_backends", "load", "open",
@@ -68,7 +69,8 @@ class Result(RunResult):
     def _check_columns(self, columns: list[str]) -> None:
         unknown = [c for c in columns if c not in self.timeseries.columns]
         if unknown:
-            raise KeyError(f"no column {', '.join(map(repr, unknown))} in this result; its columns: "
+            raise KeyError(f"no column {', '.join(map(repr, unknown))} in this result"
+                           f"{did_you_mean(unknown[0], self.timeseries.columns)}; its columns: "
                            f"{', '.join(self.timeseries.columns)}")
 
     def plot(self, which: str | Iterable[str] | None = None, x: str = "time"):
@@ -96,8 +98,10 @@ class Result(RunResult):
         else:
             names = ""
         unknown = [w for w in wanted if w not in self.timeseries.columns]
-        raise KeyError(f"no column {', '.join(map(repr, unknown)) or '(none given)'} in this result; its columns: "
-                       f"{', '.join(self.timeseries.columns)}{names}")
+        hint = did_you_mean(unknown[0], [*self.timeseries.columns, *figs]) if unknown and names else (
+            did_you_mean(unknown[0], self.timeseries.columns) if unknown else "")
+        raise KeyError(f"no column {', '.join(map(repr, unknown)) or '(none given)'} in this result{hint}; its "
+                       f"columns: {', '.join(self.timeseries.columns)}{names}")
 
     def _columns_figure(self, columns: list[str], x: str):
         import pandas as pd

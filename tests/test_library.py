@@ -61,6 +61,11 @@ def test_plot_names_an_unknown_column_and_lists_the_columns(lc1):
     with pytest.raises(KeyError) as err:
         lc1.plot(["contact_force_N", "contact_forse_N"])
     assert "'contact_forse_N'" in str(err.value) and "wheel_speed_rad_s" in str(err.value)
+    assert "(did you mean contact_force_N?)" in str(err.value)               # the likely column
+    with pytest.raises(KeyError, match=r"\(did you mean motion_vs_time\?\)"):      # or figure
+        lc1.plot("motion_vs_tme")
+    with pytest.raises(KeyError, match=r"\(did you mean wheel_speed_rad_s\?\)"):
+        lc1["wheel_sped_rad_s"]
     with pytest.raises(KeyError, match="no column 'nope'"):
         lc1["nope"]
     pd.testing.assert_series_equal(lc1["contact_force_N"], lc1.timeseries["contact_force_N"])
