@@ -194,6 +194,8 @@ def test_an_untraced_value_is_refused_not_guessed():
         mechsim.sensitivity("rolling-a-torque", wrt="mechanism.line_angle")
     with pytest.raises(mechsim.ScenarioError, match="^mechanism.start_rolling_angle:"):
         mechsim.sensitivity("rolling-a-torque", wrt="mechanism.start_rolling_angle")
+    with pytest.raises(mechsim.ScenarioError, match=r"\(did you mean mechanism\.crank_radius\?\)"):   # misspelt
+        mechsim.sensitivity("geneva-motor", wrt="mechanism.crank_radus")
 
 
 def test_constant_torque_cycle_energy_is_exact(tables):

@@ -124,6 +124,8 @@ def test_unknown_names_are_refused_naming_the_valid_ones(name):
     assert "\n" not in message and "peak_contact_force_N" in message
     assert "max_/min_/startup_max_/startup_min_" in message
     assert "contact_force_N, drive_torque_N_m" in message
+    if name == "max_contact_force":            # the likely name suggested
+        assert "(did you mean max_contact_force_N?)" in message
 
 
 def test_sweep_rows_carry_the_start_up_extremes():

@@ -13,6 +13,7 @@ from collections import OrderedDict
 import numpy as np
 
 from mechsim.mechanisms.parameter_map import ParameterMap
+from mechsim.scenarios.schema import did_you_mean
 from mechsim.scenarios.studies.sensitivity_thermal_map import (THERMAL_KEYS, THERMAL_MATERIAL_KEYS, check_thermal,
                                                                thermal_parameters, thermal_values)
 from mechsim.scenarios.units import ScenarioError
@@ -456,7 +457,8 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
                 _lookup_or_none(si, key) is None):
             raise ScenarioError(key, "not set in this scenario (it is derived from other values): set it to trace it")
         if key not in allowed:
-            raise ScenarioError(key, f"not a value sensitivities are traced for here; traced: {', '.join(allowed)}")
+            raise ScenarioError(key, f"not a value sensitivities are traced for here{did_you_mean(key, allowed)}; "
+                                     f"traced: {', '.join(allowed)}")
     if len(set(wrt)) != len(wrt):
         raise ScenarioError("--wrt", "a key is named twice")
     known = traced_quantities(plan, pmap)
@@ -470,7 +472,8 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
                                 "(thermal/plan.py) and is not traced; the mechanical quantities are")
         if q not in known and q not in named:
             columns = ", ".join(PEAKS[p] for p in pmap.peaks if p in PEAKS)
-            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism; one of {', '.join(known)}; or "
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism{did_you_mean(q, [*known, *named])}; "
+                                f"one of {', '.join(known)}; or "
                                 f"{'/'.join(SIDES)}<column> of the columns {columns}")
     return pmap
 
