@@ -343,7 +343,8 @@ def validate(raw: dict) -> dict:
         raise ScenarioError("mechanism.type", f"missing (required: one of {', '.join(MECHANISMS)})")
     if not isinstance(mtype, str) or mtype not in MECHANISMS:
         shown = repr(mtype) if isinstance(mtype, (str, int, float, bool, type(None))) else type(mtype).__name__
-        raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {shown[:80]}")
+        hint = did_you_mean(mtype, MECHANISMS) if isinstance(mtype, str) else ""
+        raise ScenarioError("mechanism.type", f"must be one of {', '.join(MECHANISMS)}; got {shown[:80]}{hint}")
     sections = sections_for(mtype)
     for name, value in raw.items():
         if name in sections and not isinstance(value, dict):

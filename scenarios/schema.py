@@ -211,7 +211,9 @@ def check_field(where: str, spec: Field, value):
             known = False
         if not known:
             why = f" ({spec.help})" if len(spec.choices) == 1 and spec.help else ""
-            raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {_shown(out)}{why}")
+            hint = did_you_mean(out, map(str, spec.choices)) if isinstance(out, str) else ""
+            raise ScenarioError(where, f"must be one of {', '.join(map(str, spec.choices))}; got {_shown(out)}"
+                                       f"{hint}{why}")
     if isinstance(out, (int, float)) and not isinstance(out, bool):
         check_range(where, spec, out, value)
     return out

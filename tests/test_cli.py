@@ -79,8 +79,10 @@ MALFORMED = [
      "drive.no_load_speed"),
     ("key of another drive type", lambda r: r["drive"].update(torque="5 N*m"), "drive.torque"),
     ("unknown mechanism", lambda r: r["mechanism"].update(type="cam"), "mechanism.type"),
+    ("misspelt mechanism", lambda r: r["mechanism"].update(type="genva"), "got 'genva' (did you mean geneva?)"),
     ("no mechanism type", lambda r: r["mechanism"].pop("type"), "mechanism.type: missing (required: one of"),
     ("bad formulation", lambda r: r["solver"].update(formulation="index7"), "solver.formulation"),
+    ("misspelt backend", lambda r: r["solver"].update(backend="difrax"), "got 'difrax' (did you mean diffrax?)"),
     ("pin too big", lambda r: r["mechanism"].update(pin_radius="40 mm"), "pin_radius"),
 ]
 
