@@ -98,8 +98,8 @@ class Result(RunResult):
         else:
             names = ""
         unknown = [w for w in wanted if w not in self.timeseries.columns]
-        hint = did_you_mean(unknown[0], [*self.timeseries.columns, *figs]) if unknown and names else (
-            did_you_mean(unknown[0], self.timeseries.columns) if unknown else "")
+        names_known = [*self.timeseries.columns, *figs] if names else self.timeseries.columns
+        hint = did_you_mean(unknown[0], names_known) if unknown else ""
         raise KeyError(f"no column {', '.join(map(repr, unknown)) or '(none given)'} in this result{hint}; its "
                        f"columns: {', '.join(self.timeseries.columns)}{names}")
 

@@ -20,7 +20,8 @@ from pathlib import Path
 from mechsim.mechanisms import MECHANISMS, Mechanism
 from mechsim.mechanisms.base import Field
 
-from mechsim.scenarios.schema import COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_derived, check_section, did_you_mean
+from mechsim.scenarios.schema import (COMMON_SECTIONS, REQUIRED_FOR_DRIVE, TOP, check_derived, check_section,
+                                      did_you_mean)
 from mechsim.scenarios.units import ScenarioError
 
 BUILTIN_PACKAGE = "mechsim.scenarios.builtin"
@@ -352,9 +353,9 @@ def validate(raw: dict) -> dict:
         if isinstance(value, dict) and name not in sections:
             raise ScenarioError(name, f"unknown section (known: {', '.join(sorted(sections))})")
     top_raw = {k: v for k, v in raw.items() if not isinstance(v, dict)}
-    for key in top_raw:         # a section's key written without its section (--set crank_radius=75mm)
+    for key in [k for k in top_raw if k not in TOP]:   # a section's key without its section (--set crank_radius=75mm)
         owners = [name for name, fields in sections.items() if key in fields]
-        if key not in TOP and owners:
+        if owners:
             raise ScenarioError(key, f"not a top-level key: it belongs in [{owners[0]}] "
                                      f"({owners[0]}.{key} with --set)")
     si = check_section("", TOP, top_raw)

@@ -472,9 +472,9 @@ def check_request(plan, wrt: list[str], of: list[str]) -> ParameterMap:
                                 "(thermal/plan.py) and is not traced; the mechanical quantities are")
         if q not in known and q not in named:
             columns = ", ".join(PEAKS[p] for p in pmap.peaks if p in PEAKS)
-            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism{did_you_mean(q, [*known, *named])}; "
-                                f"one of {', '.join(known)}; or "
-                                f"{'/'.join(SIDES)}<column> of the columns {columns}")
+            hint = did_you_mean(q, [*known, *named])
+            raise ScenarioError("--of", f"unknown quantity {q!r} for this mechanism{hint}; one of {', '.join(known)}; "
+                                f"or {'/'.join(SIDES)}<column> of the columns {columns}")
     return pmap
 
 
